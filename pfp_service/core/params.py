@@ -1,0 +1,109 @@
+"""Planner parameters and the scale-free rule that fills in the ones not given.
+
+The rule (also in README.md, "Scale-free defaults"):
+
+* ``D0 = ||goal - start||`` and ``s_min`` = the smallest threat spread
+  ``det(Omega)^(1/4)``.
+* ``step = clamp(min(D0 / 150, s_min / 4), D0 / 3000, D0 / 20)``: fine enough to
+  resolve the narrowest threat, coarse enough that a path is never more than a
+  few thousand steps.
+* ``tolerance = step``: the paper's pairing (0.1 and 0.1).
+* ``max_iter = max(300, ceil(8 D0 / step))``: room for a path eight times the
+  straight line before giving up.
+* ``delta = 0.15 D0 median_j(L_j / s_j)``, where ``L_j`` is threat j's peak
+  level (its weight under ``peak`` intensity, weight times peak density under
+  ``density``).  This sets the goal's pull at the start, ``2 delta / D0``, to
+  about half the steepest flank of a typical threat, so the goal draws the unit
+  on but never pushes it through a threat's core.  With no threats, 1.
+
+Every quantity is a length ratio or a dimensionless level, so a scenario scaled
+by any factor resolves to the same path, scaled.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass, replace
+from typing import Literal
+
+from pfp_service.core.threat import Intensity, Threat
+
+__all__ = ["ESCAPES", "Escape", "PlannerParams", "Resolved", "resolve"]
+
+Escape = Literal["none", "auto", "delta", "random", "waypoint", "contour", "global"]
+ESCAPES: tuple[str, ...] = ("none", "auto", "delta", "random", "waypoint", "contour", "global")
+
+
+@dataclass(frozen=True, slots=True)
+class PlannerParams:
+    """What a user may set; ``None`` means "derive it" (see module docstring)."""
+
+    delta: float | None = None
+    step: float | None = None
+    max_iter: int | None = None
+    tolerance: float | None = None
+    intensity: Intensity = "peak"
+    escape: Escape = "none"
+    trap_window: int = 20
+    progress_window: int = 200
+    seed: int = 0
+
+    def merged(self, **overrides: object) -> PlannerParams:
+        """A copy with every non-``None`` override applied."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None})  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True, slots=True)
+class Resolved:
+    """Concrete parameters for one start-goal pair."""
+
+    delta: float
+    step: float
+    max_iter: int
+    tolerance: float
+    intensity: Intensity
+    escape: Escape
+    trap_window: int
+    progress_window: int
+    seed: int
+
+
+def _peak_level(t: Threat, intensity: Intensity) -> float:
+    return t.weight if intensity == "peak" else t.weight * t.peak_density()
+
+
+def resolve(
+    params: PlannerParams,
+    start: tuple[float, float],
+    goal: tuple[float, float],
+    threats: tuple[Threat, ...] | list[Threat] = (),
+) -> Resolved:
+    """Fill in what ``params`` leaves open for this start, goal and threat set."""
+    d0 = math.hypot(goal[0] - start[0], goal[1] - start[1])
+    scale = d0 if d0 > 0 else 1.0
+    spreads = [t.spread() for t in threats]
+    s_min = min(spreads) if spreads else math.inf
+    step = params.step
+    if step is None:
+        step = min(scale / 150.0, s_min / 4.0)
+        step = min(max(step, scale / 3000.0), scale / 20.0)
+    tolerance = params.tolerance if params.tolerance is not None else step
+    max_iter = params.max_iter
+    if max_iter is None:
+        max_iter = max(300, math.ceil(8.0 * scale / step))
+    delta = params.delta
+    if delta is None:
+        ratios = [_peak_level(t, params.intensity) / s for t, s in zip(threats, spreads) if t.weight > 0]
+        delta = 0.15 * scale * statistics.median(ratios) if ratios else 1.0
+    return Resolved(
+        delta=float(delta),
+        step=float(step),
+        max_iter=int(max_iter),
+        tolerance=float(tolerance),
+        intensity=params.intensity,
+        escape=params.escape,
+        trap_window=params.trap_window,
+        progress_window=params.progress_window,
+        seed=params.seed,
+    )

@@ -1,0 +1,186 @@
+"""Scenario files: YAML or JSON, decoded into typed, validated structs.
+
+A scenario names a start, a goal, optional mission bounds, planner settings
+and threats (each optionally popping up at a step).  ``load_scenario`` is the
+only function here that touches the file system; ``decode_scenario`` works on
+bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import msgspec
+import yaml
+
+from pfp_service.core import PlannerParams, Scheduled, Threat
+from pfp_service.core.params import ESCAPES, Escape
+from pfp_service.errors import InputError, from_validation
+from pfp_service.types import Finite, Id, Iterations, Point, Positive, Skew, StepIndex, Weight
+
+__all__ = [
+    "CHOICES",
+    "PlannerSpec",
+    "Scenario",
+    "ThreatSpec",
+    "decode_scenario",
+    "load_scenario",
+]
+
+Matrix = tuple[tuple[Finite, Finite], tuple[Finite, Finite]]
+CHOICES: dict[str, tuple[str, ...]] = {"intensity": ("peak", "density"), "escape": ESCAPES}
+
+
+class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """One threat, in user-facing form or raw skew-normal form.
+
+    User form: ``position, facing_deg, sigma_range, sigma_lateral, skew, weight``.
+    Raw form: ``position`` (xi), ``omega`` (2x2 SPD) and ``alpha`` instead of the
+    facing, sigmas and skew.
+    """
+
+    id: Id | None = None
+    position: Point
+    facing_deg: Finite = 0.0
+    sigma_range: Positive | None = None
+    sigma_lateral: Positive | None = None
+    skew: Skew = 0.0
+    weight: Weight = 1.0
+    appear_step: StepIndex = 0
+    omega: Matrix | None = None
+    alpha: Point | None = None
+
+    def __post_init__(self) -> None:
+        if self.omega is None:
+            if self.sigma_range is None:
+                raise ValueError("sigma_range: is required (or give the raw form omega and alpha)")
+            if self.sigma_lateral is None:
+                raise ValueError("sigma_lateral: is required (or give the raw form omega and alpha)")
+            if self.alpha is not None:
+                raise ValueError("alpha: goes with omega (the raw form), not with sigma_range")
+            return
+        if self.sigma_range is not None or self.sigma_lateral is not None:
+            raise ValueError("omega: give either omega or sigma_range/sigma_lateral, not both")
+        (a, b), (c, d) = self.omega
+        if b != c:
+            raise ValueError("omega: must be symmetric")
+        if not (a > 0 and d > 0 and a * d - b * c > 0):
+            raise ValueError("omega: must be positive definite")
+
+    def to_threat(self, default_id: str) -> Threat:
+        tid = self.id or default_id
+        if self.omega is None:
+            assert self.sigma_range is not None and self.sigma_lateral is not None
+            return Threat.from_facing(
+                self.position, self.facing_deg, self.sigma_range, self.sigma_lateral, self.skew, self.weight, tid
+            )
+        alpha = self.alpha if self.alpha is not None else (0.0, 0.0)
+        return Threat(
+            xi=(self.position[0], self.position[1]),
+            omega=((self.omega[0][0], self.omega[0][1]), (self.omega[1][0], self.omega[1][1])),
+            alpha=(alpha[0], alpha[1]),
+            weight=self.weight,
+            id=tid,
+        )
+
+
+class PlannerSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """Planner settings; anything left out is derived by the scale-free rule."""
+
+    delta: Positive | None = None
+    step: Positive | None = None
+    max_iter: Iterations | None = None
+    tolerance: Positive | None = None
+    intensity: Literal["peak", "density"] = "peak"
+    escape: Escape = "none"
+    seed: int = 0
+
+    def to_params(self) -> PlannerParams:
+        return PlannerParams(
+            delta=self.delta,
+            step=self.step,
+            max_iter=self.max_iter,
+            tolerance=self.tolerance,
+            intensity=self.intensity,
+            escape=self.escape,
+            seed=self.seed,
+        )
+
+
+class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A whole planning problem, as written in a scenario file."""
+
+    name: str = "scenario"
+    start: Point
+    goal: Point
+    bounds: tuple[Point, Point] | None = None
+    planner: PlannerSpec = PlannerSpec()
+    threats: list[ThreatSpec] = []
+
+    def __post_init__(self) -> None:
+        if self.bounds is not None:
+            (x0, y0), (x1, y1) = self.bounds
+            if not (x0 < x1 and y0 < y1):
+                raise ValueError("bounds: must be [[xmin, ymin], [xmax, ymax]] with xmin < xmax, ymin < ymax")
+            for name, (x, y) in (("start", self.start), ("goal", self.goal)):
+                if not (x0 <= x <= x1 and y0 <= y <= y1):
+                    raise ValueError(f"{name}: lies outside bounds")
+        seen: set[str] = set()
+        for i, t in enumerate(self.threats):
+            tid = t.id or f"t{i + 1}"
+            if tid in seen:
+                raise ValueError(f"threats[{i}].id: duplicate id {tid!r}")
+            seen.add(tid)
+
+    def schedule(self) -> list[Scheduled]:
+        return [Scheduled(t.to_threat(f"t{i + 1}"), t.appear_step) for i, t in enumerate(self.threats)]
+
+    def bounds_tuple(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        if self.bounds is None:
+            return None
+        (x0, y0), (x1, y1) = self.bounds
+        return (x0, y0), (x1, y1)
+
+
+def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
+    """Decode and validate a scenario.
+
+    Raises:
+        InputError: with the field path and the reason.
+    """
+    if fmt == "json":
+        try:
+            return msgspec.json.decode(data, type=Scenario)
+        except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+            raise from_validation(exc, CHOICES) from exc
+    try:
+        obj = yaml.safe_load(data)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "file"
+        problem = getattr(exc, "problem", None) or "invalid YAML"
+        raise InputError(where, f"invalid YAML: {problem}") from exc
+    if not isinstance(obj, dict):
+        raise InputError("", "a scenario must be a mapping with start, goal and threats")
+    try:
+        return msgspec.convert(obj, Scenario)
+    except msgspec.ValidationError as exc:
+        raise from_validation(exc, CHOICES) from exc
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read a ``.yaml``/``.yml``/``.json`` scenario file.
+
+    Raises:
+        InputError: unreadable file, unknown suffix or invalid content.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in (".json", ".yaml", ".yml"):
+        raise InputError(str(p), "scenario files must end in .yaml, .yml or .json")
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise InputError(str(p), f"cannot read: {exc.strerror or exc}") from exc
+    return decode_scenario(data, "json" if suffix == ".json" else "yaml")
