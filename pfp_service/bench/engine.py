@@ -1,0 +1,200 @@
+"""Engine speed: the paper's Table 3 grid against its MATLAB figures and an as-published Python baseline.
+
+Every row runs exactly MAXITER descent steps (the work the paper timed: its
+times grow with MAXITER), for our planner and for the baseline alike, on the
+same scenario.  Ours is timed end to end through ``plan()``: stepper, trap
+bookkeeping and path metrics included.  Two more figures: a natural 300-step,
+8-threat plan, and one vectorised call stepping 10,000 units against 100
+threats.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import statistics
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from pfp_service.cli._common import positive_int
+
+# Table 3 of the paper: (MAXITER, size, threats) -> seconds, with its delta and step per size.
+PAPER_SECONDS: dict[tuple[int, int, int], float] = {
+    (300, 10, 2): 1.760, (300, 10, 4): 2.609, (300, 20, 4): 2.931,
+    (300, 20, 6): 3.832, (300, 30, 6): 5.117, (300, 30, 8): 5.488,
+    (500, 10, 2): 2.273, (500, 10, 4): 3.421, (500, 20, 4): 3.642,
+    (500, 20, 6): 4.679, (500, 30, 6): 5.329, (500, 30, 8): 6.909,
+    (1000, 10, 2): 3.306, (1000, 10, 4): 4.918, (1000, 20, 4): 5.087,
+    (1000, 20, 6): 6.760, (1000, 30, 6): 8.171, (1000, 30, 8): 11.302,
+}  # fmt: skip
+PAPER_DELTA_STEP = {10: (0.08, 0.1), 20: (0.3, 0.2), 30: (0.7, 0.3)}
+TARGET_VS_PAPER = 1000.0
+TARGET_VS_BASELINE = 50.0
+TARGET_PATH_MS = 2.0
+TARGET_FLEET_MS = 20.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--repeat", type=positive_int, default=21, help="runs per row for our median (default 21)")
+    p.add_argument("--baseline-repeat", type=positive_int, default=3, help="runs per row for the baseline median")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--quick", action="store_true", help="only MAXITER 300 rows (a smoke run)")
+
+
+def table_threats(size: int, count: int) -> list[Any]:
+    """The threat layout for one row: Table 1's for 10x10 with 2, else seeded and spread along the route."""
+    from pfp_service.core import Threat
+
+    sr, sl = 0.1 * size, 0.07 * size
+    if (size, count) == (10, 2):
+        spots = [(4.0, 6.0), (7.0, 3.0)]
+    else:
+        rng = np.random.default_rng(1000 * size + count)
+        spots = []
+        for k in range(count):
+            along = size * (0.2 + 0.6 * (k + rng.random()) / count)
+            off = rng.uniform(0.12, 0.3) * size * (1 if k % 2 else -1)
+            spots.append((along + off / math.sqrt(2), along - off / math.sqrt(2)))
+    return [Threat.from_facing(p, 225.0, sr, sl, 2.0, 1.0, f"e{i + 1}") for i, p in enumerate(spots)]
+
+
+@dataclass
+class Row:
+    max_iter: int
+    size: int
+    threats: int
+    delta: float
+    step: float
+    steps_run: int
+    ours_ms: float
+    paper_ms: float
+    baseline_ms: float
+    vs_paper: float
+    vs_baseline: float
+
+
+def _fixed_params(delta: float, step: float, iterations: int) -> Any:
+    from pfp_service.core import Resolved
+
+    # tolerance 0 and detection windows past MAXITER: exactly `iterations` steps, like the paper
+    return Resolved(delta, step, iterations, 0.0, "density", "none", iterations + 1, iterations + 1, 0)
+
+
+def _median_ms(fn: Any, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times)
+
+
+def run_rows(repeat: int, baseline_repeat: int, quick: bool) -> list[Row]:
+    from pfp_service.bench._baseline import baseline_path
+    from pfp_service.core import Scheduled, plan
+
+    rows = []
+    for (k, size, n), paper_s in PAPER_SECONDS.items():
+        if quick and k != 300:
+            continue
+        delta, step = PAPER_DELTA_STEP[size]
+        threats = table_threats(size, n)
+        sched = [Scheduled(t) for t in threats]
+        params = _fixed_params(delta, step, k)
+        goal = (float(size), float(size))
+        result = plan((0.0, 0.0), goal, sched, params)
+        plan((0.0, 0.0), goal, sched, params)  # warm
+        ours = _median_ms(lambda: plan((0.0, 0.0), goal, sched, params), repeat)
+        base = _median_ms(lambda: baseline_path((0, 0), goal, threats, delta, step, k), baseline_repeat)
+        rows.append(
+            Row(k, size, n, delta, step, result.steps, ours, paper_s * 1e3, base, paper_s * 1e3 / ours, base / ours)
+        )
+    return rows
+
+
+def natural_path_ms(repeat: int) -> dict[str, Any]:
+    """A real plan (stops on arrival) through 8 threats, sized to take about 300 steps."""
+    from pfp_service.core import PlannerParams, Scheduled, plan
+
+    threats = table_threats(30, 8)
+    sched = [Scheduled(t) for t in threats]
+    goal = (30.0, 30.0)
+    params = PlannerParams(delta=0.7, step=0.15, max_iter=1000, tolerance=0.15, intensity="density")
+    r = plan((0.0, 0.0), goal, sched, params)
+    ms = _median_ms(lambda: plan((0.0, 0.0), goal, sched, params), repeat)
+    return {"status": r.status.value, "steps": r.steps, "threats": 8, "median_ms": ms, "target_ms": TARGET_PATH_MS}
+
+
+def fleet_ms(repeat: int) -> dict[str, Any]:
+    """One vectorised kernel call for 10,000 units against 100 threats; plus full advise_many."""
+    from pfp_service.core import Threat, ThreatField, resolve
+    from pfp_service.core.kernels import batch_descent
+    from pfp_service.core.params import PlannerParams
+    from pfp_service.core.stepper import Stepper, advise_many
+
+    rng = np.random.default_rng(7)
+    out: dict[str, Any] = {"units": 10_000, "threats": 100, "target_ms": TARGET_FLEET_MS}
+    for layout, box, sigma in (("spread", 30_000.0, 600.0), ("dense", 3_000.0, 600.0)):
+        threats = [
+            Threat.from_facing(rng.uniform(0, box, 2), rng.uniform(0, 360), sigma, 0.7 * sigma, 2.0, 1.0, f"t{j}")
+            for j in range(100)
+        ]
+        field = ThreatField(threats)
+        pts = rng.uniform(0, box, (10_000, 2))
+        goals = rng.uniform(0, box, (10_000, 2))
+        gains = np.full(10_000, 1e-6)
+        res = np.empty((10_000, 4))
+        batch_descent(field.packed, pts, goals, gains, res)  # compile + warm
+        out[f"{layout}_kernel_ms"] = _median_ms(lambda: batch_descent(field.packed, pts, goals, gains, res), repeat)
+        params = resolve(PlannerParams(), (0.0, 0.0), (box, box), threats)
+        steppers = [Stepper(tuple(p), tuple(g), params) for p, g in zip(pts, goals)]
+        advise_many(steppers, field, pts)
+        out[f"{layout}_advise_many_ms"] = _median_ms(lambda: advise_many(steppers, field, pts), max(3, repeat // 4))
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from pfp_service.core import kernels
+
+    rows = run_rows(args.repeat, args.baseline_repeat, args.quick)
+    path = natural_path_ms(args.repeat)
+    fleet = fleet_ms(args.repeat)
+    machine = f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {kernels.numba.get_num_threads()}"
+    checks = {
+        "every row >= 1000x the paper": all(r.vs_paper >= TARGET_VS_PAPER for r in rows),
+        "every row >= 50x the baseline": all(r.vs_baseline >= TARGET_VS_BASELINE for r in rows),
+        "300-step 8-threat path <= 2 ms": path["median_ms"] <= TARGET_PATH_MS,
+        "10,000 units x 100 threats <= 20 ms (dense kernel call)": fleet["dense_kernel_ms"] <= TARGET_FLEET_MS,
+    }
+    if args.json:
+        doc = {"machine": machine, "rows": [asdict(r) for r in rows], "path": path, "fleet": fleet, "checks": checks}
+        print(json.dumps(doc, indent=2))
+        return 0
+    print(f"pfp bench engine on {machine}")
+    print("each row: exactly MAXITER steps, density intensity, the paper's delta and step per size\n")
+    head = f"{'MAXITER':>7} {'size':>6} {'thr':>3} {'ours ms':>9} {'paper ms':>9} {'baseline ms':>12} {'x paper':>9} {'x baseline':>10}"
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        print(
+            f"{r.max_iter:>7} {r.size:>3}x{r.size:<2} {r.threats:>3} {r.ours_ms:>9.3f} {r.paper_ms:>9.0f} "
+            f"{r.baseline_ms:>12.1f} {r.vs_paper:>9.0f} {r.vs_baseline:>10.0f}"
+        )
+    print(
+        f"\nnatural plan, 8 threats: {path['status']} in {path['steps']} steps, median {path['median_ms']:.3f} ms"
+    )
+    print(
+        "10,000 units x 100 threats, one batch_descent call: "
+        f"spread {fleet['spread_kernel_ms']:.2f} ms, dense {fleet['dense_kernel_ms']:.2f} ms; "
+        f"full advise_many (with per-unit bookkeeping): spread {fleet['spread_advise_many_ms']:.1f} ms, "
+        f"dense {fleet['dense_advise_many_ms']:.1f} ms"
+    )
+    print()
+    for name, ok in checks.items():
+        print(f"  [{'ok' if ok else 'MISSED'}] {name}")
+    return 0
