@@ -1,0 +1,43 @@
+"""``pfp schemas``: regenerate ``schemas/`` (JSON Schema + examples), or ``--check`` it is current."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("schemas", help="write or check the wire contract's JSON Schemas", description=__doc__)
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="change nothing; exit 1 and list what is stale if schemas/ is out of date",
+    )
+    p.add_argument(
+        "--dir", default="schemas", metavar="DIR", help="the schemas directory (default: ./schemas)"
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pfp_service.errors import InputError
+    from pfp_service.wire import schema
+
+    directory = Path(args.dir)
+    if directory.exists() and not directory.is_dir():
+        raise InputError(str(directory), "is not a directory")
+    if args.check:
+        stale = schema.diff(directory)
+        for line in stale:
+            print(f"pfp schemas: {directory}: {line}", file=sys.stderr)
+        if stale:
+            print("pfp schemas: stale; run `pfp schemas` and commit the result", file=sys.stderr)
+            return 1
+        print(f"{directory}: up to date")
+        return 0
+    changes = schema.write(directory, log=lambda line: print(f"{directory}: {line}"))
+    if not changes:
+        print(f"{directory}: up to date")
+    return 0

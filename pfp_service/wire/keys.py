@@ -1,0 +1,269 @@
+"""Every Zenoh key expression of the wire contract: built, parsed and subscribed here only.
+
+No other module spells a topic string.  The layout (one mission per prefix):
+
+    mumt/{m}/unit/{u}/state        unit -> planner      UnitState
+    mumt/{m}/unit/{u}/goal         any -> planner       Goal (DELETE cancels)
+    mumt/{m}/unit/{u}/direction    planner -> unit      Direction
+    mumt/{m}/threat/{t}            any -> planner       ThreatUpdate (DELETE removes)
+    mumt/{m}/preview/{u}           queryable            PreviewRequest -> PlanResult
+    mumt/{m}/planner/{p}/status    queryable            -> PlannerStatus
+    mumt/{m}/event/{kind}          planner -> any       Event
+    mumt/{m}/alive/unit/{u}        liveliness token
+    mumt/{m}/alive/planner/{p}     liveliness token
+
+Every variable part is one key chunk matching ``[A-Za-z0-9_-]{1,64}``, so a
+wildcard ``*`` stands for exactly one of them and an ACL rule can name one
+unit's keys (``mumt/m/unit/u7/**``).  Pure strings: no zenoh import.
+"""
+
+from __future__ import annotations
+
+import re
+from enum import StrEnum
+from typing import NamedTuple
+
+from pfp_service.errors import InputError
+
+__all__ = [
+    "CHUNK_PATTERN",
+    "DEFAULT_MISSION",
+    "ID_NAMES",
+    "PREFIX",
+    "TEMPLATES",
+    "Key",
+    "KeyKind",
+    "alive_planner",
+    "alive_planners",
+    "alive_unit",
+    "alive_units",
+    "check_chunk",
+    "event",
+    "events",
+    "goals",
+    "mission_all",
+    "parse",
+    "planner_status",
+    "planner_statuses",
+    "preview",
+    "previews",
+    "template",
+    "threat",
+    "threats",
+    "unit_direction",
+    "unit_directions",
+    "unit_goal",
+    "unit_state",
+    "unit_states",
+]
+
+PREFIX = "mumt"
+DEFAULT_MISSION = "default"
+CHUNK_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+_CHUNK = re.compile(CHUNK_PATTERN)
+
+
+class KeyKind(StrEnum):
+    """What a key is for; the value names its template in ``TEMPLATES``."""
+
+    UNIT_STATE = "unit_state"
+    UNIT_GOAL = "unit_goal"
+    UNIT_DIRECTION = "unit_direction"
+    THREAT = "threat"
+    PREVIEW = "preview"
+    PLANNER_STATUS = "planner_status"
+    EVENT = "event"
+    ALIVE_UNIT = "alive_unit"
+    ALIVE_PLANNER = "alive_planner"
+
+
+# ``{mission}`` and ``{id}`` are the only variables; the id is a unit, threat,
+# planner or event kind depending on the template.  Published in schemas/index.json.
+TEMPLATES: dict[KeyKind, str] = {
+    KeyKind.UNIT_STATE: PREFIX + "/{mission}/unit/{id}/state",
+    KeyKind.UNIT_GOAL: PREFIX + "/{mission}/unit/{id}/goal",
+    KeyKind.UNIT_DIRECTION: PREFIX + "/{mission}/unit/{id}/direction",
+    KeyKind.THREAT: PREFIX + "/{mission}/threat/{id}",
+    KeyKind.PREVIEW: PREFIX + "/{mission}/preview/{id}",
+    KeyKind.PLANNER_STATUS: PREFIX + "/{mission}/planner/{id}/status",
+    KeyKind.EVENT: PREFIX + "/{mission}/event/{id}",
+    KeyKind.ALIVE_UNIT: PREFIX + "/{mission}/alive/unit/{id}",
+    KeyKind.ALIVE_PLANNER: PREFIX + "/{mission}/alive/planner/{id}",
+}
+
+# What the ``{id}`` chunk names in each template, for people reading the layout.
+ID_NAMES: dict[KeyKind, str] = {
+    KeyKind.UNIT_STATE: "unit",
+    KeyKind.UNIT_GOAL: "unit",
+    KeyKind.UNIT_DIRECTION: "unit",
+    KeyKind.THREAT: "threat",
+    KeyKind.PREVIEW: "unit",
+    KeyKind.PLANNER_STATUS: "planner",
+    KeyKind.EVENT: "kind",
+    KeyKind.ALIVE_UNIT: "unit",
+    KeyKind.ALIVE_PLANNER: "planner",
+}
+
+
+def template(kind: KeyKind) -> str:
+    """The key template with readable variables, e.g. ``mumt/{mission}/unit/{unit}/state``."""
+    return TEMPLATES[kind].replace("{id}", "{" + ID_NAMES[kind] + "}")
+
+
+# Chunk patterns, from the templates, so parse() cannot drift from the builders.
+_PARSERS: list[tuple[KeyKind, re.Pattern[str]]] = [
+    (
+        kind,
+        re.compile(
+            "^"
+            + re.escape(t)
+            .replace(re.escape("{mission}"), r"(?P<mission>[^/]+)")
+            .replace(re.escape("{id}"), r"(?P<id>[^/]+)")
+            + "$"
+        ),
+    )
+    for kind, t in TEMPLATES.items()
+]
+
+
+class Key(NamedTuple):
+    """A parsed key: what it is, its mission and its variable chunk (unit, threat, ...)."""
+
+    kind: KeyKind
+    mission: str
+    id: str
+
+
+def check_chunk(value: str, what: str = "id") -> str:
+    """Return ``value`` if it is a valid key chunk, else raise.
+
+    Raises:
+        InputError: ``value`` is not 1-64 of ``[A-Za-z0-9_-]`` (so no ``/``, ``*``, ``$``).
+    """
+    if not isinstance(value, str) or not _CHUNK.match(value):
+        raise InputError(what, f"{value!r} is not 1-64 characters of [A-Za-z0-9_-]")
+    return value
+
+
+def _build(kind: KeyKind, mission: str, id: str, what: str) -> str:
+    return TEMPLATES[kind].format(mission=check_chunk(mission, "mission"), id=check_chunk(id, what))
+
+
+def _wild(kind: KeyKind, mission: str) -> str:
+    return TEMPLATES[kind].format(mission=check_chunk(mission, "mission"), id="*")
+
+
+# -- concrete keys ------------------------------------------------------------
+def unit_state(mission: str, unit: str) -> str:
+    """``mumt/{mission}/unit/{unit}/state``: where a unit is (unit -> planner)."""
+    return _build(KeyKind.UNIT_STATE, mission, unit, "unit")
+
+
+def unit_goal(mission: str, unit: str) -> str:
+    """``mumt/{mission}/unit/{unit}/goal``: where a unit should go; DELETE cancels."""
+    return _build(KeyKind.UNIT_GOAL, mission, unit, "unit")
+
+
+def unit_direction(mission: str, unit: str) -> str:
+    """``mumt/{mission}/unit/{unit}/direction``: which way to go (planner -> unit)."""
+    return _build(KeyKind.UNIT_DIRECTION, mission, unit, "unit")
+
+
+def threat(mission: str, threat_id: str) -> str:
+    """``mumt/{mission}/threat/{threat_id}``: a threat; DELETE removes it."""
+    return _build(KeyKind.THREAT, mission, threat_id, "threat")
+
+
+def preview(mission: str, unit: str) -> str:
+    """``mumt/{mission}/preview/{unit}``: the whole-path preview queryable."""
+    return _build(KeyKind.PREVIEW, mission, unit, "unit")
+
+
+def planner_status(mission: str, planner: str) -> str:
+    """``mumt/{mission}/planner/{planner}/status``: health and counters queryable."""
+    return _build(KeyKind.PLANNER_STATUS, mission, planner, "planner")
+
+
+def event(mission: str, kind: str) -> str:
+    """``mumt/{mission}/event/{kind}``: planner events (rejected, replan, trapped, arrived)."""
+    return _build(KeyKind.EVENT, mission, kind, "event kind")
+
+
+def alive_unit(mission: str, unit: str) -> str:
+    """``mumt/{mission}/alive/unit/{unit}``: a unit's liveliness token."""
+    return _build(KeyKind.ALIVE_UNIT, mission, unit, "unit")
+
+
+def alive_planner(mission: str, planner: str) -> str:
+    """``mumt/{mission}/alive/planner/{planner}``: a planner's liveliness token."""
+    return _build(KeyKind.ALIVE_PLANNER, mission, planner, "planner")
+
+
+# -- wildcards: one ``*`` per variable chunk, for subscribers and queryables ---
+def unit_states(mission: str) -> str:
+    """``mumt/{mission}/unit/*/state``."""
+    return _wild(KeyKind.UNIT_STATE, mission)
+
+
+def goals(mission: str) -> str:
+    """``mumt/{mission}/unit/*/goal``."""
+    return _wild(KeyKind.UNIT_GOAL, mission)
+
+
+def unit_directions(mission: str) -> str:
+    """``mumt/{mission}/unit/*/direction``."""
+    return _wild(KeyKind.UNIT_DIRECTION, mission)
+
+
+def threats(mission: str) -> str:
+    """``mumt/{mission}/threat/*``."""
+    return _wild(KeyKind.THREAT, mission)
+
+
+def previews(mission: str) -> str:
+    """``mumt/{mission}/preview/*``: what a planner declares its preview queryable on."""
+    return _wild(KeyKind.PREVIEW, mission)
+
+
+def planner_statuses(mission: str) -> str:
+    """``mumt/{mission}/planner/*/status``: ask every planner of a mission."""
+    return _wild(KeyKind.PLANNER_STATUS, mission)
+
+
+def events(mission: str) -> str:
+    """``mumt/{mission}/event/*``."""
+    return _wild(KeyKind.EVENT, mission)
+
+
+def alive_units(mission: str) -> str:
+    """``mumt/{mission}/alive/unit/*``."""
+    return _wild(KeyKind.ALIVE_UNIT, mission)
+
+
+def alive_planners(mission: str) -> str:
+    """``mumt/{mission}/alive/planner/*``."""
+    return _wild(KeyKind.ALIVE_PLANNER, mission)
+
+
+def mission_all(mission: str) -> str:
+    """``mumt/{mission}/**``: everything of one mission (monitoring, ACL)."""
+    return f"{PREFIX}/{check_chunk(mission, 'mission')}/**"
+
+
+def parse(key: str) -> Key:
+    """Split a concrete key into ``Key(kind, mission, id)``.
+
+    Args:
+        key: a key as received (``str(sample.key_expr)``); no wildcards.
+
+    Raises:
+        InputError: path ``key``, when the key is not in the layout or a chunk is invalid.
+    """
+    text = str(key)
+    for kind, pattern in _PARSERS:
+        m = pattern.match(text)
+        if m is not None:
+            if not _CHUNK.match(m["mission"]) or not _CHUNK.match(m["id"]):
+                raise InputError("key", f"{text!r}: a chunk is not 1-64 characters of [A-Za-z0-9_-]")
+            return Key(kind, m["mission"], m["id"])
+    raise InputError("key", f"{text!r} is not a key of the pfp wire contract")

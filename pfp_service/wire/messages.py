@@ -1,0 +1,486 @@
+"""Every message on the wire: frozen msgspec Structs, their decoders, and validation.
+
+Payloads are JSON (``CONTENT_TYPE``), encoded with ``encode()`` and read with
+the ``decode_*`` functions, which are the only way in.  They check the size,
+the types and every bound, and raise ``InputError`` whose ``path`` is rooted
+at ``$`` (``$.position[1]: expected a finite number within ±1e+09``).
+
+Evolution: schemas only grow.  A new field always has a default, and decoders
+ignore fields they do not know, so an older reader accepts a newer message.
+The preview reply is ``core.plan.PlanResult`` itself (what ``pfp plan --json``
+prints); it is imported lazily so this module stays light and zenoh-free.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator, Sequence
+from enum import StrEnum
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar, Union
+
+import msgspec
+from msgspec import Meta
+
+from pfp_service.errors import FINITE_LIMIT, InputError, from_validation
+from pfp_service.types import Id, Iterations, NonNegative, Point, Positive, Skew, Weight
+
+if TYPE_CHECKING:
+    from pfp_service.core.plan import PlanResult
+    from pfp_service.core.threat import Threat
+
+__all__ = [
+    "CHOICES",
+    "CONTENT_TYPE",
+    "EVENT_KINDS",
+    "MAX_LOOKAHEAD",
+    "MAX_PAYLOAD_BYTES",
+    "MAX_WHATIF_THREATS",
+    "AnyEvent",
+    "ArrivedEvent",
+    "Bounds",
+    "Direction",
+    "DirectionStatus",
+    "ErrorReply",
+    "Event",
+    "Goal",
+    "PlannerStatus",
+    "PreviewRequest",
+    "RejectedEvent",
+    "ReplanEvent",
+    "ThreatUpdate",
+    "TrappedEvent",
+    "UnitKind",
+    "UnitState",
+    "WhatIfThreat",
+    "check_bounds",
+    "decode",
+    "decode_direction",
+    "decode_error_reply",
+    "decode_event",
+    "decode_goal",
+    "decode_plan_result",
+    "decode_planner_status",
+    "decode_preview_request",
+    "decode_threat",
+    "decode_unit_state",
+    "encode",
+]
+
+# The MIME type of every payload; ``pfp_service.wire.zenoh_encoding()`` maps it to Zenoh's.
+CONTENT_TYPE = "application/json"
+# Largest payload a decoder reads.  The biggest legitimate message, a preview
+# request with MAX_WHATIF_THREATS threats, is about 60 KiB.
+MAX_PAYLOAD_BYTES = 256 * 1024
+MAX_WHATIF_THREATS = 256
+MAX_LOOKAHEAD = 1000
+
+# ((xmin, ymin), (xmax, ymax)) in metres, the same shape as core.stepper.Bounds.
+Bounds = tuple[tuple[float, float], tuple[float, float]]
+
+Angle = Annotated[float, Meta(ge=-360.0, le=360.0)]
+Speed = Annotated[float, Meta(ge=0.0, le=1000.0)]
+# Sender's clock in seconds (Unix time or any epoch it likes); not checked against ours.
+Time = Annotated[float, Meta(ge=0.0, le=1e11)]
+# Sequence numbers stay within JSON's exactly representable integers.
+Seq = Annotated[int, Meta(ge=0, le=2**53 - 1)]
+Count = Annotated[int, Meta(ge=0, le=2**53 - 1)]
+Text = Annotated[str, Meta(max_length=1024)]
+
+
+class UnitKind(StrEnum):
+    MANNED = "manned"
+    UNMANNED = "unmanned"
+
+
+class DirectionStatus(StrEnum):
+    """What a direction means for the unit receiving it."""
+
+    EN_ROUTE = "en_route"
+    ESCAPING = "escaping"
+    ARRIVED = "arrived"
+    TRAPPED = "trapped"
+    NO_GOAL = "no_goal"
+
+
+CHOICES: dict[str, tuple[str, ...]] = {
+    "kind": tuple(k.value for k in UnitKind),
+    "status": tuple(s.value for s in DirectionStatus),
+}
+
+
+class _Message(msgspec.Struct, frozen=True, kw_only=True):
+    """Base of every wire message: frozen, keyword-only, unknown fields ignored."""
+
+
+# -- unit -> planner ------------------------------------------------------------
+class UnitState(_Message, frozen=True, kw_only=True):
+    """Where a unit is; published on ``mumt/{m}/unit/{u}/state``.
+
+    Attributes:
+        position: ``[x, y]`` in metres (x east, y north).
+        t: the sender's time of the fix in seconds, if it has one.
+        seq: the sender's sequence number; the direction answering it echoes it.
+        kind: ``manned`` or ``unmanned``.
+        speed_mps: ground speed in metres per second.
+        heading_deg: compass heading in degrees, clockwise from north.
+    """
+
+    position: Point
+    t: Time | None = None
+    seq: Seq | None = None
+    kind: UnitKind | None = None
+    speed_mps: Speed | None = None
+    heading_deg: Angle | None = None
+
+
+class Goal(_Message, frozen=True, kw_only=True):
+    """Where a unit should go; put on ``mumt/{m}/unit/{u}/goal``, a DELETE cancels it.
+
+    Attributes:
+        position: ``[x, y]`` in metres.
+        delta: goal weight; derived by the scale-free rule when absent.
+        tolerance: arrival radius in metres; derived when absent.
+        step: step length in metres; derived when absent.
+    """
+
+    position: Point
+    delta: Positive | None = None
+    tolerance: Positive | None = None
+    step: Positive | None = None
+
+
+class ThreatUpdate(_Message, frozen=True, kw_only=True):
+    """A threat, put on ``mumt/{m}/threat/{t}`` (the id is the key's last chunk); a DELETE removes it.
+
+    Attributes:
+        position: the enemy position ``[x, y]`` in metres.
+        facing_deg: the direction it faces, compass degrees.
+        sigma_range: spread along the facing, metres (> 0).
+        sigma_lateral: spread across the facing, metres (> 0).
+        skew: how far the threat reaches forward rather than back (0 = symmetric, <= 1000).
+        weight: how much it matters (0 to 1e6).
+        ttl_s: seconds until it expires unless put again; absent = until deleted.
+    """
+
+    position: Point
+    facing_deg: Angle = 0.0
+    sigma_range: Positive
+    sigma_lateral: Positive
+    skew: Skew = 0.0
+    weight: Weight = 1.0
+    ttl_s: Positive | None = None
+
+    def to_threat(self, threat_id: str) -> Threat:
+        """The core's ``Threat`` for this update, named ``threat_id``."""
+        from pfp_service.core.threat import Threat
+
+        return Threat.from_facing(
+            self.position,
+            self.facing_deg,
+            self.sigma_range,
+            self.sigma_lateral,
+            self.skew,
+            self.weight,
+            threat_id,
+        )
+
+
+class WhatIfThreat(ThreatUpdate, frozen=True, kw_only=True):
+    """A hypothetical threat in a preview request; it carries its own id."""
+
+    id: Id
+
+
+def _duplicate_ids(threats: Sequence[WhatIfThreat]) -> None:
+    seen: set[str] = set()
+    for i, t in enumerate(threats):
+        if t.id in seen:
+            raise ValueError(f"threats[{i}].id: duplicate id {t.id!r}")
+        seen.add(t.id)
+
+
+class PreviewRequest(_Message, frozen=True, kw_only=True):
+    """Optional body of a query on ``mumt/{m}/preview/{u}``.
+
+    No body (or ``{}``) previews the unit's live state to its live goal.  Any
+    field given makes it a what-if: ``start`` and ``goal`` replace the unit's,
+    ``threats`` are added to the live ones, and the live world is unchanged.
+    """
+
+    start: Point | None = None
+    goal: Point | None = None
+    threats: Annotated[list[WhatIfThreat], Meta(max_length=MAX_WHATIF_THREATS)] = []
+    delta: Positive | None = None
+    step: Positive | None = None
+    tolerance: Positive | None = None
+    max_iter: Iterations | None = None
+
+    def __post_init__(self) -> None:
+        _duplicate_ids(self.threats)
+
+    @property
+    def what_if(self) -> bool:
+        """True when anything was asked beyond the live preview."""
+        return self != PreviewRequest()
+
+
+# -- planner -> unit and replies ------------------------------------------------
+class Direction(_Message, frozen=True, kw_only=True):
+    """Which way to go; published on ``mumt/{m}/unit/{u}/direction``.
+
+    Attributes:
+        unit: the unit this is for.
+        seq: the ``seq`` of the state it answers (null when it had none, or when
+            a threat or goal change triggered it: then the latest seen).
+        status: ``en_route | escaping | arrived | trapped | no_goal``.
+        vector: unit vector ``[dx, dy]`` to move along; ``[0, 0]`` when not moving.
+        heading_deg: the vector as a compass heading, null when not moving.
+        distance_to_goal: metres, null without a goal.
+        threat_level: weighted threat level at the unit's position.
+        lookahead: the next positions the same stepper predicts, ``[[x, y], ...]``.
+        reason: why, for ``trapped`` and ``escaping``.
+    """
+
+    unit: Id
+    seq: Seq | None = None
+    status: DirectionStatus
+    vector: Point
+    heading_deg: Angle | None = None
+    distance_to_goal: NonNegative | None = None
+    threat_level: NonNegative = 0.0
+    lookahead: Annotated[list[Point], Meta(max_length=MAX_LOOKAHEAD)] = []
+    reason: Text = ""
+
+
+class ErrorReply(_Message, frozen=True, kw_only=True):
+    """The ``reply_err`` body for a bad query: the reason and the field path."""
+
+    error: Text
+    field: Text = "$"
+
+    @classmethod
+    def of(cls, exc: InputError) -> ErrorReply:
+        return cls(error=exc.reason, field=exc.path or "$")
+
+
+class PlannerStatus(_Message, frozen=True, kw_only=True):
+    """Reply of ``mumt/{m}/planner/{p}/status``: health and counters."""
+
+    planner: Id
+    mission: Id
+    version: Text = ""
+    uptime_s: NonNegative
+    units: Count = 0
+    units_stale: Count = 0
+    threats: Count = 0
+    msgs_in: Count = 0
+    msgs_out: Count = 0
+    rejected: Count = 0
+    latency_p50_ms: NonNegative | None = None
+    latency_p99_ms: NonNegative | None = None
+
+
+# -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
+class Event(_Message, frozen=True, kw_only=True, tag_field="kind"):
+    """Base of planner events.  ``t`` is the planner's Unix time in seconds."""
+
+    planner: Id | None = None
+    t: Time | None = None
+
+
+class RejectedEvent(Event, frozen=True, kw_only=True, tag="rejected"):
+    """An input the planner refused: the key it came on, the field path and why."""
+
+    key: Text
+    field: Text = "$"
+    reason: Text
+
+    @classmethod
+    def of(
+        cls, key: str, exc: InputError, planner: str | None = None, t: float | None = None
+    ) -> RejectedEvent:
+        return cls(key=key, field=exc.path or "$", reason=exc.reason, planner=planner, t=t)
+
+
+class ReplanEvent(Event, frozen=True, kw_only=True, tag="replan"):
+    """The world changed (threat or goal), and these units got fresh directions."""
+
+    units: list[Id]
+    reason: Text
+
+
+class TrappedEvent(Event, frozen=True, kw_only=True, tag="trapped"):
+    """A unit is honestly stuck."""
+
+    unit: Id
+    position: Point
+    reason: Text = ""
+
+
+class ArrivedEvent(Event, frozen=True, kw_only=True, tag="arrived"):
+    """A unit is within tolerance of its goal."""
+
+    unit: Id
+    position: Point
+    distance_to_goal: NonNegative = 0.0
+
+
+AnyEvent = Union[RejectedEvent, ReplanEvent, TrappedEvent, ArrivedEvent]  # noqa: UP007
+EVENT_KINDS: tuple[str, ...] = ("rejected", "replan", "trapped", "arrived")
+
+# -- encoding and decoding -------------------------------------------------------
+_ENCODER = msgspec.json.Encoder()
+_DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
+    t: msgspec.json.Decoder(t)
+    for t in (UnitState, Goal, ThreatUpdate, PreviewRequest, Direction, ErrorReply, PlannerStatus, AnyEvent)
+}
+M = TypeVar("M")
+
+
+def encode(msg: msgspec.Struct) -> bytes:
+    """JSON bytes of any wire message (or of a ``PlanResult``)."""
+    return _ENCODER.encode(msg)
+
+
+def _rooted(path: str) -> str:
+    if not path:
+        return "$"
+    return "$" + path if path.startswith("[") else "$." + path
+
+
+_ROOT_OWN = re.compile(r"^(?P<path>[A-Za-z_][\w\[\].]*): (?P<reason>.+)$", re.S)
+
+
+def _wire_error(exc: msgspec.ValidationError | msgspec.DecodeError) -> InputError:
+    text = str(exc)
+    # A __post_init__ check of the top-level struct comes without " - at `$`";
+    # from_validation would call it malformed JSON.
+    own = _ROOT_OWN.match(text) if isinstance(exc, msgspec.ValidationError) else None
+    if own is not None and " - at `$" not in text:
+        return InputError(_rooted(own["path"]), own["reason"])
+    e = from_validation(exc, CHOICES)
+    reason = e.reason
+    if reason == "number out of range":  # 1e999 and friends: JSON has no infinities
+        reason = f"expected a finite number within ±{FINITE_LIMIT:g}"
+    elif reason.startswith("expected float, got "):
+        reason = "expected a finite number, got " + reason[len("expected float, got ") :]
+    return InputError(_rooted(e.path), reason)
+
+
+def decode(cls: type[M], data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> M:
+    """Decode and validate one message of type ``cls``.
+
+    Args:
+        cls: a message Struct of this module, ``AnyEvent``, or ``PlanResult``.
+        data: the payload as received.
+        bounds: the mission bounds, if any; every position must lie within them.
+
+    Raises:
+        InputError: ``path`` rooted at ``$`` and the reason.
+    """
+    decoder = _DECODERS.get(cls)
+    if decoder is None:
+        decoder = _DECODERS[cls] = msgspec.json.Decoder(cls)
+    size = 0 if data is None else len(data)
+    if size == 0:
+        raise InputError("$", "empty payload (expected a JSON object)")
+    if size > MAX_PAYLOAD_BYTES:
+        raise InputError("$", f"payload of {size} bytes exceeds the limit of {MAX_PAYLOAD_BYTES}")
+    try:
+        msg: M = decoder.decode(data)  # type: ignore[arg-type]
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise _wire_error(exc) from exc
+    if bounds is not None:
+        check_bounds(msg, bounds)
+    return msg
+
+
+def _positions(msg: object) -> Iterator[tuple[str, tuple[float, float]]]:
+    if isinstance(msg, (UnitState, Goal, ThreatUpdate, TrappedEvent, ArrivedEvent)):
+        yield "$.position", msg.position
+    elif isinstance(msg, PreviewRequest):
+        if msg.start is not None:
+            yield "$.start", msg.start
+        if msg.goal is not None:
+            yield "$.goal", msg.goal
+        for i, t in enumerate(msg.threats):
+            yield f"$.threats[{i}].position", t.position
+
+
+def check_bounds(msg: object, bounds: Bounds) -> None:
+    """Check that every position in ``msg`` lies within ``bounds`` (edges included).
+
+    Args:
+        msg: a decoded message; those without positions pass.
+        bounds: ``((xmin, ymin), (xmax, ymax))`` from the daemon's mission config.
+
+    Raises:
+        InputError: the first position outside, with its path.
+        ValueError: ``bounds`` is empty or inverted (a configuration bug).
+    """
+    (x0, y0), (x1, y1) = bounds
+    if not (x0 < x1 and y0 < y1):
+        raise ValueError(f"bounds: must be ((xmin, ymin), (xmax, ymax)) with min < max, got {bounds}")
+    for path, (x, y) in _positions(msg):
+        if not (x0 <= x <= x1 and y0 <= y <= y1):
+            raise InputError(
+                path, f"[{x:g}, {y:g}] lies outside the mission bounds [[{x0:g}, {y0:g}], [{x1:g}, {y1:g}]]"
+            )
+
+
+def decode_unit_state(data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> UnitState:
+    """A ``UnitState`` from a ``unit/{u}/state`` payload (see ``decode``)."""
+    return decode(UnitState, data, bounds)
+
+
+def decode_goal(data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> Goal:
+    """A ``Goal`` from a ``unit/{u}/goal`` PUT payload (see ``decode``)."""
+    return decode(Goal, data, bounds)
+
+
+def decode_threat(data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> ThreatUpdate:
+    """A ``ThreatUpdate`` from a ``threat/{t}`` PUT payload (see ``decode``)."""
+    return decode(ThreatUpdate, data, bounds)
+
+
+def decode_preview_request(
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None
+) -> PreviewRequest:
+    """A ``PreviewRequest`` from a preview query body; no body means the live preview."""
+    if data is None or len(data) == 0:
+        return PreviewRequest()
+    return decode(PreviewRequest, data, bounds)
+
+
+def decode_direction(data: bytes | bytearray | memoryview | None) -> Direction:
+    """A ``Direction`` (for units and clients)."""
+    return decode(Direction, data)
+
+
+def decode_planner_status(data: bytes | bytearray | memoryview | None) -> PlannerStatus:
+    """A ``PlannerStatus`` status-query reply."""
+    return decode(PlannerStatus, data)
+
+
+def decode_error_reply(data: bytes | bytearray | memoryview | None) -> ErrorReply:
+    """An ``ErrorReply`` from a ``reply_err`` body."""
+    return decode(ErrorReply, data)
+
+
+def decode_event(
+    data: bytes | bytearray | memoryview | None,
+) -> RejectedEvent | ReplanEvent | TrappedEvent | ArrivedEvent:
+    """One planner event, by its ``kind`` tag (an unknown kind is an ``InputError`` at ``$.kind``)."""
+    try:
+        return decode(AnyEvent, data)  # type: ignore[arg-type, no-any-return]
+    except InputError as exc:
+        if exc.path == "$.kind" and exc.reason.startswith("invalid value"):
+            raise InputError(exc.path, f"{exc.reason} (expected one of: {', '.join(EVENT_KINDS)})") from exc
+        raise
+
+
+def decode_plan_result(data: bytes | bytearray | memoryview | None) -> PlanResult:
+    """A preview reply: ``core.plan.PlanResult``, exactly what ``pfp plan --json`` prints."""
+    from pfp_service.core.plan import PlanResult
+
+    return decode(PlanResult, data)

@@ -1,0 +1,378 @@
+"""The published contract: JSON Schema, an example and the key of every wire message.
+
+``render()`` returns the whole ``schemas/`` directory as ``{relative path: text}``
+from the Structs themselves (the preview reply from ``core.plan.PlanResult``),
+so it cannot drift from the code.  ``diff()`` says what on disk is stale and
+``write()`` brings it up to date; ``pfp schemas [--check]`` calls them.  Only
+``diff`` and ``write`` touch the file system.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from pfp_service.wire import keys
+from pfp_service.wire import messages as m
+from pfp_service.wire.keys import KeyKind
+
+__all__ = ["CONTRACT_VERSION", "MESSAGES", "MessageSpec", "diff", "examples", "render", "write"]
+
+# Bumped only for a change an older client cannot read; adding a defaulted field is not one.
+CONTRACT_VERSION = 1
+JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+
+
+@dataclass(frozen=True)
+class MessageSpec:
+    """One message of the contract: its name, type, key and who sends it how."""
+
+    name: str
+    type: Any
+    key: KeyKind | None
+    op: str
+    sender: str
+    receiver: str
+    note: str = ""
+
+
+def _plan_result() -> Any:
+    from pfp_service.core.plan import PlanResult
+
+    return PlanResult
+
+
+MESSAGES: tuple[MessageSpec, ...] = (
+    MessageSpec("unit_state", m.UnitState, KeyKind.UNIT_STATE, "put", "unit", "planner"),
+    MessageSpec(
+        "goal", m.Goal, KeyKind.UNIT_GOAL, "put", "any", "planner", "a DELETE on the key cancels the goal"
+    ),
+    MessageSpec(
+        "threat",
+        m.ThreatUpdate,
+        KeyKind.THREAT,
+        "put",
+        "any",
+        "planner",
+        "a DELETE on the key removes the threat",
+    ),
+    MessageSpec("direction", m.Direction, KeyKind.UNIT_DIRECTION, "put", "planner", "unit"),
+    MessageSpec(
+        "preview_request",
+        m.PreviewRequest,
+        KeyKind.PREVIEW,
+        "get payload",
+        "any",
+        "planner",
+        "optional; no payload previews the unit's live state to its live goal",
+    ),
+    MessageSpec(
+        "preview_reply",
+        None,
+        KeyKind.PREVIEW,
+        "reply",
+        "planner",
+        "any",
+        "the same object as `pfp plan --json`",
+    ),
+    MessageSpec(
+        "error_reply",
+        m.ErrorReply,
+        None,
+        "reply_err",
+        "planner",
+        "any",
+        "answer to a bad preview or status query",
+    ),
+    MessageSpec("planner_status", m.PlannerStatus, KeyKind.PLANNER_STATUS, "reply", "planner", "any"),
+    MessageSpec(
+        "event", m.AnyEvent, KeyKind.EVENT, "put", "planner", "any", "`kind` repeats the key's last chunk"
+    ),
+)
+
+LIVELINESS: tuple[KeyKind, ...] = (KeyKind.ALIVE_UNIT, KeyKind.ALIVE_PLANNER)
+
+
+def _type_of(spec: MessageSpec) -> Any:
+    return _plan_result() if spec.type is None else spec.type
+
+
+def examples() -> dict[str, list[tuple[str, Any]]]:
+    """Example instances by message name, as ``(example name, struct)`` pairs."""
+    from pfp_service.core.plan import PlanResult, PlanStatus, UsedParams
+
+    hit = m.WhatIfThreat(
+        id="ambush",
+        position=(5.0, 6.0),
+        facing_deg=225.0,
+        sigma_range=1.5,
+        sigma_lateral=0.8,
+        skew=2.0,
+        weight=1.0,
+    )
+    return {
+        "unit_state": [
+            (
+                "unit_state",
+                m.UnitState(
+                    position=(1.5, 2.25),
+                    t=1767225600.5,
+                    seq=42,
+                    kind=m.UnitKind.UNMANNED,
+                    speed_mps=1.2,
+                    heading_deg=45.0,
+                ),
+            )
+        ],
+        "goal": [("goal", m.Goal(position=(10.0, 10.0), tolerance=0.1))],
+        "threat": [
+            (
+                "threat",
+                m.ThreatUpdate(
+                    position=(4.0, 5.0),
+                    facing_deg=180.0,
+                    sigma_range=2.0,
+                    sigma_lateral=1.0,
+                    skew=3.0,
+                    weight=1.0,
+                    ttl_s=30.0,
+                ),
+            )
+        ],
+        "direction": [
+            (
+                "direction",
+                m.Direction(
+                    unit="ugv-1",
+                    seq=42,
+                    status=m.DirectionStatus.EN_ROUTE,
+                    vector=(0.6, 0.8),
+                    heading_deg=36.87,
+                    distance_to_goal=10.2,
+                    threat_level=0.031,
+                    lookahead=[(1.56, 2.33), (1.62, 2.41)],
+                ),
+            )
+        ],
+        "preview_request": [
+            (
+                "preview_request",
+                m.PreviewRequest(start=(0.0, 0.0), goal=(10.0, 10.0), threats=[hit], max_iter=2000),
+            )
+        ],
+        "preview_reply": [
+            (
+                "preview_reply",
+                PlanResult(
+                    status=PlanStatus.REACHED,
+                    reason="within tolerance of the goal",
+                    steps=2,
+                    length=0.2,
+                    exposure=0.0015,
+                    peak_threat=0.0081,
+                    min_clearance=6.3,
+                    final_distance=0.05,
+                    path=[(9.85, 9.85), (9.92, 9.92), (9.99, 9.99)],
+                    compute_ms=0.4,
+                    params=UsedParams(
+                        delta=1.0, step=0.1, max_iter=300, tolerance=0.1, intensity="peak", escape="none"
+                    ),
+                ),
+            )
+        ],
+        "error_reply": [("error_reply", m.ErrorReply(error="must be > 0", field="$.threats[0].sigma_range"))],
+        "planner_status": [
+            (
+                "planner_status",
+                m.PlannerStatus(
+                    planner="planner-1",
+                    mission="default",
+                    version="0.1.0",
+                    uptime_s=3600.0,
+                    units=12,
+                    units_stale=1,
+                    threats=5,
+                    msgs_in=43200,
+                    msgs_out=43190,
+                    rejected=3,
+                    latency_p50_ms=0.21,
+                    latency_p99_ms=0.9,
+                ),
+            )
+        ],
+        "event": [
+            (
+                "event.rejected",
+                m.RejectedEvent(
+                    key="mumt/default/unit/ugv-1/state",
+                    field="$.position[1]",
+                    reason="expected a finite number within ±1e+09",
+                    planner="planner-1",
+                    t=1767225600.5,
+                ),
+            ),
+            (
+                "event.replan",
+                m.ReplanEvent(
+                    units=["ugv-1", "tank-2"], reason="threat ambush appeared", planner="planner-1"
+                ),
+            ),
+            (
+                "event.trapped",
+                m.TrappedEvent(unit="ugv-1", position=(4.6, 4.9), reason="no progress in 200 steps"),
+            ),
+            ("event.arrived", m.ArrivedEvent(unit="ugv-1", position=(9.97, 10.02), distance_to_goal=0.036)),
+        ],
+    }
+
+
+def _dump(obj: Any) -> str:
+    return json.dumps(obj, indent=2, ensure_ascii=False) + "\n"
+
+
+def _describe(defs: dict[str, Any]) -> None:
+    """Dedent each struct's docstring and move its ``Attributes:`` lines onto the properties."""
+    for d in defs.values():
+        if "description" not in d:
+            continue
+        doc, _, attrs = inspect.cleandoc(d["description"]).partition("\nAttributes:\n")
+        d["description"] = doc.strip()
+        name = ""
+        notes: dict[str, str] = {}
+        for line in attrs.splitlines():
+            head, sep, text = line.strip().partition(": ")
+            if sep and head.isidentifier() and line.startswith("    ") and not line.startswith("        "):
+                name = head
+                notes[name] = text.strip()
+            elif name:
+                notes[name] += " " + line.strip()
+        for field, text in notes.items():
+            prop = d.get("properties", {}).get(field)
+            if prop is not None:
+                d["properties"][field] = {"description": text, **prop}
+
+
+def _schema(spec: MessageSpec) -> dict[str, Any]:
+    body = msgspec.json.schema(_type_of(spec))
+    _describe(body.get("$defs", {}))
+    head: dict[str, Any] = {
+        "$schema": JSON_SCHEMA_DIALECT,
+        "$id": f"{spec.name}.schema.json",
+        "title": spec.name,
+    }
+    info: dict[str, Any] = {"op": spec.op, "from": spec.sender, "to": spec.receiver}
+    if spec.key is not None:
+        info["key"] = keys.template(spec.key)
+    if spec.note:
+        info["note"] = spec.note
+    head["x-pfp"] = info
+    return {**head, **body}
+
+
+def _index(ex: dict[str, list[tuple[str, Any]]]) -> dict[str, Any]:
+    msgs: dict[str, Any] = {}
+    for spec in MESSAGES:
+        entry: dict[str, Any] = {"key": keys.template(spec.key) if spec.key is not None else None}
+        entry.update(op=spec.op, sender=spec.sender, receiver=spec.receiver)
+        if spec.note:
+            entry["note"] = spec.note
+        entry["schema"] = f"{spec.name}.schema.json"
+        entry["examples"] = [f"examples/{name}.json" for name, _ in ex[spec.name]]
+        msgs[spec.name] = entry
+    return {
+        "contract": "pfp-service wire contract",
+        "version": CONTRACT_VERSION,
+        "encoding": m.CONTENT_TYPE,
+        "max_payload_bytes": m.MAX_PAYLOAD_BYTES,
+        "default_mission": keys.DEFAULT_MISSION,
+        "chunk_pattern": keys.CHUNK_PATTERN,
+        "evolution": "fields are only added, always with a default; readers ignore unknown fields",
+        "messages": msgs,
+        "liveliness": {k.value: keys.template(k) for k in LIVELINESS},
+    }
+
+
+def _readme(index: dict[str, Any]) -> str:
+    lines = [
+        "# pfp-service wire contract (generated by `pfp schemas`; do not edit)",
+        "",
+        f"Contract version {index['version']}. Every payload is JSON (`{index['encoding']}`), at most "
+        f"{index['max_payload_bytes']} bytes. `{{mission}}` defaults to `{index['default_mission']}`; "
+        f"every `{{...}}` chunk matches `{index['chunk_pattern']}`. {index['evolution'].capitalize()}.",
+        "",
+        "| message | key | op | from → to | schema | example |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, e in index["messages"].items():
+        key = f"`{e['key']}`" if e["key"] else "(reply to a query)"
+        exs = ", ".join(f"[{Path(x).stem}]({x})" for x in e["examples"])
+        note = f" — {e['note']}" if "note" in e else ""
+        lines.append(
+            f"| {name}{note} | {key} | {e['op']} | {e['sender']} → {e['receiver']} | "
+            f"[{e['schema']}]({e['schema']}) | {exs} |"
+        )
+    lines += ["", "Liveliness tokens (no payload):", ""]
+    lines += [f"- `{t}`" for t in index["liveliness"].values()]
+    lines += ["", "Machine-readable: [index.json](index.json).", ""]
+    return "\n".join(lines)
+
+
+def render() -> dict[str, str]:
+    """Every file of ``schemas/`` as ``{relative posix path: text}``."""
+    ex = examples()
+    files: dict[str, str] = {}
+    for spec in MESSAGES:
+        files[f"{spec.name}.schema.json"] = _dump(_schema(spec))
+        for name, obj in ex[spec.name]:
+            files[f"examples/{name}.json"] = _dump(msgspec.to_builtins(obj))
+    index = _index(ex)
+    files["index.json"] = _dump(index)
+    files["README.md"] = _readme(index)
+    return files
+
+
+def _on_disk(directory: Path) -> set[str]:
+    if not directory.is_dir():
+        return set()
+    return {
+        p.relative_to(directory).as_posix()
+        for p in directory.rglob("*")
+        if p.is_file() and p.suffix in (".json", ".md")
+    }
+
+
+def diff(directory: Path, files: dict[str, str] | None = None) -> list[str]:
+    """What is stale in ``directory``: ``missing X``, ``changed X`` and ``extra X`` lines."""
+    files = render() if files is None else files
+    out: list[str] = []
+    present = _on_disk(directory)
+    for rel, text in sorted(files.items()):
+        if rel not in present:
+            out.append(f"missing {rel}")
+        elif (directory / rel).read_text(encoding="utf-8") != text:
+            out.append(f"changed {rel}")
+    out += [f"extra {rel}" for rel in sorted(present - files.keys())]
+    return out
+
+
+def write(directory: Path, log: Callable[[str], None] | None = None) -> list[str]:
+    """Bring ``directory`` up to date and return what changed (as ``diff`` names it)."""
+    files = render()
+    changes = diff(directory, files)
+    for line in changes:
+        what, rel = line.split(" ", 1)
+        path = directory / rel
+        if what == "extra":
+            path.unlink()
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(files[rel], encoding="utf-8")
+        if log is not None:
+            log(line)
+    return changes
