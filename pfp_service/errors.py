@@ -53,7 +53,9 @@ def _num(text: str) -> str:
     return f"{value:g}"
 
 
-def from_validation(exc: msgspec.ValidationError | msgspec.DecodeError, choices: dict[str, tuple[str, ...]] | None = None) -> InputError:
+def from_validation(
+    exc: msgspec.ValidationError | msgspec.DecodeError, choices: dict[str, tuple[str, ...]] | None = None
+) -> InputError:
     """Turn a msgspec error into ``InputError(path, reason)`` in this project's words.
 
     Args:
@@ -81,8 +83,8 @@ def from_validation(exc: msgspec.ValidationError | msgspec.DecodeError, choices:
         return InputError(path, msg.replace("Invalid enum value", "unknown value") + extra)
     if msg.startswith("Expected `"):
         return InputError(path, "expected " + msg[len("Expected ") :].replace("`", ""))
-    if (b := _OWN.match(msg)) is not None and m is not None:
-        return InputError(_join(path, b["field"]), b["reason"])
-    if msg.startswith("JSON is malformed") or isinstance(exc, msgspec.DecodeError) and not m:
+    if not isinstance(exc, msgspec.ValidationError):
         return InputError(path, "malformed JSON: " + msg.split(": ", 1)[-1])
+    if (b := _OWN.match(msg)) is not None:
+        return InputError(_join(path, b["field"]), b["reason"])
     return InputError(path, msg[0].lower() + msg[1:] if msg else "invalid")

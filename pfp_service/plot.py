@@ -27,7 +27,9 @@ def _pyplot() -> Any:
     return plt
 
 
-def extent(points: Sequence[Sequence[float]], threats: Sequence[Threat], margin: float = 0.08) -> tuple[float, float, float, float]:
+def extent(
+    points: Sequence[Sequence[float]], threats: Sequence[Threat], margin: float = 0.08
+) -> tuple[float, float, float, float]:
     """A box around ``points`` and each threat's 3-sigma zone."""
     xs = [p[0] for p in points]
     ys = [p[1] for p in points]
@@ -85,7 +87,9 @@ def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.set_title(f"{scenario.name}: {result.status.value}, {result.steps} steps, exposure {result.exposure:.3g}")
+    ax.set_title(
+        f"{scenario.name}: {result.status.value}, {result.steps} steps, exposure {result.exposure:.3g}"
+    )
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     fig.savefig(out)

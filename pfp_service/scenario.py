@@ -9,7 +9,7 @@ bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import msgspec
 import yaml
@@ -73,7 +73,13 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
         if self.omega is None:
             assert self.sigma_range is not None and self.sigma_lateral is not None
             return Threat.from_facing(
-                self.position, self.facing_deg, self.sigma_range, self.sigma_lateral, self.skew, self.weight, tid
+                self.position,
+                self.facing_deg,
+                self.sigma_range,
+                self.sigma_lateral,
+                self.skew,
+                self.weight,
+                tid,
             )
         alpha = self.alpha if self.alpha is not None else (0.0, 0.0)
         return Threat(

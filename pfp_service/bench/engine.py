@@ -41,7 +41,9 @@ TARGET_FLEET_MS = 20.0
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--repeat", type=positive_int, default=21, help="runs per row for our median (default 21)")
-    p.add_argument("--baseline-repeat", type=positive_int, default=3, help="runs per row for the baseline median")
+    p.add_argument(
+        "--baseline-repeat", type=positive_int, default=3, help="runs per row for the baseline median"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--quick", action="store_true", help="only MAXITER 300 rows (a smoke run)")
 
@@ -112,7 +114,19 @@ def run_rows(repeat: int, baseline_repeat: int, quick: bool) -> list[Row]:
         ours = _median_ms(lambda: plan((0.0, 0.0), goal, sched, params), repeat)
         base = _median_ms(lambda: baseline_path((0, 0), goal, threats, delta, step, k), baseline_repeat)
         rows.append(
-            Row(k, size, n, delta, step, result.steps, ours, paper_s * 1e3, base, paper_s * 1e3 / ours, base / ours)
+            Row(
+                k,
+                size,
+                n,
+                delta,
+                step,
+                result.steps,
+                ours,
+                paper_s * 1e3,
+                base,
+                paper_s * 1e3 / ours,
+                base / ours,
+            )
         )
     return rows
 
@@ -127,7 +141,13 @@ def natural_path_ms(repeat: int) -> dict[str, Any]:
     params = PlannerParams(delta=0.7, step=0.15, max_iter=1000, tolerance=0.15, intensity="density")
     r = plan((0.0, 0.0), goal, sched, params)
     ms = _median_ms(lambda: plan((0.0, 0.0), goal, sched, params), repeat)
-    return {"status": r.status.value, "steps": r.steps, "threats": 8, "median_ms": ms, "target_ms": TARGET_PATH_MS}
+    return {
+        "status": r.status.value,
+        "steps": r.steps,
+        "threats": 8,
+        "median_ms": ms,
+        "target_ms": TARGET_PATH_MS,
+    }
 
 
 def fleet_ms(repeat: int) -> dict[str, Any]:
@@ -141,7 +161,9 @@ def fleet_ms(repeat: int) -> dict[str, Any]:
     out: dict[str, Any] = {"units": 10_000, "threats": 100, "target_ms": TARGET_FLEET_MS}
     for layout, box, sigma in (("spread", 30_000.0, 600.0), ("dense", 3_000.0, 600.0)):
         threats = [
-            Threat.from_facing(rng.uniform(0, box, 2), rng.uniform(0, 360), sigma, 0.7 * sigma, 2.0, 1.0, f"t{j}")
+            Threat.from_facing(
+                rng.uniform(0, box, 2), rng.uniform(0, 360), sigma, 0.7 * sigma, 2.0, 1.0, f"t{j}"
+            )
             for j in range(100)
         ]
         field = ThreatField(threats)
@@ -150,11 +172,15 @@ def fleet_ms(repeat: int) -> dict[str, Any]:
         gains = np.full(10_000, 1e-6)
         res = np.empty((10_000, 4))
         batch_descent(field.packed, pts, goals, gains, res)  # compile + warm
-        out[f"{layout}_kernel_ms"] = _median_ms(lambda: batch_descent(field.packed, pts, goals, gains, res), repeat)
+        out[f"{layout}_kernel_ms"] = _median_ms(
+            lambda: batch_descent(field.packed, pts, goals, gains, res), repeat
+        )
         params = resolve(PlannerParams(), (0.0, 0.0), (box, box), threats)
         steppers = [Stepper(tuple(p), tuple(g), params) for p, g in zip(pts, goals)]
         advise_many(steppers, field, pts)
-        out[f"{layout}_advise_many_ms"] = _median_ms(lambda: advise_many(steppers, field, pts), max(3, repeat // 4))
+        out[f"{layout}_advise_many_ms"] = _median_ms(
+            lambda: advise_many(steppers, field, pts), max(3, repeat // 4)
+        )
     return out
 
 
@@ -169,10 +195,17 @@ def run(args: argparse.Namespace) -> int:
         "every row >= 1000x the paper": all(r.vs_paper >= TARGET_VS_PAPER for r in rows),
         "every row >= 50x the baseline": all(r.vs_baseline >= TARGET_VS_BASELINE for r in rows),
         "300-step 8-threat path <= 2 ms": path["median_ms"] <= TARGET_PATH_MS,
-        "10,000 units x 100 threats <= 20 ms (dense kernel call)": fleet["dense_kernel_ms"] <= TARGET_FLEET_MS,
+        "10,000 units x 100 threats <= 20 ms (dense kernel call)": fleet["dense_kernel_ms"]
+        <= TARGET_FLEET_MS,
     }
     if args.json:
-        doc = {"machine": machine, "rows": [asdict(r) for r in rows], "path": path, "fleet": fleet, "checks": checks}
+        doc = {
+            "machine": machine,
+            "rows": [asdict(r) for r in rows],
+            "path": path,
+            "fleet": fleet,
+            "checks": checks,
+        }
         print(json.dumps(doc, indent=2))
         return 0
     print(f"pfp bench engine on {machine}")

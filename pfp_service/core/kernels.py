@@ -18,7 +18,14 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["Q_CUTOFF", "batch_descent", "batch_level", "batch_level_grad", "point_descent", "point_level_grad"]
+__all__ = [
+    "Q_CUTOFF",
+    "batch_descent",
+    "batch_level",
+    "batch_level_grad",
+    "point_descent",
+    "point_level_grad",
+]
 
 # exp(-x) == 0.0 in float64 for x > 745.14; 2 * 746 leaves a margin.
 Q_CUTOFF = 1492.0
@@ -102,11 +109,7 @@ def batch_level(packed: np.ndarray, points: np.ndarray, out: np.ndarray) -> None
                 continue
             zx = x - packed[j, _XX]
             zy = y - packed[j, _XY]
-            q = (
-                packed[j, _P00] * zx * zx
-                + 2.0 * packed[j, _P01] * zx * zy
-                + packed[j, _P11] * zy * zy
-            )
+            q = packed[j, _P00] * zx * zx + 2.0 * packed[j, _P01] * zx * zy + packed[j, _P11] * zy * zy
             if q > Q_CUTOFF:
                 continue
             u = packed[j, _AX] * zx + packed[j, _AY] * zy

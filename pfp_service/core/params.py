@@ -7,7 +7,9 @@ The rule (also in README.md, "Scale-free defaults"):
 * ``step = clamp(min(D0 / 150, s_min / 4), D0 / 3000, D0 / 20)``: fine enough to
   resolve the narrowest threat, coarse enough that a path is never more than a
   few thousand steps.
-* ``tolerance = step``: the paper's pairing (0.1 and 0.1).
+* ``tolerance = 0.75 step``: a straight approach ends within half a step of the
+  goal, so this always arrives, and it never sits on the knife edge of a
+  whole number of steps (the paper pairs 0.1 and 0.1; give both to match it).
 * ``max_iter = max(300, ceil(8 D0 / step))``: room for a path eight times the
   straight line before giving up.
 * ``delta = 0.15 D0 median_j(L_j / s_j)``, where ``L_j`` is threat j's peak
@@ -88,7 +90,7 @@ def resolve(
     if step is None:
         step = min(scale / 150.0, s_min / 4.0)
         step = min(max(step, scale / 3000.0), scale / 20.0)
-    tolerance = params.tolerance if params.tolerance is not None else step
+    tolerance = params.tolerance if params.tolerance is not None else 0.75 * step
     max_iter = params.max_iter
     if max_iter is None:
         max_iter = max(300, math.ceil(8.0 * scale / step))

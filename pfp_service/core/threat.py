@@ -39,9 +39,7 @@ def skew_normal_mode(q: float) -> float:
         return 0.0
 
     def eq(v: float) -> float:
-        return q * math.exp(-0.5 * (q * v) ** 2) / math.sqrt(2 * math.pi) - v * float(
-            ndtr(q * v)
-        )
+        return q * math.exp(-0.5 * (q * v) ** 2) / math.sqrt(2 * math.pi) - v * float(ndtr(q * v))
 
     return float(brentq(eq, 0.0, 2.0, xtol=1e-14, rtol=1e-14))
 
@@ -144,7 +142,7 @@ class ThreatField:
     Immutable: adding or removing a threat builds a new field (cheap).
     """
 
-    __slots__ = ("threats", "intensity", "packed", "positions", "_spreads")
+    __slots__ = ("_spreads", "intensity", "packed", "positions", "threats")
 
     def __init__(self, threats: Iterable[Threat] = (), intensity: Intensity = "peak") -> None:
         if intensity not in ("peak", "density"):
@@ -200,5 +198,7 @@ class ThreatField:
         if not len(self.threats):
             return math.inf
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        d = np.hypot(pts[:, None, 0] - self.positions[None, :, 0], pts[:, None, 1] - self.positions[None, :, 1])
+        d = np.hypot(
+            pts[:, None, 0] - self.positions[None, :, 0], pts[:, None, 1] - self.positions[None, :, 1]
+        )
         return float(d.min())

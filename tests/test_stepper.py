@@ -1,0 +1,70 @@
+"""The stepper on its own: the contract both drivers rely on."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
+from pfp_service.core.stepper import advise_many
+
+
+def _stepper(start=(0.0, 0.0), goal=(10.0, 10.0), threats=(), bounds=None, **kw):
+    params = resolve(PlannerParams(**kw), start, goal, list(threats))
+    return Stepper(start, goal, params, bounds), ThreatField(threats, params.intensity)
+
+
+def test_no_threats_points_at_the_goal():
+    s, field = _stepper()
+    a = s.advise(field, 3.0, 1.0)
+    assert a.status is StepStatus.EN_ROUTE
+    assert math.isclose(a.dx, 7 / math.hypot(7, 9)) and math.isclose(a.dy, 9 / math.hypot(7, 9))
+    assert a.level == 0.0 and math.isclose(a.distance, math.hypot(7, 9))
+
+
+def test_arrival_bounds_and_invalid():
+    s, field = _stepper(bounds=((-1.0, -1.0), (11.0, 11.0)))
+    assert s.advise(field, 10.0, 10.05).status is StepStatus.ARRIVED
+    assert s.advise(field, 20.0, 0.0).status is StepStatus.OUT_OF_BOUNDS
+    a = s.advise(field, math.nan, 0.0)
+    assert a.status is StepStatus.INVALID and (a.dx, a.dy) == (0.0, 0.0)
+
+
+def test_symmetric_block_is_detected_as_a_trap():
+    block = [Threat.from_facing((5.0, 5.0), 225.0, 1.0, 1.0, 0.0)]
+    s, field = _stepper(threats=block, delta=0.05)
+    x, y = 0.0, 0.0
+    for k in range(2000):
+        a = s.advise(field, x, y)
+        if a.status.terminal:
+            break
+        x, y = x + s.params.step * a.dx, y + s.params.step * a.dy
+    assert a.status is StepStatus.TRAPPED
+    assert k < 400 and a.reason
+    # a trapped verdict stands until the world changes
+    assert s.advise(field, x, y).status is StepStatus.TRAPPED
+    s.world_changed()
+    assert s.advise(ThreatField([]), x, y).status is StepStatus.EN_ROUTE
+
+
+def test_advise_many_equals_advise_one_by_one():
+    rng = np.random.default_rng(5)
+    threats = [
+        Threat.from_facing(rng.uniform(0, 10, 2), rng.uniform(0, 360), 1.0, 0.7, 2.0) for _ in range(6)
+    ]
+    field = ThreatField(threats)
+    pos = rng.uniform(0, 10, (50, 2))
+    goals = rng.uniform(0, 10, (50, 2))
+    pos[3] = goals[3]  # one has arrived
+    pos[7, 0] = math.nan  # one reports garbage
+    params = resolve(PlannerParams(), (0.0, 0.0), (10.0, 10.0), threats)
+    a = [Stepper((0.0, 0.0), tuple(g), params) for g in goals]
+    b = [Stepper((0.0, 0.0), tuple(g), params) for g in goals]
+    batch = advise_many(a, field, pos)
+    single = [s.advise(field, *p) for s, p in zip(b, pos)]
+    assert [a._replace(distance=0.0) for a in batch] == [a._replace(distance=0.0) for a in single]
+    assert [a.distance for a in batch if not math.isnan(a.distance)] == [
+        a.distance for a in single if not math.isnan(a.distance)
+    ]
+    assert batch[3].status is StepStatus.ARRIVED and batch[7].status is StepStatus.INVALID
