@@ -162,7 +162,7 @@ def fleet_ms(repeat: int) -> dict[str, Any]:
     for layout, box, sigma in (("spread", 30_000.0, 600.0), ("dense", 3_000.0, 600.0)):
         threats = [
             Threat.from_facing(
-                rng.uniform(0, box, 2), rng.uniform(0, 360), sigma, 0.7 * sigma, 2.0, 1.0, f"t{j}"
+                tuple(rng.uniform(0, box, 2)), rng.uniform(0, 360), sigma, 0.7 * sigma, 2.0, 1.0, f"t{j}"
             )
             for j in range(100)
         ]
