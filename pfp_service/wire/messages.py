@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar, Union
 import msgspec
 from msgspec import Meta
 
-from pfp_service.errors import FINITE_LIMIT, InputError, from_validation
+from pfp_service.errors import InputError, from_validation
 from pfp_service.types import Id, Iterations, NonNegative, Point, Positive, Skew, Weight
 
 if TYPE_CHECKING:
@@ -361,9 +361,11 @@ def _wire_error(exc: msgspec.ValidationError | msgspec.DecodeError) -> InputErro
     e = from_validation(exc, CHOICES)
     reason = e.reason
     if reason == "number out of range":  # 1e999 and friends: JSON has no infinities
-        reason = f"expected a finite number within ±{FINITE_LIMIT:g}"
+        reason = "expected a finite number"
     elif reason.startswith("expected float, got "):
         reason = "expected a finite number, got " + reason[len("expected float, got ") :]
+    elif reason.startswith("expected float | null, got "):
+        reason = "expected a finite number or null, got " + reason[len("expected float | null, got ") :]
     return InputError(_rooted(e.path), reason)
 
 

@@ -210,7 +210,7 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             (
                 "event.rejected",
                 m.RejectedEvent(
-                    key="mumt/default/unit/ugv-1/state",
+                    key=keys.unit_state(keys.DEFAULT_MISSION, "ugv-1"),
                     field="$.position[1]",
                     reason="expected a finite number within ±1e+09",
                     planner="planner-1",
