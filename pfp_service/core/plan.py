@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from enum import Enum
+from enum import StrEnum
 
 import msgspec
 import numpy as np
@@ -22,7 +22,7 @@ from pfp_service.core.threat import Threat, ThreatField
 __all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan"]
 
 
-class PlanStatus(str, Enum):
+class PlanStatus(StrEnum):
     REACHED = "reached"
     MAX_ITER = "max_iter"
     TRAPPED = "trapped"
@@ -59,6 +59,10 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
 
     ``min_clearance`` is ``None`` when no threat was ever in force.
     ``status`` is ``reached`` only if the final point is within tolerance.
+    ``escapes`` names the strategy of each escape made, in order; ``traps``
+    counts trapped verdicts (escaped or final); ``escape_steps`` counts steps
+    taken while escaping.  ``planner`` is ``pfp`` or ``optimal``; ``lambda``
+    is the optimal planner's exposure weight (``None`` for ``pfp``).
     """
 
     status: PlanStatus
@@ -73,6 +77,11 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     compute_ms: float
     params: UsedParams
     events: list[str] = []
+    escapes: list[str] = []
+    traps: int = 0
+    escape_steps: int = 0
+    planner: str = "pfp"
+    lam: float | None = msgspec.field(default=None, name="lambda")
 
 
 def _field_at(
@@ -89,24 +98,32 @@ def plan(
     start: tuple[float, float],
     goal: tuple[float, float],
     schedule: Sequence[Scheduled] = (),
-    params: PlannerParams | Resolved = PlannerParams(),
+    params: PlannerParams | Resolved | None = None,
     bounds: Bounds | None = None,
     clock: Callable[[], float] | None = None,
+    origin: tuple[float, float] | None = None,
+    budget_s: float | None = None,
 ) -> PlanResult:
     """Plan a path from ``start`` to ``goal`` among scheduled threats.
 
     Args:
         start, goal: positions in metres.
         schedule: threats with the step at which each appears.
-        params: user parameters (resolved here) or already resolved ones.
+        params: user parameters (resolved here), already resolved ones, or ``None`` for the defaults.
         bounds: optional mission bounds; leaving them ends the plan.
         clock: a monotonic clock in seconds, for ``compute_ms`` (0 without one).
+        origin: where the goal was assigned (``x0`` of the goal term); default ``start``.
+            The live daemon's previews pass the unit's origin so they match its stream.
+        budget_s: stop with ``max_iter`` once this much ``clock`` time is spent
+            (checked every 64 steps; needs ``clock``).
 
     Returns:
         A ``PlanResult``; failure is a status, never an exception.
     """
     t0 = clock() if clock else 0.0
     schedule = sorted(schedule, key=lambda s: s.appear_step)
+    if params is None:
+        params = PlannerParams()
     if isinstance(params, PlannerParams):
         params = resolve(params, start, goal, [s.threat for s in schedule])
     cache: dict[int, ThreatField] = {}
@@ -115,7 +132,7 @@ def plan(
     epochs: list[Epoch] = []
     epoch_start = 0
     events: list[str] = []
-    stepper = Stepper(start, goal, params, bounds)
+    stepper = Stepper(origin if origin is not None else start, goal, params, bounds)
     x, y = float(start[0]), float(start[1])
     track = [(x, y)]
     step = params.step
@@ -142,6 +159,9 @@ def plan(
         y += step * adv.dy
         track.append((x, y))
         k += 1
+        if budget_s is not None and clock is not None and k % 64 == 0 and clock() - t0 > budget_s:
+            reason = f"time budget of {budget_s * 1e3:g} ms spent after {k} steps"
+            break
     epochs.append(Epoch(epoch_start, k, field))
     path = np.array(track)
     m = measure(path, epochs)
@@ -163,4 +183,7 @@ def plan(
             params.delta, params.step, params.max_iter, params.tolerance, params.intensity, params.escape
         ),
         events=events,
+        escapes=stepper.escapes,
+        traps=stepper.traps,
+        escape_steps=stepper.escape_steps,
     )

@@ -14,19 +14,24 @@ Trap detection (plain descent has no memory, so this is the only guard):
   ``progress_window`` advisories (a slow creep into a basin or an orbit).
 
 Either one ends plain descent with ``trapped`` and the reason, rather than
-running on silently to ``max_iter``.
+running on silently to ``max_iter`` -- unless ``escape`` is set: then the
+verdict goes to the unit's ``escape.Escaper``, which either commits to a way
+out (status ``escaping`` while the unit follows it, then plain descent again)
+or confirms ``trapped`` with every strategy's reason.  Descent pays nothing
+for this until a trap: the escape state is created at the first one.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from enum import Enum
+from enum import StrEnum
 from typing import NamedTuple
 
 import numpy as np
 
 from pfp_service.core import kernels
+from pfp_service.core.escape import Escaper, EscapeRun
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
@@ -35,7 +40,7 @@ __all__ = ["Advice", "Bounds", "StepStatus", "Stepper", "advise_many"]
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
 
-class StepStatus(str, Enum):
+class StepStatus(StrEnum):
     """What the stepper says about the unit at this position."""
 
     EN_ROUTE = "en_route"
@@ -74,19 +79,25 @@ class Stepper:
         goal: the target position.
         params: resolved planner parameters (``core.params.resolve``).
         bounds: optional ``((xmin, ymin), (xmax, ymax))``; leaving them ends the run.
+        unit_key: seeds this unit's random escapes (with ``params.seed``); give
+            each live unit its own, and its preview the same one.
     """
 
     __slots__ = (
-        "goal",
-        "origin",
-        "params",
-        "bounds",
-        "goal_gain",
-        "advisories",
-        "_recent",
         "_best",
+        "_escaper",
+        "_recent",
+        "_run",
         "_since_best",
         "_terminal",
+        "_traps",
+        "advisories",
+        "bounds",
+        "goal",
+        "goal_gain",
+        "origin",
+        "params",
+        "unit_key",
     )
 
     def __init__(
@@ -95,6 +106,7 @@ class Stepper:
         goal: tuple[float, float],
         params: Resolved,
         bounds: Bounds | None = None,
+        unit_key: int = 0,
     ) -> None:
         self.goal = (float(goal[0]), float(goal[1]))
         self.origin = (float(origin[0]), float(origin[1]))
@@ -107,12 +119,38 @@ class Stepper:
         self._best = math.inf
         self._since_best = 0
         self._terminal: Advice | None = None
+        self.unit_key = unit_key
+        self._escaper: Escaper | None = None
+        self._run: EscapeRun | None = None
+        self._traps = 0
+
+    @property
+    def traps(self) -> int:
+        """How many times plain descent was trapped for this goal."""
+        return self._traps
+
+    @property
+    def escape_steps(self) -> int:
+        """Advisories given while escaping (status ``escaping``)."""
+        return self._escaper.escape_steps if self._escaper is not None else 0
+
+    @property
+    def escapes(self) -> list[str]:
+        """The strategy of each escape committed to, in order."""
+        return list(self._escaper.log) if self._escaper is not None else []
+
+    @property
+    def escaping(self) -> bool:
+        return self._run is not None
 
     def world_changed(self) -> None:
         """Threats appeared, moved or vanished: judge progress afresh from here."""
         self._recent.clear()
         self._best = math.inf
         self._since_best = 0
+        self._run = None  # judged under the old field
+        if self._escaper is not None:
+            self._escaper.forget_sites()
         if self._terminal is not None and self._terminal.status is StepStatus.TRAPPED:
             self._terminal = None
 
@@ -121,10 +159,12 @@ class Stepper:
         early = self.check(x, y)
         if early is not None:
             return early
+        if self._run is not None:
+            return self._escaping(field, x, y)
         fx, fy, level, norm = kernels.point_descent(
             field.packed, x, y, self.goal[0], self.goal[1], self.goal_gain
         )
-        return self.follow(x, y, fx, fy, level, norm)
+        return self.follow(x, y, fx, fy, level, norm, field)
 
     def check(self, x: float, y: float) -> Advice | None:
         """The part of ``advise`` that needs no field: arrival, bounds, a standing verdict."""
@@ -140,24 +180,67 @@ class Stepper:
                 return self._end(StepStatus.OUT_OF_BOUNDS, 0.0, dist, "left the mission bounds")
         return self._terminal
 
-    def follow(self, x: float, y: float, fx: float, fy: float, level: float, norm: float) -> Advice:
-        """The rest of ``advise``, given the potential's gradient at ``(x, y)``.
+    def follow(
+        self,
+        x: float,
+        y: float,
+        fx: float,
+        fy: float,
+        level: float,
+        norm: float,
+        field: ThreatField | None = None,
+    ) -> Advice:
+        """The rest of ``advise`` in plain descent, given the potential's gradient at ``(x, y)``.
 
         ``advise_many`` computes the gradients of many units in one kernel call
-        and then calls this per unit.
+        and then calls this per unit.  ``field`` is needed only to escape a
+        trap; without it a trap is final.
         """
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
         if not math.isfinite(norm):
             return self._end(StepStatus.INVALID, level, dist, "gradient is not finite")
         if norm == 0.0:
-            return self._end(StepStatus.TRAPPED, level, dist, "gradient vanishes (stationary point)")
+            return self._trapped(field, x, y, level, dist, "gradient vanishes (stationary point)")
         self.advisories += 1
         trapped = self._watch(x, y, dist)
         if trapped:
-            return self._end(StepStatus.TRAPPED, level, dist, trapped)
+            return self._trapped(field, x, y, level, dist, trapped)
         return Advice(StepStatus.EN_ROUTE, -fx / norm, -fy / norm, level, dist)
 
     # -- internals ----------------------------------------------------------
+    def _trapped(
+        self, field: ThreatField | None, x: float, y: float, level: float, dist: float, reason: str
+    ) -> Advice:
+        self._traps += 1
+        if self.params.escape == "none" or field is None:
+            return self._end(StepStatus.TRAPPED, level, dist, reason)
+        if self._escaper is None:
+            self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
+        run, why = self._escaper.begin(field, x, y, reason)
+        if run is None:
+            return self._end(StepStatus.TRAPPED, level, dist, why)
+        self._run = run
+        return self._escaping(field, x, y)
+
+    def _escaping(self, field: ThreatField, x: float, y: float) -> Advice:
+        run = self._run
+        assert run is not None and self._escaper is not None
+        heading = run.direction(x, y)
+        if heading is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
+            self._run = None
+            self._recent.clear()
+            self._best = math.inf
+            self._since_best = 0
+            fx, fy, level, norm = kernels.point_descent(
+                field.packed, x, y, self.goal[0], self.goal[1], self.goal_gain
+            )
+            return self.follow(x, y, fx, fy, level, norm, field)
+        self.advisories += 1
+        self._escaper.escape_steps += 1
+        level = field.level_grad_at(x, y)[0]
+        dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        return Advice(StepStatus.ESCAPING, heading[0], heading[1], level, dist, f"escape: {run.name}")
+
     def _watch(self, x: float, y: float, dist: float) -> str:
         p = self.params
         if dist < self._best - p.tolerance:
@@ -207,5 +290,10 @@ def advise_many(steppers: list[Stepper], field: ThreatField, positions: np.ndarr
     result = []
     for s, (x, y), (fx, fy, level, norm) in zip(steppers, coords, rows):
         early = s.check(x, y)
-        result.append(early if early is not None else s.follow(x, y, fx, fy, level, norm))
+        if early is not None:
+            result.append(early)
+        elif s._run is not None:  # escaping: its own path, not the batch's descent
+            result.append(s.advise(field, x, y))
+        else:
+            result.append(s.follow(x, y, fx, fy, level, norm, field))
     return result

@@ -1,0 +1,256 @@
+"""The five ways out of a trap, each proposing candidate escape paths.
+
+A strategy looks at a ``Trap`` (where the unit is stuck, under which field)
+and yields candidate polylines from the trap point to an *exit*, the point
+where plain descent takes over again, cheapest candidate first.  It never
+moves a unit: ``escape.Escaper`` judges each candidate (no threat core, and
+descent from the exit must get clearly closer to the goal) and commits to the
+first one that passes.  A strategy may also yield a string: the reason it has
+no candidate at all.
+
+* ``delta``: the paper's first remedy, descent with the goal weight raised
+  x4, x16, x64.
+* ``random``: the paper's second, a seeded random heading held for
+  ``3 * trap_window`` steps (eight headings at most).
+* ``waypoint``: the paper's third, descent towards an intermediate point
+  beside the local threat cluster (1, 2 and 3 cluster radii out, at 45, 90
+  and 135 degrees either side of the goal bearing).
+* ``contour``: follow the iso-threat line through the trap, on the side with
+  lower threat ahead, until clearly closer to the goal; if the line closes on
+  itself, raise its level x1.5 and go on (never into a core).
+* ``global``: Dijkstra cost-to-go, cost ``1 + lambda T``, on a local grid with
+  the cores left out; the route is cut at the first exit from which descent
+  works.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from pfp_service.core import kernels
+from pfp_service.core.cores import Cores
+from pfp_service.core.grid import GridGraph
+from pfp_service.core.threat import ThreatField
+
+__all__ = ["GLOBAL_CELLS", "GLOBAL_LAMBDA", "STRATEGIES", "Candidate", "Trap", "rollout"]
+
+GLOBAL_LAMBDA = 10.0
+GLOBAL_CELLS = 160
+_MAX_RAISES = 6  # x1.5 each: up to 11x the trap's level
+_MAX_EXITS = 4
+Candidate = np.ndarray | str
+Bounds = tuple[tuple[float, float], tuple[float, float]]
+
+
+@numba.njit(cache=True, nogil=True)
+def _rollout(
+    packed: np.ndarray,
+    x: float,
+    y: float,
+    tx: float,
+    ty: float,
+    gain: float,
+    step: float,
+    tol: float,
+    out: np.ndarray,
+) -> int:
+    out[0, 0] = x
+    out[0, 1] = y
+    n = 1
+    for _ in range(out.shape[0] - 1):
+        if math.hypot(tx - x, ty - y) <= tol:
+            break
+        fx, fy, _lv, norm = kernels.point_descent(packed, x, y, tx, ty, gain)
+        if not (norm > 0.0 and math.isfinite(norm)):
+            break
+        x += step * (-fx / norm)
+        y += step * (-fy / norm)
+        out[n, 0] = x
+        out[n, 1] = y
+        n += 1
+    return n
+
+
+def rollout(
+    field: ThreatField,
+    start: tuple[float, float],
+    target: tuple[float, float],
+    gain: float,
+    step: float,
+    tol: float,
+    n: int,
+) -> np.ndarray:
+    """Simulated plain descent: at most ``n`` steps from ``start`` towards ``target`` (stops within ``tol``)."""
+    out = np.empty((n + 1, 2))
+    k = _rollout(field.packed, start[0], start[1], target[0], target[1], gain, step, tol, out)
+    return out[:k]
+
+
+@dataclass(slots=True)
+class Trap:
+    """Everything a strategy may use about one trap."""
+
+    field: ThreatField
+    cores: Cores
+    x: float
+    y: float
+    goal: tuple[float, float]
+    delta: float
+    gain: float
+    step: float
+    tolerance: float
+    trap_window: int
+    dist: float  # distance to the goal at the trap
+    margin: float  # "clearly closer": the exit must be this much nearer the goal
+    budget: int  # most points an escape polyline may have
+    bounds: Bounds | None
+    rng: np.random.Generator
+
+    def cut(self, poly: np.ndarray) -> np.ndarray:
+        """``poly`` up to its first point clearly closer to the goal than the trap."""
+        d = np.hypot(poly[:, 0] - self.goal[0], poly[:, 1] - self.goal[1])
+        hit = np.flatnonzero(d <= self.dist - self.margin)
+        return poly[: hit[0] + 1] if len(hit) else poly
+
+    def cluster_radius(self) -> float:
+        """Size of the threat cluster around the trap: farthest reach of nearby threats."""
+        best = 0.0
+        nearest = (math.inf, 0.0)
+        for t in self.field.threats:
+            s = t.spread()
+            d = math.hypot(t.xi[0] - self.x, t.xi[1] - self.y)
+            nearest = min(nearest, (d, d + 2.0 * s))
+            if d < 4.0 * s:
+                best = max(best, d + 2.0 * s)
+        return best if best > 0 else (nearest[1] if math.isfinite(nearest[0]) else 10.0 * self.step)
+
+
+def _delta(tr: Trap) -> Iterator[Candidate]:
+    for factor in (4.0, 16.0, 64.0):
+        yield tr.cut(
+            rollout(tr.field, (tr.x, tr.y), tr.goal, tr.gain * factor, tr.step, tr.tolerance, tr.budget)
+        )
+
+
+def _random(tr: Trap) -> Iterator[Candidate]:
+    m = 3 * tr.trap_window
+    k = np.arange(m + 1)[:, None] * tr.step
+    for _ in range(8):
+        b = tr.rng.uniform(0.0, 2.0 * math.pi)
+        yield np.array([tr.x, tr.y]) + k * np.array([math.sin(b), math.cos(b)])
+
+
+def _waypoint(tr: Trap) -> Iterator[Candidate]:
+    r0 = tr.cluster_radius()
+    gb = math.atan2(tr.goal[0] - tr.x, tr.goal[1] - tr.y)  # compass bearing of the goal
+    for r in (r0, 2.0 * r0, 3.0 * r0):
+        for off in (45.0, -45.0, 90.0, -90.0, 135.0, -135.0):
+            b = gb + math.radians(off)
+            wp = (tr.x + r * math.sin(b), tr.y + r * math.cos(b))
+            n = min(tr.budget, int(4.0 * r / tr.step) + tr.trap_window)
+            yield rollout(tr.field, (tr.x, tr.y), wp, tr.delta / (r * r), tr.step, tr.tolerance, n)
+
+
+def _contour(tr: Trap) -> Iterator[Candidate]:
+    f = tr.field
+    level, gx, gy = f.level_grad_at(tr.x, tr.y)
+    g = math.hypot(gx, gy)
+    if not (level > 0.0 and g * tr.step > 1e-9 * level):
+        yield "no threat slope at the trap to follow"
+        return
+    step = tr.step
+    ahead = []
+    for sign in (1.0, -1.0):
+        tx, ty = -sign * gy / g, sign * gx / g
+        probe = f.level_grad_at(tr.x + 3 * step * tx, tr.y + 3 * step * ty)[0]
+        toward = tx * (tr.goal[0] - tr.x) + ty * (tr.goal[1] - tr.y)
+        ahead.append((probe, -toward, sign))
+    sign = min(ahead)[2]
+    tx, ty = -sign * gy / g, sign * gx / g
+    x, y, c = tr.x, tr.y, level
+    pts = [(x, y)]
+    lx, ly, away, raises, exits, closer = x, y, False, 0, 0, False
+    while len(pts) < tr.budget:
+        qx, qy = x + step * tx, y + step * ty
+        for _ in range(3):  # pull back onto the level set, by at most one step
+            lv, hx, hy = f.level_grad_at(qx, qy)
+            h2 = hx * hx + hy * hy
+            if h2 == 0.0:
+                break
+            k = max(-step, min(step, (lv - c) / math.sqrt(h2)))
+            qx, qy = qx - k * hx / math.sqrt(h2), qy - k * hy / math.sqrt(h2)
+        lv, hx, hy = f.level_grad_at(qx, qy)
+        h = math.hypot(hx, hy)
+        if h == 0.0:
+            yield "the contour fades out (no threat slope)"
+            return
+        nx, ny = -hy / h, hx / h
+        if nx * tx + ny * ty < 0:
+            nx, ny = -nx, -ny
+        x, y, tx, ty = qx, qy, nx, ny
+        pts.append((x, y))
+        if tr.cores.inside(np.array([[x, y]]))[0]:
+            yield f"the contour reaches a threat core at level {c:.3g} without an exit"
+            return
+        was, closer = closer, math.hypot(tr.goal[0] - x, tr.goal[1] - y) <= tr.dist - tr.margin
+        if closer and not was:  # an exit; if it is refused, trace on to the next one
+            yield np.array(pts)
+            exits += 1
+            if exits >= _MAX_EXITS:
+                yield f"{_MAX_EXITS} exits along the contour, none acceptable"
+                return
+        r = math.hypot(x - lx, y - ly)
+        if not away and r > 6.0 * step:
+            away = True
+        elif away and r < 2.5 * step:  # closed on itself: raise the level
+            raises += 1
+            if raises > _MAX_RAISES:
+                yield f"the contour closed at every level up to {c:.3g} without an exit"
+                return
+            c *= 1.5
+            lx, ly, away = x, y, False
+    yield f"the contour found no exit within {tr.budget} steps"
+
+
+def _global(tr: Trap) -> Iterator[Candidate]:
+    gx, gy = tr.goal
+    spreads = [t.spread() for t in tr.field.threats] or [tr.step]
+    pad = max(0.3 * tr.dist, 3.0 * max(spreads))
+    (x0, y0), (x1, y1) = (
+        (min(tr.x, gx) - pad, min(tr.y, gy) - pad),
+        (max(tr.x, gx) + pad, max(tr.y, gy) + pad),
+    )
+    if tr.bounds is not None:
+        (bx0, by0), (bx1, by1) = tr.bounds
+        x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
+    # a margin inside the core test, so a route between grid nodes never clips one
+    grid = GridGraph(
+        tr.field, ((x0, y0), (x1, y1)), GLOBAL_CELLS, 16, Cores(tr.field, 0.8 * tr.cores.fraction)
+    )
+    route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), GLOBAL_LAMBDA)
+    if not len(route.points):
+        yield f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
+        return
+    pts = np.concatenate([[[tr.x, tr.y]], route.points, [[gx, gy]]])
+    seg = np.diff(pts, axis=0)
+    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / tr.step)).astype(np.int64)
+    poly = np.concatenate(
+        [pts[:1]] + [a + (np.arange(1, m + 1)[:, None] / m) * d for a, d, m in zip(pts[:-1], seg, k.tolist())]
+    )
+    for frac in (0.25, 0.5, 0.75):
+        yield poly[: max(2, int(frac * len(poly)))]
+    yield poly
+
+
+STRATEGIES: dict[str, Callable[[Trap], Iterator[Candidate]]] = {
+    "delta": _delta,
+    "random": _random,
+    "waypoint": _waypoint,
+    "contour": _contour,
+    "global": _global,
+}
