@@ -1,0 +1,113 @@
+"""Helpers for network tests: free ports, client sessions, a planner subprocess, waiting on queues."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import socket
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def client_config(endpoint: str) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+@contextmanager
+def client(endpoint: str):
+    session = zenoh.open(client_config(endpoint))
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+def wait_for_planner(endpoint: str, mission: str, timeout: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout
+    last: Exception | None = None
+    while time.monotonic() < deadline:
+        try:
+            with client(endpoint) as s:
+                while time.monotonic() < deadline:
+                    for r in s.get(f"mumt/{mission}/planner/*/status", timeout=1.0):
+                        if r.ok is not None:
+                            return
+                    time.sleep(0.1)
+        except Exception as exc:  # router not listening yet
+            last = exc
+            time.sleep(0.2)
+    raise TimeoutError(f"planner on {endpoint} did not answer: {last}")
+
+
+@contextmanager
+def planner_process(*extra: str, mission: str = "default"):
+    """``pfp serve`` as a subprocess on a free loopback port; yields (endpoint, process)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", mission, *extra],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_for_planner(endpoint, mission)
+        yield endpoint, proc
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+class Inbox:
+    """A subscriber feeding a queue of decoded JSON payloads (or DELETE markers)."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        self.q: queue.Queue[tuple[str, Any]] = queue.Queue()
+        self.sub = session.declare_subscriber(key, self._cb)
+
+    def _cb(self, sample: zenoh.Sample) -> None:
+        data = sample.payload.to_bytes()
+        self.q.put((str(sample.key_expr), json.loads(data) if data else None))
+
+    def get(self, timeout: float = 5.0, where=lambda msg: True) -> Any:
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError("no matching message")
+            try:
+                _key, msg = self.q.get(timeout=left)
+            except queue.Empty:
+                raise TimeoutError("no matching message") from None
+            if where(msg):
+                return msg
+
+
+def put_json(session: zenoh.Session, key: str, obj: Any) -> None:
+    session.put(key, json.dumps(obj).encode(), encoding=zenoh.Encoding.APPLICATION_JSON)
