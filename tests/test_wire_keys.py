@@ -134,10 +134,19 @@ def _string_constants(tree: ast.AST) -> list[tuple[int, str]]:
 def test_no_topic_string_outside_keys_py() -> None:
     """Style rule 6: one module builds key expressions (docstrings may mention them)."""
     offenders = []
-    for path in sorted((ROOT / "pfp_service").rglob("*.py")):
+    sources = [*(ROOT / "pfp_service").rglob("*.py"), *(ROOT / "clients").rglob("*.py")]
+    for path in sorted(sources):
         if path == ROOT / "pfp_service" / "wire" / "keys.py":
             continue
         for line, text in _string_constants(ast.parse(path.read_text(encoding="utf-8"))):
             if "mumt/" in text or text.startswith("mumt"):
                 offenders.append(f"{path.relative_to(ROOT)}:{line}: {text!r}")
     assert not offenders, "key strings outside pfp_service/wire/keys.py:\n" + "\n".join(offenders)
+    assert len(sources) > 5
+
+
+def test_the_topic_scan_sees_code_but_not_docstrings() -> None:
+    src = (
+        '"""mumt/{m}/unit in a docstring"""\n\ndef f():\n    """mumt/x too"""\n    return "mumt/a/b" + KEY\n'
+    )
+    assert [text for _, text in _string_constants(ast.parse(src))] == ["mumt/a/b"]
