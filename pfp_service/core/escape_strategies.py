@@ -140,8 +140,9 @@ def _delta(tr: Trap) -> Iterator[Candidate]:
 def _random(tr: Trap) -> Iterator[Candidate]:
     m = 3 * tr.trap_window
     k = np.arange(m + 1)[:, None] * tr.step
+    gb = math.atan2(tr.goal[0] - tr.x, tr.goal[1] - tr.y)  # relative to the goal: rotation-equivariant
     for _ in range(8):
-        b = tr.rng.uniform(0.0, 2.0 * math.pi)
+        b = gb + tr.rng.uniform(0.0, 2.0 * math.pi)
         yield np.array([tr.x, tr.y]) + k * np.array([math.sin(b), math.cos(b)])
 
 

@@ -18,6 +18,11 @@ The rule (also in README.md, "Scale-free defaults"):
   about half the steepest flank of a typical threat, so the goal draws the unit
   on but never pushes it through a threat's core.  With no threats, 1.
 
+``escape`` (default ``none`` until the engine tests pin it; ``auto`` is the
+recommended setting) says what the stepper does when plain descent
+is trapped: ``none`` reports ``trapped``; the others are in ``core.escape``.
+``seed`` seeds the ``random`` escape (with the stepper's ``unit_key``).
+
 Every quantity is a length ratio or a dimensionless level, so a scenario scaled
 by any factor resolves to the same path, scaled.
 """

@@ -23,6 +23,7 @@ for this until a trap: the escape state is created at the first one.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections import deque
 from enum import StrEnum
@@ -123,6 +124,15 @@ class Stepper:
         self._escaper: Escaper | None = None
         self._run: EscapeRun | None = None
         self._traps = 0
+
+    def __deepcopy__(self, memo: dict[int, object]) -> Stepper:
+        """A ghost for look-ahead: shares the immutable parts, copies the state."""
+        new = Stepper.__new__(Stepper)
+        shared = ("params", "bounds", "goal", "origin", "_terminal")
+        for name in Stepper.__slots__:
+            value = getattr(self, name)
+            setattr(new, name, value if name in shared else copy.deepcopy(value, memo))
+        return new
 
     @property
     def traps(self) -> int:
@@ -284,7 +294,7 @@ def advise_many(steppers: list[Stepper], field: ThreatField, positions: np.ndarr
         goals[i] = s.goal
         gains[i] = s.goal_gain
     out = np.empty((n, 4))
-    kernels.batch_descent(field.packed, pts, goals, gains, out)
+    kernels.descent_many(field.packed, pts, goals, gains, out)
     rows = out.tolist()
     coords = pts.tolist()
     result = []

@@ -1,0 +1,297 @@
+"""Path quality per escape mode on a seeded trap suite, and the Pareto gap to the grid optimum.
+
+For every generated scenario (``bench._suite``) and every escape mode this
+plans once, then reports: the reach rate over the *reachable* scenarios (a way
+avoiding every threat core exists: the core-free grid of the optimal planner
+connects start and goal), the honest-``trapped`` rate on enclosures (no
+``reached`` there is honest), paths entering a threat core, median and worst
+length and exposure (as multiples of the scenario's start-goal distance, since
+sizes span 10-30,000 m), and compute time.
+
+Pareto gap: the optimal planner is solved for ``lambda`` in ``LAMBDAS``.  Of
+the optimal paths that are no longer *and* no more exposed than a PFP path,
+take the one that beats it most on both, i.e. maximise
+``min(1 - L_opt / L_pfp, 1 - E_opt / E_pfp)``; that minimum is the gap (0 when
+none beats it on both).  ``--write`` puts the tables in BENCHMARKS.md between
+markers, so the file can hold other benchmarks too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import msgspec
+import numpy as np
+
+from pfp_service.bench._suite import Case, generate
+from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
+from pfp_service.core.cores import Cores
+from pfp_service.core.optimal import OptimalSolver
+from pfp_service.core.params import ESCAPES
+
+__all__ = ["LAMBDAS", "add_arguments", "run"]
+
+LAMBDAS = (0.0, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+BEGIN, END = "<!-- pfp bench quality: begin -->", "<!-- pfp bench quality: end -->"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenarios", type=int, default=48, help="how many scenarios (default 48)")
+    p.add_argument("--seed", type=int, default=2023, help="suite seed (default 2023)")
+    p.add_argument("--modes", default=",".join(ESCAPES), help="comma-separated escape modes")
+    p.add_argument("--cells", type=int, default=200, help="optimal-planner grid cells on the longer side")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--write", metavar="MD", nargs="?", const="BENCHMARKS.md", help="update this markdown file"
+    )
+
+
+@dataclass
+class Row:
+    case: str
+    kind: str
+    mode: str
+    status: str
+    traps: int
+    escapes: list[str]
+    escape_steps: int
+    length_rel: float  # length / start-goal distance
+    exposure_rel: float  # exposure / start-goal distance
+    compute_ms: float
+    core_entry: str
+    gap: float | None = None
+    gap_shorter: float | None = None
+    gap_less_exposed: float | None = None
+
+
+@dataclass
+class Report:
+    seed: int
+    scenarios: int
+    reachable: list[str]
+    enclosed: list[str]
+    disagreements: list[str]
+    rows: list[Row] = field(default_factory=list)
+    targets: dict[str, object] = field(default_factory=dict)
+
+
+def _pareto(length: float, exposure: float, opts: list[tuple[float, float]]) -> tuple[float, float, float]:
+    best = (0.0, 0.0, 0.0)
+    for lo, eo in opts:
+        if lo <= length and eo <= exposure:
+            dl = 1.0 - lo / length if length > 0 else 0.0
+            de = 1.0 - eo / exposure if exposure > 0 else 0.0
+            if min(dl, de) > best[0]:
+                best = (min(dl, de), dl, de)
+    return best
+
+
+def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float]:
+    sched = [Scheduled(t) for t in case.threats]
+    times, result = [], None
+    for _ in range(repeat):
+        result = plan(case.start, case.goal, sched, PlannerParams(escape=mode), None, time.perf_counter)  # type: ignore[arg-type]
+        times.append(result.compute_ms)
+    return result, statistics.median(times)
+
+
+def measure_suite(count: int, seed: int, modes: list[str], cells: int, log: bool = False) -> Report:
+    """Run the whole benchmark and return its figures (no printing unless ``log``)."""
+    cases = generate(count, seed)
+    rep = Report(seed, count, [], [], [])
+    plan(
+        cases[0].start, cases[0].goal, [Scheduled(t) for t in cases[0].threats], PlannerParams(escape="auto")
+    )
+    for case in cases:
+        fieldm = ThreatField(case.threats)
+        d0 = math.hypot(case.goal[0] - case.start[0], case.goal[1] - case.start[1])
+        free = OptimalSolver(fieldm, case.start, case.goal, None, cells, avoid_cores=True).solve(0.0)
+        reachable = len(free.path) > 0
+        (rep.reachable if reachable else rep.enclosed).append(case.name)
+        if reachable == case.enclosed:
+            rep.disagreements.append(case.name)
+        solver = OptimalSolver(fieldm, case.start, case.goal, None, cells)
+        opts = [(o.length, o.exposure) for o in (solver.solve(lam) for lam in LAMBDAS)]
+        cores = Cores(fieldm)
+        for mode in modes:
+            r, ms = _timed_plan(case, mode, 3 if mode in ("none", "auto") else 1)
+            row = Row(
+                case.name,
+                case.kind,
+                mode,
+                r.status.value,  # type: ignore[attr-defined]
+                r.traps,  # type: ignore[attr-defined]
+                r.escapes,  # type: ignore[attr-defined]
+                r.escape_steps,  # type: ignore[attr-defined]
+                r.length / d0,  # type: ignore[attr-defined]
+                r.exposure / d0,  # type: ignore[attr-defined]
+                ms,
+                cores.first_hit(np.asarray(r.path)),  # type: ignore[attr-defined]
+            )
+            if row.status == "reached":
+                row.gap, row.gap_shorter, row.gap_less_exposed = _pareto(
+                    r.length,  # type: ignore[attr-defined]
+                    r.exposure,  # type: ignore[attr-defined]
+                    opts,
+                )
+            rep.rows.append(row)
+            if log:
+                print(
+                    f"{case.name:22s} {mode:8s} {row.status:8s} traps={row.traps} {row.escapes} "
+                    f"L={row.length_rel:.3f} E={row.exposure_rel:.4f} gap={row.gap} {ms:.1f} ms {row.core_entry}",
+                    file=sys.stderr,
+                )
+    rep.targets = _targets(rep)
+    return rep
+
+
+def _med(xs: list[float]) -> float:
+    return statistics.median(xs) if xs else math.nan
+
+
+def _targets(rep: Report) -> dict[str, object]:
+    auto = [r for r in rep.rows if r.mode == "auto"]
+    reach = [r for r in auto if r.case in rep.reachable]
+    encl = [r for r in auto if r.case in rep.enclosed]
+    gaps = [r.gap for r in auto if r.gap is not None]
+    plain = {r.case: r for r in rep.rows if r.mode == "none"}
+    no_trap = [
+        r for r in auto if r.case in plain and plain[r.case].status == "reached" and plain[r.case].traps == 0
+    ]
+    ratio = (
+        _med([r.compute_ms for r in no_trap]) / _med([plain[r.case].compute_ms for r in no_trap])
+        if no_trap
+        else math.nan
+    )
+    out: dict[str, object] = {
+        "auto_reach_rate": sum(r.status == "reached" for r in reach) / len(reach) if reach else math.nan,
+        "auto_false_reached_on_enclosures": sum(r.status == "reached" for r in encl),
+        "auto_median_pareto_gap": _med([g for g in gaps]),
+        "auto_over_plain_median_compute_no_trap": ratio,
+    }
+    out["met"] = {
+        "auto reaches 100% of reachable": out["auto_reach_rate"] == 1.0,
+        "0 false reached on enclosures": out["auto_false_reached_on_enclosures"] == 0,
+        "median Pareto gap <= 5%": _med(gaps) <= 0.05,
+        "median compute within 2x of plain (no-trap)": ratio <= 2.0,
+    }
+    return out
+
+
+def _fmt(x: float | None, pct: bool = False) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    return f"{100 * x:.1f} %" if pct else f"{x:.3g}"
+
+
+def render(rep: Report, modes: list[str]) -> str:
+    """The markdown tables."""
+    lines = [
+        f"Suite: {rep.scenarios} scenarios, seed {rep.seed}; {len(rep.reachable)} reachable, "
+        f"{len(rep.enclosed)} enclosed (no way avoids every threat core)."
+        + (f" Kind/verdict disagreements: {', '.join(rep.disagreements)}." if rep.disagreements else ""),
+        "",
+        "| escape | reached (reachable) | honest trapped (enclosed) | paths entering a core | median / worst length "
+        "(x D0) | median / worst exposure (x D0) | median / worst Pareto gap | median / max compute ms |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for mode in modes:
+        rows = [r for r in rep.rows if r.mode == mode]
+        reach = [r for r in rows if r.case in rep.reachable]
+        encl = [r for r in rows if r.case in rep.enclosed]
+        ok = [r for r in rows if r.status == "reached"]
+        gaps = [r.gap for r in ok if r.gap is not None]
+        honest = sum(r.status == "trapped" for r in encl)
+        lines.append(
+            f"| {mode} | {sum(r.status == 'reached' for r in reach)}/{len(reach)} | {honest}/{len(encl)} | "
+            f"{sum(bool(r.core_entry) for r in rows)} | "
+            f"{_fmt(_med([r.length_rel for r in ok]))} / {_fmt(max((r.length_rel for r in ok), default=None))} | "
+            f"{_fmt(_med([r.exposure_rel for r in ok]))} / {_fmt(max((r.exposure_rel for r in ok), default=None))} | "
+            f"{_fmt(_med(gaps), True)} / {_fmt(max(gaps, default=None), True)} | "
+            f"{_fmt(_med([r.compute_ms for r in rows]))} / {_fmt(max(r.compute_ms for r in rows))} |"
+        )
+    t = rep.targets
+    met = t.get("met", {})
+    assert isinstance(met, dict)
+    lines += [
+        "",
+        "| target | measured | met |",
+        "|---|---|---|",
+        f"| auto reaches 100 % of reachable | {_fmt(t['auto_reach_rate'], True)} | {met.get('auto reaches 100% of reachable')} |",  # type: ignore[arg-type]
+        f"| 0 false reached on enclosures | {t['auto_false_reached_on_enclosures']} | {met.get('0 false reached on enclosures')} |",
+        f"| median Pareto gap <= 5 % | {_fmt(t['auto_median_pareto_gap'], True)} | {met.get('median Pareto gap <= 5%')} |",  # type: ignore[arg-type]
+        f"| median compute within 2x of plain descent (no-trap scenarios) | "
+        f"{_fmt(t['auto_over_plain_median_compute_no_trap'])}x | {met.get('median compute within 2x of plain (no-trap)')} |",  # type: ignore[arg-type]
+    ]
+    by_kind: dict[str, list[Row]] = {}
+    for r in rep.rows:
+        if r.mode == "auto":
+            by_kind.setdefault(r.kind, []).append(r)
+    lines += [
+        "",
+        "`auto` by kind:",
+        "",
+        "| kind | scenarios | reached | trapped | escapes used | median gap |",
+        "|---|---|---|---|---|---|",
+    ]
+    for kind, rows in by_kind.items():
+        used = sorted({e for r in rows for e in r.escapes})
+        gaps = [r.gap for r in rows if r.gap is not None]
+        lines.append(
+            f"| {kind} | {len(rows)} | {sum(r.status == 'reached' for r in rows)} | "
+            f"{sum(r.status == 'trapped' for r in rows)} | {', '.join(used) or '-'} | {_fmt(_med(gaps), True)} |"
+        )
+    return "\n".join(lines)
+
+
+def _write(path: str, body: str, machine: str) -> None:
+    p = Path(path)
+    text = p.read_text() if p.exists() else "# Benchmarks\n"
+    block = (
+        f"{BEGIN}\n## Path quality (`pfp bench quality`)\n\nRegenerate with `pfp bench quality --write`. "
+        f"Machine: {machine}.\n\n{body}\n{END}"
+    )
+    if BEGIN in text and END in text:
+        text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    p.write_text(text)
+
+
+def run(args: argparse.Namespace) -> int:
+    modes = [m for m in args.modes.split(",") if m]
+    bad = [m for m in modes if m not in ESCAPES]
+    if bad or args.scenarios < 1:
+        print(
+            f"pfp bench quality: --modes: unknown {bad}"
+            if bad
+            else "pfp bench quality: --scenarios: must be >= 1",
+            file=sys.stderr,
+        )
+        return 2
+    if "none" not in modes:
+        modes.insert(0, "none")
+    if "auto" not in modes:
+        modes.insert(1, "auto")
+    rep = measure_suite(args.scenarios, args.seed, modes, args.cells, log=not args.json)
+    body = render(rep, modes)
+    if args.json:
+        sys.stdout.write(msgspec.json.encode(rep).decode() + "\n")
+    else:
+        print(body)
+    if args.write:
+        import os
+        import platform
+
+        _write(
+            args.write,
+            body,
+            f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        )
+    return 0
