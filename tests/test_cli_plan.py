@@ -42,7 +42,7 @@ def test_json_repeat_and_plot(tmp_path):
 
 
 def test_overrides_reach_the_core():
-    r = run_pfp("plan", str(EXAMPLES / "paper-simple.yaml"), "--json", "--delta", "0.01")
+    r = run_pfp("plan", str(EXAMPLES / "paper-simple.yaml"), "--json", "--delta", "0.01", "--escape", "none")
     doc = json.loads(r.stdout)
     assert doc["params"]["delta"] == 0.01
     assert doc["status"] == "trapped"

@@ -37,7 +37,7 @@ def test_figure_9_large_delta_passes_closer(paper_scenario):
 
 
 def test_figure_9_tiny_delta_fails_and_says_so(paper_scenario):
-    timid = _plan(paper_scenario, delta=0.01)
+    timid = _plan(paper_scenario, delta=0.01, escape="none")  # plain descent, as in the paper
     assert timid.status is not PlanStatus.REACHED
     assert timid.status is PlanStatus.TRAPPED
     assert timid.final_distance > 0.1

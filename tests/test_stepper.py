@@ -33,7 +33,7 @@ def test_arrival_bounds_and_invalid():
 
 def test_symmetric_block_is_detected_as_a_trap():
     block = [Threat.from_facing((5.0, 5.0), 225.0, 1.0, 1.0, 0.0)]
-    s, field = _stepper(threats=block, delta=0.05)
+    s, field = _stepper(threats=block, delta=0.05, escape="none")
     x, y = 0.0, 0.0
     for k in range(2000):
         a = s.advise(field, x, y)

@@ -51,7 +51,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     step: Positive | None = None
     tolerance: Positive | None = None
     intensity: Literal["peak", "density"] = "peak"
-    escape: Escape = "none"
+    escape: Escape = "auto"
     # the live world
     bounds: tuple[tuple[Finite, Finite], tuple[Finite, Finite]] | None = None
     threat_ttl_s: Positive | None = None

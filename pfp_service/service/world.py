@@ -168,7 +168,7 @@ class World:
         stale = []
         s = self.settings
         for rec in self.units.values():
-            if rec.stale:
+            if rec.stale or rec.position is None:  # never reported: nothing to go stale
                 continue
             gone = rec.token_gone_since is not None and now - rec.token_gone_since >= s.liveliness_debounce_s
             silent = now - rec.last_seen > s.unit_stale_s
