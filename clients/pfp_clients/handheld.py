@@ -1,0 +1,205 @@
+"""The handheld's Textual screen: a thin shell over ``HandheldModel`` and a ``Link``.
+
+A timer drains the link's queue (directions, GPS fixes), advances the
+simulated walk, publishes the unit's state at ``publish_hz`` and redraws from
+``model.view(now)``.  Laid out for a 50x20 terminal; the arrow grows with
+the terminal.  Keys: arrows nudge, space pauses the walk, q quits.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+from collections.abc import Callable
+from typing import ClassVar
+
+from rich.text import Text
+from textual.app import App, ComposeResult
+from textual.binding import Binding, BindingType
+from textual.widgets import Static
+
+from pfp_clients.handheld_link import (
+    DirectionIn,
+    FixIn,
+    Link,
+    NmeaEnded,
+    NmeaReader,
+    NmeaRejected,
+    NoFixIn,
+    WireRejected,
+)
+from pfp_clients.handheld_model import HandheldModel, Severity, View, format_duration, threat_bar
+
+__all__ = ["HandheldApp"]
+
+SEVERITY_STYLES = {Severity.LOW: "bold green", Severity.CAUTION: "bold yellow", Severity.DANGER: "bold red"}
+STATUS_STYLES = {
+    "EN ROUTE": "bold green",
+    "ESCAPING": "bold yellow",
+    "TRAPPED": "bold white on red",
+    "ARRIVED": "bold cyan",
+    "NO GOAL": "bold",
+}
+# Rows the fixed lines take (title, bearing, status, nav, threat, age, position, note, keys)
+# plus margins: the arrow gets the rest, within these bounds.
+FIXED_ROWS = 11
+ARROW_ROWS = (7, 15)
+
+
+class HandheldApp(App[int]):
+    """``pfp handheld``: where to go, how far, how dangerous, how fresh."""
+
+    TITLE = "pfp handheld"
+    CSS = """
+    Screen { layout: vertical; overflow: hidden hidden; }
+    Static { width: 100%; height: auto; padding: 0 1; }
+    #title { background: $primary-background; color: $text; text-style: bold; }
+    #arrow { content-align: center middle; text-align: center; color: $accent; height: 1fr; }
+    #bearing { text-align: center; text-style: bold; }
+    #status { text-align: center; }
+    #keys { dock: bottom; color: $text-muted; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("up", "nudge(0, 1)", "north", show=False),
+        Binding("down", "nudge(0, -1)", "south", show=False),
+        Binding("left", "nudge(-1, 0)", "west", show=False),
+        Binding("right", "nudge(1, 0)", "east", show=False),
+        Binding("space", "toggle_walk", "walk", show=False),
+        Binding("q", "quit", "quit", show=False),
+    ]
+
+    def __init__(
+        self,
+        model: HandheldModel,
+        link: Link,
+        *,
+        mission: str,
+        source: str = "sim",
+        nmea: NmeaReader | None = None,
+        publish_hz: float = 2.0,
+        tick_s: float = 0.1,
+        clock: Callable[[], float] = time.monotonic,
+        wallclock: Callable[[], float] = time.time,
+    ) -> None:
+        super().__init__()
+        self.model = model
+        self.link = link
+        self.mission = mission
+        self.source = source
+        self.nmea = nmea
+        self.publish_period_s = 1.0 / publish_hz
+        self.tick_s = tick_s
+        self.clock = clock
+        self.wallclock = wallclock
+        self.last_view: View | None = None
+        self.published = 0
+        self._last_publish_s = -float("inf")
+
+    # -- layout -------------------------------------------------------------------
+    def compose(self) -> ComposeResult:
+        for wid in ("title", "arrow", "bearing", "status", "nav", "threat", "age", "pos", "note"):
+            yield Static(id=wid, markup=False)
+        yield Static("←↑↓→ nudge · space walk · q quit", id="keys", markup=False)
+
+    def on_mount(self) -> None:
+        if self.nmea is not None:
+            self.nmea.start()
+        self.set_interval(self.tick_s, self.tick)
+        self.tick()
+
+    # -- actions ------------------------------------------------------------------
+    def action_nudge(self, east: int, north: int) -> None:
+        step = self.model.settings.nudge_m
+        self.model.nudge(east * step, north * step)
+        self.publish()
+        self.redraw()
+
+    def action_toggle_walk(self) -> None:
+        self.model.toggle_walk(self.clock())
+        self.redraw()
+
+    # -- the loop -------------------------------------------------------------------
+    def tick(self) -> None:
+        """Drain the inbox, walk, publish when due, redraw."""
+        now = self.clock()
+        fixed = False
+        while True:
+            try:
+                item = self.link.inbox.get_nowait()
+            except queue.Empty:
+                break
+            match item:
+                case DirectionIn(direction=d):
+                    self.model.on_direction(d, self.clock())
+                case WireRejected(reason=reason):
+                    self.model.on_rejected(reason)
+                case FixIn(x_m=x, y_m=y):
+                    self.model.on_fix(x, y, self.clock())
+                    fixed = True
+                case NoFixIn():
+                    self.model.on_no_fix()
+                case NmeaRejected(reason=reason):
+                    self.model.on_nmea_rejected(reason)
+                case NmeaEnded(reason=reason):
+                    self.model.on_nmea_ended(reason)
+        now = self.clock()
+        self.model.advance(now)
+        goal = self.model.goal_to_send(now)
+        if goal is not None:
+            self.link.put_goal(goal)
+        if fixed or now - self._last_publish_s >= self.publish_period_s:
+            self.publish()
+        self.redraw()
+
+    def publish(self) -> None:
+        """Put the unit's state now (nothing before the first GPS fix)."""
+        state = self.model.next_state(self.wallclock())
+        if state is not None:
+            self.link.publish_state(state)
+            self.published += 1
+        self._last_publish_s = self.clock()
+
+    # -- drawing --------------------------------------------------------------------
+    def _arrow_size(self) -> tuple[int, int]:
+        rows = min(max(self.size.height - FIXED_ROWS, ARROW_ROWS[0]), ARROW_ROWS[1])
+        cols = min(2 * rows + 1, max(self.size.width - 4, 9))
+        return cols, rows
+
+    def redraw(self) -> None:
+        v = self.model.view(self.clock(), self._arrow_size())
+        self.last_view = v
+        m = self.model
+        mode = "GPS" if self.source == "nmea" else ("walk" if v.walking else "paused")
+        if self.source == "sim" and m.settings.speed_up != 1.0:
+            mode += f" ×{m.settings.speed_up:g}"
+        self._set("title", Text(f"{m.settings.unit} · {self.mission} · {mode}"))
+        self._set("arrow", Text("\n".join(v.arrow)))
+        self._set("bearing", Text(v.bearing))
+        self._set("status", Text(v.status_label, style=STATUS_STYLES.get(v.status_label, "bold")))
+        dist = "--" if v.distance_m is None else f"{v.distance_m:.1f} m"
+        self._set("nav", Text(f"Dist {dist}  ETA {format_duration(v.eta_s)} @{m.settings.speed_mps:g} m/s"))
+        bar_w = max(min(self.size.width - 28, 20), 5)
+        threat = Text("Threat ")
+        threat.append(threat_bar(v.threat_fraction, bar_w), style=SEVERITY_STYLES[v.severity])
+        threat.append(f" {v.threat_level:.2f} ")
+        threat.append(v.severity.value.upper(), style=SEVERITY_STYLES[v.severity])
+        self._set("threat", threat)
+        self._set("age", self._age_text(v))
+        if v.position is None:
+            pos = "Pos: no fix yet"
+        else:
+            pos = f"Pos E {v.position[0]:.1f} N {v.position[1]:.1f} m  {v.speed_mps:.1f} m/s"
+        self._set("pos", Text(pos))
+        self._set("note", Text(v.note, style="yellow", overflow="ellipsis", no_wrap=True))
+
+    def _age_text(self, v: View) -> Text:
+        if v.age_s is None:
+            label = "NO UPDATE YET" if v.stale else "Waiting for first update"
+        elif v.stale:
+            label = f"STALE: last update {format_duration(v.age_s)} ago"
+        else:
+            label = f"Updated {v.age_s:.1f} s ago"
+        return Text(f" {label} ", style="bold white on red" if v.stale else "green")
+
+    def _set(self, wid: str, content: Text) -> None:
+        self.query_one(f"#{wid}", Static).update(content)
