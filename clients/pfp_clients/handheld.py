@@ -40,10 +40,8 @@ STATUS_STYLES = {
     "ARRIVED": "bold cyan",
     "NO GOAL": "bold",
 }
-# Rows the fixed lines take (title, bearing, status, nav, threat, age, position, note, keys)
-# plus margins: the arrow gets the rest, within these bounds.
-FIXED_ROWS = 11
-ARROW_ROWS = (7, 15)
+# The arrow fills what the other lines leave, within these bounds (rows of two pixels).
+ARROW_ROWS = (3, 15)
 
 
 class HandheldApp(App[int]):
@@ -99,7 +97,8 @@ class HandheldApp(App[int]):
     def compose(self) -> ComposeResult:
         for wid in ("title", "arrow", "bearing", "status", "nav", "threat", "age", "pos", "note"):
             yield Static(id=wid, markup=False)
-        yield Static("←↑↓→ nudge · space walk · q quit", id="keys", markup=False)
+        keys = "←↑↓→ nudge · q quit" if self.source == "nmea" else "←↑↓→ nudge · space walk · q quit"
+        yield Static(keys, id="keys", markup=False)
 
     def on_mount(self) -> None:
         if self.nmea is not None:
@@ -115,7 +114,10 @@ class HandheldApp(App[int]):
         self.redraw()
 
     def action_toggle_walk(self) -> None:
-        self.model.toggle_walk(self.clock())
+        if self.source == "nmea":  # the receiver gives the position; a simulated walk would fight it
+            self.model.note = "no simulated walk: the GPS gives the position"
+        else:
+            self.model.toggle_walk(self.clock())
         self.redraw()
 
     # -- the loop -------------------------------------------------------------------
@@ -161,8 +163,10 @@ class HandheldApp(App[int]):
 
     # -- drawing --------------------------------------------------------------------
     def _arrow_size(self) -> tuple[int, int]:
-        rows = min(max(self.size.height - FIXED_ROWS, ARROW_ROWS[0]), ARROW_ROWS[1])
-        cols = min(2 * rows + 1, max(self.size.width - 4, 9))
+        """Fill the arrow's widget (as laid out), keeping the pixels square."""
+        box = self.query_one("#arrow", Static).size
+        rows = min(max(box.height, ARROW_ROWS[0]), ARROW_ROWS[1])
+        cols = min(2 * rows + 1, max(box.width, 9))
         return cols, rows
 
     def redraw(self) -> None:
