@@ -330,8 +330,15 @@ def test_arrow_keys_nudge_the_published_position(planner):
                     back = await _next_msg(pilot, states, lambda m: m["position"] == [3.5, 4.5], "west")
                     assert back["heading_deg"] == 270.0
                     assert app.last_view.position == (3.5, 4.5)
+                    assert _alive(s, mission) == {keys.alive_unit(mission, uid)}
+            assert _alive(s, mission) == set()  # the token went with the closed session
 
     asyncio.run(scenario())
+
+
+def _alive(session, mission: str) -> set[str]:
+    replies = session.liveliness().get(keys.alive_units(mission), timeout=2.0)
+    return {str(r.ok.key_expr) for r in replies if r.ok is not None}
 
 
 def test_nmea_file_drives_the_position(planner, tmp_path: Path):

@@ -25,7 +25,6 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Direction, Goal, UnitState, decode_direction, encode, keys, zenoh_encoding
 
 __all__ = [
-    "DEFAULT_ENDPOINT",
     "DirectionIn",
     "FixIn",
     "Inbound",
@@ -40,7 +39,6 @@ __all__ = [
     "open_nmea",
 ]
 
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 INBOX_DEPTH = 1024
 
 
