@@ -192,8 +192,10 @@ def test_units_go_stale_when_their_token_goes(planner, mission):
     with client(endpoint) as s:
         token = s.liveliness().declare_token(f"mumt/{mission}/alive/unit/u7")
         u = Unit(s, mission, "u7")
+        u.report()
+        # goals and states arrive on different subscriber threads: wait for the goal to land
         put_json(s, f"mumt/{mission}/unit/u7/goal", {"position": [10, 10]})
-        assert u.report()["status"] == "en_route"
+        u.inbox.get(where=lambda d: d["status"] == "en_route")
 
         def status():
             return json.loads(
