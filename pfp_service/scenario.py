@@ -99,7 +99,7 @@ class PlannerSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     max_iter: Iterations | None = None
     tolerance: Positive | None = None
     intensity: Literal["peak", "density"] = "peak"
-    escape: Escape = "none"
+    escape: Escape = "auto"
     seed: int = 0
 
     def to_params(self) -> PlannerParams:

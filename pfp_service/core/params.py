@@ -18,8 +18,7 @@ The rule (also in README.md, "Scale-free defaults"):
   about half the steepest flank of a typical threat, so the goal draws the unit
   on but never pushes it through a threat's core.  With no threats, 1.
 
-``escape`` (default ``none`` until the engine tests pin it; ``auto`` is the
-recommended setting) says what the stepper does when plain descent
+``escape`` (default ``auto``) says what the stepper does when plain descent
 is trapped: ``none`` reports ``trapped``; the others are in ``core.escape``.
 ``seed`` seeds the ``random`` escape (with the stepper's ``unit_key``).
 
@@ -51,7 +50,7 @@ class PlannerParams:
     max_iter: int | None = None
     tolerance: float | None = None
     intensity: Intensity = "peak"
-    escape: Escape = "none"
+    escape: Escape = "auto"
     trap_window: int = 20
     progress_window: int = 200
     seed: int = 0
