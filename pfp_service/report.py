@@ -16,10 +16,18 @@ def summary(name: str, r: PlanResult, plot: str | None = None) -> str:
         f"{name}: {r.status.value}" + (f" ({r.reason})" if r.reason else ""),
         f"  steps {r.steps}, length {_m(r.length)}, final distance {_m(r.final_distance)}",
         f"  exposure {r.exposure:.4g}, peak threat {r.peak_threat:.4g}, min clearance {_m(r.min_clearance)}",
-        f"  delta {p.delta:.4g}, step {p.step:.4g} m, tolerance {p.tolerance:.4g} m, "
-        f"max_iter {p.max_iter}, intensity {p.intensity}, escape {p.escape}",
+        (
+            f"  planner optimal, lambda {r.lam:g}, grid {p.step:.4g} m, intensity {p.intensity}"
+            if r.planner == "optimal" and r.lam is not None
+            else f"  delta {p.delta:.4g}, step {p.step:.4g} m, tolerance {p.tolerance:.4g} m, "
+            f"max_iter {p.max_iter}, intensity {p.intensity}, escape {p.escape}"
+        ),
         f"  compute {r.compute_ms:.3f} ms",
     ]
+    if r.traps:
+        lines.append(
+            f"  traps {r.traps}, escapes {', '.join(r.escapes) or 'none'}, {r.escape_steps} steps escaping"
+        )
     lines += [f"  event: {e}" for e in r.events]
     if plot:
         lines.append(f"  plot written to {plot}")
