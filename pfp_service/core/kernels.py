@@ -117,19 +117,26 @@ def batch_level(packed: np.ndarray, points: np.ndarray, out: np.ndarray) -> None
         out[i] = val
 
 
+@_jit
+def _descent_row(
+    packed: np.ndarray, points: np.ndarray, goals: np.ndarray, gains: np.ndarray, out: np.ndarray, i: int
+) -> None:
+    fx, fy, level, norm = point_descent(
+        packed, points[i, 0], points[i, 1], goals[i, 0], goals[i, 1], gains[i]
+    )
+    out[i, 0] = fx
+    out[i, 1] = fy
+    out[i, 2] = level
+    out[i, 3] = norm
+
+
 @numba.njit(cache=True, parallel=True, nogil=True)
 def batch_descent(
     packed: np.ndarray, points: np.ndarray, goals: np.ndarray, gains: np.ndarray, out: np.ndarray
 ) -> None:
     """``point_descent`` for many units at once: ``out[i] = (grad_x, grad_y, level, norm)``."""
     for i in numba.prange(points.shape[0]):
-        fx, fy, level, norm = point_descent(
-            packed, points[i, 0], points[i, 1], goals[i, 0], goals[i, 1], gains[i]
-        )
-        out[i, 0] = fx
-        out[i, 1] = fy
-        out[i, 2] = level
-        out[i, 3] = norm
+        _descent_row(packed, points, goals, gains, out, i)
 
 
 @_jit
@@ -137,13 +144,7 @@ def _serial_descent(
     packed: np.ndarray, points: np.ndarray, goals: np.ndarray, gains: np.ndarray, out: np.ndarray
 ) -> None:
     for i in range(points.shape[0]):
-        fx, fy, level, norm = point_descent(
-            packed, points[i, 0], points[i, 1], goals[i, 0], goals[i, 1], gains[i]
-        )
-        out[i, 0] = fx
-        out[i, 1] = fy
-        out[i, 2] = level
-        out[i, 3] = norm
+        _descent_row(packed, points, goals, gains, out, i)
 
 
 # Below this many pair evaluations, waking numba's thread pool costs more than

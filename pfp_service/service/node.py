@@ -133,9 +133,6 @@ class PlannerNode:
         self._publishers.clear()
 
     # -- callbacks: decode and enqueue, nothing more -----------------------------
-    def _unit_of(self, key: str) -> str:
-        return keys.parse(key).id
-
     def _reject(self, key: str, err: InputError) -> None:
         self._push("reject", key, err)
 
@@ -147,7 +144,7 @@ class PlannerNode:
     def _on_state(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         try:
-            uid = self._unit_of(key)
+            uid = keys.parse(key).id
             msg = decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds)
         except InputError as err:
             self._reject(key, err)
@@ -156,31 +153,26 @@ class PlannerNode:
             self._states[uid] = (msg, self.clock())
         self._wake.set()
 
-    def _on_goal(self, sample: zenoh.Sample) -> None:
+    def _put_or_delete(self, sample: zenoh.Sample, decode: Callable[..., Any], put: str, delete: str) -> None:
         key = str(sample.key_expr)
         try:
-            uid = self._unit_of(key)
+            ident = keys.parse(key).id
             if sample.kind == zenoh.SampleKind.DELETE:
-                self._push("cancel", uid, None)
-                return
-            self._push("goal", uid, decode_goal(sample.payload.to_bytes(), self.cfg.bounds))
+                self._push(delete, ident, None)
+            else:
+                self._push(put, ident, decode(sample.payload.to_bytes(), self.cfg.bounds))
         except InputError as err:
             self._reject(key, err)
 
+    def _on_goal(self, sample: zenoh.Sample) -> None:
+        self._put_or_delete(sample, decode_goal, "goal", "cancel")
+
     def _on_threat(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
-        try:
-            tid = self._unit_of(key)
-            if sample.kind == zenoh.SampleKind.DELETE:
-                self._push("unthreat", tid, None)
-                return
-            self._push("threat", tid, decode_threat(sample.payload.to_bytes(), self.cfg.bounds))
-        except InputError as err:
-            self._reject(key, err)
+        self._put_or_delete(sample, decode_threat, "threat", "unthreat")
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
-            uid = self._unit_of(str(sample.key_expr))
+            uid = keys.parse(str(sample.key_expr)).id
         except InputError:
             return
         self._push("alive", uid, sample.kind == zenoh.SampleKind.PUT)

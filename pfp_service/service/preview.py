@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
-from pfp_service.core import PlanResult, Scheduled, Threat, plan, resolve
+from pfp_service.core import PlanResult, Scheduled, plan, resolve
 from pfp_service.errors import InputError
 from pfp_service.service.world import World
 from pfp_service.wire import Goal, PreviewRequest
@@ -52,10 +52,7 @@ def preview(
     if rec is not None and rec.origin is not None and req.start is None and req.goal is None:
         origin = rec.origin
     threats = world.threat_list()
-    extra = [
-        Threat.from_facing(t.position, t.facing_deg, t.sigma_range, t.sigma_lateral, t.skew, t.weight, t.id)
-        for t in req.threats
-    ]
+    extra = [t.to_threat(t.id) for t in req.threats]
     replaced = {e.id for e in extra}  # a what-if threat with a live id stands in for it
     threats = [t for t in threats if t.id not in replaced] + extra
     params = world.params_for(origin, goal_msg).merged(

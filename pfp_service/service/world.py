@@ -97,9 +97,7 @@ class World:
 
     def apply_threat(self, threat_id: str, msg: ThreatUpdate, now: float) -> set[str]:
         """A threat appeared or moved.  Returns the units that need a fresh direction."""
-        threat = Threat.from_facing(
-            msg.position, msg.facing_deg, msg.sigma_range, msg.sigma_lateral, msg.skew, msg.weight, threat_id
-        )
+        threat = msg.to_threat(threat_id)
         ttl = msg.ttl_s if msg.ttl_s is not None else self.settings.threat_ttl_s
         self._threats[threat_id] = _ThreatRecord(threat, None if ttl is None else now + ttl)
         return self._world_changed()
