@@ -1,0 +1,114 @@
+"""What every client shares: its Zenoh client session, and YAML files decoded with line numbers.
+
+``load_yaml(path, Struct)`` turns a bad file into one ``InputError`` that names
+the file, the line and the field (``team.yaml line 7, units[2].speed_mps: must
+be > 0``), so a CLI prints one line and exits 2.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+import msgspec
+import yaml
+
+from pfp_service.errors import InputError, from_validation
+
+__all__ = ["DEFAULT_CONNECT", "client_config", "line_of", "load_yaml", "located", "open_client"]
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+T = TypeVar("T")
+
+
+def client_config(connect: Sequence[str] | None = None, multicast: bool = False) -> Any:
+    """A ``zenoh.Config`` in client mode connecting to ``connect`` (default ``DEFAULT_CONNECT``)."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    try:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect or [DEFAULT_CONNECT])))
+    except Exception as exc:  # zenoh's own error type: translate at the edge
+        raise InputError("--connect", f"rejected by zenoh: {exc}") from None
+    if not multicast:
+        conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+def open_client(connect: Sequence[str] | None = None) -> Any:
+    """Open a client session, or raise ``InputError`` naming the endpoint that is unreachable."""
+    import zenoh
+
+    try:
+        return zenoh.open(client_config(connect))
+    except InputError:
+        raise
+    except Exception as exc:
+        where = ", ".join(connect or [DEFAULT_CONNECT])
+        raise InputError("--connect", f"cannot reach {where}: {exc}") from None
+
+
+_SEGMENT = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
+
+
+def line_of(root: yaml.Node | None, path: str) -> int | None:
+    """The 1-based line of the YAML node at ``path`` (``timeline[3].position``), or its nearest parent."""
+    node = root
+    line = None if node is None else node.start_mark.line + 1
+    for name, index in _SEGMENT.findall(path):
+        nxt = None
+        if index and isinstance(node, yaml.SequenceNode) and int(index) < len(node.value):
+            nxt = node.value[int(index)]
+        elif name and isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                if getattr(k, "value", None) == name:
+                    nxt = v if not isinstance(v, yaml.ScalarNode) else k
+                    break
+        if nxt is None:
+            break
+        node = nxt
+        line = node.start_mark.line + 1
+    return line
+
+
+def load_yaml(
+    path: str | Path, cls: type[T], choices: dict[str, tuple[str, ...]] | None = None
+) -> tuple[T, yaml.Node | None]:
+    """Read and validate a YAML file as ``cls``; returns the value and the node tree (for line numbers).
+
+    Raises:
+        InputError: unreadable file, invalid YAML or an invalid field, with its line.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as exc:
+        raise InputError(str(p), f"cannot read: {exc.strerror or exc}") from None
+    try:
+        root = yaml.compose(text)
+        obj = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{p.name} line {mark.line + 1}" if mark is not None else p.name
+        raise InputError(where, f"invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    if not isinstance(obj, dict):
+        raise InputError(p.name, f"expected a mapping at the top, got {type(obj).__name__}")
+    try:
+        return msgspec.convert(obj, cls), root
+    except msgspec.ValidationError as exc:
+        err = from_validation(exc, choices)
+        name = err.path.rsplit(".", 1)[-1]
+        if err.reason.startswith("invalid value") and name in (choices or {}):
+            err = InputError(err.path, f"{err.reason} (expected one of: {', '.join((choices or {})[name])})")
+        raise located(p, root, err) from None
+
+
+def located(path: Path, root: yaml.Node | None, err: InputError) -> InputError:
+    """``err`` with the file name and the line of its field prefixed to the path."""
+    line = line_of(root, err.path)
+    where = f"{path.name} line {line}" if line is not None else path.name
+    return InputError(f"{where}, {err.path}" if err.path else where, err.reason)

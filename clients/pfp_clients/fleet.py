@@ -1,0 +1,221 @@
+"""``pfp fleet``: a headless fleet of simulated vehicles on Zenoh, following the planner's directions.
+
+Each tick every unit publishes its state (with a fresh ``seq``), the fleet
+waits for the planner's answers, then every unit moves ``speed_mps * dt`` along
+its newest direction.  Ticks are paced at ``dt / speed_up`` of wall time, so
+``--speed-up 10`` runs ten simulated seconds per second; if the planner answers
+late the fleet waits up to ``reply_timeout_s`` (lockstep), so acceleration never
+outruns the planner.  A unit whose answer still has not come moves along the
+direction it had, as a vehicle would.  Each unit holds a liveliness token
+``mumt/{m}/alive/unit/{u}`` while the fleet runs.
+
+Goals from the team file are put with ``step = speed_mps * dt``: the planner's
+stepper then expects exactly the motion it gets, so its preview matches the
+track and its trap detection judges real progress.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import queue
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from pfp_clients.sim import SimUnit
+from pfp_clients.team import Team
+from pfp_service.errors import InputError
+from pfp_service.wire import Direction, Goal, decode_direction, encode, keys, zenoh_encoding
+
+__all__ = ["FleetOptions", "FleetResult", "run_fleet", "summary_lines"]
+
+
+@dataclass(frozen=True)
+class FleetOptions:
+    """How the fleet runs.
+
+    Attributes:
+        mission: the mission's key chunk.
+        rate_hz: state reports per simulated second, per unit.
+        speed_up: simulated seconds per wall second.
+        duration_s: stop after this much simulated time (None: run until stopped).
+        until_arrived: stop as soon as the planner reports every unit arrived.
+        set_goals: put the team file's goals (else units wait for goals from elsewhere).
+        reply_timeout_s: wall seconds to wait for late answers before moving on.
+    """
+
+    mission: str = keys.DEFAULT_MISSION
+    rate_hz: float = 5.0
+    speed_up: float = 1.0
+    duration_s: float | None = None
+    until_arrived: bool = False
+    set_goals: bool = True
+    reply_timeout_s: float = 1.0
+
+
+@dataclass
+class FleetResult:
+    """How the run ended: the units (with tracks), the simulated time, and why it stopped."""
+
+    units: list[SimUnit]
+    t_s: float
+    ticks: int
+    late_replies: int
+    reason: str
+
+    @property
+    def all_arrived(self) -> bool:
+        return all(u.arrived for u in self.units)
+
+
+def _goal_of(u: SimUnit, dt_s: float) -> Goal | None:
+    if u.spec.goal is None:
+        return None
+    return Goal(position=u.spec.goal, step=u.spec.speed_mps * dt_s)
+
+
+def run_fleet(
+    session: Any,
+    team: Team,
+    opts: FleetOptions,
+    stop: threading.Event | None = None,
+    say: Callable[[str], None] = print,
+    on_tick: Callable[[float, Sequence[SimUnit]], None] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> FleetResult:
+    """Run the fleet on an open session until arrival, the duration or ``stop``.
+
+    Args:
+        session: an open ``zenoh.Session`` (the caller closes it).
+        team: the units.
+        opts: rates, acceleration and stop conditions.
+        stop: set it to end the run early.
+        say: where progress lines go (each starts with the simulated time).
+        on_tick: called after every tick with the simulated time and the units.
+        clock: monotonic wall seconds.
+    """
+    import zenoh
+
+    m = keys.check_chunk(opts.mission, "--mission")
+    stop = stop or threading.Event()
+    units = [SimUnit(spec) for spec in team.units]
+    by_id = {u.id: u for u in units}
+    dt_s = 1.0 / opts.rate_hz
+    inbox: queue.Queue[tuple[str, Direction]] = queue.Queue()
+
+    def on_direction(sample: zenoh.Sample) -> None:  # decode and enqueue, nothing more
+        try:
+            uid = keys.parse(str(sample.key_expr)).id
+            if uid in by_id:
+                inbox.put((uid, decode_direction(sample.payload.to_bytes())))
+        except InputError:
+            pass  # not ours to judge: the planner's own rejections are events
+
+    enc = zenoh_encoding()
+    declared: list[Any] = [session.declare_subscriber(keys.unit_directions(m), on_direction)]
+    tokens = [session.liveliness().declare_token(keys.alive_unit(m, u.id)) for u in units]
+    pubs = {u.id: session.declare_publisher(keys.unit_state(m, u.id), encoding=enc) for u in units}
+    t_s, tick, late = 0.0, 0, 0
+    reason = "stopped"
+    last_answer = clock()
+    silent_warned = False
+
+    def drain(deadline: float, need_seq: int | None) -> None:
+        while True:
+            if need_seq is not None and all(u.answered >= need_seq for u in units):
+                return
+            left = deadline - clock()
+            try:
+                uid, d = inbox.get(timeout=max(left, 0.0)) if left > 0 else inbox.get_nowait()
+            except queue.Empty:
+                return
+            nonlocal last_answer
+            last_answer = clock()
+            line = by_id[uid].on_direction(d, t_s)
+            if line is not None:
+                say(f"t={t_s:7.2f}s  {line}")
+
+    say(f"fleet {team.name}: {len(units)} units, {opts.rate_hz:g} Hz, speed-up x{opts.speed_up:g}")
+    try:
+        started = clock()
+        while not stop.is_set():
+            tick_start = clock()
+            for u in units:
+                pubs[u.id].put(encode(u.state(t_s)))
+            if tick == 0 and opts.set_goals:
+                for u in units:
+                    goal = _goal_of(u, dt_s)
+                    if goal is not None:
+                        session.put(keys.unit_goal(m, u.id), encode(goal), encoding=enc)
+                        say(
+                            f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal ({goal.position[0]:.1f}, {goal.position[1]:.1f})"
+                        )
+            # pace the tick, then (lockstep) wait a while longer for answers still missing
+            drain(tick_start + dt_s / opts.speed_up, None)
+            need = units[0].seq
+            if clock() - last_answer < 2 * opts.reply_timeout_s:  # lockstep only while a planner answers
+                drain(clock() + opts.reply_timeout_s, need)
+            late += sum(1 for u in units if u.answered < need)
+            silent_s = clock() - last_answer
+            if silent_s > 3.0 and not silent_warned:
+                say(f"t={t_s:7.2f}s  no direction from any planner of mission {m!r} for {silent_s:.0f} s")
+            silent_warned = silent_s > 3.0
+            tick += 1
+            t_s = tick * dt_s
+            now = clock()
+            for u in units:
+                u.advance(dt_s, t_s, now)
+            if on_tick is not None:
+                on_tick(t_s, units)
+            if opts.until_arrived and all(u.arrived for u in units):
+                reason = "all arrived"
+                break
+            if opts.duration_s is not None and t_s >= opts.duration_s - 1e-9:
+                reason = f"duration {opts.duration_s:g} s reached"
+                break
+        wall = clock() - started
+        say(f"t={t_s:7.2f}s  fleet stops: {reason} ({tick} ticks in {wall:.1f} s wall)")
+    finally:
+        for d in [*declared, *pubs.values(), *tokens]:
+            with contextlib.suppress(Exception):  # already gone with the session: nothing to release
+                d.undeclare()
+    return FleetResult(units, t_s, tick, late, reason)
+
+
+def summary_lines(result: FleetResult) -> list[str]:
+    """A plain-text table: unit, kind, status, arrival time, path length."""
+    rows = [("unit", "kind", "speed", "status", "arrived at", "path m")]
+    for u in result.units:
+        arrived = f"{u.arrived_at_s:.1f} s" if u.arrived_at_s is not None else "-"
+        status = u.status + (f" ({u.trapped_reason})" if u.trapped_reason else "")
+        rows.append(
+            (u.id, u.spec.kind.value, f"{u.spec.speed_mps:g}", status, arrived, f"{u.path_length_m():.1f}")
+        )
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+
+
+def main(
+    team: Team, opts: FleetOptions, connect: Sequence[str] | None, stop: threading.Event | None = None
+) -> int:
+    """``pfp fleet``: open a client session, run, print the summary.
+
+    Returns:
+        0, or 1 when ``until_arrived`` was asked and some unit did not arrive.
+    """
+    from pfp_clients.common import open_client
+
+    session = open_client(connect)
+    try:
+        result = run_fleet(session, team, opts, stop, say=lambda s: print(s, flush=True))
+    finally:
+        session.close()
+    for line in summary_lines(result):
+        print(line)
+    if result.late_replies:
+        print(
+            f"{result.late_replies} reports were not answered within the tick plus {opts.reply_timeout_s:g} s"
+        )
+    return 1 if opts.until_arrived and not result.all_arrived else 0

@@ -1,0 +1,315 @@
+"""``pfp inject``: play a contingency script against a live planner and judge its expectations.
+
+The script (``pfp_clients.script``) is validated whole before the session
+opens.  Its clock is simulated seconds, ``speed_up`` times the wall clock.
+While it runs it follows every unit's state (for ``when`` triggers and
+clearance), every direction's status and ``event/arrived`` (for arrival), and
+prints each action with the time it fired.  It stops when the timeline is done
+and every unit named by an expectation has arrived (or its deadline passed),
+or at ``duration_s``.  Exit code 0 iff every expectation held and every
+timeline entry fired.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from pfp_clients.script import (
+    AddThreat,
+    CancelGoal,
+    Expect,
+    MoveThreat,
+    RemoveThreat,
+    Script,
+    SetGoal,
+    Step,
+    Wait,
+)
+from pfp_clients.watch import Watch
+from pfp_service.errors import InputError
+from pfp_service.wire import (
+    ArrivedEvent,
+    ThreatUpdate,
+    decode_direction,
+    decode_event,
+    decode_unit_state,
+    encode,
+    keys,
+    zenoh_encoding,
+)
+
+__all__ = ["Fired", "InjectReport", "Verdict", "judge", "main", "report_lines", "run_inject"]
+
+
+@dataclass(frozen=True)
+class Fired:
+    """A timeline entry that fired: when (script seconds and wall clock), what, and where its trigger unit was."""
+
+    index: int
+    t_s: float
+    wall_s: float
+    step: Step
+    where: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Verdict:
+    expect: Expect
+    held: bool
+    detail: str
+
+
+@dataclass
+class InjectReport:
+    """What happened: actions fired, entries that never fired, verdicts, and the watch itself."""
+
+    script: Script
+    fired: list[Fired]
+    unfired: list[int]
+    verdicts: list[Verdict]
+    watch: Watch
+    t_s: float
+    t0_wall_s: float
+    speed_up: float
+    reason: str = ""
+    lines: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.unfired and all(v.held for v in self.verdicts)
+
+
+def judge(e: Expect, watch: Watch) -> Verdict:
+    """Whether one expectation held, from what ``watch`` saw."""
+    if e.arrives_within_s is not None:
+        t = watch.arrived_at_s.get(e.unit)
+        if t is None:
+            last = watch.statuses.get(e.unit, "never heard of")
+            return Verdict(e, False, f"not arrived (last status: {last})")
+        return Verdict(e, t <= e.arrives_within_s, f"arrived at {t:.1f} s")
+    assert e.min_clearance_m is not None
+    if not watch.tracks.get(e.unit):
+        return Verdict(e, False, "no state of the unit was seen")
+    c = watch.clearance(e.unit, e.to)
+    if math.isinf(c):
+        what = e.to or "any threat"
+        return Verdict(e, False, f"{what} was never in force while {e.unit} was seen")
+    return Verdict(e, c >= e.min_clearance_m, f"min clearance {c:.2f} m")
+
+
+def _settled(script: Script, watch: Watch, t_s: float) -> bool:
+    for e in script.expect:
+        if e.unit in watch.arrived_at_s:
+            continue
+        if e.arrives_within_s is not None and t_s > e.arrives_within_s:
+            continue
+        return False
+    return True
+
+
+class _Runner:
+    """The script's state machine; the Zenoh parts are the two callables it is given."""
+
+    def __init__(self, script: Script, session: Any, mission: str, say: Callable[[str], None]) -> None:
+        self.script = script
+        self.s = session
+        self.m = mission
+        self.say = say
+        self.watch = Watch()
+        self.index = 0
+        self.wait_until: float | None = None
+        self.fired: list[Fired] = []
+        self.enc = zenoh_encoding()
+
+    def due(self, step: Step, t_s: float) -> bool:
+        if step.at_s is not None and t_s < step.at_s:
+            return False
+        if step.when is not None:
+            pos = self.watch.position(step.when.unit)
+            if pos is None or math.dist(pos, step.when.of) > step.when.within_m:
+                return False
+        return True
+
+    def advance(self, t_s: float, wall_s: float) -> None:
+        tl = self.script.timeline
+        while self.index < len(tl):
+            step = tl[self.index]
+            if self.wait_until is not None:
+                if t_s < self.wait_until:
+                    return
+                self.wait_until = None
+                self.index += 1
+                continue
+            if not self.due(step, t_s):
+                return
+            where = self.watch.position(step.when.unit) if step.when is not None else None
+            self.fire(step, t_s)
+            self.fired.append(Fired(self.index, t_s, wall_s, step, where))
+            trig = ""
+            if where is not None and step.when is not None:
+                trig = f"  (when {step.when.unit} at ({where[0]:.2f}, {where[1]:.2f}))"
+            self.say(f"t={t_s:7.2f}s  {step.describe()}{trig}")
+            if isinstance(step, Wait):
+                self.wait_until = t_s + step.seconds
+            else:
+                self.index += 1
+
+    def fire(self, step: Step, t_s: float) -> None:
+        s, m, w = self.s, self.m, self.watch
+        if isinstance(step, AddThreat):
+            update = step.update()
+            s.put(keys.threat(m, step.threat), encode(update), encoding=self.enc)
+            w.threat_put(step.threat, update, t_s)
+        elif isinstance(step, MoveThreat):
+            old = w.current(step.threat)
+            if old is None:  # removed or expired meanwhile: nothing to move
+                self.say(f"t={t_s:7.2f}s  threat {step.threat} is gone; move skipped")
+                return
+            facing = old.update.facing_deg if step.facing_deg is None else step.facing_deg
+            moved = ThreatUpdate(
+                position=step.position,
+                facing_deg=facing,
+                sigma_range=old.update.sigma_range,
+                sigma_lateral=old.update.sigma_lateral,
+                skew=old.update.skew,
+                weight=old.update.weight,
+                ttl_s=old.update.ttl_s,
+            )
+            s.put(keys.threat(m, step.threat), encode(moved), encoding=self.enc)
+            w.threat_put(step.threat, moved, t_s)
+        elif isinstance(step, RemoveThreat):
+            s.delete(keys.threat(m, step.threat))
+            w.threat_removed(step.threat, t_s)
+        elif isinstance(step, SetGoal):
+            s.put(keys.unit_goal(m, step.unit), encode(step.goal()), encoding=self.enc)
+        elif isinstance(step, CancelGoal):
+            s.delete(keys.unit_goal(m, step.unit))
+
+
+def run_inject(
+    session: Any,
+    script: Script,
+    mission: str = keys.DEFAULT_MISSION,
+    speed_up: float = 1.0,
+    say: Callable[[str], None] = print,
+    stop: threading.Event | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> InjectReport:
+    """Play ``script`` on an open session and judge it.
+
+    Args:
+        session: an open ``zenoh.Session`` (the caller closes it).
+        script: a validated script.
+        mission: the mission's key chunk.
+        speed_up: script seconds per wall second.
+        say: where progress lines go.
+        stop: set it to end early (the report then judges what was seen).
+        clock: monotonic wall seconds.
+    """
+    import zenoh
+
+    m = keys.check_chunk(mission, "--mission")
+    stop = stop or threading.Event()
+    inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue()
+
+    def on_state(sample: zenoh.Sample) -> None:  # decode and enqueue, nothing more
+        with contextlib.suppress(InputError):  # the planner rejects it and says so on event/rejected
+            uid = keys.parse(str(sample.key_expr)).id
+            inbox.put(("state", uid, decode_unit_state(sample.payload.to_bytes())))
+
+    def on_direction(sample: zenoh.Sample) -> None:
+        try:
+            d = decode_direction(sample.payload.to_bytes())
+            inbox.put(("status", keys.parse(str(sample.key_expr)).id, d.status.value))
+        except InputError:
+            pass
+
+    def on_event(sample: zenoh.Sample) -> None:
+        try:
+            ev = decode_event(sample.payload.to_bytes())
+        except InputError:
+            return
+        if isinstance(ev, ArrivedEvent):
+            inbox.put(("arrived", ev.unit, None))
+
+    subs = [
+        session.declare_subscriber(keys.unit_states(m), on_state),
+        session.declare_subscriber(keys.unit_directions(m), on_direction),
+        session.declare_subscriber(keys.events(m), on_event),
+    ]
+    run = _Runner(script, session, m, say)
+    w = run.watch
+    t0 = clock()
+    t_s = 0.0
+    reason = ""
+    say(
+        f"inject {script.name}: {len(script.timeline)} actions, {len(script.expect)} expectations, x{speed_up:g}"
+    )
+    try:
+        while True:
+            batch: list[tuple[str, str, Any]] = []
+            try:
+                batch.append(inbox.get(timeout=0.005))
+                while True:
+                    batch.append(inbox.get_nowait())
+            except queue.Empty:
+                pass
+            t_s = (clock() - t0) * speed_up
+            for kind, uid, payload in batch:
+                if kind == "state":
+                    w.on_state(uid, payload.position, t_s)
+                elif kind == "status":
+                    w.on_status(uid, payload, t_s)
+                else:
+                    w.on_arrived_event(uid, t_s)
+            run.advance(t_s, clock())
+            if run.index >= len(script.timeline) and _settled(script, w, t_s):
+                reason = "timeline done, expectations settled"
+                break
+            if t_s >= script.duration_s:
+                reason = f"duration {script.duration_s:g} s reached"
+                break
+            if stop.is_set():
+                reason = "stopped"
+                break
+    finally:
+        for sub in subs:
+            with contextlib.suppress(Exception):  # already gone with the session
+                sub.undeclare()
+    say(f"t={t_s:7.2f}s  inject stops: {reason}")
+    verdicts = [judge(e, w) for e in script.expect]
+    unfired = list(range(run.index, len(script.timeline)))
+    return InjectReport(script, run.fired, unfired, verdicts, w, t_s, t0, speed_up, reason)
+
+
+def report_lines(rep: InjectReport) -> list[str]:
+    """The verdicts as text, one line each, then the overall result."""
+    out = []
+    for i in rep.unfired:
+        out.append(f"  FAIL  timeline[{i}] ({rep.script.timeline[i].describe()}) never fired")
+    for v in rep.verdicts:
+        out.append(f"  {'PASS' if v.held else 'FAIL'}  {v.expect.describe()}: {v.detail}")
+    held = sum(v.held for v in rep.verdicts)
+    out.append(f"{held}/{len(rep.verdicts)} expectations held" + ("" if rep.ok else "; FAILED"))
+    return out
+
+
+def main(script: Script, mission: str, speed_up: float, connect: Sequence[str] | None) -> int:
+    """``pfp inject``: open a client session, play, print the report; 0 iff everything held."""
+    from pfp_clients.common import open_client
+
+    session = open_client(connect)
+    try:
+        rep = run_inject(session, script, mission, speed_up, say=lambda s: print(s, flush=True))
+    finally:
+        session.close()
+    for line in report_lines(rep):
+        print(line)
+    return 0 if rep.ok else 1

@@ -1,0 +1,218 @@
+"""Injection scripts: a timeline of contingencies and the expectations that judge the planner.
+
+A script is YAML, validated whole before anything is sent::
+
+    name: figure-8
+    duration_s: 120            # simulated seconds at most
+    timeline:                  # run in order; each entry waits for its trigger
+      - {do: add_threat, threat: e1, position: [4, 6], facing_deg: 225,
+         sigma_range: 1.0, sigma_lateral: 0.7, skew: 2}
+      - {do: set_goal, unit: u1, position: [10, 10]}
+      - {do: add_threat, when: {unit: u1, within_m: 0.5, of: [4.6, 4.9]},
+         threat: e3, position: [6, 7], facing_deg: 225, sigma_range: 1.0, sigma_lateral: 0.7}
+      - {do: wait, seconds: 5}
+      - {do: move_threat, threat: e3, position: [6, 8]}
+    expect:
+      - {unit: u1, arrives_within_s: 60}
+      - {unit: u1, min_clearance_m: 1.5, to: e3}
+
+Triggers: none (right after the previous entry), ``at_s`` (seconds from the
+start; at once if already past) or ``when`` (a unit within ``within_m`` of a
+point).  Actions: ``add_threat``, ``move_threat``, ``remove_threat``,
+``set_goal``, ``cancel_goal``, ``wait``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Union
+
+import msgspec
+from msgspec import Meta
+
+from pfp_clients.common import load_yaml, located
+from pfp_service.errors import InputError
+from pfp_service.types import Id, NonNegative, Point, Positive, Skew, Weight
+from pfp_service.wire import Goal, ThreatUpdate
+
+__all__ = [
+    "ACTIONS",
+    "AddThreat",
+    "CancelGoal",
+    "Expect",
+    "MoveThreat",
+    "RemoveThreat",
+    "Script",
+    "SetGoal",
+    "Step",
+    "Wait",
+    "When",
+    "load_script",
+]
+
+Angle = Annotated[float, Meta(ge=-360.0, le=360.0)]
+ACTIONS = ("add_threat", "move_threat", "remove_threat", "set_goal", "cancel_goal", "wait")
+
+
+class When(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """Fires once ``unit`` is reported within ``within_m`` metres of ``of``."""
+
+    unit: Id
+    within_m: Positive
+    of: Point
+
+
+class _Step(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True, tag_field="do"):
+    at_s: NonNegative | None = None
+    when: When | None = None
+
+    def __post_init__(self) -> None:
+        if self.at_s is not None and self.when is not None:
+            raise ValueError("when: give at_s or when, not both")
+
+    def describe(self) -> str:
+        raise NotImplementedError
+
+
+class AddThreat(_Step, kw_only=True, frozen=True, tag="add_threat"):
+    """Put a new threat (or replace one) with its full shape."""
+
+    threat: Id
+    position: Point
+    facing_deg: Angle = 0.0
+    sigma_range: Positive
+    sigma_lateral: Positive
+    skew: Skew = 0.0
+    weight: Weight = 1.0
+    ttl_s: Positive | None = None
+
+    def update(self) -> ThreatUpdate:
+        return ThreatUpdate(
+            position=self.position,
+            facing_deg=self.facing_deg,
+            sigma_range=self.sigma_range,
+            sigma_lateral=self.sigma_lateral,
+            skew=self.skew,
+            weight=self.weight,
+            ttl_s=self.ttl_s,
+        )
+
+    def describe(self) -> str:
+        return f"add threat {self.threat} at ({self.position[0]:g}, {self.position[1]:g})"
+
+
+class MoveThreat(_Step, kw_only=True, frozen=True, tag="move_threat"):
+    """Move a threat the script added (its shape is kept; the facing may change)."""
+
+    threat: Id
+    position: Point
+    facing_deg: Angle | None = None
+
+    def describe(self) -> str:
+        return f"move threat {self.threat} to ({self.position[0]:g}, {self.position[1]:g})"
+
+
+class RemoveThreat(_Step, kw_only=True, frozen=True, tag="remove_threat"):
+    """Delete a threat."""
+
+    threat: Id
+
+    def describe(self) -> str:
+        return f"remove threat {self.threat}"
+
+
+class SetGoal(_Step, kw_only=True, frozen=True, tag="set_goal"):
+    """Give a unit a goal; ``step``/``tolerance``/``delta`` as in the wire ``Goal``."""
+
+    unit: Id
+    position: Point
+    step: Positive | None = None
+    tolerance: Positive | None = None
+    delta: Positive | None = None
+
+    def goal(self) -> Goal:
+        return Goal(position=self.position, step=self.step, tolerance=self.tolerance, delta=self.delta)
+
+    def describe(self) -> str:
+        return f"set goal of {self.unit} to ({self.position[0]:g}, {self.position[1]:g})"
+
+
+class CancelGoal(_Step, kw_only=True, frozen=True, tag="cancel_goal"):
+    """Cancel a unit's goal."""
+
+    unit: Id
+
+    def describe(self) -> str:
+        return f"cancel goal of {self.unit}"
+
+
+class Wait(_Step, kw_only=True, frozen=True, tag="wait"):
+    """Hold the timeline for ``seconds`` (simulated)."""
+
+    seconds: Positive
+
+    def describe(self) -> str:
+        return f"wait {self.seconds:g} s"
+
+
+Step = Union[AddThreat, MoveThreat, RemoveThreat, SetGoal, CancelGoal, Wait]  # noqa: UP007
+
+
+class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """One expectation: ``arrives_within_s``, or ``min_clearance_m`` (to threat ``to``, else to all)."""
+
+    unit: Id
+    arrives_within_s: Positive | None = None
+    min_clearance_m: NonNegative | None = None
+    to: Id | None = None
+
+    def __post_init__(self) -> None:
+        if (self.arrives_within_s is None) == (self.min_clearance_m is None):
+            raise ValueError("arrives_within_s: give exactly one of arrives_within_s or min_clearance_m")
+        if self.to is not None and self.min_clearance_m is None:
+            raise ValueError("to: only goes with min_clearance_m")
+
+    def describe(self) -> str:
+        if self.arrives_within_s is not None:
+            return f"{self.unit} arrives within {self.arrives_within_s:g} s"
+        return f"min clearance of {self.unit} to {self.to or 'every threat'} >= {self.min_clearance_m:g} m"
+
+
+class Script(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A whole injection script."""
+
+    name: str = "script"
+    duration_s: Positive = 300.0
+    timeline: Annotated[list[Step], Meta(max_length=10_000)] = []
+    expect: Annotated[list[Expect], Meta(max_length=10_000)] = []
+
+
+def _check_references(script: Script) -> None:
+    """Threats moved, removed or named by an expectation must be added by the script first."""
+    added: set[str] = set()
+    for i, step in enumerate(script.timeline):
+        if isinstance(step, AddThreat):
+            added.add(step.threat)
+        elif isinstance(step, (MoveThreat, RemoveThreat)) and step.threat not in added:
+            raise InputError(f"timeline[{i}].threat", f"{step.threat!r} is not added earlier in the timeline")
+        if isinstance(step, RemoveThreat):
+            added.discard(step.threat)
+    ever = {s.threat for s in script.timeline if isinstance(s, AddThreat)}
+    for i, e in enumerate(script.expect):
+        if e.to is not None and e.to not in ever:
+            raise InputError(f"expect[{i}].to", f"{e.to!r} is never added by the timeline")
+
+
+def load_script(path: str | Path) -> Script:
+    """Read and validate a script: types, bounds, triggers and references to threats.
+
+    Raises:
+        InputError: naming the file, the line and the field.
+    """
+    p = Path(path)
+    script, root = load_yaml(p, Script, {"do": ACTIONS})
+    try:
+        _check_references(script)
+    except InputError as err:
+        raise located(p, root, err) from None
+    return script

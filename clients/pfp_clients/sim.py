@@ -1,0 +1,126 @@
+"""Sans-I/O simulated vehicles: they report where they are and move along the directions they get.
+
+A ``SimUnit`` never reads the clock or touches the network.  The fleet driver
+asks it for a ``UnitState`` (which bumps ``seq``), hands it every ``Direction``
+received, and calls ``advance(dt_s, t_s)`` once per tick: it then moves
+``speed_mps * dt_s`` along the newest direction -- never past the goal -- unless
+the planner said it is arrived, trapped or has no goal.  Arrival is only ever
+what the planner reported (status ``arrived`` within its tolerance).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from pfp_clients.team import UnitSpec
+from pfp_service.wire import Direction, DirectionStatus, UnitState
+
+__all__ = ["SimUnit", "TrackPoint"]
+
+_MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
+
+
+@dataclass(frozen=True, slots=True)
+class TrackPoint:
+    """Where a unit was at simulated time ``t_s`` (and at ``wall_s``, the driver's monotonic clock)."""
+
+    t_s: float
+    wall_s: float
+    x: float
+    y: float
+
+
+@dataclass
+class SimUnit:
+    """One simulated vehicle following the planner's directions."""
+
+    spec: UnitSpec
+    position: tuple[float, float] = (0.0, 0.0)
+    seq: int = 0
+    direction: Direction | None = None
+    arrived_at_s: float | None = None
+    trapped_reason: str = ""
+    replies: int = 0  # directions received
+    track: list[TrackPoint] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.position = (float(self.spec.start[0]), float(self.spec.start[1]))
+
+    @property
+    def id(self) -> str:
+        return self.spec.id
+
+    @property
+    def status(self) -> str:
+        """The planner's latest word on this unit, or ``waiting`` before the first direction."""
+        return "waiting" if self.direction is None else self.direction.status.value
+
+    @property
+    def arrived(self) -> bool:
+        return self.direction is not None and self.direction.status is DirectionStatus.ARRIVED
+
+    @property
+    def answered(self) -> int:
+        """The ``seq`` of the newest direction received (-1 before any)."""
+        d = self.direction
+        return -1 if d is None or d.seq is None else d.seq
+
+    def state(self, t_s: float) -> UnitState:
+        """The next report: the current position with a fresh ``seq``."""
+        self.seq += 1
+        heading = None
+        if self.direction is not None and self.direction.heading_deg is not None:
+            heading = self.direction.heading_deg
+        return UnitState(
+            position=self.position,
+            t=max(t_s, 0.0),
+            seq=self.seq,
+            kind=self.spec.kind,
+            speed_mps=self.spec.speed_mps,
+            heading_deg=heading,
+        )
+
+    def on_direction(self, d: Direction, t_s: float) -> str | None:
+        """Take a direction; returns a line worth logging when the status changed, else ``None``.
+
+        A direction answering an older ``seq`` than one already held is stale and ignored.
+        """
+        if d.seq is not None and d.seq < self.answered:
+            return None
+        before = self.status
+        self.direction = d
+        self.replies += 1
+        if d.status is DirectionStatus.ARRIVED:
+            if self.arrived_at_s is None:
+                self.arrived_at_s = t_s
+        else:
+            self.arrived_at_s = None  # a new goal, or the planner changed its mind
+        self.trapped_reason = d.reason if d.status is DirectionStatus.TRAPPED else ""
+        if d.status.value == before:
+            return None
+        x, y = self.position
+        where = f"at ({x:.2f}, {y:.2f})"
+        if d.status is DirectionStatus.ARRIVED:
+            return f"{self.id} arrived {where}, {d.distance_to_goal or 0.0:.2f} m from its goal"
+        if d.status is DirectionStatus.TRAPPED:
+            return f"{self.id} trapped {where}: {d.reason}"
+        return f"{self.id} {d.status.value} {where}" + (f" ({d.reason})" if d.reason else "")
+
+    def advance(self, dt_s: float, t_s: float, wall_s: float) -> None:
+        """Move for ``dt_s`` along the newest direction and record the track point at ``t_s``."""
+        d = self.direction
+        if not self.track:
+            self.track.append(TrackPoint(t_s - dt_s, wall_s, *self.position))
+        if d is not None and d.status in _MOVING:
+            dist = self.spec.speed_mps * dt_s
+            if d.distance_to_goal is not None:
+                dist = min(dist, d.distance_to_goal)  # slow down at the goal rather than overshoot it
+            vx, vy = d.vector
+            norm = math.hypot(vx, vy)
+            if norm > 0 and dist > 0:
+                self.position = (self.position[0] + dist * vx / norm, self.position[1] + dist * vy / norm)
+        self.track.append(TrackPoint(t_s, wall_s, *self.position))
+
+    def path_length_m(self) -> float:
+        return sum(math.hypot(b.x - a.x, b.y - a.y) for a, b in zip(self.track, self.track[1:]))

@@ -1,0 +1,102 @@
+"""Team files and generated teams: which units there are, where they start and where they go.
+
+A team file is YAML::
+
+    name: demo-team
+    units:
+      - {id: u1, kind: manned, start: [0, 0], goal: [90, 80], speed_mps: 1.4}
+      - {id: r1, kind: unmanned, start: [0, 10], goal: [95, 60], speed_mps: 3.0}
+
+``goal`` may be left out (the unit waits for one, e.g. from ``pfp inject``).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from pathlib import Path
+from typing import Annotated
+
+import msgspec
+from msgspec import Meta
+
+from pfp_clients.common import load_yaml
+from pfp_service.errors import InputError
+from pfp_service.types import Id, Point
+from pfp_service.wire import UnitKind
+
+__all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team"]
+
+Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
+CHOICES: dict[str, tuple[str, ...]] = {"kind": tuple(k.value for k in UnitKind)}
+# Typical ground speeds used by generated teams: a soldier walking, a small robot driving.
+SPEEDS_MPS: dict[UnitKind, tuple[float, float]] = {
+    UnitKind.MANNED: (1.2, 1.6),
+    UnitKind.UNMANNED: (2.0, 3.5),
+}
+
+
+class UnitSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """One unit of a team: its id, kind, start, optional goal and ground speed."""
+
+    id: Id
+    kind: UnitKind = UnitKind.UNMANNED
+    start: Point
+    goal: Point | None = None
+    speed_mps: Speed = 1.5
+
+
+class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A named list of units with distinct ids."""
+
+    name: str = "team"
+    units: Annotated[list[UnitSpec], Meta(min_length=1, max_length=10_000)]
+
+    def __post_init__(self) -> None:
+        seen: set[str] = set()
+        for i, u in enumerate(self.units):
+            if u.id in seen:
+                raise ValueError(f"units[{i}].id: duplicate id {u.id!r}")
+            seen.add(u.id)
+
+
+def load_team(path: str | Path) -> Team:
+    """Read a team file.
+
+    Raises:
+        InputError: naming the file, the line and the field.
+    """
+    team, _root = load_yaml(path, Team, CHOICES)
+    return team
+
+
+def generate_team(n: int, seed: int, area_m: float, manned_share: float = 0.5) -> Team:
+    """``n`` units with seeded random starts on the west edge and goals on the east edge of a square.
+
+    Args:
+        n: how many units (>= 1).
+        seed: seeds the generator; the same seed gives the same team.
+        area_m: side of the square ``[0, area_m]^2`` in metres.
+        manned_share: fraction of manned units (the rest unmanned).
+    """
+    if n < 1:
+        raise InputError("--generate", "must be >= 1")
+    if not (math.isfinite(area_m) and area_m > 0):
+        raise InputError("--area", "must be a finite number > 0")
+    rng = random.Random(seed)
+    n_manned = round(n * manned_share)
+    units = []
+    for i in range(n):
+        kind = UnitKind.MANNED if i < n_manned else UnitKind.UNMANNED
+        lo, hi = SPEEDS_MPS[kind]
+        prefix = "m" if kind is UnitKind.MANNED else "r"
+        units.append(
+            UnitSpec(
+                id=f"{prefix}{i + 1}",
+                kind=kind,
+                start=(rng.uniform(0.0, 0.1) * area_m, rng.uniform(0.05, 0.95) * area_m),
+                goal=(rng.uniform(0.9, 1.0) * area_m, rng.uniform(0.05, 0.95) * area_m),
+                speed_mps=round(rng.uniform(lo, hi), 2),
+            )
+        )
+    return Team(name=f"generated-{n}-seed{seed}", units=units)

@@ -1,0 +1,122 @@
+"""``pfp fleet`` against a real planner subprocess, and its sans-I/O parts (team files, simulated units)."""
+
+from __future__ import annotations
+
+import queue
+import uuid
+
+import pytest
+import zenoh
+from pfp_clients.sim import SimUnit
+from pfp_clients.team import UnitSpec, generate_team, load_team
+
+from pfp_service.errors import InputError
+from pfp_service.wire import Direction, DirectionStatus, keys
+from tests.conftest import run_pfp
+from tests.zenoh_util import Inbox, client, planner_process, put_json
+
+TEAM = """\
+name: mixed
+units:
+  - {id: m1, kind: manned, start: [0, 0], goal: [20, 18], speed_mps: 1.4}
+  - {id: r1, kind: unmanned, start: [0, 6], goal: [22, 4], speed_mps: 3.0}
+  - {id: r2, kind: unmanned, start: [2, 14], goal: [21, 20], speed_mps: 2.5}
+"""
+
+
+@pytest.fixture
+def mission():
+    return "f" + uuid.uuid4().hex[:10]
+
+
+def test_fleet_reaches_its_goals_around_a_threat(tmp_path, mission):
+    team = tmp_path / "team.yaml"
+    team.write_text(TEAM)
+    with planner_process(mission=mission) as (endpoint, _), client(endpoint) as s:
+        put_json(
+            s,
+            keys.threat(mission, "t1"),
+            {"position": [10, 9], "facing_deg": 225, "sigma_range": 2.0, "sigma_lateral": 1.5},
+        )
+        arrived = Inbox(s, keys.event(mission, "arrived"))
+        alive: queue.Queue[tuple[str, bool]] = queue.Queue()
+        s.liveliness().declare_subscriber(
+            keys.alive_units(mission),
+            lambda smp: alive.put((keys.parse(str(smp.key_expr)).id, smp.kind == zenoh.SampleKind.PUT)),
+        )
+        r = run_pfp(
+            "fleet", "--team", str(team), "--connect", endpoint, "--mission", mission,
+            "--speed-up", "20", "--until-arrived", "--duration-s", "120", timeout=60,
+        )  # fmt: skip
+        assert r.returncode == 0, r.stdout + r.stderr
+        # the planner said so, for every unit: the fleet claims nothing of its own
+        seen = {arrived.get(timeout=5)["unit"] for _ in range(3)}
+        assert seen == {"m1", "r1", "r2"}
+        for uid in ("m1", "r1", "r2"):
+            assert f"{uid} arrived at" in r.stdout
+        assert "all arrived" in r.stdout
+        tokens = []
+        while not alive.empty():
+            tokens.append(alive.get_nowait())
+        assert {u for u, up in tokens if up} == {"m1", "r1", "r2"}
+        assert {u for u, up in tokens if not up} == {"m1", "r1", "r2"}  # withdrawn at exit
+
+
+def test_fleet_without_planner_answers_stops_at_duration_and_says_so(mission):
+    with planner_process(mission=mission) as (endpoint, _):
+        r = run_pfp(
+            "fleet", "--generate", "2", "--seed", "4", "--connect", endpoint, "--mission", "nobody-" + mission[:8],
+            "--speed-up", "20", "--duration-s", "80", "--until-arrived", timeout=60,
+        )  # fmt: skip
+    assert r.returncode == 1  # asked to arrive, and nobody guided it
+    assert "no direction from any planner" in r.stdout
+    assert "arrived " not in r.stdout.split("fleet stops")[0]
+
+
+def test_bad_team_file_is_one_line_exit_2(tmp_path):
+    bad = tmp_path / "team.yaml"
+    bad.write_text("units:\n  - {id: u1, start: [0, 0]}\n  - {id: u2, start: [1, 1], speed_mps: -3}\n")
+    r = run_pfp("fleet", "--team", str(bad), "--connect", "tcp/127.0.0.1:1", timeout=30)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "pfp fleet: team.yaml line 3, units[1].speed_mps: must be > 0"
+
+
+def test_generated_team_is_seeded_and_mixed():
+    a, b = generate_team(6, 7, 100.0), generate_team(6, 7, 100.0)
+    assert a == b and a != generate_team(6, 8, 100.0)
+    kinds = {u.kind.value for u in a.units}
+    assert kinds == {"manned", "unmanned"}
+    with pytest.raises(InputError):
+        generate_team(3, 0, -1.0)
+
+
+def test_example_team_files_load():
+    from tests.conftest import EXAMPLES
+
+    for path in EXAMPLES.glob("*team*.yaml"):
+        assert load_team(path).units
+
+
+def _d(status: DirectionStatus, seq: int, vector=(1.0, 0.0), dist=10.0) -> Direction:
+    return Direction(unit="u", seq=seq, status=status, vector=vector, distance_to_goal=dist)
+
+
+def test_sim_unit_moves_only_when_told_and_arrives_only_when_the_planner_says():
+    u = SimUnit(UnitSpec(id="u", start=(0.0, 0.0), goal=(10.0, 0.0), speed_mps=2.0))
+    assert u.state(0.0).seq == 1
+    u.advance(0.5, 0.5, 0.0)
+    assert u.position == (0.0, 0.0)  # no direction yet: stays put
+    u.on_direction(_d(DirectionStatus.EN_ROUTE, 1), 0.5)
+    u.advance(0.5, 1.0, 0.0)
+    assert u.position == (1.0, 0.0)
+    u.on_direction(_d(DirectionStatus.EN_ROUTE, 2, dist=0.3), 1.0)
+    u.advance(0.5, 1.5, 0.0)
+    assert u.position == pytest.approx((1.3, 0.0))  # never past the goal
+    assert not u.arrived  # close is not arrived: only the planner's word counts
+    assert u.on_direction(_d(DirectionStatus.EN_ROUTE, 1), 1.5) is None  # stale seq ignored
+    line = u.on_direction(_d(DirectionStatus.TRAPPED, 3, vector=(0.0, 0.0)), 2.0)
+    assert line is not None and "trapped" in line
+    u.advance(0.5, 2.0, 0.0)
+    assert u.position == pytest.approx((1.3, 0.0)) and not u.arrived
+    u.on_direction(_d(DirectionStatus.ARRIVED, 4, vector=(0.0, 0.0), dist=0.05), 2.5)
+    assert u.arrived and u.arrived_at_s == 2.5

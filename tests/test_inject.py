@@ -1,0 +1,146 @@
+"""``pfp inject`` against a real planner and a real ``pfp fleet``, all subprocesses on loopback."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+import uuid
+
+import pytest
+from pfp_clients.script import load_script
+
+from pfp_service.errors import InputError
+from tests.conftest import EXAMPLES, ROOT, run_pfp
+from tests.zenoh_util import client, planner_process
+
+SPEED_UP = "10"
+
+
+@pytest.fixture
+def mission():
+    return "i" + uuid.uuid4().hex[:10]
+
+
+def _pfp(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "pfp_service", *args],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for_line(proc: subprocess.Popen[str], needle: str, timeout: float = 20.0) -> list[str]:
+    seen = []
+    deadline = time.monotonic() + timeout
+    assert proc.stdout is not None
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        seen.append(line)
+        if needle in line:
+            return seen
+    raise AssertionError(f"{needle!r} never printed; got {seen}")
+
+
+def test_figure_8_expectations_hold_and_a_failing_one_exits_1(tmp_path, mission):
+    failing = tmp_path / "strict.yaml"
+    text = (EXAMPLES / "figure8-inject.yaml").read_text()
+    failing.write_text(
+        text.replace("arrives_within_s: 60", "arrives_within_s: 2").replace(
+            "min_clearance_m: 1.0", "min_clearance_m: 4.0"
+        )
+    )
+    with planner_process("--intensity", "density", mission=mission) as (endpoint, _):
+        common = ("--connect", endpoint, "--mission", mission, "--speed-up", SPEED_UP)
+        good = _pfp("inject", str(EXAMPLES / "figure8-inject.yaml"), *common)
+        strict = _pfp("inject", str(failing), *common)
+        try:
+            head = _wait_for_line(good, "set goal of u1")
+            _wait_for_line(strict, "set goal of u1")
+            fleet = run_pfp(
+                "fleet", "--team", str(EXAMPLES / "figure8-team.yaml"), *common,
+                "--until-arrived", "--duration-s", "100", timeout=60,
+            )  # fmt: skip
+            out, err = good.communicate(timeout=30)
+            s_out, s_err = strict.communicate(timeout=30)
+        finally:
+            for p in (good, strict):
+                if p.poll() is None:
+                    p.kill()
+    assert fleet.returncode == 0, fleet.stdout + fleet.stderr
+    out = "".join(head) + out
+    assert good.returncode == 0, out + err
+    assert "add threat e3 at (6, 7)  (when u1 at (" in out  # the contingency struck mid-route
+    assert "PASS  u1 arrives within 60 s" in out
+    assert "PASS  min clearance of u1 to e3 >= 1 m" in out
+    assert "2/2 expectations held" in out
+    assert strict.returncode == 1, s_out + s_err
+    assert "FAIL  u1 arrives within 2 s: arrived at" in s_out
+    assert "FAIL  min clearance of u1 to e3 >= 4 m: min clearance" in s_out
+    assert "FAILED" in s_out
+
+
+def test_bad_script_is_one_line_exit_2_and_nothing_is_sent(tmp_path, mission):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        "timeline:\n"
+        "  - {do: add_threat, threat: e1, position: [1, 1], sigma_range: 1, sigma_lateral: 1}\n"
+        "  - {do: set_goal, unit: u1, position: [5, 5]}\n"
+        "  - do: add_threat\n"
+        "    threat: e2\n"
+        "    position: [2, 2]\n"
+        "    sigma_range: 0\n"
+        "    sigma_lateral: 1\n"
+    )
+    with planner_process(mission=mission) as (endpoint, _), client(endpoint) as s:
+        heard = []
+        s.declare_subscriber(f"mumt/{mission}/**", lambda smp: heard.append(str(smp.key_expr)))
+        time.sleep(0.3)
+        r = run_pfp("inject", str(bad), "--connect", endpoint, "--mission", mission, timeout=30)
+        time.sleep(0.5)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "pfp inject: bad.yaml line 7, timeline[2].sigma_range: must be > 0"
+    assert r.stdout == ""
+    assert heard == []
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        (
+            "timeline:\n  - {do: fly, unit: u1}\n",
+            "line 2, timeline[0].do: invalid value 'fly' (expected one of:",
+        ),
+        ("timeline:\n  - {do: remove_threat, threat: e9}\n", "line 2, timeline[0].threat: 'e9' is not added"),
+        (
+            "expect:\n  - {unit: u1, min_clearance_m: 1, to: e3}\n",
+            "line 2, expect[0].to: 'e3' is never added",
+        ),
+        ("expect:\n  - {unit: u1}\n", "expect[0].arrives_within_s: give exactly one of"),
+        (
+            "timeline:\n  - do: wait\n    seconds: 1\n    at_s: 2\n    when: {unit: u1, within_m: 1, of: [0, 0]}\n",
+            "line 5, timeline[0].when: give at_s or when, not both",
+        ),
+        ("timeline: [\n", "invalid YAML"),
+    ],
+)
+def test_script_errors_name_the_line_and_field(tmp_path, body, message):
+    p = tmp_path / "s.yaml"
+    p.write_text(body)
+    with pytest.raises(InputError) as info:
+        load_script(p)
+    assert message in str(info.value)
+
+
+def test_example_scripts_validate():
+    scripts = sorted(EXAMPLES.glob("*inject*.yaml"))
+    assert scripts
+    for path in scripts:
+        r = run_pfp("inject", str(path), "--check", timeout=30)
+        assert r.returncode == 0, r.stderr
