@@ -142,16 +142,15 @@ def run_fleet(
         started = clock()
         while not stop.is_set():
             tick_start = clock()
-            for u in units:
-                pubs[u.id].put(encode(u.state(t_s)))
-            if tick == 0 and opts.set_goals:
+            if tick == 0 and opts.set_goals:  # goals first: the first report starts each stepper
                 for u in units:
                     goal = _goal_of(u, dt_s)
                     if goal is not None:
                         session.put(keys.unit_goal(m, u.id), encode(goal), encoding=enc)
-                        say(
-                            f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal ({goal.position[0]:.1f}, {goal.position[1]:.1f})"
-                        )
+                        gx, gy = goal.position
+                        say(f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal ({gx:.1f}, {gy:.1f})")
+            for u in units:
+                pubs[u.id].put(encode(u.state(t_s)))
             # pace the tick, then (lockstep) wait a while longer for answers still missing
             drain(tick_start + dt_s / opts.speed_up, None)
             need = units[0].seq

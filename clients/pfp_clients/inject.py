@@ -201,6 +201,7 @@ def run_inject(
     say: Callable[[str], None] = print,
     stop: threading.Event | None = None,
     clock: Callable[[], float] = time.monotonic,
+    ready: threading.Event | None = None,
 ) -> InjectReport:
     """Play ``script`` on an open session and judge it.
 
@@ -212,6 +213,8 @@ def run_inject(
         say: where progress lines go.
         stop: set it to end early (the report then judges what was seen).
         clock: monotonic wall seconds.
+        ready: set once the entries due at the start have been sent (and the
+            timeline waits for a later trigger), so a caller can start units after them.
     """
     import zenoh
 
@@ -270,6 +273,8 @@ def run_inject(
                 else:
                     w.on_arrived_event(uid, t_s)
             run.advance(t_s, clock())
+            if ready is not None:
+                ready.set()
             if run.index >= len(script.timeline) and _settled(script, w, t_s):
                 reason = "timeline done, expectations settled"
                 break

@@ -1,0 +1,205 @@
+"""``pfp demo``: the whole system in one command -- planner, fleet and a contingency script.
+
+It opens an embedded router on a free loopback port with an in-process
+``PlannerNode``, plays ``examples/demo-inject.yaml`` on one client session,
+starts the team of ``examples/demo-team.yaml`` on another once the known
+threats are in, prints progress once a second, and ends when every unit has
+arrived (or the script's duration passed).  Then it prints a summary table
+(unit, status, time, path length, exposure, minimum clearance; exposure and
+clearance measured on the fleet's own track under the threats in force when
+each segment was walked) and writes a PNG of the threat contours and tracks,
+with a star where the contingency struck.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
+from pfp_clients.inject import InjectReport, report_lines, run_inject
+from pfp_clients.script import AddThreat, load_script
+from pfp_clients.sim import SimUnit
+from pfp_clients.team import load_team
+from pfp_service.core.metrics import measure
+
+__all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DemoOptions", "run_demo"]
+
+_EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+DEMO_TEAM = _EXAMPLES / "demo-team.yaml"
+DEMO_SCRIPT = _EXAMPLES / "demo-inject.yaml"
+MISSION = "demo"
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """What ``pfp demo`` can be told."""
+
+    out: Path = Path("demo.png")
+    speed_up: float = 5.0
+    rate_hz: float = 5.0
+    team: Path = DEMO_TEAM
+    script: Path = DEMO_SCRIPT
+    progress_every_s: float = 1.0  # wall seconds between progress lines
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _progress(t_s: float, units: Sequence[SimUnit]) -> str:
+    parts = []
+    for u in units:
+        d = u.direction
+        togo = f"{d.distance_to_goal:5.1f}m" if d is not None and d.distance_to_goal is not None else "   -  "
+        parts.append(f"{u.id} {u.status[:8]:<8} {togo}")
+    return f"t={t_s:6.1f}s | " + " | ".join(parts)
+
+
+def summary_rows(fleet: FleetResult, rep: InjectReport, intensity: str) -> list[tuple[str, ...]]:
+    """Per unit: status, arrival time, path length, exposure and minimum clearance."""
+    rows: list[tuple[str, ...]] = [("unit", "kind", "status", "time s", "path m", "exposure", "min clear m")]
+    for u in fleet.units:
+        path = np.array([(p.x, p.y) for p in u.track], dtype=float).reshape(-1, 2)
+        # the script's clock: segments are judged under the threats it had put by then
+        times = [(p.wall_s - rep.t0_wall_s) * rep.speed_up for p in u.track]
+        epochs = [ep for ep, _ in rep.watch.epochs(times, intensity)]
+        m = measure(path, epochs) if len(path) > 1 else None
+        arrived = f"{u.arrived_at_s:.1f}" if u.arrived_at_s is not None else "-"
+        if m is None:
+            rows.append((u.id, u.spec.kind.value, u.status, arrived, "0.0", "-", "-"))
+            continue
+        clear = "inf" if math.isinf(m.min_clearance) else f"{m.min_clearance:.2f}"
+        rows.append(
+            (u.id, u.spec.kind.value, u.status, arrived, f"{m.length:.1f}", f"{m.exposure:.3f}", clear)
+        )
+    return rows
+
+
+def _table(rows: list[tuple[str, ...]]) -> list[str]:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+
+
+def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> None:
+    from pfp_service.plot import plot_tracks
+
+    latest: dict[str, Any] = {}
+    for v in rep.watch.versions:
+        latest[v.threat_id] = v.threat()
+    tracks: dict[str, Sequence[Sequence[float]]] = {u.id: [(p.x, p.y) for p in u.track] for u in fleet.units}
+    goals: dict[str, Sequence[float]] = {u.id: u.spec.goal for u in fleet.units if u.spec.goal is not None}
+    for f in rep.fired:  # goals the script gave
+        if type(f.step).__name__ == "SetGoal":
+            goals[f.step.unit] = f.step.position  # type: ignore[union-attr]
+    marks = []
+    for f in rep.fired:
+        if f.where is not None and f.step.when is not None:
+            what = f.step.threat if isinstance(f.step, AddThreat) else f.step.describe()
+            marks.append(
+                (f.where[0], f.where[1], f"{what} struck at t={f.t_s:.0f}s ({f.step.when.unit} here)")
+            )
+    title = f"pfp demo: {sum(u.arrived for u in fleet.units)}/{len(fleet.units)} arrived"
+    plot_tracks(list(latest.values()), intensity, tracks, goals, out, title=title, marks=marks)
+
+
+def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
+    """Run the demo; 0 iff every unit arrived and every expectation held."""
+    import zenoh
+
+    lock = threading.Lock()
+
+    def say(text: str) -> None:  # three threads report: one line at a time
+        with lock:
+            say_line(text)
+
+    from pfp_clients.common import client_config
+    from pfp_service.service.config import ServeConfig, zenoh_config
+    from pfp_service.service.log import setup_logging
+    from pfp_service.service.node import PlannerNode
+
+    wall0 = time.monotonic()
+    team = load_team(opts.team)
+    script = load_script(opts.script)
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    cfg = ServeConfig(mission=MISSION, listen=[endpoint], log_level="error", escape="auto")
+    setup_logging(cfg.log_format, cfg.log_level)
+    say(f"planner: embedded router on {endpoint}, mission {MISSION!r}; speed-up x{opts.speed_up:g}")
+    results: dict[str, Any] = {}
+    errors: list[BaseException] = []
+    latest: list[tuple[float, Sequence[SimUnit]]] = []
+    stop = threading.Event()
+    ready = threading.Event()
+    router = zenoh.open(zenoh_config(cfg))
+    node = PlannerNode(router, cfg)
+    try:
+        node.start()
+        sessions = [zenoh.open(client_config([endpoint])) for _ in range(2)]
+
+        def inject() -> None:
+            try:
+                results["inject"] = run_inject(
+                    sessions[0], script, MISSION, opts.speed_up, say=say, stop=stop, ready=ready
+                )
+            except BaseException as exc:  # reported by the main thread
+                errors.append(exc)
+                ready.set()
+
+        def fleet() -> None:
+            fopts = FleetOptions(
+                mission=MISSION,
+                rate_hz=opts.rate_hz,
+                speed_up=opts.speed_up,
+                duration_s=script.duration_s,
+                until_arrived=True,
+            )
+            try:
+                results["fleet"] = run_fleet(
+                    sessions[1], team, fopts, stop, say=say, on_tick=lambda t, us: latest.append((t, us))
+                )
+            except BaseException as exc:
+                errors.append(exc)
+
+        threads = [threading.Thread(target=inject, name="demo-inject", daemon=True)]
+        threads[0].start()
+        ready.wait(10.0)  # the known threats are in before any goal is set
+        threads.append(threading.Thread(target=fleet, name="demo-fleet", daemon=True))
+        threads[1].start()
+        next_line = time.monotonic() + opts.progress_every_s
+        while threads[1].is_alive():
+            threads[1].join(timeout=0.05)
+            if time.monotonic() >= next_line and latest:
+                say(_progress(*latest[-1]))
+                next_line += opts.progress_every_s
+        threads[0].join(timeout=5.0 + script.duration_s / opts.speed_up)
+        stop.set()
+        threads[0].join(timeout=5.0)
+        for s in sessions:
+            s.close()
+    finally:
+        stop.set()
+        node.stop()
+        router.close()
+    if errors:
+        raise errors[0]
+    fleet_result: FleetResult = results["fleet"]
+    rep: InjectReport = results["inject"]
+    say("")
+    for line in _table(summary_rows(fleet_result, rep, cfg.intensity)):
+        say(line)
+    say("expectations:")
+    for line in report_lines(rep):
+        say(line)
+    _plot(fleet_result, rep, cfg.intensity, opts.out)
+    say(f"wrote {opts.out}; demo took {time.monotonic() - wall0:.1f} s wall")
+    return 0 if rep.ok and fleet_result.all_arrived else 1
