@@ -28,7 +28,7 @@ format: $(STAMP)
 	$(BIN)/ruff check --fix .
 
 demo: $(STAMP)
-	$(BIN)/pfp plan examples/paper-simple.yaml --plot demo.png
+	$(BIN)/pfp demo --out demo.png
 
 bench: $(STAMP)
 	$(BIN)/pfp bench engine
