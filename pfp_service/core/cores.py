@@ -53,6 +53,29 @@ def _ratios(packed: np.ndarray, points: np.ndarray, out_ratio: np.ndarray, out_i
         out_idx[i] = arg
 
 
+@numba.njit(cache=True, nogil=True)
+def _inside(packed: np.ndarray, points: np.ndarray, fraction: float, out: np.ndarray) -> None:
+    """``out[i]``: some ``t_j / max t_j >= fraction`` at point i (exactly ``_ratios``' test, sooner)."""
+    for i in range(points.shape[0]):
+        x = points[i, 0]
+        y = points[i, 1]
+        hit = False
+        for j in range(packed.shape[0]):
+            zx = x - packed[j, 0]
+            zy = y - packed[j, 1]
+            q = packed[j, 2] * zx * zx + 2.0 * packed[j, 3] * zx * zy + packed[j, 4] * zy * zy
+            if q > _Q_CUTOFF:
+                continue
+            e = packed[j, 7] * math.exp(-0.5 * q)
+            if e < fraction:  # the skew factor is at most 1
+                continue
+            u = packed[j, 5] * zx + packed[j, 6] * zy
+            if e * 0.5 * math.erfc(-u * _INV_SQRT2) >= fraction:
+                hit = True
+                break
+        out[i] = hit
+
+
 class Cores:
     """The cores of one threat field.
 
@@ -85,7 +108,11 @@ class Cores:
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """Boolean mask: which points lie in some threat's core."""
-        return self.ratio(points)[0] >= self.fraction
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+        out = np.zeros(len(pts), dtype=np.bool_)
+        if len(self.packed) and len(pts):
+            _inside(self.packed, pts, self.fraction, out)
+        return out
 
     def first_hit(self, path: np.ndarray) -> str:
         """The id of the first core the polyline ``path`` enters, or ``""`` if none."""
@@ -105,8 +132,7 @@ class Cores:
         n = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / h)).astype(np.int64)
         if int(n.max()) == 1:
             return path
-        parts = [path[:1]]
-        for a, d, k in zip(path[:-1], seg, n.tolist()):
-            t = np.arange(1, k + 1)[:, None] / k
-            parts.append(a + t * d)
-        return np.concatenate(parts)
+        which = np.repeat(np.arange(len(seg)), n)
+        k = np.arange(len(which)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each segment
+        t = (k / n[which])[:, None]
+        return np.concatenate([path[:1], path[:-1][which] + t * seg[which]])

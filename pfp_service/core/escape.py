@@ -39,7 +39,7 @@ import math
 import numpy as np
 
 from pfp_service.core.cores import Cores
-from pfp_service.core.escape_strategies import STRATEGIES, Bounds, Trap, rollout
+from pfp_service.core.escape_strategies import STRATEGIES, Bounds, Trap, global_route, rollout
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
@@ -134,29 +134,9 @@ class Escaper:
         self.traps += 1
         if self.traps > MAX_TRAPS:
             return None, f"{reason}; gave up after {MAX_TRAPS} escapes"
-        p = self.params
-        gx, gy = self.goal
-        dist = math.hypot(gx - x, gy - y)
-        margin = max(4.0 * p.step, 0.05 * dist)
-        site = self._site(x, y, max(10.0 * p.step, margin))
-        trap = Trap(
-            field=field,
-            cores=Cores(field),
-            x=x,
-            y=y,
-            goal=self.goal,
-            delta=p.delta,
-            gain=self.goal_gain,
-            step=p.step,
-            tolerance=p.tolerance,
-            trap_window=p.trap_window,
-            dist=dist,
-            margin=margin,
-            budget=int(min(8000, max(10 * p.trap_window, math.ceil(6.0 * dist / p.step)))),
-            bounds=self.bounds,
-            rng=np.random.default_rng([p.seed & 0xFFFFFFFF, self.unit_key & 0xFFFFFFFF, self.traps]),
-        )
-        order = AUTO_ORDER if p.escape == "auto" else (p.escape,)
+        trap = self._trap(field, x, y)
+        site = self._site(x, y, max(10.0 * self.params.step, trap.margin))
+        order = AUTO_ORDER if self.params.escape == "auto" else (self.params.escape,)
         refusals: list[str] = []
         best: tuple[float, str, np.ndarray] | None = None
         for name in order:
@@ -173,7 +153,49 @@ class Escaper:
         _, name, path = best
         site.tried.add(name)
         self.log.append(name)
-        return EscapeRun(name, path, p.step), ""
+        return EscapeRun(name, path, self.params.step), ""
+
+    def foresee(self, field: ThreatField, x: float, y: float, ahead: str) -> tuple[EscapeRun | None, str]:
+        """Plain descent from ``(x, y)`` is foreseen to end ``ahead`` (``foresight``): go round now.
+
+        Rather than walk into the trap and back out, commit to the whole
+        ``global`` route to the goal, judged like any candidate.
+
+        Returns:
+            ``(run, "")``, or ``(None, why)`` when there is no acceptable route;
+            the stepper then descends and meets the trap as usual.
+        """
+        self.traps += 1
+        tr = self._trap(field, x, y)
+        poly = global_route(tr)
+        if isinstance(poly, str):
+            return None, f"{ahead} foreseen; {poly}"
+        verdict, _ = self._judge(tr, poly)
+        if verdict:
+            return None, f"{ahead} foreseen; global: {verdict}"
+        self.log.append("global")
+        return EscapeRun(f"global ({ahead} foreseen)", poly, self.params.step), ""
+
+    def _trap(self, field: ThreatField, x: float, y: float) -> Trap:
+        p = self.params
+        dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        return Trap(
+            field=field,
+            cores=Cores(field),
+            x=x,
+            y=y,
+            goal=self.goal,
+            delta=p.delta,
+            gain=self.goal_gain,
+            step=p.step,
+            tolerance=p.tolerance,
+            trap_window=p.trap_window,
+            dist=dist,
+            margin=max(4.0 * p.step, 0.05 * dist),
+            budget=int(min(8000, max(10 * p.trap_window, math.ceil(6.0 * dist / p.step)))),
+            bounds=self.bounds,
+            rng=np.random.default_rng([p.seed & 0xFFFFFFFF, self.unit_key & 0xFFFFFFFF, self.traps]),
+        )
 
     def _first_pass(self, tr: Trap, name: str, refusals: list[str]) -> tuple[float, np.ndarray] | None:
         """The first candidate of strategy ``name`` that passes, with its estimated cost to the goal."""

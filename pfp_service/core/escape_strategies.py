@@ -19,8 +19,9 @@ no candidate at all.
   lower threat ahead, until clearly closer to the goal; if the line closes on
   itself, raise its level x1.5 and go on (never into a core).
 * ``global``: Dijkstra cost-to-go, cost ``1 + lambda T``, on a local grid with
-  the cores left out; the route is cut at the first exit from which descent
-  works.
+  the cores left out, shortcut where that costs no more; the route is cut at
+  the first exit from which descent works (``global_route`` is the whole of
+  it, which ``auto`` follows when the stepper foresees a trap).
 """
 
 from __future__ import annotations
@@ -34,13 +35,13 @@ import numpy as np
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
-from pfp_service.core.grid import GridGraph
+from pfp_service.core.grid import GridGraph, resample, shortcut
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["GLOBAL_CELLS", "GLOBAL_LAMBDA", "STRATEGIES", "Candidate", "Trap", "rollout"]
+__all__ = ["GLOBAL_CELLS", "GLOBAL_LAMBDA", "STRATEGIES", "Candidate", "Trap", "global_route", "rollout"]
 
 GLOBAL_LAMBDA = 10.0
-GLOBAL_CELLS = 160
+GLOBAL_CELLS = 100
 _MAX_RAISES = 6  # x1.5 each: up to 11x the trap's level
 _MAX_EXITS = 4
 Candidate = np.ndarray | str
@@ -218,31 +219,43 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
     yield f"the contour found no exit within {tr.budget} steps"
 
 
-def _global(tr: Trap) -> Iterator[Candidate]:
+def global_route(tr: Trap) -> np.ndarray | str:
+    """The whole way from the trap point to the goal, or why there is none.
+
+    Dijkstra cost-to-go, cost ``1 + GLOBAL_LAMBDA T``, on a local grid without
+    the cores (with a margin, so a route between grid nodes never clips one);
+    then shortcut wherever a straight segment costs no more and keeps that
+    margin, and resampled at ``step`` for the stepper to follow.
+    """
     gx, gy = tr.goal
     spreads = [t.spread() for t in tr.field.threats] or [tr.step]
+    wide = Cores(tr.field, 0.8 * tr.cores.fraction)
     pad = max(0.3 * tr.dist, 3.0 * max(spreads))
-    (x0, y0), (x1, y1) = (
-        (min(tr.x, gx) - pad, min(tr.y, gy) - pad),
-        (max(tr.x, gx) + pad, max(tr.y, gy) + pad),
-    )
-    if tr.bounds is not None:
-        (bx0, by0), (bx1, by1) = tr.bounds
-        x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
-    # a margin inside the core test, so a route between grid nodes never clips one
-    grid = GridGraph(
-        tr.field, ((x0, y0), (x1, y1)), GLOBAL_CELLS, 16, Cores(tr.field, 0.8 * tr.cores.fraction)
-    )
-    route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), GLOBAL_LAMBDA)
-    if not len(route.points):
-        yield f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
-        return
+    for _ in range(2):  # a trap close to the goal may need more room to go round: once, 3x the pad
+        (x0, y0), (x1, y1) = (
+            (min(tr.x, gx) - pad, min(tr.y, gy) - pad),
+            (max(tr.x, gx) + pad, max(tr.y, gy) + pad),
+        )
+        if tr.bounds is not None:
+            (bx0, by0), (bx1, by1) = tr.bounds
+            x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
+        grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), GLOBAL_CELLS, 16, wide)
+        route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), GLOBAL_LAMBDA)
+        if len(route.points):
+            break
+        pad *= 3.0
+    else:
+        return f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
     pts = np.concatenate([[[tr.x, tr.y]], route.points, [[gx, gy]]])
-    seg = np.diff(pts, axis=0)
-    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / tr.step)).astype(np.int64)
-    poly = np.concatenate(
-        [pts[:1]] + [a + (np.arange(1, m + 1)[:, None] / m) * d for a, d, m in zip(pts[:-1], seg, k.tolist())]
-    )
+    pts = pts[np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])]
+    return resample(shortcut(tr.field, pts, GLOBAL_LAMBDA, wide), tr.step)
+
+
+def _global(tr: Trap) -> Iterator[Candidate]:
+    poly = global_route(tr)
+    if isinstance(poly, str):
+        yield poly
+        return
     for frac in (0.25, 0.5, 0.75):
         yield poly[: max(2, int(frac * len(poly)))]
     yield poly

@@ -8,6 +8,11 @@ cost ``length + lambda * exposure``.  Connectivity is 8 (king moves) or 16
 of 22.5).  Nodes inside a threat core, and edges whose midpoint is, can be
 left out, which makes "is there a way that avoids every core?" a question of
 graph connectivity.
+
+A node path is then smoothed by ``shortcut``: a run of grid edges becomes one
+straight segment whenever that costs no more ``J`` (and, given cores, enters
+none), which removes the grid's heading quantisation.  ``resample`` spaces a
+polyline evenly again, for a stepper to follow.
 """
 
 from __future__ import annotations
@@ -22,10 +27,12 @@ from scipy.sparse.csgraph import dijkstra
 from pfp_service.core.cores import Cores
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["GridGraph", "Route"]
+__all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut"]
 
 _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
+_WINDOW = 48  # grid edges a shortcut may replace at once
+_SAMPLES = 33  # Simpson points on a candidate shortcut
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,3 +131,48 @@ class GridGraph:
         while chain[-1] != target:
             chain.append(int(pred[chain[-1]]))
         return Route(self.nodes[chain], float(dist[source]))
+
+
+def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
+    """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
+    t = np.linspace(0.0, 1.0, _SAMPLES)
+    pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
+    lv = field.level(pts) if len(field) else np.zeros(pts.shape[:2])
+    w = np.ones(_SAMPLES)
+    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
+    length = np.hypot(*(b - a).T)
+    return length + lam * length * (lv @ w) / (3.0 * (_SAMPLES - 1))
+
+
+def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
+    """Greedily replace runs of segments by straight ones that cost no more."""
+    if len(pts) < 3:
+        return pts
+    seg = segment_costs(field, pts[:-1], pts[1:], lam)
+    prefix = np.concatenate([[0.0], np.cumsum(seg)])
+    keep = [0]
+    i = 0
+    n = len(pts)
+    while i < n - 1:
+        js = np.arange(i + 2, min(n, i + _WINDOW + 1))
+        best = i + 1
+        if len(js):
+            direct = segment_costs(field, np.repeat(pts[i : i + 1], len(js), axis=0), pts[js], lam)
+            ok = direct <= (prefix[js] - prefix[i]) * (1.0 + 1e-12)
+            for j in js[ok][::-1]:
+                if cores is None or not cores.first_hit(pts[[i, j]]):
+                    best = int(j)
+                    break
+        keep.append(best)
+        i = best
+    return pts[keep]
+
+
+def resample(pts: np.ndarray, spacing: float) -> np.ndarray:
+    """``pts`` with every segment split evenly into pieces of at most ``spacing``."""
+    seg = np.diff(pts, axis=0)
+    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / spacing)).astype(np.int64)
+    parts = [pts[:1]]
+    for a, d, m in zip(pts[:-1], seg, k.tolist()):
+        parts.append(a + (np.arange(1, m + 1)[:, None] / m) * d)
+    return np.concatenate(parts)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pfp_service.core.cores import Cores
-from pfp_service.core.grid import GridGraph
+from pfp_service.core.grid import GridGraph, resample, shortcut
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.plan import PlanResult, PlanStatus, Scheduled, UsedParams
 from pfp_service.core.stepper import Bounds
@@ -32,8 +32,6 @@ __all__ = ["DEFAULT_CELLS", "DEFAULT_LAMBDA", "OptimalPath", "OptimalSolver", "p
 
 DEFAULT_LAMBDA = 10.0
 DEFAULT_CELLS = 300
-_WINDOW = 48  # grid edges a shortcut may replace at once
-_SAMPLES = 33  # Simpson points on a candidate shortcut
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,50 +42,6 @@ class OptimalPath:
     length: float
     exposure: float
     cost: float
-
-
-def _segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
-    """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
-    t = np.linspace(0.0, 1.0, _SAMPLES)
-    pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
-    lv = field.level(pts) if len(field) else np.zeros(pts.shape[:2])
-    w = np.ones(_SAMPLES)
-    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
-    length = np.hypot(*(b - a).T)
-    return length + lam * length * (lv @ w) / (3.0 * (_SAMPLES - 1))
-
-
-def _shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
-    """Greedily replace runs of segments by straight ones that cost no more."""
-    if len(pts) < 3:
-        return pts
-    seg = _segment_costs(field, pts[:-1], pts[1:], lam)
-    prefix = np.concatenate([[0.0], np.cumsum(seg)])
-    keep = [0]
-    i = 0
-    n = len(pts)
-    while i < n - 1:
-        js = np.arange(i + 2, min(n, i + _WINDOW + 1))
-        best = i + 1
-        if len(js):
-            direct = _segment_costs(field, np.repeat(pts[i : i + 1], len(js), axis=0), pts[js], lam)
-            ok = direct <= (prefix[js] - prefix[i]) * (1.0 + 1e-12)
-            for j in js[ok][::-1]:
-                if cores is None or not cores.first_hit(pts[[i, j]]):
-                    best = int(j)
-                    break
-        keep.append(best)
-        i = best
-    return pts[keep]
-
-
-def _resample(pts: np.ndarray, spacing: float) -> np.ndarray:
-    seg = np.diff(pts, axis=0)
-    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / spacing)).astype(np.int64)
-    parts = [pts[:1]]
-    for a, d, m in zip(pts[:-1], seg, k.tolist()):
-        parts.append(a + (np.arange(1, m + 1)[:, None] / m) * d)
-    return np.concatenate(parts)
 
 
 class OptimalSolver:
@@ -131,8 +85,8 @@ class OptimalSolver:
             return OptimalPath(np.zeros((0, 2)), math.inf, math.inf, math.inf)
         pts = np.concatenate([[self.start], route.points, [self.goal]])
         keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])
-        pts = _shortcut(self.field, pts[keep], lam, self.cores)
-        pts = _resample(pts, self.graph.cell_m / 2.0)
+        pts = shortcut(self.field, pts[keep], lam, self.cores)
+        pts = resample(pts, self.graph.cell_m / 2.0)
         m = measure(pts, [Epoch(0, len(pts) - 1, self.field)])
         return OptimalPath(pts, m.length, m.exposure, m.length + lam * m.exposure)
 

@@ -19,6 +19,15 @@ verdict goes to the unit's ``escape.Escaper``, which either commits to a way
 out (status ``escaping`` while the unit follows it, then plain descent again)
 or confirms ``trapped`` with every strategy's reason.  Descent pays nothing
 for this until a trap: the escape state is created at the first one.
+
+Look-ahead (``escape: auto`` only): at the first advisory after the goal is
+set, and after each ``world_changed``, the stepper simulates its own plain
+descent from the reported position (``foresight``, one compiled loop).  If
+that simulation is trapped or leaves the bounds, the unit commits to the
+``global`` route round the trap at once (status ``escaping``) instead of
+walking in and back out.  Otherwise, and on every other advisory, nothing
+extra runs: a unit whose descent is foreseen to arrive moves exactly as
+under ``escape: none``.
 """
 
 from __future__ import annotations
@@ -31,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pfp_service.core import kernels
+from pfp_service.core import foresight, kernels
 from pfp_service.core.escape import Escaper, EscapeRun
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
@@ -87,6 +96,7 @@ class Stepper:
     __slots__ = (
         "_best",
         "_escaper",
+        "_foresee",
         "_recent",
         "_run",
         "_since_best",
@@ -124,6 +134,7 @@ class Stepper:
         self._escaper: Escaper | None = None
         self._run: EscapeRun | None = None
         self._traps = 0
+        self._foresee = params.escape == "auto"  # look ahead at the next advisory
 
     def __deepcopy__(self, memo: dict[int, object]) -> Stepper:
         """A ghost for look-ahead: shares the immutable parts, copies the state."""
@@ -136,7 +147,7 @@ class Stepper:
 
     @property
     def traps(self) -> int:
-        """How many times plain descent was trapped for this goal."""
+        """How many times plain descent was trapped for this goal (or foreseen to be, and went round)."""
         return self._traps
 
     @property
@@ -159,6 +170,7 @@ class Stepper:
         self._best = math.inf
         self._since_best = 0
         self._run = None  # judged under the old field
+        self._foresee = self.params.escape == "auto"
         if self._escaper is not None:
             self._escaper.forget_sites()
         if self._terminal is not None and self._terminal.status is StepStatus.TRAPPED:
@@ -169,6 +181,8 @@ class Stepper:
         early = self.check(x, y)
         if early is not None:
             return early
+        if self._foresee:
+            self._look_ahead(field, x, y)
         if self._run is not None:
             return self._escaping(field, x, y)
         fx, fy, level, norm = kernels.point_descent(
@@ -218,6 +232,19 @@ class Stepper:
         return Advice(StepStatus.EN_ROUTE, -fx / norm, -fy / norm, level, dist)
 
     # -- internals ----------------------------------------------------------
+    def _look_ahead(self, field: ThreatField, x: float, y: float) -> None:
+        """Simulate plain descent from here; if it fails, commit to a way round before walking in."""
+        self._foresee = False
+        sim = foresight.simulate(field, (x, y), self.goal, self.goal_gain, self.params, self.bounds)
+        if not sim.outcome.fails:
+            return
+        if self._escaper is None:
+            self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
+        run, _why = self._escaper.foresee(field, x, y, sim.outcome.value.replace("_", " "))
+        if run is not None:  # else descend and meet the trap as usual
+            self._traps += 1
+            self._run = run
+
     def _trapped(
         self, field: ThreatField | None, x: float, y: float, level: float, dist: float, reason: str
     ) -> Advice:
@@ -302,7 +329,7 @@ def advise_many(steppers: list[Stepper], field: ThreatField, positions: np.ndarr
         early = s.check(x, y)
         if early is not None:
             result.append(early)
-        elif s._run is not None:  # escaping: its own path, not the batch's descent
+        elif s._run is not None or s._foresee:  # escaping, or looking ahead: not the batch's descent
             result.append(s.advise(field, x, y))
         else:
             result.append(s.follow(x, y, fx, fy, level, norm, field))
