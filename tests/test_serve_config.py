@@ -104,3 +104,19 @@ def test_peer_planner_joins_an_existing_router_and_logs_json():
     lines = [json.loads(line) for line in err.splitlines() if line.startswith("{")]
     assert any(r["msg"] == "goal set" and r["unit"] == "scout-1" for r in lines)
     assert time.time() - lines[-1]["ts"] < 60
+
+
+def test_zenoh_json5_file_is_passed_through(tmp_path):
+    port = free_port()
+    j5 = tmp_path / "zenoh.json5"
+    j5.write_text(
+        "{\n  // a comment, as JSON5 allows\n  mode: 'peer',\n"
+        f"  listen: {{ endpoints: ['tcp/127.0.0.1:{port}'] }},\n"
+        "  transport: { link: { tx: { lease: 3000 } } },\n}\n"
+    )
+    conf = zenoh_config(load_config(None, {}, {"zenoh_config": str(j5), "mode": "client"}))
+    assert json.loads(conf.get_json("transport/link/tx/lease")) == 3000  # from the file
+    assert f"tcp/127.0.0.1:{port}" in json.dumps(json.loads(conf.get_json("listen/endpoints")))
+    assert json.loads(conf.get_json("mode")) == "client"  # our flag wins over the file
+    with pytest.raises(InputError, match=r"^zenoh_config: cannot load"):
+        zenoh_config(load_config(None, {}, {"zenoh_config": str(tmp_path / "missing.json5")}))
