@@ -29,4 +29,5 @@ def test_tiny_bench_run_reports_enclosures_honestly():
     for name in rep.enclosed:
         assert auto[name].status != "reached"
     assert all(not r.core_entry for r in auto.values() if r.status == "reached")
+    assert all(r.j_ratio is not None and r.j_ratio > 0 for r in auto.values() if r.status == "reached")
     assert "| auto |" in render(rep, ["none", "auto"])

@@ -30,6 +30,15 @@ after ``2 * len(path) + 20`` advisories) and plain descent resumes.
 
 Randomness comes from ``numpy.random.default_rng([seed, unit_key, trap])``:
 the same unit, seed and trap always make the same choice, live or preview.
+
+Foreseen traps.  Under ``auto`` the stepper also simulates its own descent
+when the goal is set and after each world change (``foresight``).  When that
+simulation is trapped (or leaves the bounds), ``foresee`` commits at once to
+the whole ``global`` route, judged like any candidate: a way round chosen
+before the unit walks in, not after.  That route is the Dijkstra optimum of
+``length + GLOBAL_LAMBDA * exposure``, shortcut, so it lies near the
+length/exposure Pareto front; the cheap strategies stay for traps that were
+not foreseen (drift, or threats that appear later).
 """
 
 from __future__ import annotations

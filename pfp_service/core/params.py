@@ -20,6 +20,7 @@ The rule (also in README.md, "Scale-free defaults"):
 
 ``escape`` (default ``auto``) says what the stepper does when plain descent
 is trapped: ``none`` reports ``trapped``; the others are in ``core.escape``.
+``auto`` also looks ahead for traps when a goal is set (``core.foresight``).
 ``seed`` seeds the ``random`` escape (with the stepper's ``unit_key``).
 
 Every quantity is a length ratio or a dimensionless level, so a scenario scaled

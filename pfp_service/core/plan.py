@@ -60,9 +60,10 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     ``min_clearance`` is ``None`` when no threat was ever in force.
     ``status`` is ``reached`` only if the final point is within tolerance.
     ``escapes`` names the strategy of each escape made, in order; ``traps``
-    counts trapped verdicts (escaped or final); ``escape_steps`` counts steps
-    taken while escaping.  ``planner`` is ``pfp`` or ``optimal``; ``lambda``
-    is the optimal planner's exposure weight (``None`` for ``pfp``).
+    counts trapped verdicts (escaped, final, or foreseen and gone round);
+    ``escape_steps`` counts steps taken while escaping.  ``planner`` is
+    ``pfp`` or ``optimal``; ``lambda`` is the optimal planner's exposure
+    weight (``None`` for ``pfp``).
     """
 
     status: PlanStatus
