@@ -175,12 +175,22 @@ def fleet_ms(repeat: int) -> dict[str, Any]:
         out[f"{layout}_kernel_ms"] = _median_ms(
             lambda: batch_descent(field.packed, pts, goals, gains, res), repeat
         )
-        params = resolve(PlannerParams(), (0.0, 0.0), (box, box), threats)
+        # steady state: plain descent (auto's look-ahead runs once per goal or world change, timed below)
+        params = resolve(PlannerParams(escape="none"), (0.0, 0.0), (box, box), threats)
         steppers = [Stepper(tuple(p), tuple(g), params) for p, g in zip(pts, goals)]
         advise_many(steppers, field, pts)
         out[f"{layout}_advise_many_ms"] = _median_ms(
             lambda: advise_many(steppers, field, pts), max(3, repeat // 4)
         )
+        # auto's one-off look-ahead when a goal is set: per unit, over the first 40 units
+        params = resolve(PlannerParams(escape="auto"), (0.0, 0.0), (box, box), threats)
+        per_unit = []
+        for p, g in zip(pts[:40], goals[:40]):
+            s = Stepper(tuple(p), tuple(g), params)
+            t0 = time.perf_counter()
+            s.advise(field, float(p[0]), float(p[1]))
+            per_unit.append((time.perf_counter() - t0) * 1e3)
+        out[f"{layout}_foresight_ms_per_unit"] = statistics.median(per_unit)
     return out
 
 
@@ -226,6 +236,10 @@ def run(args: argparse.Namespace) -> int:
         f"spread {fleet['spread_kernel_ms']:.2f} ms, dense {fleet['dense_kernel_ms']:.2f} ms; "
         f"full advise_many (with per-unit bookkeeping): spread {fleet['spread_advise_many_ms']:.1f} ms, "
         f"dense {fleet['dense_advise_many_ms']:.1f} ms"
+    )
+    print(
+        "escape auto look-ahead, once per goal or world change, median per unit: "
+        f"spread {fleet['spread_foresight_ms_per_unit']:.2f} ms, dense {fleet['dense_foresight_ms_per_unit']:.2f} ms"
     )
     print()
     for name, ok in checks.items():
