@@ -8,6 +8,7 @@ bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Literal
 
@@ -17,7 +18,18 @@ import yaml
 from pfp_service.core import PlannerParams, Scheduled, Threat
 from pfp_service.core.params import ESCAPES, Escape
 from pfp_service.errors import InputError, from_validation
-from pfp_service.types import Finite, Id, Iterations, Point, Positive, Skew, StepIndex, Weight
+from pfp_service.types import (
+    Finite,
+    Id,
+    Iterations,
+    Point,
+    Positive,
+    Sigma,
+    Skew,
+    StepIndex,
+    Weight,
+    check_spreads,
+)
 
 __all__ = [
     "CHOICES",
@@ -43,8 +55,8 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
     id: Id | None = None
     position: Point
     facing_deg: Finite = 0.0
-    sigma_range: Positive | None = None
-    sigma_lateral: Positive | None = None
+    sigma_range: Sigma | None = None
+    sigma_lateral: Sigma | None = None
     skew: Skew = 0.0
     weight: Weight = 1.0
     appear_step: StepIndex = 0
@@ -59,14 +71,20 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
                 raise ValueError("sigma_lateral: is required (or give the raw form omega and alpha)")
             if self.alpha is not None:
                 raise ValueError("alpha: goes with omega (the raw form), not with sigma_range")
+            check_spreads(self.sigma_range, self.sigma_lateral)
             return
         if self.sigma_range is not None or self.sigma_lateral is not None:
             raise ValueError("omega: give either omega or sigma_range/sigma_lateral, not both")
         (a, b), (c, d) = self.omega
         if b != c:
             raise ValueError("omega: must be symmetric")
-        if not (a > 0 and d > 0 and a * d - b * c > 0):
+        det = a * d - b * c  # as the field will compute it: it may underflow to 0 or overflow
+        if not (a > 0 and d > 0 and math.isfinite(det) and det > 0):
             raise ValueError("omega: must be positive definite")
+        try:
+            self.to_threat("")
+        except ValueError:
+            raise ValueError("omega: must be positive definite and invertible in floating point") from None
 
     def to_threat(self, default_id: str) -> Threat:
         tid = self.id or default_id

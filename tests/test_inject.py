@@ -105,7 +105,7 @@ def test_bad_script_is_one_line_exit_2_and_nothing_is_sent(tmp_path, mission):
         r = run_pfp("inject", str(bad), "--connect", endpoint, "--mission", mission, timeout=30)
         time.sleep(0.5)
     assert r.returncode == 2
-    assert r.stderr.strip() == "pfp inject: bad.yaml line 7, timeline[2].sigma_range: must be > 0"
+    assert r.stderr.strip() == "pfp inject: bad.yaml line 7, timeline[2].sigma_range: must be >= 0.001"
     assert r.stdout == ""
     assert heard == []
 

@@ -57,8 +57,8 @@ def test_good_scenario_decodes():
 @pytest.mark.parametrize(
     ("path", "value", "message"),
     [
-        ("threats.2.sigma_range", -1, "threats[2].sigma_range: must be > 0"),
-        ("threats.0.sigma_lateral", 0, "threats[0].sigma_lateral: must be > 0"),
+        ("threats.2.sigma_range", -1, "threats[2].sigma_range: must be >= 0.001"),
+        ("threats.0.sigma_lateral", 0, "threats[0].sigma_lateral: must be >= 0.001"),
         ("threats.0.skew", -0.5, "threats[0].skew: must be >= 0"),
         ("threats.1.weight", -1, "threats[1].weight: must be >= 0"),
         ("threats.0.appear_step", -3, "threats[0].appear_step: must be >= 0"),
@@ -94,7 +94,7 @@ def test_yaml_nan_and_inf_are_rejected():
     doc = b"start: [0, 0]\ngoal: [1, 1]\nthreats: [{position: [.inf, 0], sigma_range: 1, sigma_lateral: 1}]\n"
     assert _error(doc, "yaml").startswith("threats[0].position[0]: expected a finite number")
     doc = b"start: [0, 0]\ngoal: [1, 1]\nthreats: [{position: [0, 0], sigma_range: .nan, sigma_lateral: 1}]\n"
-    assert _error(doc, "yaml").startswith("threats[0].sigma_range: must be > 0")
+    assert _error(doc, "yaml").startswith("threats[0].sigma_range: must be >= 0.001")
 
 
 def test_raw_form():

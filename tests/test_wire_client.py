@@ -378,7 +378,7 @@ def test_queries_preview_status_and_errors(sessions: tuple[zenoh.Session, zenoh.
         assert reply.err is not None
         err = json.loads(reply.err.payload.to_bytes())
         check("error_reply", err)
-        assert err == {"error": "must be > 0", "field": "$.threats[0].sigma_range"}
+        assert err == {"error": "must be >= 0.001", "field": "$.threats[0].sigma_range"}
         (reply,) = ask(key_for("planner_status", planner="p-1"))
         assert reply.ok is not None
         status = json.loads(reply.ok.payload.to_bytes())

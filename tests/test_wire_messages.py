@@ -87,6 +87,14 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         (-1.5, "", "must be > 0"),
         (2e9, "", "finite number within"),
     ],
+    "sigma": [
+        *FINITE,
+        (BIG, "", "expected a finite number"),
+        (-BIG, "", "must be >= 0.001"),
+        (0, "", "must be >= 0.001"),
+        (1e-170, "", "must be >= 0.001"),
+        (2e9, "", "finite number within"),
+    ],
     "nonneg": [
         *FINITE,
         (BIG, "", "finite number"),
@@ -173,8 +181,8 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
 THREAT_FIELDS = {
     "position": ("point", REQ),
     "facing_deg": ("angle", DEF),
-    "sigma_range": ("positive", REQ),
-    "sigma_lateral": ("positive", REQ),
+    "sigma_range": ("sigma", REQ),
+    "sigma_lateral": ("sigma", REQ),
     "skew": ("skew", DEF),
     "weight": ("weight", DEF),
     "ttl_s": ("positive", OPT),
@@ -324,7 +332,7 @@ def test_boundary_values_are_accepted() -> None:
         b'{"position":[-1e9,1e9],"heading_deg":-360,"speed_mps":0,"seq":9007199254740991,"t":0}'
     )
     m.decode_threat(
-        b'{"position":[0,0],"facing_deg":360,"sigma_range":1e-9,"sigma_lateral":1e9,"skew":1000,"weight":0}'
+        b'{"position":[0,0],"facing_deg":360,"sigma_range":1e-3,"sigma_lateral":1e3,"skew":1000,"weight":0}'
     )
     m.decode_direction(
         b'{"unit":"' + b"u" * 64 + b'","status":"no_goal","vector":[0,0],"reason":"' + b"r" * 1024 + b'"}'
@@ -505,7 +513,7 @@ def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
     with pytest.raises(InputError) as e:
         m.decode_threat(b'{"position":[0,0],"sigma_range":0,"sigma_lateral":1}')
     reply = m.ErrorReply.of(e.value)
-    assert msgspec.json.decode(m.encode(reply)) == {"error": "must be > 0", "field": "$.sigma_range"}
+    assert msgspec.json.decode(m.encode(reply)) == {"error": "must be >= 0.001", "field": "$.sigma_range"}
     ev = m.RejectedEvent.of("k/1", e.value, planner="p1", t=5.0)
     assert msgspec.json.decode(m.encode(ev)) == {
         "kind": "rejected",
@@ -513,7 +521,7 @@ def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
         "t": 5.0,
         "key": "k/1",
         "field": "$.sigma_range",
-        "reason": "must be > 0",
+        "reason": "must be >= 0.001",
     }
     assert m.decode_event(m.encode(ev)) == ev
 

@@ -32,7 +32,7 @@ from msgspec import Meta
 
 from pfp_clients.common import load_yaml, located
 from pfp_service.errors import InputError
-from pfp_service.types import Id, NonNegative, Point, Positive, Skew, Weight
+from pfp_service.types import Id, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 from pfp_service.wire import Goal, ThreatUpdate
 
 __all__ = [
@@ -80,11 +80,14 @@ class AddThreat(_Step, kw_only=True, frozen=True, tag="add_threat"):
     threat: Id
     position: Point
     facing_deg: Angle = 0.0
-    sigma_range: Positive
-    sigma_lateral: Positive
+    sigma_range: Sigma
+    sigma_lateral: Sigma
     skew: Skew = 0.0
     weight: Weight = 1.0
     ttl_s: Positive | None = None
+
+    def __post_init__(self) -> None:
+        check_spreads(self.sigma_range, self.sigma_lateral)
 
     def update(self) -> ThreatUpdate:
         return ThreatUpdate(

@@ -62,6 +62,28 @@ class Threat:
     weight: float = 1.0
     id: str = ""
 
+    def __post_init__(self) -> None:
+        """Refuse a threat the field could not evaluate, here rather than as a ZeroDivisionError later.
+
+        Raises:
+            ValueError: a non-finite number, a negative weight, or an ``omega``
+                that is not symmetric positive definite once computed in floats
+                (e.g. a spread so small its square underflows).
+        """
+        (o00, o01), (o10, o11) = self.omega
+        numbers = (*self.xi, o00, o01, o10, o11, *self.alpha, self.weight)
+        if not all(math.isfinite(v) for v in numbers):
+            raise ValueError(f"threat {self.id!r}: position, omega, alpha and weight must be finite")
+        if not self.weight >= 0.0:
+            raise ValueError(f"threat {self.id!r}: weight must be >= 0, got {self.weight!r}")
+        if abs(o01 - o10) > 1e-9 * math.sqrt(abs(o00 * o11)):  # rounding of R D R^T is allowed
+            raise ValueError(f"threat {self.id!r}: omega must be symmetric")
+        det = o00 * o11 - o01 * o01
+        if not (o00 > 0.0 and o11 > 0.0 and det > 0.0 and math.isfinite(det)):
+            raise ValueError(f"threat {self.id!r}: omega must be positive definite (det = {det:g})")
+        if not all(math.isfinite(v) for v in (o11 / det, o00 / det, 1.0 / math.sqrt(det))):
+            raise ValueError(f"threat {self.id!r}: omega is too nearly singular to invert")
+
     @classmethod
     def from_facing(
         cls,

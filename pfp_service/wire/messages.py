@@ -22,7 +22,7 @@ import msgspec
 from msgspec import Meta
 
 from pfp_service.errors import InputError, from_validation
-from pfp_service.types import Id, Iterations, NonNegative, Point, Positive, Skew, Weight
+from pfp_service.types import Id, Iterations, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
@@ -155,8 +155,8 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
     Attributes:
         position: the enemy position ``[x, y]`` in metres.
         facing_deg: the direction it faces, compass degrees.
-        sigma_range: spread along the facing, metres (> 0).
-        sigma_lateral: spread across the facing, metres (> 0).
+        sigma_range: spread along the facing, metres (>= 0.001).
+        sigma_lateral: spread across the facing, metres (>= 0.001).
         skew: how far the threat reaches forward rather than back (0 = symmetric, <= 1000).
         weight: how much it matters (0 to 1e6).
         ttl_s: seconds until it expires unless put again; absent = until deleted.
@@ -164,11 +164,14 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
 
     position: Point
     facing_deg: Angle = 0.0
-    sigma_range: Positive
-    sigma_lateral: Positive
+    sigma_range: Sigma
+    sigma_lateral: Sigma
     skew: Skew = 0.0
     weight: Weight = 1.0
     ttl_s: Positive | None = None
+
+    def __post_init__(self) -> None:
+        check_spreads(self.sigma_range, self.sigma_lateral)
 
     def to_threat(self, threat_id: str) -> Threat:
         """The core's ``Threat`` for this update, named ``threat_id``."""

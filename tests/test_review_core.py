@@ -1,0 +1,106 @@
+"""Regression tests for the core/CLI review findings: each failed before its fix."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from pfp_service.core.threat import Threat
+from pfp_service.errors import InputError
+from pfp_service.scenario import decode_scenario
+from pfp_service.wire import messages as m
+
+PFP = [sys.executable, "-m", "pfp_service"]
+
+
+# -- 1. degenerate threats ------------------------------------------------------
+def _scenario_yaml(threat: str) -> bytes:
+    return f"start: [0, 0]\ngoal: [100, 0]\nthreats:\n  - {threat}\n".encode()
+
+
+@pytest.mark.parametrize(
+    ("threat", "path", "reason"),
+    [
+        (
+            "{position: [50, 0], sigma_range: 1.0e-170, sigma_lateral: 5}",
+            "threats[0].sigma_range",
+            ">= 0.001",
+        ),
+        ("{position: [50, 0], sigma_range: 5, sigma_lateral: 0.0}", "threats[0].sigma_lateral", ">= 0.001"),
+        ("{position: [50, 0], sigma_range: 1.0e+8, sigma_lateral: 1}", "threats[0].sigma_lateral", "factor"),
+        (
+            "{position: [50, 0], omega: [[1.0e-170, 0], [0, 1.0e-170]]}",
+            "threats[0].omega",
+            "positive definite",
+        ),
+        ("{position: [50, 0], omega: [[1.0e+9, 0], [0, 1.0e-310]]}", "threats[0].omega", "positive definite"),
+    ],
+)
+def test_degenerate_threats_are_rejected_with_their_field(threat, path, reason):
+    with pytest.raises(InputError) as exc:
+        decode_scenario(_scenario_yaml(threat), "yaml")
+    assert exc.value.path == path
+    assert reason in exc.value.reason
+
+
+def test_smallest_sigma_is_usable():
+    s = decode_scenario(
+        _scenario_yaml("{position: [50, 0], sigma_range: 0.001, sigma_lateral: 1000}"), "yaml"
+    )
+    t = s.schedule()[0].threat
+    assert all(math.isfinite(v) for v in t.precision())
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"omega": ((1e-170, 0.0), (0.0, 1e-170))},
+        {"omega": ((1.0, 2.0), (2.0, 1.0))},
+        {"omega": ((1.0, 0.5), (0.4, 1.0))},
+        {"omega": ((math.inf, 0.0), (0.0, 1.0))},
+        {"omega": ((1.0, 0.0), (0.0, 1.0)), "alpha": (math.nan, 0.0)},
+        {"omega": ((1.0, 0.0), (0.0, 1.0)), "weight": math.inf},
+        {"omega": ((1.0, 0.0), (0.0, 1.0)), "weight": -1.0},
+    ],
+)
+def test_threat_refuses_what_it_cannot_evaluate(kwargs):
+    args = {"xi": (0.0, 0.0), "alpha": (0.0, 0.0), **kwargs}
+    with pytest.raises(ValueError, match="threat"):
+        Threat(**args)
+
+
+def test_threat_from_tiny_sigma_raises_value_error_not_zero_division():
+    with pytest.raises(ValueError, match="positive definite"):
+        Threat.from_facing((0, 0), 0.0, 1e-170, 1e-170, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("body", "path"),
+    [
+        (b'{"position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}', "$.sigma_range"),
+        (b'{"position": [0, 0], "sigma_range": 1e8, "sigma_lateral": 1}', "$.sigma_lateral"),
+    ],
+)
+def test_wire_threat_rejects_degenerate_sigma(body, path):
+    with pytest.raises(InputError) as exc:
+        m.decode_threat(body)
+    assert exc.value.path == path
+
+
+def test_wire_what_if_rejects_degenerate_sigma():
+    body = b'{"threats": [{"id": "x", "position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}]}'
+    with pytest.raises(InputError) as exc:
+        m.decode_preview_request(body)
+    assert exc.value.path == "$.threats[0].sigma_range"
+
+
+def test_plan_cli_on_degenerate_threat_is_one_line(tmp_path):
+    f = tmp_path / "s.yaml"
+    f.write_bytes(_scenario_yaml("{position: [50, 0], sigma_range: 1.0e-170, sigma_lateral: 5}"))
+    out = subprocess.run([*PFP, "plan", str(f)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    assert "sigma_range" in out.stderr
