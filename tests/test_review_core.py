@@ -104,3 +104,39 @@ def test_plan_cli_on_degenerate_threat_is_one_line(tmp_path):
     assert out.returncode == 2
     assert "Traceback" not in out.stderr
     assert "sigma_range" in out.stderr
+
+
+# -- 2. look-ahead budget -------------------------------------------------------
+def _far_goal_setup():
+    from pfp_service.core import PlannerParams, ThreatField, resolve
+
+    threat = Threat.from_facing((5e4, 3.0), 0.0, 10.0, 10.0, 0.0)
+    params = resolve(PlannerParams(step=1e-4), (0.0, 0.0), (1e5, 0.0), [threat])
+    return ThreatField([threat]), params
+
+
+def test_derived_max_iter_is_capped_explicit_is_kept():
+    from pfp_service.core import PlannerParams, resolve
+    from pfp_service.core.params import MAX_ITER_DERIVED
+
+    assert resolve(PlannerParams(step=1e-4), (0, 0), (1e5, 0)).max_iter == MAX_ITER_DERIVED
+    assert resolve(PlannerParams(step=1e-4, max_iter=5_000_000), (0, 0), (1e5, 0)).max_iter == 5_000_000
+    # the derived step keeps the old rule untouched
+    assert resolve(PlannerParams(), (0, 0), (1e5, 0)).max_iter == 1200
+
+
+def test_look_ahead_is_bounded_and_a_cut_short_simulation_foresees_nothing():
+    import time
+
+    from pfp_service.core import foresight
+    from pfp_service.core.stepper import Stepper, StepStatus
+
+    field, params = _far_goal_setup()
+    sim = foresight.simulate(field, (0.0, 0.0), (1e5, 0.0), params.delta / 1e10, params)
+    assert sim.outcome is foresight.Outcome.RUNS_ON
+    assert sim.steps == foresight.FORESIGHT_MAX_STEPS
+    stepper = Stepper((0.0, 0.0), (1e5, 0.0), params)
+    t0 = time.perf_counter()
+    advice = stepper.advise(field, 0.0, 0.0)
+    assert time.perf_counter() - t0 < 2.0
+    assert advice.status is StepStatus.EN_ROUTE and stepper.traps == 0

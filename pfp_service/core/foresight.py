@@ -11,7 +11,12 @@ round before walking in (``escape.Escaper.foresee``).
 
 It is a prediction, not a promise: a live unit drifts from its advice, and a
 trap the simulation missed is still caught, and escaped, when it happens.
-It costs one compiled loop, about 0.1 ms for a few hundred steps.
+It costs one compiled loop, about 0.1 ms for a few hundred steps, and never
+more than ``FORESIGHT_MAX_STEPS`` steps (a few ms): the simulation runs on the
+planning thread that serves every unit, and a goal given with a tiny explicit
+step could otherwise ask for billions.  A simulation cut short ends
+``runs_on``, which foresees no trap: the unit descends as under ``escape: none``
+and a trap is still caught when it happens.
 """
 
 from __future__ import annotations
@@ -27,7 +32,9 @@ from pfp_service.core import kernels
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["Foresight", "Outcome", "simulate"]
+__all__ = ["FORESIGHT_MAX_STEPS", "Foresight", "Outcome", "simulate"]
+
+FORESIGHT_MAX_STEPS = 20_000
 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
@@ -132,8 +139,11 @@ def simulate(
         gain: the stepper's ``delta / ||goal - x0||^2``.
         params: the stepper's resolved parameters (step, tolerance, trap windows).
         bounds: the mission bounds, if any.
-        budget: most steps simulated; default ``params.max_iter``.
+        budget: most steps simulated; default ``params.max_iter``.  Never
+            more than ``FORESIGHT_MAX_STEPS``.
     """
+    limit = params.max_iter if budget is None else budget
+    limit = min(limit, FORESIGHT_MAX_STEPS)
     if bounds is None:
         box = np.array([-math.inf, -math.inf, math.inf, math.inf])
     else:
@@ -150,7 +160,7 @@ def simulate(
         params.tolerance,
         params.trap_window,
         params.progress_window,
-        params.max_iter if budget is None else budget,
+        limit,
         box,
     )
     return Foresight(_OUTCOMES[code], steps, x, y)

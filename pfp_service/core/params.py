@@ -10,8 +10,10 @@ The rule (also in README.md, "Scale-free defaults"):
 * ``tolerance = 0.75 step``: a straight approach ends within half a step of the
   goal, so this always arrives, and it never sits on the knife edge of a
   whole number of steps (the paper pairs 0.1 and 0.1; give both to match it).
-* ``max_iter = max(300, ceil(8 D0 / step))``: room for a path eight times the
-  straight line before giving up.
+* ``max_iter = clamp(ceil(8 D0 / step), 300, 1_000_000)``: room for a path
+  eight times the straight line before giving up.  The upper bound only
+  matters for an explicit tiny step (the derived step gives at most 24 000);
+  an explicit ``max_iter`` is taken as given.
 * ``delta = 0.15 D0 median_j(L_j / s_j)``, where ``L_j`` is threat j's peak
   level (its weight under ``peak`` intensity, weight times peak density under
   ``density``).  This sets the goal's pull at the start, ``2 delta / D0``, to
@@ -36,7 +38,9 @@ from typing import Literal
 
 from pfp_service.core.threat import Intensity, Threat
 
-__all__ = ["ESCAPES", "Escape", "PlannerParams", "Resolved", "resolve"]
+__all__ = ["ESCAPES", "MAX_ITER_DERIVED", "Escape", "PlannerParams", "Resolved", "resolve"]
+
+MAX_ITER_DERIVED = 1_000_000
 
 Escape = Literal["none", "auto", "delta", "random", "waypoint", "contour", "global"]
 ESCAPES: tuple[str, ...] = ("none", "auto", "delta", "random", "waypoint", "contour", "global")
@@ -98,7 +102,7 @@ def resolve(
     tolerance = params.tolerance if params.tolerance is not None else 0.75 * step
     max_iter = params.max_iter
     if max_iter is None:
-        max_iter = max(300, math.ceil(8.0 * scale / step))
+        max_iter = min(max(300, math.ceil(8.0 * scale / step)), MAX_ITER_DERIVED)
     delta = params.delta
     if delta is None:
         ratios = [_peak_level(t, params.intensity) / s for t, s in zip(threats, spreads) if t.weight > 0]
