@@ -14,7 +14,10 @@ Trap detection (plain descent has no memory, so this is the only guard):
   ``progress_window`` advisories (a slow creep into a basin or an orbit).
 
 Either one ends plain descent with ``trapped`` and the reason, rather than
-running on silently to ``max_iter`` -- unless ``escape`` is set: then the
+running on silently to ``max_iter``.  The verdict stands while the unit stays
+where it was trapped; a unit reported more than ``trap_window * step`` away
+from that point (a person walked it out) is guided again, judged afresh.
+Plain descent ends -- unless ``escape`` is set: then the
 verdict goes to the unit's ``escape.Escaper``, which either commits to a way
 out (status ``escaping`` while the unit follows it, then plain descent again)
 or confirms ``trapped`` with every strategy's reason.  Descent pays nothing
@@ -101,6 +104,7 @@ class Stepper:
         "_run",
         "_since_best",
         "_terminal",
+        "_trap_at",
         "_traps",
         "advisories",
         "bounds",
@@ -130,6 +134,7 @@ class Stepper:
         self._best = math.inf
         self._since_best = 0
         self._terminal: Advice | None = None
+        self._trap_at: tuple[float, float] | None = None  # where the standing trapped verdict was given
         self.unit_key = unit_key
         self._escaper: Escaper | None = None
         self._run: EscapeRun | None = None
@@ -160,10 +165,6 @@ class Stepper:
         """The strategy of each escape committed to, in order."""
         return list(self._escaper.log) if self._escaper is not None else []
 
-    @property
-    def escaping(self) -> bool:
-        return self._run is not None
-
     def world_changed(self) -> None:
         """Threats appeared, moved or vanished: judge progress afresh from here."""
         self._recent.clear()
@@ -175,11 +176,14 @@ class Stepper:
             self._escaper.forget_sites()
         if self._terminal is not None and self._terminal.status is StepStatus.TRAPPED:
             self._terminal = None
+            self._trap_at = None
 
     def advise(self, field: ThreatField, x: float, y: float) -> Advice:
         """The next direction for a unit at ``(x, y)`` under ``field``."""
         early = self.check(x, y)
         if early is not None:
+            if early.status is StepStatus.TRAPPED:
+                return early._replace(level=field.level_grad_at(x, y)[0])
             return early
         if self._foresee:
             self._look_ahead(field, x, y)
@@ -191,7 +195,13 @@ class Stepper:
         return self.follow(x, y, fx, fy, level, norm, field)
 
     def check(self, x: float, y: float) -> Advice | None:
-        """The part of ``advise`` that needs no field: arrival, bounds, a standing verdict."""
+        """The part of ``advise`` that needs no field: arrival, bounds, a standing verdict.
+
+        A standing ``trapped`` verdict comes back with this position's distance
+        and the level it was given with (``advise`` fills in this position's);
+        it is dropped, and ``None`` returned, once the unit is more than
+        ``trap_window * step`` from where it was trapped.
+        """
         gx, gy = self.goal
         dist = math.hypot(gx - x, gy - y)
         if not (math.isfinite(x) and math.isfinite(y)):
@@ -202,7 +212,18 @@ class Stepper:
             (x0, y0), (x1, y1) = self.bounds
             if not (x0 <= x <= x1 and y0 <= y <= y1):
                 return self._end(StepStatus.OUT_OF_BOUNDS, 0.0, dist, "left the mission bounds")
-        return self._terminal
+        if self._terminal is None:
+            return None
+        if self._trap_at is not None:
+            tx, ty = self._trap_at
+            if math.hypot(x - tx, y - ty) > self.params.trap_window * self.params.step:
+                self._terminal = None
+                self._trap_at = None
+                self._recent.clear()
+                self._best = math.inf
+                self._since_best = 0
+                return None
+        return self._terminal._replace(distance=dist)
 
     def follow(
         self,
@@ -250,12 +271,12 @@ class Stepper:
     ) -> Advice:
         self._traps += 1
         if self.params.escape == "none" or field is None:
-            return self._end(StepStatus.TRAPPED, level, dist, reason)
+            return self._end(StepStatus.TRAPPED, level, dist, reason, (x, y))
         if self._escaper is None:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
         run, why = self._escaper.begin(field, x, y, reason)
         if run is None:
-            return self._end(StepStatus.TRAPPED, level, dist, why)
+            return self._end(StepStatus.TRAPPED, level, dist, why, (x, y))
         self._run = run
         return self._escaping(field, x, y)
 
@@ -295,10 +316,18 @@ class Stepper:
         recent.append((x, y))
         return ""
 
-    def _end(self, status: StepStatus, level: float, dist: float, reason: str) -> Advice:
+    def _end(
+        self,
+        status: StepStatus,
+        level: float,
+        dist: float,
+        reason: str,
+        at: tuple[float, float] | None = None,
+    ) -> Advice:
         advice = Advice(status, 0.0, 0.0, level, dist, reason)
         if status is StepStatus.TRAPPED:
             self._terminal = advice
+            self._trap_at = at
         return advice
 
 
@@ -328,7 +357,7 @@ def advise_many(steppers: list[Stepper], field: ThreatField, positions: np.ndarr
     for s, (x, y), (fx, fy, level, norm) in zip(steppers, coords, rows):
         early = s.check(x, y)
         if early is not None:
-            result.append(early)
+            result.append(early._replace(level=level) if early.status is StepStatus.TRAPPED else early)
         elif s._run is not None or s._foresee:  # escaping, or looking ahead: not the batch's descent
             result.append(s.advise(field, x, y))
         else:
