@@ -183,3 +183,23 @@ def test_trapped_unit_walked_away_is_guided_again():
     assert b == a
     (c,) = advise_many([_trapped_stepper()[0]], field, np.array([[x, y]]))
     assert c.status is StepStatus.TRAPPED and math.isclose(c.level, field.level_grad_at(x, y)[0])
+
+
+# -- 5. CLI edges: one line, exit 2 ---------------------------------------------
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["schemas", "--dir", "/proc/no-such-dir/x"], "cannot write"),
+        (
+            ["plan", "examples/x.yaml", "--planner", "optimal", "--cells", "50000"],
+            "--cells: must be 10 to 5000",
+        ),
+        (["bench", "quality", "--cells", "0"], "--cells: must be 10 to 5000"),
+        (["bench", "quality", "--cells", "-5"], "--cells: must be 10 to 5000"),
+    ],
+)
+def test_cli_edges_are_one_line_exit_2(args, fragment):
+    out = subprocess.run([*PFP, *args], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2, out.stderr
+    assert "Traceback" not in out.stderr
+    assert fragment in out.stderr

@@ -34,6 +34,7 @@ import msgspec
 import numpy as np
 
 from pfp_service.bench._suite import Case, generate
+from pfp_service.cli._common import grid_cells
 from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
 from pfp_service.core.cores import Cores
 from pfp_service.core.optimal import OptimalSolver
@@ -50,7 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenarios", type=int, default=48, help="how many scenarios (default 48)")
     p.add_argument("--seed", type=int, default=2023, help="suite seed (default 2023)")
     p.add_argument("--modes", default=",".join(ESCAPES), help="comma-separated escape modes")
-    p.add_argument("--cells", type=int, default=200, help="optimal-planner grid cells on the longer side")
+    p.add_argument(
+        "--cells", type=grid_cells, default=200, help="optimal-planner grid cells on the longer side"
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
         "--write", metavar="MD", nargs="?", const="BENCHMARKS.md", help="update this markdown file"

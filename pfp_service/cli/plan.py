@@ -9,13 +9,12 @@ force from the start).  Both print the same JSON object.
 from __future__ import annotations
 
 import argparse
-import math
 import statistics
 import sys
 import time
 from typing import Any
 
-from pfp_service.cli._common import positive_float, positive_int
+from pfp_service.cli._common import grid_cells, non_negative_float, positive_float, positive_int
 from pfp_service.core.optimal import DEFAULT_CELLS, DEFAULT_LAMBDA
 from pfp_service.core.params import ESCAPES
 
@@ -50,22 +49,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--cells",
-        type=positive_int,
+        type=grid_cells,
         default=DEFAULT_CELLS,
         metavar="N",
         help=f"optimal planner: grid cells along the longer side (default {DEFAULT_CELLS})",
     )
     p.set_defaults(func=run)
-
-
-def non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -29,7 +29,10 @@ def run(args: argparse.Namespace) -> int:
     if directory.exists() and not directory.is_dir():
         raise InputError(str(directory), "is not a directory")
     if args.check:
-        stale = schema.diff(directory)
+        try:
+            stale = schema.diff(directory)
+        except OSError as exc:
+            raise InputError(str(directory), f"cannot read: {exc.strerror or exc}") from exc
         for line in stale:
             print(f"pfp schemas: {directory}: {line}", file=sys.stderr)
         if stale:
@@ -37,7 +40,10 @@ def run(args: argparse.Namespace) -> int:
             return 1
         print(f"{directory}: up to date")
         return 0
-    changes = schema.write(directory, log=lambda line: print(f"{directory}: {line}"))
+    try:
+        changes = schema.write(directory, log=lambda line: print(f"{directory}: {line}"))
+    except OSError as exc:
+        raise InputError(str(directory), f"cannot write: {exc.strerror or exc}") from exc
     if not changes:
         print(f"{directory}: up to date")
     return 0
