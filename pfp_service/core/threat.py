@@ -25,9 +25,14 @@ from scipy.special import ndtr
 
 from pfp_service.core import kernels
 
-__all__ = ["Intensity", "Threat", "ThreatField", "skew_normal_mode"]
+__all__ = ["PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
 
 Intensity = Literal["peak", "density"]
+
+# One row of ``ThreatField.packed`` per threat: xi, P = Omega^-1, a = omega^-1 alpha,
+# the leading constant times the weight (divided by the peak density under ``peak``),
+# and a spare column held at 1.0 that no kernel reads.
+PACKED_COLUMNS = ("xi_x", "xi_y", "p00", "p01", "p11", "a_x", "a_y", "scale", "one")
 
 
 def skew_normal_mode(q: float) -> float:
@@ -164,14 +169,14 @@ class ThreatField:
     Immutable: adding or removing a threat builds a new field (cheap).
     """
 
-    __slots__ = ("_spreads", "intensity", "packed", "positions", "threats")
+    __slots__ = ("intensity", "packed", "positions", "threats")
 
     def __init__(self, threats: Iterable[Threat] = (), intensity: Intensity = "peak") -> None:
         if intensity not in ("peak", "density"):
             raise ValueError(f"intensity: must be 'peak' or 'density', got {intensity!r}")
         self.threats: tuple[Threat, ...] = tuple(threats)
         self.intensity: Intensity = intensity
-        packed = np.zeros((len(self.threats), 9))
+        packed = np.zeros((len(self.threats), len(PACKED_COLUMNS)))
         for j, t in enumerate(self.threats):
             p00, p01, p11 = t.precision()
             ax, ay = t.shape()
@@ -183,17 +188,12 @@ class ThreatField:
             packed[j] = (t.xi[0], t.xi[1], p00, p01, p11, ax, ay, scale, 1.0)
         self.packed = packed
         self.positions = packed[:, :2].copy()
-        self._spreads = np.array([t.spread() for t in self.threats])
 
     def __len__(self) -> int:
         return len(self.threats)
 
     def with_threats(self, threats: Iterable[Threat]) -> ThreatField:
         return ThreatField(threats, self.intensity)
-
-    def min_spread(self) -> float:
-        """Smallest threat spread in metres (``inf`` for an empty field)."""
-        return float(self._spreads.min()) if len(self._spreads) else math.inf
 
     # -- evaluation ---------------------------------------------------------
     def level_grad_at(self, x: float, y: float) -> tuple[float, float, float]:
