@@ -142,9 +142,13 @@ def test_deleted_threat_stops_being_avoided(planner, mission):
         bent = u.inbox.get(where=lambda d: d["status"] == "en_route")
         straight = np.array([6.0, 7.0]) / math.hypot(6, 7)
         assert np.dot(bent["vector"], straight) < 0.99
+        replans = Inbox(s, f"mumt/{mission}/event/replan")
+        time.sleep(0.2)  # let the event subscription reach the router
+        s.delete(f"mumt/{mission}/threat/nope")  # unknown: nothing to replan
         s.delete(f"mumt/{mission}/threat/b")
         d = u.inbox.get(where=lambda m: abs(np.dot(m["vector"], straight) - 1) < 1e-9)
         assert d["threat_level"] == 0.0
+        assert replans.get()["reason"] == "threat b removed"
 
 
 def test_what_if_preview_changes_nothing(planner, mission):

@@ -62,6 +62,9 @@ def test_cli_config_errors_are_one_line(tmp_path):
     r = run_pfp("serve", "--config", str(bad))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip().splitlines() == [f"pfp serve: {bad}: lookahead: must be between 0 and 100"]
+    r = run_pfp("health", "--connect", "foo")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert r.stderr.startswith("pfp health: --connect: rejected by zenoh")
     env = {**os.environ, "PFP_UNIT_STALE_S": "-3"}
     r = subprocess.run(
         [sys.executable, "-m", "pfp_service", "serve"],

@@ -126,3 +126,40 @@ def test_preview_budget_bounds_time():
     )
     assert pv.status.value == "max_iter" and "time budget" in pv.reason
     assert pv.steps == 64
+
+
+def test_preview_uses_the_live_units_parameters_after_threats_change():
+    """Parameters are fixed when the goal is set; a later preview must not re-derive them."""
+    w = World(WorldSettings())  # peak intensity, scale-free defaults
+    w.apply_state("u", _state(0, 0), 0.0)
+    w.apply_goal("u", Goal(position=(10, 10)), 0.0)  # no threats yet: delta resolves to 1
+    w.apply_threat("e1", ThreatUpdate(position=(4, 6), **T), 1.0)
+    w.apply_threat("e2", ThreatUpdate(position=(7, 3), **T), 1.0)
+    pv = preview(w.view("u"), "u", None, lambda: 0.0, 1.0, 10_000)
+    assert pv.params.delta == w.units["u"].params.delta
+    step, pos, track = pv.params.step, (0.0, 0.0), [(0.0, 0.0)]
+    for k in range(1, 600):
+        (d,) = w.directions({"u"})
+        if d.status is not DirectionStatus.EN_ROUTE:
+            break
+        pos = (pos[0] + step * d.vector[0], pos[1] + step * d.vector[1])
+        track.append(pos)
+        w.apply_state("u", _state(*pos, k), 2.0 + k)
+    assert d.status is DirectionStatus.ARRIVED
+    np.testing.assert_allclose(np.array(track), np.array(pv.path), atol=1e-9)
+
+
+def test_mission_bounds_reach_the_stepper_and_levels_stay_on_the_wire():
+    bounds = ((-5.0, -5.0), (15.0, 15.0))
+    w = World(WorldSettings(planner=PlannerParams(intensity="density"), bounds=bounds))
+    w.apply_state("u", _state(1.0, 1.0), 0.0)
+    w.apply_goal("u", Goal(position=(10, 10)), 0.0)
+    assert w.units["u"].stepper.bounds == bounds
+    # an absurd weight at density intensity: the level is clamped to what the wire carries
+    w.apply_threat(
+        "hot", ThreatUpdate(position=(1.0, 1.0), sigma_range=0.01, sigma_lateral=0.01, weight=1e6), 0.0
+    )
+    (d,) = w.directions({"u"})
+    from pfp_service.wire import decode_direction, encode
+
+    assert decode_direction(encode(d)).threat_level == d.threat_level <= 1e9

@@ -7,7 +7,6 @@ be > 0``), so a CLI prints one line and exits 2.
 
 from __future__ import annotations
 
-import json
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,26 +16,16 @@ import msgspec
 import yaml
 
 from pfp_service.errors import InputError, from_validation
+from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
 
 __all__ = ["DEFAULT_CONNECT", "client_config", "line_of", "load_yaml", "located", "open_client"]
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 T = TypeVar("T")
 
 
 def client_config(connect: Sequence[str] | None = None, multicast: bool = False) -> Any:
     """A ``zenoh.Config`` in client mode connecting to ``connect`` (default ``DEFAULT_CONNECT``)."""
-    import zenoh
-
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    try:
-        conf.insert_json5("connect/endpoints", json.dumps(list(connect or [DEFAULT_CONNECT])))
-    except Exception as exc:  # zenoh's own error type: translate at the edge
-        raise InputError("--connect", f"rejected by zenoh: {exc}") from None
-    if not multicast:
-        conf.insert_json5("scouting/multicast/enabled", "false")
-    return conf
+    return client_zenoh_config(connect, multicast)
 
 
 def open_client(connect: Sequence[str] | None = None) -> Any:

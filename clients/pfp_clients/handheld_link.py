@@ -8,7 +8,6 @@ blocks Zenoh's receive path; the Textual app drains the queue on a timer.
 
 from __future__ import annotations
 
-import json
 import os
 import queue
 import sys
@@ -22,6 +21,7 @@ import zenoh
 
 from pfp_clients.nmea import Fix, LocalFrame, read_sentence
 from pfp_service.errors import InputError
+from pfp_service.service.config import client_zenoh_config
 from pfp_service.wire import Direction, Goal, UnitState, decode_direction, encode, keys, zenoh_encoding
 
 __all__ = [
@@ -84,11 +84,7 @@ def _offer(inbox: queue.Queue[Inbound], item: Inbound) -> None:
 
 def client_config(endpoints: list[str]) -> zenoh.Config:
     """A client-mode config that connects to ``endpoints`` only (no multicast scouting)."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps(endpoints))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return conf
+    return client_zenoh_config(endpoints)
 
 
 class Link:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any
 
 from pfp_service.cli._common import positive_float
@@ -24,17 +23,15 @@ def run(args: argparse.Namespace) -> int:
     import zenoh
 
     from pfp_service.errors import InputError
+    from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
     from pfp_service.wire import decode_planner_status, keys
 
     keys.check_chunk(args.mission, "--mission")
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps(args.connect or ["tcp/127.0.0.1:7447"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf = client_zenoh_config(args.connect)
     try:
         session = zenoh.open(conf)
-    except Exception as exc:
-        print(f"pfp health: cannot reach {', '.join(args.connect or ['tcp/127.0.0.1:7447'])}: {exc}")
+    except Exception as exc:  # unreachable router: not healthy, and say why
+        print(f"pfp health: cannot reach {', '.join(args.connect or [DEFAULT_CONNECT])}: {exc}")
         return 1
     found = []
     try:

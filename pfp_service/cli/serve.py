@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import signal
 import threading
 from typing import Any
 
-from pfp_service.cli._common import positive_float
+from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
 
-def _list(text: str) -> list[str]:
-    return [text]
+def _bounds(text: str) -> object:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        raise argparse.ArgumentTypeError("expected JSON like [[0, 0], [100, 100]]") from None
 
 
 def register(sub: Any) -> None:
@@ -42,6 +46,11 @@ def register(sub: Any) -> None:
     p.add_argument("--unit-stale-s", type=positive_float, help="silence after which a unit is stale")
     p.add_argument("--liveliness-debounce-s", type=float, help="how long a token must stay gone")
     p.add_argument("--preview-budget-ms", type=positive_float, help="time budget of one preview")
+    p.add_argument("--preview-max-iter", type=positive_int, help="iteration cap of one preview")
+    p.add_argument("--lookahead", type=int, help="predicted positions per direction (0-100)")
+    p.add_argument("--tick-s", type=positive_float, help="longest wait of the planning loop when idle")
+    p.add_argument("--bounds", type=_bounds, metavar="JSON", help="mission bounds [[xmin,ymin],[xmax,ymax]]")
+    p.add_argument("--multicast", action="store_const", const=True, help="enable Zenoh multicast scouting")
     p.set_defaults(func=run)
 
 
@@ -62,6 +71,11 @@ _FLAG_KEYS = [
     "unit_stale_s",
     "liveliness_debounce_s",
     "preview_budget_ms",
+    "preview_max_iter",
+    "lookahead",
+    "tick_s",
+    "bounds",
+    "multicast",
     "zenoh_config",
 ]
 

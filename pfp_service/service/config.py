@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -26,9 +26,17 @@ from pfp_service.errors import InputError, from_validation
 from pfp_service.scenario import CHOICES
 from pfp_service.types import Finite, Id, NonNegative, Positive
 
-__all__ = ["DEFAULT_LISTEN", "ServeConfig", "load_config", "zenoh_config"]
+__all__ = [
+    "DEFAULT_CONNECT",
+    "DEFAULT_LISTEN",
+    "ServeConfig",
+    "client_zenoh_config",
+    "load_config",
+    "zenoh_config",
+]
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+DEFAULT_CONNECT = DEFAULT_LISTEN  # where clients look for the embedded router
 LogFormat = Literal["human", "json"]
 LogLevel = Literal["debug", "info", "warning", "error"]
 Mode = Literal["router", "peer", "client"]
@@ -71,6 +79,12 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
             (x0, y0), (x1, y1) = self.bounds
             if not (x0 < x1 and y0 < y1):
                 raise ValueError("bounds: must be [[xmin, ymin], [xmax, ymax]] with xmin < xmax, ymin < ymax")
+
+    def bounds_tuple(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        if self.bounds is None:
+            return None
+        (x0, y0), (x1, y1) = self.bounds
+        return (x0, y0), (x1, y1)
 
     def planner_params(self) -> PlannerParams:
         return PlannerParams(
@@ -171,4 +185,23 @@ def zenoh_config(cfg: ServeConfig) -> Any:
             conf.insert_json5("scouting/multicast/enabled", "false")
     except Exception as exc:
         raise InputError("listen/connect", f"rejected by zenoh: {exc}") from None
+    return conf
+
+
+def client_zenoh_config(connect: Sequence[str] | None = None, multicast: bool = False) -> Any:
+    """A client-mode ``zenoh.Config`` that connects to ``connect`` (default ``DEFAULT_CONNECT``) only.
+
+    Raises:
+        InputError: ``--connect``, when zenoh rejects an endpoint.
+    """
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    try:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect or [DEFAULT_CONNECT])))
+    except Exception as exc:  # zenoh's own error type: translate at the edge
+        raise InputError("--connect", f"rejected by zenoh: {exc}") from None
+    if not multicast:
+        conf.insert_json5("scouting/multicast/enabled", "false")
     return conf

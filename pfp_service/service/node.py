@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import msgspec
 import zenoh
 
 from pfp_service import __version__
@@ -85,6 +86,7 @@ class PlannerNode:
                 unit_stale_s=cfg.unit_stale_s,
                 liveliness_debounce_s=cfg.liveliness_debounce_s,
                 lookahead=cfg.lookahead,
+                bounds=cfg.bounds_tuple(),
             )
         )
         self.started = clock()
@@ -100,6 +102,7 @@ class PlannerNode:
         self._publishers: dict[str, Any] = {}
         self._declared: list[Any] = []
         self._threads: list[threading.Thread] = []
+        self._snapshot = self._status()
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
@@ -186,10 +189,13 @@ class PlannerNode:
             )
 
     def _on_status(self, query: zenoh.Query) -> None:
-        query.reply(query.key_expr, encode(self.status()), encoding=_JSON)
+        # the planning loop refreshes the snapshot every tick; the callback never touches the world
+        snap = self._snapshot
+        snap = msgspec.structs.replace(snap, uptime_s=max(self.clock() - self.started, 0.0))
+        query.reply(query.key_expr, encode(snap), encoding=_JSON)
 
     # -- status -------------------------------------------------------------------
-    def status(self) -> PlannerStatus:
+    def _status(self) -> PlannerStatus:
         p50, p99 = self.latency.quantiles_ms()
         units = list(self.world.units.values())
         return PlannerStatus(
@@ -230,24 +236,14 @@ class PlannerNode:
                 self.counters["msgs_in"] += 1
                 if kind == "reject":
                     self._publish_reject(ident, payload)
-                elif kind == "goal":
-                    dirty |= w.apply_goal(ident, payload, now)
-                    log.info("goal set", extra={"fields": {"unit": ident, "goal": list(payload.position)}})
-                elif kind == "cancel":
-                    dirty |= w.cancel_goal(ident)
-                    log.info("goal cancelled", extra={"fields": {"unit": ident}})
-                elif kind == "threat":
-                    changed = w.apply_threat(ident, payload, now)
-                    dirty |= changed
-                    replan.append(f"threat {ident} put")
-                    log.info("threat put", extra={"fields": {"threat": ident, "affected": len(changed)}})
-                elif kind == "unthreat":
-                    changed = w.remove_threat(ident)
-                    dirty |= changed
-                    replan.append(f"threat {ident} removed")
-                    log.info("threat removed", extra={"fields": {"threat": ident}})
-                elif kind == "alive":
-                    w.liveliness(ident, payload, now)
+                    continue
+                try:
+                    dirty |= self._apply(kind, ident, payload, now, replan)
+                except Exception as exc:  # a message the world cannot take: reject it, keep the rest
+                    log.exception("could not apply message", extra={"fields": {"kind": kind, "id": ident}})
+                    self._publish_reject(
+                        self._key_of(kind, ident), InputError("$", f"could not apply: {exc}")
+                    )
             for uid, (msg, _t) in states.items():
                 self.counters["msgs_in"] += 1
                 dirty |= w.apply_state(uid, msg, now)
@@ -259,7 +255,8 @@ class PlannerNode:
             for uid in stale:
                 log.warning("unit stale", extra={"fields": {"unit": uid}})
             previous = {uid: w.units[uid].last_status for uid in dirty if uid in w.units}
-            directions = w.directions(dirty) if dirty else []
+            directions = self._directions(dirty) if dirty else []
+            self._snapshot = self._status()
         for d in directions:
             self._publish_direction(d, previous.get(d.unit))
         done = self.clock()
@@ -270,6 +267,51 @@ class PlannerNode:
             self._event(
                 "replan", ReplanEvent(planner=self.cfg.planner_id, units=guided, reason="; ".join(replan))
             )
+
+    def _apply(self, kind: str, ident: str, payload: Any, now: float, replan: list[str]) -> set[str]:
+        """Apply one queued message to the world; return the units that need a direction."""
+        w = self.world
+        if kind == "goal":
+            log.info("goal set", extra={"fields": {"unit": ident, "goal": list(payload.position)}})
+            return w.apply_goal(ident, payload, now)
+        if kind == "cancel":
+            had = ident in w.units and w.units[ident].goal is not None
+            if had:
+                log.info("goal cancelled", extra={"fields": {"unit": ident}})
+            return w.cancel_goal(ident)
+        if kind == "threat":
+            changed = w.apply_threat(ident, payload, now)
+            replan.append(f"threat {ident} put")
+            log.info("threat put", extra={"fields": {"threat": ident, "affected": len(changed)}})
+            return changed
+        if kind == "unthreat":
+            known = ident in w.threat_ids()
+            changed = w.remove_threat(ident)
+            if known:
+                replan.append(f"threat {ident} removed")
+                log.info("threat removed", extra={"fields": {"threat": ident}})
+            return changed
+        if kind == "alive":
+            w.liveliness(ident, payload, now)
+        return set()
+
+    def _key_of(self, kind: str, ident: str) -> str:
+        m = self.cfg.mission
+        return keys.threat(m, ident) if kind in ("threat", "unthreat") else keys.unit_goal(m, ident)
+
+    def _directions(self, dirty: set[str]) -> list[Direction]:
+        """All pending directions in one call; if that fails, unit by unit, so one bad unit cannot starve the rest."""
+        try:
+            return self.world.directions(dirty)
+        except Exception:
+            log.exception("batch planning failed; planning unit by unit")
+        out: list[Direction] = []
+        for uid in sorted(dirty):
+            try:
+                out += self.world.directions({uid})
+            except Exception:
+                log.exception("planning failed", extra={"fields": {"unit": uid}})
+        return out
 
     # -- output -----------------------------------------------------------------------
     def _publish_direction(self, d: Direction, before: DirectionStatus | None) -> None:

@@ -55,10 +55,20 @@ def preview(
     extra = [t.to_threat(t.id) for t in req.threats]
     replaced = {e.id for e in extra}  # a what-if threat with a live id stands in for it
     threats = [t for t in threats if t.id not in replaced] + extra
-    params = world.params_for(origin, goal_msg).merged(
-        delta=req.delta, step=req.step, tolerance=req.tolerance, max_iter=req.max_iter
-    )
-    resolved = resolve(params, origin, goal, threats)
+    overrides = (req.start, req.goal, req.delta, req.step, req.tolerance, req.max_iter)
+    if (
+        rec is not None
+        and rec.params is not None
+        and origin == rec.origin
+        and all(v is None for v in overrides)
+    ):
+        # the live unit's own parameters, fixed when its goal was set: the preview is its stream
+        resolved = rec.params
+    else:
+        params = world.params_for(goal_msg).merged(
+            delta=req.delta, step=req.step, tolerance=req.tolerance, max_iter=req.max_iter
+        )
+        resolved = resolve(params, origin, goal, threats)
     if resolved.max_iter > max_iter_cap:
         resolved = dataclasses.replace(resolved, max_iter=max_iter_cap)
     return plan(
@@ -66,6 +76,7 @@ def preview(
         goal,
         [Scheduled(t) for t in threats],
         resolved,
+        bounds=world.settings.bounds,
         clock=clock,
         origin=origin,
         budget_s=budget_s,

@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
+from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
 from pfp_service.core.stepper import Advice, advise_many
+from pfp_service.errors import FINITE_LIMIT
 from pfp_service.wire import Direction, DirectionStatus, Goal, ThreatUpdate, UnitState
 
 __all__ = ["UnitRecord", "World", "WorldSettings"]
@@ -43,6 +44,7 @@ class WorldSettings:
     unit_stale_s: float = 10.0  # silence after which a unit is stale
     liveliness_debounce_s: float = 2.0  # a token DELETE counts after this long
     lookahead: int = 5  # predicted positions per direction
+    bounds: tuple[tuple[float, float], tuple[float, float]] | None = None  # mission bounds
 
 
 @dataclass
@@ -57,6 +59,7 @@ class UnitRecord:
     goal: Goal | None = None
     origin: tuple[float, float] | None = None  # x0: where the unit was when the goal was set
     stepper: Stepper | None = None
+    params: Resolved | None = None  # what the stepper was resolved with when the goal was set
     stale: bool = False
     token_gone_since: float | None = None
     last_status: DirectionStatus | None = None
@@ -91,6 +94,9 @@ class World:
         if unit_id in self.units:
             units[unit_id] = dataclasses.replace(self.units[unit_id], stepper=None)
         return World(self.settings, units, dict(self._threats), self._field)
+
+    def threat_ids(self) -> set[str]:
+        return set(self._threats)
 
     def threat_list(self) -> list[Threat]:
         return list(self.field.threats)
@@ -177,7 +183,7 @@ class World:
         return dirty, expired, stale
 
     # -- planning -------------------------------------------------------------
-    def params_for(self, origin: tuple[float, float], goal: Goal) -> PlannerParams:
+    def params_for(self, goal: Goal) -> PlannerParams:
         """The unit's planner parameters: service defaults, then the goal's overrides."""
         return self.settings.planner.merged(delta=goal.delta, tolerance=goal.tolerance, step=goal.step)
 
@@ -185,8 +191,8 @@ class World:
         assert rec.goal is not None and rec.position is not None
         rec.origin = rec.position
         goal = (rec.goal.position[0], rec.goal.position[1])
-        resolved = resolve(self.params_for(rec.origin, rec.goal), rec.origin, goal, self.threat_list())
-        rec.stepper = Stepper(rec.origin, goal, resolved)
+        rec.params = resolve(self.params_for(rec.goal), rec.origin, goal, self.threat_list())
+        rec.stepper = Stepper(rec.origin, goal, rec.params, self.settings.bounds)
 
     def _world_changed(self) -> set[str]:
         self._field = None
@@ -239,7 +245,7 @@ class World:
             vector=(adv.dx, adv.dy),
             heading_deg=heading,
             distance_to_goal=adv.distance,
-            threat_level=max(adv.level, 0.0),
+            threat_level=min(max(adv.level, 0.0), FINITE_LIMIT),  # the wire's bound, even for absurd weights
             lookahead=self._lookahead(rec.stepper, field, rec.position, adv),
             reason=adv.reason,
         )
@@ -252,6 +258,8 @@ class World:
         if n <= 0 or adv.status.terminal:
             return []
         ghost = copy.deepcopy(stepper)
+        # a prediction, not a plan: a ghost that meets a new trap stops there instead of searching
+        ghost.params = dataclasses.replace(ghost.params, escape="none")
         step = stepper.params.step
         x, y = pos[0] + step * adv.dx, pos[1] + step * adv.dy
         points = [(x, y)]
