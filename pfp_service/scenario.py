@@ -15,6 +15,7 @@ from typing import Literal
 import msgspec
 import yaml
 
+from pfp_service import yamlio
 from pfp_service.core import PlannerParams, Scheduled, Threat
 from pfp_service.core.params import ESCAPES, Escape
 from pfp_service.errors import InputError, from_validation
@@ -179,7 +180,7 @@ def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
         except (msgspec.ValidationError, msgspec.DecodeError) as exc:
             raise from_validation(exc, CHOICES) from exc
     try:
-        obj = yaml.safe_load(data)
+        obj = yamlio.load(data)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "file"

@@ -126,3 +126,24 @@ def test_malformed_files(tmp_path):
         load_scenario(tmp_path / "s.txt")
     with pytest.raises(InputError, match="cannot read"):
         load_scenario(tmp_path / "missing.yaml")
+
+
+def test_yaml_exponent_floats_are_numbers(tmp_path):
+    """PyYAML (YAML 1.1) reads 1e3 as a string; our loader reads YAML 1.2 floats."""
+    doc = b"start: [0, 0]\ngoal: [1e3, 2.5e+2]\nthreats: [{position: [5e2, 1E2], sigma_range: 1e2, sigma_lateral: 5e1}]\n"
+    s = decode_scenario(doc, "yaml")
+    assert s.goal == (1000.0, 250.0)
+    assert s.threats[0].sigma_range == 100.0 and s.threats[0].position == (500.0, 100.0)
+    quoted = b"name: '1e3'\nstart: [0, 0]\ngoal: [1, 1]\n"
+    assert decode_scenario(quoted, "yaml").name == "1e3"
+
+
+def test_team_files_read_exponent_floats_too(tmp_path):
+    from pfp_clients.team import load_team
+
+    p = tmp_path / "team.yaml"
+    p.write_text(
+        "name: t\nunits:\n  - {id: a, kind: manned, start: [0, 0], goal: [1e3, 0], speed_mps: 1.5e0}\n"
+    )
+    team = load_team(p)
+    assert team.units[0].goal == (1000.0, 0.0)

@@ -15,6 +15,7 @@ from typing import Any, TypeVar
 import msgspec
 import yaml
 
+from pfp_service import yamlio
 from pfp_service.errors import InputError, from_validation
 from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
 
@@ -78,8 +79,8 @@ def load_yaml(
     except OSError as exc:
         raise InputError(str(p), f"cannot read: {exc.strerror or exc}") from None
     try:
-        root = yaml.compose(text)
-        obj = yaml.safe_load(text)
+        root = yamlio.compose(text)
+        obj = yamlio.load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{p.name} line {mark.line + 1}" if mark is not None else p.name
