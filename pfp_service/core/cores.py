@@ -95,7 +95,7 @@ class Cores:
             packed[row, 7] = t.density_scale() / t.peak_density()  # level 1 at the mode
         self.packed = packed
         self.ids = [field.threats[j].id or f"#{j + 1}" for j in keep]
-        self.min_spread_m = min((field.threats[j].spread() for j in keep), default=math.inf)
+        self.min_spread_m = min((field.threats[j].min_sigma() for j in keep), default=math.inf)
 
     def ratio(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Largest normalised threat level ``t_j / max t_j`` at each point, and its threat index."""
@@ -124,7 +124,7 @@ class Cores:
         return self.ids[int(idx[hits[0]])] if len(hits) else ""
 
     def densify(self, path: np.ndarray) -> np.ndarray:
-        """``path`` with every segment split to at most a quarter of the narrowest spread."""
+        """``path`` with every segment split to at most a quarter of the narrowest standard deviation."""
         if len(path) < 2 or not math.isfinite(self.min_spread_m):
             return path
         h = self.min_spread_m / 4.0

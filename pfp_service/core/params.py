@@ -2,8 +2,9 @@
 
 The rule (also in README.md, "Scale-free defaults"):
 
-* ``D0 = ||goal - start||`` and ``s_min`` = the smallest threat spread
-  ``det(Omega)^(1/4)``.
+* ``D0 = ||goal - start||``; ``s_min`` = the narrowest standard deviation of
+  any threat, ``sqrt(lambda_min(Omega))``; ``s_j`` = threat j's spread
+  ``det(Omega_j)^(1/4)``.
 * ``step = clamp(min(D0 / 150, s_min / 4), D0 / 3000, D0 / 20)``: fine enough to
   resolve the narrowest threat, coarse enough that a path is never more than a
   few thousand steps.
@@ -94,7 +95,7 @@ def resolve(
     d0 = math.hypot(goal[0] - start[0], goal[1] - start[1])
     scale = d0 if d0 > 0 else 1.0
     spreads = [t.spread() for t in threats]
-    s_min = min(spreads) if spreads else math.inf
+    s_min = min((t.min_sigma() for t in threats), default=math.inf)  # resolve the narrowest axis
     step = params.step
     if step is None:
         step = min(scale / 150.0, s_min / 4.0)

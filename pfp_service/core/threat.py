@@ -159,6 +159,17 @@ class Threat:
         (o00, o01), (_, o11) = self.omega
         return float((o00 * o11 - o01 * o01) ** 0.25)
 
+    def min_sigma(self) -> float:
+        """Narrowest standard deviation ``sqrt(lambda_min(Omega))`` in metres: the finest scale to resolve."""
+        (o00, o01), (_, o11) = self.omega
+        half_trace = 0.5 * (o00 + o11)
+        lam_min = half_trace - math.sqrt(max(half_trace**2 - (o00 * o11 - o01 * o01), 0.0))
+        if lam_min <= 0.0:  # rounding on an extreme aspect ratio: fall back on det / lambda_max
+            lam_min = (o00 * o11 - o01 * o01) / (
+                half_trace + math.sqrt(max(half_trace**2 - (o00 * o11 - o01 * o01), 0.0))
+            )
+        return math.sqrt(lam_min)
+
     def translated(self, dx: float, dy: float) -> Threat:
         return Threat((self.xi[0] + dx, self.xi[1] + dy), self.omega, self.alpha, self.weight, self.id)
 
