@@ -13,7 +13,7 @@ from pfp_service.core import PlanResult, Threat, ThreatField
 from pfp_service.errors import InputError
 from pfp_service.scenario import Scenario
 
-__all__ = ["extent", "plot_plan", "plot_tracks"]
+__all__ = ["check_png_path", "extent", "plot_plan", "plot_tracks"]
 
 
 def _pyplot() -> Any:
@@ -25,6 +25,27 @@ def _pyplot() -> Any:
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise InputError("--plot", "needs matplotlib: pip install 'pfp-service[plot]'") from exc
     return plt
+
+
+def check_png_path(path: str | Path, what: str) -> Path:
+    """Refuse, before any work is done, an output path that cannot take a PNG.
+
+    Raises:
+        InputError: naming ``what`` (the flag), when the folder is missing or the suffix is not ``.png``.
+    """
+    p = Path(path)
+    if p.suffix.lower() != ".png":
+        raise InputError(what, f"{path}: must end in .png")
+    if not p.parent.is_dir():
+        raise InputError(what, f"{path}: folder {p.parent} does not exist")
+    return p
+
+
+def _save(fig: Any, out: str | Path, what: str) -> None:
+    try:
+        fig.savefig(out)
+    except (OSError, ValueError) as exc:
+        raise InputError(what, f"cannot write {out}: {exc}") from None
 
 
 def extent(
@@ -92,8 +113,10 @@ def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path) -> None:
     )
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
+    try:
+        _save(fig, out, "--plot")
+    finally:
+        plt.close(fig)
 
 
 def plot_tracks(
@@ -133,5 +156,7 @@ def plot_tracks(
     ax.set_title(title)
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
+    try:
+        _save(fig, out, "--out")
+    finally:
+        plt.close(fig)

@@ -82,7 +82,14 @@ def _write(tmp_path, text):
     return p
 
 
-def test_bad_flags_are_one_line():
-    for args in (["--repeat", "0"], ["--delta", "nan"], ["--intensity", "loud"], ["--nope"]):
+def test_bad_flags_are_one_line(tmp_path):
+    for args in (
+        ["--repeat", "0"],
+        ["--delta", "nan"],
+        ["--intensity", "loud"],
+        ["--nope"],
+        ["--plot", str(tmp_path / "missing" / "x.png")],
+        ["--plot", str(tmp_path / "x.jpeg")],
+    ):
         line = _one_line_exit_2(run_pfp("plan", str(EXAMPLES / "paper-simple.yaml"), *args))
         assert line.startswith("pfp")

@@ -33,7 +33,11 @@ from pfp_service.core.metrics import measure
 
 __all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DemoOptions", "run_demo"]
 
-_EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+# a source checkout keeps examples/ beside clients/; an installed copy (the docker image) finds it in the cwd
+_EXAMPLES = next(
+    (p for p in (Path(__file__).resolve().parents[2] / "examples", Path.cwd() / "examples") if p.is_dir()),
+    Path("examples"),
+)
 DEMO_TEAM = _EXAMPLES / "demo-team.yaml"
 DEMO_SCRIPT = _EXAMPLES / "demo-inject.yaml"
 MISSION = "demo"

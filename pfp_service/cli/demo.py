@@ -23,7 +23,9 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.demo import DemoOptions, run_demo
 
     speed_up = args.speed_up or (15.0 if args.quick else 5.0)
-    opts = DemoOptions(out=Path(args.out), speed_up=speed_up)
+    from pfp_service.plot import check_png_path
+
+    opts = DemoOptions(out=check_png_path(args.out, "--out"), speed_up=speed_up)
     if args.team:
         opts = DemoOptions(out=opts.out, speed_up=speed_up, team=Path(args.team), script=opts.script)
     if args.script:

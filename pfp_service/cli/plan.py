@@ -65,6 +65,10 @@ def run(args: argparse.Namespace) -> int:
     from pfp_service.report import summary
     from pfp_service.scenario import load_scenario
 
+    if args.plot:
+        from pfp_service.plot import check_png_path
+
+        check_png_path(args.plot, "--plot")
     scenario = load_scenario(args.scenario)
     params = scenario.planner.to_params().merged(
         delta=args.delta,
