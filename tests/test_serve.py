@@ -183,6 +183,7 @@ def test_bad_messages_are_rejected_and_service_carries_on(planner, mission):
         s.put(f"mumt/{mission}/unit/u1/state", b'{"position": [1, "x"]}')
         ev = events.get()
         assert ev["key"] == f"mumt/{mission}/unit/u1/state" and ev["field"] == "$.position[1]"
+        assert abs(ev["t"] - time.time()) < 60
         s.put(f"mumt/{mission}/threat/t1", b'{"position": [1, 1], "sigma_range": -2, "sigma_lateral": 1}')
         ev = events.get()
         assert ev["field"] == "$.sigma_range"

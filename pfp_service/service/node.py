@@ -350,6 +350,8 @@ class PlannerNode:
                 log.warning("unit trapped", extra={"fields": {**fields, "reason": d.reason}})
 
     def _event(self, kind: str, ev: Any) -> None:
+        if ev.t is None:  # events carry wall-clock time (Unix seconds); planning never reads it
+            ev = msgspec.structs.replace(ev, t=time.time())
         self.session.put(keys.event(self.cfg.mission, kind), encode(ev), encoding=_JSON)
         self.counters["msgs_out"] += 1
 
@@ -365,7 +367,7 @@ class PlannerNode:
         log.warning("rejected input", extra={"fields": fields})
         self._event(
             "rejected",
-            RejectedEvent(planner=self.cfg.planner_id, key=key, field=err.path or "$", reason=err.reason),
+            RejectedEvent.of(key, err, planner=self.cfg.planner_id),
         )
 
     # -- previews ---------------------------------------------------------------------
@@ -401,6 +403,6 @@ class PlannerNode:
                 self.cfg.preview_max_iter,
             )
         except InputError as err:
-            query.reply_err(encode(ErrorReply(error=err.reason, field=err.path or "$")), encoding=_JSON)
+            query.reply_err(encode(ErrorReply.of(err)), encoding=_JSON)
             return
         query.reply(key, encode(result), encoding=_JSON)
