@@ -136,7 +136,7 @@ def test_preview_uses_the_live_units_parameters_after_threats_change():
     w.apply_threat("e1", ThreatUpdate(position=(4, 6), **T), 1.0)
     w.apply_threat("e2", ThreatUpdate(position=(7, 3), **T), 1.0)
     pv = preview(w.view("u"), "u", None, lambda: 0.0, 1.0, 10_000)
-    assert pv.params.delta == w.units["u"].params.delta
+    assert pv.params.delta == w.units["u"].stepper.params.delta
     step, pos, track = pv.params.step, (0.0, 0.0), [(0.0, 0.0)]
     for k in range(1, 600):
         (d,) = w.directions({"u"})

@@ -21,12 +21,12 @@ import math
 import numba
 import numpy as np
 
+from pfp_service.core.kernels import Q_CUTOFF as _Q_CUTOFF
 from pfp_service.core.threat import ThreatField
 
 __all__ = ["CORE_FRACTION", "Cores"]
 
 CORE_FRACTION = 0.5
-_Q_CUTOFF = 1492.0
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 

@@ -56,14 +56,9 @@ def preview(
     replaced = {e.id for e in extra}  # a what-if threat with a live id stands in for it
     threats = [t for t in threats if t.id not in replaced] + extra
     overrides = (req.start, req.goal, req.delta, req.step, req.tolerance, req.max_iter)
-    if (
-        rec is not None
-        and rec.params is not None
-        and origin == rec.origin
-        and all(v is None for v in overrides)
-    ):
+    if rec is not None and rec.stepper is not None and all(v is None for v in overrides):
         # the live unit's own parameters, fixed when its goal was set: the preview is its stream
-        resolved = rec.params
+        resolved = rec.stepper.params
     else:
         params = world.params_for(goal_msg).merged(
             delta=req.delta, step=req.step, tolerance=req.tolerance, max_iter=req.max_iter

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
+from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT
 from pfp_service.wire import Direction, DirectionStatus, Goal, ThreatUpdate, UnitState
@@ -59,7 +59,6 @@ class UnitRecord:
     goal: Goal | None = None
     origin: tuple[float, float] | None = None  # x0: where the unit was when the goal was set
     stepper: Stepper | None = None
-    params: Resolved | None = None  # what the stepper was resolved with when the goal was set
     stale: bool = False
     token_gone_since: float | None = None
     last_status: DirectionStatus | None = None
@@ -92,7 +91,8 @@ class World:
         """A detached copy holding one unit and the threats in force, for previews off the lock."""
         units = {}
         if unit_id in self.units:
-            units[unit_id] = dataclasses.replace(self.units[unit_id], stepper=None)
+            rec = self.units[unit_id]
+            units[unit_id] = dataclasses.replace(rec, stepper=copy.deepcopy(rec.stepper))
         return World(self.settings, units, dict(self._threats), self._field)
 
     def threat_ids(self) -> set[str]:
@@ -191,8 +191,8 @@ class World:
         assert rec.goal is not None and rec.position is not None
         rec.origin = rec.position
         goal = (rec.goal.position[0], rec.goal.position[1])
-        rec.params = resolve(self.params_for(rec.goal), rec.origin, goal, self.threat_list())
-        rec.stepper = Stepper(rec.origin, goal, rec.params, self.settings.bounds)
+        resolved = resolve(self.params_for(rec.goal), rec.origin, goal, self.threat_list())
+        rec.stepper = Stepper(rec.origin, goal, resolved, self.settings.bounds)
 
     def _world_changed(self) -> set[str]:
         self._field = None
