@@ -31,7 +31,7 @@ class InputError(PfpError):
         self.reason = reason
 
 
-# Bounds used as "finite" sentinels by ``pfp_service.types``; NaN fails them too.
+# Bounds used as "finite" sentinels by ``pfp_service.constraints``; NaN fails them too.
 FINITE_LIMIT = 1e9
 
 _AT = re.compile(r"^(?P<msg>.*) - at `\$(?P<path>[^`]*)`$", re.S)

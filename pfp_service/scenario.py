@@ -16,10 +16,7 @@ import msgspec
 import yaml
 
 from pfp_service import yamlio
-from pfp_service.core import PlannerParams, Scheduled, Threat
-from pfp_service.core.params import ESCAPES, Escape
-from pfp_service.errors import InputError, from_validation
-from pfp_service.types import (
+from pfp_service.constraints import (
     Finite,
     Id,
     Iterations,
@@ -31,6 +28,9 @@ from pfp_service.types import (
     Weight,
     check_spreads,
 )
+from pfp_service.core import PlannerParams, Scheduled, Threat
+from pfp_service.core.params import ESCAPES, Escape
+from pfp_service.errors import InputError, from_validation
 
 __all__ = [
     "CHOICES",

@@ -93,3 +93,14 @@ def test_bad_flags_are_one_line(tmp_path):
     ):
         line = _one_line_exit_2(run_pfp("plan", str(EXAMPLES / "paper-simple.yaml"), *args))
         assert line.startswith("pfp")
+
+
+def test_degenerate_threat_is_one_line(tmp_path):
+    f = tmp_path / "s.yaml"
+    f.write_text(
+        "start: [0, 0]\ngoal: [100, 0]\nthreats:\n  - {position: [50, 0], sigma_range: 1.0e-170, sigma_lateral: 5}\n"
+    )
+    out = run_pfp("plan", str(f), timeout=60)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    assert "sigma_range" in out.stderr

@@ -116,3 +116,19 @@ def test_a_threat_on_the_committed_route_is_seen_and_avoided():
     r = plan(START, GOAL, sched, PlannerParams(escape="auto"))
     assert r.status.value == "reached" and r.final_distance <= r.params.tolerance
     assert not _core_entry([*threats, blocker], r.path[len(r0.path) // 4 :])
+
+
+def test_look_ahead_is_bounded_and_a_cut_short_simulation_foresees_nothing():
+    import time
+
+    threat = Threat.from_facing((5e4, 3.0), 0.0, 10.0, 10.0, 0.0)
+    params = resolve(PlannerParams(step=1e-4), (0.0, 0.0), (1e5, 0.0), [threat])
+    field = ThreatField([threat])
+    sim = foresight.simulate(field, (0.0, 0.0), (1e5, 0.0), params.delta / 1e10, params)
+    assert sim.outcome is foresight.Outcome.RUNS_ON
+    assert sim.steps == foresight.FORESIGHT_MAX_STEPS
+    stepper = Stepper((0.0, 0.0), (1e5, 0.0), params)
+    t0 = time.perf_counter()
+    advice = stepper.advise(field, 0.0, 0.0)
+    assert time.perf_counter() - t0 < 2.0
+    assert advice.status is StepStatus.EN_ROUTE and stepper.traps == 0

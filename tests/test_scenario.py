@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -147,3 +148,38 @@ def test_team_files_read_exponent_floats_too(tmp_path):
     )
     team = load_team(p)
     assert team.units[0].goal == (1000.0, 0.0)
+
+
+def _one_threat(threat: str) -> bytes:
+    return f"start: [0, 0]\ngoal: [100, 0]\nthreats:\n  - {threat}\n".encode()
+
+
+@pytest.mark.parametrize(
+    ("threat", "path", "reason"),
+    [
+        (
+            "{position: [50, 0], sigma_range: 1.0e-170, sigma_lateral: 5}",
+            "threats[0].sigma_range",
+            ">= 0.001",
+        ),
+        ("{position: [50, 0], sigma_range: 5, sigma_lateral: 0.0}", "threats[0].sigma_lateral", ">= 0.001"),
+        ("{position: [50, 0], sigma_range: 1.0e+8, sigma_lateral: 1}", "threats[0].sigma_lateral", "factor"),
+        (
+            "{position: [50, 0], omega: [[1.0e-170, 0], [0, 1.0e-170]]}",
+            "threats[0].omega",
+            "positive definite",
+        ),
+        ("{position: [50, 0], omega: [[1.0e+9, 0], [0, 1.0e-310]]}", "threats[0].omega", "positive definite"),
+    ],
+)
+def test_degenerate_threats_are_rejected_with_their_field(threat, path, reason):
+    with pytest.raises(InputError) as exc:
+        decode_scenario(_one_threat(threat), "yaml")
+    assert exc.value.path == path
+    assert reason in exc.value.reason
+
+
+def test_smallest_sigma_is_usable():
+    s = decode_scenario(_one_threat("{position: [50, 0], sigma_range: 0.001, sigma_lateral: 1000}"), "yaml")
+    t = s.schedule()[0].threat
+    assert all(math.isfinite(v) for v in t.precision())

@@ -68,3 +68,38 @@ def test_advise_many_equals_advise_one_by_one():
         a.distance for a in single if not math.isnan(a.distance)
     ]
     assert batch[3].status is StepStatus.ARRIVED and batch[7].status is StepStatus.INVALID
+
+
+def _trapped_stepper():
+    block = [Threat.from_facing((5.0, 5.0), 225.0, 1.0, 1.0, 0.0)]
+    params = resolve(PlannerParams(delta=0.05, escape="none"), (0.0, 0.0), (10.0, 10.0), block)
+    s, field = Stepper((0.0, 0.0), (10.0, 10.0), params), ThreatField(block)
+    x, y = 0.0, 0.0
+    for _ in range(2000):
+        a = s.advise(field, x, y)
+        if a.status.terminal:
+            break
+        x, y = x + params.step * a.dx, y + params.step * a.dy
+    assert a.status is StepStatus.TRAPPED
+    return s, field, x, y
+
+
+def test_trapped_verdict_reports_the_position_it_is_asked_about():
+    s, field, x, y = _trapped_stepper()
+    nudge = 0.5 * s.params.step * s.params.trap_window  # still near the trap
+    a = s.advise(field, x + nudge, y)
+    assert a.status is StepStatus.TRAPPED
+    assert math.isclose(a.distance, math.hypot(10.0 - x - nudge, 10.0 - y))
+    assert math.isclose(a.level, field.level_grad_at(x + nudge, y)[0])
+
+
+def test_trapped_unit_walked_away_is_guided_again():
+    s, field, _x, _y = _trapped_stepper()
+    a = s.advise(field, 9.0, 4.0)  # carried round the block
+    assert a.status is StepStatus.EN_ROUTE
+    assert math.isclose(a.distance, math.hypot(1.0, 6.0))
+    s2, field, x, y = _trapped_stepper()
+    (b,) = advise_many([s2], field, np.array([[9.0, 4.0]]))
+    assert b == a
+    (c,) = advise_many([_trapped_stepper()[0]], field, np.array([[x, y]]))
+    assert c.status is StepStatus.TRAPPED and math.isclose(c.level, field.level_grad_at(x, y)[0])

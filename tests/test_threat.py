@@ -125,3 +125,26 @@ def test_skew_normal_mode():
         # the mode maximises phi(v) Phi(q v)
         g = lambda u: norm.pdf(u) * norm.cdf(q * u)
         assert g(v) >= max(g(v - 1e-4), g(v + 1e-4))
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"omega": ((1e-170, 0.0), (0.0, 1e-170))},
+        {"omega": ((1.0, 2.0), (2.0, 1.0))},
+        {"omega": ((1.0, 0.5), (0.4, 1.0))},
+        {"omega": ((math.inf, 0.0), (0.0, 1.0))},
+        {"omega": ((1.0, 0.0), (0.0, 1.0)), "alpha": (math.nan, 0.0)},
+        {"omega": ((1.0, 0.0), (0.0, 1.0)), "weight": math.inf},
+        {"omega": ((1.0, 0.0), (0.0, 1.0)), "weight": -1.0},
+    ],
+)
+def test_threat_refuses_what_it_cannot_evaluate(kwargs):
+    args = {"xi": (0.0, 0.0), "alpha": (0.0, 0.0), **kwargs}
+    with pytest.raises(ValueError, match="threat"):
+        Threat(**args)
+
+
+def test_threat_from_tiny_sigma_raises_value_error_not_zero_division():
+    with pytest.raises(ValueError, match="positive definite"):
+        Threat.from_facing((0, 0), 0.0, 1e-170, 1e-170, 0.0)

@@ -550,3 +550,23 @@ def test_wire_modules_import_without_zenoh_or_numpy() -> None:
         "bad = {'zenoh', 'numpy', 'numba'} & set(sys.modules); assert not bad, bad"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize(
+    ("body", "path"),
+    [
+        (b'{"position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}', "$.sigma_range"),
+        (b'{"position": [0, 0], "sigma_range": 1e8, "sigma_lateral": 1}', "$.sigma_lateral"),
+    ],
+)
+def test_wire_threat_rejects_degenerate_sigma(body, path):
+    with pytest.raises(InputError) as exc:
+        m.decode_threat(body)
+    assert exc.value.path == path
+
+
+def test_wire_what_if_rejects_degenerate_sigma():
+    body = b'{"threats": [{"id": "x", "position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}]}'
+    with pytest.raises(InputError) as exc:
+        m.decode_preview_request(body)
+    assert exc.value.path == "$.threats[0].sigma_range"

@@ -31,8 +31,8 @@ import msgspec
 from msgspec import Meta
 
 from pfp_clients.common import load_yaml, located
+from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 from pfp_service.errors import InputError
-from pfp_service.types import Id, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 from pfp_service.wire import Goal, ThreatUpdate
 
 __all__ = [

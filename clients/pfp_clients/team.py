@@ -21,8 +21,8 @@ import msgspec
 from msgspec import Meta
 
 from pfp_clients.common import load_yaml
+from pfp_service.constraints import Id, Point
 from pfp_service.errors import InputError
-from pfp_service.types import Id, Point
 from pfp_service.wire import UnitKind
 
 __all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team"]

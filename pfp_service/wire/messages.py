@@ -21,8 +21,18 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar, Union
 import msgspec
 from msgspec import Meta
 
+from pfp_service.constraints import (
+    Id,
+    Iterations,
+    NonNegative,
+    Point,
+    Positive,
+    Sigma,
+    Skew,
+    Weight,
+    check_spreads,
+)
 from pfp_service.errors import InputError, from_validation
-from pfp_service.types import Id, Iterations, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
