@@ -8,6 +8,7 @@ No other module spells a topic string.  The layout (one mission per prefix):
     mumt/{m}/threat/{t}            any -> planner       ThreatUpdate (DELETE removes)
     mumt/{m}/preview/{u}           queryable            PreviewRequest -> PlanResult
     mumt/{m}/planner/{p}/status    queryable            -> PlannerStatus
+    mumt/{m}/planner/{p}/world     queryable            -> WorldSnapshot (units, threats held)
     mumt/{m}/event/{kind}          planner -> any       Event
     mumt/{m}/alive/unit/{u}        liveliness token
     mumt/{m}/alive/planner/{p}     liveliness token
@@ -55,6 +56,8 @@ __all__ = [
     "unit_goal",
     "unit_state",
     "unit_states",
+    "world",
+    "worlds",
 ]
 
 PREFIX = "mumt"
@@ -75,6 +78,7 @@ class KeyKind(StrEnum):
     EVENT = "event"
     ALIVE_UNIT = "alive_unit"
     ALIVE_PLANNER = "alive_planner"
+    WORLD = "world"
 
 
 # ``{mission}`` and ``{id}`` are the only variables; the id is a unit, threat,
@@ -89,6 +93,7 @@ TEMPLATES: dict[KeyKind, str] = {
     KeyKind.EVENT: PREFIX + "/{mission}/event/{id}",
     KeyKind.ALIVE_UNIT: PREFIX + "/{mission}/alive/unit/{id}",
     KeyKind.ALIVE_PLANNER: PREFIX + "/{mission}/alive/planner/{id}",
+    KeyKind.WORLD: PREFIX + "/{mission}/planner/{id}/world",
 }
 
 # What the ``{id}`` chunk names in each template, for people reading the layout.
@@ -102,6 +107,7 @@ ID_NAMES: dict[KeyKind, str] = {
     KeyKind.EVENT: "kind",
     KeyKind.ALIVE_UNIT: "unit",
     KeyKind.ALIVE_PLANNER: "planner",
+    KeyKind.WORLD: "planner",
 }
 
 
@@ -199,6 +205,11 @@ def alive_planner(mission: str, planner: str) -> str:
     return _build(KeyKind.ALIVE_PLANNER, mission, planner, "planner")
 
 
+def world(mission: str, planner: str) -> str:
+    """``mumt/{mission}/planner/{planner}/world``: the units and threats a planner holds (queryable)."""
+    return _build(KeyKind.WORLD, mission, planner, "planner")
+
+
 # -- wildcards: one ``*`` per variable chunk, for subscribers and queryables ---
 def unit_states(mission: str) -> str:
     """``mumt/{mission}/unit/*/state``."""
@@ -228,6 +239,11 @@ def previews(mission: str) -> str:
 def planner_statuses(mission: str) -> str:
     """``mumt/{mission}/planner/*/status``: ask every planner of a mission."""
     return _wild(KeyKind.PLANNER_STATUS, mission)
+
+
+def worlds(mission: str) -> str:
+    """``mumt/{mission}/planner/*/world``: ask every planner of a mission what it holds."""
+    return _wild(KeyKind.WORLD, mission)
 
 
 def events(mission: str) -> str:

@@ -42,6 +42,8 @@ __all__ = [
     "CHOICES",
     "CONTENT_TYPE",
     "EVENT_KINDS",
+    "MAX_EVENT_ITEMS",
+    "MAX_SNAPSHOT_ITEMS",
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",
     "MAX_WHATIF_THREATS",
@@ -52,16 +54,22 @@ __all__ = [
     "DirectionStatus",
     "ErrorReply",
     "Event",
+    "ForgottenEvent",
     "Goal",
     "PlannerStatus",
     "PreviewRequest",
     "RejectedEvent",
     "ReplanEvent",
+    "StaleEvent",
+    "ThreatChange",
+    "ThreatSummary",
     "ThreatUpdate",
     "TrappedEvent",
     "UnitKind",
     "UnitState",
+    "UnitSummary",
     "WhatIfThreat",
+    "WorldSnapshot",
     "check_bounds",
     "decode",
     "decode_direction",
@@ -73,6 +81,7 @@ __all__ = [
     "decode_preview_request",
     "decode_threat",
     "decode_unit_state",
+    "decode_world_snapshot",
     "encode",
 ]
 
@@ -83,6 +92,8 @@ CONTENT_TYPE = "application/json"
 MAX_PAYLOAD_BYTES = 256 * 1024
 MAX_WHATIF_THREATS = 256
 MAX_LOOKAHEAD = 1000
+MAX_EVENT_ITEMS = 64  # ids listed in one event; the rest are counted
+MAX_SNAPSHOT_ITEMS = 1000  # units or threats listed in one world reply
 
 # ((xmin, ymin), (xmax, ymax)) in metres, the same shape as core.stepper.Bounds.
 Bounds = tuple[tuple[float, float], tuple[float, float]]
@@ -252,6 +263,8 @@ class Direction(_Message, frozen=True, kw_only=True):
         threat_level: weighted threat level at the unit's position.
         lookahead: the next positions the same stepper predicts, ``[[x, y], ...]``.
         reason: why, for ``trapped`` and ``escaping``.
+        deliberating: a route for this unit is being computed off the planning
+            loop; until it is adopted the vector is plain steepest descent.
     """
 
     unit: Id
@@ -263,6 +276,7 @@ class Direction(_Message, frozen=True, kw_only=True):
     threat_level: NonNegative = 0.0
     lookahead: Annotated[list[Point], Meta(max_length=MAX_LOOKAHEAD)] = []
     reason: Text = ""
+    deliberating: bool = False
 
 
 class ErrorReply(_Message, frozen=True, kw_only=True):
@@ -291,6 +305,8 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     rejected: Count = 0
     latency_p50_ms: NonNegative | None = None
     latency_p99_ms: NonNegative | None = None
+    deliberating: Count = 0
+    overload: Count = 0
 
 
 # -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
@@ -315,11 +331,41 @@ class RejectedEvent(Event, frozen=True, kw_only=True, tag="rejected"):
         return cls(key=key, field=exc.path or "$", reason=exc.reason, planner=planner, t=t)
 
 
-class ReplanEvent(Event, frozen=True, kw_only=True, tag="replan"):
-    """The world changed (threat or goal), and these units got fresh directions."""
+class ThreatChange(_Message, frozen=True, kw_only=True):
+    """One change to the threats in force: ``put``, ``removed`` or ``expired``."""
 
-    units: list[Id]
+    threat: Id
+    change: Annotated[str, Meta(pattern="^(put|removed|expired)$")]
+    position: Point | None = None
+
+
+class ReplanEvent(Event, frozen=True, kw_only=True, tag="replan"):
+    """The threats changed, and these units got fresh directions.
+
+    ``changes`` lists what changed (at most ``MAX_EVENT_ITEMS``; ``more`` counts
+    the rest), ``units`` the units re-directed (also capped, ``more_units``).
+    """
+
+    units: Annotated[list[Id], Meta(max_length=MAX_EVENT_ITEMS)]
     reason: Text
+    changes: Annotated[list[ThreatChange], Meta(max_length=MAX_EVENT_ITEMS)] = []
+    more: Count = 0
+    more_units: Count = 0
+
+
+class StaleEvent(Event, frozen=True, kw_only=True, tag="stale"):
+    """A unit went silent (or its liveliness token went) and gets no directions until it reports."""
+
+    unit: Id
+    position: Point
+    reason: Text = ""
+
+
+class ForgottenEvent(Event, frozen=True, kw_only=True, tag="forgotten"):
+    """A unit stale for ``unit_forget_s`` was dropped, with its goal and memory."""
+
+    unit: Id
+    stale_s: NonNegative = 0.0
 
 
 class TrappedEvent(Event, frozen=True, kw_only=True, tag="trapped"):
@@ -338,14 +384,65 @@ class ArrivedEvent(Event, frozen=True, kw_only=True, tag="arrived"):
     distance_to_goal: NonNegative = 0.0
 
 
-AnyEvent = Union[RejectedEvent, ReplanEvent, TrappedEvent, ArrivedEvent]  # noqa: UP007
-EVENT_KINDS: tuple[str, ...] = ("rejected", "replan", "trapped", "arrived")
+AnyEvent = Union[  # noqa: UP007
+    RejectedEvent, ReplanEvent, TrappedEvent, ArrivedEvent, StaleEvent, ForgottenEvent
+]
+EVENT_KINDS: tuple[str, ...] = ("rejected", "replan", "trapped", "arrived", "stale", "forgotten")
+
+
+# -- the world queryable ---------------------------------------------------------
+class UnitSummary(_Message, frozen=True, kw_only=True):
+    """One unit as the planner holds it (``WorldSnapshot.units``)."""
+
+    id: Id
+    kind: UnitKind | None = None
+    status: DirectionStatus | None = None
+    position: Point | None = None
+    goal: Point | None = None
+    last_seen_s: NonNegative | None = None
+    distance_to_goal: NonNegative | None = None
+    stale: bool = False
+    deliberating: bool = False
+    reason: Text = ""
+
+
+class ThreatSummary(_Message, frozen=True, kw_only=True):
+    """One threat in force (``WorldSnapshot.threats``); ``ttl_s`` is the time left, null: no expiry."""
+
+    id: Id
+    threat: ThreatUpdate
+    ttl_s: NonNegative | None = None
+
+
+class WorldSnapshot(_Message, frozen=True, kw_only=True):
+    """Reply of ``mumt/{m}/planner/{p}/world``: the units and threats a planner holds.
+
+    Lists are sorted by id and capped at ``MAX_SNAPSHOT_ITEMS``; ``units_total``
+    and ``threats_total`` say how many there are in all.
+    """
+
+    planner: Id
+    mission: Id
+    units: Annotated[list[UnitSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
+    threats: Annotated[list[ThreatSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
+    units_total: Count = 0
+    threats_total: Count = 0
 
 # -- encoding and decoding -------------------------------------------------------
 _ENCODER = msgspec.json.Encoder()
 _DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
     t: msgspec.json.Decoder(t)
-    for t in (UnitState, Goal, ThreatUpdate, PreviewRequest, Direction, ErrorReply, PlannerStatus, AnyEvent)
+    for t in (
+        UnitState,
+        Goal,
+        ThreatUpdate,
+        PreviewRequest,
+        Direction,
+        ErrorReply,
+        PlannerStatus,
+        AnyEvent,
+        WorldSnapshot,
+    )
 }
 M = TypeVar("M")
 
@@ -477,6 +574,11 @@ def decode_planner_status(data: bytes | bytearray | memoryview | None) -> Planne
     return decode(PlannerStatus, data)
 
 
+def decode_world_snapshot(data: bytes | bytearray | memoryview | None) -> WorldSnapshot:
+    """A ``WorldSnapshot`` world-query reply."""
+    return decode(WorldSnapshot, data)
+
+
 def decode_error_reply(data: bytes | bytearray | memoryview | None) -> ErrorReply:
     """An ``ErrorReply`` from a ``reply_err`` body."""
     return decode(ErrorReply, data)
@@ -484,7 +586,7 @@ def decode_error_reply(data: bytes | bytearray | memoryview | None) -> ErrorRepl
 
 def decode_event(
     data: bytes | bytearray | memoryview | None,
-) -> RejectedEvent | ReplanEvent | TrappedEvent | ArrivedEvent:
+) -> Event:
     """One planner event, by its ``kind`` tag (an unknown kind is an ``InputError`` at ``$.kind``)."""
     try:
         return decode(AnyEvent, data)  # type: ignore[arg-type, no-any-return]

@@ -92,6 +92,15 @@ MESSAGES: tuple[MessageSpec, ...] = (
     ),
     MessageSpec("planner_status", m.PlannerStatus, KeyKind.PLANNER_STATUS, "reply", "planner", "any"),
     MessageSpec(
+        "world_snapshot",
+        m.WorldSnapshot,
+        KeyKind.WORLD,
+        "reply",
+        "planner",
+        "any",
+        "units and threats the planner holds; `pfp status` asks every planner",
+    ),
+    MessageSpec(
         "event", m.AnyEvent, KeyKind.EVENT, "put", "planner", "any", "`kind` repeats the key's last chunk"
     ),
 )
@@ -206,6 +215,41 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                 ),
             )
         ],
+        "world_snapshot": [
+            (
+                "world_snapshot",
+                m.WorldSnapshot(
+                    planner="planner-1",
+                    mission="default",
+                    units=[
+                        m.UnitSummary(
+                            id="ugv-1",
+                            kind=m.UnitKind.UNMANNED,
+                            status=m.DirectionStatus.EN_ROUTE,
+                            position=(4.6, 4.9),
+                            goal=(10.0, 10.0),
+                            last_seen_s=0.4,
+                            distance_to_goal=7.4,
+                        )
+                    ],
+                    threats=[
+                        m.ThreatSummary(
+                            id="ambush",
+                            threat=m.ThreatUpdate(
+                                position=(5.0, 5.0),
+                                facing_deg=225.0,
+                                sigma_range=1.0,
+                                sigma_lateral=0.7,
+                                skew=2.0,
+                            ),
+                            ttl_s=25.0,
+                        )
+                    ],
+                    units_total=1,
+                    threats_total=1,
+                ),
+            )
+        ],
         "event": [
             (
                 "event.rejected",
@@ -220,7 +264,10 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             (
                 "event.replan",
                 m.ReplanEvent(
-                    units=["ugv-1", "tank-2"], reason="threat ambush appeared", planner="planner-1"
+                    units=["ugv-1", "tank-2"],
+                    reason="threat ambush put",
+                    changes=[m.ThreatChange(threat="ambush", change="put", position=(310.0, 220.0))],
+                    planner="planner-1",
                 ),
             ),
             (
@@ -228,6 +275,8 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                 m.TrappedEvent(unit="ugv-1", position=(4.6, 4.9), reason="no progress in 200 steps"),
             ),
             ("event.arrived", m.ArrivedEvent(unit="ugv-1", position=(9.97, 10.02), distance_to_goal=0.036)),
+            ("event.stale", m.StaleEvent(unit="ugv-3", position=(120.0, 40.5), reason="silent for 10 s")),
+            ("event.forgotten", m.ForgottenEvent(unit="ugv-3", stale_s=600.0)),
         ],
     }
 
