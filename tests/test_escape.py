@@ -183,3 +183,50 @@ def test_plain_descent_is_untouched_by_escape_machinery():
     a, b = _plan(threats, "none"), _plan(threats, "auto")
     if a.status.value == "reached":
         assert a.path == b.path and b.traps == 0 and b.escapes == []
+
+
+def test_one_registry_gives_the_choices_the_order_and_the_tiers():
+    import typing
+
+    from pfp_service.core.escape import AUTO_ORDER
+    from pfp_service.core.escape_strategies import STRATEGIES
+    from pfp_service.core.params import ESCAPES, Escape
+
+    assert ("none", "auto", *STRATEGIES) == ESCAPES
+    assert typing.get_args(Escape) == ESCAPES
+    assert tuple(STRATEGIES) == AUTO_ORDER
+    tiers = [STRATEGIES[n].tier for n in AUTO_ORDER]
+    assert tiers == sorted(tiers) and len(set(tiers)) >= 2
+    assert all(s.name == n and s.summary for n, s in STRATEGIES.items())
+
+
+def test_a_strategy_without_a_way_out_says_why_as_a_value():
+    from pfp_service.core.escape_strategies import STRATEGIES, NoCandidate, Trap
+
+    threats = ring()
+    field = ThreatField(threats)
+    p = resolve(PlannerParams(escape="contour"), (20.0, 20.0), GOAL, threats)
+    tr = Trap(
+        field, Cores(field), 20.0, 20.0, GOAL, p.delta, 0.0, p.step, p.tolerance, p.trap_window,
+        math.dist((20.0, 20.0), GOAL), 4 * p.step, 2000, None, np.random.default_rng(0),
+    )  # fmt: skip
+    out = list(STRATEGIES["contour"].propose(tr))  # the ring's centre is flat: no slope
+    assert isinstance(out[-1], NoCandidate) and "slope" in out[-1].reason
+    assert isinstance(list(STRATEGIES["global"].propose(tr))[-1], NoCandidate)
+    r = _plan(threats, "contour", start=(20.0, 20.0))
+    assert r.status.value == "trapped" and "contour: " in r.reason
+
+
+def test_one_lambda_ranks_every_path():
+    import pfp_service.core.escape_strategies as strategies
+    import pfp_service.core.optimal as optimal
+    from pfp_service.core.metrics import LAMBDA, path_cost
+
+    assert optimal.plan_optimal.__defaults__ is not None and LAMBDA in optimal.plan_optimal.__defaults__
+    for mod in (strategies, optimal):
+        assert all(v is LAMBDA for k, v in vars(mod).items() if k.endswith("LAMBDA"))
+    path = np.array([[0.0, 0.0], [30.0, 40.0]])
+    field = ThreatField(block())
+    assert math.isclose(path_cost(path, ThreatField()), 50.0)
+    e = path_cost(path, field, 1.0) - 50.0
+    assert e > 0 and math.isclose(path_cost(path, field), 50.0 + LAMBDA * e)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from pfp_service.bench._suite import generate
+from pfp_service.bench.cases import generate
 from pfp_service.bench.quality import _pareto, measure_suite, render
 
 

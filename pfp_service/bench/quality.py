@@ -1,6 +1,6 @@
 """Path quality per escape mode on a seeded trap suite, and the Pareto gap to the grid optimum.
 
-For every generated scenario (``bench._suite``) and every escape mode this
+For every generated scenario (``bench.cases``) and every escape mode this
 plans once, then reports: the reach rate over the *reachable* scenarios (a way
 avoiding every threat core exists: the core-free grid of the optimal planner
 connects start and goal), the honest-``trapped`` rate on enclosures (no
@@ -33,17 +33,17 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from pfp_service.bench._suite import Case, generate
+from pfp_service.bench.cases import Case, generate
 from pfp_service.cli._common import grid_cells
 from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
 from pfp_service.core.cores import Cores
+from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.optimal import OptimalSolver
 from pfp_service.core.params import ESCAPES
 
 __all__ = ["LAMBDAS", "add_arguments", "run"]
 
 LAMBDAS = (0.0, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
-J_LAMBDA = 10.0  # the cross-check's exposure weight (one of LAMBDAS)
 BEGIN, END = "<!-- pfp bench quality: begin -->", "<!-- pfp bench quality: end -->"
 
 
@@ -149,8 +149,8 @@ def measure_suite(count: int, seed: int, modes: list[str], cells: int, log: bool
                     r.exposure,  # type: ignore[attr-defined]
                     opts,
                 )
-                lo, eo = opts[LAMBDAS.index(J_LAMBDA)]
-                row.j_ratio = (r.length + J_LAMBDA * r.exposure) / (lo + J_LAMBDA * eo)  # type: ignore[attr-defined]
+                lo, eo = opts[LAMBDAS.index(LAMBDA)]
+                row.j_ratio = (r.length + LAMBDA * r.exposure) / (lo + LAMBDA * eo)  # type: ignore[attr-defined]
             rep.rows.append(row)
             if log:
                 print(

@@ -21,31 +21,22 @@ import math
 import numba
 import numpy as np
 
-from pfp_service.core.kernels import Q_CUTOFF as _Q_CUTOFF
+from pfp_service.core import kernels
 from pfp_service.core.threat import ThreatField
 
 __all__ = ["CORE_FRACTION", "Cores"]
 
 CORE_FRACTION = 0.5
-_INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
 @numba.njit(cache=True, nogil=True)
 def _ratios(packed: np.ndarray, points: np.ndarray, out_ratio: np.ndarray, out_idx: np.ndarray) -> None:
     """Per point, the largest ``t_j / max t_j`` over threats and which threat gives it."""
     for i in range(points.shape[0]):
-        x = points[i, 0]
-        y = points[i, 1]
         best = 0.0
         arg = -1
         for j in range(packed.shape[0]):
-            zx = x - packed[j, 0]
-            zy = y - packed[j, 1]
-            q = packed[j, 2] * zx * zx + 2.0 * packed[j, 3] * zx * zy + packed[j, 4] * zy * zy
-            if q > _Q_CUTOFF:
-                continue
-            u = packed[j, 5] * zx + packed[j, 6] * zy
-            r = packed[j, 7] * math.exp(-0.5 * q) * 0.5 * math.erfc(-u * _INV_SQRT2)
+            r = kernels.threat_term(packed, j, points[i, 0], points[i, 1], 0.0, False)[0]
             if r > best:
                 best = r
                 arg = j
@@ -57,20 +48,9 @@ def _ratios(packed: np.ndarray, points: np.ndarray, out_ratio: np.ndarray, out_i
 def _inside(packed: np.ndarray, points: np.ndarray, fraction: float, out: np.ndarray) -> None:
     """``out[i]``: some ``t_j / max t_j >= fraction`` at point i (exactly ``_ratios``' test, sooner)."""
     for i in range(points.shape[0]):
-        x = points[i, 0]
-        y = points[i, 1]
         hit = False
         for j in range(packed.shape[0]):
-            zx = x - packed[j, 0]
-            zy = y - packed[j, 1]
-            q = packed[j, 2] * zx * zx + 2.0 * packed[j, 3] * zx * zy + packed[j, 4] * zy * zy
-            if q > _Q_CUTOFF:
-                continue
-            e = packed[j, 7] * math.exp(-0.5 * q)
-            if e < fraction:  # the skew factor is at most 1
-                continue
-            u = packed[j, 5] * zx + packed[j, 6] * zy
-            if e * 0.5 * math.erfc(-u * _INV_SQRT2) >= fraction:
+            if kernels.threat_term(packed, j, points[i, 0], points[i, 1], fraction, False)[0] >= fraction:
                 hit = True
                 break
         out[i] = hit
@@ -89,10 +69,10 @@ class Cores:
     def __init__(self, field: ThreatField, fraction: float = CORE_FRACTION) -> None:
         self.fraction = fraction
         keep = [j for j, t in enumerate(field.threats) if t.weight > 0]
-        packed = field.packed[keep].copy() if keep else np.zeros((0, 9))
+        packed = field.packed[keep].copy() if keep else np.zeros((0, len(kernels.PACKED_COLUMNS)))
         for row, j in enumerate(keep):
             t = field.threats[j]
-            packed[row, 7] = t.density_scale() / t.peak_density()  # level 1 at the mode
+            packed[row, kernels.SCALE] = t.density_scale() / t.peak_density()  # level 1 at the mode
         self.packed = packed
         self.ids = [field.threats[j].id or f"#{j + 1}" for j in keep]
         self.min_spread_m = min((field.threats[j].min_sigma() for j in keep), default=math.inf)

@@ -3,13 +3,14 @@
 The stepper hands a trap to its ``Escaper`` only after plain descent has
 given its trapped verdict, so descent itself pays nothing for this module.
 
-Choosing.  ``escape`` names one strategy (``escape_strategies``) or ``auto``,
-which escalates from cheap to expensive: it asks each of the cheap four
-(``delta, random, waypoint, contour``) for its first acceptable candidate and
-commits to the one of least estimated ``length + 10 * exposure`` to the goal
-(escape path, simulated descent after it, straight remainder); only when none
-of them has one does it pay for ``global``.  A single named strategy commits
-to its own first acceptable candidate.  Every candidate is *judged* before
+Choosing.  ``escape`` names one strategy (``escape_strategies.STRATEGIES``)
+or ``auto``, which escalates tier by tier: it asks each strategy of the
+cheapest tier (``delta, random, waypoint, contour``) for its first acceptable
+candidate and commits to the one of least estimated
+``J = length + LAMBDA * exposure`` to the goal (escape path, simulated descent
+after it, straight remainder); only when none of them has one does it pay for
+the next tier (``global``).  A single named strategy commits to its own first
+acceptable candidate.  Every candidate is *judged* before
 the unit moves:
 
 1. it may not enter a threat core (``cores``) nor leave the mission bounds;
@@ -36,7 +37,7 @@ when the goal is set and after each world change (``foresight``).  When that
 simulation is trapped (or leaves the bounds), ``foresee`` commits at once to
 the whole ``global`` route, judged like any candidate: a way round chosen
 before the unit walks in, not after.  That route is the Dijkstra optimum of
-``length + GLOBAL_LAMBDA * exposure``, shortcut, so it lies near the
+``length + LAMBDA * exposure``, shortcut, so it lies near the
 length/exposure Pareto front; the cheap strategies stay for traps that were
 not foreseen (drift, or threats that appear later).
 """
@@ -48,15 +49,22 @@ import math
 import numpy as np
 
 from pfp_service.core.cores import Cores
-from pfp_service.core.escape_strategies import STRATEGIES, Bounds, Trap, global_route, rollout
+from pfp_service.core.escape_strategies import (
+    AUTO_ORDER,
+    STRATEGIES,
+    Bounds,
+    NoCandidate,
+    Trap,
+    global_route,
+    rollout,
+)
+from pfp_service.core.metrics import path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["AUTO_ORDER", "ESCAPE_LAMBDA", "MAX_TRAPS", "EscapeRun", "Escaper"]
+__all__ = ["AUTO_ORDER", "MAX_TRAPS", "EscapeRun", "Escaper"]
 
-AUTO_ORDER = ("delta", "random", "waypoint", "contour", "global")
 MAX_TRAPS = 12
-ESCAPE_LAMBDA = 10.0
 
 
 class EscapeRun:
@@ -149,8 +157,8 @@ class Escaper:
         refusals: list[str] = []
         best: tuple[float, str, np.ndarray] | None = None
         for name in order:
-            if name == "global" and best is not None:
-                break  # the expensive tier only when every cheap one failed
+            if best is not None and STRATEGIES[name].tier > STRATEGIES[best[1]].tier:
+                break  # a dearer tier only when every cheaper one failed
             if name in site.tried:
                 refusals.append(f"{name}: already tried at this trap")
                 continue
@@ -177,8 +185,8 @@ class Escaper:
         self.traps += 1
         tr = self._trap(field, x, y)
         poly = global_route(tr)
-        if isinstance(poly, str):
-            return None, f"{ahead} foreseen; {poly}"
+        if isinstance(poly, NoCandidate):
+            return None, f"{ahead} foreseen; {poly.reason}"
         verdict, _ = self._judge(tr, poly)
         if verdict:
             return None, f"{ahead} foreseen; global: {verdict}"
@@ -209,9 +217,9 @@ class Escaper:
     def _first_pass(self, tr: Trap, name: str, refusals: list[str]) -> tuple[float, np.ndarray] | None:
         """The first candidate of strategy ``name`` that passes, with its estimated cost to the goal."""
         why, n = "", 0
-        for cand in STRATEGIES[name](tr):
-            if isinstance(cand, str):
-                why = why or cand
+        for cand in STRATEGIES[name].propose(tr):
+            if isinstance(cand, NoCandidate):
+                why = why or cand.reason
                 break
             n += 1
             verdict, after = self._judge(tr, cand)
@@ -223,15 +231,10 @@ class Escaper:
 
     @staticmethod
     def _cost(tr: Trap, poly: np.ndarray, after: np.ndarray) -> float:
-        """``length + ESCAPE_LAMBDA * exposure`` of the escape, the descent after it, and what remains."""
+        """``J`` of the escape, the descent after it, and the straight remainder to the goal."""
         pts = np.concatenate([poly, after[1:]])
-        seg = np.hypot(*np.diff(pts, axis=0).T)
-        mid = 0.5 * (pts[1:] + pts[:-1])
-        lv = tr.field.level(np.concatenate([pts, mid]))
-        a, m = lv[: len(pts)], lv[len(pts) :]
-        exposure = float(np.sum(seg * (a[:-1] + 4.0 * m + a[1:]) / 6.0))
         rest = math.hypot(tr.goal[0] - pts[-1, 0], tr.goal[1] - pts[-1, 1])
-        return float(seg.sum()) + rest + ESCAPE_LAMBDA * exposure
+        return path_cost(pts, tr.field) + rest
 
     def _site(self, x: float, y: float, radius: float) -> _Site:
         for s in self._sites:

@@ -1,12 +1,18 @@
-"""The five ways out of a trap, each proposing candidate escape paths.
+"""The ways out of a trap, as one registry: ``STRATEGIES``, in ``auto``'s order.
 
 A strategy looks at a ``Trap`` (where the unit is stuck, under which field)
 and yields candidate polylines from the trap point to an *exit*, the point
 where plain descent takes over again, cheapest candidate first.  It never
 moves a unit: ``escape.Escaper`` judges each candidate (no threat core, and
 descent from the exit must get clearly closer to the goal) and commits to the
-first one that passes.  A strategy may also yield a string: the reason it has
-no candidate at all.
+first one that passes.  A strategy with no candidate at all yields
+``NoCandidate(reason)`` and stops.
+
+Each entry is a ``Strategy(name, tier, propose)``.  Adding one is one entry
+here: the ``escape`` choices (``params.ESCAPES``), ``auto``'s order and its
+tiers are all read from this registry.  ``auto`` asks every strategy of the
+lowest tier, and only pays for a higher tier when that finds nothing
+acceptable (tier 0: cheap, reactive; tier 1: a search).
 
 * ``delta``: the paper's first remedy, descent with the goal weight raised
   x4, x16, x64.
@@ -29,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numba
 import numpy as np
@@ -36,16 +43,35 @@ import numpy as np
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
 from pfp_service.core.grid import GridGraph, resample, shortcut
+from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["GLOBAL_CELLS", "GLOBAL_LAMBDA", "STRATEGIES", "Candidate", "Trap", "global_route", "rollout"]
+__all__ = [
+    "AUTO_ORDER",
+    "GLOBAL_CELLS",
+    "STRATEGIES",
+    "Candidate",
+    "NoCandidate",
+    "Strategy",
+    "Trap",
+    "global_route",
+    "rollout",
+]
 
-GLOBAL_LAMBDA = 10.0
 GLOBAL_CELLS = 100
 _MAX_RAISES = 6  # x1.5 each: up to 11x the trap's level
 _MAX_EXITS = 4
-Candidate = np.ndarray | str
 Bounds = tuple[tuple[float, float], tuple[float, float]]
+
+
+@dataclass(frozen=True, slots=True)
+class NoCandidate:
+    """A strategy's answer when it has no way out to offer, and why."""
+
+    reason: str
+
+
+Candidate = np.ndarray | NoCandidate
 
 
 @numba.njit(cache=True, nogil=True)
@@ -163,7 +189,7 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
     level, gx, gy = f.level_grad_at(tr.x, tr.y)
     g = math.hypot(gx, gy)
     if not (level > 0.0 and g * tr.step > 1e-9 * level):
-        yield "no threat slope at the trap to follow"
+        yield NoCandidate("no threat slope at the trap to follow")
         return
     step = tr.step
     ahead = []
@@ -189,7 +215,7 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
         lv, hx, hy = f.level_grad_at(qx, qy)
         h = math.hypot(hx, hy)
         if h == 0.0:
-            yield "the contour fades out (no threat slope)"
+            yield NoCandidate("the contour fades out (no threat slope)")
             return
         nx, ny = -hy / h, hx / h
         if nx * tx + ny * ty < 0:
@@ -197,14 +223,14 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
         x, y, tx, ty = qx, qy, nx, ny
         pts.append((x, y))
         if tr.cores.inside(np.array([[x, y]]))[0]:
-            yield f"the contour reaches a threat core at level {c:.3g} without an exit"
+            yield NoCandidate(f"the contour reaches a threat core at level {c:.3g} without an exit")
             return
         was, closer = closer, math.hypot(tr.goal[0] - x, tr.goal[1] - y) <= tr.dist - tr.margin
         if closer and not was:  # an exit; if it is refused, trace on to the next one
             yield np.array(pts)
             exits += 1
             if exits >= _MAX_EXITS:
-                yield f"{_MAX_EXITS} exits along the contour, none acceptable"
+                yield NoCandidate(f"{_MAX_EXITS} exits along the contour, none acceptable")
                 return
         r = math.hypot(x - lx, y - ly)
         if not away and r > 6.0 * step:
@@ -212,17 +238,17 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
         elif away and r < 2.5 * step:  # closed on itself: raise the level
             raises += 1
             if raises > _MAX_RAISES:
-                yield f"the contour closed at every level up to {c:.3g} without an exit"
+                yield NoCandidate(f"the contour closed at every level up to {c:.3g} without an exit")
                 return
             c *= 1.5
             lx, ly, away = x, y, False
-    yield f"the contour found no exit within {tr.budget} steps"
+    yield NoCandidate(f"the contour found no exit within {tr.budget} steps")
 
 
-def global_route(tr: Trap) -> np.ndarray | str:
+def global_route(tr: Trap) -> np.ndarray | NoCandidate:
     """The whole way from the trap point to the goal, or why there is none.
 
-    Dijkstra cost-to-go, cost ``1 + GLOBAL_LAMBDA T``, on a local grid without
+    Dijkstra cost-to-go, cost ``1 + LAMBDA T``, on a local grid without
     the cores (with a margin, so a route between grid nodes never clips one);
     then shortcut wherever a straight segment costs no more and keeps that
     margin, and resampled at ``step`` for the stepper to follow.
@@ -240,20 +266,22 @@ def global_route(tr: Trap) -> np.ndarray | str:
             (bx0, by0), (bx1, by1) = tr.bounds
             x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
         grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), GLOBAL_CELLS, 16, wide)
-        route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), GLOBAL_LAMBDA)
+        route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), LAMBDA)
         if len(route.points):
             break
         pad *= 3.0
     else:
-        return f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
+        return NoCandidate(
+            f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
+        )
     pts = np.concatenate([[[tr.x, tr.y]], route.points, [[gx, gy]]])
     pts = pts[np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])]
-    return resample(shortcut(tr.field, pts, GLOBAL_LAMBDA, wide), tr.step)
+    return resample(shortcut(tr.field, pts, LAMBDA, wide), tr.step)
 
 
 def _global(tr: Trap) -> Iterator[Candidate]:
     poly = global_route(tr)
-    if isinstance(poly, str):
+    if isinstance(poly, NoCandidate):
         yield poly
         return
     for frac in (0.25, 0.5, 0.75):
@@ -261,10 +289,34 @@ def _global(tr: Trap) -> Iterator[Candidate]:
     yield poly
 
 
-STRATEGIES: dict[str, Callable[[Trap], Iterator[Candidate]]] = {
-    "delta": _delta,
-    "random": _random,
-    "waypoint": _waypoint,
-    "contour": _contour,
-    "global": _global,
-}
+@dataclass(frozen=True, slots=True)
+class Strategy:
+    """One way out of a trap.
+
+    Attributes:
+        name: the ``escape`` value that selects it alone.
+        tier: ``auto`` asks a tier only when every lower one found nothing acceptable.
+        propose: candidate escape paths for a trap, cheapest first, or a ``NoCandidate``.
+        summary: one line for help text.
+    """
+
+    name: str
+    tier: int
+    propose: Callable[[Trap], Iterator[Candidate]]
+    summary: str
+
+
+_REGISTRY = (
+    Strategy("delta", 0, _delta, "descent with the goal weight raised x4, x16, x64"),
+    Strategy("random", 0, _random, "a seeded random heading held for 3 trap windows"),
+    Strategy("waypoint", 0, _waypoint, "descent towards a point beside the threat cluster"),
+    Strategy("contour", 0, _contour, "follow the iso-threat line round the trap"),
+    Strategy("global", 1, _global, "cheapest core-free route on a local grid"),
+)
+
+STRATEGIES: MappingProxyType[str, Strategy] = MappingProxyType(
+    {s.name: s for s in sorted(_REGISTRY, key=lambda s: s.tier)}
+)
+"""Every strategy by name, in ``auto``'s order (by tier, then as registered)."""
+
+AUTO_ORDER: tuple[str, ...] = tuple(STRATEGIES)

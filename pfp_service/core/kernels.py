@@ -1,14 +1,18 @@
-"""Compiled inner loops: the threat field's value and closed-form gradient.
+"""Compiled inner loops: the threat field's value and closed-form gradient, written once.
 
 Everything here is a pure function of arrays and floats, compiled with numba.
-A threat set travels as one packed ``(M, 9)`` float64 array (see
-``threat.PACKED_COLUMNS``), so a call unboxes one array instead of nine.
+A threat set travels as one packed ``(M, 9)`` float64 array, one row per
+threat with the columns of ``PACKED_COLUMNS``, so a call unboxes one array
+instead of nine.  The column indices below are the only place those numbers
+appear.
 
-The gradient is exact:  with ``z = x - xi``, ``P = Omega^-1``, ``a = omega^-1 alpha``
-and ``u = a.z``,  ``grad t = 2 phi2(z; Omega) (phi(u) a - Phi(u) P z)``.
-A pair whose Mahalanobis term exceeds ``Q_CUTOFF`` is skipped: there
-``exp(-q/2)`` underflows to exactly 0.0, so skipping changes no bit of the
-result and keeps far-away threats free (and never NaN).
+``threat_term`` is the one per-threat formula: every kernel here and in
+``cores`` sums or compares it.  Its gradient is exact:  with ``z = x - xi``,
+``P = Omega^-1``, ``a = omega^-1 alpha`` and ``u = a.z``,
+``grad t = 2 phi2(z; Omega) (phi(u) a - Phi(u) P z)``.  A pair whose
+Mahalanobis term exceeds ``Q_CUTOFF`` is skipped: there ``exp(-q/2)``
+underflows to exactly 0.0, so skipping changes no bit of the result and keeps
+far-away threats free (and never NaN).
 """
 
 from __future__ import annotations
@@ -19,23 +23,82 @@ import numba
 import numpy as np
 
 __all__ = [
+    "ACTIVE",
+    "A_X",
+    "A_Y",
+    "P00",
+    "P01",
+    "P11",
+    "PACKED_COLUMNS",
     "Q_CUTOFF",
+    "SCALE",
+    "XI_X",
+    "XI_Y",
     "batch_descent",
     "batch_level",
     "batch_level_grad",
+    "pack_row",
     "point_descent",
+    "point_level",
     "point_level_grad",
+    "threat_term",
 ]
+
+# One row per threat: xi; P = Omega^-1 (three entries, it is symmetric);
+# a = omega^-1 alpha; the leading constant (``ThreatField`` folds in the weight
+# and, under ``peak``, divides by the peak density; ``Cores`` sets it so the
+# mode is 1); 1.0 for a threat in force, 0.0 for one every kernel skips.
+PACKED_COLUMNS = ("xi_x", "xi_y", "p00", "p01", "p11", "a_x", "a_y", "scale", "active")
+XI_X, XI_Y, P00, P01, P11, A_X, A_Y, SCALE, ACTIVE = range(len(PACKED_COLUMNS))
 
 # exp(-x) == 0.0 in float64 for x > 745.14; 2 * 746 leaves a margin.
 Q_CUTOFF = 1492.0
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
 _INV_SQRT2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
-# Packed columns: xi_x, xi_y, P00, P01, P11, a_x, a_y, coef, (reserved: active 1/0)
-_XX, _XY, _P00, _P01, _P11, _AX, _AY, _COEF, _ACTIVE = range(9)
-
 _jit = numba.njit(cache=True, fastmath=False, nogil=True)
+
+
+def pack_row(
+    xi: tuple[float, float],
+    precision: tuple[float, float, float],
+    shape: tuple[float, float],
+    scale: float,
+) -> tuple[float, ...]:
+    """One packed row, in ``PACKED_COLUMNS`` order (an active threat)."""
+    return (xi[0], xi[1], precision[0], precision[1], precision[2], shape[0], shape[1], scale, 1.0)
+
+
+@numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
+def threat_term(
+    packed: np.ndarray, j: int, x: float, y: float, floor: float, grad: bool
+) -> tuple[float, float, float]:
+    """Threat ``j``'s scaled level at ``(x, y)`` and, if ``grad``, its gradient.
+
+    ``floor``: return zeros early once the Gaussian factor alone is below it
+    (the skew factor is at most 1, so the level would be too); 0.0 never
+    does.  Inactive rows and points past ``Q_CUTOFF`` give exact zeros.
+    """
+    if packed[j, ACTIVE] == 0.0:
+        return 0.0, 0.0, 0.0
+    zx = x - packed[j, XI_X]
+    zy = y - packed[j, XI_Y]
+    pzx = packed[j, P00] * zx + packed[j, P01] * zy
+    pzy = packed[j, P01] * zx + packed[j, P11] * zy
+    q = zx * pzx + zy * pzy
+    if q > Q_CUTOFF:
+        return 0.0, 0.0, 0.0
+    e = packed[j, SCALE] * math.exp(-0.5 * q)
+    if e < floor:
+        return 0.0, 0.0, 0.0
+    ax = packed[j, A_X]
+    ay = packed[j, A_Y]
+    u = ax * zx + ay * zy
+    cdf = 0.5 * math.erfc(-u * _INV_SQRT2)
+    if not grad:
+        return e * cdf, 0.0, 0.0
+    pdf = _INV_SQRT2PI * math.exp(-0.5 * u * u)
+    return e * cdf, e * (pdf * ax - cdf * pzx), e * (pdf * ay - cdf * pzy)
 
 
 @_jit
@@ -45,28 +108,20 @@ def point_level_grad(packed: np.ndarray, x: float, y: float) -> tuple[float, flo
     gx = 0.0
     gy = 0.0
     for j in range(packed.shape[0]):
-        if packed[j, _ACTIVE] == 0.0:
-            continue
-        zx = x - packed[j, _XX]
-        zy = y - packed[j, _XY]
-        p00 = packed[j, _P00]
-        p01 = packed[j, _P01]
-        p11 = packed[j, _P11]
-        pzx = p00 * zx + p01 * zy
-        pzy = p01 * zx + p11 * zy
-        q = zx * pzx + zy * pzy
-        if q > Q_CUTOFF:
-            continue
-        e = packed[j, _COEF] * math.exp(-0.5 * q)
-        ax = packed[j, _AX]
-        ay = packed[j, _AY]
-        u = ax * zx + ay * zy
-        cdf = 0.5 * math.erfc(-u * _INV_SQRT2)
-        pdf = _INV_SQRT2PI * math.exp(-0.5 * u * u)
-        val += e * cdf
-        gx += e * (pdf * ax - cdf * pzx)
-        gy += e * (pdf * ay - cdf * pzy)
+        v, dx, dy = threat_term(packed, j, x, y, 0.0, True)
+        val += v
+        gx += dx
+        gy += dy
     return val, gx, gy
+
+
+@_jit
+def point_level(packed: np.ndarray, x: float, y: float) -> float:
+    """Weighted threat level at one point (no gradient)."""
+    val = 0.0
+    for j in range(packed.shape[0]):
+        val += threat_term(packed, j, x, y, 0.0, False)[0]
+    return val
 
 
 @_jit
@@ -101,20 +156,7 @@ def batch_level_grad(packed: np.ndarray, points: np.ndarray, out: np.ndarray) ->
 def batch_level(packed: np.ndarray, points: np.ndarray, out: np.ndarray) -> None:
     """Level only at many points (no gradient): contour plots and exposure."""
     for i in numba.prange(points.shape[0]):
-        x = points[i, 0]
-        y = points[i, 1]
-        val = 0.0
-        for j in range(packed.shape[0]):
-            if packed[j, _ACTIVE] == 0.0:
-                continue
-            zx = x - packed[j, _XX]
-            zy = y - packed[j, _XY]
-            q = packed[j, _P00] * zx * zx + 2.0 * packed[j, _P01] * zx * zy + packed[j, _P11] * zy * zy
-            if q > Q_CUTOFF:
-                continue
-            u = packed[j, _AX] * zx + packed[j, _AY] * zy
-            val += packed[j, _COEF] * math.exp(-0.5 * q) * 0.5 * math.erfc(-u * _INV_SQRT2)
-        out[i] = val
+        out[i] = point_level(packed, points[i, 0], points[i, 1])
 
 
 @_jit

@@ -4,6 +4,10 @@ Exposure is the line integral of the weighted threat level along the path,
 ``sum_i integral over segment i of sum_j w_j t_j ds``, by Simpson's rule per
 segment.  Each segment is judged under the field that was in force when it was
 walked, so a pop-up threat counts only from its appearance.
+
+Where one number must rank paths, it is ``J = length + LAMBDA * exposure``
+with the one ``LAMBDA`` below: the escapes' cost estimate, the ``global``
+route's search, the optimal planner's default and the benchmark's ``J / J*``.
 """
 
 from __future__ import annotations
@@ -15,7 +19,10 @@ import numpy as np
 
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["Epoch", "PathMetrics", "measure", "segment_clearance"]
+__all__ = ["LAMBDA", "Epoch", "PathMetrics", "exposure", "measure", "path_cost", "segment_clearance"]
+
+LAMBDA = 10.0
+"""Exposure weight of ``J = length + LAMBDA * exposure`` (metres per unit exposure)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,3 +91,20 @@ def measure(path: np.ndarray, epochs: list[Epoch]) -> PathMetrics:
         peak = max(peak, float(lv.max()))
         clearance = min(clearance, segment_clearance(path[ep.first : ep.last + 1], ep.field.positions))
     return PathMetrics(float(seglen.sum()), exposure, peak, clearance)
+
+
+def exposure(path: np.ndarray, field: ThreatField) -> float:
+    """Simpson exposure of ``path`` (``(K+1, 2)``) walked under one ``field``."""
+    if len(path) < 2 or len(field) == 0:
+        return 0.0
+    a, b = path[:-1], path[1:]
+    n = len(a)
+    lv = field.level(np.concatenate([a, 0.5 * (a + b), b]))
+    seglen = np.hypot(*(b - a).T)
+    return float(np.sum(seglen * (lv[:n] + 4.0 * lv[n : 2 * n] + lv[2 * n :])) / 6.0)
+
+
+def path_cost(path: np.ndarray, field: ThreatField, lam: float = LAMBDA) -> float:
+    """``J = length + lam * exposure`` of ``path`` walked under one ``field``."""
+    pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+    return float(np.hypot(*np.diff(pts, axis=0).T).sum()) + lam * exposure(pts, field)

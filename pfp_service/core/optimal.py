@@ -23,14 +23,14 @@ import numpy as np
 
 from pfp_service.core.cores import Cores
 from pfp_service.core.grid import GridGraph, resample, shortcut
-from pfp_service.core.metrics import Epoch, measure
+from pfp_service.core.metrics import LAMBDA, Epoch, measure
 from pfp_service.core.plan import PlanResult, PlanStatus, Scheduled, UsedParams
 from pfp_service.core.stepper import Bounds
 from pfp_service.core.threat import Intensity, ThreatField
 
-__all__ = ["DEFAULT_CELLS", "DEFAULT_LAMBDA", "OptimalPath", "OptimalSolver", "plan_optimal"]
+__all__ = ["DEFAULT_CELLS", "OptimalPath", "OptimalSolver", "plan_optimal"]
 
-DEFAULT_LAMBDA = 10.0
+DEFAULT_LAMBDA = LAMBDA  # the same constant, under its old name, until the CLI imports metrics.LAMBDA
 DEFAULT_CELLS = 300
 
 
@@ -95,7 +95,7 @@ def plan_optimal(
     start: tuple[float, float],
     goal: tuple[float, float],
     schedule: Sequence[Scheduled] = (),
-    lam: float = DEFAULT_LAMBDA,
+    lam: float = LAMBDA,
     intensity: Intensity = "peak",
     bounds: Bounds | None = None,
     cells: int = DEFAULT_CELLS,

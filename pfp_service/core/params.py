@@ -22,7 +22,9 @@ The rule (also in README.md, "Scale-free defaults"):
   on but never pushes it through a threat's core.  With no threats, 1.
 
 ``escape`` (default ``auto``) says what the stepper does when plain descent
-is trapped: ``none`` reports ``trapped``; the others are in ``core.escape``.
+is trapped: ``none`` reports ``trapped``; ``auto`` escalates through the
+strategies (``core.escape``); any other value is one strategy's name, and the
+choices are read from the registry ``escape_strategies.STRATEGIES``.
 ``auto`` also looks ahead for traps when a goal is set (``core.foresight``).
 ``seed`` seeds the ``random`` escape (with the stepper's ``unit_key``).
 
@@ -35,16 +37,24 @@ from __future__ import annotations
 import math
 import statistics
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
+from pfp_service.core.escape_strategies import STRATEGIES
 from pfp_service.core.threat import Intensity, Threat
 
 __all__ = ["ESCAPES", "MAX_ITER_DERIVED", "Escape", "PlannerParams", "Resolved", "resolve"]
 
 MAX_ITER_DERIVED = 1_000_000
 
-Escape = Literal["none", "auto", "delta", "random", "waypoint", "contour", "global"]
-ESCAPES: tuple[str, ...] = ("none", "auto", "delta", "random", "waypoint", "contour", "global")
+ESCAPES: tuple[str, ...] = ("none", "auto", *STRATEGIES)
+
+# At run time a real Literal, so msgspec-decoded configs and scenarios refuse
+# an unknown escape and the JSON schemas list the choices; a type checker
+# cannot read a Literal built from a registry, so to it this is a string.
+if TYPE_CHECKING:
+    Escape = str
+else:
+    Escape = Literal[ESCAPES]
 
 
 @dataclass(frozen=True, slots=True)

@@ -29,10 +29,8 @@ __all__ = ["PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_
 
 Intensity = Literal["peak", "density"]
 
-# One row of ``ThreatField.packed`` per threat: xi, P = Omega^-1, a = omega^-1 alpha,
-# the leading constant times the weight (divided by the peak density under ``peak``),
-# and a spare column held at 1.0 that no kernel reads.
-PACKED_COLUMNS = ("xi_x", "xi_y", "p00", "p01", "p11", "a_x", "a_y", "scale", "one")
+# One row of ``ThreatField.packed`` per threat, in the kernels' column order.
+PACKED_COLUMNS = kernels.PACKED_COLUMNS
 
 
 def skew_normal_mode(q: float) -> float:
@@ -189,16 +187,14 @@ class ThreatField:
         self.intensity: Intensity = intensity
         packed = np.zeros((len(self.threats), len(PACKED_COLUMNS)))
         for j, t in enumerate(self.threats):
-            p00, p01, p11 = t.precision()
-            ax, ay = t.shape()
             scale = t.density_scale()
             if intensity == "peak":
                 scale = scale * t.weight / t.peak_density()
             else:
                 scale = scale * t.weight
-            packed[j] = (t.xi[0], t.xi[1], p00, p01, p11, ax, ay, scale, 1.0)
+            packed[j] = kernels.pack_row(t.xi, t.precision(), t.shape(), scale)
         self.packed = packed
-        self.positions = packed[:, :2].copy()
+        self.positions = packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
 
     def __len__(self) -> int:
         return len(self.threats)

@@ -1,0 +1,73 @@
+"""The one per-threat kernel: every compiled sum and the core test are made of ``threat_term``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pfp_service.core import Threat, ThreatField, kernels
+from pfp_service.core.cores import Cores
+
+SHAPES = [
+    ((0.0, 0.0), 0.0, 2.0, 1.0, 0.0, 1.0),
+    ((3.0, 1.0), 70.0, 1.5, 0.7, 4.0, 0.6),
+    ((-2.0, 4.0), 200.0, 3.0, 2.5, 1.2, 1.4),
+]
+
+
+def _terms(packed, x, y, grad):
+    return np.array([kernels.threat_term(packed, j, x, y, 0.0, grad) for j in range(len(packed))])
+
+
+def test_packed_columns_are_named_once_and_fill_the_rows():
+    assert len(kernels.PACKED_COLUMNS) == len(set(kernels.PACKED_COLUMNS)) == 9
+    for name in kernels.PACKED_COLUMNS:
+        assert getattr(kernels, name.upper()) == kernels.PACKED_COLUMNS.index(name)
+    t = Threat.from_facing(*SHAPES[1])
+    row = ThreatField([t]).packed[0]
+    assert (row[kernels.XI_X], row[kernels.XI_Y]) == t.xi
+    assert tuple(row[[kernels.P00, kernels.P01, kernels.P11]]) == t.precision()
+    assert tuple(row[[kernels.A_X, kernels.A_Y]]) == t.shape()
+    assert row[kernels.ACTIVE] == 1.0
+
+
+def test_field_sums_are_sums_of_the_per_threat_term():
+    field = ThreatField([Threat.from_facing(*s) for s in SHAPES])
+    for x, y in np.random.default_rng(4).uniform(-6, 8, (50, 2)):
+        terms = _terms(field.packed, x, y, True)
+        v, gx, gy = kernels.point_level_grad(field.packed, x, y)
+        np.testing.assert_allclose((v, gx, gy), terms.sum(axis=0), rtol=1e-14, atol=1e-300)
+        assert kernels.point_level(field.packed, x, y) == v
+        assert np.array_equal(_terms(field.packed, x, y, False)[:, 0], terms[:, 0])
+
+
+def test_inactive_rows_and_the_floor_give_exact_zeros():
+    field = ThreatField([Threat.from_facing(*s) for s in SHAPES])
+    packed = field.packed.copy()
+    packed[1, kernels.ACTIVE] = 0.0
+    assert kernels.threat_term(packed, 1, 3.0, 1.0, 0.0, True) == (0.0, 0.0, 0.0)
+    alone = ThreatField([Threat.from_facing(SHAPES[0][0], *SHAPES[0][1:]), Threat.from_facing(*SHAPES[2])])
+    assert kernels.point_level_grad(packed, 0.5, 0.5) == kernels.point_level_grad(alone.packed, 0.5, 0.5)
+    v = kernels.threat_term(field.packed, 0, 0.0, 0.0, 0.0, False)[0]
+    assert v > 0.0 and kernels.threat_term(field.packed, 0, 0.0, 0.0, 10.0 * v, False)[0] == 0.0
+
+
+def test_cores_use_the_same_term_normalised_to_the_peak():
+    threats = [Threat.from_facing(*s) for s in SHAPES]
+    cores = Cores(ThreatField(threats))
+    pts = np.random.default_rng(9).uniform(-6, 8, (200, 2))
+    ratio, idx = cores.ratio(pts)
+    for p, r, j in zip(pts, ratio, idx):
+        per = _terms(cores.packed, p[0], p[1], False)[:, 0]
+        assert r == per.max() and (j == int(np.argmax(per)) or r == 0.0)
+    assert np.array_equal(cores.inside(pts), ratio >= cores.fraction)
+    for t in threats:  # 1 at the threat's mode: the field's peak-intensity level over its weight
+        one = Cores(ThreatField([t]))
+        mode = _mode(t)
+        assert abs(one.ratio(np.array([mode]))[0][0] - 1.0) < 1e-6
+
+
+def _mode(t):
+    from scipy.optimize import minimize
+
+    f = ThreatField([Threat(t.xi, t.omega, t.alpha, 1.0)])
+    return minimize(lambda p: -f.level(p[None, :])[0], np.array(t.xi), method="Nelder-Mead", tol=1e-12).x
