@@ -1,0 +1,444 @@
+"""``pfp acl TEAM.yaml``: a deny-by-default Zenoh router ACL for one mission, with credentials.
+
+Zenoh's access control is fixed when the router starts and has no templating
+by user name, so every unit needs rules of its own: this command writes them
+from the team file.  Roles, each a list of grants built from ``wire.keys``
+(no topic string is spelled here):
+
+    unit        publish its own state, hold its own token, read its own
+                direction, preview its own path, set its own goal (unless
+                --no-unit-goals)
+    fleet       a simulator playing every unit of the team in one session
+                (``pfp fleet``): the unit grants of all of them, reading
+                every direction
+    planner     read states, goals, threats and unit tokens; publish
+                directions and events; serve previews and its status; hold
+                its own planner token; see other planners' tokens and status
+    reporter    put and delete threats
+    commander   set and cancel any unit's goal, preview any unit
+    observer    read everything of the mission, ask any planner's status
+
+Everything else is denied: another unit's state, a direction from anyone but
+a planner, a planner token or status queryable from anyone else.  A
+principal may hold several roles (``--role injector=reporter,commander,observer``).
+
+Writes into ``--out``:
+
+    zenoh-router.json5        router config: usrpwd auth, payload limit, the ACL
+    credentials.txt           ``user:password`` lines (kept across runs; 0600)
+    clients/NAME.json5        a client config per principal (``pfp serve --zenoh-config``)
+    with --tls:
+    zenoh-router-mtls.json5   the same ACL with ``cert_common_names`` subjects, mutual TLS
+    names.txt                 the common names, for ``docker/gen-certs.py --names-file``
+    endpoints.txt             ``NAME ENDPOINT``: a ``--connect`` value carrying that
+                              principal's certificate (works with every pfp client)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import secrets
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pfp_service.errors import InputError
+from pfp_service.wire import MAX_PAYLOAD_BYTES, keys
+
+__all__ = [
+    "DEFAULT_PRINCIPALS",
+    "MAX_MESSAGE_BYTES",
+    "ROLES",
+    "Grant",
+    "Mission",
+    "Principal",
+    "access_control",
+    "client_config",
+    "principals_for",
+    "router_config",
+    "tls_endpoint",
+]
+
+# Largest Zenoh message a router or planner reassembles (transport/link/rx/max_message_size).
+# Twice the wire contract's payload limit leaves room for the key, the encoding and
+# attachments; anything bigger is dropped by Zenoh before a callback sees it.
+MAX_MESSAGE_BYTES = 2 * MAX_PAYLOAD_BYTES
+INGRESS, EGRESS = "ingress", "egress"
+
+
+@dataclass(frozen=True)
+class Grant:
+    """Allow ``messages`` in one ``flow`` (seen from the router) on ``key_exprs``."""
+
+    flow: str
+    messages: tuple[str, ...]
+    key_exprs: tuple[str, ...]
+
+
+def _publish(*key_exprs: str, delete: bool = False) -> list[Grant]:
+    """Put (and delete) on these keys; the router may tell us who listens (write filtering)."""
+    msgs = ("put", "delete") if delete else ("put",)
+    return [Grant(INGRESS, msgs, key_exprs), Grant(EGRESS, ("declare_subscriber",), key_exprs)]
+
+
+def _subscribe(*key_exprs: str) -> list[Grant]:
+    return [
+        Grant(INGRESS, ("declare_subscriber",), key_exprs),
+        Grant(EGRESS, ("put", "delete"), key_exprs),
+    ]
+
+
+def _ask(*key_exprs: str) -> list[Grant]:
+    return [Grant(INGRESS, ("query",), key_exprs), Grant(EGRESS, ("reply", "declare_queryable"), key_exprs)]
+
+
+def _token(*key_exprs: str) -> list[Grant]:
+    return [Grant(INGRESS, ("liveliness_token",), key_exprs)]
+
+
+def _watch_tokens(*key_exprs: str) -> list[Grant]:
+    return [
+        Grant(INGRESS, ("declare_liveliness_subscriber", "liveliness_query"), key_exprs),
+        Grant(EGRESS, ("liveliness_token", "reply"), key_exprs),
+    ]
+
+
+def unit_grants(mission: str, unit: str, own_goal: bool = True) -> list[Grant]:
+    """What unit ``unit`` may do: its own state, token, direction, preview (and goal)."""
+    out = [
+        *_publish(keys.unit_state(mission, unit)),
+        *_token(keys.alive_unit(mission, unit)),
+        *_subscribe(keys.unit_direction(mission, unit)),
+        *_ask(keys.preview(mission, unit)),
+    ]
+    if own_goal:
+        out += _publish(keys.unit_goal(mission, unit), delete=True)
+    return out
+
+
+def fleet_grants(mission: str, units: Sequence[str], own_goal: bool = True) -> list[Grant]:
+    """A simulator that plays every unit of ``units`` and reads every direction (``pfp fleet``)."""
+    out: list[Grant] = []
+    for u in units:
+        out += unit_grants(mission, u, own_goal)
+    return out + _subscribe(keys.unit_directions(mission))
+
+
+def planner_grants(mission: str, planner: str) -> list[Grant]:
+    return [
+        *_subscribe(keys.unit_states(mission), keys.goals(mission), keys.threats(mission)),
+        *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
+        *_publish(keys.unit_directions(mission), keys.events(mission)),
+        # its own status queryable; queries and replies also on the wildcard `pfp health` asks with
+        Grant(
+            INGRESS, ("declare_queryable",), (keys.previews(mission), keys.planner_status(mission, planner))
+        ),
+        Grant(INGRESS, ("reply",), (keys.previews(mission), keys.planner_statuses(mission))),
+        Grant(EGRESS, ("query",), (keys.previews(mission), keys.planner_statuses(mission))),
+        *_token(keys.alive_planner(mission, planner)),
+        # other planners' status: conflict detection, and `pfp health` run with the planner's identity
+        *_ask(keys.planner_statuses(mission)),
+    ]
+
+
+def reporter_grants(mission: str) -> list[Grant]:
+    return _publish(keys.threats(mission), delete=True)
+
+
+def commander_grants(mission: str) -> list[Grant]:
+    return [*_publish(keys.goals(mission), delete=True), *_ask(keys.previews(mission))]
+
+
+def observer_grants(mission: str) -> list[Grant]:
+    return [
+        *_subscribe(keys.mission_all(mission)),
+        *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
+        *_ask(keys.planner_statuses(mission)),
+    ]
+
+
+@dataclass(frozen=True)
+class Mission:
+    """What a role needs to know: the mission, its planner, the team's units and the goal policy."""
+
+    mission: str
+    planner: str
+    units: tuple[str, ...]
+    own_goal: bool = True
+
+
+# The mission-wide roles a principal can be given with --role; ``unit`` is per team unit.
+ROLES: dict[str, Callable[[Mission], list[Grant]]] = {
+    "planner": lambda t: planner_grants(t.mission, t.planner),
+    "fleet": lambda t: fleet_grants(t.mission, t.units, t.own_goal),
+    "reporter": lambda t: reporter_grants(t.mission),
+    "commander": lambda t: commander_grants(t.mission),
+    "observer": lambda t: observer_grants(t.mission),
+}
+
+# Who gets an identity when --role is not given: one per role, plus `pfp inject`'s needs.
+DEFAULT_PRINCIPALS: dict[str, tuple[str, ...]] = {
+    "planner": ("planner",),
+    "fleet": ("fleet",),
+    "injector": ("reporter", "commander", "observer"),
+    "reporter": ("reporter",),
+    "commander": ("commander",),
+    "observer": ("observer",),
+}
+UNIT_PREFIX = "unit-"
+
+
+@dataclass(frozen=True)
+class Principal:
+    """One identity (a user name, or a certificate's common name) and what it may do."""
+
+    name: str
+    roles: tuple[str, ...]
+    grants: tuple[Grant, ...]
+
+
+def principals_for(team: Mission, roles: dict[str, tuple[str, ...]]) -> list[Principal]:
+    """Every principal: ``roles`` (name -> role names) then ``unit-<id>`` for each unit.
+
+    Raises:
+        InputError: an unknown role, or a name clash with a unit's principal.
+    """
+    out: list[Principal] = []
+    for name, rs in roles.items():
+        keys.check_chunk(name, "--role")
+        if name.startswith(UNIT_PREFIX):
+            raise InputError("--role", f"{name!r}: names starting with {UNIT_PREFIX!r} are the units'")
+        grants: list[Grant] = []
+        for r in rs:
+            if r not in ROLES:
+                raise InputError("--role", f"{name}={r}: unknown role (expected one of: {', '.join(ROLES)})")
+            grants += ROLES[r](team)
+        out.append(Principal(name, tuple(rs), tuple(grants)))
+    for u in team.units:
+        out.append(Principal(UNIT_PREFIX + u, ("unit",), tuple(unit_grants(team.mission, u, team.own_goal))))
+    return out
+
+
+def access_control(principals: Iterable[Principal], tls: bool = False) -> dict[str, Any]:
+    """The router's ``access_control`` section: deny by default, one subject and policy per principal."""
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for p in principals:
+        ids = []
+        for i, g in enumerate(p.grants):
+            rid = f"{p.name}-{i}"
+            ids.append(rid)
+            rules.append(
+                {
+                    "id": rid,
+                    "permission": "allow",
+                    "flows": [g.flow],
+                    "messages": list(g.messages),
+                    "key_exprs": list(g.key_exprs),
+                }
+            )
+        subjects.append({"id": p.name, ("cert_common_names" if tls else "usernames"): [p.name]})
+        policies.append({"id": p.name, "rules": ids, "subjects": [p.name]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def router_config(
+    principals: Sequence[Principal], listen: Sequence[str], runtime_dir: str, tls: bool = False
+) -> dict[str, Any]:
+    """A whole router config (zenohd or a Python session in router mode).
+
+    Args:
+        principals: from ``principals_for``.
+        listen: endpoints, ``tcp/...`` (``tls/...`` with ``tls``).
+        runtime_dir: where credentials.txt (or the PEM files) are when the router runs.
+        tls: mutual TLS with ``cert_common_names`` subjects instead of user/password.
+    """
+    link: dict[str, Any] = {"rx": {"max_message_size": MAX_MESSAGE_BYTES}}
+    transport: dict[str, Any] = {"link": link}
+    if tls:
+        link["tls"] = {
+            "root_ca_certificate": f"{runtime_dir}/ca.pem",
+            "listen_private_key": f"{runtime_dir}/router-key.pem",
+            "listen_certificate": f"{runtime_dir}/router.pem",
+            "enable_mtls": True,
+        }
+    else:
+        transport["auth"] = {"usrpwd": {"dictionary_file": f"{runtime_dir}/credentials.txt"}}
+    return {
+        "mode": "router",
+        "listen": {"endpoints": list(listen)},
+        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+        "transport": transport,
+        "access_control": access_control(principals, tls),
+    }
+
+
+def tls_endpoint(host_port: str, name: str, runtime_dir: str) -> str:
+    """A ``--connect`` value that carries ``name``'s certificate: ``tls/HOST:PORT#...``."""
+    return (
+        f"tls/{host_port}#root_ca_certificate_file={runtime_dir}/ca.pem;"
+        f"connect_private_key_file={runtime_dir}/{name}-key.pem;"
+        f"connect_certificate_file={runtime_dir}/{name}.pem;enable_mtls=true"
+    )
+
+
+def client_config(
+    name: str, connect: str, runtime_dir: str, password: str | None = None, tls: bool = False
+) -> dict[str, Any]:
+    """A client config for one principal: ``password`` for usrpwd, or its certificate with ``tls``."""
+    transport: dict[str, Any] = {"link": {"rx": {"max_message_size": MAX_MESSAGE_BYTES}}}
+    if tls:
+        transport["link"]["tls"] = {
+            "root_ca_certificate": f"{runtime_dir}/ca.pem",
+            "connect_private_key": f"{runtime_dir}/{name}-key.pem",
+            "connect_certificate": f"{runtime_dir}/{name}.pem",
+            "enable_mtls": True,
+        }
+        endpoint = f"tls/{connect}"
+    else:
+        transport["auth"] = {"usrpwd": {"user": name, "password": password}}
+        endpoint = f"tcp/{connect}"
+    return {
+        "mode": "client",
+        "connect": {"endpoints": [endpoint]},
+        "scouting": {"multicast": {"enabled": False}},
+        "transport": transport,
+    }
+
+
+def _dump(obj: dict[str, Any], header: str) -> str:
+    return "".join(f"// {line}\n" for line in header.splitlines()) + json.dumps(obj, indent=2) + "\n"
+
+
+def _read_credentials(path: Path) -> dict[str, str]:
+    if not path.exists():
+        return {}
+    out: dict[str, str] = {}
+    for line in path.read_text().splitlines():
+        user, sep, pwd = line.partition(":")
+        if sep and user and pwd:
+            out[user] = pwd
+    return out
+
+
+def _write(path: Path, text: str, private: bool = False) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if private:  # never world-readable, not even for an instant
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.chmod(path, 0o600)
+    else:
+        path.write_text(text)
+
+
+def _parse_roles(specs: Sequence[str] | None) -> dict[str, tuple[str, ...]]:
+    if not specs:
+        return dict(DEFAULT_PRINCIPALS)
+    out: dict[str, tuple[str, ...]] = {}
+    for spec in specs:
+        name, sep, rest = spec.partition("=")
+        rs = tuple(r.strip() for r in rest.split(",") if r.strip())
+        if not sep or not name or not rs:
+            raise InputError("--role", f"{spec!r}: expected NAME=ROLE[,ROLE...]")
+        out[name] = out.get(name, ()) + rs
+    return out
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("acl", help="write a deny-by-default router ACL and credentials", description=__doc__)
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.add_argument("team", metavar="TEAM.yaml", help="team file: one unit identity per unit")
+    p.add_argument("--out", default="acl", metavar="DIR", help="where to write (default ./acl)")
+    p.add_argument("--mission", default=keys.DEFAULT_MISSION)
+    p.add_argument("--planner-id", default="planner", metavar="ID", help="the planner's id (default planner)")
+    p.add_argument(
+        "--role",
+        action="append",
+        metavar="NAME=ROLE[,ROLE]",
+        help=f"a principal and its roles ({', '.join(ROLES)}); repeat; default: "
+        + " ".join(f"{n}={','.join(r)}" for n, r in DEFAULT_PRINCIPALS.items()),
+    )
+    p.add_argument("--no-unit-goals", action="store_true", help="units may not set their own goal")
+    p.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="router endpoints (default tcp/0.0.0.0:7447, tls/0.0.0.0:7447 with --tls)",
+    )
+    p.add_argument(
+        "--connect-host", default="127.0.0.1:7447", metavar="HOST:PORT", help="what clients connect to"
+    )
+    p.add_argument(
+        "--runtime-dir",
+        metavar="DIR",
+        help="where these files are when the router and clients run (default: --out, absolute)",
+    )
+    p.add_argument("--tls", action="store_true", help="also write the mutual-TLS variant")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pfp_clients.team import load_team
+
+    keys.check_chunk(args.mission, "--mission")
+    keys.check_chunk(args.planner_id, "--planner-id")
+    team_file = load_team(args.team)
+    team = Mission(
+        mission=args.mission,
+        planner=args.planner_id,
+        units=tuple(u.id for u in team_file.units),
+        own_goal=not args.no_unit_goals,
+    )
+    principals = principals_for(team, _parse_roles(args.role))
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} is not a directory")
+    runtime = args.runtime_dir or str(out.resolve())
+    header = (
+        f"Generated by `pfp acl {args.team}` for mission {args.mission!r}: deny by default.\n"
+        "Zenoh's ACL is fixed when the router starts: regenerate and restart to change it."
+    )
+    try:
+        creds_path = out / "credentials.txt"
+        creds = _read_credentials(creds_path)
+        for pr in principals:
+            creds.setdefault(pr.name, secrets.token_urlsafe(18))
+        names = [pr.name for pr in principals]
+        _write(creds_path, "".join(f"{n}:{creds[n]}\n" for n in names), private=True)
+        listen = args.listen or ["tcp/0.0.0.0:7447"]
+        _write(out / "zenoh-router.json5", _dump(router_config(principals, listen, runtime), header))
+        for n in names:
+            conf = client_config(n, args.connect_host, runtime, password=creds[n])
+            _write(out / "clients" / f"{n}.json5", _dump(conf, f"{n}: {header}"), private=True)
+        if args.tls:
+            tls_listen = [e.replace("tcp/", "tls/", 1) for e in listen]
+            conf = router_config(principals, tls_listen, runtime, tls=True)
+            _write(out / "zenoh-router-mtls.json5", _dump(conf, header))
+            _write(out / "names.txt", "".join(f"{n}\n" for n in ["router", *names]))
+            _write(
+                out / "endpoints.txt",
+                "".join(f"{n} {tls_endpoint(args.connect_host, n, runtime)}\n" for n in names),
+            )
+            for n in names:
+                conf = client_config(n, args.connect_host, runtime, tls=True)
+                _write(out / "clients" / f"{n}-tls.json5", _dump(conf, f"{n}: {header}"))
+    except OSError as exc:
+        raise InputError(str(out), f"cannot write: {exc.strerror or exc}") from None
+    if not args.quiet:
+        roles = ", ".join(f"{pr.name} ({'+'.join(pr.roles)})" for pr in principals if pr.roles != ("unit",))
+        print(f"{out}: {len(principals)} principals: {roles} and {len(team.units)} units")
+        if args.tls:
+            print(f"{out}: certificates: python docker/gen-certs.py --out {out} --names-file {out}/names.txt")
+    return 0

@@ -1,0 +1,341 @@
+"""Access control: routers started from ``pfp acl`` output deny what issue 11 saw done, and allow the real flows.
+
+Each test talks to a Python router opened from the generated config itself
+(user/password, or mutual TLS with certificates from ``docker/gen-certs.py``).
+"Denied" is shown by a legitimate message sent after the hostile one arriving
+while the hostile one never does.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from pfp_service.cli import main as pfp_main
+from tests.zenoh_util import ROOT, Inbox, free_port, put_json
+
+M = "acl"
+UNITS = ("u1", "u2")
+GEN_CERTS = ROOT / "docker" / "gen-certs.py"
+TEAM = """name: acl-test
+units:
+  - {id: u1, start: [0, 0], goal: [10, 10]}
+  - {id: u2, start: [0, 5], goal: [10, 10]}
+"""
+NOT_DELIVERED_S = 0.6  # after the legitimate message arrived, how long we still watch for the hostile one
+
+
+def _generate(tmp: Path, port: int, tls: bool) -> Path:
+    team = tmp / "team.yaml"
+    team.write_text(TEAM)
+    out = tmp / "acl"
+    scheme = "tls" if tls else "tcp"
+    argv = ["acl", str(team), "--out", str(out), "--mission", M, "--quiet"]
+    argv += ["--listen", f"tcp/127.0.0.1:{port}", "--connect-host", f"127.0.0.1:{port}"]
+    assert pfp_main([*argv, "--tls"] if tls else argv) == 0, scheme
+    if tls:
+        done = subprocess.run(
+            [sys.executable, str(GEN_CERTS), "--out", str(out), "--names-file", str(out / "names.txt")],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 0, done.stderr
+    return out
+
+
+class Router:
+    """A router opened from the generated config, and sessions opened as its principals."""
+
+    def __init__(self, out: Path, port: int, tls: bool) -> None:
+        self.out, self.port, self.tls = out, port, tls
+        conf = zenoh.Config.from_file(str(out / ("zenoh-router-mtls.json5" if tls else "zenoh-router.json5")))
+        self.session = zenoh.open(conf)
+
+    def config_of(self, name: str) -> zenoh.Config:
+        return zenoh.Config.from_file(str(self.out / "clients" / f"{name}{'-tls' if self.tls else ''}.json5"))
+
+    @contextmanager
+    def as_(self, name: str):
+        s = zenoh.open(self.config_of(name))
+        try:
+            yield s
+        finally:
+            s.close()
+
+
+@pytest.fixture(scope="module", params=["usrpwd", "mtls"])
+def router(request, tmp_path_factory):
+    tls = request.param == "mtls"
+    port = free_port()
+    out = _generate(tmp_path_factory.mktemp(request.param), port, tls)
+    r = Router(out, port, tls)
+    try:
+        yield r
+    finally:
+        r.session.close()
+
+
+def _settle() -> None:
+    time.sleep(0.3)  # declarations reach the router; nothing here waits on data with it
+
+
+def _never(inbox: Inbox, what: str, where=lambda msg: True) -> None:
+    with pytest.raises(TimeoutError):
+        got = inbox.get(timeout=NOT_DELIVERED_S, where=where)
+        pytest.fail(f"{what} was delivered: {got}")
+
+
+STATE = {"position": [1.0, 2.0], "seq": 1}
+THREAT = {"position": [5, 5], "sigma_range": 1.0, "sigma_lateral": 1.0}
+DIRECTION = {"unit": "u1", "status": "en_route", "vector": [1.0, 0.0]}
+
+
+# -- denied -------------------------------------------------------------------------
+def test_a_unit_cannot_spoof_another_units_state(router):
+    with router.as_("observer") as obs, router.as_("unit-u1") as u1, router.as_("unit-u2") as u2:
+        inbox = Inbox(obs, f"mumt/{M}/unit/*/state")
+        _settle()
+        put_json(u2, f"mumt/{M}/unit/u1/state", {**STATE, "seq": 666})  # spoof
+        put_json(u1, f"mumt/{M}/unit/u1/state", STATE)
+        assert inbox.get(where=lambda m: m["seq"] == 1)["position"] == [1.0, 2.0]
+        _never(inbox, "u2's state for u1")
+
+
+def test_a_unit_cannot_set_another_units_goal(router):
+    with router.as_("observer") as obs, router.as_("unit-u2") as u2, router.as_("commander") as cmd:
+        inbox = Inbox(obs, f"mumt/{M}/unit/*/goal")
+        _settle()
+        put_json(u2, f"mumt/{M}/unit/u1/goal", {"position": [999, 999]})
+        u2.delete(f"mumt/{M}/unit/u1/goal")
+        put_json(cmd, f"mumt/{M}/unit/u1/goal", {"position": [10, 10]})
+        assert inbox.get() == {"position": [10, 10]}
+        _never(inbox, "u2's goal for u1")
+
+
+@pytest.mark.parametrize("who", ["unit-u1", "commander", "observer"])
+def test_only_a_reporter_publishes_threats(router, who):
+    with router.as_("observer") as obs, router.as_(who) as bad, router.as_("reporter") as rep:
+        inbox = Inbox(obs, f"mumt/{M}/threat/*")
+        _settle()
+        put_json(bad, f"mumt/{M}/threat/fake", THREAT)
+        bad.delete(f"mumt/{M}/threat/real")
+        put_json(rep, f"mumt/{M}/threat/real", THREAT)
+        assert inbox.get()["sigma_range"] == 1.0
+        _never(inbox, f"a threat from {who}")
+
+
+@pytest.mark.parametrize("who", ["unit-u2", "unit-u1", "reporter", "commander", "fleet"])
+def test_only_the_planner_publishes_directions(router, who):
+    with router.as_("unit-u1") as u1, router.as_(who) as bad, router.as_("planner") as planner:
+        inbox = Inbox(u1, f"mumt/{M}/unit/u1/direction")
+        _settle()
+        put_json(bad, f"mumt/{M}/unit/u1/direction", {**DIRECTION, "vector": [-1.0, 0.0]})
+        put_json(planner, f"mumt/{M}/unit/u1/direction", DIRECTION)
+        assert inbox.get()["vector"] == [1.0, 0.0]
+        _never(inbox, f"a direction from {who}")
+
+
+def test_a_unit_reads_only_its_own_direction(router):
+    with router.as_("unit-u2") as u2, router.as_("planner") as planner:
+        own = Inbox(u2, f"mumt/{M}/unit/u2/direction")
+        other = Inbox(u2, f"mumt/{M}/unit/u1/direction")
+        wide = Inbox(u2, f"mumt/{M}/unit/*/direction")
+        _settle()
+        put_json(planner, f"mumt/{M}/unit/u1/direction", DIRECTION)
+        put_json(planner, f"mumt/{M}/unit/u2/direction", {**DIRECTION, "unit": "u2"})
+        assert own.get()["unit"] == "u2"
+        _never(other, "u1's direction to u2")
+        assert wide.get()["unit"] == "u2"  # its own, through a wider subscription
+        _never(wide, "u1's direction through a wildcard", where=lambda m: m["unit"] == "u1")
+
+
+def test_no_fake_planner_token_or_status(router):
+    """What made ``pfp health`` exit 0 after the real planner died: now refused at the router."""
+    with router.as_("observer") as obs, router.as_("unit-u1") as fake, router.as_("commander") as fake2:
+        tokens: queue.Queue[str] = queue.Queue()
+        sub = obs.liveliness().declare_subscriber(
+            f"mumt/{M}/alive/planner/*", lambda s: tokens.put(str(s.key_expr)), history=True
+        )
+        _settle()
+        held = [
+            fake.liveliness().declare_token(f"mumt/{M}/alive/planner/planner"),
+            fake2.liveliness().declare_token(f"mumt/{M}/alive/planner/evil"),
+            fake.declare_queryable(f"mumt/{M}/planner/planner/status", lambda q: q.reply(q.key_expr, b"{}")),
+            fake2.declare_queryable(f"mumt/{M}/planner/*/status", lambda q: q.reply(q.key_expr, b"{}")),
+        ]
+        _settle()
+        replies = list(obs.get(f"mumt/{M}/planner/*/status", timeout=1.0))
+        assert [r for r in replies if r.ok is not None] == []
+        alive = list(obs.liveliness().get(f"mumt/{M}/alive/planner/*", timeout=1.0))
+        assert [r for r in alive if r.ok is not None] == []
+        with pytest.raises(queue.Empty):
+            tokens.get(timeout=NOT_DELIVERED_S)
+        # the real planner's token and status do get through
+        with router.as_("planner") as planner:
+            held += [
+                planner.liveliness().declare_token(f"mumt/{M}/alive/planner/planner"),
+                planner.declare_queryable(
+                    f"mumt/{M}/planner/planner/status", lambda q: q.reply(q.key_expr, b'{"ok": 1}')
+                ),
+            ]
+            assert tokens.get(timeout=5) == f"mumt/{M}/alive/planner/planner"
+            replies = [r.ok for r in obs.get(f"mumt/{M}/planner/*/status", timeout=2.0) if r.ok is not None]
+            assert [json.loads(r.payload.to_bytes()) for r in replies] == [{"ok": 1}]
+            for h in held:
+                h.undeclare()
+        sub.undeclare()
+
+
+def test_a_unit_cannot_hold_another_units_token(router):
+    with router.as_("observer") as obs, router.as_("unit-u2") as u2:
+        tokens: queue.Queue[str] = queue.Queue()
+        sub = obs.liveliness().declare_subscriber(
+            f"mumt/{M}/alive/unit/*", lambda s: tokens.put(str(s.key_expr)), history=True
+        )
+        _settle()
+        bad = u2.liveliness().declare_token(f"mumt/{M}/alive/unit/u1")
+        good = u2.liveliness().declare_token(f"mumt/{M}/alive/unit/u2")
+        assert tokens.get(timeout=5) == f"mumt/{M}/alive/unit/u2"
+        with pytest.raises(queue.Empty):
+            tokens.get(timeout=NOT_DELIVERED_S)
+        bad.undeclare()
+        good.undeclare()
+        sub.undeclare()
+
+
+def test_connecting_without_credentials_is_refused(router):
+    plain = zenoh.Config()
+    plain.insert_json5("mode", '"client"')
+    plain.insert_json5("scouting/multicast/enabled", "false")
+    scheme = "tls" if router.tls else "tcp"
+    plain.insert_json5("connect/endpoints", json.dumps([f"{scheme}/127.0.0.1:{router.port}"]))
+    if router.tls:  # trusts the CA but shows no certificate of its own
+        plain.insert_json5("transport/link/tls/root_ca_certificate", json.dumps(str(router.out / "ca.pem")))
+    with pytest.raises(zenoh.ZError):
+        zenoh.open(plain).close()
+    if not router.tls:
+        wrong = router.config_of("unit-u1")
+        wrong.insert_json5("transport/auth/usrpwd/password", '"not-the-password"')
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(wrong).close()
+        # plain TCP to the router with no usrpwd at all
+        tcp = zenoh.Config()
+        tcp.insert_json5("mode", '"client"')
+        tcp.insert_json5("scouting/multicast/enabled", "false")
+        tcp.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{router.port}"]))
+        with pytest.raises(zenoh.ZError):
+            zenoh.open(tcp).close()
+
+
+def test_a_certificate_from_another_ca_is_refused(router, tmp_path):
+    if not router.tls:
+        pytest.skip("mutual TLS only")
+    done = subprocess.run(
+        [sys.executable, str(GEN_CERTS), "--out", str(tmp_path), "unit-u1"], capture_output=True, timeout=60
+    )
+    assert done.returncode == 0
+    conf = router.config_of("unit-u1")
+    conf.insert_json5("transport/link/tls/connect_private_key", json.dumps(str(tmp_path / "unit-u1-key.pem")))
+    conf.insert_json5("transport/link/tls/connect_certificate", json.dumps(str(tmp_path / "unit-u1.pem")))
+    with pytest.raises(zenoh.ZError):
+        zenoh.open(conf).close()
+
+
+def test_oversized_payloads_are_dropped_by_zenoh(router):
+    """transport/link/rx/max_message_size: a 1 MiB put never reaches a subscriber; 100 KiB does."""
+    with router.as_("observer") as obs, router.as_("reporter") as rep:
+        inbox = Inbox(obs, f"mumt/{M}/threat/*")
+        _settle()
+        rep.put(f"mumt/{M}/threat/big", b"x" * (1 << 20))
+        put_json(rep, f"mumt/{M}/threat/ok", {**THREAT, "pad": "y" * 100_000})
+        assert len(inbox.get()["pad"]) == 100_000
+        with pytest.raises((TimeoutError, ValueError)):
+            inbox.get(timeout=NOT_DELIVERED_S)
+            pytest.fail("a 1 MiB payload was delivered")
+
+
+# -- allowed: the real flows under the same config ------------------------------------------
+def test_a_real_planner_answers_a_unit_through_the_acl(router):
+    from pfp_service.service.config import ServeConfig
+    from pfp_service.service.node import PlannerNode
+
+    with router.as_("planner") as ps:
+        node = PlannerNode(ps, ServeConfig(mission=M, planner_id="planner", mode="client"))
+        node.start()
+        try:
+            with router.as_("unit-u1") as u1, router.as_("observer") as obs:
+                token = u1.liveliness().declare_token(f"mumt/{M}/alive/unit/u1")
+                inbox = Inbox(u1, f"mumt/{M}/unit/u1/direction")
+                events = Inbox(obs, f"mumt/{M}/event/*")
+                _settle()
+                put_json(u1, f"mumt/{M}/unit/u1/goal", {"position": [10, 0]})
+                deadline = time.monotonic() + 10
+                d = None
+                seq = 0
+                while time.monotonic() < deadline:  # the goal and the state race: report until en_route
+                    seq += 1
+                    put_json(u1, f"mumt/{M}/unit/u1/state", {"position": [0.0, 0.0], "seq": seq})
+                    d = inbox.get(where=lambda m, s=seq: m.get("seq") == s)
+                    if d["status"] == "en_route":
+                        break
+                assert d is not None and d["status"] == "en_route"
+                assert d["vector"][0] == pytest.approx(1.0, abs=1e-6)
+                # the unit previews its own path; the planner's status answers an observer
+                replies = [r.ok for r in u1.get(f"mumt/{M}/preview/u1", timeout=5.0) if r.ok is not None]
+                assert json.loads(replies[0].payload.to_bytes())["status"] == "reached"
+                status = [r.ok for r in obs.get(f"mumt/{M}/planner/*/status", timeout=2.0) if r.ok]
+                assert json.loads(status[0].payload.to_bytes())["planner"] == "planner"
+                # a reporter's threat makes the planner replan and say so on events
+                with router.as_("reporter") as rep:
+                    put_json(rep, f"mumt/{M}/threat/e1", {**THREAT, "position": [5, 3]})
+                    ev = events.get(timeout=10, where=lambda e: e.get("kind") == "replan")
+                    assert "u1" in ev["units"]
+                token.undeclare()
+        finally:
+            node.stop()
+
+
+def test_health_and_fleet_commands_connect_with_a_certificate_endpoint(router):
+    """Every pfp client takes only ``--connect``; with mTLS that endpoint carries the certificate."""
+    if not router.tls:
+        pytest.skip("pfp clients take no usrpwd credentials; mutual TLS goes in the endpoint")
+    from pfp_service.service.config import ServeConfig
+    from pfp_service.service.node import PlannerNode
+
+    endpoints = dict(
+        line.split(" ", 1) for line in (router.out / "endpoints.txt").read_text().splitlines() if line
+    )
+    with router.as_("planner") as ps:
+        node = PlannerNode(ps, ServeConfig(mission=M, planner_id="planner", mode="client"))
+        node.start()
+        try:
+            cmd = [sys.executable, "-m", "pfp_service"]
+            health = subprocess.run(
+                [*cmd, "health", "--mission", M, "--connect", endpoints["observer"], "--timeout", "3"],
+                capture_output=True,
+                text=True,
+                timeout=60,
+                cwd=ROOT,
+            )
+            assert health.returncode == 0, health.stdout + health.stderr
+            team = router.out.parent / "team.yaml"
+            fleet = subprocess.run(
+                [*cmd, "fleet", "--team", str(team), "--mission", M, "--connect", endpoints["fleet"]]
+                + ["--speed-up", "20", "--until-arrived", "--duration-s", "60"],
+                capture_output=True,
+                text=True,
+                timeout=120,
+                cwd=ROOT,
+            )
+            assert fleet.returncode == 0, fleet.stdout[-2000:] + fleet.stderr[-2000:]
+        finally:
+            node.stop()
