@@ -18,6 +18,8 @@ EXPECTED = [
     "Event",
     "ForgottenEvent",
     "Goal",
+    "LatLon",
+    "Origin",
     "PlannerStatus",
     "PreviewRequest",
     "RejectedEvent",

@@ -140,6 +140,8 @@ V1: dict[str, tuple[set[str], set[str]]] = {
         {"seq", "heading_deg", "distance_to_goal", "threat_level", "lookahead", "reason"},
     ),
     "ErrorReply": ({"error"}, {"field"}),
+    # positions to the planner may be {"lat", "lon"} (added with geo)
+    "LatLon": ({"lat", "lon"}, set()),
     "PlannerStatus": (
         {"planner", "mission", "uptime_s"},
         {"version", "units", "units_stale", "threats", "msgs_in", "msgs_out", "rejected"}

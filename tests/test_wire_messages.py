@@ -160,6 +160,15 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         ([[0.0, 0.0], [1.0]], "[1]", "expected array of length 2"),
         ([[0.0, BIG]], "[0][1]", "expected a finite number"),
     ],
+    "bool": [(1, "", "expected bool"), ("true", "", "expected bool")],
+    "latlons": [
+        ("x", "", "expected array"),
+        ([{"lat": 0.0, "lon": 0.0}] * (m.MAX_LOOKAHEAD + 1), "", "length must be <= 1000"),
+        ([{"lat": 91.0, "lon": 0.0}], "[0].lat", "must be <= 90"),
+        ([{"lat": 0.0, "lon": -180.5}], "[0].lon", "must be >= -180"),
+        ([{"lat": 0.0}], "[0].lon", "is required"),
+        ([[0.0, 0.0]], "[0]", "expected object"),
+    ],
     "ids": [
         ("u1", "", "expected array, got str"),
         (["ok", "a b"], "[1]", "matching regex"),
@@ -224,6 +233,9 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "threat_level": ("nonneg", DEF),
         "lookahead": ("points", DEF),
         "reason": ("text", DEF),
+        "deliberating": ("bool", DEF),
+        "true_bearing_deg": ("angle", OPT),
+        "lookahead_geo": ("latlons", DEF),
     },
     "error_reply": {"error": ("text", REQ), "field": ("text", DEF)},
     "planner_status": {

@@ -33,6 +33,7 @@ from pfp_service.constraints import (
     check_spreads,
 )
 from pfp_service.errors import InputError, from_validation
+from pfp_service.geo import LatLon, Origin, localise
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
@@ -43,10 +44,11 @@ __all__ = [
     "CONTENT_TYPE",
     "EVENT_KINDS",
     "MAX_EVENT_ITEMS",
-    "MAX_SNAPSHOT_ITEMS",
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",
+    "MAX_SNAPSHOT_ITEMS",
     "MAX_WHATIF_THREATS",
+    "TEXT_MAX_CHARS",
     "AnyEvent",
     "ArrivedEvent",
     "Bounds",
@@ -56,6 +58,8 @@ __all__ = [
     "Event",
     "ForgottenEvent",
     "Goal",
+    "LatLon",
+    "Origin",
     "PlannerStatus",
     "PreviewRequest",
     "RejectedEvent",
@@ -83,6 +87,7 @@ __all__ = [
     "decode_unit_state",
     "decode_world_snapshot",
     "encode",
+    "fit_text",
 ]
 
 # The MIME type of every payload; ``pfp_service.wire.zenoh_encoding()`` maps it to Zenoh's.
@@ -105,7 +110,13 @@ Time = Annotated[float, Meta(ge=0.0, le=1e11)]
 # Sequence numbers stay within JSON's exactly representable integers.
 Seq = Annotated[int, Meta(ge=0, le=2**53 - 1)]
 Count = Annotated[int, Meta(ge=0, le=2**53 - 1)]
-Text = Annotated[str, Meta(max_length=1024)]
+TEXT_MAX_CHARS = 1024
+Text = Annotated[str, Meta(max_length=TEXT_MAX_CHARS)]
+
+
+def fit_text(text: str, limit: int = TEXT_MAX_CHARS) -> str:
+    """``text`` if it fits a ``Text`` field, else its start ending in "…" (``limit`` characters in all)."""
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 class UnitKind(StrEnum):
@@ -263,6 +274,9 @@ class Direction(_Message, frozen=True, kw_only=True):
         threat_level: weighted threat level at the unit's position.
         lookahead: the next positions the same stepper predicts, ``[[x, y], ...]``.
         reason: why, for ``trapped`` and ``escaping``.
+        true_bearing_deg: the vector as a bearing from true north at the unit,
+            when the mission has an origin (``geo.with_geodetic``); null otherwise.
+        lookahead_geo: ``lookahead`` as ``[{"lat", "lon"}, ...]`` when the mission has an origin.
         deliberating: a route for this unit is being computed off the planning
             loop; until it is adopted the vector is plain steepest descent.
     """
@@ -277,6 +291,8 @@ class Direction(_Message, frozen=True, kw_only=True):
     lookahead: Annotated[list[Point], Meta(max_length=MAX_LOOKAHEAD)] = []
     reason: Text = ""
     deliberating: bool = False
+    true_bearing_deg: Angle | None = None
+    lookahead_geo: Annotated[list[LatLon], Meta(max_length=MAX_LOOKAHEAD)] = []
 
 
 class ErrorReply(_Message, frozen=True, kw_only=True):
@@ -287,7 +303,7 @@ class ErrorReply(_Message, frozen=True, kw_only=True):
 
     @classmethod
     def of(cls, exc: InputError) -> ErrorReply:
-        return cls(error=exc.reason, field=exc.path or "$")
+        return cls(error=fit_text(exc.reason), field=fit_text(exc.path or "$"))
 
 
 class PlannerStatus(_Message, frozen=True, kw_only=True):
@@ -323,12 +339,16 @@ class RejectedEvent(Event, frozen=True, kw_only=True, tag="rejected"):
     key: Text
     field: Text = "$"
     reason: Text
+    truncated: bool = False  # key, field or reason was cut to TEXT_MAX_CHARS (it then ends in "…")
 
     @classmethod
     def of(
         cls, key: str, exc: InputError, planner: str | None = None, t: float | None = None
     ) -> RejectedEvent:
-        return cls(key=key, field=exc.path or "$", reason=exc.reason, planner=planner, t=t)
+        """The event for ``exc`` on ``key``, every text cut to fit the schema and marked ``truncated``."""
+        texts = (str(key), exc.path or "$", exc.reason)
+        k, f, r = (fit_text(s) for s in texts)
+        return cls(key=k, field=f, reason=r, truncated=(k, f, r) != texts, planner=planner, t=t)
 
 
 class ThreatChange(_Message, frozen=True, kw_only=True):
@@ -428,6 +448,7 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     units_total: Count = 0
     threats_total: Count = 0
 
+
 # -- encoding and decoding -------------------------------------------------------
 _ENCODER = msgspec.json.Encoder()
 _DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
@@ -479,13 +500,23 @@ def _wire_error(exc: msgspec.ValidationError | msgspec.DecodeError) -> InputErro
     return InputError(_rooted(e.path), reason)
 
 
-def decode(cls: type[M], data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> M:
+def decode(
+    cls: type[M],
+    data: bytes | bytearray | memoryview | None,
+    bounds: Bounds | None = None,
+    origin: Origin | None = None,
+) -> M:
     """Decode and validate one message of type ``cls``.
+
+    A position may be ``[x, y]`` metres or ``{"lat": …, "lon": …}``; the
+    second becomes metres from ``origin`` here (``geo.localise``), so what
+    comes out is always in metres.
 
     Args:
         cls: a message Struct of this module, ``AnyEvent``, or ``PlanResult``.
         data: the payload as received.
         bounds: the mission bounds, if any; every position must lie within them.
+        origin: the mission origin, if any; without one a lat/lon is refused.
 
     Raises:
         InputError: ``path`` rooted at ``$`` and the reason.
@@ -499,9 +530,19 @@ def decode(cls: type[M], data: bytes | bytearray | memoryview | None, bounds: Bo
     if size > MAX_PAYLOAD_BYTES:
         raise InputError("$", f"payload of {size} bytes exceeds the limit of {MAX_PAYLOAD_BYTES}")
     try:
-        msg: M = decoder.decode(data)  # type: ignore[arg-type]
+        if b'"lat"' in data or b'"lon"' in data:  # type: ignore[operator]
+            # the slow path only for lat/lon: untyped, localised, then typed with the same paths
+            msg: M = msgspec.convert(localise(msgspec.json.decode(data), origin, "$"), cls)  # type: ignore[arg-type]
+        else:
+            msg = decoder.decode(data)  # type: ignore[arg-type]
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
         raise _wire_error(exc) from exc
+    except RecursionError:  # [[[[... or {"a":{"a":... deeper than the decoder's stack
+        raise InputError("$", "malformed JSON: nested too deeply") from None
+    except InputError:
+        raise
+    except Exception as exc:  # hostile bytes leave this function as an InputError and nothing else
+        raise InputError("$", f"cannot decode: {type(exc).__name__}: {exc}"[:200]) from exc
     if bounds is not None:
         check_bounds(msg, bounds)
     return msg
@@ -540,28 +581,34 @@ def check_bounds(msg: object, bounds: Bounds) -> None:
             )
 
 
-def decode_unit_state(data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> UnitState:
+def decode_unit_state(
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
+) -> UnitState:
     """A ``UnitState`` from a ``unit/{u}/state`` payload (see ``decode``)."""
-    return decode(UnitState, data, bounds)
+    return decode(UnitState, data, bounds, origin)
 
 
-def decode_goal(data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> Goal:
+def decode_goal(
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
+) -> Goal:
     """A ``Goal`` from a ``unit/{u}/goal`` PUT payload (see ``decode``)."""
-    return decode(Goal, data, bounds)
+    return decode(Goal, data, bounds, origin)
 
 
-def decode_threat(data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None) -> ThreatUpdate:
+def decode_threat(
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
+) -> ThreatUpdate:
     """A ``ThreatUpdate`` from a ``threat/{t}`` PUT payload (see ``decode``)."""
-    return decode(ThreatUpdate, data, bounds)
+    return decode(ThreatUpdate, data, bounds, origin)
 
 
 def decode_preview_request(
-    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
 ) -> PreviewRequest:
     """A ``PreviewRequest`` from a preview query body; no body means the live preview."""
     if data is None or len(data) == 0:
         return PreviewRequest()
-    return decode(PreviewRequest, data, bounds)
+    return decode(PreviewRequest, data, bounds, origin)
 
 
 def decode_direction(data: bytes | bytearray | memoryview | None) -> Direction:

@@ -18,6 +18,7 @@ from typing import Any
 
 import msgspec
 
+from pfp_service.geo import POSITION_FIELDS, LatLon
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from pfp_service.wire.keys import KeyKind
@@ -307,9 +308,42 @@ def _describe(defs: dict[str, Any]) -> None:
                 d["properties"][field] = {"description": text, **prop}
 
 
+GEODETIC_NOTE = (
+    "A position is [x, y] metres east and north of the mission origin, or "
+    '{"lat": …, "lon": …} in WGS-84 degrees (the planner needs a mission origin for that).'
+)
+
+
+def _either_form(prop: dict[str, Any]) -> dict[str, Any]:
+    """A point's schema widened to ``point | LatLon`` (keeping null if it was allowed)."""
+    ref = {"$ref": "#/$defs/LatLon"}
+    note = {"description": prop["description"]} if "description" in prop else {}
+    if prop.get("type") == "array":
+        return {**note, "anyOf": [{k: v for k, v in prop.items() if k != "description"}, ref]}
+    alts = prop.get("anyOf")
+    if alts and any(a.get("type") == "array" for a in alts):
+        return {**prop, "anyOf": [*alts, ref]}
+    return prop
+
+
+def _geodetic_positions(spec: MessageSpec, body: dict[str, Any]) -> None:
+    """Messages to the planner take lat/lon wherever they take a position (``geo.POSITION_FIELDS``)."""
+    if spec.receiver != "planner":
+        return
+    defs = body.setdefault("$defs", {})
+    for d in list(defs.values()):
+        props = d.get("properties", {})
+        for name in POSITION_FIELDS & props.keys():
+            props[name] = _either_form(props[name])
+        if POSITION_FIELDS & props.keys():
+            d["description"] = f"{d.get('description', '').rstrip()}\n\n{GEODETIC_NOTE}".lstrip()
+    defs.update(msgspec.json.schema(LatLon)["$defs"])
+
+
 def _schema(spec: MessageSpec) -> dict[str, Any]:
     body = msgspec.json.schema(_type_of(spec))
     _describe(body.get("$defs", {}))
+    _geodetic_positions(spec, body)
     head: dict[str, Any] = {
         "$schema": JSON_SCHEMA_DIALECT,
         "$id": f"{spec.name}.schema.json",

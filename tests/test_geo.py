@@ -1,0 +1,209 @@
+"""Geodetic positions: the ENU plane against Karney's geodesics, lat/lon on the wire, directions' bearings."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from geographiclib.geodesic import Geodesic
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pfp_service import geo
+from pfp_service.errors import InputError
+from pfp_service.geo import LatLon, Origin
+from pfp_service.wire import messages as m
+
+WGS84 = Geodesic.WGS84
+ORIGINS = [
+    Origin(lat=59.3293, lon=18.0686),
+    Origin(lat=-33.86, lon=151.21, alt=40.0),
+    Origin(lat=0.5, lon=179.9),
+]
+
+
+def _walk(o: Origin, x: float, y: float) -> tuple[float, float]:
+    """Karney's direct problem from the origin: the lat/lon ``hypot(x, y)`` metres along bearing atan2(x, y)."""
+    g = WGS84.Direct(o.lat, o.lon, math.degrees(math.atan2(x, y)), math.hypot(x, y))
+    return g["lat2"], g["lon2"]
+
+
+@pytest.mark.parametrize("o", ORIGINS)
+def test_round_trip_is_exact_to_a_tenth_of_a_millimetre(o):
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(-25_000, 25_000, size=(200, 2))
+    ll = o.to_geodetic_many(xy)
+    back = np.array([o.to_local(a, b) for a, b in ll])
+    assert np.max(np.abs(back - xy)) < 1e-4
+
+
+@pytest.mark.parametrize("o", ORIGINS)
+def test_distances_in_a_30_km_area_match_karney_to_centimetres(o):
+    """The documented accuracy: any two points of a 30 km x 30 km area keep their geodesic distance to < 10 cm."""
+    rng = np.random.default_rng(11)
+    worst = 0.0
+    for _ in range(300):
+        (x1, y1), (x2, y2) = rng.uniform(-15_000, 15_000, size=(2, 2))
+        (a1, b1), (a2, b2) = o.to_geodetic_many(np.array([[x1, y1], [x2, y2]]))
+        # the plane lies at the origin's height: distances there are longer by alt / R than on the ellipsoid
+        s12 = WGS84.Inverse(a1, b1, a2, b2)["s12"] * (1.0 + o.alt / 6_371_000.0)
+        worst = max(worst, abs(math.hypot(x2 - x1, y2 - y1) - s12))
+    assert worst < 0.10, worst
+    # from the origin the error is the projection's d**3 / (6 R**2): 1.4 cm at 15 km
+    lat, lon = _walk(o, 15_000.0, 0.0)
+    x, y = o.to_local(lat, lon)
+    assert 0.005 < 15_000.0 * (1.0 + o.alt / 6_371_000.0) - math.hypot(x, y) < 0.03
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.floats(-15_000, 15_000),
+    st.floats(-15_000, 15_000),
+    st.floats(0, 359.9),
+)
+def test_true_bearing_matches_the_geodesic_azimuth(x, y, heading):
+    """A planner vector re-expressed at the unit is the azimuth of the short geodesic along it."""
+    o = ORIGINS[0]
+    dx, dy = math.sin(math.radians(heading)), math.cos(math.radians(heading))
+    lat1, lon1 = o.to_geodetic(x, y)
+    lat2, lon2 = o.to_geodetic(x + dx, y + dy)  # one metre along the vector
+    azi = WGS84.Inverse(lat1, lon1, lat2, lon2)["azi1"] % 360.0
+    got = geo.true_bearing_deg(o, (x, y), (dx, dy))
+    assert abs((got - azi + 180.0) % 360.0 - 180.0) < 0.01
+
+
+def test_true_bearing_turns_by_the_meridian_convergence():
+    o = ORIGINS[0]
+    x = 15_000.0  # east of the origin, north of the equator: grid north lies east of true north
+    _lat, lon = o.to_geodetic(x, 0.0)
+    convergence = (lon - o.lon) * math.sin(math.radians(o.lat))
+    assert 0.2 < convergence < 0.25
+    assert abs(geo.true_bearing_deg(o, (x, 0.0), (0.0, 1.0)) - convergence) < 0.001
+
+
+def test_localise_converts_positions_and_names_their_paths():
+    o = ORIGINS[0]
+    lat, lon = o.to_geodetic(100.0, -50.0)
+    doc = {
+        "start": {"lat": lat, "lon": lon},
+        "goal": [1.0, 2.0],
+        "bounds": [{"lat": lat, "lon": lon}, [500.0, 500.0]],
+        "threats": [{"position": {"lat": lat, "lon": lon}, "alpha": [1.0, 0.0]}],
+    }
+    out = geo.localise(doc, o)
+    assert np.allclose(out["start"], [100.0, -50.0], atol=1e-6)
+    assert out["goal"] == [1.0, 2.0] and out["bounds"][1] == [500.0, 500.0]
+    assert np.allclose(out["bounds"][0], [100.0, -50.0], atol=1e-6)
+    assert np.allclose(out["threats"][0]["position"], [100.0, -50.0], atol=1e-6)
+    assert out["threats"][0]["alpha"] == [1.0, 0.0]
+    assert doc["start"] == {"lat": lat, "lon": lon}  # not modified
+    with pytest.raises(InputError) as e:
+        geo.localise(doc, None)
+    assert e.value.path == "start" and "origin" in e.value.reason
+    with pytest.raises(InputError) as e:
+        geo.localise({"threats": [{"position": {"lat": 95, "lon": 0}}]}, o, "$")
+    assert e.value.path == "$.threats[0].position.lat" and "<= 90" in e.value.reason
+    with pytest.raises(InputError) as e:
+        geo.localise({"goal": {"lat": lat}}, o)
+    assert e.value.path == "goal.lon" and "is required" in e.value.reason
+    with pytest.raises(InputError) as e:
+        geo.localise({"goal": {"lat": o.lat + 1.0, "lon": o.lon}}, o)
+    assert e.value.path == "goal" and "111 km from the mission origin" in e.value.reason
+
+
+@pytest.mark.parametrize(
+    ("text", "want"),
+    [
+        ("59.5,18.25", Origin(lat=59.5, lon=18.25)),
+        (' {"lat": 1, "lon": 2, "alt": 3} ', Origin(lat=1, lon=2, alt=3)),
+    ],
+)
+def test_parse_origin(text, want):
+    assert geo.parse_origin(text) == want
+
+
+@pytest.mark.parametrize("text", ["59.5", "a,b", "95,0", '{"lat": 1}', "1,2,3,4"])
+def test_parse_origin_refuses(text):
+    with pytest.raises(InputError) as e:
+        geo.parse_origin(text)
+    assert e.value.path == "origin"
+
+
+# -- on the wire ----------------------------------------------------------------
+def test_a_lat_lon_message_decodes_to_the_same_metres():
+    o = ORIGINS[0]
+    lat, lon = o.to_geodetic(120.5, 80.25)
+    for decode, body in (
+        (m.decode_unit_state, {"position": [120.5, 80.25], "seq": 3}),
+        (m.decode_goal, {"position": [120.5, 80.25], "tolerance": 1.0}),
+        (m.decode_threat, {"position": [120.5, 80.25], "sigma_range": 5, "sigma_lateral": 3}),
+    ):
+        metres = decode(json.dumps(body).encode())
+        geodetic = decode(json.dumps({**body, "position": {"lat": lat, "lon": lon}}).encode(), origin=o)
+        assert type(geodetic) is type(metres)
+        assert np.allclose(geodetic.position, metres.position, atol=1e-6)
+    req = m.decode_preview_request(
+        json.dumps(
+            {
+                "start": {"lat": lat, "lon": lon},
+                "goal": [0, 0],
+                "threats": [
+                    {"id": "a", "position": {"lat": lat, "lon": lon}, "sigma_range": 2, "sigma_lateral": 2}
+                ],
+            }
+        ).encode(),
+        origin=o,
+    )
+    assert np.allclose(req.start, (120.5, 80.25), atol=1e-6)
+    assert np.allclose(req.threats[0].position, (120.5, 80.25), atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("body", "origin", "path", "fragment"),
+    [
+        ({"position": {"lat": 59.33, "lon": 18.07}}, None, "$.position", "needs a mission origin"),
+        ({"position": {"lat": 91, "lon": 18.07}}, ORIGINS[0], "$.position.lat", "must be <= 90"),
+        ({"position": {"lat": "x", "lon": 18.07}}, ORIGINS[0], "$.position.lat", "expected float"),
+        ({"position": {"lat": 60.5, "lon": 18.07}}, ORIGINS[0], "$.position", "from the mission origin"),
+        ({"position": [0, 0], "seq": "lat"}, ORIGINS[0], "$.seq", "expected int"),
+    ],
+)
+def test_bad_lat_lon_is_rejected_with_its_path(body, origin, path, fragment):
+    with pytest.raises(InputError) as e:
+        m.decode_unit_state(json.dumps(body).encode(), origin=origin)
+    assert e.value.path == path and fragment in e.value.reason, str(e.value)
+
+
+def test_mission_bounds_apply_after_conversion():
+    o = ORIGINS[0]
+    lat, lon = o.to_geodetic(150.0, 0.0)
+    with pytest.raises(InputError) as e:
+        m.decode_goal(
+            json.dumps({"position": {"lat": lat, "lon": lon}}).encode(), bounds=((0, 0), (100, 100)), origin=o
+        )
+    assert e.value.path == "$.position" and "outside the mission bounds" in e.value.reason
+
+
+def test_with_geodetic_fills_bearing_and_lat_lon_lookahead():
+    o = ORIGINS[0]
+    d = m.Direction(
+        unit="u1",
+        status=m.DirectionStatus.EN_ROUTE,
+        vector=(0.6, 0.8),
+        heading_deg=math.degrees(math.atan2(0.6, 0.8)),
+        lookahead=[(10.6, 20.8), (11.2, 21.6)],
+    )
+    assert geo.with_geodetic(d, None, (10.0, 20.0)) is d
+    g = geo.with_geodetic(d, o, (10.0, 20.0))
+    assert (
+        g.true_bearing_deg is not None and abs(g.true_bearing_deg - d.heading_deg) < 0.01
+    )  # near the origin
+    assert len(g.lookahead_geo) == 2
+    for p, q in zip(g.lookahead_geo, d.lookahead):
+        assert np.allclose(o.to_local(p.lat, p.lon), q, atol=0.02)  # 1e-7 degrees is about a centimetre
+    back = m.decode_direction(m.encode(g))
+    assert back == g and isinstance(back.lookahead_geo[0], LatLon)
+    still = m.Direction(unit="u1", status=m.DirectionStatus.ARRIVED, vector=(0.0, 0.0))
+    assert geo.with_geodetic(still, o, (0.0, 0.0)).true_bearing_deg is None
