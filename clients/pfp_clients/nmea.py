@@ -11,25 +11,22 @@ the rejection and carry on.  ``read_sentence`` is the same for a stream that
 carries other sentences too (RMC, GSV, ...): those come back as ``IGNORED``.
 
 ``LocalFrame`` turns latitude and longitude into metres east (x) and north (y)
-of an origin, the planner's frame.  It is a local tangent plane
-(equirectangular): the WGS-84 ellipsoid's meridian radius ``M`` and prime
-vertical radius ``N`` at the origin's latitude give
-
-    y_north_m = M * dlat_rad
-    x_east_m  = N * cos(lat0) * dlon_rad
-
-which is exact at the origin and good to about 0.1 % of the distance within
-10 km at mid latitudes (the plane ignores the curvature of meridians and the
-change of the radii with latitude).  An exercise area is far smaller.
+of an origin, the planner's frame.  It is the project's one conversion,
+``pfp_service.geo.Origin`` (the WGS-84 local tangent plane, ENU, via
+pymap3d), under the names this module has always used; its accuracy is
+documented and tested there (centimetres over a 30 km area).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Final
 
+import msgspec
+
 from pfp_service.errors import InputError
+from pfp_service.geo import Origin
 
 __all__ = [
     "IGNORED",
@@ -219,37 +216,40 @@ class LocalFrame:
     """A local tangent plane at ``origin``: degrees to metres east (x) and north (y).
 
     Attributes:
-        lat0_deg: the origin's latitude, strictly between -90 and 90.
+        lat0_deg: the origin's latitude, strictly between -90 and 90 (the plane needs ±89.9).
         lon0_deg: the origin's longitude, -180 to 180.
     """
 
     lat0_deg: float
     lon0_deg: float
+    origin: Origin = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.lat0_deg) and -90.0 < self.lat0_deg < 90.0):
             raise InputError("origin", f"latitude must be strictly between -90 and 90, got {self.lat0_deg}")
         if not (math.isfinite(self.lon0_deg) and -180.0 <= self.lon0_deg <= 180.0):
             raise InputError("origin", f"longitude must be within -180..180, got {self.lon0_deg}")
+        try:
+            origin = msgspec.convert({"lat": self.lat0_deg, "lon": self.lon0_deg}, Origin)
+        except msgspec.ValidationError as exc:
+            raise InputError("origin", f"latitude must be within ±89.9, got {self.lat0_deg}") from exc
+        object.__setattr__(self, "origin", origin)
 
     @property
     def radii_m(self) -> tuple[float, float]:
-        """``(M, N)``: meridian and prime vertical radii of curvature at the origin, metres."""
+        """``(M, N)``: meridian and prime vertical radii of curvature at the origin, metres.
+
+        Metres per radian of latitude and (times ``cos(lat0)``) of longitude at the
+        origin: a display's scale, not the conversion (that is ``to_local_m``).
+        """
         s = math.sin(math.radians(self.lat0_deg))
         w = math.sqrt(1.0 - WGS84_E2 * s * s)
         return WGS84_A_M * (1.0 - WGS84_E2) / w**3, WGS84_A_M / w
 
     def to_local_m(self, lat_deg: float, lon_deg: float) -> tuple[float, float]:
         """``(x_east_m, y_north_m)`` of a point; longitudes wrap across the antimeridian."""
-        m, n = self.radii_m
-        dlon = (lon_deg - self.lon0_deg + 180.0) % 360.0 - 180.0
-        x = n * math.cos(math.radians(self.lat0_deg)) * math.radians(dlon)
-        y = m * math.radians(lat_deg - self.lat0_deg)
-        return x, y
+        return self.origin.to_local(lat_deg, lon_deg)
 
     def to_geodetic(self, x_east_m: float, y_north_m: float) -> tuple[float, float]:
         """``(lat_deg, lon_deg)`` of a local point: the inverse of ``to_local_m``."""
-        m, n = self.radii_m
-        lat = self.lat0_deg + math.degrees(y_north_m / m)
-        lon = self.lon0_deg + math.degrees(x_east_m / (n * math.cos(math.radians(self.lat0_deg))))
-        return lat, (lon + 180.0) % 360.0 - 180.0
+        return self.origin.to_geodetic(x_east_m, y_north_m)
