@@ -1,7 +1,10 @@
 """Scenario files: YAML or JSON, decoded into typed, validated structs.
 
 A scenario names a start, a goal, optional mission bounds, planner settings
-and threats (each optionally popping up at a step).  ``load_scenario`` is the
+and threats (each optionally popping up at a step).  With an ``origin``
+(``{lat, lon, alt}``), every position (start, goal, bounds corners, threat
+positions) may be ``{lat, lon}`` instead of ``[x, y]`` metres; it is turned
+into metres on decoding (``geo.localise``), so the rest never sees a degree.  ``load_scenario`` is the
 only function here that touches the file system; ``decode_scenario`` works on
 bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
 """
@@ -31,6 +34,7 @@ from pfp_service.constraints import (
 from pfp_service.core import PlannerParams, Scheduled, Threat
 from pfp_service.core.params import ESCAPES, Escape
 from pfp_service.errors import InputError, from_validation
+from pfp_service.geo import Origin, localise
 
 __all__ = [
     "CHOICES",
@@ -137,6 +141,7 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     """A whole planning problem, as written in a scenario file."""
 
     name: str = "scenario"
+    origin: Origin | None = None
     start: Point
     goal: Point
     bounds: tuple[Point, Point] | None = None
@@ -175,10 +180,16 @@ def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
         InputError: with the field path and the reason.
     """
     if fmt == "json":
+        if b'"lat"' not in data and b'"lon"' not in data:
+            try:
+                return msgspec.json.decode(data, type=Scenario)
+            except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+                raise from_validation(exc, CHOICES) from exc
         try:
-            return msgspec.json.decode(data, type=Scenario)
-        except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+            raw = msgspec.json.decode(data)
+        except msgspec.DecodeError as exc:
             raise from_validation(exc, CHOICES) from exc
+        return _convert(raw)
     try:
         obj = yamlio.load(data)
     except yaml.YAMLError as exc:
@@ -186,10 +197,21 @@ def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "file"
         problem = getattr(exc, "problem", None) or "invalid YAML"
         raise InputError(where, f"invalid YAML: {problem}") from exc
+    return _convert(obj)
+
+
+def _convert(obj: object) -> Scenario:
     if not isinstance(obj, dict):
         raise InputError("", "a scenario must be a mapping with start, goal and threats")
+    origin = None
+    if obj.get("origin") is not None:
+        try:
+            origin = msgspec.convert(obj["origin"], Origin)
+        except msgspec.ValidationError as exc:
+            e = from_validation(exc, CHOICES)
+            raise InputError(f"origin.{e.path}" if e.path else "origin", e.reason) from exc
     try:
-        return msgspec.convert(obj, Scenario)
+        return msgspec.convert(localise(obj, origin), Scenario)
     except msgspec.ValidationError as exc:
         raise from_validation(exc, CHOICES) from exc
 

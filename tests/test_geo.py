@@ -207,3 +207,87 @@ def test_with_geodetic_fills_bearing_and_lat_lon_lookahead():
     assert back == g and isinstance(back.lookahead_geo[0], LatLon)
     still = m.Direction(unit="u1", status=m.DirectionStatus.ARRIVED, vector=(0.0, 0.0))
     assert geo.with_geodetic(still, o, (0.0, 0.0)).true_bearing_deg is None
+
+
+# -- scenario files ---------------------------------------------------------------
+METRES = {
+    "start": (0.0, 0.0),
+    "goal": (1800.0, 1400.0),
+    "ridge": (700.0, 800.0),
+    "farm": (1200.0, 500.0),
+    "wood": (1000.0, 1150.0),
+}
+SHAPES = {
+    "ridge": "facing_deg: 225, sigma_range: 120, sigma_lateral: 80, skew: 2",
+    "farm": "facing_deg: 270, sigma_range: 100, sigma_lateral: 100",
+    "wood": "facing_deg: 200, sigma_range: 90, sigma_lateral: 60, skew: 1",
+}
+
+
+def _scenario(pos) -> bytes:
+    threats = "".join(f"  - {{id: {k}, position: {pos(k)}, {v}}}\n" for k, v in SHAPES.items())
+    head = "origin: {lat: 58.4105, lon: 15.6213}\n"
+    return f"{head}start: {pos('start')}\ngoal: {pos('goal')}\nthreats:\n{threats}".encode()
+
+
+def test_a_lat_lon_scenario_plans_the_metres_path_to_within_centimetres():
+    """The lat/lon are Karney's (geographiclib), not ours: the check is independent of pymap3d."""
+    from pfp_service.core import plan
+    from pfp_service.scenario import decode_scenario
+
+    o = Origin(lat=58.4105, lon=15.6213)
+
+    def geodetic(k):
+        lat, lon = _walk(o, *METRES[k])
+        return f"{{lat: {lat!r}, lon: {lon!r}}}"
+
+    in_metres = decode_scenario(_scenario(lambda k: list(METRES[k])), "yaml")
+    in_degrees = decode_scenario(_scenario(geodetic), "yaml")
+    assert in_degrees.origin == o
+    runs = [plan(s.start, s.goal, s.schedule(), s.planner.to_params()) for s in (in_metres, in_degrees)]
+    assert runs[0].status.value == runs[1].status.value == "reached"
+    assert len(runs[0].path) == len(runs[1].path)
+    gap = np.max(np.abs(np.asarray(runs[0].path) - np.asarray(runs[1].path)))
+    assert gap < 0.01, gap
+
+
+def test_the_shipped_lat_lon_example_matches_its_metres():
+    from pfp_service.scenario import load_scenario
+    from tests.conftest import EXAMPLES
+
+    s = load_scenario(EXAMPLES / "geo-simple.yaml")
+    assert s.origin is not None and s.origin.alt == 90.0
+    got = {"start": s.start, "goal": s.goal, **{t.id: t.position for t in s.threats}}
+    for k, xy in METRES.items():  # the plane at 90 m is 14 ppm larger than the ellipsoid: 3 cm at 2.3 km
+        assert np.allclose(got[k], xy, atol=0.05), (k, got[k])
+
+
+@pytest.mark.parametrize(
+    ("doc", "path", "fragment"),
+    [
+        (b"start: {lat: 58.4, lon: 15.6}\ngoal: [1, 1]\n", "start", "needs a mission origin"),
+        (b"origin: {lat: 95, lon: 0}\nstart: [0, 0]\ngoal: [1, 1]\n", "origin.lat", "must be < 89.9"),
+        (b"origin: {lat: 58, lon: 15, x: 1}\nstart: [0, 0]\ngoal: [1, 1]\n", "origin.x", "unknown field"),
+        (b"origin: 58.4\nstart: [0, 0]\ngoal: [1, 1]\n", "origin", "expected object"),
+        (
+            b"origin: {lat: 58, lon: 15}\nstart: [0, 0]\ngoal: [1, 1]\nthreats:\n"
+            b"  - {position: {lat: 58, lon: 200}, sigma_range: 1, sigma_lateral: 1}\n",
+            "threats[0].position.lon",
+            "must be <= 180",
+        ),
+    ],
+)
+def test_bad_geodetic_scenarios_name_their_field(doc, path, fragment):
+    from pfp_service.scenario import decode_scenario
+
+    with pytest.raises(InputError) as e:
+        decode_scenario(doc, "yaml")
+    assert e.value.path == path and fragment in e.value.reason, str(e.value)
+
+
+def test_a_json_scenario_takes_lat_lon_too():
+    from pfp_service.scenario import decode_scenario
+
+    doc = {"origin": {"lat": 1.0, "lon": 2.0}, "start": {"lat": 1.0, "lon": 2.0}, "goal": [10, 0]}
+    s = decode_scenario(json.dumps(doc).encode(), "json")
+    assert np.allclose(s.start, (0.0, 0.0), atol=1e-9) and s.goal == (10.0, 0.0)
