@@ -43,6 +43,7 @@ __all__ = [
     "LatLon",
     "Origin",
     "localise",
+    "localise_document",
     "lookahead_geodetic",
     "parse_origin",
     "true_bearing_deg",
@@ -52,7 +53,7 @@ __all__ = [
 # Farther than this the 2-D plane is off by decimetres (0.5 m at 50 km); refuse it.
 MAX_RANGE_M = 50_000.0
 # Keys whose value is a position, in wire messages and in scenario, team and inject files.
-POSITION_FIELDS = frozenset({"position", "start", "goal"})
+POSITION_FIELDS = frozenset({"position", "start", "goal", "of"})  # "of": an inject trigger's point
 
 Latitude = Annotated[float, Meta(ge=-90.0, le=90.0)]
 Longitude = Annotated[float, Meta(ge=-180.0, le=180.0)]
@@ -200,6 +201,26 @@ def localise(obj: Any, origin: Origin | None, path: str = "") -> Any:
             out[key] = localise(value, origin, here)
         else:
             out[key] = value
+    return out
+
+
+def localise_document(doc: dict[str, Any]) -> dict[str, Any]:
+    """A file's document with its lat/lon positions in metres from its own ``origin`` key.
+
+    Scenario, team and inject files carry ``origin: {lat, lon, alt}`` at the top.
+
+    Raises:
+        InputError: a bad origin (at ``origin…``), or a bad or origin-less lat/lon (at its field).
+    """
+    raw = doc.get("origin")
+    origin = None
+    if raw is not None:
+        try:
+            origin = msgspec.convert(raw, Origin)
+        except msgspec.ValidationError as exc:
+            e = from_validation(exc)
+            raise InputError(f"origin.{e.path}" if e.path else "origin", e.reason) from exc
+    out: dict[str, Any] = localise(doc, origin)
     return out
 
 

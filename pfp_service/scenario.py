@@ -34,7 +34,7 @@ from pfp_service.constraints import (
 from pfp_service.core import PlannerParams, Scheduled, Threat
 from pfp_service.core.params import ESCAPES, Escape
 from pfp_service.errors import InputError, from_validation
-from pfp_service.geo import Origin, localise
+from pfp_service.geo import Origin, localise_document
 
 __all__ = [
     "CHOICES",
@@ -203,15 +203,8 @@ def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
 def _convert(obj: object) -> Scenario:
     if not isinstance(obj, dict):
         raise InputError("", "a scenario must be a mapping with start, goal and threats")
-    origin = None
-    if obj.get("origin") is not None:
-        try:
-            origin = msgspec.convert(obj["origin"], Origin)
-        except msgspec.ValidationError as exc:
-            e = from_validation(exc, CHOICES)
-            raise InputError(f"origin.{e.path}" if e.path else "origin", e.reason) from exc
     try:
-        return msgspec.convert(localise(obj, origin), Scenario)
+        return msgspec.convert(localise_document(obj), Scenario)
     except msgspec.ValidationError as exc:
         raise from_validation(exc, CHOICES) from exc
 

@@ -291,3 +291,34 @@ def test_a_json_scenario_takes_lat_lon_too():
     doc = {"origin": {"lat": 1.0, "lon": 2.0}, "start": {"lat": 1.0, "lon": 2.0}, "goal": [10, 0]}
     s = decode_scenario(json.dumps(doc).encode(), "json")
     assert np.allclose(s.start, (0.0, 0.0), atol=1e-9) and s.goal == (10.0, 0.0)
+
+
+def test_team_and_inject_files_take_lat_lon(tmp_path):
+    from pfp_clients.script import load_script
+    from pfp_clients.team import load_team
+
+    o = Origin(lat=48.0, lon=11.0)
+    lat, lon = o.to_geodetic(30.0, 40.0)
+    here = f"{{lat: {lat!r}, lon: {lon!r}}}"
+    team = tmp_path / "team.yaml"
+    team.write_text(f"origin: {{lat: 48.0, lon: 11.0}}\nunits:\n  - {{id: a, start: {here}, goal: [5, 5]}}\n")
+    t = load_team(team)
+    assert t.origin == o and np.allclose(t.units[0].start, (30.0, 40.0), atol=1e-6)
+    script = tmp_path / "inject.yaml"
+    script.write_text(
+        "origin: {lat: 48.0, lon: 11.0}\ntimeline:\n"
+        f"  - {{do: add_threat, threat: e1, position: {here}, sigma_range: 5, sigma_lateral: 3,"
+        f" when: {{unit: a, within_m: 3, of: {here}}}}}\n"
+        f"  - {{do: set_goal, unit: a, position: {here}}}\n"
+    )
+    s = load_script(script)
+    add, goal = s.timeline
+    assert np.allclose(add.position, (30.0, 40.0), atol=1e-6) and np.allclose(
+        goal.position, (30.0, 40.0), atol=1e-6
+    )
+    assert add.when is not None and np.allclose(add.when.of, (30.0, 40.0), atol=1e-6)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"units:\n  - {{id: a, start: {here}}}\n")
+    with pytest.raises(InputError) as e:
+        load_team(bad)
+    assert e.value.path == "bad.yaml line 2, units[0].start" and "origin" in e.value.reason

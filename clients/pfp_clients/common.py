@@ -17,6 +17,7 @@ import yaml
 
 from pfp_service import yamlio
 from pfp_service.errors import InputError, from_validation
+from pfp_service.geo import localise_document
 from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
 
 __all__ = ["DEFAULT_CONNECT", "client_config", "line_of", "load_yaml", "located", "open_client"]
@@ -87,6 +88,10 @@ def load_yaml(
         raise InputError(where, f"invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
     if not isinstance(obj, dict):
         raise InputError(p.name, f"expected a mapping at the top, got {type(obj).__name__}")
+    try:
+        obj = localise_document(obj)  # {lat, lon} positions to metres from the file's origin
+    except InputError as err:
+        raise located(p, root, err) from None
     try:
         return msgspec.convert(obj, cls), root
     except msgspec.ValidationError as exc:

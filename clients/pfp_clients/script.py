@@ -33,6 +33,7 @@ from msgspec import Meta
 from pfp_clients.common import load_yaml, located
 from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 from pfp_service.errors import InputError
+from pfp_service.geo import Origin
 from pfp_service.wire import Goal, ThreatUpdate
 
 __all__ = [
@@ -185,6 +186,7 @@ class Script(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=Tr
     """A whole injection script."""
 
     name: str = "script"
+    origin: Origin | None = None  # where [0, 0] lies; positions may then be {lat, lon}
     duration_s: Positive = 300.0
     timeline: Annotated[list[Step], Meta(max_length=10_000)] = []
     expect: Annotated[list[Expect], Meta(max_length=10_000)] = []

@@ -23,6 +23,7 @@ from msgspec import Meta
 from pfp_clients.common import load_yaml
 from pfp_service.constraints import Id, Point
 from pfp_service.errors import InputError
+from pfp_service.geo import Origin
 from pfp_service.wire import UnitKind
 
 __all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team"]
@@ -50,6 +51,7 @@ class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
     """A named list of units with distinct ids."""
 
     name: str = "team"
+    origin: Origin | None = None  # where [0, 0] lies; positions may then be {lat, lon}
     units: Annotated[list[UnitSpec], Meta(min_length=1, max_length=10_000)]
 
     def __post_init__(self) -> None:
