@@ -322,3 +322,25 @@ def test_team_and_inject_files_take_lat_lon(tmp_path):
     with pytest.raises(InputError) as e:
         load_team(bad)
     assert e.value.path == "bad.yaml line 2, units[0].start" and "origin" in e.value.reason
+
+
+def test_serve_config_takes_an_origin_from_file_env_and_flag(tmp_path):
+    from pfp_service.service.config import load_config
+
+    toml = tmp_path / "serve.toml"
+    toml.write_text("origin = { lat = 58.41, lon = 15.62, alt = 90 }\n")
+    assert load_config(str(toml), {}, {}).origin == Origin(lat=58.41, lon=15.62, alt=90.0)
+    assert load_config(None, {"PFP_ORIGIN": "59.5,18.25"}, {}).origin == Origin(lat=59.5, lon=18.25)
+    flag = {"origin": {"lat": 1.0, "lon": 2.0}}
+    assert load_config(str(toml), {"PFP_ORIGIN": "59.5,18.25"}, flag).origin == Origin(lat=1.0, lon=2.0)
+    assert load_config(None, {}, {}).origin is None
+    with pytest.raises(InputError) as e:
+        load_config(None, {"PFP_ORIGIN": "north"}, {})
+    assert e.value.path == "PFP_ORIGIN"
+
+
+def test_serve_origin_flag_is_one_line_exit_2():
+    from tests.conftest import run_pfp
+
+    out = run_pfp("serve", "--origin", "95,0", timeout=60)
+    assert out.returncode == 2 and "Traceback" not in out.stderr and "--origin" in out.stderr

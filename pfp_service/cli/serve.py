@@ -20,6 +20,18 @@ def _bounds(text: str) -> object:
         raise argparse.ArgumentTypeError("expected JSON like [[0, 0], [100, 100]]") from None
 
 
+def _origin(text: str) -> object:
+    import msgspec
+
+    from pfp_service.errors import InputError
+    from pfp_service.geo import parse_origin
+
+    try:
+        return msgspec.to_builtins(parse_origin(text))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "serve",
@@ -51,6 +63,13 @@ def register(sub: Any) -> None:
     p.add_argument("--tick-s", type=positive_float, help="longest wait of the planning loop when idle")
     p.add_argument("--bounds", type=_bounds, metavar="JSON", help="mission bounds [[xmin,ymin],[xmax,ymax]]")
     p.add_argument("--multicast", action="store_const", const=True, help="enable Zenoh multicast scouting")
+    p.add_argument(
+        "--origin",
+        type=_origin,
+        metavar="LAT,LON[,ALT]",
+        help="mission origin in WGS-84 degrees (and metres): [0, 0] lies there and positions may be "
+        "{lat, lon} (default: none)",
+    )
     p.set_defaults(func=run)
 
 
@@ -75,6 +94,7 @@ _FLAG_KEYS = [
     "lookahead",
     "tick_s",
     "bounds",
+    "origin",
     "multicast",
     "zenoh_config",
 ]

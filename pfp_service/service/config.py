@@ -24,6 +24,7 @@ from pfp_service.constraints import Finite, Id, NonNegative, Positive
 from pfp_service.core import PlannerParams
 from pfp_service.core.params import Escape
 from pfp_service.errors import InputError, from_validation
+from pfp_service.geo import Origin, parse_origin
 from pfp_service.scenario import CHOICES
 
 __all__ = [
@@ -62,6 +63,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     escape: Escape = "auto"
     # the live world
     bounds: tuple[tuple[Finite, Finite], tuple[Finite, Finite]] | None = None
+    origin: Origin | None = None  # the mission origin; lat/lon positions become metres from it
     threat_ttl_s: Positive | None = None
     unit_stale_s: Positive = 10.0
     liveliness_debounce_s: NonNegative = 2.0
@@ -108,6 +110,11 @@ def _from_env(env: Mapping[str, str]) -> dict[str, Any]:
             continue
         if name in _LISTS:
             out[name] = [s.strip() for s in raw.split(",") if s.strip()]
+        elif name == "origin":
+            try:
+                out[name] = msgspec.to_builtins(parse_origin(raw))
+            except InputError as exc:
+                raise InputError("PFP_ORIGIN", exc.reason) from None
         elif name == "bounds":
             try:
                 out[name] = json.loads(raw)
