@@ -197,8 +197,18 @@ def test_goal_is_resent_until_acted_on_then_left_alone():
     m.on_direction(_direction(status="no_goal", vector=(0.0, 0.0), distance=None), now=1.5)
     assert m.goal_to_send(2.5) is not None  # the planner missed it (restarted, raced): again
     m.on_direction(_direction(), now=3.0)
-    m.on_direction(_direction(status="no_goal", vector=(0.0, 0.0), distance=None), now=4.0)
-    assert m.goal_to_send(10.0) is None  # somebody cancelled it: respect that
+    assert m.goal_to_send(6.0) is None  # acted on: left alone
+    m.on_direction(_direction(status="no_goal", vector=(0.0, 0.0), distance=None), now=7.0)
+    assert m.goal_to_send(7.5) is not None  # the planner lost it (a restart): again
+    m.on_direction(_direction(), now=8.0)
+    m.on_planner_up()  # a new planner's token: it knows nothing of our goal
+    assert m.goal_to_send(8.1) is not None
+    m.on_direction(_direction(), now=8.5)
+    m.on_goal(None)  # somebody cancelled it on the wire: respect that
+    m.on_direction(_direction(status="no_goal", vector=(0.0, 0.0), distance=None), now=9.0)
+    assert m.goal_to_send(20.0) is None
+    m.set_goal((7.0, 1.0))  # the g prompt
+    assert m.goal_to_send(20.1).position == (7.0, 1.0)
 
 
 def test_threat_severity_and_bad_direction_note():
@@ -419,8 +429,18 @@ def test_cli_errors_are_one_line():
     assert r.returncode == 2 and r.stderr.strip() == (
         "pfp handheld: --origin: required with --nmea (the LAT,LON of the planner's 0,0)"
     )
-    r = run_pfp("handheld", "--unit", "u1", "--connect", f"tcp/127.0.0.1:{free_port()}")
-    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
-    assert r.stderr.startswith("pfp handheld: --connect: cannot reach")
     r = run_pfp("handheld", "--unit", "u1", "--origin", "48,north")
     assert r.returncode == 2 and "LAT,LON" in r.stderr and "Traceback" not in r.stderr
+    r = run_pfp("handheld", "--unit", "u1", "--origin", "48,11")
+    assert r.returncode == 2 and r.stderr.strip() == "pfp handheld: --origin: only goes with --nmea"
+    r = run_pfp("handheld", "--unit", "u1", "--connect", "notanendpoint")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_refuses_to_start_without_a_terminal():
+    """A pipe on stdout would get escape codes: one line instead, and nothing drawn."""
+    r = run_pfp("handheld", "--unit", "u1", "--connect", f"tcp/127.0.0.1:{free_port()}")
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip() == (
+        "pfp handheld: needs a terminal: stdout is not one (it is a terminal UI; run it in a terminal)"
+    )

@@ -64,7 +64,9 @@ def test_cli_config_errors_are_one_line(tmp_path):
     assert r.stderr.strip().splitlines() == [f"pfp serve: {bad}: lookahead: must be between 0 and 100"]
     r = run_pfp("health", "--connect", "foo")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
-    assert r.stderr.startswith("pfp health: --connect: rejected by zenoh")
+    assert r.stderr.strip() == (
+        "pfp health: --connect: 'foo' is not an endpoint (expected PROTOCOL/ADDRESS, e.g. tcp/10.0.0.1:7447)"
+    )
     env = {**os.environ, "PFP_UNIT_STALE_S": "-3"}
     r = subprocess.run(
         [sys.executable, "-m", "pfp_service", "serve"],
@@ -121,5 +123,5 @@ def test_zenoh_json5_file_is_passed_through(tmp_path):
     assert json.loads(conf.get_json("transport/link/tx/lease")) == 3000  # from the file
     assert f"tcp/127.0.0.1:{port}" in json.dumps(json.loads(conf.get_json("listen/endpoints")))
     assert json.loads(conf.get_json("mode")) == "client"  # our flag wins over the file
-    with pytest.raises(InputError, match=r"^zenoh_config: cannot load"):
+    with pytest.raises(InputError, match=r"^zenoh_config: .*missing.json5: no such file or directory$"):
         zenoh_config(load_config(None, {}, {"zenoh_config": str(tmp_path / "missing.json5")}))

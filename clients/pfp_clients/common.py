@@ -1,4 +1,4 @@
-"""What every client shares: its Zenoh client session, and YAML files decoded with line numbers.
+"""What every client shares: opening its Zenoh session, and YAML files decoded with line numbers.
 
 ``load_yaml(path, Struct)`` turns a bad file into one ``InputError`` that names
 the file, the line and the field (``team.yaml line 7, units[2].speed_mps: must
@@ -16,11 +16,12 @@ import msgspec
 import yaml
 
 from pfp_service import yamlio
-from pfp_service.errors import InputError, from_validation
+from pfp_service.errors import InputError, from_validation, map_zenoh_errors
+from pfp_service.files import read_text
 from pfp_service.geo import localise_document
 from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
 
-__all__ = ["DEFAULT_CONNECT", "client_config", "line_of", "load_yaml", "located", "open_client"]
+__all__ = ["DEFAULT_CONNECT", "client_config", "line_of", "load_yaml", "located", "open_session"]
 
 T = TypeVar("T")
 
@@ -30,17 +31,16 @@ def client_config(connect: Sequence[str] | None = None, multicast: bool = False)
     return client_zenoh_config(connect, multicast)
 
 
-def open_client(connect: Sequence[str] | None = None) -> Any:
-    """Open a client session, or raise ``InputError`` naming the endpoint that is unreachable."""
+def open_session(conf: Any) -> Any:
+    """``zenoh.open(conf)``, its errors as one line: use it as ``with open_session(conf) as session:``.
+
+    Raises:
+        Unreachable: ``--connect``, no router answers; ZenohError: anything else Zenoh refused.
+    """
     import zenoh
 
-    try:
-        return zenoh.open(client_config(connect))
-    except InputError:
-        raise
-    except Exception as exc:
-        where = ", ".join(connect or [DEFAULT_CONNECT])
-        raise InputError("--connect", f"cannot reach {where}: {exc}") from None
+    with map_zenoh_errors("--connect"):
+        return zenoh.open(conf)
 
 
 _SEGMENT = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
@@ -75,10 +75,7 @@ def load_yaml(
         InputError: unreadable file, invalid YAML or an invalid field, with its line.
     """
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as exc:
-        raise InputError(str(p), f"cannot read: {exc.strerror or exc}") from None
+    text = read_text(p)
     try:
         root = yamlio.compose(text)
         obj = yamlio.load(text)

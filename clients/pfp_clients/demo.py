@@ -9,10 +9,16 @@ arrived (or the script's duration passed).  Then it prints a summary table
 clearance measured on the fleet's own track under the threats in force when
 each segment was walked) and writes a PNG of the threat contours and tracks,
 with a star where the contingency struck.
+
+One clock: the fleet's simulated mission time.  The script's triggers and
+deadlines, every log line, the summary and the plot read it, so a busy
+machine slows the demo down but cannot make a unit "late": when the planner
+answers slowly the fleet waits (lockstep), and mission time waits with it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import socket
 import threading
@@ -30,6 +36,7 @@ from pfp_clients.script import AddThreat, load_script
 from pfp_clients.sim import SimUnit
 from pfp_clients.team import load_team
 from pfp_service.core.metrics import measure
+from pfp_service.errors import map_zenoh_errors
 
 __all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DemoOptions", "run_demo"]
 
@@ -41,6 +48,7 @@ _EXAMPLES = next(
 DEMO_TEAM = _EXAMPLES / "demo-team.yaml"
 DEMO_SCRIPT = _EXAMPLES / "demo-inject.yaml"
 MISSION = "demo"
+INJECT_GRACE_S = 3.0  # wall seconds the script may take, after the fleet stopped, to see the last answers
 
 
 @dataclass(frozen=True)
@@ -75,8 +83,8 @@ def summary_rows(fleet: FleetResult, rep: InjectReport, intensity: str) -> list[
     rows: list[tuple[str, ...]] = [("unit", "kind", "status", "time s", "path m", "exposure", "min clear m")]
     for u in fleet.units:
         path = np.array([(p.x, p.y) for p in u.track], dtype=float).reshape(-1, 2)
-        # the script's clock: segments are judged under the threats it had put by then
-        times = [(p.wall_s - rep.t0_wall_s) * rep.speed_up for p in u.track]
+        # one mission clock: segments are judged under the threats the script had put by then
+        times = [p.t_s for p in u.track]
         epochs = [ep for ep, _ in rep.watch.epochs(times, intensity)]
         m = measure(path, epochs) if len(path) > 1 else None
         arrived = f"{u.arrived_at_s:.1f}" if u.arrived_at_s is not None else "-"
@@ -96,7 +104,7 @@ def _table(rows: list[tuple[str, ...]]) -> list[str]:
 
 
 def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> None:
-    from pfp_service.plot import plot_tracks
+    from pfp_service.render import plot_tracks
 
     latest: dict[str, Any] = {}
     for v in rep.watch.versions:
@@ -113,7 +121,12 @@ def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> N
             marks.append(
                 (f.where[0], f.where[1], f"{what} struck at t={f.t_s:.0f}s ({f.step.when.unit} here)")
             )
-    title = f"pfp demo: {sum(u.arrived for u in fleet.units)}/{len(fleet.units)} arrived"
+    held = sum(v.held for v in rep.verdicts)
+    title = (
+        f"pfp demo: {sum(u.arrived for u in fleet.units)}/{len(fleet.units)} arrived, "
+        f"{held}/{len(rep.verdicts)} expectations held"
+        + ("" if rep.ok and fleet.all_arrived else " - FAILED")
+    )
     plot_tracks(list(latest.values()), intensity, tracks, goals, out, title=title, marks=marks)
 
 
@@ -127,7 +140,7 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
         with lock:
             say_line(text)
 
-    from pfp_clients.common import client_config
+    from pfp_clients.common import client_config, open_session
     from pfp_service.service.config import ServeConfig, zenoh_config
     from pfp_service.service.log import setup_logging
     from pfp_service.service.node import PlannerNode
@@ -142,18 +155,34 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
     results: dict[str, Any] = {}
     errors: list[BaseException] = []
     latest: list[tuple[float, Sequence[SimUnit]]] = []
+    mission_s = [0.0]  # the fleet's simulated time: the demo's one clock
+
+    def on_tick(t_s: float, units: Sequence[SimUnit]) -> None:
+        mission_s[0] = t_s
+        latest.append((t_s, units))
+
     stop = threading.Event()
     ready = threading.Event()
-    router = zenoh.open(zenoh_config(cfg))
-    node = PlannerNode(router, cfg)
-    try:
+    with map_zenoh_errors("demo router"):
+        router = zenoh.open(zenoh_config(cfg))
+    with router, contextlib.ExitStack() as stack:  # closed in reverse: clients, node, then the router
+        node = PlannerNode(router, cfg)
         node.start()
-        sessions = [zenoh.open(client_config([endpoint])) for _ in range(2)]
+        stack.callback(node.stop)
+        sessions = [stack.enter_context(open_session(client_config([endpoint]))) for _ in range(2)]
+        stack.callback(stop.set)
 
         def inject() -> None:
             try:
                 results["inject"] = run_inject(
-                    sessions[0], script, MISSION, opts.speed_up, say=say, stop=stop, ready=ready
+                    sessions[0],
+                    script,
+                    MISSION,
+                    opts.speed_up,
+                    say=say,
+                    stop=stop,
+                    ready=ready,
+                    mission_clock=lambda: mission_s[0],
                 )
             except BaseException as exc:  # reported by the main thread
                 errors.append(exc)
@@ -168,9 +197,7 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
                 until_arrived=True,
             )
             try:
-                results["fleet"] = run_fleet(
-                    sessions[1], team, fopts, stop, say=say, on_tick=lambda t, us: latest.append((t, us))
-                )
+                results["fleet"] = run_fleet(sessions[1], team, fopts, stop, say=say, on_tick=on_tick)
             except BaseException as exc:
                 errors.append(exc)
 
@@ -185,15 +212,10 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
             if time.monotonic() >= next_line and latest:
                 say(_progress(*latest[-1]))
                 next_line += opts.progress_every_s
-        threads[0].join(timeout=5.0 + script.duration_s / opts.speed_up)
+        # mission time stops with the fleet: the script only has the last answers left to see
+        threads[0].join(timeout=INJECT_GRACE_S)
         stop.set()
         threads[0].join(timeout=5.0)
-        for s in sessions:
-            s.close()
-    finally:
-        stop.set()
-        node.stop()
-        router.close()
     if errors:
         raise errors[0]
     fleet_result: FleetResult = results["fleet"]

@@ -196,21 +196,56 @@ def summary_lines(result: FleetResult) -> list[str]:
     return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
 
 
+def counts(units: Sequence[SimUnit], silent_after: int) -> dict[str, int]:
+    """How many units are en route (or escaping), arrived, trapped, and stale.
+
+    A unit is stale when its newest direction answers a report more than
+    ``silent_after`` reports old (or none came yet).
+    """
+    out = {"en route": 0, "arrived": 0, "trapped": 0, "stale": 0}
+    for u in units:
+        if u.seq - u.answered > silent_after:
+            out["stale"] += 1
+        elif u.arrived:
+            out["arrived"] += 1
+        elif u.status == "trapped":
+            out["trapped"] += 1
+        else:
+            out["en route"] += 1
+    return out
+
+
+def progress_line(t_s: float, units: Sequence[SimUnit], silent_after: int) -> str:
+    """``t=  12.00s  50 units: 31 en route, 17 arrived, 1 trapped, 1 stale``."""
+    c = counts(units, silent_after)
+    return f"t={t_s:7.2f}s  {len(units)} units: " + ", ".join(f"{n} {k}" for k, n in c.items())
+
+
 def main(
-    team: Team, opts: FleetOptions, connect: Sequence[str] | None, stop: threading.Event | None = None
+    team: Team,
+    opts: FleetOptions,
+    conf: Any,
+    stop: threading.Event | None = None,
+    progress_s: float = 5.0,
 ) -> int:
-    """``pfp fleet``: open a client session, run, print the summary.
+    """``pfp fleet``: open a session from ``conf``, run with progress, print the summary.
 
     Returns:
         0, or 1 when ``until_arrived`` was asked and some unit did not arrive.
-    """
-    from pfp_clients.common import open_client
 
-    session = open_client(connect)
-    try:
-        result = run_fleet(session, team, opts, stop, say=lambda s: print(s, flush=True))
-    finally:
-        session.close()
+    Raises:
+        ZenohError: the session cannot be opened (``Unreachable`` when no router answers).
+    """
+    from pfp_clients.common import open_session
+    from pfp_clients.progress import Progress
+
+    silent_after = max(round(2 * opts.rate_hz), 2)  # about two simulated seconds without an answer
+    with open_session(conf) as session, Progress(progress_s, total=len(team.units)) as progress:
+
+        def on_tick(t_s: float, units: Sequence[SimUnit]) -> None:
+            progress.update(progress_line(t_s, units, silent_after), sum(u.arrived for u in units))
+
+        result = run_fleet(session, team, opts, stop, say=progress.say, on_tick=on_tick)
     for line in summary_lines(result):
         print(line)
     if result.late_replies:

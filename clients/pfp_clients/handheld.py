@@ -3,11 +3,13 @@
 A timer drains the link's queue (directions, GPS fixes), advances the
 simulated walk, publishes the unit's state at ``publish_hz`` and redraws from
 ``model.view(now)``.  Laid out for a 50x20 terminal; the arrow grows with
-the terminal.  Keys: arrows nudge, space pauses the walk, q quits.
+the terminal.  Keys: arrows nudge, space pauses the walk, g sets the goal
+(a prompt for ``X,Y``), q quits.
 """
 
 from __future__ import annotations
 
+import math
 import queue
 import time
 from collections.abc import Callable
@@ -16,21 +18,27 @@ from typing import ClassVar
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
-from textual.widgets import Static
+from textual.screen import ModalScreen
+from textual.widgets import Input, Label, Static
 
 from pfp_clients.handheld_link import (
     DirectionIn,
     FixIn,
+    GoalIn,
     Link,
+    LinkDown,
+    LinkUp,
     NmeaEnded,
     NmeaReader,
     NmeaRejected,
     NoFixIn,
+    PlannerUp,
+    RetryingLink,
     WireRejected,
 )
 from pfp_clients.handheld_model import HandheldModel, Severity, View, format_duration, threat_bar
 
-__all__ = ["HandheldApp"]
+__all__ = ["GoalPrompt", "HandheldApp", "parse_goal"]
 
 SEVERITY_STYLES = {Severity.LOW: "bold green", Severity.CAUTION: "bold yellow", Severity.DANGER: "bold red"}
 STATUS_STYLES = {
@@ -42,6 +50,52 @@ STATUS_STYLES = {
 }
 # The arrow fills what the other lines leave, within these bounds (rows of two pixels).
 ARROW_ROWS = (3, 15)
+
+
+def parse_goal(text: str) -> tuple[float, float] | str:
+    """``"120,80"`` as metres, or the reason it is not a point."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        x, y = (float(v) for v in parts)
+    except ValueError:
+        return f"expected X,Y in metres, got {text!r}"
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return f"expected finite numbers, got {text!r}"
+    return x, y
+
+
+class GoalPrompt(ModalScreen[tuple[float, float] | None]):
+    """Asks for a goal ``X,Y``; Enter sets it, Escape keeps the old one."""
+
+    CSS = """
+    GoalPrompt { align: center middle; }
+    #box { width: 40; height: auto; border: round $accent; padding: 0 1; background: $surface; }
+    #why { color: $warning; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "cancel", show=False)]
+
+    def __init__(self, current: tuple[float, float] | None) -> None:
+        super().__init__()
+        self.current = current
+
+    def compose(self) -> ComposeResult:
+        from textual.containers import Vertical
+
+        with Vertical(id="box"):
+            yield Label("Goal X,Y in metres (Enter sets, Esc keeps)")
+            value = "" if self.current is None else f"{self.current[0]:g},{self.current[1]:g}"
+            yield Input(value=value, placeholder="120,80", id="goal")
+            yield Label("", id="why")
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        result = parse_goal(event.value)
+        if isinstance(result, str):
+            self.query_one("#why", Label).update(result)
+            return
+        self.dismiss(result)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
 
 
 class HandheldApp(App[int]):
@@ -63,13 +117,14 @@ class HandheldApp(App[int]):
         Binding("left", "nudge(-1, 0)", "west", show=False),
         Binding("right", "nudge(1, 0)", "east", show=False),
         Binding("space", "toggle_walk", "walk", show=False),
+        Binding("g", "goal_prompt", "goal", show=False),
         Binding("q", "quit", "quit", show=False),
     ]
 
     def __init__(
         self,
         model: HandheldModel,
-        link: Link,
+        link: Link | RetryingLink,
         *,
         mission: str,
         source: str = "sim",
@@ -97,10 +152,15 @@ class HandheldApp(App[int]):
     def compose(self) -> ComposeResult:
         for wid in ("title", "arrow", "bearing", "status", "nav", "threat", "age", "pos", "note"):
             yield Static(id=wid, markup=False)
-        keys = "←↑↓→ nudge · q quit" if self.source == "nmea" else "←↑↓→ nudge · space walk · q quit"
+        keys = (
+            "←↑↓→ nudge · g goal · q quit"
+            if self.source == "nmea"
+            else "←↑↓→ nudge · space walk · g goal · q quit"
+        )
         yield Static(keys, id="keys", markup=False)
 
     def on_mount(self) -> None:
+        self._home = self.screen  # the goal prompt goes on top; the readouts stay on this one
         if self.nmea is not None:
             self.nmea.start()
         self.set_interval(self.tick_s, self.tick)
@@ -112,6 +172,14 @@ class HandheldApp(App[int]):
         self.model.nudge(east * step, north * step)
         self.publish()
         self.redraw()
+
+    def action_goal_prompt(self) -> None:
+        def chosen(goal: tuple[float, float] | None) -> None:
+            if goal is not None:
+                self.model.set_goal(goal)
+                self.tick()
+
+        self.push_screen(GoalPrompt(self.model.goal), chosen)
 
     def action_toggle_walk(self) -> None:
         if self.source == "nmea":  # the receiver gives the position; a simulated walk would fight it
@@ -144,6 +212,14 @@ class HandheldApp(App[int]):
                     self.model.on_nmea_rejected(reason)
                 case NmeaEnded(reason=reason):
                     self.model.on_nmea_ended(reason)
+                case LinkUp(where=where):
+                    self.model.on_link(True, where)
+                case LinkDown(reason=reason):
+                    self.model.on_link(False, reason)
+                case PlannerUp():
+                    self.model.on_planner_up()
+                case GoalIn(position=position):
+                    self.model.on_goal(position)
         now = self.clock()
         self.model.advance(now)
         goal = self.model.goal_to_send(now)
@@ -164,7 +240,7 @@ class HandheldApp(App[int]):
     # -- drawing --------------------------------------------------------------------
     def _arrow_size(self) -> tuple[int, int]:
         """Fill the arrow's widget (as laid out), keeping the pixels square."""
-        box = self.query_one("#arrow", Static).size
+        box = self._home.query_one("#arrow", Static).size
         rows = min(max(box.height, ARROW_ROWS[0]), ARROW_ROWS[1])
         cols = min(2 * rows + 1, max(box.width, 9))
         return cols, rows
@@ -181,7 +257,7 @@ class HandheldApp(App[int]):
         self._set("bearing", Text(v.bearing))
         self._set("status", Text(v.status_label, style=STATUS_STYLES.get(v.status_label, "bold")))
         dist = "--" if v.distance_m is None else f"{v.distance_m:.1f} m"
-        self._set("nav", Text(f"Dist {dist}  ETA {format_duration(v.eta_s)} @{m.settings.speed_mps:g} m/s"))
+        self._set("nav", Text(f"Dist {dist}  ETA {format_duration(v.eta_s)} @{m.eta_speed_mps():.3g} m/s"))
         bar_w = max(min(self.size.width - 28, 20), 5)
         threat = Text("Threat ")
         threat.append(threat_bar(v.threat_fraction, bar_w), style=SEVERITY_STYLES[v.severity])
@@ -206,4 +282,4 @@ class HandheldApp(App[int]):
         return Text(f" {label} ", style="bold white on red" if v.stale else "green")
 
     def _set(self, wid: str, content: Text) -> None:
-        self.query_one(f"#{wid}", Static).update(content)
+        self._home.query_one(f"#{wid}", Static).update(content)

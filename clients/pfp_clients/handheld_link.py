@@ -3,36 +3,61 @@
 Zenoh callbacks and the reader thread only decode and enqueue (``Inbound``
 items on a bounded ``queue.Queue`` with ``put_nowait``), so nothing ever
 blocks Zenoh's receive path; the Textual app drains the queue on a timer.
-``open_link`` opens a client-mode session and closes it on the way out.
+``open_link`` opens a client-mode session at once (or raises) and closes it
+on the way out; ``RetryingLink`` is what ``pfp handheld`` uses: it starts
+with the router down, says so (``LinkDown``), and keeps trying until it is
+up (``LinkUp``).  Besides directions, a link reports the unit's goal being
+set or cancelled by anyone (``GoalIn``) and a planner's liveliness token
+appearing (``PlannerUp``), so the handheld can re-send its goal to a
+restarted planner and still respect a cancel.
+
+The NMEA reader paces a regular file by the sentences' own UTC times (or at
+``rate_hz``), and reads lines of bounded length, so a binary file is a run
+of rejected sentences that ends, never a spinning core.
 """
 
 from __future__ import annotations
 
 import os
 import queue
+import stat
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from typing import IO, Any
 
 import zenoh
 
-from pfp_clients.nmea import Fix, LocalFrame, read_sentence
-from pfp_service.errors import InputError
+from pfp_clients.nmea import IGNORED, Fix, LocalFrame, read_sentence
+from pfp_service.errors import InputError, ZenohError, map_zenoh_errors
 from pfp_service.service.config import client_zenoh_config
-from pfp_service.wire import Direction, Goal, UnitState, decode_direction, encode, keys, zenoh_encoding
+from pfp_service.wire import (
+    Direction,
+    Goal,
+    UnitState,
+    decode_direction,
+    decode_goal,
+    encode,
+    keys,
+    zenoh_encoding,
+)
 
 __all__ = [
     "DirectionIn",
     "FixIn",
+    "GoalIn",
     "Inbound",
     "Link",
+    "LinkDown",
+    "LinkUp",
     "NmeaEnded",
     "NmeaReader",
     "NmeaRejected",
     "NoFixIn",
+    "PlannerUp",
+    "RetryingLink",
     "WireRejected",
     "client_config",
     "open_link",
@@ -73,7 +98,40 @@ class NmeaEnded:
     reason: str
 
 
-Inbound = DirectionIn | WireRejected | FixIn | NoFixIn | NmeaRejected | NmeaEnded
+@dataclass(frozen=True, slots=True)
+class LinkUp:
+    where: str
+
+
+@dataclass(frozen=True, slots=True)
+class LinkDown:
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class PlannerUp:
+    planner: str
+
+
+@dataclass(frozen=True, slots=True)
+class GoalIn:
+    """The unit's goal as put on the wire by anyone (``None``: cancelled)."""
+
+    position: tuple[float, float] | None
+
+
+Inbound = (
+    DirectionIn
+    | WireRejected
+    | FixIn
+    | NoFixIn
+    | NmeaRejected
+    | NmeaEnded
+    | LinkUp
+    | LinkDown
+    | PlannerUp
+    | GoalIn
+)
 
 
 def _offer(inbox: queue.Queue[Inbound], item: Inbound) -> None:
@@ -90,11 +148,13 @@ def client_config(endpoints: list[str]) -> zenoh.Config:
 class Link:
     """One unit's side of the wire: state out, directions in, a liveliness token while open."""
 
-    def __init__(self, session: zenoh.Session, mission: str, unit: str) -> None:
+    def __init__(
+        self, session: zenoh.Session, mission: str, unit: str, inbox: queue.Queue[Inbound] | None = None
+    ) -> None:
         self.session = session
         self.mission = mission
         self.unit = unit
-        self.inbox: queue.Queue[Inbound] = queue.Queue(INBOX_DEPTH)
+        self.inbox: queue.Queue[Inbound] = inbox if inbox is not None else queue.Queue(INBOX_DEPTH)
         self._state_pub = session.declare_publisher(
             keys.unit_state(mission, unit),
             encoding=zenoh_encoding(),
@@ -102,7 +162,29 @@ class Link:
             express=True,
         )
         self._sub = session.declare_subscriber(keys.unit_direction(mission, unit), self._on_direction)
+        self._goal_sub = session.declare_subscriber(keys.unit_goal(mission, unit), self._on_goal)
+        self._planners = session.liveliness().declare_subscriber(
+            keys.alive_planners(mission), self._on_planner
+        )
         self._token = session.liveliness().declare_token(keys.alive_unit(mission, unit))
+
+    @property
+    def connected(self) -> bool:
+        return True
+
+    def _on_goal(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            _offer(self.inbox, GoalIn(None))
+            return
+        try:
+            goal = decode_goal(sample.payload.to_bytes())
+        except InputError:
+            return  # the planner rejects it and says so on event/rejected
+        _offer(self.inbox, GoalIn((float(goal.position[0]), float(goal.position[1]))))
+
+    def _on_planner(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            _offer(self.inbox, PlannerUp(str(sample.key_expr).rsplit("/", 1)[-1]))
 
     def _on_direction(self, sample: zenoh.Sample) -> None:
         # decode and enqueue only: this runs on Zenoh's callback thread
@@ -129,7 +211,7 @@ class Link:
 
     def close(self) -> None:
         """Withdraw the token, undeclare, then close the session."""
-        for entity in (self._token, self._sub, self._state_pub):
+        for entity in (self._token, self._planners, self._goal_sub, self._sub, self._state_pub):
             with suppress(Exception):  # already gone with the session; closing matters more
                 entity.undeclare()
         self.session.close()
@@ -144,10 +226,8 @@ def open_link(endpoints: list[str], mission: str, unit: str) -> Iterator[Link]:
     """
     keys.check_chunk(mission, "--mission")
     keys.check_chunk(unit, "--unit")
-    try:
+    with map_zenoh_errors("--connect"):
         session = zenoh.open(client_config(endpoints))
-    except Exception as exc:
-        raise InputError("--connect", f"cannot reach {', '.join(endpoints)}: {exc}") from exc
     try:
         link = Link(session, mission, unit)
     except BaseException:
@@ -159,35 +239,184 @@ def open_link(endpoints: list[str], mission: str, unit: str) -> Iterator[Link]:
         link.close()
 
 
-class NmeaReader(threading.Thread):
-    """Reads NMEA lines from a byte stream, converts GGA fixes to local metres, enqueues them."""
+class RetryingLink:
+    """A ``Link`` that connects in the background: it starts with the router down and retries.
 
-    def __init__(self, stream: IO[bytes], frame: LocalFrame, inbox: queue.Queue[Inbound]) -> None:
+    Until it is up, states and goals are dropped (the handheld shows STALE, and
+    re-sends its goal once a planner answers).  Feeds ``LinkDown(reason)`` when a
+    try fails with a new reason and ``LinkUp`` once connected, on ``inbox``.
+    """
+
+    def __init__(
+        self,
+        conf_factory: Callable[[], Any],
+        where: str,
+        mission: str,
+        unit: str,
+        retry_s: float = 1.0,
+    ) -> None:
+        self.mission = keys.check_chunk(mission, "--mission")
+        self.unit = keys.check_chunk(unit, "--unit")
+        self.where = where
+        self.retry_s = retry_s
+        self.inbox: queue.Queue[Inbound] = queue.Queue(INBOX_DEPTH)
+        self._conf_factory = conf_factory
+        self._link: Link | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._connect, name="handheld-connect", daemon=True)
+        self._thread.start()
+
+    @property
+    def connected(self) -> bool:
+        return self._link is not None
+
+    def _connect(self) -> None:
+        last = ""
+        while not self._stop.is_set():
+            try:
+                with map_zenoh_errors("--connect"):
+                    session = zenoh.open(self._conf_factory())
+            except ZenohError as exc:
+                if exc.reason != last:
+                    last = exc.reason
+                    _offer(self.inbox, LinkDown(f"{exc.reason}; retrying every {self.retry_s:g} s"))
+                self._stop.wait(self.retry_s)
+                continue
+            with self._lock:
+                if self._stop.is_set():
+                    session.close()
+                    return
+                self._link = Link(session, self.mission, self.unit, self.inbox)
+            _offer(self.inbox, LinkUp(self.where))
+            return
+
+    def publish_state(self, state: UnitState) -> None:
+        if self._link is not None:
+            self._link.publish_state(state)
+
+    def put_goal(self, goal: Goal) -> None:
+        if self._link is not None:
+            self._link.put_goal(goal)
+
+    def close(self) -> None:
+        """Stop trying; close the link if it is up."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        with self._lock:
+            if self._link is not None:
+                self._link.close()
+                self._link = None
+
+
+MAX_LINE_BYTES = 256  # NMEA caps a sentence at 82 characters; anything past this is not one
+MAX_BAD_RUN = 1000  # this many lines in a row that are not sentences: not a GPS receiver at all
+MAX_GAP_S = 10.0  # a longer jump between two fixes' UTC times is a gap in the log, not a pause to replay
+
+
+def is_regular_file(stream: IO[bytes]) -> bool:
+    """True for a file on disk (a log to replay), False for a device, pipe or terminal (live)."""
+    try:
+        return stat.S_ISREG(os.fstat(stream.fileno()).st_mode)
+    except (OSError, ValueError):
+        return False
+
+
+class NmeaReader(threading.Thread):
+    """Reads NMEA lines from a byte stream, converts GGA fixes to local metres, enqueues them.
+
+    Args:
+        stream: the byte stream (a file, a serial device, a pipe).
+        frame: the local frame fixes are converted to.
+        inbox: where items go.
+        rate_hz: replay GGA sentences at this rate.
+        paced: replay by the fixes' UTC times (default: when ``stream`` is a regular file,
+            which would otherwise be read in one burst).
+    """
+
+    def __init__(
+        self,
+        stream: IO[bytes],
+        frame: LocalFrame,
+        inbox: queue.Queue[Inbound],
+        rate_hz: float | None = None,
+        paced: bool | None = None,
+    ) -> None:
         super().__init__(name="nmea-reader", daemon=True)  # a blocked read must not hold up exit
         self.stream = stream
         self.frame = frame
         self.inbox = inbox
+        self.rate_hz = rate_hz
+        self.paced = is_regular_file(stream) if paced is None else paced
+        self.bad_run = 0
+        self._stop_event = threading.Event()
+        self._last_utc_s: float | None = None
+
+    def stop(self) -> None:
+        """End the replay at the next line (a blocked device read still ends with the process)."""
+        self._stop_event.set()
+
+    def _lines(self) -> Iterator[bytes | None]:
+        """Lines of at most ``MAX_LINE_BYTES``; ``None`` for a longer one (the rest is skipped)."""
+        while not self._stop_event.is_set():
+            raw = self.stream.readline(MAX_LINE_BYTES + 1)
+            if not raw:
+                return
+            if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
+                while (rest := self.stream.readline(64 * 1024)) and not rest.endswith(b"\n"):
+                    pass
+                yield None
+                continue
+            yield raw
 
     def run(self) -> None:
         try:
-            for raw in self.stream:
-                self.feed(raw.decode("ascii", "replace"))
-        except Exception as exc:  # a serial device unplugged, say
-            _offer(self.inbox, NmeaEnded(f"read failed: {exc}"))
+            for raw in self._lines():
+                if raw is None:
+                    self._rejected(f"line longer than {MAX_LINE_BYTES} bytes")
+                else:
+                    self.feed(raw.decode("ascii", "replace"))
+                if self.bad_run >= MAX_BAD_RUN:
+                    _offer(self.inbox, NmeaEnded(f"not NMEA: {self.bad_run} lines in a row were no sentence"))
+                    return
+        except OSError as exc:  # a serial device unplugged, say
+            _offer(self.inbox, NmeaEnded(f"read failed: {exc.strerror or exc}"))
             return
         _offer(self.inbox, NmeaEnded("stream ended"))
+
+    def _rejected(self, reason: str) -> None:
+        self.bad_run += 1
+        _offer(self.inbox, NmeaRejected(reason))
+
+    def _pace(self, fix: Fix | None) -> None:
+        """Wait as long as the recording did between this GGA sentence and the last."""
+        if self.rate_hz is not None:
+            self._stop_event.wait(1.0 / self.rate_hz)
+            return
+        if not self.paced or fix is None or fix.utc_s is None:
+            return
+        last, self._last_utc_s = self._last_utc_s, fix.utc_s
+        if last is not None:
+            gap = (fix.utc_s - last) % 86_400.0  # across midnight
+            if 0.0 < gap <= MAX_GAP_S:
+                self._stop_event.wait(gap)
 
     def feed(self, line: str) -> None:
         """Handle one line (public so it can be fed without a thread)."""
         try:
             result = read_sentence(line)
         except InputError as exc:
-            _offer(self.inbox, NmeaRejected(str(exc)))
+            self._rejected(str(exc))
             return
-        if result is None:
+        if result == IGNORED:
+            return
+        self.bad_run = 0
+        fix = result if isinstance(result, Fix) else None
+        self._pace(fix)
+        if fix is None:
             _offer(self.inbox, NoFixIn())
-        elif isinstance(result, Fix):
-            x, y = self.frame.to_local_m(result.lat_deg, result.lon_deg)
+        else:
+            x, y = self.frame.to_local_m(fix.lat_deg, fix.lon_deg)
             _offer(self.inbox, FixIn(x, y))
 
 
@@ -223,9 +452,9 @@ def open_nmea(path: str, baud: int | None = None) -> IO[bytes]:
         pipe_fd = os.dup(0)
         os.dup2(tty_fd, 0)
         os.close(tty_fd)
-        return os.fdopen(pipe_fd, "rb", buffering=0)
+        return os.fdopen(pipe_fd, "rb")  # buffered: readline() then costs one read per chunk, not per byte
     try:
-        stream = open(path, "rb", buffering=0)  # noqa: SIM115 - the reader thread owns it
+        stream = open(path, "rb")  # noqa: SIM115 - the reader thread owns it
     except OSError as exc:
         raise InputError("--nmea", f"cannot open {path!r}: {exc.strerror}") from exc
     if baud is not None:

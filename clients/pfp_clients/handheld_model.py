@@ -59,6 +59,8 @@ class Severity(StrEnum):
     DANGER = "danger"
 
 
+# Below this ground speed a GPS unit is standing; its ETA then assumes the walking speed.
+MOVING_MPS: Final = 0.3
 # Fractions of the full-scale threat level where the bar turns yellow, then red.
 CAUTION_FRACTION: Final = 0.3
 DANGER_FRACTION: Final = 0.6
@@ -184,6 +186,7 @@ class Settings:
         nudge_m: how far one arrow-key press moves the position.
         goal: ``(x, y)`` in metres to ask the planner for, if any.
         goal_retry_s: re-send the goal this often until the planner acts on it.
+        gps: a GPS gives the position (the ETA then uses the measured ground speed).
     """
 
     unit: str
@@ -195,6 +198,7 @@ class Settings:
     nudge_m: float = 1.0
     goal: tuple[float, float] | None = None
     goal_retry_s: float = 2.0
+    gps: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -237,6 +241,9 @@ class HandheldModel:
         self._last_advance_s = now
         self._walked_m = 0.0  # since the last direction, so the walk never overshoots the goal
         self._last_fix: tuple[float, float, float] | None = None
+        self.goal = settings.goal  # what this handheld asks for: --goal, the g prompt or the wire's
+        self.connected = True  # False while the link has no session (the router is down)
+        self.link_note = ""
         self._goal_sent_s: float | None = None
         self._goal_acked = False
 
@@ -250,6 +257,38 @@ class HandheldModel:
         self.counts["directions"] += 1
         if d.status is not DirectionStatus.NO_GOAL:
             self._goal_acked = True
+        elif self.goal is not None and self._goal_acked:
+            # the planner lost it (restarted, or raced a goal put): a cancel would have come as GoalIn(None)
+            self._goal_acked = False
+
+    def on_link(self, up: bool, text: str) -> None:
+        """The link connected (``up``) or a try failed; ``text`` says where or why."""
+        self.connected = up
+        self.link_note = "" if up else text
+        if up:
+            self._goal_sent_s = None  # send the goal at once
+
+    def on_planner_up(self) -> None:
+        """A planner's liveliness token appeared: a new planner knows nothing of our goal yet."""
+        self._goal_acked = False
+        self._goal_sent_s = None
+
+    def on_goal(self, position: tuple[float, float] | None) -> None:
+        """The unit's goal as put on the wire by anyone; ``None`` means somebody cancelled it."""
+        if position is None:
+            self.goal = None
+            self.note = "goal cancelled"
+        elif position != self.goal:
+            self.goal = position
+            self._goal_acked = False
+            self._goal_sent_s = None
+
+    def set_goal(self, position: tuple[float, float]) -> None:
+        """A new goal from the keyboard: sent at the next tick."""
+        self.goal = position
+        self._goal_acked = False
+        self._goal_sent_s = None
+        self.note = f"goal set to ({position[0]:g}, {position[1]:g})"
 
     def on_rejected(self, reason: str) -> None:
         """A direction payload failed to decode; keep the last good one."""
@@ -334,6 +373,8 @@ class HandheldModel:
     # -- outputs --------------------------------------------------------------------
     def stale(self, now: float) -> bool:
         """True when the last update (or the start, if none came) is older than ``stale_after_s``."""
+        if not self.connected:
+            return True
         since = self.last_update_s if self.last_update_s is not None else self.started_s
         return now - since > self.settings.stale_after_s
 
@@ -358,13 +399,23 @@ class HandheldModel:
     def goal_to_send(self, now: float) -> Goal | None:
         """The configured goal, when it is due: at first, then every ``goal_retry_s``
         until a direction shows the planner acts on it (a later cancel is respected)."""
-        g = self.settings.goal
-        if g is None or self._goal_acked:
+        g = self.goal
+        if g is None or self._goal_acked or not self.connected:
             return None
         if self._goal_sent_s is not None and now - self._goal_sent_s < self.settings.goal_retry_s:
             return None
         self._goal_sent_s = now
         return Goal(position=g)
+
+    def eta_speed_mps(self) -> float:
+        """The speed the ETA assumes, and the one the screen shows beside it.
+
+        A simulated walk moves at ``speed_mps * speed_up``; with a GPS it is the
+        measured ground speed once moving, else the configured walking speed.
+        """
+        if not self.settings.gps:
+            return self.settings.speed_mps * self.settings.speed_up
+        return self.speed_mps if self.speed_mps >= MOVING_MPS else self.settings.speed_mps
 
     def view(self, now: float, arrow_size: tuple[int, int] = (15, 7)) -> View:
         """What to show at ``now``; ``arrow_size`` is ``(width, height)`` in cells."""
@@ -391,7 +442,7 @@ class HandheldModel:
             bearing=bearing_text(bearing),
             arrow=arrow_art(bearing, *arrow_size, status=d.status.value if d is not None else ""),
             distance_m=distance,
-            eta_s=eta_s(distance, self.settings.speed_mps),
+            eta_s=eta_s(distance, self.eta_speed_mps()),
             threat_level=level,
             threat_fraction=fraction,
             severity=severity,
@@ -401,5 +452,5 @@ class HandheldModel:
             heading_deg=self.heading_deg,
             speed_mps=self.speed_mps,
             walking=self.walking,
-            note=self.note,
+            note=self.link_note or self.note,
         )

@@ -17,7 +17,7 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -137,6 +137,31 @@ class _Runner:
                 return False
         return True
 
+    def waiting_on(self, t_s: float) -> str:
+        """What the timeline waits for now, in words: the entry, and its trigger's distance or time."""
+        tl = self.script.timeline
+        if self.index >= len(tl):
+            due = [
+                f"{e.unit} to arrive (by {e.arrives_within_s:g} s)"
+                for e in self.script.expect
+                if e.arrives_within_s is not None
+                and e.unit not in self.watch.arrived_at_s
+                and t_s <= e.arrives_within_s
+            ]
+            return "timeline done; waiting for " + ", ".join(due) if due else "timeline done"
+        step = tl[self.index]
+        head = f"timeline[{self.index}] ({step.describe()})"
+        if self.wait_until is not None:
+            return f"{head}: {max(self.wait_until - t_s, 0.0):.1f} s left"
+        if step.at_s is not None and t_s < step.at_s:
+            return f"{head}: until t={step.at_s:g} s"
+        if step.when is not None:
+            w = step.when
+            pos = self.watch.position(w.unit)
+            where = "not seen yet" if pos is None else f"now {math.dist(pos, w.of):.1f} m away"
+            return f"{head}: {w.unit} within {w.within_m:g} m of ({w.of[0]:g}, {w.of[1]:g}), {where}"
+        return head
+
     def advance(self, t_s: float, wall_s: float) -> None:
         tl = self.script.timeline
         while self.index < len(tl):
@@ -202,6 +227,8 @@ def run_inject(
     stop: threading.Event | None = None,
     clock: Callable[[], float] = time.monotonic,
     ready: threading.Event | None = None,
+    mission_clock: Callable[[], float] | None = None,
+    on_wait: Callable[[float, int, str], None] | None = None,
 ) -> InjectReport:
     """Play ``script`` on an open session and judge it.
 
@@ -215,6 +242,9 @@ def run_inject(
         clock: monotonic wall seconds.
         ready: set once the entries due at the start have been sent (and the
             timeline waits for a later trigger), so a caller can start units after them.
+        mission_clock: the script's seconds, when another part owns the mission clock
+            (``pfp demo`` passes its fleet's simulated time); else wall seconds x ``speed_up``.
+        on_wait: called each round with the script time, the entries done and what the timeline waits for.
     """
     import zenoh
 
@@ -264,7 +294,7 @@ def run_inject(
                     batch.append(inbox.get_nowait())
             except queue.Empty:
                 pass
-            t_s = (clock() - t0) * speed_up
+            t_s = mission_clock() if mission_clock is not None else (clock() - t0) * speed_up
             for kind, uid, payload in batch:
                 if kind == "state":
                     w.on_state(uid, payload.position, t_s)
@@ -275,6 +305,8 @@ def run_inject(
             run.advance(t_s, clock())
             if ready is not None:
                 ready.set()
+            if on_wait is not None:
+                on_wait(t_s, run.index, run.waiting_on(t_s))
             if run.index >= len(script.timeline) and _settled(script, w, t_s):
                 reason = "timeline done, expectations settled"
                 break
@@ -306,15 +338,22 @@ def report_lines(rep: InjectReport) -> list[str]:
     return out
 
 
-def main(script: Script, mission: str, speed_up: float, connect: Sequence[str] | None) -> int:
-    """``pfp inject``: open a client session, play, print the report; 0 iff everything held."""
-    from pfp_clients.common import open_client
+def main(script: Script, mission: str, speed_up: float, conf: Any, progress_s: float = 5.0) -> int:
+    """``pfp inject``: open a session from ``conf``, play with progress, print the report; 0 iff all held.
 
-    session = open_client(connect)
-    try:
-        rep = run_inject(session, script, mission, speed_up, say=lambda s: print(s, flush=True))
-    finally:
-        session.close()
+    Raises:
+        ZenohError: the session cannot be opened (``Unreachable`` when no router answers).
+    """
+    from pfp_clients.common import open_session
+    from pfp_clients.progress import Progress
+
+    total = len(script.timeline)
+    with open_session(conf) as session, Progress(progress_s, total=total) as progress:
+
+        def on_wait(t_s: float, done: int, what: str) -> None:
+            progress.update(f"t={t_s:7.2f}s  waiting on {what}", done)
+
+        rep = run_inject(session, script, mission, speed_up, say=progress.say, on_wait=on_wait)
     for line in report_lines(rep):
         print(line)
     return 0 if rep.ok else 1

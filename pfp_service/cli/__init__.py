@@ -1,58 +1,116 @@
-"""The ``pfp`` command line: one subcommand per module in this package.
+"""The ``pfp`` command line: one subcommand per module.
 
-Each module ``pfp_service.cli.<name>`` defines ``register(subparsers)``, which
-adds its parser and sets ``func(args) -> int``.  This file finds them, so a new
-command is a new module and nothing else.
+Each command module defines ``register(subparsers)``, which adds its parser
+and sets ``func(args) -> int``.  The commands of this package are found by
+listing it, so a new command here is a new module and nothing else.  Other
+packages add theirs through the ``pfp_service.commands`` entry-point group
+(``pfp_clients`` adds fleet, inject, demo and handheld), so this package
+never imports them: the dependency runs one way, clients -> service.
 
 Errors at this edge: an ``InputError`` (bad file, flag or value) prints one
-line, ``pfp <command>: <field>: <reason>``, and exits 2, with no traceback.
+line, ``pfp <command>: <field>: <reason>``, and exits 2, with no traceback;
+so does a reader closing the pipe early (``pfp plan X | head -1``).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
-from collections.abc import Sequence
-from typing import NoReturn
+from collections.abc import Iterator, Sequence
+from importlib.metadata import entry_points
+from types import ModuleType
+from typing import Any, NoReturn
 
 from pfp_service import __version__
 from pfp_service.errors import InputError
 
-__all__ = ["ArgumentParser", "main"]
+__all__ = ["COMMAND_GROUP", "ArgumentParser", "build_parser", "main"]
+
+COMMAND_GROUP = "pfp_service.commands"
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Shows every flag's default in its help, unless the help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if (
+            "default" in text
+            or default is None
+            or default is False
+            or default is argparse.SUPPRESS
+            or not action.option_strings
+        ):
+            return text
+        shown = ", ".join(map(str, default)) if isinstance(default, (list, tuple)) else default
+        return f"{text} (default: {shown})"
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line and exit code 2."""
+    """argparse, but a usage error is one line and exit code 2, and help shows defaults."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def command_modules() -> Iterator[ModuleType]:
+    """This package's command modules and those other packages registered, by command name.
+
+    A name in this package wins over a registered one of the same name.
+    """
+    found = {ep.name: ep.value for ep in entry_points(group=COMMAND_GROUP)}
+    for info in pkgutil.iter_modules(__path__):
+        if not info.name.startswith("_"):
+            found[info.name] = f"{__name__}.{info.name}"
+    for name in sorted(found):
+        yield importlib.import_module(found[name])
 
 
 def build_parser() -> ArgumentParser:
     parser = ArgumentParser(prog="pfp", description="Potential-field path planning for MUM-T teams.")
     parser.add_argument("--version", action="version", version=f"pfp-service {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=ArgumentParser)
-    sub.required = True
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{__name__}.{info.name}")
+    for module in command_modules():
         register = getattr(module, "register", None)
         if register is not None:
             register(sub)
     return parser
 
 
+def _closed_pipe(command: str) -> int:
+    # Python would print "Exception ignored ... BrokenPipeError" when it flushes stdout at exit
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    print(f"pfp {command}: stdout: the reader closed the pipe before the output was written", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    func = getattr(args, "func", None)
+    if func is None:  # `pfp`, or `pfp bench` without a name: show what there is
+        helper = getattr(args, "help_parser", parser)
+        helper.print_help()
+        return 0
+    command = " ".join(filter(None, [args.command, getattr(args, "benchmark", None)]))
     try:
-        return int(args.func(args))
+        code = int(func(args))
+        sys.stdout.flush()
+        return code
     except InputError as exc:
         print(f"pfp {args.command}: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        return _closed_pipe(command)
     except KeyboardInterrupt:
         return 130
 

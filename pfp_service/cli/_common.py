@@ -1,9 +1,19 @@
-"""Argument types shared by several subcommands: checked at the edge, one-line errors."""
+"""What several subcommands share: argument types checked at the edge, and the Zenoh session flags.
+
+``add_session_args(parser)`` declares ``--connect``, ``--listen``, ``--mode``
+and ``--mission`` the same way for every command that opens a session, and
+``session_config(args)`` turns them into a ``zenoh.Config``.
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
+
+from pfp_service.service.config import DEFAULT_CONNECT, DEFAULT_LISTEN
+
+MODES = ("router", "peer", "client")
 
 
 def positive_float(text: str) -> float:
@@ -30,6 +40,22 @@ def grid_cells(text: str) -> int:
     return value
 
 
+def bounded_int(lo: int, hi: int) -> Any:
+    """An argument type: a whole number from ``lo`` to ``hi``, the same bounds a file field has."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be {lo} to {hi:,}, got {text!r}")
+        return value
+
+    parse.__name__ = "whole number"
+    return parse
+
+
 def non_negative_float(text: str) -> float:
     try:
         value = float(text)
@@ -48,3 +74,69 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
     return value
+
+
+def mission_chunk(text: str) -> str:
+    """``--mission``: one key chunk, 1-64 of ``[A-Za-z0-9_-]``."""
+    from pfp_service.errors import InputError
+    from pfp_service.wire import keys
+
+    try:
+        return keys.check_chunk(text, "--mission")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+
+
+def add_session_args(parser: argparse.ArgumentParser, *, serve: bool = False) -> None:
+    """Declare ``--connect``, ``--listen``, ``--mode`` and ``--mission`` on ``parser``.
+
+    Args:
+        serve: the planner's own flags: unset flags stay ``None`` so the config file
+            and environment can supply them, and the help names the router defaults.
+    """
+    g = parser.add_argument_group("Zenoh session")
+    if serve:
+        g.add_argument("--mode", choices=MODES, help="Zenoh mode (default: router, an embedded router)")
+        g.add_argument(
+            "--listen",
+            action="append",
+            metavar="ENDPOINT",
+            help=f"endpoint to listen on, repeatable (default for a router: {DEFAULT_LISTEN})",
+        )
+        g.add_argument(
+            "--connect",
+            action="append",
+            metavar="ENDPOINT",
+            help="router or peer to join, repeatable (default: none)",
+        )
+        g.add_argument(
+            "--mission", type=mission_chunk, help="mission name, the {mission} key chunk (default: default)"
+        )
+        return
+    g.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"router or peer to join, repeatable (default: {DEFAULT_CONNECT})",
+    )
+    g.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="endpoint to listen on too, repeatable (default: none)",
+    )
+    g.add_argument("--mode", choices=MODES, default="client", help="Zenoh mode")
+    g.add_argument(
+        "--mission", type=mission_chunk, default="default", help="mission name, the {mission} key chunk"
+    )
+
+
+def session_config(args: argparse.Namespace) -> Any:
+    """The ``zenoh.Config`` of a client command's session flags (see ``add_session_args``).
+
+    Raises:
+        ZenohError: naming ``--connect`` or ``--listen``, when Zenoh rejects an endpoint.
+    """
+    from pfp_service.service.config import client_zenoh_config
+
+    return client_zenoh_config(args.connect, mode=args.mode, listen=args.listen)

@@ -19,9 +19,11 @@ def register(sub: Any) -> None:
     p = sub.add_parser("bench", help="run a benchmark (engine, quality, ...)", description=__doc__)
     names = sub_benchmarks()
     inner = p.add_subparsers(dest="benchmark", metavar="NAME", parser_class=type(p))
-    inner.required = True
+    p.set_defaults(help_parser=p)  # `pfp bench` alone lists the benchmarks
     for name in names:
         module = importlib.import_module(f"pfp_service.bench.{name}")
+        if not (hasattr(module, "add_arguments") and hasattr(module, "run")):
+            continue  # a helper module of the benchmarks (cases, baselines), not a benchmark
         doc = (module.__doc__ or name).strip().splitlines()[0]
         bp = inner.add_parser(name, help=doc, description=module.__doc__)
         module.add_arguments(bp)

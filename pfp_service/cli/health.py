@@ -1,40 +1,59 @@
-"""``pfp health``: exit 0 when a planner of the mission answers its status query, 1 otherwise."""
+"""``pfp health``: exit 0 when a planner of the mission answers its status query, 1 otherwise.
+
+Exit codes: 0 a planner answered; 1 none answered (or no router at the
+endpoint); 2 a bad flag, such as a malformed ``--connect`` endpoint.
+``--json`` prints one JSON array of every planner's status, for scripts.
+"""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
-from pfp_service.cli._common import positive_float
+from pfp_service.cli._common import add_session_args, positive_float, session_config
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser("health", help="check that a planner answers", description=__doc__)
+    add_session_args(p)
     p.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", help="router to ask (default tcp/127.0.0.1:7447)"
+        "--timeout", type=positive_float, default=2.0, metavar="S", help="seconds to wait for answers"
     )
-    p.add_argument("--mission", default="default")
-    p.add_argument("--timeout", type=positive_float, default=2.0, metavar="S")
-    p.add_argument("--json", action="store_true", help="print every planner's status as JSON")
+    p.add_argument("--json", action="store_true", help="print a JSON array of every planner's status")
     p.set_defaults(func=run)
 
 
+def _ms(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f} ms"
+
+
+def status_line(st: Any) -> str:
+    """One planner's status for people: rounded figures, units named, no ``None``."""
+    return (
+        f"{st.planner} ok: mission {st.mission}, up {st.uptime_s:.1f} s, {st.units} units "
+        f"({st.units_stale} stale), {st.threats} threats; messages in {st.msgs_in}, out {st.msgs_out}, "
+        f"rejected {st.rejected}; latency p50 {_ms(st.latency_p50_ms)}, p99 {_ms(st.latency_p99_ms)}"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
+    import sys
+
+    import msgspec
     import zenoh
 
-    from pfp_service.errors import InputError
-    from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
+    from pfp_service.errors import InputError, Unreachable, map_zenoh_errors
     from pfp_service.wire import decode_planner_status, keys
 
-    keys.check_chunk(args.mission, "--mission")
-    conf = client_zenoh_config(args.connect)
+    conf = session_config(args)
     try:
-        session = zenoh.open(conf)
-    except Exception as exc:  # unreachable router: not healthy, and say why
-        print(f"pfp health: cannot reach {', '.join(args.connect or [DEFAULT_CONNECT])}: {exc}")
+        with map_zenoh_errors("--connect"):
+            session = zenoh.open(conf)
+    except Unreachable as exc:  # not healthy, and say why
+        print(f"pfp health: {exc}", file=sys.stderr)
         return 1
     found = []
-    try:
+    with session:
         for reply in session.get(keys.planner_statuses(args.mission), timeout=args.timeout):
             if reply.ok is None:
                 continue
@@ -42,20 +61,15 @@ def run(args: argparse.Namespace) -> int:
                 found.append(decode_planner_status(reply.ok.payload.to_bytes()))
             except InputError:
                 continue
-    finally:
-        session.close()
+    if args.json:
+        print(msgspec.json.encode(found).decode())
     if not found:
-        print(f"pfp health: no planner of mission {args.mission!r} answered within {args.timeout:g} s")
+        print(
+            f"pfp health: no planner of mission {args.mission!r} answered within {args.timeout:g} s",
+            file=sys.stderr,
+        )
         return 1
-    for st in found:
-        if args.json:
-            import msgspec
-
-            print(msgspec.json.encode(st).decode())
-        else:
-            print(
-                f"{st.planner} ok: mission {st.mission}, up {st.uptime_s:.1f} s, {st.units} units "
-                f"({st.units_stale} stale), {st.threats} threats, in {st.msgs_in}, out {st.msgs_out}, "
-                f"rejected {st.rejected}, p50 {st.latency_p50_ms} ms, p99 {st.latency_p99_ms} ms"
-            )
+    if not args.json:
+        for st in found:
+            print(status_line(st))
     return 0

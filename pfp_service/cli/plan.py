@@ -4,6 +4,9 @@
 escapes; ``--planner optimal`` is the reference that minimises
 ``length + lambda * exposure`` on a fine 16-connected grid (every threat in
 force from the start).  Both print the same JSON object.
+
+Exit codes: 0 the goal was reached; 1 planned but not reached (trapped,
+max_iter, out_of_bounds, invalid); 2 bad input (file or flag).
 """
 
 from __future__ import annotations
@@ -14,8 +17,15 @@ import sys
 import time
 from typing import Any
 
-from pfp_service.cli._common import grid_cells, non_negative_float, positive_float, positive_int
-from pfp_service.core.optimal import DEFAULT_CELLS, DEFAULT_LAMBDA
+from pfp_service.cli._common import (
+    bounded_int,
+    grid_cells,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
+from pfp_service.core.metrics import LAMBDA
+from pfp_service.core.optimal import DEFAULT_CELLS
 from pfp_service.core.params import ESCAPES
 
 
@@ -27,12 +37,17 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--repeat", type=positive_int, default=1, metavar="N", help="compute_ms is the median of N runs"
     )
-    p.add_argument("--delta", type=positive_float, help="override the goal weight delta")
-    p.add_argument("--step", type=positive_float, help="override the step length (m)")
-    p.add_argument("--tolerance", type=positive_float, help="override the arrival tolerance (m)")
-    p.add_argument("--max-iter", type=positive_int, help="override the iteration limit")
-    p.add_argument("--intensity", choices=("peak", "density"), help="override the intensity scale")
-    p.add_argument("--escape", choices=ESCAPES, help="override the trap-escape strategy")
+    p.add_argument("--intensity", choices=("peak", "density"), help="override the file's intensity scale")
+    pf = p.add_argument_group(
+        "potential-field planner only (--planner pfp); unset: the file's, else the scale-free rule"
+    )
+    pf.add_argument("--delta", type=positive_float, help="override the goal weight delta")
+    pf.add_argument("--step", type=positive_float, help="override the step length (m)")
+    pf.add_argument("--tolerance", type=positive_float, help="override the arrival tolerance (m)")
+    pf.add_argument(
+        "--max-iter", type=bounded_int(1, MAX_ITER), help=f"override the iteration limit (1 to {MAX_ITER:,})"
+    )
+    pf.add_argument("--escape", choices=ESCAPES, help="override the trap-escape strategy")
     p.add_argument(
         "--planner",
         choices=("pfp", "optimal"),
@@ -43,18 +58,45 @@ def register(sub: Any) -> None:
         "--lambda",
         dest="lam",
         type=non_negative_float,
-        default=DEFAULT_LAMBDA,
         metavar="L",
-        help=f"optimal planner: exposure weight in length + L * exposure (default {DEFAULT_LAMBDA:g})",
+        help=f"optimal planner: exposure weight in length + L * exposure (default {LAMBDA:g})",
     )
     p.add_argument(
         "--cells",
         type=grid_cells,
-        default=DEFAULT_CELLS,
         metavar="N",
         help=f"optimal planner: grid cells along the longer side (default {DEFAULT_CELLS})",
     )
     p.set_defaults(func=run)
+
+
+# The same bound a scenario file's ``planner.max_iter`` has (``constraints.Iterations``).
+MAX_ITER = 10_000_000
+PFP_ONLY = ("delta", "step", "tolerance", "max_iter", "escape")
+OPTIMAL_ONLY = ("lam", "cells")
+
+
+def _flag(dest: str) -> str:
+    return "--lambda" if dest == "lam" else "--" + dest.replace("_", "-")
+
+
+def check_flags(args: argparse.Namespace) -> None:
+    """Refuse flags the chosen planner would ignore.
+
+    Raises:
+        InputError: naming the first such flag.
+    """
+    from pfp_service.errors import InputError
+
+    unused, other = (OPTIMAL_ONLY, "optimal") if args.planner == "pfp" else (PFP_ONLY, "pfp")
+    for dest in unused:
+        if getattr(args, dest) is not None:
+            raise InputError(_flag(dest), f"only goes with --planner {other}")
+
+
+def exit_code(status: str) -> int:
+    """0 when the goal was reached, 1 for any other plan status."""
+    return 0 if status == "reached" else 1
 
 
 def run(args: argparse.Namespace) -> int:
@@ -62,11 +104,14 @@ def run(args: argparse.Namespace) -> int:
 
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
-    from pfp_service.report import summary
+    from pfp_service.render import summary
     from pfp_service.scenario import load_scenario
 
+    check_flags(args)
+    lam = LAMBDA if args.lam is None else args.lam
+    cells = DEFAULT_CELLS if args.cells is None else args.cells
     if args.plot:
-        from pfp_service.plot import check_png_path
+        from pfp_service.render import check_png_path
 
         check_png_path(args.plot, "--plot")
     scenario = load_scenario(args.scenario)
@@ -86,10 +131,10 @@ def run(args: argparse.Namespace) -> int:
                 scenario.start,
                 scenario.goal,
                 schedule,
-                args.lam,
+                lam,
                 params.intensity,
                 scenario.bounds_tuple(),
-                args.cells,
+                cells,
                 time.perf_counter,
             )
         else:
@@ -99,11 +144,11 @@ def run(args: argparse.Namespace) -> int:
         times.append(result.compute_ms)
     result = msgspec.structs.replace(result, compute_ms=statistics.median(times))
     if args.plot:
-        from pfp_service.plot import plot_plan
+        from pfp_service.render import plot_plan
 
         plot_plan(scenario, result, args.plot)
     if args.json:
         sys.stdout.write(msgspec.json.encode(result).decode() + "\n")
     else:
         print(summary(scenario.name, result, plot=args.plot))
-    return 0
+    return exit_code(result.status.value)

@@ -5,11 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import threading
 from typing import Any
 
-from pfp_service.cli._common import positive_float, positive_int
+from pfp_service.cli._common import (
+    add_session_args,
+    bounded_int,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
 from pfp_service.core.params import ESCAPES
 
 
@@ -38,31 +42,57 @@ def register(sub: Any) -> None:
         help="run the planner daemon",
         description=__doc__ + " Precedence: defaults < --config TOML < PFP_* environment < flags.",
     )
-    p.add_argument("--config", metavar="TOML", help="configuration file")
-    p.add_argument("--zenoh-config", metavar="JSON5", help="Zenoh configuration file passed through")
-    p.add_argument("--mode", choices=("router", "peer", "client"), help="Zenoh mode (default router)")
-    p.add_argument("--listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
+    p.add_argument("--config", metavar="TOML", help="configuration file (default: none)")
     p.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", help="router or peer to join (repeatable)"
+        "--zenoh-config", metavar="JSON5", help="Zenoh configuration file passed through (default: none)"
     )
-    p.add_argument("--mission", help="mission name (default: default)")
+    add_session_args(p, serve=True)
     p.add_argument("--planner-id", help="this planner's id (default: planner)")
-    p.add_argument("--log-format", choices=("human", "json"))
-    p.add_argument("--log-level", choices=("debug", "info", "warning", "error"))
-    p.add_argument("--delta", type=positive_float)
-    p.add_argument("--step", type=positive_float)
-    p.add_argument("--tolerance", type=positive_float)
-    p.add_argument("--intensity", choices=("peak", "density"))
-    p.add_argument("--escape", choices=ESCAPES)
-    p.add_argument("--threat-ttl-s", type=positive_float, help="default TTL of threats that carry none")
-    p.add_argument("--unit-stale-s", type=positive_float, help="silence after which a unit is stale")
-    p.add_argument("--liveliness-debounce-s", type=float, help="how long a token must stay gone")
-    p.add_argument("--preview-budget-ms", type=positive_float, help="time budget of one preview")
-    p.add_argument("--preview-max-iter", type=positive_int, help="iteration cap of one preview")
-    p.add_argument("--lookahead", type=int, help="predicted positions per direction (0-100)")
-    p.add_argument("--tick-s", type=positive_float, help="longest wait of the planning loop when idle")
-    p.add_argument("--bounds", type=_bounds, metavar="JSON", help="mission bounds [[xmin,ymin],[xmax,ymax]]")
-    p.add_argument("--multicast", action="store_const", const=True, help="enable Zenoh multicast scouting")
+    p.add_argument(
+        "--log-format", choices=("human", "json"), help="log lines for people or JSON (default: human)"
+    )
+    p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="(default: info)")
+    g = p.add_argument_group("planner defaults (a goal message may override delta, step, tolerance)")
+    g.add_argument("--delta", type=positive_float, help="goal weight (default: the scale-free rule)")
+    g.add_argument("--step", type=positive_float, help="step length in m (default: the scale-free rule)")
+    g.add_argument(
+        "--tolerance", type=positive_float, help="arrival tolerance in m (default: the scale-free rule)"
+    )
+    g.add_argument("--intensity", choices=("peak", "density"), help="threat intensity scale (default: peak)")
+    g.add_argument("--escape", choices=ESCAPES, help="trap-escape strategy (default: auto)")
+    w = p.add_argument_group("the live world")
+    w.add_argument(
+        "--threat-ttl-s", type=positive_float, help="TTL of threats that carry none (default: none)"
+    )
+    w.add_argument(
+        "--unit-stale-s", type=positive_float, help="silence after which a unit is stale (default: 10)"
+    )
+    w.add_argument(
+        "--liveliness-debounce-s",
+        type=non_negative_float,
+        help="how long a unit's token must stay gone before it is stale (default: 2)",
+    )
+    w.add_argument(
+        "--preview-budget-ms", type=positive_float, help="time budget of one preview (default: 500)"
+    )
+    w.add_argument(
+        "--preview-max-iter", type=positive_int, help="iteration cap of one preview (default: 200000)"
+    )
+    w.add_argument(
+        "--lookahead", type=bounded_int(0, 100), help="predicted positions per direction, 0-100 (default: 5)"
+    )
+    w.add_argument(
+        "--tick-s", type=positive_float, help="longest wait of the planning loop when idle (default: 0.05)"
+    )
+    w.add_argument(
+        "--bounds",
+        type=_bounds,
+        metavar="JSON",
+        help="mission bounds [[xmin,ymin],[xmax,ymax]] (default: none)",
+    )
+    w.add_argument(
+        "--multicast", action="store_const", const=True, help="enable Zenoh multicast scouting (default: off)"
+    )
     p.add_argument(
         "--origin",
         type=_origin,
@@ -102,56 +132,8 @@ _FLAG_KEYS = [
 
 def run(args: argparse.Namespace) -> int:
     from pfp_service.service.config import load_config
+    from pfp_service.service.run import serve
 
     flags = {k: getattr(args, k) for k in _FLAG_KEYS}
     cfg = load_config(args.config, os.environ, flags)
     return serve(cfg)
-
-
-def serve(cfg: Any, ready: threading.Event | None = None, stop: threading.Event | None = None) -> int:
-    """Open the session, run the node until SIGTERM/SIGINT (or ``stop``), close everything."""
-    import zenoh
-
-    from pfp_service.errors import InputError
-    from pfp_service.service.config import zenoh_config
-    from pfp_service.service.log import setup_logging
-    from pfp_service.service.node import PlannerNode
-
-    log = setup_logging(cfg.log_format, cfg.log_level)
-    stop = stop or threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, lambda *_: stop.set())
-    conf = zenoh_config(cfg)
-    try:
-        session = zenoh.open(conf)
-    except Exception as exc:  # zenoh.ZError: endpoint in use, router unreachable ...
-        raise InputError("zenoh", f"cannot open session: {exc}") from None
-    try:
-        node = PlannerNode(session, cfg)
-        node.start()
-        endpoints = (
-            cfg.listen or ([] if cfg.zenoh_config else ["tcp/127.0.0.1:7447"])
-            if cfg.mode == "router"
-            else cfg.listen
-        )
-        log.info(
-            "serving",
-            extra={
-                "fields": {
-                    "mode": cfg.mode,
-                    "listen": endpoints,
-                    "connect": cfg.connect,
-                    "mission": cfg.mission,
-                }
-            },
-        )
-        if ready is not None:
-            ready.set()
-        stop.wait()
-        log.info("shutting down")
-        node.stop()
-    finally:
-        session.close()
-    log.info("stopped")
-    return 0

@@ -16,28 +16,34 @@ import json
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import msgspec
+from msgspec import Meta
 
 from pfp_service.constraints import Finite, Id, NonNegative, Positive
 from pfp_service.core import PlannerParams
 from pfp_service.core.params import Escape
-from pfp_service.errors import InputError, from_validation
+from pfp_service.errors import InputError, from_validation, map_zenoh_errors
+from pfp_service.files import read_text
 from pfp_service.geo import Origin, parse_origin
 from pfp_service.scenario import CHOICES
 
 __all__ = [
     "DEFAULT_CONNECT",
+    "DEFAULT_ENDPOINT",
     "DEFAULT_LISTEN",
     "ServeConfig",
+    "build_zenoh_config",
     "client_zenoh_config",
     "load_config",
     "zenoh_config",
 ]
 
-DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
-DEFAULT_CONNECT = DEFAULT_LISTEN  # where clients look for the embedded router
+# The one place the default endpoint is written: the embedded router listens here, clients look here.
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+DEFAULT_LISTEN = DEFAULT_ENDPOINT
+DEFAULT_CONNECT = DEFAULT_ENDPOINT
 LogFormat = Literal["human", "json"]
 LogLevel = Literal["debug", "info", "warning", "error"]
 Mode = Literal["router", "peer", "client"]
@@ -71,6 +77,15 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     tick_s: Positive = 0.05
     preview_budget_ms: Positive = 500.0
     preview_max_iter: int = 200_000
+    preview_workers: Annotated[int, Meta(ge=1, le=64)] = 2
+    preview_queue: Annotated[int, Meta(ge=1, le=100_000)] = 256
+    # deliberation (look-ahead, escape searches) off the planning loop
+    deliberation_workers: Annotated[int, Meta(ge=1, le=64)] = 1
+    deliberation_budget_s: Positive = 5.0
+    # bounded memory under overload
+    unit_forget_s: Positive | None = 600.0
+    max_units: Annotated[int, Meta(ge=1, le=10_000_000)] = 100_000
+    max_threats: Annotated[int, Meta(ge=1, le=1_000_000)] = 10_000
 
     def __post_init__(self) -> None:
         if not 0 <= self.lookahead <= 100:
@@ -156,10 +171,9 @@ def load_config(file: str | Path | None, env: Mapping[str, str], flags: Mapping[
     layers: list[tuple[str, dict[str, Any]]] = []
     if file is not None:
         path = Path(file)
+        text = read_text(path)
         try:
-            data = tomllib.loads(path.read_text())
-        except OSError as exc:
-            raise InputError(str(path), f"cannot read: {exc.strerror or exc}") from None
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise InputError(str(path), f"invalid TOML: {exc}") from None
         layers.append((str(path), data))
@@ -168,47 +182,60 @@ def load_config(file: str | Path | None, env: Mapping[str, str], flags: Mapping[
     return _convert(layers)
 
 
-def zenoh_config(cfg: ServeConfig) -> Any:
-    """The ``zenoh.Config`` for this service: the JSON5 file if any, then our overrides."""
-    import zenoh
-
-    if cfg.zenoh_config is not None:
-        try:
-            conf = zenoh.Config.from_file(cfg.zenoh_config)
-        except Exception as exc:  # zenoh raises its own ZError; translate at the edge
-            raise InputError("zenoh_config", f"cannot load {cfg.zenoh_config}: {exc}") from None
-    else:
-        conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(cfg.mode))
-    listen = cfg.listen
-    if listen is None and cfg.zenoh_config is None and cfg.mode == "router":
-        listen = [DEFAULT_LISTEN]
-    try:
-        if listen is not None:
-            conf.insert_json5("listen/endpoints", json.dumps(listen))
-        if cfg.connect:
-            conf.insert_json5("connect/endpoints", json.dumps(cfg.connect))
-        if not cfg.multicast:
-            conf.insert_json5("scouting/multicast/enabled", "false")
-    except Exception as exc:
-        raise InputError("listen/connect", f"rejected by zenoh: {exc}") from None
-    return conf
-
-
-def client_zenoh_config(connect: Sequence[str] | None = None, multicast: bool = False) -> Any:
-    """A client-mode ``zenoh.Config`` that connects to ``connect`` (default ``DEFAULT_CONNECT``) only.
+def build_zenoh_config(
+    *,
+    mode: str,
+    listen: Sequence[str] | None = None,
+    connect: Sequence[str] | None = None,
+    multicast: bool = False,
+    file: str | None = None,
+) -> Any:
+    """A ``zenoh.Config``: the JSON5 ``file`` if any, then ``mode``, ``listen`` and ``connect`` over it.
 
     Raises:
-        InputError: ``--connect``, when zenoh rejects an endpoint.
+        ZenohError: naming the file, ``--listen`` or ``--connect``, in Zenoh's words made readable.
     """
     import zenoh
 
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    try:
-        conf.insert_json5("connect/endpoints", json.dumps(list(connect or [DEFAULT_CONNECT])))
-    except Exception as exc:  # zenoh's own error type: translate at the edge
-        raise InputError("--connect", f"rejected by zenoh: {exc}") from None
+    if file is not None:
+        with map_zenoh_errors("zenoh_config", about=file):
+            conf = zenoh.Config.from_file(file)
+    else:
+        conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    if listen is not None:
+        with map_zenoh_errors("--listen"):
+            conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if connect:
+        with map_zenoh_errors("--connect"):
+            conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if not multicast:
         conf.insert_json5("scouting/multicast/enabled", "false")
     return conf
+
+
+def zenoh_config(cfg: ServeConfig) -> Any:
+    """The ``zenoh.Config`` for this service: the JSON5 file if any, then our overrides."""
+    listen = cfg.listen
+    if listen is None and cfg.zenoh_config is None and cfg.mode == "router":
+        listen = [DEFAULT_LISTEN]
+    return build_zenoh_config(
+        mode=cfg.mode, listen=listen, connect=cfg.connect, multicast=cfg.multicast, file=cfg.zenoh_config
+    )
+
+
+def client_zenoh_config(
+    connect: Sequence[str] | None = None,
+    multicast: bool = False,
+    mode: str = "client",
+    listen: Sequence[str] | None = None,
+) -> Any:
+    """A ``zenoh.Config`` for a client program: ``mode`` (client by default) joining ``connect``
+    (default ``DEFAULT_CONNECT``) only.
+
+    Raises:
+        ZenohError: ``--connect`` or ``--listen``, when zenoh rejects an endpoint.
+    """
+    return build_zenoh_config(
+        mode=mode, listen=listen, connect=list(connect or [DEFAULT_CONNECT]), multicast=multicast
+    )

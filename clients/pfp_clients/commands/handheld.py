@@ -12,11 +12,9 @@ import argparse
 import math
 from typing import Any
 
-from pfp_service.cli._common import positive_float, positive_int
+from pfp_service.cli._common import add_session_args, positive_float, positive_int, session_config
 
 __all__ = ["register", "run"]
-
-DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
 def _pair(text: str, what: str) -> tuple[float, float]:
@@ -45,45 +43,88 @@ def register(sub: Any) -> None:
         "handheld", help="navigation client for a dismounted soldier (TUI)", description=__doc__
     )
     p.add_argument("--unit", required=True, metavar="ID", help="this unit's id")
-    p.add_argument("--mission", default="default")
+    add_session_args(p)
     p.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", help=f"router to join (default {DEFAULT_ENDPOINT})"
+        "--goal",
+        type=point,
+        metavar="X,Y",
+        help="ask the planner to guide this unit here (default: none; g sets one)",
     )
-    p.add_argument("--goal", type=point, metavar="X,Y", help="ask the planner to guide this unit here")
     p.add_argument("--start", type=point, default=(0.0, 0.0), metavar="X,Y", help="simulated start")
-    p.add_argument("--speed-mps", type=positive_float, default=1.4, help="walking speed (default 1.4)")
+    p.add_argument("--speed-mps", type=positive_float, default=1.4, help="walking speed")
     p.add_argument(
         "--speed-up", type=positive_float, default=1.0, help="simulated walk runs this much faster"
     )
     p.add_argument("--no-walk", action="store_true", help="start with the simulated walk paused")
     p.add_argument("--nudge-m", type=positive_float, default=1.0, help="metres per arrow-key press")
-    p.add_argument("--rate-hz", type=positive_float, default=2.0, help="state publish rate (default 2)")
+    p.add_argument("--rate-hz", type=positive_float, default=2.0, help="state publish rate")
     p.add_argument("--stale-s", type=positive_float, default=5.0, help="flag updates older than this")
-    p.add_argument(
-        "--threat-full-scale", type=positive_float, default=1.0, help="threat level of a full bar (default 1)"
+    p.add_argument("--threat-full-scale", type=positive_float, default=1.0, help="threat level of a full bar")
+    g = p.add_argument_group("GPS")
+    g.add_argument("--nmea", metavar="PATH|-", help="read GGA sentences from a file, serial device or stdin")
+    g.add_argument("--nmea-baud", type=positive_int, metavar="BAUD", help="set a serial device's baud rate")
+    g.add_argument(
+        "--nmea-rate",
+        type=positive_float,
+        metavar="HZ",
+        help="replay a file's GGA sentences at this rate (default: by their own UTC times)",
     )
-    p.add_argument("--nmea", metavar="PATH|-", help="read GGA sentences from a file, serial device or stdin")
-    p.add_argument("--nmea-baud", type=positive_int, metavar="BAUD", help="set a serial device's baud rate")
-    p.add_argument(
+    g.add_argument(
         "--origin", type=lat_lon, metavar="LAT,LON", help="local frame origin (needed with --nmea)"
     )
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def check_flags(args: argparse.Namespace) -> None:
+    """Refuse flags that conflict or that nothing would use.
+
+    Raises:
+        InputError: naming the flag.
+    """
     from pfp_service.errors import InputError
 
     if args.nmea is not None and args.origin is None:
         raise InputError("--origin", "required with --nmea (the LAT,LON of the planner's 0,0)")
-    if args.nmea is None and args.nmea_baud is not None:
-        raise InputError("--nmea-baud", "only makes sense with --nmea")
+    for flag, value in (
+        ("--nmea-baud", args.nmea_baud),
+        ("--nmea-rate", args.nmea_rate),
+        ("--origin", args.origin),
+    ):
+        if args.nmea is None and value is not None:
+            raise InputError(flag, "only goes with --nmea")
+    if args.nmea is not None and args.no_walk:
+        raise InputError("--no-walk", "the GPS gives the position: there is no simulated walk with --nmea")
+
+
+def check_terminal(nmea: str | None) -> None:
+    """A terminal UI needs a terminal: refuse a pipe or a file on stdout (or on stdin, unless ``--nmea -``).
+
+    Raises:
+        InputError: saying which side is not a terminal.
+    """
+    import os
+
+    from pfp_service.errors import InputError
+
+    if not os.isatty(1):
+        raise InputError(
+            "", "needs a terminal: stdout is not one (it is a terminal UI; run it in a terminal)"
+        )
+    if nmea != "-" and not os.isatty(0):
+        raise InputError("", "needs a terminal: stdin is not one (pipe NMEA in with --nmea - instead)")
+
+
+def run(args: argparse.Namespace) -> int:
+    check_flags(args)
+    check_terminal(args.nmea)
 
     import time
 
     from pfp_clients.handheld import HandheldApp
-    from pfp_clients.handheld_link import NmeaReader, open_link, open_nmea
+    from pfp_clients.handheld_link import NmeaReader, RetryingLink, open_nmea
     from pfp_clients.handheld_model import HandheldModel, Settings
     from pfp_clients.nmea import LocalFrame
+    from pfp_service.service.config import DEFAULT_CONNECT
 
     gps = args.nmea is not None
     settings = Settings(
@@ -95,12 +136,19 @@ def run(args: argparse.Namespace) -> int:
         threat_full_scale=args.threat_full_scale,
         nudge_m=args.nudge_m,
         goal=args.goal,
+        gps=gps,
     )
     frame = LocalFrame(*args.origin) if gps else None
+    session_config(args)  # a malformed endpoint is a bad flag now, not a retry loop later
     stream = open_nmea(args.nmea, args.nmea_baud) if gps else None
-    with open_link(args.connect or [DEFAULT_ENDPOINT], args.mission, args.unit) as link:
-        reader = NmeaReader(stream, frame, link.inbox) if stream is not None and frame is not None else None
+    where = ", ".join(args.connect or [DEFAULT_CONNECT])
+    link = RetryingLink(lambda: session_config(args), where, args.mission, args.unit)
+    try:
+        reader = None
+        if stream is not None and frame is not None:
+            reader = NmeaReader(stream, frame, link.inbox, rate_hz=args.nmea_rate)
         model = HandheldModel(settings, None if gps else args.start, time.monotonic())
+        model.on_link(False, f"connecting to {where}")
         app = HandheldApp(
             model,
             link,
@@ -110,4 +158,8 @@ def run(args: argparse.Namespace) -> int:
             publish_hz=args.rate_hz,
         )
         app.run()
+        if reader is not None:
+            reader.stop()
+    finally:
+        link.close()
     return 0

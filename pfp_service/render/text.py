@@ -1,4 +1,4 @@
-"""Human-readable summaries of plan results (text only; no I/O)."""
+"""Text summaries of plan results for a terminal (no I/O)."""
 
 from __future__ import annotations
 

@@ -23,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.demo import DemoOptions, run_demo
 
     speed_up = args.speed_up or (15.0 if args.quick else 5.0)
-    from pfp_service.plot import check_png_path
+    from pfp_service.render import check_png_path
 
     opts = DemoOptions(out=check_png_path(args.out, "--out"), speed_up=speed_up)
     if args.team:

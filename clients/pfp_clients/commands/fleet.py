@@ -1,0 +1,92 @@
+"""``pfp fleet``: simulate a team of manned and unmanned vehicles that follow the planner's directions."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from typing import Any
+
+from pfp_service.cli._common import add_session_args, positive_float, positive_int, session_config
+
+# Each unit costs a publisher, a token and a Python object per tick: past this one fleet process
+# cannot keep up (ZENOH-NOTES: ~10 000 updates/s per process), so run several instead.
+MAX_GENERATE = 10_000
+
+
+def generated_units(text: str) -> int:
+    """``--generate N``: 1 to ``MAX_GENERATE`` units."""
+    value = positive_int(text)
+    if value > MAX_GENERATE:
+        raise argparse.ArgumentTypeError(
+            f"at most {MAX_GENERATE} units per fleet process, got {text!r} (run several fleets instead)"
+        )
+    return value
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("fleet", help="simulate a fleet of vehicles (a load source)", description=__doc__)
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--team", metavar="YAML", help="team file: units with id, kind, start, goal, speed_mps")
+    src.add_argument(
+        "--generate",
+        type=generated_units,
+        metavar="N",
+        help=f"generate N units instead (1 to {MAX_GENERATE})",
+    )
+    p.add_argument("--seed", type=int, help="seed of the generated team (default: 0)")
+    p.add_argument(
+        "--area", type=positive_float, metavar="M", help="side of the generated square in m (default: 100)"
+    )
+    add_session_args(p)
+    p.add_argument("--rate-hz", type=positive_float, default=5.0, help="state reports per simulated second")
+    p.add_argument("--speed-up", type=positive_float, default=1.0, help="simulated seconds per wall second")
+    p.add_argument(
+        "--duration-s",
+        type=positive_float,
+        metavar="S",
+        help="stop after S simulated seconds (default: run on)",
+    )
+    p.add_argument(
+        "--until-arrived", action="store_true", help="stop when every unit arrived (exit 1 if not)"
+    )
+    p.add_argument("--no-goals", action="store_true", help="do not put the team's goals")
+    p.add_argument(
+        "--reply-timeout-s", type=positive_float, default=1.0, help="wait this long for late answers"
+    )
+    p.add_argument(
+        "--progress-s",
+        type=positive_float,
+        default=5.0,
+        metavar="S",
+        help="wall seconds between progress lines when stdout is not a terminal",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pfp_clients.fleet import FleetOptions, main
+    from pfp_clients.team import generate_team, load_team
+    from pfp_service.errors import InputError
+
+    for flag, value in (("--seed", args.seed), ("--area", args.area)):
+        if args.team and value is not None:
+            raise InputError(flag, "only goes with --generate (a team file gives its own units)")
+    if args.team:
+        team = load_team(args.team)
+    else:
+        team = generate_team(args.generate, 0 if args.seed is None else args.seed, args.area or 100.0)
+    opts = FleetOptions(
+        mission=args.mission,
+        rate_hz=args.rate_hz,
+        speed_up=args.speed_up,
+        duration_s=args.duration_s,
+        until_arrived=args.until_arrived,
+        set_goals=not args.no_goals,
+        reply_timeout_s=args.reply_timeout_s,
+    )
+    conf = session_config(args)
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    return main(team, opts, conf, stop, progress_s=args.progress_s)

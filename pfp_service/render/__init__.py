@@ -1,0 +1,13 @@
+"""Rendering results for people: text summaries (``text``) and PNG plots (``plots``, needs matplotlib).
+
+Nothing here plans or talks to the network: it takes plan results, threats
+and tracks and returns text or writes one image.  matplotlib is imported
+only when a plot is drawn, so ``summary`` works on a plain install.
+"""
+
+from __future__ import annotations
+
+from pfp_service.render.plots import check_png_path, extent, plot_plan, plot_tracks
+from pfp_service.render.text import summary
+
+__all__ = ["check_png_path", "extent", "plot_plan", "plot_tracks", "summary"]
