@@ -1,0 +1,150 @@
+"""``pfp map``: the operator's live map of a mission, served as one web page (a client, not the planner).
+
+Registered under the ``pfp_service.commands`` entry-point group in pyproject.toml.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from pfp_service.cli._common import positive_float
+
+MAX_PUSH_HZ = 10.0
+
+
+def http_address(text: str) -> tuple[str, int]:
+    """``--http HOST:PORT`` (``[::1]:8080`` for IPv6; port 0 picks a free one)."""
+    host, sep, port_text = text.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    try:
+        port = int(port_text)
+    except ValueError:
+        port = -1
+    if not sep or not host or not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, e.g. 127.0.0.1:8080, got {text!r}")
+    return host, port
+
+
+def origin(text: str) -> Any:
+    """``--origin LAT,LON[,ALT]``: the mission origin, as ``pfp serve`` takes it."""
+    from pfp_service.errors import InputError
+    from pfp_service.geo import parse_origin
+
+    try:
+        return parse_origin(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+
+
+def push_rate(text: str) -> float:
+    value = positive_float(text)
+    if value > MAX_PUSH_HZ:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_PUSH_HZ:g}, got {text!r}")
+    return value
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("map", help="serve a live web map of the mission", description=__doc__)
+    p.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="router, repeatable (default: tcp/127.0.0.1:7447)",
+    )
+    p.add_argument(
+        "--zenoh-config",
+        metavar="JSON5",
+        help="client config to start from, e.g. one `pfp acl` wrote (credentials); --connect overrides its endpoints",
+    )
+    p.add_argument("--mission", default="default", help="mission name, the {mission} key chunk")
+    p.add_argument(
+        "--http",
+        type=http_address,
+        default=("127.0.0.1", 8080),
+        metavar="HOST:PORT",
+        help="where to serve the page (default: 127.0.0.1:8080; port 0: any free port)",
+    )
+    p.add_argument("--allow-edit", action="store_true", help="let the page put and delete threats and goals")
+    p.add_argument(
+        "--origin",
+        type=origin,
+        metavar="LAT,LON[,ALT]",
+        help="the mission origin (the planner's (0, 0)): draw in lat/lon (default: plain metres)",
+    )
+    p.add_argument(
+        "--tiles",
+        metavar="URL",
+        help="tile URL template of an offline tile server, e.g. http://tiles/{z}/{x}/{y}.png",
+    )
+    p.add_argument(
+        "--push-hz",
+        type=push_rate,
+        default=5.0,
+        help=f"updates per second to the page, at most {MAX_PUSH_HZ:g}",
+    )
+    p.add_argument(
+        "--stale-s", type=positive_float, default=10.0, help="draw a unit stale after this silence in s"
+    )
+    p.set_defaults(func=run)
+
+
+def _zenoh_config(args: argparse.Namespace) -> Any:
+    import json
+
+    import zenoh
+
+    from pfp_service.errors import InputError
+    from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
+
+    if args.zenoh_config is None:
+        return client_zenoh_config(args.connect)
+    try:
+        conf = zenoh.Config.from_file(args.zenoh_config)
+        if args.connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(args.connect)))
+        elif conf.get_json("connect/endpoints") in ("[]", "null", None):
+            conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
+        conf.insert_json5("mode", '"client"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+    except Exception as exc:  # zenoh's own error type: one line at the edge
+        raise InputError("--zenoh-config", f"{args.zenoh_config}: {exc}") from None
+    return conf
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    import zenoh
+
+    from pfp_service.errors import InputError
+    from pfp_service.wire import keys
+
+    keys.check_chunk(args.mission, "--mission")
+    if args.tiles is not None and args.origin is None:
+        raise InputError("--tiles", "tiles need --origin: without one the map is drawn in plain metres")
+    try:
+        from pfp_clients.map.server import MapOptions, serve
+    except ImportError as exc:
+        raise InputError("pfp map", f"needs the map extra: pip install 'pfp-service[map]' ({exc})") from None
+    host, port = args.http
+    opts = MapOptions(
+        mission=args.mission,
+        host=host,
+        port=port,
+        allow_edit=args.allow_edit,
+        push_hz=args.push_hz,
+        stale_s=args.stale_s,
+        origin=args.origin,
+        tiles=args.tiles,
+    )
+    conf = _zenoh_config(args)
+    try:
+        session = zenoh.open(conf)
+    except Exception as exc:  # zenoh's own error type: one line at the edge
+        where = ", ".join(args.connect or ["the configured endpoints"])
+        raise InputError("--connect", f"cannot reach {where}: {exc}") from None
+    try:
+        return asyncio.run(serve(session, opts))
+    finally:
+        session.close()

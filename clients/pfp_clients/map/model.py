@@ -1,0 +1,414 @@
+"""What the operator's map knows about a mission, and what changed since the browser last heard.
+
+Sans-I/O, as the planner's world is: the Zenoh callbacks decode each sample
+into one of the ``Seen`` inputs below, the server applies them in batches with
+``MapModel.apply(inputs, now)``, and ``take_delta(now)`` returns the JSON-ready
+changes since the previous call (or ``None``).  ``snapshot(now)`` is the whole
+picture for a browser that has just connected.  ``now`` is wall-clock Unix
+seconds, passed in; nothing here reads a clock.
+
+Staleness follows the planner's rule from the outside: a unit is stale when it
+has not reported for ``stale_s``, or when its liveliness token has stayed gone
+for ``debounce_s`` (a router restart withdraws every token for a few seconds).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgspec
+
+from pfp_clients.map.geometry import CORE_FRACTION, ZONE_FRACTION, outline, peak_point
+from pfp_service.errors import InputError
+from pfp_service.wire import (
+    Direction,
+    Event,
+    ForgottenEvent,
+    Goal,
+    PlannerStatus,
+    RejectedEvent,
+    StaleEvent,
+    ThreatUpdate,
+    UnitState,
+    WorldSnapshot,
+    keys,
+)
+
+__all__ = [
+    "AliveSeen",
+    "DirectionSeen",
+    "EventSeen",
+    "GoalSeen",
+    "Input",
+    "MapModel",
+    "StateSeen",
+    "StatusSeen",
+    "ThreatSeen",
+    "WorldSeen",
+    "eta_s",
+]
+
+
+# -- inputs: one frozen record per kind of sample --------------------------------
+@dataclass(frozen=True, slots=True)
+class StateSeen:
+    unit: str
+    state: UnitState
+
+
+@dataclass(frozen=True, slots=True)
+class DirectionSeen:
+    unit: str
+    direction: Direction
+
+
+@dataclass(frozen=True, slots=True)
+class GoalSeen:
+    """A goal put, or cancelled (``goal`` is None)."""
+
+    unit: str
+    goal: Goal | None
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatSeen:
+    """A threat put, or removed (``update`` is None)."""
+
+    threat: str
+    update: ThreatUpdate | None
+
+
+@dataclass(frozen=True, slots=True)
+class AliveSeen:
+    unit: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class EventSeen:
+    event: Event
+
+
+@dataclass(frozen=True, slots=True)
+class StatusSeen:
+    status: PlannerStatus
+
+
+@dataclass(frozen=True, slots=True)
+class WorldSeen:
+    """A planner's reply to the world query: what it held before the map started listening."""
+
+    world: WorldSnapshot
+
+
+Input = StateSeen | DirectionSeen | GoalSeen | ThreatSeen | AliveSeen | EventSeen | StatusSeen | WorldSeen
+
+
+# -- what is kept -----------------------------------------------------------------
+@dataclass(slots=True)
+class _Unit:
+    id: str
+    kind: str | None = None
+    position: tuple[float, float] | None = None
+    heading_deg: float | None = None
+    speed_mps: float | None = None
+    last_seen: float | None = None
+    status: str | None = None
+    reason: str = ""
+    distance_to_goal: float | None = None
+    threat_level: float = 0.0
+    lookahead: list[tuple[float, float]] = field(default_factory=list)
+    goal: tuple[float, float] | None = None
+    alive: bool | None = None
+    gone_since: float | None = None
+    said_stale: bool = False  # the planner's stale event, until the unit reports again
+    stale: bool = False
+    track: deque[tuple[float, float]] = field(default_factory=deque)
+    track_new: list[tuple[float, float]] = field(default_factory=list)
+
+    def view(self, track: list[tuple[float, float]] | None) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "id": self.id,
+            "kind": self.kind,
+            "position": self.position,
+            "heading_deg": self.heading_deg,
+            "speed_mps": self.speed_mps,
+            "last_seen": self.last_seen,
+            "status": self.status,
+            "reason": self.reason,
+            "distance_to_goal": self.distance_to_goal,
+            "threat_level": self.threat_level,
+            "lookahead": self.lookahead,
+            "goal": self.goal,
+            "alive": self.alive,
+            "stale": self.stale,
+        }
+        if track is not None:
+            out["track"] = track
+        else:
+            out["track_add"] = self.track_new
+        return out
+
+
+@dataclass(slots=True)
+class _Threat:
+    id: str
+    update: ThreatUpdate
+    put_at: float
+    expires_at: float | None
+    zone: list[tuple[float, float]]
+    core: list[tuple[float, float]]
+    peak: tuple[float, float]
+
+    def view(self) -> dict[str, Any]:
+        u = self.update
+        return {
+            "id": self.id,
+            "position": u.position,
+            "facing_deg": u.facing_deg,
+            "sigma_range": u.sigma_range,
+            "sigma_lateral": u.sigma_lateral,
+            "skew": u.skew,
+            "weight": u.weight,
+            "ttl_s": u.ttl_s,
+            "put_at": self.put_at,
+            "expires_at": self.expires_at,
+            "zone": self.zone,
+            "core": self.core,
+            "peak": self.peak,
+        }
+
+
+def _threat_of(threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: float | None) -> _Threat:
+    return _Threat(
+        threat_id,
+        update,
+        now,
+        None if ttl_left_s is None else now + ttl_left_s,
+        outline(update, ZONE_FRACTION),
+        outline(update, CORE_FRACTION) if update.weight > 0 else [],
+        peak_point(update.to_threat(threat_id)),
+    )
+
+
+def _rejected_group(ev: RejectedEvent) -> tuple[str, str]:
+    """Rejections are counted per (kind of key, field, reason): a flood of one mistake is one line."""
+    try:
+        what = keys.parse(ev.key).kind.value
+    except InputError:
+        what = "other"
+    return f"{what}|{ev.field}|{ev.reason}", what
+
+
+class MapModel:
+    """Units, threats, events and planner status as the map shows them.
+
+    Args:
+        stale_s: a unit silent this long is stale (the planner's ``unit_stale_s``).
+        debounce_s: a unit whose liveliness token stays gone this long is stale.
+        track_max: positions kept per unit for its track.
+        events_max: events kept for the feed (rejections are aggregated, not counted here).
+    """
+
+    def __init__(
+        self, stale_s: float = 10.0, debounce_s: float = 2.0, track_max: int = 200, events_max: int = 100
+    ) -> None:
+        self.stale_s = stale_s
+        self.debounce_s = debounce_s
+        self.track_max = track_max
+        self.units: dict[str, _Unit] = {}
+        self.threats: dict[str, _Threat] = {}
+        self.events: deque[dict[str, Any]] = deque(maxlen=events_max)
+        self.rejected: dict[str, dict[str, Any]] = {}
+        self.status: dict[str, dict[str, Any]] = {}
+        self._dirty_units: set[str] = set()
+        self._removed_units: set[str] = set()
+        self._dirty_threats: set[str] = set()
+        self._removed_threats: set[str] = set()
+        self._new_events: list[dict[str, Any]] = []
+        self._dirty_rejected: set[str] = set()
+        self._dirty_status: set[str] = set()
+
+    # -- inputs -------------------------------------------------------------------
+    def _unit(self, unit_id: str) -> _Unit:
+        u = self.units.get(unit_id)
+        if u is None:
+            u = self.units[unit_id] = _Unit(unit_id)
+            self._removed_units.discard(unit_id)
+        self._dirty_units.add(unit_id)
+        return u
+
+    def apply(self, inputs: Iterable[Input], now: float) -> None:
+        """Fold decoded samples into the picture, in arrival order."""
+        for msg in inputs:
+            match msg:
+                case StateSeen(unit_id, st):
+                    u = self._unit(unit_id)
+                    pos = (float(st.position[0]), float(st.position[1]))
+                    u.position = pos
+                    u.last_seen = now
+                    u.said_stale = False
+                    if st.kind is not None:
+                        u.kind = str(st.kind)
+                    if st.speed_mps is not None:
+                        u.speed_mps = st.speed_mps
+                    if st.heading_deg is not None:
+                        u.heading_deg = st.heading_deg
+                    if not u.track or u.track[-1] != pos:
+                        u.track.append(pos)
+                        u.track_new.append(pos)
+                        if len(u.track) > self.track_max:
+                            u.track.popleft()
+                case DirectionSeen(unit_id, d):
+                    u = self._unit(unit_id)
+                    u.status = str(d.status)
+                    u.reason = d.reason
+                    u.distance_to_goal = d.distance_to_goal
+                    u.threat_level = d.threat_level
+                    u.lookahead = [(float(x), float(y)) for x, y in d.lookahead]
+                    if d.heading_deg is not None:
+                        u.heading_deg = d.heading_deg
+                case GoalSeen(unit_id, goal):
+                    self._unit(unit_id).goal = None if goal is None else goal.position
+                case ThreatSeen(threat_id, update):
+                    if update is None:
+                        if self.threats.pop(threat_id, None) is not None:
+                            self._removed_threats.add(threat_id)
+                            self._dirty_threats.discard(threat_id)
+                    else:
+                        self._put_threat(threat_id, update, now, update.ttl_s)
+                case AliveSeen(unit_id, alive):
+                    u = self._unit(unit_id)
+                    u.alive = alive
+                    u.gone_since = None if alive else now
+                case EventSeen(ev):
+                    self._on_event(ev, now)
+                case StatusSeen(st):
+                    self.status[st.planner] = {**msgspec.to_builtins(st), "received_at": now}
+                    self._dirty_status.add(st.planner)
+                case WorldSeen(world):
+                    self._on_world(world, now)
+
+    def _put_threat(self, threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: float | None) -> None:
+        self.threats[threat_id] = _threat_of(threat_id, update, now, ttl_left_s)
+        self._dirty_threats.add(threat_id)
+        self._removed_threats.discard(threat_id)
+
+    def _on_world(self, world: WorldSnapshot, now: float) -> None:
+        """Fill in what the samples have not told yet; a sample seen since is newer, so it wins."""
+        for s in world.units:
+            u = self._unit(s.id)
+            if u.position is None and s.position is not None:
+                u.position = (float(s.position[0]), float(s.position[1]))
+                u.track.append(u.position)
+                u.track_new.append(u.position)
+                u.last_seen = None if s.last_seen_s is None else now - s.last_seen_s
+            if u.kind is None and s.kind is not None:
+                u.kind = str(s.kind)
+            if u.status is None and s.status is not None:
+                u.status = str(s.status)
+                u.reason = s.reason
+                u.distance_to_goal = s.distance_to_goal
+            if u.goal is None and s.goal is not None:
+                u.goal = s.goal
+        for t in world.threats:
+            if t.id not in self.threats:
+                self._put_threat(t.id, t.threat, now, t.ttl_s)
+
+    def _on_event(self, ev: Event, now: float) -> None:
+        t = ev.t if ev.t is not None else now
+        if isinstance(ev, RejectedEvent):
+            group, what = _rejected_group(ev)
+            agg = self.rejected.get(group)
+            if agg is None:
+                agg = self.rejected[group] = {
+                    "id": group,
+                    "key_kind": what,
+                    "field": ev.field,
+                    "reason": ev.reason,
+                    "count": 0,
+                    "first_t": t,
+                }
+            agg["count"] += 1
+            agg["last_t"] = t
+            agg["last_key"] = ev.key
+            self._dirty_rejected.add(group)
+            return
+        if isinstance(ev, StaleEvent) and ev.unit in self.units:
+            self._unit(ev.unit).said_stale = True
+        if isinstance(ev, ForgottenEvent) and self.units.pop(ev.unit, None) is not None:
+            self._dirty_units.discard(ev.unit)
+            self._removed_units.add(ev.unit)
+        view = {**msgspec.to_builtins(ev), "t": t}
+        self.events.append(view)
+        self._new_events.append(view)
+
+    # -- time ---------------------------------------------------------------------
+    def _age_out(self, now: float) -> None:
+        for u in self.units.values():
+            silent = u.last_seen is not None and now - u.last_seen > self.stale_s
+            gone = u.gone_since is not None and now - u.gone_since >= self.debounce_s
+            stale = silent or gone or u.said_stale
+            if stale != u.stale:
+                u.stale = stale
+                self._dirty_units.add(u.id)
+        for tid in [t.id for t in self.threats.values() if t.expires_at is not None and t.expires_at <= now]:
+            del self.threats[tid]
+            self._removed_threats.add(tid)
+            self._dirty_threats.discard(tid)
+
+    # -- outputs ------------------------------------------------------------------
+    def take_delta(self, now: float) -> dict[str, Any] | None:
+        """What changed since the last call (JSON-ready), or ``None`` when nothing did."""
+        self._age_out(now)
+        out: dict[str, Any] = {}
+        if self._dirty_units:
+            out["units"] = {uid: self.units[uid].view(None) for uid in self._dirty_units}
+            for uid in self._dirty_units:
+                self.units[uid].track_new = []
+        if self._removed_units:
+            out["units_removed"] = sorted(self._removed_units)
+        if self._dirty_threats:
+            out["threats"] = {tid: self.threats[tid].view() for tid in self._dirty_threats}
+        if self._removed_threats:
+            out["threats_removed"] = sorted(self._removed_threats)
+        if self._new_events:
+            out["events"] = self._new_events[-(self.events.maxlen or 100) :]
+        if self._dirty_rejected:
+            out["rejected"] = {g: dict(self.rejected[g]) for g in self._dirty_rejected}
+        if self._dirty_status:
+            out["status"] = {p: self.status[p] for p in self._dirty_status}
+        self._dirty_units, self._dirty_threats, self._removed_threats = set(), set(), set()
+        self._removed_units = set()
+        self._new_events, self._dirty_rejected, self._dirty_status = [], set(), set()
+        if not out:
+            return None
+        return {"type": "delta", "now": now, **out}
+
+    def snapshot(self, now: float) -> dict[str, Any]:
+        """Everything, for a browser that has just connected (call right after ``take_delta``)."""
+        return {
+            "type": "snapshot",
+            "now": now,
+            "units": {uid: u.view(list(u.track)) for uid, u in self.units.items()},
+            "threats": {tid: t.view() for tid, t in self.threats.items()},
+            "events": list(self.events),
+            "rejected": {g: dict(a) for g, a in self.rejected.items()},
+            "status": dict(self.status),
+        }
+
+    def speed_of(self, unit_id: str) -> float | None:
+        """The unit's last reported speed in m/s (for a preview's ETA), if it reported one."""
+        u = self.units.get(unit_id)
+        return None if u is None else u.speed_mps
+
+
+def eta_s(length_m: float, speed_mps: float | None) -> float | None:
+    """Seconds to walk ``length_m`` at ``speed_mps``; None without a positive speed."""
+    if speed_mps is None or not speed_mps > 0 or not math.isfinite(length_m):
+        return None
+    return length_m / speed_mps

@@ -1,0 +1,461 @@
+"""The map's two edges: Zenoh in (subscribers, queries, puts) and HTTP out (one page, a WebSocket, a small API).
+
+Zenoh callbacks decode each sample into a ``model`` input and enqueue it,
+nothing more.  One asyncio task, the pump, wakes ``push_hz`` times a second,
+applies everything queued in one batch, and sends the delta to every browser
+as one JSON text frame; a browser that has just connected gets the snapshot
+in the same tick, after the delta, so it never sees a change twice.  A browser
+that cannot keep up is dropped (it reconnects and gets a fresh snapshot), so
+no backlog grows anywhere: the inbox is drained whole every tick and deltas
+coalesce whatever happened in between.
+
+Blocking Zenoh calls (status and world queries, previews, puts) run on the
+default executor, never on the event loop or inside a callback.  The page
+talks to the planner only through this server, and this server only through
+the keys every other client uses: edits are the same puts as ``pfp inject``.
+
+HTTP API (JSON):
+    GET    /                      the page
+    GET    /ws                    WebSocket: a snapshot, then deltas
+    GET    /api/state             the snapshot, for scripts and tests
+    GET    /api/preview/{unit}    the planner's preview of the unit, with its ETA
+    PUT    /api/threat/{id}       a ThreatUpdate      (--allow-edit only)
+    DELETE /api/threat/{id}
+    PUT    /api/goal/{unit}       a Goal              (--allow-edit only)
+    DELETE /api/goal/{unit}
+Edits need the header ``X-PFP-Edit: 1``: a custom header cannot be sent
+cross-origin without a CORS preflight, which this server never grants, so
+another web page open in the operator's browser cannot edit the mission.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import queue
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import msgspec
+from aiohttp import WSMsgType, web
+
+from pfp_clients.map.model import (
+    AliveSeen,
+    DirectionSeen,
+    EventSeen,
+    GoalSeen,
+    Input,
+    MapModel,
+    StateSeen,
+    StatusSeen,
+    ThreatSeen,
+    WorldSeen,
+    eta_s,
+)
+from pfp_service.errors import InputError
+from pfp_service.geo import Origin
+from pfp_service.wire import (
+    decode_direction,
+    decode_error_reply,
+    decode_event,
+    decode_goal,
+    decode_plan_result,
+    decode_planner_status,
+    decode_threat,
+    decode_unit_state,
+    decode_world_snapshot,
+    encode,
+    keys,
+    zenoh_encoding,
+)
+
+__all__ = ["STATIC_DIR", "MapOptions", "MapServer", "serve"]
+
+log = logging.getLogger("pfp.map")
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+_EDIT_HEADER = "X-PFP-Edit"
+_SEND_TIMEOUT_S = 2.0  # a browser that takes longer to accept one frame is dropped
+
+
+@dataclass(frozen=True)
+class MapOptions:
+    """How the map runs.
+
+    Attributes:
+        mission: the mission's key chunk.
+        host, port: where the page is served (port 0: any free port).
+        allow_edit: accept threat and goal edits from the page.
+        push_hz: deltas per second to each browser, at most.
+        stale_s: a unit silent this long is drawn stale (the planner's ``unit_stale_s``).
+        status_period_s: how often the planners' status is asked.
+        query_timeout_s: how long a status, world or preview query waits.
+        origin: the mission origin (the planner's (0, 0)); None draws plain metres.
+        tiles: a tile URL template for an offline tile server (lat/lon only).
+    """
+
+    mission: str = keys.DEFAULT_MISSION
+    host: str = "127.0.0.1"
+    port: int = 8080
+    allow_edit: bool = False
+    push_hz: float = 5.0
+    stale_s: float = 10.0
+    status_period_s: float = 1.0
+    query_timeout_s: float = 2.0
+    origin: Origin | None = None
+    tiles: str | None = None
+
+
+class _Browser:
+    """One connected page."""
+
+    def __init__(self, ws: web.WebSocketResponse) -> None:
+        self.ws = ws
+        self.dropped = False
+
+
+class MapServer:
+    """The map's Zenoh subscriptions, its model and its web app, on one open session.
+
+    Args:
+        session: an open ``zenoh.Session`` (the caller closes it).
+        opts: see ``MapOptions``.
+        clock: wall-clock Unix seconds (the page shows ages and TTLs from it).
+    """
+
+    def __init__(self, session: Any, opts: MapOptions, clock: Callable[[], float] = time.time) -> None:
+        self.session = session
+        self.opts = opts
+        self.clock = clock
+        self.model = MapModel(stale_s=opts.stale_s)
+        self._inbox: queue.SimpleQueue[Input] = queue.SimpleQueue()
+        self._browsers: list[_Browser] = []
+        self._joining: list[_Browser] = []
+        self._declared: list[Any] = []
+        self.frames_sent = 0
+        self.samples_in = 0
+
+    # -- Zenoh in: decode and enqueue, nothing more ---------------------------------
+    def _enqueue(self, make: Callable[[Any], Input | None]) -> Callable[[Any], None]:
+        def callback(sample: Any) -> None:
+            try:
+                item = make(sample)
+            except InputError:
+                return  # not ours to judge: the planner publishes its own rejections
+            except Exception:  # a callback must never die; say so and carry on
+                log.exception("map: cannot read a sample on %s", sample.key_expr)
+                return
+            if item is not None:
+                self.samples_in += 1
+                self._inbox.put(item)
+
+        return callback
+
+    def declare(self) -> None:
+        """Subscribe to the mission: states, directions, goals, threats, events and liveliness."""
+        import zenoh
+
+        m = keys.check_chunk(self.opts.mission, "--mission")
+        s = self.session
+
+        def chunk(sample: Any) -> str:
+            return keys.parse(str(sample.key_expr)).id
+
+        def is_delete(sample: Any) -> bool:
+            return bool(sample.kind == zenoh.SampleKind.DELETE)
+
+        def on_state(smp: Any) -> Input:
+            return StateSeen(chunk(smp), decode_unit_state(smp.payload.to_bytes()))
+
+        def on_direction(smp: Any) -> Input:
+            return DirectionSeen(chunk(smp), decode_direction(smp.payload.to_bytes()))
+
+        def on_goal(smp: Any) -> Input:
+            return GoalSeen(chunk(smp), None if is_delete(smp) else decode_goal(smp.payload.to_bytes()))
+
+        def on_threat(smp: Any) -> Input:
+            return ThreatSeen(chunk(smp), None if is_delete(smp) else decode_threat(smp.payload.to_bytes()))
+
+        def on_event(smp: Any) -> Input:
+            return EventSeen(decode_event(smp.payload.to_bytes()))
+
+        def on_alive(smp: Any) -> Input:
+            return AliveSeen(chunk(smp), not is_delete(smp))
+
+        self._declared = [
+            s.declare_subscriber(keys.unit_states(m), self._enqueue(on_state)),
+            s.declare_subscriber(keys.unit_directions(m), self._enqueue(on_direction)),
+            s.declare_subscriber(keys.goals(m), self._enqueue(on_goal)),
+            s.declare_subscriber(keys.threats(m), self._enqueue(on_threat)),
+            s.declare_subscriber(keys.events(m), self._enqueue(on_event)),
+            s.liveliness().declare_subscriber(keys.alive_units(m), self._enqueue(on_alive), history=True),
+        ]
+
+    def undeclare(self) -> None:
+        for d in self._declared:
+            with contextlib.suppress(Exception):  # the session may already be closing
+                d.undeclare()
+        self._declared = []
+
+    # -- blocking Zenoh calls, run on the executor ----------------------------------
+    def _ask(self, selector: str) -> list[Any]:
+        return list(self.session.get(selector, timeout=self.opts.query_timeout_s))
+
+    def ask_world(self) -> int:
+        """Ask every planner what it holds, and enqueue the answers; returns how many answered."""
+        n = 0
+        for reply in self._ask(keys.worlds(self.opts.mission)):
+            if reply.ok is None:
+                continue
+            try:
+                self._inbox.put(WorldSeen(decode_world_snapshot(reply.ok.payload.to_bytes())))
+                n += 1
+            except InputError as exc:
+                log.warning("map: unreadable world reply: %s", exc)
+        return n
+
+    def ask_status(self) -> None:
+        for reply in self._ask(keys.planner_statuses(self.opts.mission)):
+            if reply.ok is None:
+                continue
+            with contextlib.suppress(InputError):
+                self._inbox.put(StatusSeen(decode_planner_status(reply.ok.payload.to_bytes())))
+
+    def ask_preview(self, unit: str) -> tuple[int, dict[str, Any]]:
+        """The planner's preview of ``unit`` as (HTTP status, JSON body).
+
+        A planner that refuses (no goal, busy) or does not answer is still a 200 whose body
+        has ``error``: it is news for the operator, not a fault of the page, and browsers
+        log every non-2xx response as a console error.
+        """
+        selector = keys.preview(self.opts.mission, unit)
+        replies = self._ask(selector)
+        for reply in replies:
+            if reply.ok is not None:
+                result = decode_plan_result(reply.ok.payload.to_bytes())
+                body = msgspec.to_builtins(result)
+                body["eta_s"] = eta_s(result.length, self.model.speed_of(unit))
+                body["speed_mps"] = self.model.speed_of(unit)
+                return 200, {"unit": unit, "preview": body}
+        for reply in replies:
+            if reply.err is not None:
+                data = reply.err.payload.to_bytes()
+                try:
+                    err = decode_error_reply(data)
+                    return 200, {"unit": unit, "error": err.error, "field": err.field}
+                except InputError:
+                    return 200, {"unit": unit, "error": data.decode(errors="replace") or "no answer"}
+        return 200, {"unit": unit, "error": "no planner of this mission answered"}
+
+    # -- the pump --------------------------------------------------------------------
+    def _drain(self) -> list[Input]:
+        batch: list[Input] = []
+        while True:
+            try:
+                batch.append(self._inbox.get_nowait())
+            except queue.Empty:
+                return batch
+
+    def config_view(self) -> dict[str, Any]:
+        """What the page needs to draw: the mission, editing, and the frame (metres or lat/lon)."""
+        o = self.opts
+        return {
+            "mission": o.mission,
+            "allow_edit": o.allow_edit,
+            # the page projects with the same ENU plane as pfp_service.geo (map.js, enuToGeodetic)
+            "origin": None if o.origin is None else msgspec.to_builtins(o.origin),
+            "tiles": o.tiles,
+            "stale_s": o.stale_s,
+            "push_hz": o.push_hz,
+        }
+
+    def snapshot(self) -> dict[str, Any]:
+        return {**self.model.snapshot(self.clock()), "config": self.config_view()}
+
+    async def _send(self, browser: _Browser, text: str) -> None:
+        try:
+            await asyncio.wait_for(browser.ws.send_str(text), _SEND_TIMEOUT_S)
+            self.frames_sent += 1
+        except (TimeoutError, ConnectionError, RuntimeError):
+            browser.dropped = True
+            with contextlib.suppress(Exception):
+                await browser.ws.close()
+
+    async def tick(self) -> None:
+        """One pump step: apply what came, send the delta, then the snapshots to newcomers."""
+        now = self.clock()
+        self.model.apply(self._drain(), now)
+        delta = self.model.take_delta(now)
+        sends = []
+        if delta is not None and self._browsers:
+            text = msgspec.json.encode(delta).decode()
+            sends += [self._send(b, text) for b in self._browsers]
+        if self._joining:
+            text = msgspec.json.encode(self.snapshot()).decode()
+            sends += [self._send(b, text) for b in self._joining]
+            self._browsers += self._joining
+            self._joining = []
+        if sends:
+            await asyncio.gather(*sends)
+        self._browsers = [b for b in self._browsers if not (b.dropped or b.ws.closed)]
+
+    async def pump(self) -> None:
+        period = 1.0 / self.opts.push_hz
+        while True:
+            started = time.monotonic()
+            try:
+                await self.tick()
+            except Exception:  # the page must outlive any one bad tick
+                log.exception("map: tick failed")
+            await asyncio.sleep(max(0.0, period - (time.monotonic() - started)))
+
+    async def poll_status(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            try:
+                await loop.run_in_executor(None, self.ask_status)
+            except Exception as exc:  # a router restart: keep asking
+                log.warning("map: status query failed: %s", exc)
+            await asyncio.sleep(self.opts.status_period_s)
+
+    # -- HTTP --------------------------------------------------------------------------
+    def app(self) -> web.Application:
+        app = web.Application(client_max_size=64 * 1024)
+        app.router.add_get("/", self._index)
+        app.router.add_get("/ws", self._ws)
+        app.router.add_get("/api/state", self._state)
+        app.router.add_get("/api/preview/{unit}", self._preview)
+        app.router.add_put("/api/threat/{id}", self._put_threat)
+        app.router.add_delete("/api/threat/{id}", self._delete_threat)
+        app.router.add_put("/api/goal/{unit}", self._put_goal)
+        app.router.add_delete("/api/goal/{unit}", self._delete_goal)
+        app.router.add_static("/static/", STATIC_DIR)
+        return app
+
+    async def _index(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def _state(self, request: web.Request) -> web.Response:
+        return web.json_response(self.snapshot(), dumps=lambda o: msgspec.json.encode(o).decode())
+
+    async def _ws(self, request: web.Request) -> web.WebSocketResponse:
+        ws = web.WebSocketResponse(heartbeat=20.0)
+        await ws.prepare(request)
+        browser = _Browser(ws)
+        self._joining.append(browser)
+        async for msg in ws:  # the page sends nothing; read until it closes
+            if msg.type == WSMsgType.ERROR:
+                break
+        browser.dropped = True
+        return ws
+
+    async def _preview(self, request: web.Request) -> web.Response:
+        unit = request.match_info["unit"]
+        try:
+            keys.check_chunk(unit, "unit")
+        except InputError as exc:
+            return web.json_response({"error": exc.reason, "field": "unit"}, status=400)
+        loop = asyncio.get_running_loop()
+        try:
+            status, body = await loop.run_in_executor(None, self.ask_preview, unit)
+        except InputError as exc:
+            return web.json_response({"unit": unit, "error": str(exc)}, status=502)
+        return web.json_response(body, status=status)
+
+    def _edit_refused(self, request: web.Request) -> web.Response | None:
+        if not self.opts.allow_edit:
+            return web.json_response(
+                {"error": "editing is off (start pfp map with --allow-edit)"}, status=403
+            )
+        if request.headers.get(_EDIT_HEADER) != "1":
+            return web.json_response({"error": f"missing header {_EDIT_HEADER}: 1"}, status=403)
+        return None
+
+    async def _edit(
+        self, request: web.Request, key_of: Callable[[str], str], decode: Any | None
+    ) -> web.Response:
+        refused = self._edit_refused(request)
+        if refused is not None:
+            return refused
+        name = next(iter(request.match_info.values()))
+        try:
+            key = key_of(name)
+            msg = decode(await request.read()) if decode is not None else None
+        except InputError as exc:
+            return web.json_response({"error": exc.reason, "field": exc.path}, status=400)
+        loop = asyncio.get_running_loop()
+        if msg is None:
+            await loop.run_in_executor(None, self.session.delete, key)
+        else:
+            payload = encode(msg)
+            await loop.run_in_executor(
+                None, lambda: self.session.put(key, payload, encoding=zenoh_encoding())
+            )
+        log.info("map: %s %s", "put" if msg is not None else "delete", key)
+        return web.json_response({"ok": True, "key": key})
+
+    async def _put_threat(self, request: web.Request) -> web.Response:
+        return await self._edit(request, lambda t: keys.threat(self.opts.mission, t), decode_threat)
+
+    async def _delete_threat(self, request: web.Request) -> web.Response:
+        return await self._edit(request, lambda t: keys.threat(self.opts.mission, t), None)
+
+    async def _put_goal(self, request: web.Request) -> web.Response:
+        return await self._edit(request, lambda u: keys.unit_goal(self.opts.mission, u), decode_goal)
+
+    async def _delete_goal(self, request: web.Request) -> web.Response:
+        return await self._edit(request, lambda u: keys.unit_goal(self.opts.mission, u), None)
+
+
+async def serve(
+    session: Any,
+    opts: MapOptions,
+    stop: asyncio.Event | None = None,
+    say: Callable[[str], None] = print,
+) -> int:
+    """Serve the map on an open session until ``stop`` is set (or SIGTERM/SIGINT); returns 0.
+
+    Raises:
+        InputError: ``--http``, when the address cannot be bound.
+    """
+    stop = stop or asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):  # not the main thread
+            loop.add_signal_handler(sig, stop.set)
+    server = MapServer(session, opts)
+    server.declare()
+    runner = web.AppRunner(server.app(), handle_signals=False, access_log=None)
+    await runner.setup()
+    tasks: list[asyncio.Task[None]] = []
+    try:
+        site = web.TCPSite(runner, opts.host, opts.port)
+        try:
+            await site.start()
+        except OSError as exc:
+            raise InputError(
+                "--http", f"cannot listen on {opts.host}:{opts.port}: {exc.strerror or exc}"
+            ) from None
+        host, port = runner.addresses[0][:2]
+        shown = f"[{host}]" if ":" in host else host
+        answered = await loop.run_in_executor(None, server.ask_world)
+        say(
+            f"pfp map: mission {opts.mission} on http://{shown}:{port}/"
+            + (" (editing on)" if opts.allow_edit else "")
+            + (f"; {answered} planner(s) sent their world" if answered else "")
+        )
+        tasks = [asyncio.create_task(server.pump()), asyncio.create_task(server.poll_status())]
+        await stop.wait()
+    finally:
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await t
+        await runner.cleanup()
+        server.undeclare()
+    return 0

@@ -1,0 +1,624 @@
+// pfp map: the page.  It draws what the server pushes over /ws (a snapshot, then deltas at
+// a bounded rate) and talks to the mission only through the server's small HTTP API.
+// Positions arrive in mission metres (x east, y north); toLatLng() is the one place that
+// maps them onto the Leaflet map: CRS.Simple in metres, or lat/lon around the origin.
+"use strict";
+
+const STATUS_COLOURS = {
+  en_route: "#2e7d32",
+  escaping: "#f9a825",
+  arrived: "#1565c0",
+  trapped: "#c62828",
+  no_goal: "#8e24aa",
+  unknown: "#546e7a",
+  stale: "#9e9e9e",
+};
+const TRACK_MAX = 200;
+const EVENTS_SHOWN = 60;
+
+const state = {
+  config: null,
+  map: null,
+  offset: 0, // server clock minus ours, seconds
+  units: new Map(), // id -> {data, marker, track, look, goal}
+  threats: new Map(), // id -> {data, layers, label}
+  rejected: new Map(),
+  selectedUnit: null,
+  selectedThreat: null,
+  mode: null, // null | "drop-threat" | "move-threat" | "set-goal"
+  fitted: false,
+  frame: null, // the ENU frame of the origin, or null for plain metres
+  preview: null,
+  dropCount: 0,
+};
+window.pfpMap = state; // for tests and the curious: read-only by convention
+
+const $ = (id) => document.getElementById(id);
+const serverNow = () => Date.now() / 1000 + state.offset;
+const fmt = (v, digits = 1) => (v === null || v === undefined ? "–" : Number(v).toFixed(digits));
+const esc = (s) => String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
+
+function ageText(seconds) {
+  if (seconds === null || seconds === undefined || !isFinite(seconds)) return "–";
+  if (seconds < 60) return `${Math.max(0, Math.round(seconds))} s`;
+  if (seconds < 3600) return `${Math.floor(seconds / 60)} min ${Math.round(seconds % 60)} s`;
+  return `${(seconds / 3600).toFixed(1)} h`;
+}
+
+// -- frames ----------------------------------------------------------------------------
+// With an origin, mission metres are east/north on the WGS-84 ENU plane at the origin's
+// height, exactly as pfp_service/geo.py (pymap3d) defines them: geodetic -> ECEF -> ENU,
+// the up component dropped; the inverse finds the point of the plane's height with that
+// (e, n) by fixed-point passes on u.
+const WGS84_A = 6378137.0;
+const WGS84_F = 1 / 298.257223563;
+const WGS84_E2 = WGS84_F * (2 - WGS84_F);
+const RAD = Math.PI / 180;
+
+function geodeticToEcef(latDeg, lonDeg, h) {
+  const lat = latDeg * RAD, lon = lonDeg * RAD;
+  const s = Math.sin(lat), c = Math.cos(lat);
+  const n = WGS84_A / Math.sqrt(1 - WGS84_E2 * s * s);
+  return [(n + h) * c * Math.cos(lon), (n + h) * c * Math.sin(lon), (n * (1 - WGS84_E2) + h) * s];
+}
+
+function ecefToGeodetic(x, y, z) {
+  const lon = Math.atan2(y, x);
+  const p = Math.hypot(x, y);
+  let lat = Math.atan2(z, p * (1 - WGS84_E2));
+  let h = 0;
+  for (let i = 0; i < 8; i++) {
+    const s = Math.sin(lat);
+    const n = WGS84_A / Math.sqrt(1 - WGS84_E2 * s * s);
+    h = p / Math.cos(lat) - n;
+    lat = Math.atan2(z, p * (1 - (WGS84_E2 * n) / (n + h)));
+  }
+  return [lat / RAD, lon / RAD, h];
+}
+
+function frame(o) {
+  const lat = o.lat * RAD, lon = o.lon * RAD;
+  return { o, sl: Math.sin(lat), cl: Math.cos(lat), so: Math.sin(lon), co: Math.cos(lon), p0: geodeticToEcef(o.lat, o.lon, o.alt) };
+}
+
+function geodeticToEnu(f, latDeg, lonDeg, h) {
+  const [x, y, z] = geodeticToEcef(latDeg, lonDeg, h);
+  const dx = x - f.p0[0], dy = y - f.p0[1], dz = z - f.p0[2];
+  return [
+    -f.so * dx + f.co * dy,
+    -f.sl * f.co * dx - f.sl * f.so * dy + f.cl * dz,
+    f.cl * f.co * dx + f.cl * f.so * dy + f.sl * dz,
+  ];
+}
+
+function enuToGeodetic(f, e, n, u) {
+  const dx = -f.so * e - f.sl * f.co * n + f.cl * f.co * u;
+  const dy = f.co * e - f.sl * f.so * n + f.cl * f.so * u;
+  const dz = f.cl * n + f.sl * u;
+  return ecefToGeodetic(f.p0[0] + dx, f.p0[1] + dy, f.p0[2] + dz);
+}
+
+function toLatLng(p) {
+  const f = state.frame;
+  if (!f) return L.latLng(p[1], p[0]);
+  let u = 0;
+  for (let i = 0; i < 3; i++) {
+    const [lat, lon] = enuToGeodetic(f, p[0], p[1], u);
+    u = geodeticToEnu(f, lat, lon, f.o.alt)[2];
+  }
+  const [lat, lon] = enuToGeodetic(f, p[0], p[1], u);
+  return L.latLng(lat, ((lon + 540) % 360) - 180);
+}
+
+function toMetres(ll) {
+  const f = state.frame;
+  if (!f) return [ll.lng, ll.lat];
+  const [e, n] = geodeticToEnu(f, ll.lat, ll.lng, f.o.alt);
+  return [e, n];
+}
+
+// a point `dist` metres from p along a compass heading
+function along(p, headingDeg, dist) {
+  const b = (headingDeg * Math.PI) / 180;
+  return [p[0] + dist * Math.sin(b), p[1] + dist * Math.cos(b)];
+}
+
+function createMap(config) {
+  state.config = config;
+  state.frame = config.origin ? frame(config.origin) : null;
+  const geo = !!config.origin;
+  const map = L.map("map", {
+    crs: geo ? L.CRS.EPSG3857 : L.CRS.Simple,
+    minZoom: geo ? 2 : -5,
+    maxZoom: geo ? 22 : 8,
+    zoomSnap: 0.25,
+    preferCanvas: true,
+    attributionControl: !!config.tiles,
+  });
+  if (geo && config.tiles) {
+    L.tileLayer(config.tiles, { maxZoom: 22, attribution: "offline tiles" }).addTo(map);
+  }
+  if (geo) map.setView(toLatLng([0, 0]), 17);
+  else map.setView([0, 0], 2);
+  L.control.scale({ imperial: false, metric: true }).addTo(map);
+  state.layers = {
+    threats: L.layerGroup().addTo(map),
+    tracks: L.layerGroup().addTo(map),
+    look: L.layerGroup().addTo(map),
+    goals: L.layerGroup().addTo(map),
+    preview: L.layerGroup().addTo(map),
+    units: L.layerGroup().addTo(map),
+  };
+  state.renderer = L.canvas({ padding: 0.2 });
+  map.on("click", onMapClick);
+  map.on("mousemove", (e) => {
+    const [x, y] = toMetres(e.latlng);
+    $("cursor").textContent = `x ${x.toFixed(1)} m, y ${y.toFixed(1)} m` + (geo ? `  (${e.latlng.lat.toFixed(6)}, ${e.latlng.lng.toFixed(6)})` : "");
+  });
+  state.map = map;
+  $("mission").textContent = `mission ${config.mission}` + (geo ? ` · origin ${config.origin.lat}, ${config.origin.lon}` : " · metres (no origin)");
+  document.querySelectorAll(".edit-only").forEach((el) => (el.hidden = !config.allow_edit));
+  $("legend").innerHTML =
+    Object.entries(STATUS_COLOURS)
+      .map(([k, c]) => `<span class="sw" style="background:${c}"></span>${k.replace("_", " ")}`)
+      .join("") + ` &nbsp; ● manned ◆ unmanned`;
+}
+
+// -- units --------------------------------------------------------------------------------
+function unitColour(d) {
+  if (d.stale) return STATUS_COLOURS.stale;
+  return STATUS_COLOURS[d.status] || STATUS_COLOURS.unknown;
+}
+
+function unitSvg(d) {
+  const body =
+    d.kind === "unmanned"
+      ? `<rect class="body" x="-7" y="-7" width="14" height="14" transform="rotate(45)" />`
+      : `<circle class="body" r="8" />`;
+  return (
+    `<svg width="24" height="24" viewBox="-12 -12 24 24">` +
+    `<g class="arrow"><line x1="0" y1="0" x2="0" y2="-19" stroke="#111" stroke-width="2"/>` +
+    `<path d="M -4 -15 L 0 -22 L 4 -15 Z" fill="#111"/></g>` +
+    `<g class="shape" stroke="#fff" stroke-width="2">${body}</g></svg><span class="label"></span>`
+  );
+}
+
+function paintUnit(u) {
+  const d = u.data;
+  const el = u.marker.getElement();
+  if (!el) return;
+  el.classList.toggle("stale", !!d.stale);
+  el.classList.toggle("selected", state.selectedUnit === d.id);
+  el.dataset.status = d.stale ? "stale" : d.status || "unknown";
+  el.dataset.kind = d.kind || "";
+  el.querySelector(".shape").setAttribute("fill", unitColour(d));
+  el.querySelector(".shape").setAttribute("opacity", d.stale ? "0.55" : "1");
+  const arrow = el.querySelector(".arrow");
+  if (d.heading_deg === null || d.heading_deg === undefined || d.stale) arrow.setAttribute("visibility", "hidden");
+  else {
+    arrow.setAttribute("visibility", "visible");
+    arrow.setAttribute("transform", `rotate(${d.heading_deg})`);
+  }
+  const age = d.last_seen === null || d.last_seen === undefined ? null : serverNow() - d.last_seen;
+  el.querySelector(".label").textContent = d.stale ? `${d.id} · ${ageText(age)}` : d.id;
+}
+
+function upsertUnit(d, full) {
+  let u = state.units.get(d.id);
+  if (!u) {
+    u = { data: d, marker: null, track: null, look: null, lookDots: [], goal: null, points: [] };
+    state.units.set(d.id, u);
+  }
+  u.data = d;
+  if (full) u.points = (d.track || []).slice(-TRACK_MAX);
+  else if (d.track_add && d.track_add.length) {
+    u.points.push(...d.track_add);
+    if (u.points.length > TRACK_MAX) u.points.splice(0, u.points.length - TRACK_MAX);
+  }
+  if (!d.position) return; // heard of (a token, a direction) but never seen: nothing to draw yet
+  const ll = toLatLng(d.position);
+  if (!u.marker) {
+    const icon = L.divIcon({ className: "unit-icon", html: unitSvg(d), iconSize: [24, 24], iconAnchor: [12, 12] });
+    u.marker = L.marker(ll, { icon, keyboard: false, riseOnHover: true }).addTo(state.layers.units);
+    u.marker.on("click", (e) => {
+      L.DomEvent.stopPropagation(e);
+      selectUnit(d.id);
+    });
+    u.marker.getElement().dataset.unit = d.id;
+  } else {
+    u.marker.setLatLng(ll);
+  }
+  const colour = unitColour(d);
+  const trackLL = u.points.map(toLatLng);
+  if (!u.track) u.track = L.polyline(trackLL, { color: colour, weight: 2, opacity: 0.6, renderer: state.renderer, interactive: false }).addTo(state.layers.tracks);
+  else u.track.setLatLngs(trackLL).setStyle({ color: colour });
+  const lookLL = d.stale ? [] : [ll, ...(d.lookahead || []).map(toLatLng)];
+  if (!u.look) u.look = L.polyline(lookLL, { color: colour, weight: 2, dashArray: "3 4", opacity: 0.9, renderer: state.renderer, interactive: false }).addTo(state.layers.look);
+  else u.look.setLatLngs(lookLL).setStyle({ color: colour });
+  const dots = d.stale ? [] : d.lookahead || [];
+  while (u.lookDots.length > dots.length) state.layers.look.removeLayer(u.lookDots.pop());
+  dots.forEach((p, i) => {
+    if (i < u.lookDots.length) u.lookDots[i].setLatLng(toLatLng(p)).setStyle({ color: colour });
+    else u.lookDots.push(L.circleMarker(toLatLng(p), { radius: 2, color: colour, weight: 1, fillOpacity: 1, renderer: state.renderer, interactive: false }).addTo(state.layers.look));
+  });
+  if (d.goal) {
+    const gl = toLatLng(d.goal);
+    if (!u.goal) u.goal = L.circleMarker(gl, { radius: 5, color: "#000", weight: 2, fill: false, renderer: state.renderer }).bindTooltip(`goal of ${esc(d.id)}`).addTo(state.layers.goals);
+    else u.goal.setLatLng(gl);
+  } else if (u.goal) {
+    state.layers.goals.removeLayer(u.goal);
+    u.goal = null;
+  }
+  paintUnit(u);
+  if (state.selectedUnit === d.id) showUnit();
+}
+
+function removeUnit(id) {
+  const u = state.units.get(id);
+  if (!u) return;
+  if (u.marker) state.layers.units.removeLayer(u.marker);
+  if (u.track) state.layers.tracks.removeLayer(u.track);
+  if (u.look) state.layers.look.removeLayer(u.look);
+  u.lookDots.forEach((m) => state.layers.look.removeLayer(m));
+  if (u.goal) state.layers.goals.removeLayer(u.goal);
+  state.units.delete(id);
+  if (state.selectedUnit === id) closeUnit();
+}
+
+// -- threats --------------------------------------------------------------------------------
+function upsertThreat(d) {
+  removeThreat(d.id, true);
+  const pos = d.position;
+  const zone = L.polygon(d.zone.map(toLatLng), { color: "#d32f2f", weight: 1, dashArray: "4 3", fillColor: "#e53935", fillOpacity: 0.1 });
+  const layers = [zone];
+  if (d.core && d.core.length) layers.push(L.polygon(d.core.map(toLatLng), { color: "#b71c1c", weight: 1, fillColor: "#b71c1c", fillOpacity: 0.35 }));
+  const reach = 1.5 * d.sigma_range;
+  const tip = along(pos, d.facing_deg, reach);
+  const barbs = [along(tip, d.facing_deg + 150, 0.3 * reach), tip, along(tip, d.facing_deg - 150, 0.3 * reach)];
+  layers.push(L.polyline([toLatLng(pos), toLatLng(tip)], { color: "#4a0000", weight: 2 }));
+  layers.push(L.polyline(barbs.map(toLatLng), { color: "#4a0000", weight: 2 }));
+  const centre = L.circleMarker(toLatLng(pos), { radius: 4, color: "#4a0000", weight: 1, fillColor: "#fff", fillOpacity: 1 });
+  layers.push(centre);
+  centre.bindTooltip("", { permanent: true, direction: "right", offset: [6, 0], className: "threat-label" });
+  layers.forEach((l) => {
+    l.addTo(state.layers.threats);
+    l.on("click", (e) => {
+      L.DomEvent.stopPropagation(e);
+      selectThreat(d.id);
+    });
+  });
+  state.threats.set(d.id, { data: d, layers, centre });
+  paintThreat(state.threats.get(d.id));
+  if (state.selectedThreat === d.id) showThreat();
+}
+
+function threatTtl(d) {
+  return d.expires_at === null || d.expires_at === undefined ? null : d.expires_at - serverNow();
+}
+
+function paintThreat(t) {
+  const ttl = threatTtl(t.data);
+  const text = ttl === null ? t.data.id : `${t.data.id} · ${ageText(Math.max(0, ttl))}`;
+  t.centre.setTooltipContent(esc(text));
+}
+
+function removeThreat(id, replacing) {
+  const t = state.threats.get(id);
+  if (!t) return;
+  t.layers.forEach((l) => state.layers.threats.removeLayer(l));
+  state.threats.delete(id);
+  if (!replacing && state.selectedThreat === id) closeThreat();
+}
+
+// -- panels ------------------------------------------------------------------------------------
+function renderStatus(all) {
+  const rows = Object.values(all).map((s) => {
+    const age = serverNow() - s.received_at;
+    const cls = age > 5 ? "planner stale-status" : "planner";
+    return (
+      `<div class="${cls}"><b>${esc(s.planner)}</b> ${s.version ? esc(s.version) : ""} · up ${ageText(s.uptime_s)}` +
+      (age > 5 ? ` · <b>silent ${ageText(age)}</b>` : "") +
+      `<table><tr><td>units</td><td>${s.units} (${s.units_stale} stale)</td><td>threats</td><td>${s.threats}</td></tr>` +
+      `<tr><td>latency</td><td colspan="3">p50 ${fmt(s.latency_p50_ms, 2)} ms · p99 ${fmt(s.latency_p99_ms, 2)} ms</td></tr>` +
+      `<tr><td>msgs</td><td colspan="3">in ${s.msgs_in} · out ${s.msgs_out} · rejected ${s.rejected}</td></tr></table></div>`
+    );
+  });
+  $("status").innerHTML = rows.length ? rows.join("") : "no planner has answered yet";
+}
+
+function clock(t) {
+  return new Date(t * 1000).toLocaleTimeString([], { hour12: false });
+}
+
+function eventText(e) {
+  switch (e.kind) {
+    case "replan": {
+      const changes = (e.changes || []).map((c) => `${c.threat} ${c.change}`).join(", ");
+      const n = e.units.length + (e.more_units || 0);
+      return `replan: ${changes || esc(e.reason)}; ${n} unit${n === 1 ? "" : "s"} redirected`;
+    }
+    case "trapped":
+      return `${e.unit} trapped at (${fmt(e.position[0])}, ${fmt(e.position[1])})${e.reason ? ": " + e.reason : ""}`;
+    case "arrived":
+      return `${e.unit} arrived (${fmt(e.distance_to_goal, 2)} m from goal)`;
+    case "stale":
+      return `${e.unit} stale${e.reason ? ": " + e.reason : ""}`;
+    case "forgotten":
+      return `${e.unit} forgotten after ${ageText(e.stale_s)} stale`;
+    default:
+      return `${e.kind}`;
+  }
+}
+
+function addEvents(list) {
+  const ul = $("events");
+  for (const e of list) {
+    const li = document.createElement("li");
+    li.className = `ev-${e.kind}`;
+    li.innerHTML = `<span class="t">${clock(e.t)}</span>${esc(eventText(e))}`;
+    ul.prepend(li);
+  }
+  while (ul.children.length > EVENTS_SHOWN) ul.lastChild.remove();
+}
+
+function renderRejected() {
+  const items = [...state.rejected.values()].sort((a, b) => b.last_t - a.last_t);
+  $("rejected").innerHTML = items
+    .map(
+      (r) =>
+        `<li data-count="${r.count}"><span class="t">${clock(r.last_t)}</span>rejected ×${r.count}: ` +
+        `${esc(r.key_kind)} ${esc(r.field)}: ${esc(r.reason)} <span class="t">(last ${esc(r.last_key || "")})</span></li>`
+    )
+    .join("");
+}
+
+function row(k, v) {
+  return `<tr><td>${esc(k)}</td><td>${v}</td></tr>`;
+}
+
+function showUnit() {
+  const u = state.units.get(state.selectedUnit);
+  if (!u) return;
+  const d = u.data;
+  $("unit-panel").hidden = false;
+  $("unit-id").textContent = d.id;
+  const age = d.last_seen === null || d.last_seen === undefined ? null : serverNow() - d.last_seen;
+  $("unit-info").innerHTML =
+    row("kind", esc(d.kind || "?")) +
+    row("status", `<span style="color:${unitColour(d)}">■</span> ${esc(d.stale ? "stale" : d.status || "no direction yet")}`) +
+    (d.reason ? row("reason", esc(d.reason)) : "") +
+    row("position", d.position ? `${fmt(d.position[0])}, ${fmt(d.position[1])} m` : "–") +
+    row("heading", d.heading_deg === null ? "–" : `${fmt(d.heading_deg, 0)}°`) +
+    row("speed", d.speed_mps === null ? "–" : `${fmt(d.speed_mps)} m/s`) +
+    row("to goal", d.distance_to_goal === null ? "–" : `${fmt(d.distance_to_goal)} m`) +
+    row("threat level", fmt(d.threat_level, 3)) +
+    row("last report", age === null ? "never" : `${ageText(age)} ago`);
+}
+
+function showPreview(body) {
+  state.layers.preview.clearLayers();
+  state.preview = body;
+  const el = $("preview");
+  if (body.error) {
+    el.innerHTML = `<span class="err">${esc(body.error)}</span>`;
+    el.dataset.state = "error";
+    return;
+  }
+  const p = body.preview;
+  el.dataset.state = "ok";
+  el.innerHTML =
+    `<table>` +
+    row("status", esc(p.status)) +
+    row("reason", esc(p.reason || "–")) +
+    row("length", `${fmt(p.length)} m`) +
+    row("exposure", fmt(p.exposure, 3)) +
+    row("min clearance", p.min_clearance === null ? "no threat" : `${fmt(p.min_clearance, 2)} m`) +
+    row("ETA", p.eta_s === null ? "unknown speed" : `${ageText(p.eta_s)} at ${fmt(p.speed_mps)} m/s`) +
+    row("steps", `${p.steps} (${fmt(p.compute_ms, 0)} ms)`) +
+    (p.escapes && p.escapes.length ? row("escapes", esc(p.escapes.join(", "))) : "") +
+    `</table>`;
+  if (p.path && p.path.length > 1) {
+    L.polyline(p.path.map(toLatLng), { color: "#0d47a1", weight: 4, opacity: 0.75, dashArray: "8 6", interactive: false }).addTo(state.layers.preview);
+  }
+}
+
+async function fetchPreview() {
+  const id = state.selectedUnit;
+  if (!id) return;
+  $("preview").textContent = "asking the planner…";
+  $("preview").dataset.state = "pending";
+  try {
+    const r = await fetch(`/api/preview/${encodeURIComponent(id)}`);
+    const body = await r.json();
+    if (state.selectedUnit === id) showPreview(body);
+  } catch (err) {
+    if (state.selectedUnit === id) showPreview({ error: `map server unreachable (${err})` });
+  }
+}
+
+function selectUnit(id) {
+  closeThreat();
+  const prev = state.units.get(state.selectedUnit);
+  state.selectedUnit = id;
+  if (prev) paintUnit(prev);
+  const u = state.units.get(id);
+  if (u) paintUnit(u);
+  showUnit();
+  fetchPreview();
+}
+
+function closeUnit() {
+  const prev = state.units.get(state.selectedUnit);
+  state.selectedUnit = null;
+  if (prev) paintUnit(prev);
+  $("unit-panel").hidden = true;
+  state.layers.preview.clearLayers();
+  if (state.mode === "set-goal") setMode(null);
+}
+
+function showThreat() {
+  const t = state.threats.get(state.selectedThreat);
+  if (!t) return;
+  const d = t.data;
+  $("threat-panel").hidden = false;
+  $("threat-id").textContent = d.id;
+  const ttl = threatTtl(d);
+  $("threat-info").innerHTML =
+    row("position", `${fmt(d.position[0])}, ${fmt(d.position[1])} m`) +
+    row("facing", `${fmt(d.facing_deg, 0)}°`) +
+    row("σ range / lateral", `${fmt(d.sigma_range, 2)} / ${fmt(d.sigma_lateral, 2)} m`) +
+    row("skew, weight", `${fmt(d.skew, 2)}, ${fmt(d.weight, 2)}`) +
+    row("TTL left", ttl === null ? "none (until deleted)" : ageText(Math.max(0, ttl)));
+}
+
+function selectThreat(id) {
+  if (state.selectedUnit) closeUnit();
+  state.selectedThreat = id;
+  showThreat();
+}
+
+function closeThreat() {
+  state.selectedThreat = null;
+  $("threat-panel").hidden = true;
+  if (state.mode === "move-threat") setMode(null);
+}
+
+// -- editing: every edit is one put or delete on the mission's keys, through the server -----------
+function setMode(mode) {
+  state.mode = mode;
+  const text = { "drop-threat": "click the map to drop a threat", "move-threat": "click the map to move the threat", "set-goal": "click the map to set the goal" }[mode];
+  $("edit-mode").textContent = text || "";
+  if (state.map) state.map.getContainer().classList.toggle("edit-mode", !!mode);
+}
+
+async function edit(method, path, body) {
+  try {
+    const r = await fetch(path, {
+      method,
+      headers: { "Content-Type": "application/json", "X-PFP-Edit": "1" },
+      body: body === undefined ? undefined : JSON.stringify(body),
+    });
+    const out = await r.json();
+    $("edit-result").textContent = out.ok ? `${method === "DELETE" ? "deleted" : "put"} ${out.key}` : `refused: ${out.field ? out.field + ": " : ""}${out.error}`;
+    return !!out.ok;
+  } catch (err) {
+    $("edit-result").textContent = `map server unreachable (${err})`;
+    return false;
+  }
+}
+
+function num(id) {
+  const v = $(id).value.trim();
+  return v === "" ? null : Number(v);
+}
+
+function threatForm(position) {
+  const out = { position, facing_deg: num("new-facing") ?? 0, sigma_range: num("new-sr") ?? 3, sigma_lateral: num("new-sl") ?? 2, skew: num("new-skew") ?? 0 };
+  const ttl = num("new-ttl");
+  if (ttl !== null && ttl > 0) out.ttl_s = ttl;
+  return out;
+}
+
+function newThreatId() {
+  const given = $("new-id").value.trim();
+  if (given) return given;
+  let id;
+  do id = `map-${++state.dropCount}`;
+  while (state.threats.has(id));
+  return id;
+}
+
+function round2(p) {
+  return [Math.round(p[0] * 100) / 100, Math.round(p[1] * 100) / 100];
+}
+
+async function onMapClick(e) {
+  const p = round2(toMetres(e.latlng));
+  const mode = state.mode;
+  if (!mode) {
+    if (state.selectedUnit) closeUnit();
+    if (state.selectedThreat) closeThreat();
+    return;
+  }
+  setMode(null);
+  const m = encodeURIComponent;
+  if (mode === "drop-threat") await edit("PUT", `/api/threat/${m(newThreatId())}`, threatForm(p));
+  else if (mode === "move-threat" && state.threats.has(state.selectedThreat)) {
+    const d = state.threats.get(state.selectedThreat).data;
+    const body = { position: p, facing_deg: d.facing_deg, sigma_range: d.sigma_range, sigma_lateral: d.sigma_lateral, skew: d.skew, weight: d.weight };
+    if (d.ttl_s !== null) body.ttl_s = d.ttl_s;
+    await edit("PUT", `/api/threat/${m(d.id)}`, body);
+  } else if (mode === "set-goal" && state.selectedUnit) await edit("PUT", `/api/goal/${m(state.selectedUnit)}`, { position: p });
+}
+
+// -- the stream ----------------------------------------------------------------------------------
+function fitOnce() {
+  if (state.fitted) return;
+  const pts = [];
+  state.units.forEach((u) => u.data.position && pts.push(toLatLng(u.data.position)));
+  state.threats.forEach((t) => t.data.zone.forEach((p) => pts.push(toLatLng(p))));
+  if (!pts.length) return;
+  const b = L.latLngBounds(pts);
+  state.map.fitBounds(b.pad(0.25), { maxZoom: state.config.origin ? 19 : 4 });
+  state.fitted = true;
+}
+
+function apply(msg) {
+  state.offset = msg.now - Date.now() / 1000;
+  if (msg.type === "snapshot") {
+    if (!state.map) createMap(msg.config);
+    [...state.units.keys()].forEach(removeUnit);
+    [...state.threats.keys()].forEach((id) => removeThreat(id, false));
+    $("events").innerHTML = "";
+    state.rejected.clear();
+  }
+  const full = msg.type === "snapshot";
+  Object.values(msg.threats || {}).forEach(upsertThreat);
+  (msg.threats_removed || []).forEach((id) => removeThreat(id, false));
+  Object.values(msg.units || {}).forEach((d) => upsertUnit(d, full));
+  (msg.units_removed || []).forEach(removeUnit);
+  if (msg.events) addEvents(msg.events);
+  if (msg.rejected) {
+    Object.values(msg.rejected).forEach((r) => state.rejected.set(r.id, r));
+    renderRejected();
+  }
+  if (msg.status) {
+    state.status = Object.assign(state.status || {}, msg.status);
+    renderStatus(state.status);
+  }
+  fitOnce();
+  state.frames = (state.frames || 0) + 1;
+}
+
+function connect() {
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  ws.onopen = () => {
+    $("conn").textContent = "live";
+    $("conn").className = "conn up";
+  };
+  ws.onmessage = (ev) => apply(JSON.parse(ev.data));
+  ws.onclose = () => {
+    $("conn").textContent = "reconnecting";
+    $("conn").className = "conn down";
+    setTimeout(connect, 1000);
+  };
+}
+
+// ages and TTLs count down between deltas
+setInterval(() => {
+  state.units.forEach((u) => u.data.stale && u.marker && paintUnit(u));
+  state.threats.forEach(paintThreat);
+  if (state.selectedUnit) showUnit();
+  if (state.selectedThreat) showThreat();
+  if (state.status) renderStatus(state.status);
+}, 1000);
+
+$("unit-close").onclick = closeUnit;
+$("threat-close").onclick = closeThreat;
+$("preview-refresh").onclick = fetchPreview;
+$("threat-drop").onclick = () => setMode("drop-threat");
+$("threat-move").onclick = () => setMode("move-threat");
+$("threat-delete").onclick = () => state.selectedThreat && edit("DELETE", `/api/threat/${encodeURIComponent(state.selectedThreat)}`);
+$("goal-set").onclick = () => setMode("set-goal");
+$("goal-cancel").onclick = () => state.selectedUnit && edit("DELETE", `/api/goal/${encodeURIComponent(state.selectedUnit)}`);
+connect();
