@@ -32,7 +32,7 @@ import numpy as np
 
 from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
 from pfp_clients.inject import InjectReport, report_lines, run_inject
-from pfp_clients.script import AddThreat, load_script
+from pfp_clients.script import AddThreat, SetGoal, load_script
 from pfp_clients.sim import SimUnit
 from pfp_clients.team import load_team
 from pfp_service.core.metrics import measure
@@ -107,13 +107,19 @@ def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> N
     from pfp_service.render import plot_tracks
 
     latest: dict[str, Any] = {}
+    first: dict[str, Any] = {}
     for v in rep.watch.versions:
         latest[v.threat_id] = v.threat()
+        first.setdefault(v.threat_id, v.threat())
+    moved = [(first[t], latest[t]) for t in latest if first[t].xi != latest[t].xi]
     tracks: dict[str, Sequence[Sequence[float]]] = {u.id: [(p.x, p.y) for p in u.track] for u in fleet.units}
     goals: dict[str, Sequence[float]] = {u.id: u.spec.goal for u in fleet.units if u.spec.goal is not None}
+    old_goals: dict[str, Sequence[float]] = {}
     for f in rep.fired:  # goals the script gave
-        if type(f.step).__name__ == "SetGoal":
-            goals[f.step.unit] = f.step.position  # type: ignore[union-attr]
+        if isinstance(f.step, SetGoal):
+            if f.step.unit in goals and tuple(goals[f.step.unit]) != tuple(f.step.position):
+                old_goals.setdefault(f.step.unit, goals[f.step.unit])
+            goals[f.step.unit] = f.step.position
     marks = []
     for f in rep.fired:
         if f.where is not None and f.step.when is not None:
@@ -127,7 +133,17 @@ def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> N
         f"{held}/{len(rep.verdicts)} expectations held"
         + ("" if rep.ok and fleet.all_arrived else " - FAILED")
     )
-    plot_tracks(list(latest.values()), intensity, tracks, goals, out, title=title, marks=marks)
+    plot_tracks(
+        list(latest.values()),
+        intensity,
+        tracks,
+        goals,
+        out,
+        title=title,
+        marks=marks,
+        old_threats=moved,
+        old_goals=old_goals,
+    )
 
 
 def run_demo(opts: DemoOptions, say_line: Any = print) -> int:

@@ -1,4 +1,12 @@
-"""PNG plots of threat fields and paths (needs the ``plot`` extra: matplotlib)."""
+"""PNG plots of threat fields and paths (needs the ``plot`` extra: matplotlib).
+
+Every plot has the same furniture: threat level as filled contours with a
+colour bar, each threat at its peak with an arrow along its facing, start
+(circle) and goal (square) markers in the legend, and the legend beside the
+axes so it never covers the data.  Earlier positions of moved threats and
+earlier goals are drawn faded; a plan that did not reach its goal marks
+where it stopped, with the reason.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +21,7 @@ from pfp_service.core import PlanResult, Threat, ThreatField
 from pfp_service.errors import InputError
 from pfp_service.scenario import Scenario
 
-__all__ = ["check_png_path", "extent", "plot_plan", "plot_tracks"]
+__all__ = ["check_png_path", "extent", "facing", "peak", "plan_title", "plot_plan", "plot_tracks"]
 
 
 def _pyplot() -> Any:
@@ -43,7 +51,7 @@ def check_png_path(path: str | Path, what: str) -> Path:
 
 def _save(fig: Any, out: str | Path, what: str) -> None:
     try:
-        fig.savefig(out)
+        fig.savefig(out, bbox_inches="tight")  # the legend sits beside the axes
     except (OSError, ValueError) as exc:
         raise InputError(what, f"cannot write {out}: {exc}") from None
 
@@ -63,55 +71,175 @@ def extent(
     return x0 - pad, x1 + pad, y0 - pad, y1 + pad
 
 
-def _contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float], n: int = 220) -> None:
+def peak(threat: Threat, intensity: str, n: int = 161) -> tuple[float, float]:
+    """Where one threat's own level is highest: its mode, which a skewed threat has off ``xi``."""
+    r = 3.0 * max(threat.omega[0][0], threat.omega[1][1]) ** 0.5
+    x0, y0 = threat.xi
+    gx, gy = np.meshgrid(np.linspace(x0 - r, x0 + r, n), np.linspace(y0 - r, y0 + r, n))
+    level = ThreatField([threat], intensity).level(np.stack([gx, gy], axis=-1))  # type: ignore[arg-type]
+    i = np.unravel_index(int(np.argmax(level)), level.shape)
+    return float(gx[i]), float(gy[i])
+
+
+def facing(threat: Threat) -> tuple[float, float] | None:
+    """The unit vector a skewed threat faces (where its field reaches out); None without skew."""
+    ax, ay = threat.shape()
+    norm = float(np.hypot(ax, ay))
+    return None if norm == 0.0 else (ax / norm, ay / norm)
+
+
+def _contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float], n: int = 220) -> Any:
+    """Filled contours of the threat level; returns the mappable for a colour bar (None if flat)."""
     if not len(field):
-        return
+        return None
     x0, x1, y0, y1 = box
     gx, gy = np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n))
     level = field.level(np.stack([gx, gy], axis=-1))
     top = float(level.max())
     if top <= 0:
-        return
-    ax.contourf(gx, gy, level, levels=np.linspace(top * 0.02, top, 12), cmap="Reds", alpha=0.55)
+        return None
+    filled = ax.contourf(gx, gy, level, levels=np.linspace(top * 0.02, top, 12), cmap="Reds", alpha=0.55)
     ax.contour(gx, gy, level, levels=np.linspace(top * 0.05, top, 8), colors="darkred", linewidths=0.5)
+    return filled
 
 
-def _popup_marks(ax: Any, result: PlanResult) -> None:
-    for ev in result.events:
-        m = re.match(r"step (\d+):", ev)
-        if m and int(m[1]) < len(result.path):
-            x, y = result.path[int(m[1])]
-            ax.plot([x], [y], marker="*", color="orange", markersize=14, markeredgecolor="black", zorder=5)
+def _threat_marks(
+    ax: Any,
+    threats: Sequence[Threat],
+    intensity: str,
+    label: str = "",
+    faded: bool = False,
+    colour: str = "red",
+) -> None:
+    """Each threat at its peak with an arrow along its facing; faded ones are earlier positions."""
+    alpha = 0.35 if faded else 1.0
+    for t in threats:
+        px, py = peak(t, intensity)
+        ax.plot(
+            [px], [py], "^", color=colour, markeredgecolor="black", markersize=9, alpha=alpha, zorder=4,
+            linestyle="none",
+        )  # fmt: skip
+        d = facing(t)
+        if d is not None:
+            length = 1.5 * max(t.omega[0][0], t.omega[1][1]) ** 0.5
+            ax.annotate(
+                "",
+                xy=(px + length * d[0], py + length * d[1]),
+                xytext=(px, py),
+                arrowprops=dict(arrowstyle="-|>", color="black", lw=1.2, alpha=alpha),
+                zorder=4,
+            )
+        text = t.id + (f" {label}" if label else "")
+        ax.annotate(text, (px, py), textcoords="offset points", xytext=(6, 6), fontsize=8, alpha=alpha)
 
 
-def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path) -> None:
-    """Threat contours (all threats, pop-ups included), start, goal and the path."""
-    plt = _pyplot()
-    threats = [s.threat for s in scenario.schedule()]
-    field = ThreatField(threats, result.params.intensity)  # type: ignore[arg-type]
-    box = extent([scenario.start, scenario.goal, *result.path], threats)
-    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
-    _contours(ax, field, box)
-    for s in scenario.schedule():
-        t = s.threat
-        style = dict(marker="^", color="red" if s.appear_step == 0 else "orange", markeredgecolor="black")
-        ax.plot([t.xi[0]], [t.xi[1]], linestyle="none", markersize=9, **style)
-        label = t.id + (f" (step {s.appear_step})" if s.appear_step else "")
-        ax.annotate(label, t.xi, textcoords="offset points", xytext=(6, 6), fontsize=8)
-    path = np.asarray(result.path)
-    ax.plot(path[:, 0], path[:, 1], ".-", color="navy", markersize=2, linewidth=1, label="path")
-    _popup_marks(ax, result)
-    ax.plot(*scenario.start, "o", color="green", markersize=9, label="start")
-    ax.plot(*scenario.goal, "s", color="black", markersize=9, label="goal")
+def _legend(ax: Any, handles: list[Any]) -> None:
+    """The legend beside the axes, so it never covers a track, a goal or a threat."""
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
+
+
+def _proxies(plt: Any, *kinds: str) -> list[Any]:
+    """Legend entries for the markers (start, goal, threat ...), drawn in grey."""
+    from matplotlib.lines import Line2D
+
+    style: dict[str, dict[str, Any]] = {
+        "start": dict(marker="o", color="grey", label="start"),
+        "goal": dict(marker="s", color="grey", markeredgecolor="black", label="goal"),
+        "old goal": dict(marker="s", color="grey", alpha=0.35, label="goal before it changed"),
+        "threat": dict(marker="^", color="red", markeredgecolor="black", label="threat peak, arrow: facing"),
+        "popup": dict(marker="^", color="orange", markeredgecolor="black", label="pop-up threat"),
+        "old threat": dict(marker="^", color="red", alpha=0.35, label="threat before it moved"),
+        "struck": dict(
+            marker="*", color="orange", markeredgecolor="black", markersize=12, label="contingency"
+        ),
+        "stuck": dict(marker="X", color="black", markersize=10, label="where the plan stopped"),
+    }
+    return [Line2D([], [], linestyle="none", **{"markersize": 8, **style[k]}) for k in kinds]
+
+
+def _colourbar(fig: Any, ax: Any, mappable: Any) -> None:
+    if mappable is not None:
+        fig.colorbar(
+            mappable,
+            ax=ax,
+            orientation="horizontal",
+            fraction=0.04,
+            pad=0.08,
+            label="threat level",
+            format="%.2g",
+        )
+
+
+def _frame(ax: Any, box: tuple[float, float, float, float], title: str) -> None:
     ax.set_xlim(box[0], box[1])
     ax.set_ylim(box[2], box[3])
     ax.set_aspect("equal")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.set_title(
-        f"{scenario.name}: {result.status.value}, {result.steps} steps, exposure {result.exposure:.3g}"
-    )
-    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(title, fontsize=10)
+
+
+def _popup_marks(ax: Any, result: PlanResult) -> int:
+    """A star where the unit was when each pop-up threat appeared; returns how many."""
+    drawn = 0
+    for ev in result.events:
+        m = re.match(r"step (\d+):", ev)
+        if m and int(m[1]) < len(result.path):
+            x, y = result.path[int(m[1])]
+            ax.plot([x], [y], marker="*", color="orange", markersize=14, markeredgecolor="black", zorder=5)
+            drawn += 1
+    return drawn
+
+
+def plan_title(name: str, result: PlanResult) -> str:
+    """``paper: pfp (escape auto), reached, 144 steps, exposure 0.0133``; the optimal names its λ."""
+    if result.planner == "optimal":
+        planner = f"optimal (λ = {result.lam:g})" if result.lam is not None else "optimal"
+    else:
+        planner = f"pfp (escape {result.params.escape})"
+    return f"{name}: {planner}, {result.status.value}, {result.steps} steps, exposure {result.exposure:.3g}"
+
+
+def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path) -> None:
+    """Threat contours (all threats, pop-ups included), start, goal, the path, and where it stopped."""
+    plt = _pyplot()
+    intensity = result.params.intensity
+    schedule = scenario.schedule()
+    threats = [s.threat for s in schedule]
+    field = ThreatField(threats, intensity)  # type: ignore[arg-type]
+    box = extent([scenario.start, scenario.goal, *result.path], threats)
+    fig, ax = plt.subplots(figsize=(8.6, 7.4), dpi=110)
+    mappable = _contours(ax, field, box)
+    known = [s.threat for s in schedule if s.appear_step == 0]
+    _threat_marks(ax, known, intensity)
+    for s in schedule:
+        if s.appear_step:
+            _threat_marks(ax, [s.threat], intensity, label=f"(step {s.appear_step})", colour="orange")
+    path = np.asarray(result.path)
+    (line,) = ax.plot(path[:, 0], path[:, 1], ".-", color="navy", markersize=2, linewidth=1, label="path")
+    struck = _popup_marks(ax, result)
+    ax.plot(*scenario.start, "o", color="green", markersize=9)
+    ax.plot(*scenario.goal, "s", color="black", markersize=9)
+    kinds = ["start", "goal", "threat"]
+    if any(s.appear_step for s in schedule):
+        kinds.append("popup")
+    if struck:
+        kinds.append("struck")
+    if result.status.value != "reached":
+        x, y = result.path[-1]
+        ax.plot([x], [y], "X", color="black", markersize=12, zorder=6)
+        why = result.status.value + (f": {result.reason}" if result.reason else "")
+        ax.annotate(
+            why, (x, y), textcoords="offset points", xytext=(8, -14), fontsize=8, zorder=6,
+            bbox=dict(boxstyle="round", fc="white", ec="black", alpha=0.85),
+        )  # fmt: skip
+        kinds.append("stuck")
+    handles = [line, *_proxies(plt, *kinds)]
+    handles[1].set_color("green")
+    handles[2].set_color("black")
+    _frame(ax, box, plan_title(scenario.name, result))
+    _legend(ax, handles)
+    _colourbar(fig, ax, mappable)
     fig.tight_layout()
     try:
         _save(fig, out, "--plot")
@@ -127,34 +255,63 @@ def plot_tracks(
     out: str | Path,
     title: str = "",
     marks: Sequence[tuple[float, float, str]] = (),
+    old_threats: Sequence[tuple[Threat, Threat]] = (),
+    old_goals: dict[str, Sequence[float]] | None = None,
 ) -> None:
-    """Several units' tracks over one threat field, with labelled marks (e.g. contingencies)."""
+    """Several units' tracks over one threat field, with labelled marks (e.g. contingencies).
+
+    Args:
+        threats: the threats in force at the end, drawn at their peaks.
+        intensity: the field's intensity scale.
+        tracks: each unit's positions, in order.
+        goals: each unit's final goal.
+        out: the PNG to write.
+        title: the plot's title.
+        marks: ``(x, y, label)`` stars, e.g. where a contingency struck.
+        old_threats: ``(before, after)`` for each threat that moved: ``before`` is drawn faded,
+            with a dotted line to where it went.
+        old_goals: goals a unit had before it was given a new one, drawn faded.
+    """
     plt = _pyplot()
+    old_goals = old_goals or {}
     field = ThreatField(threats, intensity)  # type: ignore[arg-type]
-    pts = [p for tr in tracks.values() for p in tr] + list(goals.values())
-    box = extent(pts or [(0.0, 0.0)], threats)
-    fig, ax = plt.subplots(figsize=(8, 8), dpi=110)
-    _contours(ax, field, box)
-    for t in threats:
-        ax.plot([t.xi[0]], [t.xi[1]], "^", color="red", markeredgecolor="black", markersize=9)
-        ax.annotate(t.id, t.xi, textcoords="offset points", xytext=(6, 6), fontsize=8)
+    pts = [p for tr in tracks.values() for p in tr] + list(goals.values()) + list(old_goals.values())
+    box = extent(pts or [(0.0, 0.0)], [*threats, *(b for b, _ in old_threats)])
+    fig, ax = plt.subplots(figsize=(9.4, 8.4), dpi=110)
+    mappable = _contours(ax, field, box)
+    _threat_marks(ax, threats, intensity)
+    for before, after in old_threats:
+        _threat_marks(ax, [before], intensity, label="(before it moved)", faded=True)
+        (bx, by), (ax_, ay) = peak(before, intensity), peak(after, intensity)
+        ax.plot([bx, ax_], [by, ay], ":", color="black", alpha=0.5, linewidth=1)
+    handles = []
     for uid, tr in tracks.items():
         arr = np.asarray(tr, dtype=float).reshape(-1, 2)
         if len(arr):
             (line,) = ax.plot(arr[:, 0], arr[:, 1], "-", linewidth=1.2, label=uid)
-            ax.plot(arr[0, 0], arr[0, 1], "o", color=line.get_color(), markersize=6)
+            handles.append(line)
+            colour = line.get_color()
+            ax.plot(arr[0, 0], arr[0, 1], "o", color=colour, markersize=6)
             if uid in goals:
-                ax.plot(*goals[uid], "s", color=line.get_color(), markeredgecolor="black", markersize=8)
+                ax.plot(*goals[uid], "s", color=colour, markeredgecolor="black", markersize=8)
+            if uid in old_goals:
+                ax.plot(*old_goals[uid], "s", color=colour, alpha=0.35, markersize=8)
+                if uid in goals:
+                    (gx, gy), (hx, hy) = old_goals[uid], goals[uid]
+                    ax.plot([gx, hx], [gy, hy], ":", color=colour, alpha=0.5, linewidth=1)
     for x, y, label in marks:
         ax.plot([x], [y], marker="*", color="orange", markersize=15, markeredgecolor="black", zorder=5)
         ax.annotate(label, (x, y), textcoords="offset points", xytext=(8, -12), fontsize=8)
-    ax.set_xlim(box[0], box[1])
-    ax.set_ylim(box[2], box[3])
-    ax.set_aspect("equal")
-    ax.set_xlabel("x east (m)")
-    ax.set_ylabel("y north (m)")
-    ax.set_title(title)
-    ax.legend(loc="lower right", fontsize=8)
+    kinds = ["start", "goal", "threat"]
+    if old_goals:
+        kinds.append("old goal")
+    if old_threats:
+        kinds.append("old threat")
+    if marks:
+        kinds.append("struck")
+    _frame(ax, box, title)
+    _legend(ax, handles + _proxies(plt, *kinds))
+    _colourbar(fig, ax, mappable)
     fig.tight_layout()
     try:
         _save(fig, out, "--out")
