@@ -222,6 +222,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "step": ("positive", OPT),
         "tolerance": ("positive", OPT),
         "max_iter": ("iterations", OPT),
+        "geojson": ("bool", DEF),
     },
     "direction": {
         "unit": ("id", REQ),

@@ -12,6 +12,7 @@ max_iter, out_of_bounds, invalid); 2 bad input (file or flag).
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -34,6 +35,18 @@ def register(sub: Any) -> None:
     p.add_argument("scenario", help="scenario file (.yaml, .yml or .json)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a summary")
     p.add_argument("--plot", metavar="PNG", help="write threat contours, start, goal and path to PNG")
+    p.add_argument(
+        "--geojson",
+        metavar="FILE",
+        help="write path, threats and their zones as RFC 7946 GeoJSON (needs the scenario's origin)",
+    )
+    p.add_argument(
+        "--zone-level",
+        type=_share,
+        default=0.1,
+        metavar="F",
+        help="--geojson: zone outline at this share of each threat's peak, 0 to 1 exclusive (default 0.1)",
+    )
     p.add_argument(
         "--repeat", type=positive_int, default=1, metavar="N", help="compute_ms is the median of N runs"
     )
@@ -76,6 +89,16 @@ PFP_ONLY = ("delta", "step", "tolerance", "max_iter", "escape")
 OPTIMAL_ONLY = ("lam", "cells")
 
 
+def _share(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 1 (exclusive), got {text!r}")
+    return v
+
+
 def _flag(dest: str) -> str:
     return "--lambda" if dest == "lam" else "--" + dest.replace("_", "-")
 
@@ -104,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
+    from pfp_service.errors import InputError
     from pfp_service.render import summary
     from pfp_service.scenario import load_scenario
 
@@ -114,7 +138,13 @@ def run(args: argparse.Namespace) -> int:
         from pfp_service.render import check_png_path
 
         check_png_path(args.plot, "--plot")
+    if args.geojson:
+        from pfp_service.geojson import check_geojson_path
+
+        check_geojson_path(args.geojson)
     scenario = load_scenario(args.scenario)
+    if args.geojson and scenario.origin is None:
+        raise InputError("--geojson", f"{args.scenario} has no origin: add origin: {{lat: …, lon: …}}")
     params = scenario.planner.to_params().merged(
         delta=args.delta,
         step=args.step,
@@ -147,6 +177,10 @@ def run(args: argparse.Namespace) -> int:
         from pfp_service.render import plot_plan
 
         plot_plan(scenario, result, args.plot)
+    if args.geojson:
+        from pfp_service import geojson
+
+        geojson.write(args.geojson, geojson.scenario_collection(scenario, result, args.zone_level))
     if args.json:
         sys.stdout.write(msgspec.json.encode(result).decode() + "\n")
     else:

@@ -240,6 +240,9 @@ class PreviewRequest(_Message, frozen=True, kw_only=True):
     No body (or ``{}``) previews the unit's live state to its live goal.  Any
     field given makes it a what-if: ``start`` and ``goal`` replace the unit's,
     ``threats`` are added to the live ones, and the live world is unchanged.
+    ``geojson: true`` asks for the reply as an RFC 7946 FeatureCollection
+    (``pfp_service.geojson``) instead of the plan object; it needs a mission
+    origin, and by itself it does not make the preview a what-if.
     """
 
     start: Point | None = None
@@ -249,14 +252,15 @@ class PreviewRequest(_Message, frozen=True, kw_only=True):
     step: Positive | None = None
     tolerance: Positive | None = None
     max_iter: Iterations | None = None
+    geojson: bool = False
 
     def __post_init__(self) -> None:
         _duplicate_ids(self.threats)
 
     @property
     def what_if(self) -> bool:
-        """True when anything was asked beyond the live preview."""
-        return self != PreviewRequest()
+        """True when anything was asked beyond the live preview (the reply's form does not count)."""
+        return self != PreviewRequest(geojson=self.geojson)
 
 
 # -- planner -> unit and replies ------------------------------------------------

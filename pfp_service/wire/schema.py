@@ -80,7 +80,8 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "reply",
         "planner",
         "any",
-        "the same object as `pfp plan --json`",
+        "the same object as `pfp plan --json`; with `geojson: true` in the request, an RFC 7946 "
+        "FeatureCollection (path, threats, zones) in WGS-84",
     ),
     MessageSpec(
         "error_reply",

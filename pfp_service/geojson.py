@@ -1,0 +1,265 @@
+"""GeoJSON export (RFC 7946): a plan, its threats and their zones as one FeatureCollection.
+
+Coordinates are ``[lon, lat]`` WGS-84 degrees rounded to ``DECIMALS`` (1e-7
+degrees, about a centimetre), from planner metres through the mission
+``Origin``.  The collection holds:
+
+- the path as a LineString (``kind: path``) with the plan's metrics;
+- the start and the goal as Points (``kind: start`` / ``goal``);
+- each threat as a Point at its position (``kind: threat``) with its parameters;
+- each threat's zone (``kind: zone``), the region where its own level is at
+  least ``level`` of its peak (default 10 %), and its core (``kind: core``), the
+  half-maximum region the escapes never enter (``core.cores.CORE_FRACTION``).
+
+Zones are traced as polygons of ``ZONE_VERTICES`` points: a skew-normal
+density is log-concave, so each level set is convex and every ray from the
+mode crosses its boundary once, found by bisection.  Rings are closed and run
+counter-clockwise (the right-hand rule of RFC 7946 section 3.1.6).  The
+module computes values; only ``write`` touches the file system (``pfp plan --geojson``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import msgspec
+import numpy as np
+
+from pfp_service.core.cores import CORE_FRACTION, Cores
+from pfp_service.core.threat import Threat, ThreatField, skew_normal_mode
+from pfp_service.errors import InputError
+from pfp_service.geo import Origin
+
+if TYPE_CHECKING:
+    from pfp_service.core.plan import PlanResult
+    from pfp_service.scenario import Scenario
+
+__all__ = [
+    "DECIMALS",
+    "ZONE_LEVEL",
+    "ZONE_VERTICES",
+    "check_geojson_path",
+    "feature_collection",
+    "scenario_collection",
+    "threat_mode",
+    "write",
+    "zone_ring",
+]
+
+DECIMALS = 7
+ZONE_LEVEL = 0.1
+ZONE_VERTICES = 96
+_BISECTIONS = 60
+METRICS = (
+    "status",
+    "reason",
+    "steps",
+    "length",
+    "exposure",
+    "peak_threat",
+    "min_clearance",
+    "final_distance",
+)
+
+
+def threat_mode(t: Threat) -> tuple[float, float]:
+    """Where a threat's density peaks: ``xi + Omega a v / q`` (see ``Threat.peak_density``)."""
+    (o00, o01), (_, o11) = t.omega
+    ax, ay = t.shape()
+    oax, oay = o00 * ax + o01 * ay, o01 * ax + o11 * ay
+    q = math.sqrt(max(ax * oax + ay * oay, 0.0))
+    if q == 0.0:
+        return t.xi
+    v = skew_normal_mode(q)
+    return t.xi[0] + oax * v / q, t.xi[1] + oay * v / q
+
+
+def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndarray:
+    """The boundary of ``{x : t(x) >= level * max t}`` as ``(vertices, 2)`` metres, counter-clockwise.
+
+    Args:
+        t: a threat of positive weight.
+        level: the share of the peak, strictly between 0 and 1.
+        vertices: points on the ring (it is not closed here).
+
+    Raises:
+        ValueError: ``level`` outside (0, 1) or a weightless threat (it has no zone).
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level: must be strictly between 0 and 1, got {level}")
+    if not t.weight > 0.0:
+        raise ValueError(f"threat {t.id!r}: a threat of weight 0 has no zone")
+    cores = Cores(ThreatField([t]))
+    mx, my = threat_mode(t)
+    theta = 2.0 * math.pi * np.arange(vertices) / vertices  # from east, counter-clockwise
+    d = np.column_stack([np.cos(theta), np.sin(theta)])
+    (o00, _), (_, o11) = t.omega
+    lo = np.zeros(vertices)
+    hi = np.full(vertices, math.sqrt(max(o00, o11)))
+    for _ in range(64):  # grow until every ray has left the zone; a Gaussian tail does within ~10 sigma
+        outside = cores.ratio(np.array([mx, my]) + hi[:, None] * d)[0] < level
+        if outside.all():
+            break
+        hi = np.where(outside, hi, 2.0 * hi)
+    for _ in range(_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        inside = cores.ratio(np.array([mx, my]) + mid[:, None] * d)[0] >= level
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    r = 0.5 * (lo + hi)
+    return np.array([mx, my]) + r[:, None] * d
+
+
+def _lonlat(origin: Origin, xy: np.ndarray) -> list[list[float]]:
+    ll = origin.to_geodetic_many(np.asarray(xy, dtype=float).reshape(-1, 2))
+    out: list[list[float]] = []
+    for lat, lon in ll:
+        p = [round(float(lon), DECIMALS), round(float(lat), DECIMALS)]
+        if not out or p != out[-1]:  # rounding may merge neighbours; a ring repeats only its first
+            out.append(p)
+    return out
+
+
+def _ring(origin: Origin, xy: np.ndarray) -> list[list[float]]:
+    ring = _lonlat(origin, xy)
+    if ring[-1] == ring[0]:
+        ring.pop()
+    return [*ring, ring[0]]
+
+
+def _feature(geometry: dict[str, Any], properties: dict[str, Any]) -> dict[str, Any]:
+    return {"type": "Feature", "geometry": geometry, "properties": properties}
+
+
+def _point(origin: Origin, xy: Sequence[float], properties: dict[str, Any]) -> dict[str, Any]:
+    (coords,) = _lonlat(origin, np.array([xy]))
+    return _feature({"type": "Point", "coordinates": coords}, properties)
+
+
+def feature_collection(
+    origin: Origin,
+    threats: Sequence[Threat],
+    result: PlanResult | None = None,
+    *,
+    start: Sequence[float] | None = None,
+    goal: Sequence[float] | None = None,
+    level: float = ZONE_LEVEL,
+    threat_properties: Mapping[str, Mapping[str, Any]] | None = None,
+    name: str = "",
+) -> dict[str, Any]:
+    """The RFC 7946 FeatureCollection of a plan (as a dict for ``json.dumps``).
+
+    Args:
+        origin: the mission origin; every position is metres from it.
+        threats: the threats to draw (points, zones and cores).
+        result: the plan, drawn as a LineString with its metrics; ``None`` draws threats only.
+        start: the start, drawn as a Point when given.
+        goal: the goal, drawn as a Point when given.
+        level: the zone's share of each threat's peak, strictly between 0 and 1.
+        threat_properties: extra properties by threat id (e.g. the file's facing and sigmas).
+        name: the collection's name (a foreign member, as RFC 7946 section 6.1 allows).
+
+    Raises:
+        ValueError: ``level`` outside (0, 1).
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level: must be strictly between 0 and 1, got {level}")
+    features: list[dict[str, Any]] = []
+    if result is not None and len(result.path) >= 2:
+        props: dict[str, Any] = {"kind": "path"}
+        for k in METRICS:
+            v = getattr(result, k)
+            props[k] = v.value if hasattr(v, "value") else v
+        props["compute_ms"] = result.compute_ms
+        line = _lonlat(origin, np.asarray(result.path))
+        if len(line) < 2:  # a path shorter than the rounding: still a valid LineString
+            line = [line[0], line[0]]
+        features.append(_feature({"type": "LineString", "coordinates": line}, props))
+    if start is not None:
+        features.append(_point(origin, start, {"kind": "start"}))
+    if goal is not None:
+        features.append(_point(origin, goal, {"kind": "goal"}))
+    extra = threat_properties or {}
+    for t in threats:
+        tp: dict[str, Any] = {
+            "kind": "threat",
+            "id": t.id,
+            "weight": t.weight,
+            "omega": [list(t.omega[0]), list(t.omega[1])],
+            "alpha": list(t.alpha),
+            **extra.get(t.id, {}),
+        }
+        features.append(_point(origin, t.xi, tp))
+        if t.weight <= 0.0:
+            continue
+        for kind, share in (("zone", level), ("core", CORE_FRACTION)):
+            ring = _ring(origin, zone_ring(t, share))
+            features.append(
+                _feature(
+                    {"type": "Polygon", "coordinates": [ring]}, {"kind": kind, "id": t.id, "level": share}
+                )
+            )
+    out: dict[str, Any] = {"type": "FeatureCollection", "features": features}
+    if name:
+        out["name"] = name
+    return out
+
+
+def check_geojson_path(path: str | Path, what: str = "--geojson") -> Path:
+    """Refuse, before any work is done, an output path that cannot take GeoJSON.
+
+    Raises:
+        InputError: naming ``what``, when the suffix is not ``.geojson``/``.json`` or the folder is missing.
+    """
+    p = Path(path)
+    if p.suffix.lower() not in (".geojson", ".json"):
+        raise InputError(what, f"{path}: must end in .geojson or .json")
+    if not p.parent.is_dir():
+        raise InputError(what, f"{path}: folder {p.parent} does not exist")
+    return p
+
+
+def scenario_collection(
+    scenario: Scenario, result: PlanResult | None, level: float = ZONE_LEVEL
+) -> dict[str, Any]:
+    """``feature_collection`` of a scenario file's plan, its threats carrying the file's parameters.
+
+    Raises:
+        InputError: at ``origin``, when the scenario has none (GeoJSON is WGS-84 only).
+    """
+    if scenario.origin is None:
+        raise InputError("origin", "GeoJSON needs the scenario's origin: add origin: {lat: …, lon: …}")
+    props: dict[str, dict[str, Any]] = {}
+    for i, spec in enumerate(scenario.threats):
+        user = {
+            k: v
+            for k, v in msgspec.structs.asdict(spec).items()
+            if v is not None and k not in ("id", "position")
+        }
+        props[spec.id or f"t{i + 1}"] = user
+    threats = [s.threat for s in scenario.schedule()]
+    return feature_collection(
+        scenario.origin,
+        threats,
+        result,
+        start=scenario.start,
+        goal=scenario.goal,
+        level=level,
+        threat_properties=props,
+        name=scenario.name,
+    )
+
+
+def write(path: str | Path, collection: dict[str, Any], what: str = "--geojson") -> None:
+    """Write ``collection`` as UTF-8 JSON.
+
+    Raises:
+        InputError: naming ``what``, when the file cannot be written.
+    """
+    try:
+        Path(path).write_text(json.dumps(collection, ensure_ascii=False) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise InputError(what, f"cannot write {path}: {exc.strerror or exc}") from None
