@@ -82,7 +82,7 @@ def test_paper_instance_live_and_preview_matches(planner, mission):
         first = u.inbox.get(where=lambda d: d["status"] == "en_route")
         assert len(first["lookahead"]) == 5
         pv = u.preview()
-        assert pv["status"] == "reached"
+        assert pv["status"] == "reached", pv["reason"]
         step = pv["params"]["step"]
         for _ in range(400):
             d = u.report()
@@ -237,3 +237,27 @@ def test_sigterm_shuts_down_cleanly(mission):
     assert took < 2.0
     r = run_pfp("health", "--connect", endpoint, "--mission", mission, "--timeout", "0.5", timeout=30)
     assert r.returncode == 1
+
+
+def test_status_and_world_replies_come_from_the_planners_own_keys(planner, mission):
+    endpoint, _ = planner
+    with client(endpoint) as s:
+        _setup(s, mission, {"e1": E1})
+        u = Unit(s, mission, "u1")
+        put_json(s, f"mumt/{mission}/unit/u1/goal", {"position": [10, 10]})
+        u.report()
+        deadline = time.monotonic() + 10
+        while True:  # the world reply reflects the goal once the planner has applied it
+            (r,) = list(s.get(f"mumt/{mission}/planner/*/world", timeout=5))
+            assert str(r.ok.key_expr) == f"mumt/{mission}/planner/planner/world"
+            snap = json.loads(r.ok.payload.to_bytes())
+            if snap["units"] and snap["units"][0].get("goal"):
+                break
+            assert time.monotonic() < deadline, snap
+            time.sleep(0.05)
+        assert [t["id"] for t in snap["threats"]] == ["e1"] and snap["units"][0]["id"] == "u1"
+        assert snap["units"][0]["status"] == "en_route" and snap["units_total"] == 1
+        (r,) = list(s.get(f"mumt/{mission}/planner/*/status", timeout=5))
+        assert str(r.ok.key_expr) == f"mumt/{mission}/planner/planner/status"
+        status = json.loads(r.ok.payload.to_bytes())
+        assert status["units"] == 1 and status["threats"] == 1

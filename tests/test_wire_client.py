@@ -159,8 +159,21 @@ BUILT: dict[str, list[dict[str, Any]]] = {
         {"kind": "replan", "units": ["ugv-7"], "reason": "threat t1 moved", "t": 1767225600.0},
         {"kind": "trapped", "unit": "ugv-7", "position": [1, 2]},
         {"kind": "arrived", "unit": "ugv-7", "position": [1, 2], "distance_to_goal": 0.01},
+        {"kind": "stale", "unit": "ugv-7", "position": [1, 2], "reason": "silent for 10 s"},
+        {"kind": "forgotten", "unit": "ugv-7", "stale_s": 600},
     ],
     "preview_reply": [],  # only planners build these; the example stands in
+    "world_snapshot": [
+        {"planner": "p-1", "mission": MISSION},
+        {
+            "planner": "p-1",
+            "mission": MISSION,
+            "units": [{"id": "ugv-7", "status": "en_route", "position": [1, 2], "last_seen_s": 0.5}],
+            "threats": [{"id": "t1", "threat": {"position": [4, 6], "sigma_range": 1, "sigma_lateral": 1}}],
+            "units_total": 1,
+            "threats_total": 1,
+        },
+    ],
 }
 
 

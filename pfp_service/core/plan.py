@@ -1,8 +1,13 @@
-"""The preview driver: move a simulated unit along the stepper's directions.
+"""The simulating driver: move a simulated unit along the stepper's directions.
 
-``plan()`` is the whole-path answer (``pfp plan``, the preview queryable).  It
-uses the very ``Stepper`` the live daemon uses, so a preview is what the live
-stream will do for a unit that moves exactly ``step`` along each direction.
+``walk()`` is the one loop that moves a simulated unit; ``walk_many()`` is
+the same for many units under one field, vectorised.  ``plan()`` is the
+whole-path answer (``pfp plan``, the preview queryable) built on ``walk``.
+It uses the very ``Stepper`` the live daemon uses -- given one, the live
+unit's own detached copy, mid-escape included -- so a preview is what the
+live stream will do for a unit that moves exactly ``step`` along each
+direction.  The live direction's look-ahead points are ``walk_many`` on
+ghosts of the live steppers.
 """
 
 from __future__ import annotations
@@ -16,10 +21,10 @@ import numpy as np
 
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
-from pfp_service.core.stepper import Bounds, Stepper, StepStatus
+from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus, advise_many
 from pfp_service.core.threat import Threat, ThreatField
 
-__all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan"]
+__all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan", "walk", "walk_many"]
 
 
 class PlanStatus(StrEnum):
@@ -63,7 +68,8 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     counts trapped verdicts (escaped, final, or foreseen and gone round);
     ``escape_steps`` counts steps taken while escaping.  ``planner`` is
     ``pfp`` or ``optimal``; ``lambda`` is the optimal planner's exposure
-    weight (``None`` for ``pfp``).
+    weight (``None`` for ``pfp``).  ``path_decimated`` is true when ``path``
+    was thinned to fit a reply (``steps`` still counts every step).
     """
 
     status: PlanStatus
@@ -83,6 +89,7 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     escape_steps: int = 0
     planner: str = "pfp"
     lam: float | None = msgspec.field(default=None, name="lambda")
+    path_decimated: bool = False
 
 
 def _field_at(
@@ -95,6 +102,70 @@ def _field_at(
     return cache[key]
 
 
+def walk(
+    stepper: Stepper,
+    field: ThreatField,
+    track: list[tuple[float, float]],
+    steps: int,
+    deadline: Callable[[], bool] | None = None,
+) -> tuple[Advice | None, int]:
+    """Advise and move ``steps`` times from ``track[-1]``, appending each new position.
+
+    Returns:
+        ``(advice, moved)``: the terminal advice that stopped the walk (``None``
+        when all ``steps`` were taken, or the deadline passed) and the moves made.
+        ``deadline()`` is asked every 64 moves; true stops the walk.
+    """
+    x, y = track[-1]
+    step = stepper.params.step
+    if stepper.pending is not None:  # a deferring copy: what the unit does once it lands
+        stepper.deliberate(field)
+    stepper.defer = False
+    for k in range(steps):
+        adv = stepper.advise(field, x, y)
+        if adv.status.terminal:
+            return adv, k
+        x += step * adv.dx
+        y += step * adv.dy
+        track.append((x, y))
+        if deadline is not None and (k + 1) % 64 == 0 and deadline():
+            return None, k + 1
+    return None, steps
+
+
+def walk_many(
+    ghosts: list[Stepper], field: ThreatField, starts: np.ndarray, steps: int
+) -> list[list[tuple[float, float]]]:
+    """``walk`` for many ghosts under one field: ``steps`` vectorised advisories each.
+
+    Args:
+        ghosts: predicting steppers (``Stepper.ghost()``), one per unit; they are moved.
+        starts: ``(N, 2)`` first positions.
+
+    Returns:
+        Each ghost's track, its start first, ending early at a terminal advice.
+    """
+    pts = np.array(starts, dtype=np.float64).reshape(-1, 2)
+    tracks = [[(float(x), float(y))] for x, y in pts.tolist()]
+    live = list(range(len(ghosts)))
+    for _ in range(steps):
+        if not live:
+            break
+        advs = advise_many([ghosts[i] for i in live], field, pts[live])
+        keep = []
+        for i, adv in zip(live, advs):
+            if adv.status.terminal:
+                continue
+            step = ghosts[i].params.step
+            x, y = tracks[i][-1]
+            x, y = x + step * adv.dx, y + step * adv.dy
+            tracks[i].append((x, y))
+            pts[i] = (x, y)
+            keep.append(i)
+        live = keep
+    return tracks
+
+
 def plan(
     start: tuple[float, float],
     goal: tuple[float, float],
@@ -104,6 +175,8 @@ def plan(
     clock: Callable[[], float] | None = None,
     origin: tuple[float, float] | None = None,
     budget_s: float | None = None,
+    stepper: Stepper | None = None,
+    first_move: tuple[float, float] | None = None,
 ) -> PlanResult:
     """Plan a path from ``start`` to ``goal`` among scheduled threats.
 
@@ -117,12 +190,21 @@ def plan(
             The live daemon's previews pass the unit's origin so they match its stream.
         budget_s: stop with ``max_iter`` once this much ``clock`` time is spent
             (checked every 64 steps; needs ``clock``).
+        stepper: drive this stepper (a live unit's detached copy) instead of a
+            fresh one; its goal, origin, parameters and state are used, and
+            ``params``, ``bounds`` and ``origin`` are ignored.
+        first_move: the unit vector the stepper already gave at ``start``
+            (a live unit's last direction): the first step takes it without
+            advising again, as the live unit does.
 
     Returns:
         A ``PlanResult``; failure is a status, never an exception.
     """
     t0 = clock() if clock else 0.0
     schedule = sorted(schedule, key=lambda s: s.appear_step)
+    if stepper is not None:
+        params = stepper.params
+        goal = stepper.goal
     if params is None:
         params = PlannerParams()
     if isinstance(params, PlannerParams):
@@ -133,36 +215,48 @@ def plan(
     epochs: list[Epoch] = []
     epoch_start = 0
     events: list[str] = []
-    stepper = Stepper(origin if origin is not None else start, goal, params, bounds)
-    x, y = float(start[0]), float(start[1])
-    track = [(x, y)]
-    step = params.step
+    if stepper is None:
+        stepper = Stepper(origin if origin is not None else start, goal, params, bounds)
+    track = [(float(start[0]), float(start[1]))]
+    k = 0
+    if first_move is not None and params.max_iter > 0:
+        track.append((track[0][0] + params.step * first_move[0], track[0][1] + params.step * first_move[1]))
+        k = 1
     status = PlanStatus.MAX_ITER
     reason = f"max_iter ({params.max_iter}) reached"
-    next_pop = appear_steps.pop(0) if appear_steps else -1
-    k = 0
+    spent = None
+    if budget_s is not None and clock is not None:
+        t_end = t0 + budget_s
+
+        def spent() -> bool:
+            return clock() > t_end
+
     while True:
-        if k == next_pop:
+        seg_end = min(appear_steps[0] if appear_steps else params.max_iter, params.max_iter)
+        adv, moved = walk(stepper, field, track, seg_end - k, spent)
+        k += moved
+        if adv is not None:
+            status, reason = _FROM_STEP[adv.status], adv.reason
+            break
+        if k < seg_end:  # the deadline passed
+            reason = f"time budget of {(budget_s or 0.0) * 1e3:g} ms spent after {k} steps"
+            break
+        if appear_steps and k == appear_steps[0]:
+            appear_steps.pop(0)
+            x, y = track[-1]
             epochs.append(Epoch(epoch_start, k, field))
             epoch_start = k
             field = _field_at(schedule, k, params.intensity, cache)
             new = [s.threat.id for s in schedule if s.appear_step == k]
-            events.append(f"step {k}: threat {', '.join(new)} appeared at ({x:.6g}, {y:.6g})")
+            events.append(f"step {k}: threat {', '.join(new)} appeared; unit at ({x:.6g}, {y:.6g})")
             stepper.world_changed()
-            next_pop = appear_steps.pop(0) if appear_steps else -1
-        adv = stepper.advise(field, x, y)
-        if adv.status.terminal:
-            status, reason = _FROM_STEP[adv.status], adv.reason
-            break
-        if k >= params.max_iter:
-            break
-        x += step * adv.dx
-        y += step * adv.dy
-        track.append((x, y))
-        k += 1
-        if budget_s is not None and clock is not None and k % 64 == 0 and clock() - t0 > budget_s:
-            reason = f"time budget of {budget_s * 1e3:g} ms spent after {k} steps"
-            break
+            continue
+        # max_iter moves made: one last advice says whether the unit stands at the goal
+        last = stepper.advise(field, *track[-1])
+        if last.status.terminal:
+            status, reason = _FROM_STEP[last.status], last.reason
+        break
+    x, y = track[-1]
     epochs.append(Epoch(epoch_start, k, field))
     path = np.array(track)
     m = measure(path, epochs)

@@ -31,6 +31,19 @@ that simulation is trapped or leaves the bounds, the unit commits to the
 walking in and back out.  Otherwise, and on every other advisory, nothing
 extra runs: a unit whose descent is foreseen to arrive moves exactly as
 under ``escape: none``.
+
+Deliberation.  The look-ahead and the escape search are the stepper's only
+unbounded work.  With ``defer`` set (the live daemon), the stepper does not
+run them inline: it records a ``Need`` and keeps answering plain steepest
+descent (``Advice.deliberating``).  A driver runs ``deliberate()`` on a
+detached copy, off the planning loop, and hands the copy back to
+``adopt()``.  Without ``defer`` (``plan()``, previews) the same work runs
+inline at the same advisory, so a preview shows the route as the unit will
+follow it once the deliberation has landed.
+
+Ghosts.  ``ghost()`` is a cheap copy that predicts (the direction
+look-ahead points): it follows a committed escape, but a trap ends it and
+it never deliberates.
 """
 
 from __future__ import annotations
@@ -45,10 +58,11 @@ import numpy as np
 
 from pfp_service.core import foresight, kernels
 from pfp_service.core.escape import Escaper, EscapeRun
+from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["Advice", "Bounds", "StepStatus", "Stepper", "advise_many"]
+__all__ = ["Advice", "Bounds", "Need", "StepStatus", "Stepper", "advise_many"]
 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
@@ -82,6 +96,16 @@ class Advice(NamedTuple):
     level: float
     distance: float
     reason: str = ""
+    deliberating: bool = False
+
+
+class Need(NamedTuple):
+    """Deliberation a deferring stepper asks for: ``foresee`` (look-ahead) or ``escape`` (a trap)."""
+
+    kind: str
+    x: float
+    y: float
+    reason: str = ""
 
 
 class Stepper:
@@ -100,6 +124,7 @@ class Stepper:
         "_best",
         "_escaper",
         "_foresee",
+        "_ghost",
         "_recent",
         "_run",
         "_since_best",
@@ -108,11 +133,14 @@ class Stepper:
         "_traps",
         "advisories",
         "bounds",
+        "defer",
         "goal",
         "goal_gain",
         "origin",
         "params",
+        "pending",
         "unit_key",
+        "version",
     )
 
     def __init__(
@@ -140,15 +168,77 @@ class Stepper:
         self._run: EscapeRun | None = None
         self._traps = 0
         self._foresee = params.escape == "auto"  # look ahead at the next advisory
+        self._ghost = False
+        self.defer = False  # record deliberation as ``pending`` instead of running it inline
+        self.pending: Need | None = None
+        self.version = 0  # bumped by every world change: a deliberation is for one version
 
     def __deepcopy__(self, memo: dict[int, object]) -> Stepper:
-        """A ghost for look-ahead: shares the immutable parts, copies the state."""
+        """A detached copy (previews, deliberation): shares the immutable parts, copies the state."""
         new = Stepper.__new__(Stepper)
-        shared = ("params", "bounds", "goal", "origin", "_terminal")
+        shared = ("params", "bounds", "goal", "origin", "_terminal", "pending")
         for name in Stepper.__slots__:
             value = getattr(self, name)
             setattr(new, name, value if name in shared else copy.deepcopy(value, memo))
         return new
+
+    def ghost(self) -> Stepper:
+        """A cheap predicting copy: follows a committed escape, stops at a trap, never deliberates."""
+        new = Stepper.__new__(Stepper)
+        for name in ("params", "bounds", "goal", "origin", "goal_gain", "unit_key", "advisories"):
+            setattr(new, name, getattr(self, name))
+        new._recent = deque(self._recent, maxlen=self._recent.maxlen)
+        new._best, new._since_best = self._best, self._since_best
+        new._terminal, new._trap_at = self._terminal, self._trap_at
+        new._escaper, new._traps = None, self._traps
+        new._run = copy.copy(self._run)  # the route is shared; only its cursor moves
+        new._foresee = False
+        new._ghost = True
+        new.defer = False
+        new.pending = None
+        new.version = self.version
+        return new
+
+    def deliberate(self, field: ThreatField) -> None:
+        """Run the pending deliberation inline (on a detached copy, off the planning loop)."""
+        need = self.pending
+        self.pending = None
+        self.defer = False
+        if need is None:
+            return
+        if need.kind == "foresee":
+            self._look_ahead(field, need.x, need.y)
+            return
+        self._traps += 1
+        if self._escaper is None:
+            self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
+        run, why = self._escaper.begin(field, need.x, need.y, need.reason)
+        if run is None:
+            level = field.level_grad_at(need.x, need.y)[0]
+            dist = math.hypot(self.goal[0] - need.x, self.goal[1] - need.y)
+            self._end(StepStatus.TRAPPED, level, dist, why, (need.x, need.y))
+        else:
+            self._run = run
+
+    def adopt(self, done: Stepper) -> bool:
+        """Take the outcome of ``done.deliberate()`` (a copy of this stepper at the same version).
+
+        Returns:
+            True when it changes what the unit is told (a route to follow, or a
+            trapped verdict); a foreseen arrival changes nothing.
+        """
+        self.pending = None
+        self._escaper = done._escaper
+        self._traps = done._traps
+        self._run = done._run
+        if done._terminal is not None and done._terminal.status is StepStatus.TRAPPED:
+            self._terminal, self._trap_at = done._terminal, done._trap_at
+        changed = self._run is not None or self._terminal is not None
+        if self._run is not None:  # a route to follow: descent is judged afresh after it
+            self._recent.clear()
+            self._best = math.inf
+            self._since_best = 0
+        return changed
 
     @property
     def traps(self) -> int:
@@ -171,7 +261,9 @@ class Stepper:
         self._best = math.inf
         self._since_best = 0
         self._run = None  # judged under the old field
-        self._foresee = self.params.escape == "auto"
+        self._foresee = self.params.escape == "auto" and not self._ghost
+        self.pending = None  # asked under the old field
+        self.version += 1
         if self._escaper is not None:
             self._escaper.forget_sites()
         if self._terminal is not None and self._terminal.status is StepStatus.TRAPPED:
@@ -186,7 +278,11 @@ class Stepper:
                 return early._replace(level=field.level_grad_at(x, y)[0])
             return early
         if self._foresee:
-            self._look_ahead(field, x, y)
+            if self.defer:
+                self._foresee = False
+                self.pending = Need("foresee", x, y)
+            else:
+                self._look_ahead(field, x, y)
         if self._run is not None:
             return self._escaping(field, x, y)
         fx, fy, level, norm = kernels.point_descent(
@@ -249,29 +345,54 @@ class Stepper:
         self.advisories += 1
         trapped = self._watch(x, y, dist)
         if trapped:
-            return self._trapped(field, x, y, level, dist, trapped)
-        return Advice(StepStatus.EN_ROUTE, -fx / norm, -fy / norm, level, dist)
+            return self._trapped(field, x, y, level, dist, trapped, -fx / norm, -fy / norm)
+        return Advice(StepStatus.EN_ROUTE, -fx / norm, -fy / norm, level, dist, "", self.pending is not None)
 
     # -- internals ----------------------------------------------------------
     def _look_ahead(self, field: ThreatField, x: float, y: float) -> None:
-        """Simulate plain descent from here; if it fails, commit to a way round before walking in."""
+        """Simulate plain descent from here; go round now if it fails, or if going round is clearly cheaper.
+
+        A unit inside a threat core first leaves it by the shortest way out
+        (``Escaper.leave_core``), and the look-ahead starts where that ends.
+        """
         self._foresee = False
-        sim = foresight.simulate(field, (x, y), self.goal, self.goal_gain, self.params, self.bounds)
-        if not sim.outcome.fails:
-            return
         if self._escaper is None:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
-        run, _why = self._escaper.foresee(field, x, y, sim.outcome.value.replace("_", " "))
-        if run is not None:  # else descend and meet the trap as usual
-            self._traps += 1
+        out = self._escaper.leave_core(field, x, y)
+        ox, oy = (x, y) if out is None else out.path[-1]
+        sim = foresight.simulate(field, (ox, oy), self.goal, self.goal_gain, self.params, self.bounds)
+        run = None
+        if sim.outcome.fails:
+            run, _why = self._escaper.foresee(field, ox, oy, sim.outcome.value.replace("_", " "))
+            if run is not None:  # else descend and meet the trap as usual
+                self._traps += 1
+        elif sim.outcome is foresight.Outcome.ARRIVES:
+            foreseen = sim.steps * self.params.step + LAMBDA * sim.exposure
+            run = self._escaper.cheaper_route(field, ox, oy, foreseen)
+        if out is not None:
+            run = out.then(run)
+        if run is not None:
             self._run = run
 
     def _trapped(
-        self, field: ThreatField | None, x: float, y: float, level: float, dist: float, reason: str
+        self,
+        field: ThreatField | None,
+        x: float,
+        y: float,
+        level: float,
+        dist: float,
+        reason: str,
+        dx: float = 0.0,
+        dy: float = 0.0,
     ) -> Advice:
-        self._traps += 1
-        if self.params.escape == "none" or field is None:
+        if self.params.escape == "none" or field is None or self._ghost:
+            self._traps += 1
             return self._end(StepStatus.TRAPPED, level, dist, reason, (x, y))
+        if self.defer:  # plain descent until the escape search lands
+            if self.pending is None:
+                self.pending = Need("escape", x, y, reason)
+            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True)
+        self._traps += 1
         if self._escaper is None:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
         run, why = self._escaper.begin(field, x, y, reason)
@@ -280,9 +401,14 @@ class Stepper:
         self._run = run
         return self._escaping(field, x, y)
 
+    @property
+    def escaping(self) -> bool:
+        """Following a committed escape route."""
+        return self._run is not None
+
     def _escaping(self, field: ThreatField, x: float, y: float) -> Advice:
         run = self._run
-        assert run is not None and self._escaper is not None
+        assert run is not None
         heading = run.direction(x, y)
         if heading is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
             self._run = None
@@ -294,7 +420,8 @@ class Stepper:
             )
             return self.follow(x, y, fx, fy, level, norm, field)
         self.advisories += 1
-        self._escaper.escape_steps += 1
+        if self._escaper is not None:  # a ghost has none: it only predicts
+            self._escaper.escape_steps += 1
         level = field.level_grad_at(x, y)[0]
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
         return Advice(StepStatus.ESCAPING, heading[0], heading[1], level, dist, f"escape: {run.name}")

@@ -1,19 +1,24 @@
-"""The Zenoh wiring of the planner: thin callbacks, one planning loop, one preview worker.
+"""The Zenoh wiring of the planner: decode, enqueue, ``world.apply``, publish.
 
-Callbacks only decode and enqueue (positions latest-wins per unit).  The
-planning loop drains the queues in micro-batches, applies them to the
-``World`` and computes every pending unit's direction in one vectorised call.
-Previews run on their own thread so a long one never delays a direction.
+* Callbacks decode and enqueue, nothing more: positions latest-wins per unit,
+  everything else in order, queries handed to the loop.  No callback replies
+  or puts.
+* One planning loop drains the inbox, applies the batch and a ``Tick`` to the
+  ``World`` and publishes what it returns.  Every decision is the world's.
+* Deliberation jobs the world asks for run on their own pool and come back as
+  ``Deliberated`` inputs; previews run on another pool, each with a deadline.
+  Neither ever holds up the loop.
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
-import queue
+import dataclasses
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import msgspec
@@ -23,17 +28,27 @@ from pfp_service import __version__
 from pfp_service.errors import InputError
 from pfp_service.service.config import ServeConfig
 from pfp_service.service.log import get_logger
-from pfp_service.service.preview import preview
-from pfp_service.service.world import World, WorldSettings
+from pfp_service.service.preview import fit_reply, preview
+from pfp_service.service.world import (
+    Deliberated,
+    GoalCancelled,
+    GoalSet,
+    Input,
+    InputRejected,
+    Job,
+    StateReported,
+    ThreatPut,
+    ThreatRemoved,
+    Tick,
+    TokenChanged,
+    World,
+    WorldSettings,
+)
 from pfp_service.wire import (
-    ArrivedEvent,
-    Direction,
-    DirectionStatus,
     ErrorReply,
+    Event,
     PlannerStatus,
     RejectedEvent,
-    ReplanEvent,
-    TrappedEvent,
     decode_goal,
     decode_preview_request,
     decode_threat,
@@ -46,10 +61,48 @@ __all__ = ["PlannerNode"]
 
 log = get_logger("node")
 _JSON = zenoh.Encoding.APPLICATION_JSON
+INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
+
+
+def world_settings(cfg: ServeConfig) -> WorldSettings:
+    """The world's settings from the service configuration."""
+    return WorldSettings(
+        planner=cfg.planner_params(),
+        threat_ttl_s=cfg.threat_ttl_s,
+        unit_stale_s=cfg.unit_stale_s,
+        liveliness_debounce_s=cfg.liveliness_debounce_s,
+        lookahead=cfg.lookahead,
+        bounds=cfg.bounds_tuple(),
+        mission=cfg.mission,
+        planner_id=cfg.planner_id,
+        deliberation="deferred",
+        deliberation_budget_s=cfg.deliberation_budget_s,
+        unit_forget_s=cfg.unit_forget_s,
+        max_units=cfg.max_units,
+        max_threats=cfg.max_threats,
+    )
+
+
+def warm_up(settings: WorldSettings) -> None:
+    """Load (or compile) the numba kernels before serving, so no first direction or preview pays for it."""
+    from pfp_service.wire import Goal, ThreatUpdate, UnitState
+
+    w = World(dataclasses.replace(settings, deliberation="inline", bounds=None))
+    threat = ThreatUpdate(position=(5.0, 5.0), sigma_range=1.0, sigma_lateral=0.7)
+    out = w.apply(
+        [
+            ThreatPut("w", threat),
+            StateReported("w", UnitState(position=(0.0, 0.0))),
+            GoalSet("w", Goal(position=(10.0, 10.0))),
+        ],
+        0.0,
+    )
+    preview(w.view("w"), None, time.monotonic, 5.0, 10_000)
+    assert out.directions
 
 
 class _Latency:
-    """Recent planning latencies (receipt of a state to publication of its direction)."""
+    """Recent latencies, receipt of a state to publication of its direction; quantiles when asked."""
 
     def __init__(self, size: int = 4096) -> None:
         self._samples: collections.deque[float] = collections.deque(maxlen=size)
@@ -70,7 +123,7 @@ class PlannerNode:
     Args:
         session: an open ``zenoh.Session`` (the caller closes it).
         cfg: the service configuration.
-        clock: monotonic seconds; the world model sees only this.
+        clock: monotonic seconds; the world sees only this.
     """
 
     def __init__(
@@ -79,69 +132,60 @@ class PlannerNode:
         self.session = session
         self.cfg = cfg
         self.clock = clock
-        self.world = World(
-            WorldSettings(
-                planner=cfg.planner_params(),
-                threat_ttl_s=cfg.threat_ttl_s,
-                unit_stale_s=cfg.unit_stale_s,
-                liveliness_debounce_s=cfg.liveliness_debounce_s,
-                lookahead=cfg.lookahead,
-                bounds=cfg.bounds_tuple(),
-            )
-        )
+        self.world = World(world_settings(cfg))
         self.started = clock()
-        self.counters = {"msgs_in": 0, "msgs_out": 0, "rejected": 0}
+        self.counters = {"msgs_in": 0, "msgs_out": 0, "overload": 0}
         self.latency = _Latency()
         self._lock = threading.Lock()
         self._states: dict[str, tuple[Any, float]] = {}
-        self._inbox: collections.deque[tuple[str, str, Any]] = collections.deque()
+        self._inbox: collections.deque[Input] = collections.deque()
+        self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
-        self._world_lock = threading.Lock()
-        self._previews: queue.Queue[Any] = queue.Queue(maxsize=256)
-        self._publishers: dict[str, Any] = {}
         self._declared: list[Any] = []
-        self._threads: list[threading.Thread] = []
-        self._snapshot = self._status()
+        self._loop_thread: threading.Thread | None = None
+        self._deliberators = ThreadPoolExecutor(cfg.deliberation_workers, thread_name_prefix="pfp-deliberate")
+        self._previewers = ThreadPoolExecutor(cfg.preview_workers, thread_name_prefix="pfp-preview")
+        self._previews_in_flight = 0
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
-        m = self.cfg.mission
+        warm_up(self.world.settings)
+        m, p = self.cfg.mission, self.cfg.planner_id
         s = self.session
         self._declared += [
             s.declare_subscriber(keys.unit_states(m), self._on_state),
             s.declare_subscriber(keys.goals(m), self._on_goal),
             s.declare_subscriber(keys.threats(m), self._on_threat),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
-            s.declare_queryable(keys.previews(m), self._on_preview),
-            s.declare_queryable(keys.planner_status(m, self.cfg.planner_id), self._on_status),
-            s.liveliness().declare_token(keys.alive_planner(m, self.cfg.planner_id)),
+            s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
+            s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
+            s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
+            s.liveliness().declare_token(keys.alive_planner(m, p)),
         ]
-        for target, name in ((self._loop, "pfp-plan"), (self._preview_worker, "pfp-preview")):
-            t = threading.Thread(target=target, name=name, daemon=True)
-            t.start()
-            self._threads.append(t)
-        log.info("planner ready", extra={"fields": {"mission": m, "planner": self.cfg.planner_id}})
+        self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
+        self._loop_thread.start()
+        log.info("planner ready", extra={"fields": {"mission": m, "planner": p}})
 
     def stop(self) -> None:
         self._stop.set()
         self._wake.set()
-        self._previews.put(None)
-        for t in self._threads:
-            t.join(timeout=1.0)
-        for d in [*self._declared, *self._publishers.values()]:
+        if self._loop_thread is not None:
+            self._loop_thread.join(timeout=2.0)
+        self._deliberators.shutdown(wait=False, cancel_futures=True)
+        self._previewers.shutdown(wait=False, cancel_futures=True)
+        for d in self._declared:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
                 d.undeclare()
         self._declared.clear()
-        self._publishers.clear()
 
     # -- callbacks: decode and enqueue, nothing more -----------------------------
-    def _reject(self, key: str, err: InputError) -> None:
-        self._push("reject", key, err)
-
-    def _push(self, kind: str, ident: str, payload: Any) -> None:
+    def _push(self, item: Input) -> None:
         with self._lock:
-            self._inbox.append((kind, ident, payload))
+            if len(self._inbox) >= INBOX_MAX:
+                self.counters["overload"] += 1
+                return
+            self._inbox.append(item)
         self._wake.set()
 
     def _on_state(self, sample: zenoh.Sample) -> None:
@@ -150,68 +194,45 @@ class PlannerNode:
             uid = keys.parse(key).id
             msg = decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds)
         except InputError as err:
-            self._reject(key, err)
+            self._push(InputRejected(key, err))
             return
         with self._lock:
             self._states[uid] = (msg, self.clock())
         self._wake.set()
 
-    def _put_or_delete(self, sample: zenoh.Sample, decode: Callable[..., Any], put: str, delete: str) -> None:
+    def _on_goal(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         try:
-            ident = keys.parse(key).id
+            uid = keys.parse(key).id
             if sample.kind == zenoh.SampleKind.DELETE:
-                self._push(delete, ident, None)
+                self._push(GoalCancelled(uid))
             else:
-                self._push(put, ident, decode(sample.payload.to_bytes(), self.cfg.bounds))
+                self._push(GoalSet(uid, decode_goal(sample.payload.to_bytes(), self.cfg.bounds)))
         except InputError as err:
-            self._reject(key, err)
-
-    def _on_goal(self, sample: zenoh.Sample) -> None:
-        self._put_or_delete(sample, decode_goal, "goal", "cancel")
+            self._push(InputRejected(key, err))
 
     def _on_threat(self, sample: zenoh.Sample) -> None:
-        self._put_or_delete(sample, decode_threat, "threat", "unthreat")
+        key = str(sample.key_expr)
+        try:
+            tid = keys.parse(key).id
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._push(ThreatRemoved(tid))
+            else:
+                self._push(ThreatPut(tid, decode_threat(sample.payload.to_bytes(), self.cfg.bounds)))
+        except InputError as err:
+            self._push(InputRejected(key, err))
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
             uid = keys.parse(str(sample.key_expr)).id
         except InputError:
             return
-        self._push("alive", uid, sample.kind == zenoh.SampleKind.PUT)
+        self._push(TokenChanged(uid, sample.kind == zenoh.SampleKind.PUT))
 
-    def _on_preview(self, query: zenoh.Query) -> None:
-        try:
-            self._previews.put_nowait(query)
-        except queue.Full:
-            query.reply_err(
-                encode(ErrorReply(error="planner busy: too many previews queued", field="$")), encoding=_JSON
-            )
-
-    def _on_status(self, query: zenoh.Query) -> None:
-        # the planning loop refreshes the snapshot every tick; the callback never touches the world
-        snap = self._snapshot
-        snap = msgspec.structs.replace(snap, uptime_s=max(self.clock() - self.started, 0.0))
-        query.reply(query.key_expr, encode(snap), encoding=_JSON)
-
-    # -- status -------------------------------------------------------------------
-    def _status(self) -> PlannerStatus:
-        p50, p99 = self.latency.quantiles_ms()
-        units = list(self.world.units.values())
-        return PlannerStatus(
-            planner=self.cfg.planner_id,
-            mission=self.cfg.mission,
-            version=__version__,
-            uptime_s=max(self.clock() - self.started, 0.0),
-            units=len(units),
-            units_stale=sum(1 for u in units if u.stale),
-            threats=len(self.world.field),
-            msgs_in=self.counters["msgs_in"],
-            msgs_out=self.counters["msgs_out"],
-            rejected=self.counters["rejected"],
-            latency_p50_ms=p50,
-            latency_p99_ms=p99,
-        )
+    def _on_query(self, kind: str, query: zenoh.Query) -> None:
+        with self._lock:
+            self._queries.append((kind, query, self.clock()))
+        self._wake.set()
 
     # -- the planning loop ------------------------------------------------------------
     def _loop(self) -> None:
@@ -227,182 +248,123 @@ class PlannerNode:
         with self._lock:
             inbox, self._inbox = self._inbox, collections.deque()
             states, self._states = self._states, {}
+            queries, self._queries = self._queries, collections.deque()
         now = self.clock()
-        dirty: set[str] = set()
-        replan: list[str] = []
-        w = self.world
-        with self._world_lock:
-            for kind, ident, payload in inbox:
-                self.counters["msgs_in"] += 1
-                if kind == "reject":
-                    self._publish_reject(ident, payload)
-                    continue
-                try:
-                    dirty |= self._apply(kind, ident, payload, now, replan)
-                except Exception as exc:  # a message the world cannot take: reject it, keep the rest
-                    log.exception("could not apply message", extra={"fields": {"kind": kind, "id": ident}})
-                    self._publish_reject(
-                        self._key_of(kind, ident), InputError("$", f"could not apply: {exc}")
-                    )
-            for uid, (msg, _t) in states.items():
-                self.counters["msgs_in"] += 1
-                dirty |= w.apply_state(uid, msg, now)
-            more, expired, stale = w.expire(now)
-            dirty |= more
-            for tid in expired:
-                replan.append(f"threat {tid} expired")
-                log.info("threat expired", extra={"fields": {"threat": tid}})
-            for uid in stale:
-                log.warning("unit stale", extra={"fields": {"unit": uid}})
-            previous = {uid: w.units[uid].last_status for uid in dirty if uid in w.units}
-            directions = self._directions(dirty) if dirty else []
-            self._snapshot = self._status()
-        for d in directions:
-            self._publish_direction(d, previous.get(d.unit))
+        batch: list[Input] = list(inbox)
+        batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
+        batch.append(Tick(now))
+        self.counters["msgs_in"] += len(batch) - 1
+        out = self.world.apply(batch, now)
+        for d in out.directions:
+            self._put(keys.unit_direction(self.cfg.mission, d.unit), encode(d), direction=True)
+        for ev in out.events:
+            self._event(ev)
+        for job in out.jobs:
+            self._deliberators.submit(self._deliberate, job)
         done = self.clock()
         for _msg, t_recv in states.values():
             self.latency.add(done - t_recv)
-        if replan:
-            guided = sorted(u.unit for u in directions if u.status is not DirectionStatus.NO_GOAL)
-            self._event(
-                "replan", ReplanEvent(planner=self.cfg.planner_id, units=guided, reason="; ".join(replan))
-            )
+        for kind, query, t_recv in queries:
+            self._answer(kind, query, t_recv)
 
-    def _apply(self, kind: str, ident: str, payload: Any, now: float, replan: list[str]) -> set[str]:
-        """Apply one queued message to the world; return the units that need a direction."""
-        w = self.world
-        if kind == "goal":
-            log.info("goal set", extra={"fields": {"unit": ident, "goal": list(payload.position)}})
-            return w.apply_goal(ident, payload, now)
-        if kind == "cancel":
-            had = ident in w.units and w.units[ident].goal is not None
-            if had:
-                log.info("goal cancelled", extra={"fields": {"unit": ident}})
-            return w.cancel_goal(ident)
-        if kind == "threat":
-            changed = w.apply_threat(ident, payload, now)
-            replan.append(f"threat {ident} put")
-            log.info("threat put", extra={"fields": {"threat": ident, "affected": len(changed)}})
-            return changed
-        if kind == "unthreat":
-            known = ident in w.threat_ids()
-            changed = w.remove_threat(ident)
-            if known:
-                replan.append(f"threat {ident} removed")
-                log.info("threat removed", extra={"fields": {"threat": ident}})
-            return changed
-        if kind == "alive":
-            w.liveliness(ident, payload, now)
-        return set()
-
-    def _key_of(self, kind: str, ident: str) -> str:
-        m = self.cfg.mission
-        return keys.threat(m, ident) if kind in ("threat", "unthreat") else keys.unit_goal(m, ident)
-
-    def _directions(self, dirty: set[str]) -> list[Direction]:
-        """All pending directions in one call; if that fails, unit by unit, so one bad unit cannot starve the rest."""
+    def _deliberate(self, job: Job) -> None:
+        if job.cancelled:
+            return
         try:
-            return self.world.directions(dirty)
+            result = job.run(self.clock())
         except Exception:
-            log.exception("batch planning failed; planning unit by unit")
-        out: list[Direction] = []
-        for uid in sorted(dirty):
-            try:
-                out += self.world.directions({uid})
-            except Exception:
-                log.exception("planning failed", extra={"fields": {"unit": uid}})
-        return out
+            log.exception("deliberation failed", extra={"fields": {"unit": job.unit, "kind": job.kind}})
+            result = Deliberated(job.unit, job.token, None)
+        self._push(result)
 
     # -- output -----------------------------------------------------------------------
-    def _publish_direction(self, d: Direction, before: DirectionStatus | None) -> None:
-        key = keys.unit_direction(self.cfg.mission, d.unit)
-        pub = self._publishers.get(key)
-        if pub is None:
-            pub = self._publishers[key] = self.session.declare_publisher(
+    def _put(self, key: str, payload: bytes, direction: bool = False) -> None:
+        if direction:
+            self.session.put(
                 key,
+                payload,
                 encoding=_JSON,
                 congestion_control=zenoh.CongestionControl.DROP,
                 priority=zenoh.Priority.INTERACTIVE_HIGH,
                 express=True,
             )
-        pub.put(encode(d))
-        self.counters["msgs_out"] += 1
-        if d.status is not before:
-            rec = self.world.units.get(d.unit)
-            pos = rec.position if rec is not None and rec.position is not None else (0.0, 0.0)
-            fields = {"unit": d.unit, "status": d.status.value}
-            if d.status is DirectionStatus.ARRIVED:
-                self._event(
-                    "arrived",
-                    ArrivedEvent(
-                        planner=self.cfg.planner_id,
-                        unit=d.unit,
-                        position=pos,
-                        distance_to_goal=d.distance_to_goal or 0.0,
-                    ),
-                )
-                log.info("unit arrived", extra={"fields": fields})
-            elif d.status is DirectionStatus.TRAPPED:
-                self._event(
-                    "trapped",
-                    TrappedEvent(planner=self.cfg.planner_id, unit=d.unit, position=pos, reason=d.reason),
-                )
-                log.warning("unit trapped", extra={"fields": {**fields, "reason": d.reason}})
-
-    def _event(self, kind: str, ev: Any) -> None:
-        if ev.t is None:  # events carry wall-clock time (Unix seconds); planning never reads it
-            ev = msgspec.structs.replace(ev, t=time.time())
-        self.session.put(keys.event(self.cfg.mission, kind), encode(ev), encoding=_JSON)
+        else:
+            self.session.put(key, payload, encoding=_JSON)
         self.counters["msgs_out"] += 1
 
-    def _publish_reject(self, key: str, err: InputError) -> None:
-        self.counters["rejected"] += 1
-        fields: dict[str, Any] = {"key": key, "field": err.path or "$", "reason": err.reason}
-        try:
-            parsed = keys.parse(key)
-            if parsed.kind.value.startswith("unit"):
-                fields["unit"] = parsed.id
-        except InputError:
-            pass
-        log.warning("rejected input", extra={"fields": fields})
-        self._event(
-            "rejected",
-            RejectedEvent.of(key, err, planner=self.cfg.planner_id),
-        )
+    def _event(self, ev: Event) -> None:
+        ev = msgspec.structs.replace(ev, t=time.time())  # wall-clock time; planning never reads it
+        kind = ev.__struct_config__.tag
+        self._put(keys.event(self.cfg.mission, str(kind)), encode(ev))
+        fields = {k: v for k, v in msgspec.structs.asdict(ev).items() if k not in ("t", "planner")}
+        if isinstance(ev, RejectedEvent):
+            log.warning("rejected input", extra={"fields": fields})
+        else:
+            log.info(str(kind), extra={"fields": fields})
 
-    # -- previews ---------------------------------------------------------------------
-    def _preview_worker(self) -> None:
-        while True:
-            query = self._previews.get()
-            if query is None:
-                return
+    # -- queries ------------------------------------------------------------------------
+    def _answer(self, kind: str, query: zenoh.Query, t_recv: float) -> None:
+        m, p = self.cfg.mission, self.cfg.planner_id
+        if kind == "status":
+            query.reply(keys.planner_status(m, p), encode(self._status()), encoding=_JSON)
+            query.drop()
+        elif kind == "world":
+            query.reply(keys.world(m, p), encode(self.world.snapshot(self.clock())), encoding=_JSON)
+            query.drop()
+        elif self._previews_in_flight >= self.cfg.preview_queue:
+            self._reply_err(query, ErrorReply(error="planner busy: too many previews queued", field="$"))
+        else:
+            key = str(query.key_expr)
             try:
-                self._answer_preview(query)
-            except Exception:
-                log.exception("preview failed")
-                query.reply_err(
-                    encode(ErrorReply(error="internal error while previewing", field="$")), encoding=_JSON
-                )
-            finally:
-                query.drop()
-
-    def _answer_preview(self, query: zenoh.Query) -> None:
-        key = str(query.key_expr)
-        try:
-            uid = keys.parse(key).id
+                view = self.world.view(keys.parse(key).id)
+            except InputError as err:
+                self._reply_err(query, ErrorReply.of(err))
+                return
+            with self._lock:
+                self._previews_in_flight += 1
             payload = query.payload.to_bytes() if query.payload is not None else b""
-            request = decode_preview_request(payload, self.cfg.bounds) if payload else None
-            with self._world_lock:
-                view = self.world.view(uid)
-            result = preview(
-                view,
-                uid,
-                request,
-                self.clock,
-                self.cfg.preview_budget_ms / 1e3,
-                self.cfg.preview_max_iter,
-            )
+            self._previewers.submit(self._preview, query, key, view, payload, t_recv)
+
+    def _preview(self, query: zenoh.Query, key: str, view: Any, payload: bytes, t_recv: float) -> None:
+        try:
+            left = t_recv + self.cfg.preview_budget_ms / 1e3 - self.clock()
+            if left <= 0:
+                self._reply_err(query, ErrorReply(error="expired: the preview budget passed in the queue"))
+                return
+            request = decode_preview_request(payload, self.cfg.bounds)
+            result = preview(view, request, self.clock, left, self.cfg.preview_max_iter)
+            query.reply(key, fit_reply(result), encoding=_JSON)
+            query.drop()
         except InputError as err:
-            query.reply_err(encode(ErrorReply.of(err)), encoding=_JSON)
-            return
-        query.reply(key, encode(result), encoding=_JSON)
+            self._reply_err(query, ErrorReply.of(err))
+        except Exception:
+            log.exception("preview failed", extra={"fields": {"key": key}})
+            self._reply_err(query, ErrorReply(error="internal error while previewing", field="$"))
+        finally:
+            with self._lock:
+                self._previews_in_flight -= 1
+
+    def _reply_err(self, query: zenoh.Query, err: ErrorReply) -> None:
+        with contextlib.suppress(Exception):  # the querier may be gone
+            query.reply_err(encode(err), encoding=_JSON)
+            query.drop()
+
+    def _status(self) -> PlannerStatus:
+        p50, p99 = self.latency.quantiles_ms()
+        c = self.world.counts()
+        return PlannerStatus(
+            planner=self.cfg.planner_id,
+            mission=self.cfg.mission,
+            version=__version__,
+            uptime_s=max(self.clock() - self.started, 0.0),
+            units=c["units"],
+            units_stale=c["units_stale"],
+            threats=c["threats"],
+            msgs_in=self.counters["msgs_in"],
+            msgs_out=self.counters["msgs_out"],
+            rejected=c["rejected"],
+            latency_p50_ms=p50,
+            latency_p99_ms=p99,
+            deliberating=c["deliberating"],
+            overload=c["overload"] + self.counters["overload"],
+        )

@@ -1,28 +1,86 @@
-"""The live world model: units, goals, threats and expiry, with time passed in.
+"""The live world: a sans-I/O state machine of one mission's units, goals and threats.
 
-Sans-I/O, like the planning core: every method takes decoded messages and
-``now`` (seconds on any monotonic clock) and returns what changed.  The Zenoh
-node turns those results into puts; the tests drive it with plain numbers.
+In the manner of h11's connection: ``World.apply(inputs, now)`` takes a batch
+of frozen input events (``Input``) and returns ``Outputs``: the directions to
+publish, the events to send and the deliberation jobs to run.  It never reads
+a clock, opens a socket or touches a file; ``now`` is seconds on any
+monotonic clock.
 
-Rule 1: every decision about *who gets a fresh direction* lives here
-(``apply_*`` return the unit ids that need one; ``expire`` the same).
+Rule 1: every decision lives here -- who gets a fresh direction, which event
+fires and why, status transitions, staleness, expiry, limits.  The node only
+decodes, enqueues, applies and publishes; it never reads the world's records.
+
+The reactive part of ``apply`` is bounded: plain steepest descent for the
+units touched, in one vectorised call, plus their look-ahead points
+(``plan.walk_many`` on ghosts).  Everything unbounded -- ``auto``'s trap
+look-ahead and the escape-route searches -- is *deliberation*: with
+``deliberation="deferred"`` a unit's stepper records what it needs, the world
+emits a ``Job`` holding a detached copy, and the driver runs ``job.run()``
+anywhere and feeds back the ``Deliberated`` input it returns.  A result is
+adopted only if it was computed for the unit's goal and world version still
+in force (latest wins); until then the unit gets plain descent with
+``deliberating`` set.  ``"inline"`` runs the same work inside ``apply``.
+
+Timers (threat expiry, unit silence, token debounce, forgetting) sit in one
+heap, so a tick costs O(what is due), never a scan of every unit.
 """
 
 from __future__ import annotations
 
 import copy
-import dataclasses
+import heapq
 import math
+import zlib
 from dataclasses import dataclass, field
+from typing import Literal, Union
 
+import msgspec
 import numpy as np
 
 from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
+from pfp_service.core.plan import walk_many
 from pfp_service.core.stepper import Advice, advise_many
-from pfp_service.errors import FINITE_LIMIT
-from pfp_service.wire import Direction, DirectionStatus, Goal, ThreatUpdate, UnitState
+from pfp_service.errors import FINITE_LIMIT, InputError
+from pfp_service.wire import (
+    ArrivedEvent,
+    Direction,
+    DirectionStatus,
+    Event,
+    ForgottenEvent,
+    Goal,
+    RejectedEvent,
+    ReplanEvent,
+    StaleEvent,
+    ThreatChange,
+    ThreatSummary,
+    ThreatUpdate,
+    TrappedEvent,
+    UnitKind,
+    UnitState,
+    UnitSummary,
+    WorldSnapshot,
+    keys,
+)
+from pfp_service.wire.messages import MAX_EVENT_ITEMS, MAX_SNAPSHOT_ITEMS
 
-__all__ = ["UnitRecord", "World", "WorldSettings"]
+__all__ = [
+    "Deliberated",
+    "GoalCancelled",
+    "GoalSet",
+    "Input",
+    "InputRejected",
+    "Job",
+    "Outputs",
+    "StateReported",
+    "ThreatPut",
+    "ThreatRemoved",
+    "Tick",
+    "TokenChanged",
+    "UnitView",
+    "World",
+    "WorldSettings",
+    "unit_key",
+]
 
 _STATUS = {
     StepStatus.EN_ROUTE: DirectionStatus.EN_ROUTE,
@@ -33,6 +91,144 @@ _STATUS = {
     StepStatus.OUT_OF_BOUNDS: DirectionStatus.TRAPPED,
     StepStatus.INVALID: DirectionStatus.TRAPPED,
 }
+REJECTS_PER_S = 5  # rejected events per second per kind of key; the rest are counted in the next
+
+
+def unit_key(unit_id: str) -> int:
+    """The seed of a unit's random escapes: stable across restarts, previews and planners."""
+    return zlib.crc32(unit_id.encode())
+
+
+# -- inputs -------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class StateReported:
+    """A unit said where it is (``unit/{u}/state``)."""
+
+    unit: str
+    state: UnitState
+
+
+@dataclass(frozen=True, slots=True)
+class GoalSet:
+    unit: str
+    goal: Goal
+
+
+@dataclass(frozen=True, slots=True)
+class GoalCancelled:
+    unit: str
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatPut:
+    threat: str
+    update: ThreatUpdate
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatRemoved:
+    threat: str
+
+
+@dataclass(frozen=True, slots=True)
+class TokenChanged:
+    """A unit's liveliness token appeared (``alive``) or went."""
+
+    unit: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class InputRejected:
+    """A message that failed to decode: the world counts it and says so, rate-limited."""
+
+    key: str
+    error: InputError
+
+
+@dataclass(frozen=True, slots=True)
+class Deliberated:
+    """A finished ``Job``: ``stepper`` is its copy after ``deliberate()`` (``None``: past its deadline)."""
+
+    unit: str
+    token: tuple[int, int]
+    stepper: Stepper | None
+
+
+@dataclass(frozen=True, slots=True)
+class Tick:
+    """Time passed: run the timers due by ``now``."""
+
+    now: float
+
+
+Input = Union[  # noqa: UP007
+    StateReported,
+    GoalSet,
+    GoalCancelled,
+    ThreatPut,
+    ThreatRemoved,
+    TokenChanged,
+    InputRejected,
+    Deliberated,
+    Tick,
+]
+
+
+# -- outputs ------------------------------------------------------------------------
+@dataclass(slots=True)
+class Job:
+    """Deliberation for one unit, to run off the planning loop.
+
+    ``run()`` needs nothing from the world: it works on a detached copy of the
+    unit's stepper under the field in force when it was asked.  ``cancelled``
+    is set by the world when a newer goal or world supersedes it, so a pool
+    can skip it; a late result is discarded by its ``token`` in any case.
+    """
+
+    unit: str
+    token: tuple[int, int]
+    kind: str
+    stepper: Stepper
+    field: ThreatField
+    deadline: float
+    cancelled: bool = False
+
+    def run(self, now: float | None = None) -> Deliberated:
+        """Deliberate; ``now`` past the deadline gives up without computing."""
+        if now is not None and now > self.deadline:
+            return Deliberated(self.unit, self.token, None)
+        self.stepper.deliberate(self.field)
+        return Deliberated(self.unit, self.token, self.stepper)
+
+
+@dataclass(slots=True)
+class Outputs:
+    """What one ``apply`` must send: directions, events, and deliberation jobs to run."""
+
+    directions: list[Direction] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
+    jobs: list[Job] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.directions or self.events or self.jobs)
+
+
+@dataclass(frozen=True, slots=True)
+class UnitView:
+    """A detached copy of one unit and the threats in force, for a preview off the loop."""
+
+    unit: str
+    position: tuple[float, float] | None
+    goal: Goal | None
+    origin: tuple[float, float] | None
+    stepper: Stepper | None
+    threats: tuple[Threat, ...]
+    settings: WorldSettings
+    last_vector: tuple[float, float] | None = None  # the direction given at ``position``, if moving
+
+    def params_for(self, goal: Goal) -> PlannerParams:
+        return self.settings.params_for(goal)
 
 
 @dataclass(frozen=True)
@@ -45,41 +241,69 @@ class WorldSettings:
     liveliness_debounce_s: float = 2.0  # a token DELETE counts after this long
     lookahead: int = 5  # predicted positions per direction
     bounds: tuple[tuple[float, float], tuple[float, float]] | None = None  # mission bounds
+    mission: str = keys.DEFAULT_MISSION
+    planner_id: str = "planner"
+    deliberation: Literal["inline", "deferred"] = "inline"
+    deliberation_budget_s: float = 5.0  # a job not started by then is dropped
+    unit_forget_s: float | None = 600.0  # stale this long: forgotten (None: never)
+    max_units: int = 100_000
+    max_threats: int = 10_000
+
+    def params_for(self, goal: Goal) -> PlannerParams:
+        """A unit's planner parameters: service defaults, then the goal's overrides."""
+        return self.planner.merged(delta=goal.delta, tolerance=goal.tolerance, step=goal.step)
 
 
-@dataclass
-class UnitRecord:
-    """Everything the planner knows about one unit."""
-
+@dataclass(slots=True)
+class _Unit:
     id: str
+    key: int
     position: tuple[float, float] | None = None
     seq: int | None = None
     kind: str | None = None
     last_seen: float = -math.inf
     goal: Goal | None = None
-    origin: tuple[float, float] | None = None  # x0: where the unit was when the goal was set
+    origin: tuple[float, float] | None = None  # x0: where the unit was when its goal was set
     stepper: Stepper | None = None
+    epoch: int = 0  # bumped by every goal set or cancelled
     stale: bool = False
+    stale_since: float | None = None
     token_gone_since: float | None = None
+    silence_timer: bool = False
     last_status: DirectionStatus | None = None
+    last_reason: str = ""
+    last_distance: float | None = None
+    last_vector: tuple[float, float] | None = None
+    job: Job | None = None
+
+    def token(self) -> tuple[int, int]:
+        return (self.epoch, self.stepper.version if self.stepper is not None else -1)
 
 
-@dataclass
-class _ThreatRecord:
+@dataclass(slots=True)
+class _Threat:
+    update: ThreatUpdate
     threat: Threat
     expires_at: float | None
 
 
-@dataclass
 class World:
     """Units, goals and threats of one mission, and the steppers that guide the units."""
 
-    settings: WorldSettings = field(default_factory=WorldSettings)
-    units: dict[str, UnitRecord] = field(default_factory=dict)
-    _threats: dict[str, _ThreatRecord] = field(default_factory=dict)
-    _field: ThreatField | None = None
+    def __init__(self, settings: WorldSettings | None = None) -> None:
+        self.settings = settings or WorldSettings()
+        self._units: dict[str, _Unit] = {}
+        self._threats: dict[str, _Threat] = {}
+        self._field: ThreatField | None = None
+        self._timers: list[tuple[float, int, str, str]] = []  # (when, seq, kind, id)
+        self._timer_seq = 0
+        self._stale = 0
+        self._deliberating = 0
+        self.overload = 0  # inputs refused at a limit
+        self.rejected = 0
+        self._reject_window: dict[str, tuple[float, int, int]] = {}  # kind -> (window start, sent, held)
 
-    # -- threats --------------------------------------------------------------
+    # -- queries (read-only) ------------------------------------------------------
     @property
     def field(self) -> ThreatField:
         if self._field is None:
@@ -87,156 +311,385 @@ class World:
             self._field = ThreatField(ordered, self.settings.planner.intensity)
         return self._field
 
-    def view(self, unit_id: str) -> World:
-        """A detached copy holding one unit and the threats in force, for previews off the lock."""
-        units = {}
-        if unit_id in self.units:
-            rec = self.units[unit_id]
-            units[unit_id] = dataclasses.replace(rec, stepper=copy.deepcopy(rec.stepper))
-        return World(self.settings, units, dict(self._threats), self._field)
+    def counts(self) -> dict[str, int]:
+        """O(1) figures for the status reply."""
+        return {
+            "units": len(self._units),
+            "units_stale": self._stale,
+            "threats": len(self._threats),
+            "deliberating": self._deliberating,
+            "overload": self.overload,
+            "rejected": self.rejected,
+        }
 
-    def threat_ids(self) -> set[str]:
-        return set(self._threats)
-
-    def threat_list(self) -> list[Threat]:
-        return list(self.field.threats)
-
-    def apply_threat(self, threat_id: str, msg: ThreatUpdate, now: float) -> set[str]:
-        """A threat appeared or moved.  Returns the units that need a fresh direction."""
-        threat = msg.to_threat(threat_id)
-        ttl = msg.ttl_s if msg.ttl_s is not None else self.settings.threat_ttl_s
-        self._threats[threat_id] = _ThreatRecord(threat, None if ttl is None else now + ttl)
-        return self._world_changed()
-
-    def remove_threat(self, threat_id: str) -> set[str]:
-        if self._threats.pop(threat_id, None) is None:
-            return set()
-        return self._world_changed()
-
-    # -- units ----------------------------------------------------------------
-    def _unit(self, unit_id: str) -> UnitRecord:
-        rec = self.units.get(unit_id)
+    def view(self, unit_id: str) -> UnitView:
+        """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
+        rec = self._units.get(unit_id)
+        threats = tuple(self.field.threats)
         if rec is None:
-            rec = self.units[unit_id] = UnitRecord(unit_id)
+            return UnitView(unit_id, None, None, None, None, threats, self.settings)
+        stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
+        return UnitView(
+            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, self.settings, rec.last_vector
+        )
+
+    def snapshot(self, now: float, limit: int = MAX_SNAPSHOT_ITEMS) -> WorldSnapshot:
+        """What the planner holds, for the world queryable: units and threats sorted by id, capped."""
+        units = []
+        for uid in sorted(self._units)[:limit]:
+            r = self._units[uid]
+            units.append(
+                UnitSummary(
+                    id=uid,
+                    kind=UnitKind(r.kind) if r.kind is not None else None,
+                    status=r.last_status,
+                    position=r.position,
+                    goal=r.goal.position if r.goal is not None else None,
+                    last_seen_s=max(now - r.last_seen, 0.0) if math.isfinite(r.last_seen) else None,
+                    distance_to_goal=r.last_distance,
+                    stale=r.stale,
+                    deliberating=r.job is not None,
+                    reason=r.last_reason[:1024],
+                )
+            )
+        threats = []
+        for tid in sorted(self._threats)[:limit]:
+            t = self._threats[tid]
+            ttl = None if t.expires_at is None else max(t.expires_at - now, 0.0)
+            threats.append(ThreatSummary(id=tid, threat=t.update, ttl_s=ttl))
+        return WorldSnapshot(
+            planner=self.settings.planner_id,
+            mission=self.settings.mission,
+            units=units,
+            threats=threats,
+            units_total=len(self._units),
+            threats_total=len(self._threats),
+        )
+
+    # -- the one way in -----------------------------------------------------------
+    def apply(self, inputs: list[Input] | tuple[Input, ...], now: float) -> Outputs:
+        """Apply a batch of inputs at ``now``; return what must go out."""
+        out = Outputs()
+        dirty: set[str] = set()
+        changes: list[ThreatChange] = []
+        for inp in inputs:
+            match inp:
+                case StateReported(unit, state):
+                    self._state(unit, state, now, dirty, out)
+                case GoalSet(unit, goal):
+                    self._goal(unit, goal, now, dirty, out)
+                case GoalCancelled(unit):
+                    self._cancel(unit, dirty)
+                case ThreatPut(tid, update):
+                    self._threat_put(tid, update, now, changes, out)
+                case ThreatRemoved(tid):
+                    if self._threats.pop(tid, None) is not None:
+                        changes.append(ThreatChange(threat=tid, change="removed"))
+                case TokenChanged(unit, alive):
+                    self._token(unit, alive, now)
+                case InputRejected(key, error):
+                    self._reject(key, error, now, out)
+                case Deliberated():
+                    self._deliberated(inp, dirty)
+                case Tick(t):
+                    self._run_timers(t, changes, out)
+        if changes:
+            dirty |= self._world_changed()
+        self._directions(dirty, now, out)
+        if changes:
+            guided = sorted(d.unit for d in out.directions if d.status is not DirectionStatus.NO_GOAL)
+            shown = changes[:MAX_EVENT_ITEMS]
+            reason = "; ".join(f"threat {c.threat} {c.change}" for c in shown[:4])
+            if len(changes) > 4:
+                reason += f"; and {len(changes) - 4} more"
+            out.events.append(
+                ReplanEvent(
+                    planner=self.settings.planner_id,
+                    units=guided[:MAX_EVENT_ITEMS],
+                    reason=reason,
+                    changes=shown,
+                    more=len(changes) - len(shown),
+                    more_units=max(len(guided) - MAX_EVENT_ITEMS, 0),
+                )
+            )
+        return out
+
+    # -- inputs ---------------------------------------------------------------------
+    def _unit(self, unit_id: str, now: float, out: Outputs, key: str) -> _Unit | None:
+        rec = self._units.get(unit_id)
+        if rec is None:
+            if len(self._units) >= self.settings.max_units:
+                self.overload += 1
+                self._reject(
+                    key, InputError("$", f"planner at max_units ({self.settings.max_units})"), now, out
+                )
+                return None
+            rec = self._units[unit_id] = _Unit(unit_id, unit_key(unit_id))
         return rec
 
-    def apply_state(self, unit_id: str, msg: UnitState, now: float) -> set[str]:
-        """A unit reported where it is.  It always gets a direction back (or ``no_goal``)."""
-        rec = self._unit(unit_id)
+    def _state(self, unit_id: str, msg: UnitState, now: float, dirty: set[str], out: Outputs) -> None:
+        rec = self._unit(unit_id, now, out, keys.unit_state(self.settings.mission, unit_id))
+        if rec is None:
+            return
         rec.position = (msg.position[0], msg.position[1])
         rec.seq = msg.seq
         rec.kind = msg.kind.value if msg.kind is not None else rec.kind
         rec.last_seen = now
-        rec.stale = False
+        if rec.stale:
+            rec.stale = False
+            rec.stale_since = None
+            self._stale -= 1
         rec.token_gone_since = None  # a report is proof of life, whatever the token says
+        if not rec.silence_timer:
+            rec.silence_timer = True
+            self._timer(now + self.settings.unit_stale_s, "silence", unit_id)
         if rec.goal is not None and rec.stepper is None:
             self._start(rec)
-        return {unit_id}
+        dirty.add(unit_id)
 
-    def apply_goal(self, unit_id: str, msg: Goal, now: float) -> set[str]:
-        rec = self._unit(unit_id)
-        rec.goal = msg
-        rec.stepper = None
-        rec.origin = None
-        rec.last_status = None
+    def _goal(self, unit_id: str, goal: Goal, now: float, dirty: set[str], out: Outputs) -> None:
+        rec = self._unit(unit_id, now, out, keys.unit_goal(self.settings.mission, unit_id))
+        if rec is None:
+            return
+        self._drop_mission(rec)
+        rec.goal = goal
         if rec.position is not None:
             self._start(rec)
-        return {unit_id} if rec.position is not None and not rec.stale else set()
+            if not rec.stale:
+                dirty.add(unit_id)
 
-    def cancel_goal(self, unit_id: str) -> set[str]:
-        rec = self.units.get(unit_id)
+    def _cancel(self, unit_id: str, dirty: set[str]) -> None:
+        rec = self._units.get(unit_id)
         if rec is None or rec.goal is None:
-            return set()
+            return
+        self._drop_mission(rec)
+        if rec.position is not None and not rec.stale:
+            dirty.add(unit_id)
+
+    def _drop_mission(self, rec: _Unit) -> None:
         rec.goal = None
         rec.stepper = None
         rec.origin = None
         rec.last_status = None
-        return {unit_id} if rec.position is not None and not rec.stale else set()
+        rec.last_reason = ""
+        rec.last_distance = None
+        rec.last_vector = None
+        rec.epoch += 1
+        self._supersede(rec)
 
-    def liveliness(self, unit_id: str, alive: bool, now: float) -> None:
-        rec = self._unit(unit_id)
-        rec.token_gone_since = None if alive else now
+    def _threat_put(
+        self, tid: str, msg: ThreatUpdate, now: float, changes: list[ThreatChange], out: Outputs
+    ) -> None:
+        if tid not in self._threats and len(self._threats) >= self.settings.max_threats:
+            self.overload += 1
+            err = InputError("$", f"planner at max_threats ({self.settings.max_threats})")
+            self._reject(keys.threat(self.settings.mission, tid), err, now, out)
+            return
+        ttl = msg.ttl_s if msg.ttl_s is not None else self.settings.threat_ttl_s
+        expires = None if ttl is None else now + ttl
+        self._threats[tid] = _Threat(msg, msg.to_threat(tid), expires)
+        if expires is not None:
+            self._timer(expires, "expire", tid)
+        changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
 
-    def expire(self, now: float) -> tuple[set[str], list[str], list[str]]:
-        """Drop expired threats and mark silent or departed units stale.
+    def _token(self, unit_id: str, alive: bool, now: float) -> None:
+        rec = self._units.get(unit_id)
+        if rec is None:
+            return  # a token alone makes no unit: only a report does
+        if alive:
+            rec.token_gone_since = None
+        elif rec.token_gone_since is None:
+            rec.token_gone_since = now
+            self._timer(now + self.settings.liveliness_debounce_s, "token", unit_id)
 
-        Returns:
-            ``(needs_direction, expired_threat_ids, newly_stale_unit_ids)``.
-        """
-        expired = [k for k, r in self._threats.items() if r.expires_at is not None and r.expires_at <= now]
-        dirty: set[str] = set()
-        for k in expired:
-            del self._threats[k]
-        if expired:
-            dirty = self._world_changed()
-        stale = []
+    def _reject(self, key: str, err: InputError, now: float, out: Outputs) -> None:
+        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per kind of key."""
+        self.rejected += 1
+        try:
+            kind = keys.parse(key).kind.value
+        except InputError:
+            kind = "unknown"
+        start, sent, held = self._reject_window.get(kind, (now, 0, 0))
+        if now - start >= 1.0:
+            start, sent = now, 0
+        if sent >= REJECTS_PER_S:
+            self._reject_window[kind] = (start, sent, held + 1)
+            return
+        ev = RejectedEvent.of(key, err, planner=self.settings.planner_id)
+        if held:
+            ev = msgspec.structs.replace(ev, suppressed=held)
+        out.events.append(ev)
+        self._reject_window[kind] = (start, sent + 1, 0)
+
+    def _deliberated(self, done: Deliberated, dirty: set[str]) -> None:
+        rec = self._units.get(done.unit)
+        if rec is None or rec.job is None or rec.job.token != done.token:
+            return  # superseded: a newer goal or world is in force
+        rec.job = None
+        self._deliberating -= 1
+        if rec.stepper is None or rec.token() != done.token:
+            return
+        if done.stepper is None:  # ran past its deadline: descend, and ask again at the next need
+            rec.stepper.pending = None
+        elif rec.stepper.adopt(done.stepper) and rec.position is not None and not rec.stale:
+            dirty.add(rec.id)  # a route or a verdict: told at once, not at its next report
+
+    # -- timers ---------------------------------------------------------------------
+    def _timer(self, when: float, kind: str, ident: str) -> None:
+        self._timer_seq += 1
+        heapq.heappush(self._timers, (when, self._timer_seq, kind, ident))
+
+    def _run_timers(self, now: float, changes: list[ThreatChange], out: Outputs) -> None:
         s = self.settings
-        for rec in self.units.values():
-            if rec.stale or rec.position is None:  # never reported: nothing to go stale
+        while self._timers and self._timers[0][0] <= now:
+            _, _, kind, ident = heapq.heappop(self._timers)
+            if kind == "expire":
+                t = self._threats.get(ident)
+                if t is not None and t.expires_at is not None and t.expires_at <= now:
+                    del self._threats[ident]
+                    changes.append(ThreatChange(threat=ident, change="expired", position=t.update.position))
                 continue
-            gone = rec.token_gone_since is not None and now - rec.token_gone_since >= s.liveliness_debounce_s
-            silent = now - rec.last_seen > s.unit_stale_s
-            if gone or silent:
-                rec.stale = True
-                stale.append(rec.id)
-        dirty -= set(stale)
-        return dirty, expired, stale
+            rec = self._units.get(ident)
+            if rec is None:
+                continue
+            if kind == "silence":
+                if now - rec.last_seen <= s.unit_stale_s:  # heard since: look again when it could be due
+                    self._timer(max(rec.last_seen + s.unit_stale_s, now) + 1e-9, "silence", ident)
+                    continue
+                rec.silence_timer = False
+                self._go_stale(rec, now, f"silent for {now - rec.last_seen:.3g} s", out)
+            elif kind == "token":
+                gone = rec.token_gone_since
+                if gone is not None and now - gone >= s.liveliness_debounce_s:
+                    self._go_stale(rec, now, "liveliness token gone", out)
+            elif kind == "forget" and self._forgettable(rec, now):
+                self._forget(rec, now, out)
 
-    # -- planning -------------------------------------------------------------
-    def params_for(self, goal: Goal) -> PlannerParams:
-        """The unit's planner parameters: service defaults, then the goal's overrides."""
-        return self.settings.planner.merged(delta=goal.delta, tolerance=goal.tolerance, step=goal.step)
+    def _forgettable(self, rec: _Unit, now: float) -> bool:
+        limit = self.settings.unit_forget_s
+        return (
+            rec.stale and rec.stale_since is not None and limit is not None and now - rec.stale_since >= limit
+        )
 
-    def _start(self, rec: UnitRecord) -> None:
+    def _go_stale(self, rec: _Unit, now: float, reason: str, out: Outputs) -> None:
+        if rec.stale or rec.position is None:
+            return
+        rec.stale = True
+        rec.stale_since = now
+        self._stale += 1
+        out.events.append(
+            StaleEvent(planner=self.settings.planner_id, unit=rec.id, position=rec.position, reason=reason)
+        )
+        if self.settings.unit_forget_s is not None:
+            self._timer(now + self.settings.unit_forget_s, "forget", rec.id)
+
+    def _forget(self, rec: _Unit, now: float, out: Outputs) -> None:
+        self._supersede(rec)
+        del self._units[rec.id]
+        self._stale -= 1
+        stale_s = now - rec.stale_since if rec.stale_since is not None else 0.0
+        out.events.append(ForgottenEvent(planner=self.settings.planner_id, unit=rec.id, stale_s=stale_s))
+
+    # -- planning -------------------------------------------------------------------
+    def _start(self, rec: _Unit) -> None:
         assert rec.goal is not None and rec.position is not None
         rec.origin = rec.position
         goal = (rec.goal.position[0], rec.goal.position[1])
-        resolved = resolve(self.params_for(rec.goal), rec.origin, goal, self.threat_list())
-        rec.stepper = Stepper(rec.origin, goal, resolved, self.settings.bounds)
+        resolved = resolve(self.settings.params_for(rec.goal), rec.origin, goal, list(self.field.threats))
+        rec.stepper = Stepper(rec.origin, goal, resolved, self.settings.bounds, rec.key)
+        rec.stepper.defer = self.settings.deliberation == "deferred"
+
+    def _supersede(self, rec: _Unit) -> None:
+        if rec.job is not None:
+            rec.job.cancelled = True
+            rec.job = None
+            self._deliberating -= 1
 
     def _world_changed(self) -> set[str]:
         self._field = None
         dirty = set()
-        for rec in self.units.values():
+        for rec in self._units.values():
             if rec.stepper is not None:
                 rec.stepper.world_changed()
+                self._supersede(rec)
             if rec.goal is not None and rec.position is not None and not rec.stale:
                 dirty.add(rec.id)
         return dirty
 
-    def directions(self, unit_ids: set[str] | list[str]) -> list[Direction]:
-        """A fresh direction for each unit named (stale and unknown units are skipped).
+    def _directions(self, unit_ids: set[str], now: float, out: Outputs) -> None:
+        """A fresh direction for each unit named (stale and unknown units get none).
 
-        Units with a goal are advised in one vectorised call; the rest get ``no_goal``.
+        Units with a goal are advised in one vectorised call, their look-ahead
+        points in ``lookahead`` more; the rest get ``no_goal``.
         """
-        out: list[Direction] = []
-        guided: list[UnitRecord] = []
+        guided: list[_Unit] = []
         for uid in sorted(unit_ids):
-            rec = self.units.get(uid)
+            rec = self._units.get(uid)
             if rec is None or rec.stale or rec.position is None:
                 continue
             if rec.stepper is None:
-                out.append(
+                rec.last_status = DirectionStatus.NO_GOAL
+                out.directions.append(
                     Direction(unit=uid, seq=rec.seq, status=DirectionStatus.NO_GOAL, vector=(0.0, 0.0))
                 )
             else:
                 guided.append(rec)
         if not guided:
-            return out
-        field = self.field
-        steppers = [r.stepper for r in guided]
-        positions = np.array([r.position for r in guided], dtype=float)
-        advices = advise_many(steppers, field, positions)  # type: ignore[arg-type]
-        for rec, adv in zip(guided, advices):
-            out.append(self._direction(rec, adv, field))
-        return out
+            return
+        fld = self.field
+        steppers: list[Stepper] = [r.stepper for r in guided]  # type: ignore[misc]
+        advices = advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float))
+        ahead = self._lookahead(guided, advices, fld)
+        for rec, adv, points in zip(guided, advices, ahead):
+            out.directions.append(self._direction(rec, adv, points, out))
+            if rec.stepper is not None and rec.stepper.pending is not None and rec.job is None:
+                self._ask(rec, fld, now, out)
 
-    def _direction(self, rec: UnitRecord, adv: Advice, field: ThreatField) -> Direction:
-        assert rec.stepper is not None and rec.position is not None
+    def _ask(self, rec: _Unit, fld: ThreatField, now: float, out: Outputs) -> None:
+        assert rec.stepper is not None and rec.stepper.pending is not None
+        work = copy.deepcopy(rec.stepper)
+        kind = rec.stepper.pending.kind
+        deadline = now + self.settings.deliberation_budget_s
+        rec.job = Job(rec.id, rec.token(), kind, work, fld, deadline)
+        self._deliberating += 1
+        out.jobs.append(rec.job)
+
+    def _lookahead(
+        self, guided: list[_Unit], advices: list[Advice], fld: ThreatField
+    ) -> list[list[tuple[float, float]]]:
+        n = self.settings.lookahead
+        result: list[list[tuple[float, float]]] = [[] for _ in guided]
+        if n <= 0:
+            return result
+        idx = [i for i, a in enumerate(advices) if not a.status.terminal]
+        if not idx:
+            return result
+        ghosts = []
+        starts = []
+        for i in idx:
+            rec, adv = guided[i], advices[i]
+            assert rec.stepper is not None and rec.position is not None
+            step = rec.stepper.params.step
+            ghosts.append(rec.stepper.ghost())
+            starts.append((rec.position[0] + step * adv.dx, rec.position[1] + step * adv.dy))
+        tracks = walk_many(ghosts, fld, starts, n - 1)  # type: ignore[arg-type]
+        for i, track in zip(idx, tracks):
+            result[i] = track
+        return result
+
+    def _direction(
+        self, rec: _Unit, adv: Advice, points: list[tuple[float, float]], out: Outputs
+    ) -> Direction:
+        assert rec.position is not None
         status = _STATUS[adv.status]
+        if status is not rec.last_status:
+            self._transition(rec, status, adv, out)
         rec.last_status = status
+        rec.last_reason = adv.reason
+        rec.last_distance = adv.distance
+        rec.last_vector = None if adv.status.terminal else (adv.dx, adv.dy)
         heading = None
-        if not adv.status.terminal:
+        if not adv.status.terminal and (adv.dx or adv.dy):
             heading = math.degrees(math.atan2(adv.dx, adv.dy)) % 360.0
         return Direction(
             unit=rec.id,
@@ -246,27 +699,19 @@ class World:
             heading_deg=heading,
             distance_to_goal=adv.distance,
             threat_level=min(max(adv.level, 0.0), FINITE_LIMIT),  # the wire's bound, even for absurd weights
-            lookahead=self._lookahead(rec.stepper, field, rec.position, adv),
-            reason=adv.reason,
+            lookahead=points,
+            reason=adv.reason[:1024],
+            deliberating=adv.deliberating or rec.job is not None,
         )
 
-    def _lookahead(
-        self, stepper: Stepper, field: ThreatField, pos: tuple[float, float], adv: Advice
-    ) -> list[tuple[float, float]]:
-        """The next positions the same stepper predicts, moving ``step`` each time."""
-        n = self.settings.lookahead
-        if n <= 0 or adv.status.terminal:
-            return []
-        ghost = copy.deepcopy(stepper)
-        # a prediction, not a plan: a ghost that meets a new trap stops there instead of searching
-        ghost.params = dataclasses.replace(ghost.params, escape="none")
-        step = stepper.params.step
-        x, y = pos[0] + step * adv.dx, pos[1] + step * adv.dy
-        points = [(x, y)]
-        while len(points) < n:
-            a = ghost.advise(field, x, y)
-            if a.status.terminal:
-                break
-            x, y = x + step * a.dx, y + step * a.dy
-            points.append((x, y))
-        return points
+    def _transition(self, rec: _Unit, status: DirectionStatus, adv: Advice, out: Outputs) -> None:
+        assert rec.position is not None
+        p = self.settings.planner_id
+        if status is DirectionStatus.ARRIVED:
+            out.events.append(
+                ArrivedEvent(planner=p, unit=rec.id, position=rec.position, distance_to_goal=adv.distance)
+            )
+        elif status is DirectionStatus.TRAPPED:
+            out.events.append(
+                TrappedEvent(planner=p, unit=rec.id, position=rec.position, reason=adv.reason[:1024])
+            )

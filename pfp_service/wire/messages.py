@@ -343,6 +343,7 @@ class RejectedEvent(Event, frozen=True, kw_only=True, tag="rejected"):
     key: Text
     field: Text = "$"
     reason: Text
+    suppressed: Count = 0  # rejections of the same kind of key not sent since the last one
     truncated: bool = False  # key, field or reason was cut to TEXT_MAX_CHARS (it then ends in "…")
 
     @classmethod
