@@ -150,7 +150,7 @@ class _Runner:
             ]
             return "timeline done; waiting for " + ", ".join(due) if due else "timeline done"
         step = tl[self.index]
-        head = f"timeline[{self.index}] ({step.describe()})"
+        head = f"waiting on timeline[{self.index}] ({step.describe()})"
         if self.wait_until is not None:
             return f"{head}: {max(self.wait_until - t_s, 0.0):.1f} s left"
         if step.at_s is not None and t_s < step.at_s:
@@ -351,7 +351,7 @@ def main(script: Script, mission: str, speed_up: float, conf: Any, progress_s: f
     with open_session(conf) as session, Progress(progress_s, total=total) as progress:
 
         def on_wait(t_s: float, done: int, what: str) -> None:
-            progress.update(f"t={t_s:7.2f}s  waiting on {what}", done)
+            progress.update(f"t={t_s:7.2f}s  {what}", done)
 
         rep = run_inject(session, script, mission, speed_up, say=progress.say, on_wait=on_wait)
     for line in report_lines(rep):

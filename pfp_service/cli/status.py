@@ -1,0 +1,114 @@
+"""``pfp status``: list what each planner of the mission holds: its units and the threats in force.
+
+Asks the world queryable (``mumt/{m}/planner/*/world``) of every planner.
+Without ``--json``, two tables per planner: units (id, kind, status, last
+seen, distance to goal) and threats (id, position, TTL left).  With
+``--json``, one JSON array of every planner's full ``WorldSnapshot``.
+Exit codes: 0 a planner answered; 1 none did; 2 a bad flag.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import Any
+
+from pfp_service.cli._common import add_session_args, positive_float, session_config
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("status", help="list the units and threats a planner holds", description=__doc__)
+    add_session_args(p)
+    p.add_argument(
+        "--timeout", type=positive_float, default=2.0, metavar="S", help="seconds to wait for answers"
+    )
+    p.add_argument("--json", action="store_true", help="print a JSON array of every planner's full snapshot")
+    p.set_defaults(func=run)
+
+
+def _table(rows: Sequence[Sequence[str]]) -> list[str]:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+
+
+def _num(value: float | None, unit: str = "", digits: int = 1) -> str:
+    return "-" if value is None else f"{value:.{digits}f}{unit}"
+
+
+def snapshot_lines(snap: Any) -> list[str]:
+    """One planner's snapshot as text: a heading, the units table and the threats table."""
+    lines = [
+        f"planner {snap.planner}, mission {snap.mission}: {snap.units_total} units, {snap.threats_total} threats"
+    ]
+    if snap.units:
+        rows = [("unit", "kind", "status", "last seen", "to goal", "position")]
+        for u in snap.units:
+            status = "stale" if u.stale else (u.status.value if u.status is not None else "-")
+            if u.deliberating:
+                status += " (deliberating)"
+            pos = "-" if u.position is None else f"({u.position[0]:.1f}, {u.position[1]:.1f})"
+            rows.append(
+                (
+                    u.id,
+                    u.kind.value if u.kind is not None else "-",
+                    status,
+                    _num(u.last_seen_s, " s ago"),
+                    _num(u.distance_to_goal, " m"),
+                    pos,
+                )
+            )
+        lines += ["", *_table(rows)]
+        if snap.units_total > len(snap.units):
+            lines.append(f"... and {snap.units_total - len(snap.units)} more units (see --json for the cap)")
+    if snap.threats:
+        rows = [("threat", "position", "facing", "TTL left")]
+        for t in snap.threats:
+            x, y = t.threat.position
+            ttl = "no expiry" if t.ttl_s is None else f"{t.ttl_s:.1f} s"
+            rows.append((t.id, f"({x:.1f}, {y:.1f})", f"{t.threat.facing_deg:g}°", ttl))
+        lines += ["", *_table(rows)]
+        if snap.threats_total > len(snap.threats):
+            lines.append(f"... and {snap.threats_total - len(snap.threats)} more threats")
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    import msgspec
+    import zenoh
+
+    from pfp_service.errors import InputError, Unreachable, map_zenoh_errors
+    from pfp_service.wire import decode_world_snapshot, keys
+
+    conf = session_config(args)
+    try:
+        with map_zenoh_errors("--connect"):
+            session = zenoh.open(conf)
+    except Unreachable as exc:
+        print(f"pfp status: {exc}", file=sys.stderr)
+        return 1
+    found = []
+    with session:
+        for reply in session.get(keys.worlds(args.mission), timeout=args.timeout):
+            if reply.ok is None:
+                continue
+            try:
+                found.append(decode_world_snapshot(reply.ok.payload.to_bytes()))
+            except InputError as exc:
+                print(f"pfp status: {reply.ok.key_expr}: {exc}", file=sys.stderr)
+    found.sort(key=lambda s: s.planner)
+    if args.json:
+        print(msgspec.json.encode(found).decode())
+    if not found:
+        print(
+            f"pfp status: no planner of mission {args.mission!r} answered within {args.timeout:g} s",
+            file=sys.stderr,
+        )
+        return 1
+    if not args.json:
+        for i, snap in enumerate(found):
+            if i:
+                print()
+            print("\n".join(snapshot_lines(snap)))
+    return 0
