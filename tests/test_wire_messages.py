@@ -248,7 +248,13 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "latency_p50_ms": ("nonneg", OPT),
         "latency_p99_ms": ("nonneg", OPT),
     },
-    "event.rejected": {**EVENT_FIELDS, "key": ("text", REQ), "field": ("text", DEF), "reason": ("text", REQ)},
+    "event.rejected": {
+        **EVENT_FIELDS,
+        "key": ("text", REQ),
+        "field": ("text", DEF),
+        "reason": ("text", REQ),
+        "truncated": ("bool", DEF),
+    },
     "event.replan": {**EVENT_FIELDS, "units": ("ids", REQ), "reason": ("text", REQ)},
     "event.trapped": {
         **EVENT_FIELDS,
@@ -535,6 +541,7 @@ def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
         "key": "k/1",
         "field": "$.sigma_range",
         "reason": "must be >= 0.001",
+        "truncated": False,
     }
     assert m.decode_event(m.encode(ev)) == ev
 

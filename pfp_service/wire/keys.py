@@ -30,6 +30,7 @@ __all__ = [
     "CHUNK_PATTERN",
     "DEFAULT_MISSION",
     "ID_NAMES",
+    "MAX_KEY_CHARS",
     "PREFIX",
     "TEMPLATES",
     "Key",
@@ -64,6 +65,9 @@ PREFIX = "mumt"
 DEFAULT_MISSION = "default"
 CHUNK_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 _CHUNK = re.compile(CHUNK_PATTERN)
+# The longest key of the layout is under 200 characters (two 64-character chunks); parse()
+# refuses anything longer before matching it.
+MAX_KEY_CHARS = 256
 
 
 class KeyKind(StrEnum):
@@ -276,10 +280,19 @@ def parse(key: str) -> Key:
         InputError: path ``key``, when the key is not in the layout or a chunk is invalid.
     """
     text = str(key)
+    if len(text) > MAX_KEY_CHARS:  # before any matching: a hostile key may be megabytes long
+        raise InputError("key", f"{_shown(text)} is longer than {MAX_KEY_CHARS} characters")
     for kind, pattern in _PARSERS:
         m = pattern.match(text)
         if m is not None:
             if not _CHUNK.match(m["mission"]) or not _CHUNK.match(m["id"]):
-                raise InputError("key", f"{text!r}: a chunk is not 1-64 characters of [A-Za-z0-9_-]")
+                raise InputError("key", f"{_shown(text)}: a chunk is not 1-64 characters of [A-Za-z0-9_-]")
             return Key(kind, m["mission"], m["id"])
-    raise InputError("key", f"{text!r} is not a key of the pfp wire contract")
+    raise InputError("key", f"{_shown(text)} is not a key of the pfp wire contract")
+
+
+def _shown(text: str) -> str:
+    """``repr(text)``, its middle left out past 100 characters, so a reason stays short."""
+    if len(text) <= 100:
+        return repr(text)
+    return f"{text[:60]!r}...{text[-20:]!r} ({len(text)} characters)"

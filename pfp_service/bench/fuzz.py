@@ -1,0 +1,494 @@
+"""Hostile input: malformed payloads on every key and queryable of a real planner, which must carry on.
+
+Starts ``pfp serve`` as its own process on a free loopback port (JSON log to a
+file), then sends ``--count`` malformed inputs on each of: unit states, goals,
+threats (puts with congestion control BLOCK, so none is dropped on the way),
+preview queries and status queries, plus liveliness tokens with odd ids.  The
+inputs, from one seeded generator: random bytes, truncated JSON, deep nesting,
+wrong types, NaN and Infinity, huge numbers, out-of-range values, bad UTF-8,
+non-objects, megabyte payloads and valid payloads on keys with odd ids.
+
+It passes when afterwards the planner
+  - gives a fresh probe unit the same direction, bit for bit, as before the fuzz,
+    and answered every probe sent during it within 5 s (no stall);
+  - counted every put as rejected, and answered every query (an error reply
+    that decodes, or a status);
+  - grew its resident memory by at most ``--max-rss-growth-mb``;
+  - wrote zero tracebacks to its log, and is still running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from pfp_service.cli._common import positive_float, positive_int
+
+__all__ = ["CATEGORIES", "Input", "add_arguments", "fuzz", "malformed", "run"]
+
+MISSION = "fuzz"
+PROBE_TIMEOUT_S = 5.0
+
+# A valid message of each kind, the starting point of the structured mutations.
+_VALID: dict[str, dict[str, Any]] = {
+    "unit_state": {"position": [1.0, 2.0], "seq": 1, "kind": "manned", "speed_mps": 1.4, "heading_deg": 90},
+    "goal": {"position": [10.0, 10.0], "step": 0.1},
+    "threat": {"position": [5.0, 5.0], "facing_deg": 225, "sigma_range": 1.0, "sigma_lateral": 0.7},
+    "preview": {"start": [0.0, 0.0], "goal": [10.0, 10.0], "max_iter": 100},
+}
+# A value of the wrong type for any field of any message.
+_WRONG = ["abc", {"x": 1}, [[1, 2]], True, [], ["1", "2"], [1], [1, 2, 3], None]
+_NON_FINITE = [b"NaN", b"Infinity", b"-Infinity", b"1e999", b"-1e999", b"nan", b"inf"]
+_HUGE = [b"1" + b"0" * 400, b"-" + b"9" * 400, b"1e308", b"18446744073709551617", b"1e9000000"]
+# Valid Zenoh key chunks that are not valid ids: too long, dots, spaces, non-ASCII.
+_ODD_IDS = ["x" * 65, "a.b", "a b", "ü", "日本", "a~b", "..", "%2F", "-" * 200, "a+b", "é" * 64]
+
+
+class Input(NamedTuple):
+    """One fuzz input: its category, the payload, and an odd id to put it under (None: a normal id)."""
+
+    category: str
+    payload: bytes
+    odd_id: str | None = None
+
+
+def _base(kind: str) -> dict[str, Any]:
+    return json.loads(json.dumps(_VALID[kind]))
+
+
+def _random_bytes(rng: random.Random, kind: str) -> bytes:
+    data = rng.randbytes(rng.randint(1, 600))
+    return data if data.strip() not in (b"", b"{}") else b"\x00"
+
+
+def _truncated(rng: random.Random, kind: str) -> bytes:
+    text = json.dumps(_base(kind)).encode()
+    return text[: rng.randint(1, len(text) - 1)]
+
+
+def _deep(rng: random.Random, kind: str) -> bytes:
+    n = rng.choice([600, 5_000, 50_000, 120_000])
+    field = next(iter(_VALID[kind]))
+    opener = rng.choice([b"[", b'{"a":'])
+    return b'{"' + field.encode() + b'": ' + opener * n
+
+
+def _wrong_type(rng: random.Random, kind: str) -> bytes:
+    msg = _base(kind)
+    field = next(iter(msg))  # the one required field (or, for a preview, the start), which null cannot be
+    if rng.random() < 0.5:
+        field = rng.choice(list(msg))
+    wrong = [w for w in _WRONG if w is not None or field == next(iter(msg))]
+    msg[field] = rng.choice(wrong)
+    return json.dumps(msg).encode()
+
+
+def _splice(rng: random.Random, kind: str, tokens: list[bytes]) -> bytes:
+    """The valid message with one number replaced by a raw token (which json.dumps cannot write)."""
+    msg = _base(kind)
+    field = rng.choice([f for f, v in msg.items() if isinstance(v, (int, float, list))])
+    marker = "__TOKEN__"
+    msg[field] = [marker, 1.0] if isinstance(msg[field], list) else marker
+    return json.dumps(msg).encode().replace(b'"__TOKEN__"', rng.choice(tokens))
+
+
+def _non_finite(rng: random.Random, kind: str) -> bytes:
+    return _splice(rng, kind, _NON_FINITE)
+
+
+def _huge_number(rng: random.Random, kind: str) -> bytes:
+    return _splice(rng, kind, _HUGE)
+
+
+def _out_of_range(rng: random.Random, kind: str) -> bytes:
+    msg = _base(kind)
+    table: dict[str, list[tuple[str, Any]]] = {
+        "unit_state": [("speed_mps", -1), ("heading_deg", 1e6), ("seq", -5), ("position", [1e12, 0])],
+        "goal": [("step", 0), ("step", -1), ("tolerance", -1), ("position", [0, -2e9])],
+        "threat": [("sigma_range", 0), ("sigma_lateral", 1e-9), ("skew", 1e9), ("weight", -1)],
+        "preview": [("max_iter", 0), ("max_iter", 10**12), ("step", -1), ("threats", [{"id": "a"}])],
+    }
+    field, value = rng.choice(table[kind])
+    msg[field] = value
+    return json.dumps(msg).encode()
+
+
+def _bad_text(rng: random.Random, kind: str) -> bytes:
+    # invalid UTF-8 where a value is read (msgspec skips unknown fields without checking their text)
+    first = next(iter(_VALID[kind])).encode()
+    return rng.choice(
+        [
+            b'{"' + first + b'": "\xff\xfe"}',
+            b'{"position": [1, 2], "kind": "\\ud800"}',
+            b"\xef\xbb\xbf" + json.dumps(_base(kind)).encode()[:-1],
+            json.dumps(_base(kind)).encode("utf-16"),
+            b'{"position": "\x00\x01\x02"}',
+        ]
+    )
+
+
+def _not_object(rng: random.Random, kind: str) -> bytes:
+    return rng.choice([b"[]", b"1", b'"x"', b"null", b"true", b"[1, 2]", b"-0", b'"' + b"a" * 5000 + b'"'])
+
+
+def _oversize(rng: random.Random, kind: str) -> bytes:
+    from pfp_service.wire import MAX_PAYLOAD_BYTES
+
+    head, tail = b'{"position": [1, 2], "pad": "', b'"}'
+    size = rng.choice([MAX_PAYLOAD_BYTES + 1, 300_000, 1 << 20])
+    return head + b" " * (size - len(head) - len(tail)) + tail
+
+
+def _odd_id(rng: random.Random, kind: str) -> bytes:
+    return json.dumps(_base(kind)).encode()  # valid: only the key is wrong
+
+
+# The categories and how often each is drawn (megabyte payloads rarely: they cost the most).
+CATEGORIES: dict[str, tuple[float, Callable[[random.Random, str], bytes]]] = {
+    "random_bytes": (14, _random_bytes),
+    "truncated": (12, _truncated),
+    "deep_nesting": (8, _deep),
+    "wrong_type": (14, _wrong_type),
+    "non_finite": (10, _non_finite),
+    "huge_number": (8, _huge_number),
+    "out_of_range": (12, _out_of_range),
+    "bad_text": (8, _bad_text),
+    "not_object": (8, _not_object),
+    "oversize": (0.3, _oversize),
+    "odd_id": (6, _odd_id),
+}
+_NAMES = list(CATEGORIES)
+_WEIGHTS = [w for w, _ in CATEGORIES.values()]
+
+
+def malformed(rng: random.Random, kind: str) -> Input:
+    """One malformed input for messages of ``kind`` (``unit_state``, ``goal``, ``threat``, ``preview``)."""
+    category = rng.choices(_NAMES, _WEIGHTS)[0]
+    payload = CATEGORIES[category][1](rng, kind)
+    return Input(category, payload, rng.choice(_ODD_IDS) if category == "odd_id" else None)
+
+
+# -- the live run -------------------------------------------------------------------
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--count", type=positive_int, default=10_000, help="inputs per key and queryable")
+    p.add_argument("--seed", type=int, default=11, help="seed of the generator (default 11)")
+    p.add_argument(
+        "--max-rss-growth-mb", type=positive_float, default=100.0, help="memory bound (default 100 MB)"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _rss_mb(pid: int) -> float | None:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        return None
+    return None
+
+
+class _Probe:
+    """Fresh units asking the same question: from (0, 0) to (10, 10) among two threats, which way?"""
+
+    def __init__(self, session: Any) -> None:
+        from pfp_service.wire import keys
+
+        self.s, self.n, self.keys = session, 0, keys
+        self.latencies_ms: list[float] = []
+        self.stalls = 0
+
+    def ask(self) -> dict[str, Any] | None:
+        import queue
+
+        import zenoh
+
+        from pfp_service.wire import decode_direction
+
+        self.n += 1
+        uid = f"probe{self.n}"
+        got: queue.Queue[Any] = queue.Queue()
+        sub = self.s.declare_subscriber(
+            self.keys.unit_direction(MISSION, uid), lambda smp: got.put(smp.payload.to_bytes())
+        )
+        enc = zenoh.Encoding.APPLICATION_JSON
+        try:
+            self.s.put(self.keys.unit_goal(MISSION, uid), b'{"position": [10, 10]}', encoding=enc)
+            t0 = time.perf_counter()
+            deadline = time.monotonic() + PROBE_TIMEOUT_S
+            seq = 0
+            while time.monotonic() < deadline:  # the goal and the state race: report until en route
+                seq += 1
+                state = json.dumps({"position": [0.0, 0.0], "seq": seq}).encode()
+                self.s.put(self.keys.unit_state(MISSION, uid), state, encoding=enc)
+                try:
+                    while True:
+                        d = decode_direction(got.get(timeout=max(deadline - time.monotonic(), 0.01)))
+                        if d.seq == seq:
+                            break
+                except queue.Empty:
+                    break
+                if d.status.value != "no_goal":
+                    self.latencies_ms.append((time.perf_counter() - t0) * 1e3)
+                    return {"status": d.status.value, "vector": list(d.vector), "level": d.threat_level}
+            self.stalls += 1
+            return None
+        finally:
+            sub.undeclare()
+            self.s.delete(self.keys.unit_goal(MISSION, uid))
+
+
+def _status(session: Any) -> Any:
+    from pfp_service.wire import decode_planner_status, keys
+
+    for r in session.get(keys.planner_statuses(MISSION), timeout=2.0):
+        if r.ok is not None:
+            return decode_planner_status(r.ok.payload.to_bytes())
+    return None
+
+
+def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[[str], None] = print) -> dict:
+    """Run the whole fuzz against a fresh ``pfp serve`` subprocess; return the figures and ``ok``."""
+    import zenoh
+
+    from pfp_service.wire import decode_error_reply, decode_planner_status, keys
+
+    rng = random.Random(seed)
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    log = tempfile.NamedTemporaryFile(prefix="pfp-fuzz-", suffix=".log", delete=False)  # noqa: SIM115
+    argv = ["serve", "--listen", endpoint, "--mission", MISSION, "--log-format", "json"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pfp_service", *argv],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    enc = zenoh.Encoding.APPLICATION_JSON
+    block = zenoh.CongestionControl.BLOCK
+    sent: Counter[str] = Counter()
+    categories: Counter[str] = Counter()
+    queries = {"sent": 0, "error_replies": 0, "status_replies": 0, "unanswered": 0, "undecodable": 0}
+    r: dict[str, Any] = {"count_per_target": count, "seed": seed}
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                session = zenoh.open(conf)
+                if _status(session) is not None:
+                    break
+                session.close()
+            except Exception:
+                if time.monotonic() > deadline or proc.poll() is not None:
+                    raise RuntimeError("the planner did not start") from None
+            time.sleep(0.2)
+        try:
+            for tid, pos in (("e1", [4, 6]), ("e2", [7, 3])):
+                threat = {"position": pos, "facing_deg": 225, "sigma_range": 1.0, "sigma_lateral": 0.7}
+                session.put(keys.threat(MISSION, tid), json.dumps(threat).encode(), encoding=enc)
+            probe = _Probe(session)
+            before = probe.ask()
+            rss0 = _rss_mb(proc.pid)
+            rss_peak = rss0 or 0.0
+            rejected0 = _status(session).rejected
+            say(f"pfp bench fuzz: seed {seed}, {count} inputs per target, planner pid {proc.pid}")
+            t_start = time.perf_counter()
+            for target, kind, make_key in (
+                ("unit_state", "unit_state", lambda i: keys.unit_state(MISSION, f"fz{i % 50}")),
+                ("goal", "goal", lambda i: keys.unit_goal(MISSION, f"fz{i % 50}")),
+                ("threat", "threat", lambda i: keys.threat(MISSION, f"fz{i % 50}")),
+            ):
+                for i in range(count):
+                    x = malformed(rng, kind)
+                    key = make_key(i) if x.odd_id is None else _odd_key(target, x.odd_id)
+                    try:
+                        session.put(key, x.payload, encoding=enc, congestion_control=block)
+                    except zenoh.ZError:  # a key Zenoh itself refuses never reaches the planner
+                        sent["refused_by_zenoh"] += 1
+                        continue
+                    sent[target] += 1
+                    categories[x.category] += 1
+                    if i % 1000 == 999:
+                        probe.ask()
+                        rss_peak = max(rss_peak, _rss_mb(proc.pid) or 0.0)
+                say(f"  {target}: {count} puts sent")
+            for target in ("preview", "status"):
+                pending: list[Any] = []
+                for i in range(count):
+                    if target == "preview":
+                        x = malformed(rng, "preview")
+                        uid = x.odd_id or f"fz{i % 50}"
+                        key = keys.preview(MISSION, "fz0") if x.odd_id is None else _odd_key("preview", uid)
+                        sel, payload = key, x.payload
+                        categories[x.category] += 1
+                    else:
+                        sel = keys.planner_status(MISSION, "planner") + rng.choice(
+                            ["", "?a=b", "?;;;", "?" + "x" * 2000, "?max_iter=1e99"]
+                        )
+                        payload = malformed(rng, "preview").payload
+                    pending.append(session.get(sel, payload=payload, timeout=10.0))
+                    queries["sent"] += 1
+                    if len(pending) >= 64 or i == count - 1:
+                        for handler in pending:
+                            _collect(handler, target, queries, decode_error_reply, decode_planner_status)
+                        pending.clear()
+                    if i % 1000 == 999:
+                        probe.ask()
+                        rss_peak = max(rss_peak, _rss_mb(proc.pid) or 0.0)
+                say(f"  {target}: {count} queries sent")
+            tokens = max(count // 10, 10)
+            for i in range(tokens):
+                odd = _ODD_IDS[i % len(_ODD_IDS)] + str(i)
+                tok = session.liveliness().declare_token(_odd_key("alive_unit", odd))
+                tok.undeclare()
+            sent["alive_unit"] += tokens
+            say(f"  liveliness: {tokens} tokens with odd ids declared and dropped")
+            r["fuzz_s"] = round(time.perf_counter() - t_start, 1)
+            # let the planner drain: the rejected counter stops moving
+            expected = sent["unit_state"] + sent["goal"] + sent["threat"]
+            last, still = -1, time.monotonic()
+            while time.monotonic() - still < 2.0 and time.monotonic() - t_start < 600:
+                st = _status(session)
+                now_rej = st.rejected - rejected0 if st is not None else -1
+                if now_rej != last:
+                    last, still = now_rej, time.monotonic()
+                if now_rej >= expected:
+                    break
+                time.sleep(0.2)
+            after = probe.ask()
+            rss1 = _rss_mb(proc.pid)
+            r.update(
+                inputs=sum(sent.values()) + queries["sent"],
+                puts=dict(sent),
+                categories=dict(categories),
+                queries=queries,
+                rejected=last,
+                rejected_expected=expected,
+                probe_before=before,
+                probe_after=after,
+                probes=probe.n,
+                probe_stalls=probe.stalls,
+                probe_p50_ms=_q(probe.latencies_ms, 0.5),
+                probe_max_ms=max(probe.latencies_ms, default=None),
+                rss_mb_before=rss0,
+                rss_mb_peak=round(max(rss_peak, rss1 or 0.0), 1),
+                rss_mb_after=rss1,
+            )
+        finally:
+            session.close()
+        r["planner_alive"] = proc.poll() is None
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        log.close()
+    text = Path(log.name).read_text(errors="replace")
+    r["log_lines"] = text.count("\n")
+    r["log_bytes"] = len(text)
+    r["tracebacks"] = text.count("Traceback")
+    r["log"] = log.name
+    growth = (r["rss_mb_after"] - r["rss_mb_before"]) if r.get("rss_mb_before") else 0.0
+    r["checks"] = {
+        "same direction after the fuzz": r["probe_before"] is not None
+        and r["probe_after"] == r["probe_before"],
+        "no probe stalled (5 s)": r["probe_stalls"] == 0,
+        "every put rejected": r["rejected"] == r["rejected_expected"],
+        "every query answered": queries["unanswered"] == 0 and queries["undecodable"] == 0,
+        f"memory growth <= {max_rss_growth_mb:g} MB": growth <= max_rss_growth_mb,
+        "zero tracebacks in the log": r["tracebacks"] == 0,
+        "planner still running": r["planner_alive"],
+    }
+    r["ok"] = all(r["checks"].values())
+    if r["tracebacks"] == 0:
+        os.unlink(log.name)
+        r["log"] = None
+    return r
+
+
+def _odd_key(target: str, odd: str) -> str:
+    """A key of the layout with an id that ``keys`` would refuse to build, so it is spelled from its template."""
+    from pfp_service.wire import keys
+
+    kind = {"unit_state": keys.KeyKind.UNIT_STATE, "goal": keys.KeyKind.UNIT_GOAL}.get(target)
+    kind = kind or {"threat": keys.KeyKind.THREAT, "preview": keys.KeyKind.PREVIEW}.get(target)
+    kind = kind or keys.KeyKind.ALIVE_UNIT
+    return keys.TEMPLATES[kind].format(mission=MISSION, id=odd)
+
+
+def _collect(handler: Any, target: str, queries: dict[str, int], dec_err: Any, dec_status: Any) -> None:
+    from pfp_service.errors import InputError
+
+    replies = list(handler)
+    good = [rep for rep in replies if rep.ok is not None or not _is_timeout(rep)]
+    if not good:
+        queries["unanswered"] += 1
+        return
+    for rep in good:
+        try:
+            if rep.ok is not None:
+                dec_status(rep.ok.payload.to_bytes()) if target == "status" else None
+                queries["status_replies" if target == "status" else "error_replies"] += 1
+            else:
+                dec_err(rep.err.payload.to_bytes())
+                queries["error_replies"] += 1
+        except InputError:
+            queries["undecodable"] += 1
+
+
+def _is_timeout(rep: Any) -> bool:
+    return rep.err is not None and rep.err.payload.to_bytes() == b"Timeout"
+
+
+def _q(xs: list[float], q: float) -> float | None:
+    if not xs:
+        return None
+    s = sorted(xs)
+    return round(s[min(len(s) - 1, int(q * len(s)))], 2)
+
+
+def run(args: argparse.Namespace) -> int:
+    r = fuzz(args.count, args.seed, args.max_rss_growth_mb, say=(lambda _: None) if args.json else print)
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return 0 if r["ok"] else 1
+    q = r["queries"]
+    print(f"  inputs: {r['inputs']} in {r['fuzz_s']} s; by category: {r['categories']}")
+    print(f"  rejected {r['rejected']} of {r['rejected_expected']} puts; queries: {q}")
+    print(
+        f"  probes: {r['probes']}, p50 {r['probe_p50_ms']} ms, max {r['probe_max_ms']} ms, "
+        f"stalls {r['probe_stalls']}; direction before {r['probe_before']}, after {r['probe_after']}"
+    )
+    print(
+        f"  planner RSS: {r['rss_mb_before']:.1f} MB before, {r['rss_mb_peak']:.1f} peak, "
+        f"{r['rss_mb_after']:.1f} after; log {r['log_lines']} lines, {r['log_bytes']} bytes, "
+        f"{r['tracebacks']} tracebacks"
+    )
+    for name, ok in r["checks"].items():
+        print(f"  [{'ok' if ok else 'FAILED'}] {name}")
+    if r["log"]:
+        print(f"  the planner's log is kept at {r['log']}")
+    return 0 if r["ok"] else 1

@@ -1,0 +1,15 @@
+"""``pfp bench fuzz`` in small: a real ``pfp serve`` takes 1,500+ malformed inputs and carries on."""
+
+from __future__ import annotations
+
+from pfp_service.bench.fuzz import fuzz
+
+
+def test_a_planner_survives_malformed_input_on_every_key_and_queryable():
+    seed = 7
+    r = fuzz(count=300, seed=seed, say=lambda _: None)
+    failed = [name for name, ok in r["checks"].items() if not ok]
+    assert not failed, f"seed {seed}: {failed}; {r}"
+    assert r["inputs"] >= 1500
+    assert r["rejected"] == r["rejected_expected"] == 900
+    assert r["queries"]["error_replies"] == r["queries"]["status_replies"] == 300
