@@ -1,0 +1,267 @@
+"""The bridge's I/O: TAK transports through pytak, the planner through Zenoh, one asyncio loop between.
+
+Shape (as the zenoh examples): ``run(settings, links, zenoh_conf)`` opens the
+session in ``with``, declares the subscribers, connects every TAK link and
+then drains three queues until stopped:
+
+- Zenoh callbacks only hand ``(kind, key, payload)`` to the loop
+  (``call_soon_threadsafe``), never decode or publish there;
+- each TAK link (a pytak ``COT_URL``: ``udp://239.2.3.1:6969`` multicast,
+  ``tcp://host:8087``, ``tls://host:8089`` with ``TlsFiles``, ``+wo``/``+ro``
+  for one direction only) has pytak's TX and RX workers; what they read
+  goes through ``BridgeState.on_cot``;
+- a ticker every ``TICK_S`` sends held-back and refreshed events and asks for routes.
+
+A route is the unit's live preview, queried on a worker thread with a
+timeout.  A link that fails is logged and reconnected after ``RECONNECT_S``.
+``pytak`` is imported only here, so the rest of the package works without the ``[tak]`` extra.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Sequence
+from configparser import ConfigParser
+from dataclasses import dataclass
+from typing import Any
+
+from pfp_service.errors import InputError
+from pfp_service.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
+from pfp_service.wire import keys
+from pfp_service.wire import messages as m
+
+__all__ = ["RECONNECT_S", "TICK_S", "TlsFiles", "link_config", "run"]
+
+log = logging.getLogger("pfp.tak")
+TICK_S = 0.1
+RECONNECT_S = 2.0
+PREVIEW_TIMEOUT_S = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class TlsFiles:
+    """Client certificate, key and CA for a ``tls://`` TAK server (pytak's ``PYTAK_TLS_*``)."""
+
+    cert: str | None = None
+    key: str | None = None
+    cafile: str | None = None
+    dont_verify: bool = False
+
+
+def link_config(url: str, tls: TlsFiles | None = None) -> Any:
+    """pytak's config section for one link: XML payloads (``TAK_PROTO=0``), no FTS sleeps."""
+    cfg = ConfigParser(interpolation=None)
+    values = {"COT_URL": url, "TAK_PROTO": "0"}
+    if tls is not None:
+        for name, value in (
+            ("PYTAK_TLS_CLIENT_CERT", tls.cert),
+            ("PYTAK_TLS_CLIENT_KEY", tls.key),
+            ("PYTAK_TLS_CLIENT_CAFILE", tls.cafile),
+        ):
+            if value:
+                values[name] = value
+        if tls.dont_verify:
+            values["PYTAK_TLS_DONT_VERIFY"] = "1"
+    cfg["pfp"] = values
+    return cfg["pfp"]
+
+
+class _Link:
+    """One TAK transport: pytak's workers for ``url``, reconnected when they fail."""
+
+    def __init__(self, url: str, tls: TlsFiles | None, rx: asyncio.Queue[tuple[str, bytes]]) -> None:
+        self.url, self.tls, self.rx = url, tls, rx
+        self.tx: asyncio.Queue[bytes] = asyncio.Queue(maxsize=1000)
+        self.connected = asyncio.Event()
+
+    def send(self, data: bytes) -> None:
+        if not self.connected.is_set():
+            return  # nobody to tell; markers are refreshed once it is back
+        if self.tx.full():
+            self.tx.get_nowait()  # drop the oldest, as pytak does
+        self.tx.put_nowait(data)
+
+    async def run(self) -> None:
+        import pytak
+
+        while True:
+            section = link_config(self.url, self.tls)
+            reader = writer = None
+            tasks: list[asyncio.Task[Any]] = []
+            try:
+                reader, writer = await pytak.protocol_factory(section)
+                rx_queue: asyncio.Queue[bytes] = asyncio.Queue()
+                if writer is not None:
+                    tasks.append(asyncio.create_task(pytak.TXWorker(self.tx, section, writer).run()))
+                if reader is not None:
+                    tasks.append(asyncio.create_task(pytak.RXWorker(rx_queue, section, reader).run()))
+                    tasks.append(asyncio.create_task(self._forward(rx_queue)))
+                self.connected.set()
+                log.info("tak: connected %s", self.url)
+                done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
+                for t in done:
+                    if t.exception() is not None:
+                        raise t.exception()  # type: ignore[misc]
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # a TAK link's failure is logged and retried, never fatal
+                log.warning("tak: link %s failed: %s; retrying in %g s", self.url, exc, RECONNECT_S)
+            finally:
+                self.connected.clear()
+                for t in tasks:
+                    t.cancel()
+                for w in (writer, reader):
+                    close = getattr(w, "close", None)
+                    if callable(close):
+                        with contextlib.suppress(
+                            Exception
+                        ):  # a broken transport may raise; it is gone anyway
+                            close()
+            await asyncio.sleep(RECONNECT_S)
+
+    async def _forward(self, rx_queue: asyncio.Queue[bytes]) -> None:
+        while True:
+            data = await rx_queue.get()
+            await self.rx.put((self.url, data))
+
+
+async def _main(
+    settings: BridgeSettings,
+    urls: Sequence[str],
+    tls: TlsFiles | None,
+    session: Any,
+    stop: asyncio.Event,
+    ready: asyncio.Event | None,
+) -> None:
+    loop = asyncio.get_running_loop()
+    state = BridgeState(settings, log=lambda text: log.warning("tak: %s", text))
+    inbox: asyncio.Queue[tuple[str, str, bytes | None]] = asyncio.Queue()
+    rx: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue()
+    links = [_Link(u, tls, rx) for u in urls]
+    mission = settings.mission
+    fetching: set[asyncio.Task[None]] = set()  # route queries in flight (a reference keeps each alive)
+
+    def enqueue(kind: str) -> Any:
+        import zenoh
+
+        def callback(sample: zenoh.Sample) -> None:
+            payload = None if sample.kind == zenoh.SampleKind.DELETE else sample.payload.to_bytes()
+            loop.call_soon_threadsafe(inbox.put_nowait, (kind, str(sample.key_expr), payload))
+
+        return callback
+
+    subs = [
+        session.declare_subscriber(keys.threats(mission), enqueue("threat")),
+        session.declare_subscriber(keys.unit_states(mission), enqueue("state")),
+        session.declare_subscriber(keys.unit_directions(mission), enqueue("direction")),
+        session.declare_subscriber(keys.events(mission), enqueue("event")),
+    ]
+
+    def emit(out: Outputs) -> None:
+        for data in out.cot:
+            for link in links:
+                link.send(data)
+        for action in out.zenoh:
+            if isinstance(action, ZenohPut):
+                session.put(action.key, action.payload, encoding=_encoding())
+            elif isinstance(action, ZenohDelete):
+                session.delete(action.key)
+        for unit in out.routes:
+            task = asyncio.create_task(fetch_route(unit))
+            fetching.add(task)
+            task.add_done_callback(fetching.discard)
+
+    async def fetch_route(unit: str) -> None:
+        def ask() -> Any:
+            for reply in session.get(keys.preview(mission, unit), timeout=PREVIEW_TIMEOUT_S):
+                if reply.ok is not None:
+                    return m.decode_plan_result(reply.ok.payload.to_bytes())
+            return None
+
+        try:
+            result = await loop.run_in_executor(None, ask)
+        except InputError as exc:
+            log.warning("tak: route of %s: bad preview reply: %s", unit, exc)
+            return
+        if result is not None:
+            emit(state.on_route(unit, result.path, result.status.value, result.length, time.time()))
+
+    async def from_zenoh() -> None:
+        while True:
+            kind, key, payload = await inbox.get()
+            now = time.time()
+            if kind == "threat":
+                emit(state.on_threat(key, payload, now))
+            elif payload is None:
+                continue
+            elif kind == "state":
+                state.on_state(key, payload)
+            elif kind == "direction":
+                emit(state.on_direction(key, payload, now))
+            elif kind == "event":
+                emit(state.on_event(payload, now))
+
+    async def from_tak() -> None:
+        while True:
+            source, data = await rx.get()
+            emit(state.on_cot(data, time.time(), source))
+
+    async def ticker() -> None:
+        while True:
+            emit(state.tick(time.time()))
+            await asyncio.sleep(TICK_S)
+
+    tasks = [
+        asyncio.create_task(c) for c in (from_zenoh(), from_tak(), ticker(), *(lk.run() for lk in links))
+    ]
+    try:
+        if ready is not None:
+            await asyncio.gather(*(lk.connected.wait() for lk in links))
+            ready.set()
+        await stop.wait()
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        for sub in subs:
+            sub.undeclare()
+
+
+def _encoding() -> Any:
+    from pfp_service.wire import zenoh_encoding
+
+    return zenoh_encoding()
+
+
+def run(
+    settings: BridgeSettings,
+    urls: Sequence[str],
+    zenoh_conf: Any,
+    tls: TlsFiles | None = None,
+    stop: asyncio.Event | None = None,
+    ready: asyncio.Event | None = None,
+) -> None:
+    """Run the bridge until ``stop`` is set (or forever, until interrupted).
+
+    Args:
+        settings: mission, origin, threat defaults and rates.
+        urls: pytak ``COT_URL``s, one per TAK link.
+        zenoh_conf: the client's ``zenoh.Config``.
+        tls: certificate files for ``tls://`` links.
+        stop: set it (from the loop's thread) to end the bridge.
+        ready: set once every link has connected the first time.
+
+    Raises:
+        ZenohError: the session could not be opened.
+    """
+    import zenoh
+
+    from pfp_service.errors import map_zenoh_errors
+
+    with map_zenoh_errors("--connect"):
+        session = zenoh.open(zenoh_conf)
+    with session:
+        asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready))

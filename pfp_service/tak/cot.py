@@ -1,0 +1,404 @@
+"""Cursor-on-Target (CoT) XML in and out: pure functions and a rate limiter, no I/O, no clock.
+
+Inbound, ``read_event(bytes)`` parses one ``<event>`` (or raises ``CotError``)
+and ``to_threat_change`` maps it onto the planner's world:
+
+- a hostile ground marker (type ``a-h-G`` or below it) becomes a ``ThreatPut``:
+  ``uid`` is the threat id (``threat_id``), the marker's point the position,
+  ``<track course>`` the facing, ``stale - time`` the TTL, and the shape
+  (sigmas, skew, weight) comes from ``ThreatDefaults``;
+- a delete (``t-x-d-d``) names its target in ``<link uid>`` and becomes a ``ThreatRemoved``;
+- anything else, and our own markers echoed back, map to ``None``.
+
+Outbound, the builders return XML bytes: ``threat_event`` (``a-h-G``),
+``unit_event`` (``a-f-G-U-C`` manned, ``a-f-G-E-V`` unmanned, the direction
+as ``<track course>``, the status in ``<remarks>``), ``route_event`` (``b-m-r``
+with ordered ``<link>`` waypoints ``b-m-p-w`` at the ends and control points
+``b-m-p-c`` between) and ``delete_event``.  Points carry full float precision:
+pytak's helpers round to 4 decimals, about 11 m.
+
+``RateLimiter`` holds back a uid's events to one per ``interval_s`` and sends
+the latest when its turn comes, so nothing is lost but the intermediate ones.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+
+__all__ = [
+    "MAX_EVENT_BYTES",
+    "UID_PREFIX",
+    "CotError",
+    "CotEvent",
+    "RateLimiter",
+    "ThreatDefaults",
+    "ThreatPut",
+    "ThreatRemoved",
+    "delete_event",
+    "iso",
+    "read_event",
+    "route_event",
+    "threat_event",
+    "threat_id",
+    "to_threat_change",
+    "unit_event",
+]
+
+MAX_EVENT_BYTES = 64 * 1024
+# Every uid this bridge sends starts so; inbound events with it are our own echo and are ignored.
+UID_PREFIX = "pfp."
+_ID_OK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+_UNKNOWN_ERR = "9999999.0"  # CoT's "unknown" circular and linear error
+
+
+class CotError(ValueError):
+    """A CoT message that cannot be used: not XML, not an ``<event>``, or a field out of range."""
+
+
+@dataclass(frozen=True, slots=True)
+class CotEvent:
+    """The parts of a CoT event this bridge reads.
+
+    Attributes:
+        uid: the event's uid.
+        type: its CoT type, e.g. ``a-h-G-U-C``.
+        time: when it was sent, Unix seconds (the sender's clock).
+        stale: when it goes stale, Unix seconds.
+        lat: latitude in degrees.
+        lon: longitude in degrees.
+        course_deg: ``<track course>``, true degrees, if present.
+        link_uids: the ``uid`` of each ``<link>`` in ``<detail>``, in order.
+        callsign: ``<contact callsign>``, if present.
+    """
+
+    uid: str
+    type: str
+    time: float
+    stale: float
+    lat: float
+    lon: float
+    course_deg: float | None = None
+    link_uids: tuple[str, ...] = ()
+    callsign: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatDefaults:
+    """The shape given to a hostile marker, which carries only a position (and maybe a course)."""
+
+    sigma_range_m: float = 50.0
+    sigma_lateral_m: float = 30.0
+    skew: float = 0.0
+    weight: float = 1.0
+    facing_deg: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatPut:
+    """Put threat ``id``: a ``ThreatUpdate`` body as a dict (position in lat/lon)."""
+
+    id: str
+    uid: str
+    body: dict[str, object]
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatRemoved:
+    """Remove threat ``id`` (the marker ``uid`` was deleted, or went stale)."""
+
+    id: str
+    uid: str
+
+
+def _time(text: str | None, what: str) -> float:
+    if not text:
+        raise CotError(f"{what}: missing")
+    try:
+        t = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise CotError(f"{what}: not an ISO 8601 time: {text[:40]!r}") from None
+    if t.tzinfo is None:
+        t = t.replace(tzinfo=UTC)
+    return t.timestamp()
+
+
+def _number(text: str | None, what: str, lo: float, hi: float) -> float:
+    try:
+        v = float(text) if text is not None else math.nan
+    except ValueError:
+        raise CotError(f"{what}: not a number: {(text or '')[:40]!r}") from None
+    if not (lo <= v <= hi):
+        raise CotError(f"{what}: must be within {lo:g} to {hi:g}, got {text!r}")
+    return v
+
+
+def read_event(data: bytes) -> CotEvent:
+    """Parse one CoT ``<event>``.
+
+    Raises:
+        CotError: the reason, short enough for one log line.
+    """
+    if len(data) > MAX_EVENT_BYTES:
+        raise CotError(f"event of {len(data)} bytes exceeds {MAX_EVENT_BYTES}")
+    if b"<!DOCTYPE" in data or b"<!ENTITY" in data:  # CoT has no DTD; refuse entity expansion outright
+        raise CotError("DTDs and entities are not accepted")
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise CotError(f"not XML: {exc}") from None
+    if root.tag != "event":
+        raise CotError(f"expected <event>, got <{root.tag[:40]}>")
+    uid, typ = root.get("uid"), root.get("type")
+    if not uid or not typ:
+        raise CotError("event: uid and type are required")
+    point = root.find("point")
+    if point is None:
+        raise CotError("event: <point> is required")
+    detail = root.find("detail")
+    course = None
+    links: tuple[str, ...] = ()
+    callsign = ""
+    if detail is not None:
+        track = detail.find("track")
+        if track is not None and track.get("course") not in (None, ""):
+            course = _number(track.get("course"), "track.course", -360.0, 360.0) % 360.0
+        links = tuple(link.get("uid", "") for link in detail.findall("link"))
+        contact = detail.find("contact")
+        callsign = (contact.get("callsign") or "") if contact is not None else ""
+    return CotEvent(
+        uid=uid,
+        type=typ,
+        time=_time(root.get("time"), "event.time"),
+        stale=_time(root.get("stale"), "event.stale"),
+        lat=_number(point.get("lat"), "point.lat", -90.0, 90.0),
+        lon=_number(point.get("lon"), "point.lon", -180.0, 180.0),
+        course_deg=course,
+        link_uids=links,
+        callsign=callsign,
+    )
+
+
+def threat_id(uid: str) -> str:
+    """The planner's threat id for a marker ``uid``: the uid itself when it is a valid id.
+
+    Otherwise the allowed characters of it, shortened, plus 8 hex digits of
+    its SHA-1, so two uids never share an id by accident and one uid always
+    maps to the same id.
+    """
+    if _ID_OK.match(uid):
+        return uid
+    clean = re.sub(r"[^A-Za-z0-9_-]", "_", uid)[:55]
+    return f"{clean}-{hashlib.sha1(uid.encode()).hexdigest()[:8]}"
+
+
+def _is_hostile_ground(typ: str) -> bool:
+    return typ == "a-h-G" or typ.startswith("a-h-G-")
+
+
+def to_threat_change(ev: CotEvent, defaults: ThreatDefaults) -> ThreatPut | ThreatRemoved | None:
+    """What a CoT event means for the planner's threats, if anything.
+
+    A hostile marker already stale (``stale <= time``) is a removal: its TTL has run out.
+    """
+    if ev.type == "t-x-d-d":
+        targets = [u for u in ev.link_uids if u and not u.startswith(UID_PREFIX)]
+        return ThreatRemoved(id=threat_id(targets[0]), uid=targets[0]) if targets else None
+    if ev.uid.startswith(UID_PREFIX) or not _is_hostile_ground(ev.type):
+        return None
+    ttl_s = ev.stale - ev.time
+    if not ttl_s > 0.0:
+        return ThreatRemoved(id=threat_id(ev.uid), uid=ev.uid)
+    body: dict[str, object] = {
+        "position": {"lat": ev.lat, "lon": ev.lon},
+        "facing_deg": defaults.facing_deg if ev.course_deg is None else ev.course_deg,
+        "sigma_range": defaults.sigma_range_m,
+        "sigma_lateral": defaults.sigma_lateral_m,
+        "skew": defaults.skew,
+        "weight": defaults.weight,
+        "ttl_s": min(ttl_s, 1e9),
+    }
+    return ThreatPut(id=threat_id(ev.uid), uid=ev.uid, body=body)
+
+
+# -- outbound ---------------------------------------------------------------------
+def iso(t: float) -> str:
+    """CoT's time format: ISO 8601 UTC with milliseconds and ``Z``."""
+    return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
+
+
+def _event(
+    uid: str, typ: str, lat: float, lon: float, now: float, stale_s: float, how: str = "m-g"
+) -> ET.Element:
+    ev = ET.Element(
+        "event",
+        {
+            "version": "2.0",
+            "uid": uid,
+            "type": typ,
+            "how": how,
+            "time": iso(now),
+            "start": iso(now),
+            "stale": iso(now + stale_s),
+        },
+    )
+    # repr() keeps every digit: the full double, not pytak's 4 decimals
+    ET.SubElement(
+        ev,
+        "point",
+        {
+            "lat": repr(float(lat)),
+            "lon": repr(float(lon)),
+            "hae": "0.0",
+            "ce": _UNKNOWN_ERR,
+            "le": _UNKNOWN_ERR,
+        },
+    )
+    return ev
+
+
+def _bytes(ev: ET.Element) -> bytes:
+    return ET.tostring(ev, encoding="utf-8", xml_declaration=True)
+
+
+def threat_event(
+    uid: str,
+    lat: float,
+    lon: float,
+    now: float,
+    stale_s: float,
+    facing_deg: float,
+    remarks: str,
+    callsign: str,
+) -> bytes:
+    """A hostile ground marker (``a-h-G``) for one of the planner's threats."""
+    ev = _event(uid, "a-h-G", lat, lon, now, stale_s, how="h-e")
+    d = ET.SubElement(ev, "detail")
+    ET.SubElement(d, "track", {"course": repr(float(facing_deg) % 360.0), "speed": "0.0"})
+    ET.SubElement(d, "contact", {"callsign": callsign})
+    ET.SubElement(d, "remarks").text = remarks
+    return _bytes(ev)
+
+
+def unit_event(
+    uid: str,
+    manned: bool,
+    lat: float,
+    lon: float,
+    now: float,
+    stale_s: float,
+    course_deg: float | None,
+    speed_mps: float,
+    remarks: str,
+    callsign: str,
+) -> bytes:
+    """A unit's friendly marker: ``a-f-G-U-C`` manned, ``a-f-G-E-V`` unmanned; its direction as the course."""
+    ev = _event(uid, "a-f-G-U-C" if manned else "a-f-G-E-V", lat, lon, now, stale_s)
+    d = ET.SubElement(ev, "detail")
+    if course_deg is not None:
+        ET.SubElement(
+            d, "track", {"course": repr(float(course_deg) % 360.0), "speed": repr(float(speed_mps))}
+        )
+    ET.SubElement(d, "contact", {"callsign": callsign})
+    ET.SubElement(d, "remarks").text = remarks
+    return _bytes(ev)
+
+
+def route_event(
+    uid: str,
+    waypoints: Sequence[tuple[float, float]],
+    now: float,
+    stale_s: float,
+    callsign: str,
+    remarks: str,
+) -> bytes:
+    """A route (``b-m-r``): ``waypoints`` as ``(lat, lon)`` in order, each a ``<link>``.
+
+    Raises:
+        ValueError: fewer than two waypoints.
+    """
+    if len(waypoints) < 2:
+        raise ValueError("route_event: a route needs at least two waypoints")
+    lat0, lon0 = waypoints[0]
+    ev = _event(uid, "b-m-r", lat0, lon0, now, stale_s, how="h-e")
+    d = ET.SubElement(ev, "detail")
+    last = len(waypoints) - 1
+    for i, (lat, lon) in enumerate(waypoints):
+        end = i in (0, last)
+        ET.SubElement(
+            d,
+            "link",
+            {
+                "uid": f"{uid}.{i}",
+                "callsign": ("start" if i == 0 else "goal") if end else f"CP{i}",
+                "type": "b-m-p-w" if end else "b-m-p-c",
+                "point": f"{float(lat)!r},{float(lon)!r},0.0",
+                "remarks": "",
+                "relation": "c",
+            },
+        )
+    ET.SubElement(
+        d,
+        "link_attr",
+        {
+            "planningmethod": "Infil",
+            "color": "-1",
+            "method": "Driving",
+            "prefix": "CP",
+            "type": "Vehicle",
+            "stroke": "3",
+            "direction": "Infil",
+            "routetype": "Primary",
+            "order": "Ascending Check Points",
+        },
+    )
+    ET.SubElement(d, "contact", {"callsign": callsign})
+    ET.SubElement(d, "remarks").text = remarks
+    return _bytes(ev)
+
+
+def delete_event(uid: str, target_uid: str, target_type: str, lat: float, lon: float, now: float) -> bytes:
+    """``t-x-d-d``: tell TAK clients to remove the marker ``target_uid``."""
+    ev = _event(uid, "t-x-d-d", lat, lon, now, 20.0, how="h-g-i-g-o")
+    d = ET.SubElement(ev, "detail")
+    ET.SubElement(d, "link", {"uid": target_uid, "relation": "none", "type": target_type})
+    ET.SubElement(d, "__forcedelete")
+    return _bytes(ev)
+
+
+@dataclass
+class RateLimiter:
+    """At most one event per uid per ``interval_s``; a held-back event is replaced by a newer one.
+
+    ``offer(uid, data, now)`` returns what may go now (``[]`` or ``[data]``);
+    ``due(now)`` returns the held-back events whose turn has come.
+    """
+
+    interval_s: float
+    _last: dict[str, float] = field(default_factory=dict)
+    _held: dict[str, bytes] = field(default_factory=dict)
+
+    def offer(self, uid: str, data: bytes, now: float) -> list[bytes]:
+        last = self._last.get(uid)
+        if last is None or now - last >= self.interval_s:
+            self._last[uid] = now
+            self._held.pop(uid, None)
+            return [data]
+        self._held[uid] = data
+        return []
+
+    def due(self, now: float) -> list[bytes]:
+        out = []
+        for uid in [u for u in self._held if now - self._last[u] >= self.interval_s]:
+            out.append(self._held.pop(uid))
+            self._last[uid] = now
+        return out
+
+    @property
+    def held(self) -> int:
+        return len(self._held)
