@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 test: $(STAMP)
+	@sh .ci/ensure-chromium
 	$(BIN)/python -m pytest -q
 
 check: $(STAMP)

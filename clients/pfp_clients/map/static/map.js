@@ -27,6 +27,7 @@ const state = {
   selectedThreat: null,
   mode: null, // null | "drop-threat" | "move-threat" | "set-goal"
   fitted: false,
+  userMoved: false, // the operator panned or zoomed: stop following
   frame: null, // the ENU frame of the origin, or null for plain metres
   preview: null,
   dropCount: 0,
@@ -151,6 +152,11 @@ function createMap(config) {
   };
   state.renderer = L.canvas({ padding: 0.2 });
   map.on("click", onMapClick);
+  const moved = () => (state.userMoved = true);
+  map.on("dragstart", moved);
+  map.getContainer().addEventListener("wheel", moved, { passive: true });
+  map.getContainer().addEventListener("dblclick", moved);
+  map.zoomControl.getContainer().addEventListener("click", moved);
   map.on("mousemove", (e) => {
     const [x, y] = toMetres(e.latlng);
     $("cursor").textContent = `x ${x.toFixed(1)} m, y ${y.toFixed(1)} m` + (geo ? `  (${e.latlng.lat.toFixed(6)}, ${e.latlng.lng.toFixed(6)})` : "");
@@ -209,7 +215,9 @@ function upsertUnit(d, full) {
     u = { data: d, marker: null, track: null, look: null, lookDots: [], goal: null, points: [] };
     state.units.set(d.id, u);
   }
+  const goalMoved = JSON.stringify(u.data.goal) !== JSON.stringify(d.goal);
   u.data = d;
+  if (goalMoved && state.selectedUnit === d.id) schedulePreview();
   if (full) u.points = (d.track || []).slice(-TRACK_MAX);
   else if (d.track_add && d.track_add.length) {
     u.points.push(...d.track_add);
@@ -425,6 +433,7 @@ function showPreview(body) {
 async function fetchPreview() {
   const id = state.selectedUnit;
   if (!id) return;
+  state.previewAt = Date.now();
   $("preview").textContent = "asking the planner…";
   $("preview").dataset.state = "pending";
   try {
@@ -434,6 +443,16 @@ async function fetchPreview() {
   } catch (err) {
     if (state.selectedUnit === id) showPreview({ error: `map server unreachable (${err})` });
   }
+}
+
+// The selected unit's preview is asked again when its goal or its threats change, at most every 2 s.
+function schedulePreview() {
+  if (state.previewTimer) return;
+  const wait = Math.max(0, 2000 - (Date.now() - (state.previewAt || 0)));
+  state.previewTimer = setTimeout(() => {
+    state.previewTimer = null;
+    fetchPreview();
+  }, wait);
 }
 
 function selectUnit(id) {
@@ -552,14 +571,19 @@ async function onMapClick(e) {
 }
 
 // -- the stream ----------------------------------------------------------------------------------
-function fitOnce() {
-  if (state.fitted) return;
+// Follow the mission until the operator pans or zooms: keep every unit, goal and threat in view.
+function follow() {
+  if (state.userMoved) return;
   const pts = [];
-  state.units.forEach((u) => u.data.position && pts.push(toLatLng(u.data.position)));
+  state.units.forEach((u) => {
+    if (u.data.position) pts.push(toLatLng(u.data.position));
+    if (u.data.goal) pts.push(toLatLng(u.data.goal));
+  });
   state.threats.forEach((t) => t.data.zone.forEach((p) => pts.push(toLatLng(p))));
   if (!pts.length) return;
   const b = L.latLngBounds(pts);
-  state.map.fitBounds(b.pad(0.25), { maxZoom: state.config.origin ? 19 : 4 });
+  if (state.fitted && state.map.getBounds().contains(b)) return;
+  state.map.fitBounds(b.pad(0.15), { maxZoom: state.config.origin ? 19 : 4, animate: false });
   state.fitted = true;
 }
 
@@ -577,7 +601,11 @@ function apply(msg) {
   (msg.threats_removed || []).forEach((id) => removeThreat(id, false));
   Object.values(msg.units || {}).forEach((d) => upsertUnit(d, full));
   (msg.units_removed || []).forEach(removeUnit);
-  if (msg.events) addEvents(msg.events);
+  if (msg.events) {
+    addEvents(msg.events);
+    const sel = state.selectedUnit;
+    if (sel && msg.type === "delta" && msg.events.some((e) => e.kind === "replan" && (e.units.includes(sel) || e.more_units))) schedulePreview();
+  }
   if (msg.rejected) {
     Object.values(msg.rejected).forEach((r) => state.rejected.set(r.id, r));
     renderRejected();
@@ -586,7 +614,7 @@ function apply(msg) {
     state.status = Object.assign(state.status || {}, msg.status);
     renderStatus(state.status);
   }
-  fitOnce();
+  follow();
   state.frames = (state.frames || 0) + 1;
 }
 
