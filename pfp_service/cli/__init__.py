@@ -95,14 +95,15 @@ def _closed_pipe(command: str) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    func = getattr(args, "func", None)
-    if func is None:  # `pfp`, or `pfp bench` without a name: show what there is
-        helper = getattr(args, "help_parser", parser)
-        helper.print_help()
-        return 0
-    command = " ".join(filter(None, [args.command, getattr(args, "benchmark", None)]))
+    words = list(sys.argv[1:] if argv is None else argv)
+    command = next((w for w in words if not w.startswith("-")), "")
     try:
+        args = parser.parse_args(words)  # may print help: a closed pipe is possible from here on
+        func = getattr(args, "func", None)
+        if func is None:  # `pfp`, or `pfp bench` without a name: show what there is
+            getattr(args, "help_parser", parser).print_help()
+            sys.stdout.flush()
+            return 0
         code = int(func(args))
         sys.stdout.flush()
         return code

@@ -127,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
+    from pfp_service.files import read_text
     from pfp_service.errors import InputError
     from pfp_service.render import summary
     from pfp_service.scenario import load_scenario
@@ -142,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
         from pfp_service.geojson import check_geojson_path
 
         check_geojson_path(args.geojson)
+    read_text(args.scenario)  # a directory, binary, non-UTF-8 or huge file: one line naming it
     scenario = load_scenario(args.scenario)
     if args.geojson and scenario.origin is None:
         raise InputError("--geojson", f"{args.scenario} has no origin: add origin: {{lat: …, lon: …}}")
