@@ -230,3 +230,101 @@ def test_one_lambda_ranks_every_path():
     assert math.isclose(path_cost(path, ThreatField()), 50.0)
     e = path_cost(path, field, 1.0) - 50.0
     assert e > 0 and math.isclose(path_cost(path, field), 50.0 + LAMBDA * e)
+
+
+def _gap_wall(ratio, sigma=4.0, half_len=90.0):
+    """A wall across (0, 0) -> (100, 0) at x = 50 with one gap whose middle is ``ratio`` of the neighbours' peak."""
+    g = sigma * math.sqrt(-2.0 * math.log(ratio))
+    ys = [g + k * 1.2 * sigma for k in range(int((half_len - g) / (1.2 * sigma)) + 1)]
+    return [
+        Threat.from_facing((50.0, s * y), 270, sigma, sigma, 0.0, 1.0, f"w{i}")
+        for i, y in enumerate(ys)
+        for s in (1, -1)
+    ]
+
+
+def test_a_gap_open_by_the_core_rule_is_passed_when_cheaper():
+    threats = _gap_wall(0.4)
+    cores = Cores(ThreatField(threats))
+    assert not cores.inside(np.array([[50.0, 0.0]]))[0]  # open by the rule: 0.4 of peak at its middle
+    r = _plan(threats, "auto", goal=(100.0, 0.0))
+    assert r.status.value == "reached" and not _core_entry(threats, r.path)
+    assert max(abs(y) for _, y in r.path) < 20.0  # through the gap, not round a 90 m wall
+
+
+def test_a_gap_shut_by_the_core_rule_is_gone_round():
+    threats = _gap_wall(0.6)
+    assert Cores(ThreatField(threats)).inside(np.array([[50.0, 0.0]]))[0]
+    r = _plan(threats, "auto", goal=(100.0, 0.0))
+    assert r.status.value == "reached" and not _core_entry(threats, r.path)
+    assert max(abs(y) for _, y in r.path) > 80.0
+
+
+def test_search_margin_is_explicit_and_inside_the_rule():
+    from pfp_service.core.cores import SEARCH_FRACTION
+
+    assert 0.45 < SEARCH_FRACTION < CORE_FRACTION  # routes keep a sliver of clearance from every core
+    t = Threat.from_facing((0, 0), 0, 2.0, 2.0, 0.0)
+    r_check, r_search = (math.sqrt(-2 * math.log(f)) for f in (CORE_FRACTION, SEARCH_FRACTION))
+    pts = np.array([[2.0 * 0.5 * (r_check + r_search), 0.0]])
+    assert (
+        not Cores(ThreatField([t])).inside(pts)[0] and Cores(ThreatField([t]), SEARCH_FRACTION).inside(pts)[0]
+    )
+
+
+def test_a_goal_inside_a_core_is_named_in_the_reason():
+    threats = [Threat.from_facing((95.0, 0.0), 270, 5.0, 5.0, 0.0, 1.0, "guard")]
+    r = _plan(threats, "auto", goal=(100.0, 0.0))
+    assert r.status.value == "trapped"
+    assert "the goal lies in the core of threat guard" in r.reason
+
+
+def test_a_start_inside_a_core_leaves_it_first_and_says_so():
+    threats = [Threat.from_facing((2.0, 0.0), 0, 5.0, 5.0, 0.0, 1.0, "here")]
+    cores = Cores(ThreatField(threats))
+    assert cores.inside(np.array([START]))[0]
+    r = _plan(threats, "auto", goal=(100.0, 0.0))
+    assert r.status.value == "reached"
+    assert r.escapes and r.escapes[0] == "leave core here"
+    path = np.asarray(r.path)
+    out = int(np.argmin(cores.inside(path)))  # the first point outside
+    leave = float(np.hypot(*(path[out] - path[0])))
+    assert leave <= 5.0 * math.sqrt(2 * math.log(2)) * 1.2 + 2 * r.params.step  # about the core's radius
+    assert not cores.inside(path[out:]).any()
+
+
+def test_an_escape_ending_at_the_goal_steers_on_to_it():
+    from pfp_service.core.escape import EscapeRun
+
+    path = np.array([[float(k), 0.0] for k in range(11)])
+    handed = EscapeRun("global", path, 1.0)
+    kept = EscapeRun("global", path, 1.0, to_goal=True)
+    for run in (handed, kept):
+        run.direction(0.0, 0.0)
+    assert handed.direction(9.6, 0.3) is None  # descent takes over
+    d = kept.direction(9.6, 0.3)
+    assert d is not None and d[0] > 0.7 and d[1] < 0  # on to the goal
+
+
+def test_auto_goes_round_a_channel_that_descent_would_run_down():
+    from pfp_service.bench.cases import KINDS, generate
+    from pfp_service.core.optimal import plan_optimal
+
+    for case in [c for c in generate(2 * len(KINDS), 4) if c.kind == "corridor"]:
+        sched = [Scheduled(t) for t in case.threats]
+        plain, auto = (plan(case.start, case.goal, sched, PlannerParams(escape=m)) for m in ("none", "auto"))
+        ref = plan_optimal(case.start, case.goal, sched, avoid_cores=True)
+        j = lambda r: r.length + 10.0 * r.exposure
+        assert auto.status.value == "reached" and not _core_entry(case.threats, auto.path)
+        assert j(auto) <= min(j(plain) if plain.status.value == "reached" else math.inf, 1.10 * j(ref))
+
+
+def test_optimal_with_avoid_cores_traps_an_enclosure_and_never_enters_a_core():
+    from pfp_service.core.optimal import plan_optimal
+
+    threats = ring()
+    sched = [Scheduled(t) for t in threats]
+    r = plan_optimal((20.0, 20.0), GOAL, sched, avoid_cores=True)
+    assert r.status.value == "trapped" and "avoids the threat cores" in r.reason
+    free = plan_optimal(START, GOAL, [Scheduled(t) for t in block()], avoid_cores=True)
+    assert free.status.value == "reached" and not _core_entry(block(), free.path)

@@ -71,3 +71,33 @@ def _mode(t):
 
     f = ThreatField([Threat(t.xi, t.omega, t.alpha, 1.0)])
     return minimize(lambda p: -f.level(p[None, :])[0], np.array(t.xi), method="Nelder-Mead", tol=1e-12).x
+
+
+def test_core_raster_is_the_core_test_on_a_lattice():
+    rng = np.random.default_rng(5)
+    threats = [
+        Threat.from_facing(
+            rng.uniform(0, 60, 2), rng.uniform(0, 360), rng.uniform(1, 4), rng.uniform(0.2, 3), k
+        )
+        for k in rng.uniform(0, 30, 25)
+    ]
+    cores = Cores(ThreatField(threats))
+    h, shape = 0.3, (201, 181)
+    nodes = np.stack(np.meshgrid(np.arange(shape[0]) * h, np.arange(shape[1]) * h, indexing="ij"), -1)
+    assert np.array_equal(
+        cores.raster((0.0, 0.0), h, shape), cores.inside(nodes.reshape(-1, 2)).reshape(shape)
+    )
+
+
+def test_level_raster_differs_from_the_field_only_by_the_floor():
+    field = ThreatField([Threat.from_facing(*s) for s in SHAPES])
+    h, shape = 0.1, (141, 121)
+    out = np.zeros(shape)
+    floor = 1e-12
+    kernels.raster_level(field.packed, -6.0, -4.0, h, floor, out)
+    nodes = np.stack(
+        np.meshgrid(-6.0 + np.arange(shape[0]) * h, -4.0 + np.arange(shape[1]) * h, indexing="ij"), -1
+    )
+    exact = field.level(nodes)
+    assert np.all(out <= exact * (1 + 1e-12) + 1e-300)
+    assert np.max(exact - out) <= len(SHAPES) * floor

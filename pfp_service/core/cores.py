@@ -12,11 +12,21 @@ of weight 0 has no core.
 
 Paths are tested densely: segments are subdivided to a quarter of the
 narrowest threat spread, so no core is stepped over between two points.
+
+One rule, one margin.  Every check (an escape's judge, the benchmark's core
+entries) uses ``CORE_FRACTION``.  The route searches (the ``global`` escape,
+``--planner optimal --avoid-cores``) leave out the slightly larger region
+``SEARCH_FRACTION = 0.48`` of peak: a route between grid points then keeps a
+sliver of clearance (0.034 standard deviations across an unskewed core) and
+always passes the check.  The price is explicit: a gap whose middle is
+between 0.48 and 0.5 of peak is open by the rule but not searched through;
+``pfp bench quality`` counts such cases as ambiguous.
 """
 
 from __future__ import annotations
 
 import math
+import weakref
 
 import numba
 import numpy as np
@@ -24,9 +34,10 @@ import numpy as np
 from pfp_service.core import kernels
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["CORE_FRACTION", "Cores"]
+__all__ = ["CORE_FRACTION", "SEARCH_FRACTION", "Cores"]
 
 CORE_FRACTION = 0.5
+SEARCH_FRACTION = 0.48
 
 
 @numba.njit(cache=True, nogil=True)
@@ -56,6 +67,38 @@ def _inside(packed: np.ndarray, points: np.ndarray, fraction: float, out: np.nda
         out[i] = hit
 
 
+@numba.njit(cache=True, nogil=True)
+def _raster(packed: np.ndarray, x0: float, y0: float, h: float, fraction: float, out: np.ndarray) -> None:
+    """``out[i, k]`` |= node ``(x0 + i h, y0 + k h)`` lies in some core; each threat visits only its box.
+
+    A threat's core needs ``scale exp(-q/2) >= fraction`` (its skew factor is at
+    most 1), i.e. ``q <= 2 ln(scale / fraction)``: an ellipse whose bounding box
+    has half-widths ``sqrt(q_max Omega_00)`` and ``sqrt(q_max Omega_11)``.
+    """
+    nx, ny = out.shape
+    for j in range(packed.shape[0]):
+        s = packed[j, kernels.SCALE]
+        if packed[j, kernels.ACTIVE] == 0.0 or s < fraction:
+            continue
+        qmax = 2.0 * math.log(s / fraction)
+        p00, p01, p11 = packed[j, kernels.P00], packed[j, kernels.P01], packed[j, kernels.P11]
+        det = p00 * p11 - p01 * p01
+        ex = math.sqrt(qmax * p11 / det) + h
+        ey = math.sqrt(qmax * p00 / det) + h
+        cx, cy = packed[j, kernels.XI_X], packed[j, kernels.XI_Y]
+        i0 = max(0, math.floor((cx - ex - x0) / h))
+        i1 = min(nx - 1, math.ceil((cx + ex - x0) / h))
+        k0 = max(0, math.floor((cy - ey - y0) / h))
+        k1 = min(ny - 1, math.ceil((cy + ey - y0) / h))
+        for i in range(i0, i1 + 1):
+            x = x0 + i * h
+            for k in range(k0, k1 + 1):
+                if out[i, k]:
+                    continue
+                if kernels.threat_term(packed, j, x, y0 + k * h, fraction, False)[0] >= fraction:
+                    out[i, k] = True
+
+
 class Cores:
     """The cores of one threat field.
 
@@ -77,6 +120,14 @@ class Cores:
         self.ids = [field.threats[j].id or f"#{j + 1}" for j in keep]
         self.min_spread_m = min((field.threats[j].min_sigma() for j in keep), default=math.inf)
 
+    @classmethod
+    def of(cls, field: ThreatField, fraction: float = CORE_FRACTION) -> Cores:
+        """The cores of ``field``, built once per field and fraction (a field is immutable)."""
+        per_field = _CACHE.setdefault(field, {})
+        if fraction not in per_field:
+            per_field[fraction] = cls(field, fraction)
+        return per_field[fraction]
+
     def ratio(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Largest normalised threat level ``t_j / max t_j`` at each point, and its threat index."""
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
@@ -93,6 +144,18 @@ class Cores:
         if len(self.packed) and len(pts):
             _inside(self.packed, pts, self.fraction, out)
         return out
+
+    def raster(self, origin: tuple[float, float], cell_m: float, shape: tuple[int, int]) -> np.ndarray:
+        """Boolean ``shape`` grid: node ``(origin + (i, k) cell_m)`` lies in a core (exactly ``inside``)."""
+        out = np.zeros(shape, dtype=np.bool_)
+        if len(self.packed):
+            _raster(self.packed, float(origin[0]), float(origin[1]), float(cell_m), self.fraction, out)
+        return out
+
+    def core_at(self, x: float, y: float) -> str:
+        """The id of the threat whose core holds ``(x, y)`` (the deepest one), or ``""``."""
+        ratio, idx = self.ratio(np.array([[x, y]]))
+        return self.ids[int(idx[0])] if ratio[0] >= self.fraction else ""
 
     def first_hit(self, path: np.ndarray) -> str:
         """The id of the first core the polyline ``path`` enters, or ``""`` if none."""
@@ -116,3 +179,6 @@ class Cores:
         k = np.arange(len(which)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each segment
         t = (k / n[which])[:, None]
         return np.concatenate([path[:1], path[:-1][which] + t * seg[which]])
+
+
+_CACHE: weakref.WeakKeyDictionary[ThreatField, dict[float, Cores]] = weakref.WeakKeyDictionary()

@@ -8,9 +8,12 @@ or ``auto``, which escalates tier by tier: it asks each strategy of the
 cheapest tier (``delta, random, waypoint, contour``) for its first acceptable
 candidate and commits to the one of least estimated
 ``J = length + LAMBDA * exposure`` to the goal (escape path, simulated descent
-after it, straight remainder); only when none of them has one does it pay for
-the next tier (``global``).  A single named strategy commits to its own first
-acceptable candidate.  Every candidate is *judged* before
+after it, straight remainder).  It pays for the next tier (``global``) when
+none of them has one, or when the best costs more than ``1 + AUTO_MARGIN``
+times the straight line to the goal; a dearer candidate wins only when it is
+cheaper by more than ``AUTO_MARGIN`` (5 %).  A single named strategy commits
+to its own first acceptable candidate.  A goal inside a threat core is
+refused at once, with a reason naming the threat.  Every candidate is *judged* before
 the unit moves:
 
 1. it may not enter a threat core (``cores``) nor leave the mission bounds;
@@ -27,7 +30,10 @@ every strategy's reason; at most ``MAX_TRAPS`` escapes are made per goal.
 Steering.  The committed path is followed by aiming two points ahead of the
 nearest path point, found from the reported position, so a unit that drifts
 a little still follows it.  The escape ends at the exit (or is abandoned
-after ``2 * len(path) + 20`` advisories) and plain descent resumes.
+after ``2 * len(path) + 20`` advisories) and plain descent resumes, except
+that a path ending within ``HANDOFF_STEPS`` steps of the goal is followed on
+to the goal itself: near the goal a threat's gradient can be a hundred times
+the goal's pull, and descent there would drift off a route that had arrived.
 
 Randomness comes from ``numpy.random.default_rng([seed, unit_key, trap])``:
 the same unit, seed and trap always make the same choice, live or preview.
@@ -39,7 +45,12 @@ the whole ``global`` route, judged like any candidate: a way round chosen
 before the unit walks in, not after.  That route is the Dijkstra optimum of
 ``length + LAMBDA * exposure``, shortcut, so it lies near the
 length/exposure Pareto front; the cheap strategies stay for traps that were
-not foreseen (drift, or threats that appear later).
+not foreseen (drift, or threats that appear later).  When the simulation
+arrives instead, ``cheaper_route`` compares its ``J`` with the route's and
+commits to the route only when it is cheaper by more than ``AUTO_MARGIN``
+(descent down a channel between threats arrives, at a high price).  A unit
+that starts inside a core first leaves it by the shortest straight way out
+(``leave_core``; its escape is logged as ``leave core <id>``).
 """
 
 from __future__ import annotations
@@ -58,27 +69,44 @@ from pfp_service.core.escape_strategies import (
     global_route,
     rollout,
 )
+from pfp_service.core.grid import resample
 from pfp_service.core.metrics import path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["AUTO_ORDER", "MAX_TRAPS", "EscapeRun", "Escaper"]
+__all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "EscapeRun", "Escaper"]
 
 MAX_TRAPS = 12
+AUTO_MARGIN = 0.05  # "clearly cheaper": a dearer way is taken only when it saves more than 5 % of J
+HANDOFF_STEPS = 4.0  # an escape ending this many steps from the goal steers on to it
 
 
 class EscapeRun:
-    """A committed escape: the path to steer along and how far along the unit is."""
+    """A committed escape: the path to steer along and how far along the unit is.
 
-    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step")
+    ``to_goal``: the path ends at the goal, so at its end the unit is steered
+    on to the goal (arrival is judged along the route) instead of being handed
+    back to plain descent, whose threat gradient near the goal may be far
+    stronger than the goal's pull.
+    """
 
-    def __init__(self, name: str, path: np.ndarray, step: float) -> None:
+    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step", "to_goal")
+
+    def __init__(self, name: str, path: np.ndarray, step: float, to_goal: bool = False) -> None:
         self.name = name
         self.path: list[tuple[float, float]] = [(float(a), float(b)) for a, b in path]
         self.cursor = 0
         self.advisories = 0
         self.limit = 2 * len(self.path) + 20
         self.step = step
+        self.to_goal = to_goal
+
+    def then(self, other: EscapeRun | None) -> EscapeRun:
+        """This run followed by ``other`` (which starts where this one ends)."""
+        if other is None:
+            return self
+        pts = np.array(self.path + other.path[1:])
+        return EscapeRun(f"{self.name}, then {other.name}", pts, self.step, other.to_goal)
 
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """Unit heading towards the path ahead, or ``None`` once at the exit (or abandoned)."""
@@ -91,7 +119,7 @@ class EscapeRun:
         i += min(range(len(window)), key=lambda k: (window[k][0] - x) ** 2 + (window[k][1] - y) ** 2)
         self.cursor = i
         ex, ey = p[-1]
-        if i >= len(p) - 2 and math.hypot(ex - x, ey - y) <= self.step:
+        if i >= len(p) - 2 and math.hypot(ex - x, ey - y) <= self.step and not self.to_goal:
             return None
         tx, ty = p[min(i + 2, len(p) - 1)]
         dx, dy = tx - x, ty - y
@@ -152,25 +180,32 @@ class Escaper:
         if self.traps > MAX_TRAPS:
             return None, f"{reason}; gave up after {MAX_TRAPS} escapes"
         trap = self._trap(field, x, y)
+        inside = trap.cores.core_at(*self.goal)
+        if inside:
+            return None, f"{reason}; the goal lies in the core of threat {inside}, which no escape enters"
         site = self._site(x, y, max(10.0 * self.params.step, trap.margin))
         order = AUTO_ORDER if self.params.escape == "auto" else (self.params.escape,)
         refusals: list[str] = []
         best: tuple[float, str, np.ndarray] | None = None
         for name in order:
-            if best is not None and STRATEGIES[name].tier > STRATEGIES[best[1]].tier:
-                break  # a dearer tier only when every cheaper one failed
+            tier = STRATEGIES[name].tier
+            dearer = best is not None and tier > STRATEGIES[best[1]].tier
+            if best is not None and dearer and best[0] <= (1.0 + AUTO_MARGIN) * trap.dist:
+                break  # nothing can beat the straight line clearly: no need for a dearer tier
             if name in site.tried:
                 refusals.append(f"{name}: already tried at this trap")
                 continue
             found = self._first_pass(trap, name, refusals)
-            if found is not None and (best is None or found[0] < best[0]):
+            if found is None:
+                continue
+            if best is None or found[0] * (1.0 + (AUTO_MARGIN if dearer else 0.0)) < best[0]:
                 best = (found[0], name, found[1])
         if best is None:
             return None, f"{reason}; no escape found: " + "; ".join(refusals)
         _, name, path = best
         site.tried.add(name)
         self.log.append(name)
-        return EscapeRun(name, path, self.params.step), ""
+        return self._run(name, path, trap), ""
 
     def foresee(self, field: ThreatField, x: float, y: float, ahead: str) -> tuple[EscapeRun | None, str]:
         """Plain descent from ``(x, y)`` is foreseen to end ``ahead`` (``foresight``): go round now.
@@ -184,6 +219,9 @@ class Escaper:
         """
         self.traps += 1
         tr = self._trap(field, x, y)
+        inside = tr.cores.core_at(*self.goal)
+        if inside:
+            return None, f"{ahead} foreseen; the goal lies in the core of threat {inside}"
         poly = global_route(tr)
         if isinstance(poly, NoCandidate):
             return None, f"{ahead} foreseen; {poly.reason}"
@@ -191,14 +229,72 @@ class Escaper:
         if verdict:
             return None, f"{ahead} foreseen; global: {verdict}"
         self.log.append("global")
-        return EscapeRun(f"global ({ahead} foreseen)", poly, self.params.step), ""
+        return self._run(f"global ({ahead} foreseen)", poly, tr), ""
+
+    def cheaper_route(self, field: ThreatField, x: float, y: float, foreseen_cost: float) -> EscapeRun | None:
+        """Plain descent from ``(x, y)`` is foreseen to arrive at ``J = foreseen_cost``: is going round clearly cheaper?
+
+        The ``global`` route is searched only when the foreseen ``J`` exceeds
+        the straight-line distance by more than ``AUTO_MARGIN`` (no route can
+        beat it by more otherwise), and committed to only when its own ``J``
+        is lower by more than ``AUTO_MARGIN``, and it passes the judge.
+        """
+        dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        if not foreseen_cost > (1.0 + AUTO_MARGIN) * dist:
+            return None
+        tr = self._trap(field, x, y)
+        if tr.cores.core_at(*self.goal):
+            return None
+        poly = global_route(tr)
+        if isinstance(poly, NoCandidate) or self._judge(tr, poly)[0]:
+            return None
+        if path_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
+            return None
+        self.log.append("global")
+        return self._run("global (cheaper than descent)", poly, tr)
+
+    def leave_core(self, field: ThreatField, x: float, y: float) -> EscapeRun | None:
+        """``None`` unless ``(x, y)`` lies in a threat core; then the shortest straight way out of every core."""
+        cores = Cores.of(field)
+        inside = cores.core_at(x, y)
+        if not inside:
+            return None
+        p = self.params
+        spacing = min(p.step, cores.min_spread_m / 4.0)
+        reach = 6.0 * max(t.spread() for t in field.threats)
+        n = min(2000, math.ceil(reach / spacing))
+        angles = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
+        d = np.arange(1, n + 1) * (reach / n)
+        rays = np.stack([x + np.sin(angles)[:, None] * d, y + np.cos(angles)[:, None] * d], axis=-1)
+        blocked = cores.inside(rays.reshape(-1, 2)).reshape(len(angles), n)
+        out = np.where(blocked.all(axis=1), n, np.argmin(blocked, axis=1))
+        k = int(np.argmin(out))
+        if out[k] >= n:
+            return None  # no straight way out within reach: descend as usual
+        r = d[min(out[k], n - 1)] + p.step  # one step clear of the core's edge
+        end = (x + math.sin(angles[k]) * r, y + math.cos(angles[k]) * r)
+        self.log.append(f"leave core {inside}")
+        return EscapeRun(
+            f"leave the core of threat {inside}", resample(np.array([(x, y), end]), p.step), p.step
+        )
+
+    def _run(self, name: str, path: np.ndarray, tr: Trap) -> EscapeRun:
+        """The run for a committed path; one ending near the goal goes on to it (``EscapeRun.to_goal``)."""
+        gx, gy = self.goal
+        ex, ey = path[-1]
+        near = math.hypot(gx - ex, gy - ey) <= HANDOFF_STEPS * tr.step
+        if near and not tr.cores.first_hit(np.array([(ex, ey), (gx, gy)])):
+            if (ex, ey) != (gx, gy):
+                path = np.concatenate([path, resample(np.array([(ex, ey), (gx, gy)]), tr.step)[1:]])
+            return EscapeRun(name, path, tr.step, to_goal=True)
+        return EscapeRun(name, path, tr.step)
 
     def _trap(self, field: ThreatField, x: float, y: float) -> Trap:
         p = self.params
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
         return Trap(
             field=field,
-            cores=Cores(field),
+            cores=Cores.of(field),
             x=x,
             y=y,
             goal=self.goal,

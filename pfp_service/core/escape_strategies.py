@@ -41,7 +41,7 @@ import numba
 import numpy as np
 
 from pfp_service.core import kernels
-from pfp_service.core.cores import Cores
+from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.grid import GridGraph, resample, shortcut
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.threat import ThreatField
@@ -56,9 +56,11 @@ __all__ = [
     "Trap",
     "global_route",
     "rollout",
+    "route_cell",
 ]
 
-GLOBAL_CELLS = 100
+GLOBAL_CELLS = 100  # the coarsest route search: cells along the longer side
+ROUTE_MAX_CELLS = 400
 _MAX_RAISES = 6  # x1.5 each: up to 11x the trap's level
 _MAX_EXITS = 4
 Bounds = tuple[tuple[float, float], tuple[float, float]]
@@ -245,17 +247,33 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
     yield NoCandidate(f"the contour found no exit within {tr.budget} steps")
 
 
+def route_cell(span_m: float, s_min_m: float) -> float:
+    """Cell size of a route search over ``span_m``: fine enough for the narrowest threat.
+
+    A twelfth of the narrowest standard deviation (so a gap a fraction of a
+    standard deviation wide still holds grid nodes), at most ``span / 100``;
+    no finer than ``span / ROUTE_MAX_CELLS``, unless that would leave a cell
+    wider than 3.5 narrowest standard deviations, past which an edge's probe
+    points could step over a core (then up to ``2 * ROUTE_MAX_CELLS``).
+    """
+    h = min(span_m / GLOBAL_CELLS, s_min_m / 12.0)
+    h = max(h, span_m / ROUTE_MAX_CELLS)
+    return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
+
+
 def global_route(tr: Trap) -> np.ndarray | NoCandidate:
     """The whole way from the trap point to the goal, or why there is none.
 
-    Dijkstra cost-to-go, cost ``1 + LAMBDA T``, on a local grid without
-    the cores (with a margin, so a route between grid nodes never clips one);
-    then shortcut wherever a straight segment costs no more and keeps that
-    margin, and resampled at ``step`` for the stepper to follow.
+    Dijkstra cost-to-go, cost ``1 + LAMBDA T``, on a local grid without the
+    search cores (``cores.SEARCH_FRACTION``: the check's cores and a sliver,
+    so a route between grid nodes never clips one) at ``route_cell``'s
+    resolution; then shortcut wherever a straight segment costs no more and
+    stays out of them, and resampled at ``step`` for the stepper to follow.
     """
     gx, gy = tr.goal
     spreads = [t.spread() for t in tr.field.threats] or [tr.step]
-    wide = Cores(tr.field, 0.8 * tr.cores.fraction)
+    search = Cores.of(tr.field, SEARCH_FRACTION)
+    s_min = tr.cores.min_spread_m if math.isfinite(tr.cores.min_spread_m) else tr.dist
     pad = max(0.3 * tr.dist, 3.0 * max(spreads))
     for _ in range(2):  # a trap close to the goal may need more room to go round: once, 3x the pad
         (x0, y0), (x1, y1) = (
@@ -265,7 +283,8 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
         if tr.bounds is not None:
             (bx0, by0), (bx1, by1) = tr.bounds
             x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
-        grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), GLOBAL_CELLS, 16, wide)
+        h = route_cell(max(x1 - x0, y1 - y0), s_min)
+        grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), cores=search, cell_m=h)
         route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), LAMBDA)
         if len(route.points):
             break
@@ -276,7 +295,7 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
         )
     pts = np.concatenate([[[tr.x, tr.y]], route.points, [[gx, gy]]])
     pts = pts[np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])]
-    return resample(shortcut(tr.field, pts, LAMBDA, wide), tr.step)
+    return resample(shortcut(tr.field, pts, LAMBDA, search), tr.step)
 
 
 def _global(tr: Trap) -> Iterator[Candidate]:

@@ -60,12 +60,17 @@ _OUTCOMES = (Outcome.ARRIVES, Outcome.TRAPPED, Outcome.LEAVES_BOUNDS, Outcome.ST
 
 
 class Foresight(NamedTuple):
-    """The simulation's end: how, after how many steps, and where."""
+    """The simulation's end: how, after how many steps, and where; and what the way there cost.
+
+    ``exposure`` is the trapezoid integral of the level along the simulated
+    steps, so ``steps * step + LAMBDA * exposure`` is the foreseen path's ``J``.
+    """
 
     outcome: Outcome
     steps: int
     x: float
     y: float
+    exposure: float = 0.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -82,35 +87,42 @@ def _simulate(
     patience: int,
     budget: int,
     box: np.ndarray,
-) -> tuple[int, int, float, float]:
+) -> tuple[int, int, float, float, float]:
     # mirrors Stepper.check / follow / _watch, advisory by advisory
     best = math.inf
+    exposure = 0.0
+    last = -1.0
     since = 0
     ring = np.empty((window, 2))
     count = 0
     head = 0
     for k in range(budget + 1):
         if not (math.isfinite(x) and math.isfinite(y)):
-            return _STOPS, k, x, y
+            return _STOPS, k, x, y, exposure
         dist = math.hypot(gx - x, gy - y)
         if dist <= tol:
-            return _ARRIVES, k, x, y
+            if last >= 0.0:  # the level at the goal itself, for the last step
+                exposure += 0.5 * step * (last + kernels.point_level(packed, x, y))
+            return _ARRIVES, k, x, y, exposure
         if not (box[0] <= x <= box[2] and box[1] <= y <= box[3]):
-            return _LEAVES, k, x, y
-        fx, fy, _lv, norm = kernels.point_descent(packed, x, y, gx, gy, gain)
+            return _LEAVES, k, x, y, exposure
+        fx, fy, lv, norm = kernels.point_descent(packed, x, y, gx, gy, gain)
+        if last >= 0.0:
+            exposure += 0.5 * step * (last + lv)
+        last = lv
         if not math.isfinite(norm):
-            return _STOPS, k, x, y
+            return _STOPS, k, x, y, exposure
         if norm == 0.0:
-            return _TRAPPED, k, x, y
+            return _TRAPPED, k, x, y, exposure
         if dist < best - tol:
             best = dist
             since = 0
         else:
             since += 1
             if since >= patience:
-                return _TRAPPED, k, x, y
+                return _TRAPPED, k, x, y, exposure
         if count == window and math.hypot(x - ring[head, 0], y - ring[head, 1]) < 0.2 * window * step:
-            return _TRAPPED, k, x, y
+            return _TRAPPED, k, x, y, exposure
         ring[head, 0] = x
         ring[head, 1] = y
         head = (head + 1) % window
@@ -119,7 +131,7 @@ def _simulate(
             break
         x += step * (-fx / norm)
         y += step * (-fy / norm)
-    return _RUNS_ON, budget, x, y
+    return _RUNS_ON, budget, x, y, exposure
 
 
 def simulate(
@@ -149,7 +161,7 @@ def simulate(
     else:
         (x0, y0), (x1, y1) = bounds
         box = np.array([x0, y0, x1, y1], dtype=np.float64)
-    code, steps, x, y = _simulate(
+    code, steps, x, y, exposure = _simulate(
         field.packed,
         float(start[0]),
         float(start[1]),
@@ -163,4 +175,4 @@ def simulate(
         limit,
         box,
     )
-    return Foresight(_OUTCOMES[code], steps, x, y)
+    return Foresight(_OUTCOMES[code], steps, x, y, exposure)

@@ -11,6 +11,14 @@ It is an offline reference with full knowledge: every threat of the schedule
 is in force from the start, whatever its ``appear_step``.  The grid covers the
 mission bounds when given, else the start-goal box padded by half the
 start-goal distance on every side.
+
+With ``avoid_cores`` (``pfp plan --planner optimal --avoid-cores``) the threat
+cores are a hard constraint: the graph leaves out the search cores
+(``cores.SEARCH_FRACTION``), the cell shrinks to at most 3.5 narrowest standard
+deviations (up to 4x ``cells``) so no core slips between edge probes, and a
+goal that no core-free route reaches is ``trapped``, not ``reached``.  The
+grid's levels and cores are rasterised per threat box (``kernels.raster_level``,
+``Cores.raster``), so a thousand small threats cost about what a few do.
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pfp_service.core.cores import Cores
+from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.grid import GridGraph, resample, shortcut
 from pfp_service.core.metrics import LAMBDA, Epoch, measure
 from pfp_service.core.plan import PlanResult, PlanStatus, Scheduled, UsedParams
@@ -73,8 +81,13 @@ class OptimalSolver:
                 (min(start[0], goal[0]) - pad, min(start[1], goal[1]) - pad),
                 (max(start[0], goal[0]) + pad, max(start[1], goal[1]) + pad),
             )
-        self.cores = Cores(field) if avoid_cores else None
-        self.graph = GridGraph(field, box, cells, 16, self.cores)
+        self.cores = Cores.of(field, SEARCH_FRACTION) if avoid_cores else None
+        (x0, y0), (x1, y1) = box
+        span = max(x1 - x0, y1 - y0)
+        cell_m = span / cells if span > 0 else 1.0
+        if self.cores is not None and cell_m > 3.5 * self.cores.min_spread_m:
+            cell_m = max(3.5 * self.cores.min_spread_m, span / (4 * cells))
+        self.graph = GridGraph(field, box, cells, 16, self.cores, cell_m)
         self._src = self.graph.nearest(*self.start)
         self._dst = self.graph.nearest(*self.goal)
 
@@ -100,23 +113,31 @@ def plan_optimal(
     bounds: Bounds | None = None,
     cells: int = DEFAULT_CELLS,
     clock: Callable[[], float] | None = None,
+    avoid_cores: bool = False,
 ) -> PlanResult:
     """``pfp plan --planner optimal``: the path minimising ``length + lam * exposure``.
 
+    Args:
+        avoid_cores: never enter a threat core (``--avoid-cores``).
+
     Returns:
-        A ``PlanResult`` (``planner="optimal"``): ``reached`` with the path, or
+        A ``PlanResult`` (``planner="optimal"``): ``reached`` with the path;
+        ``trapped`` when ``avoid_cores`` and no core-free route exists; or
         ``invalid`` with the reason when the grid holds no route.
     """
     t0 = clock() if clock else 0.0
     field = ThreatField([s.threat for s in schedule], intensity)
-    solver = OptimalSolver(field, start, goal, bounds, cells)
+    solver = OptimalSolver(field, start, goal, bounds, cells, avoid_cores)
     found = solver.solve(lam)
     used = UsedParams(0.0, solver.graph.cell_m, 0, 0.0, intensity, "none")
     ms = ((clock() - t0) * 1e3) if clock else 0.0
     if not len(found.path):
+        cell = f"{solver.graph.cell_m:.4g} m grid"
         return PlanResult(
-            status=PlanStatus.INVALID,
-            reason="no route on the grid from start to goal",
+            status=PlanStatus.TRAPPED if avoid_cores else PlanStatus.INVALID,
+            reason=f"no route from start to goal avoids the threat cores ({cell})"
+            if avoid_cores
+            else "no route on the grid from start to goal",
             steps=0,
             length=0.0,
             exposure=0.0,
@@ -132,7 +153,8 @@ def plan_optimal(
     m = measure(found.path, [Epoch(0, len(found.path) - 1, field)])
     return PlanResult(
         status=PlanStatus.REACHED,
-        reason=f"minimum of length + {lam:g} * exposure on a {solver.graph.cell_m:.4g} m 16-connected grid",
+        reason=f"minimum of length + {lam:g} * exposure on a {solver.graph.cell_m:.4g} m 16-connected grid"
+        + (", avoiding every threat core" if avoid_cores else ""),
         steps=len(found.path) - 1,
         length=m.length,
         exposure=m.exposure,

@@ -178,7 +178,7 @@ class ThreatField:
     Immutable: adding or removing a threat builds a new field (cheap).
     """
 
-    __slots__ = ("intensity", "packed", "positions", "threats")
+    __slots__ = ("__weakref__", "intensity", "packed", "positions", "threats")
 
     def __init__(self, threats: Iterable[Threat] = (), intensity: Intensity = "peak") -> None:
         if intensity not in ("peak", "density"):
