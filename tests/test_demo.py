@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 import time
 
 from tests.conftest import run_pfp
@@ -37,3 +39,80 @@ def test_demo_bad_script_is_one_line_exit_2(tmp_path):
     r = run_pfp("demo", "--quick", "--script", str(bad), "--out", str(tmp_path / "x.png"), timeout=60)
     assert r.returncode == 2
     assert r.stderr.strip() == "pfp demo: s.yaml line 2, timeline[0].seconds: must be > 0"
+
+
+SMALL_TEAM = """\
+name: small
+units:
+  - {id: m1, kind: manned, start: [0, 10], goal: [30, 14], speed_mps: 1.5}
+  - {id: r1, kind: unmanned, start: [0, 2], goal: [30, 4], speed_mps: 3.0}
+"""
+# Deadlines near the simulated arrival times (about 21 s and 11 s): on a wall clock x speed-up,
+# a busy machine made them fail; on the one mission clock they cannot.
+SMALL_SCRIPT = """\
+name: small
+duration_s: 60
+timeline:
+  - {do: add_threat, threat: e1, position: [15, 8], facing_deg: 270, sigma_range: 3, sigma_lateral: 2, skew: 1}
+  - do: add_threat
+    when: {unit: m1, within_m: 2, of: [8, 11]}
+    threat: e2
+    position: [18, 15]
+    facing_deg: 270
+    sigma_range: 2
+    sigma_lateral: 1.5
+  - {do: wait, seconds: 3}
+  - {do: move_threat, threat: e2, position: [18, 17]}
+expect:
+  - {unit: m1, arrives_within_s: 30}
+  - {unit: r1, arrives_within_s: 18}
+"""
+T_LINE = re.compile(r"^t=\s*([\d.]+)s", re.M)
+
+
+def _burn() -> list[subprocess.Popen]:
+    """Keep both cores busy, as another engineer's test run would."""
+    code = "import time\nend = time.monotonic() + 600\nwhile time.monotonic() < end: pass\n"
+    return [subprocess.Popen([sys.executable, "-c", code]) for _ in range(2)]
+
+
+def test_demo_runs_on_one_clock_while_both_cores_are_busy(tmp_path):
+    team, script = tmp_path / "team.yaml", tmp_path / "script.yaml"
+    team.write_text(SMALL_TEAM)
+    script.write_text(SMALL_SCRIPT)
+    burners = _burn()
+    try:
+        for run in range(3):
+            out = tmp_path / f"demo{run}.png"
+            args = (
+                "demo",
+                "--team",
+                str(team),
+                "--script",
+                str(script),
+                "--out",
+                str(out),
+                "--speed-up",
+                "15",
+            )
+            r = run_pfp(*args, timeout=240)
+            assert r.returncode == 0, f"run {run}:\n" + r.stdout[-3000:] + r.stderr[-2000:]
+            assert "2/2 expectations held" in r.stdout
+            # log lines share the mission clock: they never go back by more than a tick (0.2 s)
+            times = [float(t) for t in T_LINE.findall(r.stdout)]
+            assert len(times) > 10
+            assert all(b >= a - 0.2 - 1e-9 for a, b in zip(times, times[1:])), times
+            # the table and the verdicts read the same clock
+            table = {
+                ln.split()[0]: float(ln.split()[3])
+                for ln in r.stdout.splitlines()
+                if ln.startswith(("m1 ", "r1 "))
+            }
+            for unit, at in re.findall(
+                r"PASS  (\w+) arrives within [\d.]+ s: arrived at ([\d.]+) s", r.stdout
+            ):
+                assert abs(table[unit] - float(at)) <= 0.2 + 1e-9, (unit, table[unit], at)
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
