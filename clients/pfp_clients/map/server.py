@@ -18,6 +18,7 @@ HTTP API (JSON):
     GET    /                      the page
     GET    /ws                    WebSocket: a snapshot, then deltas
     GET    /api/state             the snapshot, for scripts and tests
+    GET    /api/stats             samples in, inbox backlog, tick cost, frames sent
     GET    /api/preview/{unit}    the planner's preview of the unit, with its ETA
     PUT    /api/threat/{id}       a ThreatUpdate      (--allow-edit only)
     DELETE /api/threat/{id}
@@ -138,6 +139,9 @@ class MapServer:
         self._declared: list[Any] = []
         self.frames_sent = 0
         self.samples_in = 0
+        self.ticks = 0
+        self.tick_ms_max = 0.0
+        self.tick_ms_total = 0.0
 
     # -- Zenoh in: decode and enqueue, nothing more ---------------------------------
     def _enqueue(self, make: Callable[[Any], Input | None]) -> Callable[[Any], None]:
@@ -273,6 +277,20 @@ class MapServer:
             "push_hz": o.push_hz,
         }
 
+    def stats(self) -> dict[str, Any]:
+        """How the server keeps up: samples taken, what waits in the inbox, tick cost, frames sent."""
+        return {
+            "samples_in": self.samples_in,
+            "backlog": self._inbox.qsize(),
+            "ticks": self.ticks,
+            "tick_ms_mean": self.tick_ms_total / self.ticks if self.ticks else None,
+            "tick_ms_max": self.tick_ms_max,
+            "frames_sent": self.frames_sent,
+            "browsers": len(self._browsers),
+            "units": len(self.model.units),
+            "threats": len(self.model.threats),
+        }
+
     def snapshot(self) -> dict[str, Any]:
         return {**self.model.snapshot(self.clock()), "config": self.config_view()}
 
@@ -311,6 +329,10 @@ class MapServer:
                 await self.tick()
             except Exception:  # the page must outlive any one bad tick
                 log.exception("map: tick failed")
+            spent_ms = (time.monotonic() - started) * 1e3
+            self.ticks += 1
+            self.tick_ms_total += spent_ms
+            self.tick_ms_max = max(self.tick_ms_max, spent_ms)
             await asyncio.sleep(max(0.0, period - (time.monotonic() - started)))
 
     async def poll_status(self) -> None:
@@ -328,6 +350,7 @@ class MapServer:
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._ws)
         app.router.add_get("/api/state", self._state)
+        app.router.add_get("/api/stats", self._stats)
         app.router.add_get("/api/preview/{unit}", self._preview)
         app.router.add_put("/api/threat/{id}", self._put_threat)
         app.router.add_delete("/api/threat/{id}", self._delete_threat)
@@ -341,6 +364,9 @@ class MapServer:
 
     async def _state(self, request: web.Request) -> web.Response:
         return web.json_response(self.snapshot(), dumps=lambda o: msgspec.json.encode(o).decode())
+
+    async def _stats(self, request: web.Request) -> web.Response:
+        return web.json_response(self.stats())
 
     async def _ws(self, request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse(heartbeat=20.0)

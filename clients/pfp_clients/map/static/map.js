@@ -27,6 +27,7 @@ const state = {
   selectedThreat: null,
   mode: null, // null | "drop-threat" | "move-threat" | "set-goal"
   fitted: false,
+  perf: { frames: 0, bytes: 0, applyMsTotal: 0, applyMsMax: 0 }, // what each frame costs the page
   userMoved: false, // the operator panned or zoomed: stop following
   frame: null, // the ENU frame of the origin, or null for plain metres
   preview: null,
@@ -615,7 +616,6 @@ function apply(msg) {
     renderStatus(state.status);
   }
   follow();
-  state.frames = (state.frames || 0) + 1;
 }
 
 function connect() {
@@ -624,7 +624,16 @@ function connect() {
     $("conn").textContent = "live";
     $("conn").className = "conn up";
   };
-  ws.onmessage = (ev) => apply(JSON.parse(ev.data));
+  ws.onmessage = (ev) => {
+    const t0 = performance.now();
+    apply(JSON.parse(ev.data));
+    const ms = performance.now() - t0;
+    const p = state.perf;
+    p.frames += 1;
+    p.bytes += ev.data.length;
+    p.applyMsTotal += ms;
+    p.applyMsMax = Math.max(p.applyMsMax, ms);
+  };
   ws.onclose = () => {
     $("conn").textContent = "reconnecting";
     $("conn").className = "conn down";
