@@ -278,12 +278,17 @@ def test_a_real_planner_answers_a_unit_through_the_acl(router):
                 events = Inbox(obs, f"mumt/{M}/event/*")
                 _settle()
                 put_json(u1, f"mumt/{M}/unit/u1/goal", {"position": [10, 0]})
+                # a declared publisher, as the handheld and the fleet use: it sends only once the
+                # router has told it of a matching subscriber (the planner's unit/*/state)
+                pub = u1.declare_publisher(
+                    f"mumt/{M}/unit/u1/state", encoding=zenoh.Encoding.APPLICATION_JSON
+                )
                 deadline = time.monotonic() + 10
                 d = None
                 seq = 0
                 while time.monotonic() < deadline:  # the goal and the state race: report until en_route
                     seq += 1
-                    put_json(u1, f"mumt/{M}/unit/u1/state", {"position": [0.0, 0.0], "seq": seq})
+                    pub.put(json.dumps({"position": [0.0, 0.0], "seq": seq}).encode())
                     d = inbox.get(where=lambda m, s=seq: m.get("seq") == s)
                     if d["status"] == "en_route":
                         break
@@ -300,6 +305,7 @@ def test_a_real_planner_answers_a_unit_through_the_acl(router):
                     ev = events.get(timeout=10, where=lambda e: e.get("kind") == "replan")
                     assert "u1" in ev["units"]
                 token.undeclare()
+                pub.undeclare()
         finally:
             node.stop()
 
@@ -319,14 +325,15 @@ def test_health_and_fleet_commands_connect_with_a_certificate_endpoint(router):
         node.start()
         try:
             cmd = [sys.executable, "-m", "pfp_service"]
-            health = subprocess.run(
-                [*cmd, "health", "--mission", M, "--connect", endpoints["observer"], "--timeout", "3"],
-                capture_output=True,
-                text=True,
-                timeout=60,
-                cwd=ROOT,
-            )
-            assert health.returncode == 0, health.stdout + health.stderr
+            for who, what in (("observer", "health"), ("planner", "health"), ("observer", "status")):
+                done = subprocess.run(
+                    [*cmd, what, "--mission", M, "--connect", endpoints[who], "--timeout", "3"],
+                    capture_output=True,
+                    text=True,
+                    timeout=60,
+                    cwd=ROOT,
+                )
+                assert done.returncode == 0, f"pfp {what} as {who}: {done.stdout}{done.stderr}"
             team = router.out.parent / "team.yaml"
             fleet = subprocess.run(
                 [*cmd, "fleet", "--team", str(team), "--mission", M, "--connect", endpoints["fleet"]]

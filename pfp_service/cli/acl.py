@@ -12,11 +12,13 @@ from the team file.  Roles, each a list of grants built from ``wire.keys``
                 (``pfp fleet``): the unit grants of all of them, reading
                 every direction
     planner     read states, goals, threats and unit tokens; publish
-                directions and events; serve previews and its status; hold
-                its own planner token; see other planners' tokens and status
+                directions and events; serve previews, its status and its
+                world; hold its own planner token; see other planners'
+                tokens, status and world
     reporter    put and delete threats
     commander   set and cancel any unit's goal, preview any unit
-    observer    read everything of the mission, ask any planner's status
+    observer    read everything of the mission, ask any planner's status and
+                world (``pfp health``, ``pfp status``, ``pfp map``)
 
 Everything else is denied: another unit's state, a direction from anyone but
 a planner, a planner token or status queryable from anyone else.  A
@@ -79,9 +81,19 @@ class Grant:
 
 
 def _publish(*key_exprs: str, delete: bool = False) -> list[Grant]:
-    """Put (and delete) on these keys; the router may tell us who listens (write filtering)."""
     msgs = ("put", "delete") if delete else ("put",)
-    return [Grant(INGRESS, msgs, key_exprs), Grant(EGRESS, ("declare_subscriber",), key_exprs)]
+    return [Grant(INGRESS, msgs, key_exprs)]
+
+
+def _matching(mission: str) -> list[Grant]:
+    """Every principal learns which keys of the mission have subscribers and queryables.
+
+    A declared publisher sends nothing while it knows of no matching subscriber
+    (write-side filtering), and the planner subscribes with wildcards
+    (``unit/*/state``): a unit allowed to learn only of subscriptions to its
+    own key would never learn of the planner's and its states would never leave it.
+    """
+    return [Grant(EGRESS, ("declare_subscriber", "declare_queryable"), (keys.mission_all(mission),))]
 
 
 def _subscribe(*key_exprs: str) -> list[Grant]:
@@ -92,7 +104,7 @@ def _subscribe(*key_exprs: str) -> list[Grant]:
 
 
 def _ask(*key_exprs: str) -> list[Grant]:
-    return [Grant(INGRESS, ("query",), key_exprs), Grant(EGRESS, ("reply", "declare_queryable"), key_exprs)]
+    return [Grant(INGRESS, ("query",), key_exprs), Grant(EGRESS, ("reply",), key_exprs)]
 
 
 def _token(*key_exprs: str) -> list[Grant]:
@@ -128,19 +140,20 @@ def fleet_grants(mission: str, units: Sequence[str], own_goal: bool = True) -> l
 
 
 def planner_grants(mission: str, planner: str) -> list[Grant]:
+    own = (keys.planner_status(mission, planner), keys.world(mission, planner))
+    every = (keys.planner_statuses(mission), keys.worlds(mission))
     return [
         *_subscribe(keys.unit_states(mission), keys.goals(mission), keys.threats(mission)),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
         *_publish(keys.unit_directions(mission), keys.events(mission)),
-        # its own status queryable; queries and replies also on the wildcard `pfp health` asks with
-        Grant(
-            INGRESS, ("declare_queryable",), (keys.previews(mission), keys.planner_status(mission, planner))
-        ),
-        Grant(INGRESS, ("reply",), (keys.previews(mission), keys.planner_statuses(mission))),
-        Grant(EGRESS, ("query",), (keys.previews(mission), keys.planner_statuses(mission))),
+        # its own status and world queryables; replies also on the wildcards that
+        # `pfp health` and `pfp status` ask with
+        Grant(INGRESS, ("declare_queryable",), (keys.previews(mission), *own)),
+        Grant(INGRESS, ("reply",), (keys.previews(mission), *every)),
+        Grant(EGRESS, ("query",), (keys.previews(mission), *every)),
         *_token(keys.alive_planner(mission, planner)),
-        # other planners' status: conflict detection, and `pfp health` run with the planner's identity
-        *_ask(keys.planner_statuses(mission)),
+        # other planners' status and world: conflict detection, `pfp health` with the planner's identity
+        *_ask(*every),
     ]
 
 
@@ -156,7 +169,7 @@ def observer_grants(mission: str) -> list[Grant]:
     return [
         *_subscribe(keys.mission_all(mission)),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
-        *_ask(keys.planner_statuses(mission)),
+        *_ask(keys.planner_statuses(mission), keys.worlds(mission)),
     ]
 
 
@@ -216,9 +229,10 @@ def principals_for(team: Mission, roles: dict[str, tuple[str, ...]]) -> list[Pri
             if r not in ROLES:
                 raise InputError("--role", f"{name}={r}: unknown role (expected one of: {', '.join(ROLES)})")
             grants += ROLES[r](team)
-        out.append(Principal(name, tuple(rs), tuple(grants)))
+        out.append(Principal(name, tuple(rs), tuple(grants + _matching(team.mission))))
     for u in team.units:
-        out.append(Principal(UNIT_PREFIX + u, ("unit",), tuple(unit_grants(team.mission, u, team.own_goal))))
+        grants = unit_grants(team.mission, u, team.own_goal) + _matching(team.mission)
+        out.append(Principal(UNIT_PREFIX + u, ("unit",), tuple(grants)))
     return out
 
 
@@ -316,8 +330,19 @@ def client_config(
     }
 
 
+def _pretty(value: Any, pad: str = "") -> str:
+    """JSON with one key per line, and each rule, subject or policy on a line of its own."""
+    inner = pad + "  "
+    if isinstance(value, dict) and value:
+        items = [f"{inner}{json.dumps(k)}: {_pretty(v, inner)}" for k, v in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+    if isinstance(value, list) and any(isinstance(v, dict) for v in value):
+        return "[\n" + ",\n".join(inner + json.dumps(v) for v in value) + "\n" + pad + "]"
+    return json.dumps(value)
+
+
 def _dump(obj: dict[str, Any], header: str) -> str:
-    return "".join(f"// {line}\n" for line in header.splitlines()) + json.dumps(obj, indent=2) + "\n"
+    return "".join(f"// {line}\n" for line in header.splitlines()) + _pretty(obj) + "\n"
 
 
 def _read_credentials(path: Path) -> dict[str, str]:
