@@ -59,3 +59,30 @@ def test_cli_optimal_prints_the_same_json_object():
     assert set(pfp) == set(opt)
     assert opt["planner"] == "optimal" and opt["lambda"] == 10 and opt["status"] == "reached"
     assert opt["length"] + 10 * opt["exposure"] <= pfp["length"] + 10 * pfp["exposure"]
+
+
+def test_cli_avoid_cores_is_a_safe_reference(tmp_path):
+    ring = "\n".join(
+        f"  - {{position: [{20 + 14 * math.sin(a):.6f}, {20 + 14 * math.cos(a):.6f}], facing_deg: 0, "
+        "sigma_range: 4, sigma_lateral: 4, skew: 0}"
+        for a in [k * math.pi / 8 for k in range(16)]
+    )
+    scn = tmp_path / "ring.yaml"
+    scn.write_text(f"name: ring\nstart: [20, 20]\ngoal: [100, 100]\nthreats:\n{ring}\n")
+    base = [
+        sys.executable,
+        "-m",
+        "pfp_service",
+        "plan",
+        str(scn),
+        "--json",
+        "--planner",
+        "optimal",
+        "--cells",
+        "80",
+    ]
+    free = subprocess.run(base, capture_output=True, text=True)
+    assert json.loads(free.stdout)["status"] == "reached"  # ignoring cores it drives through the ring
+    safe = subprocess.run([*base, "--avoid-cores"], capture_output=True, text=True)
+    out = json.loads(safe.stdout)
+    assert safe.returncode == 1 and out["status"] == "trapped" and "threat cores" in out["reason"]

@@ -80,13 +80,19 @@ def register(sub: Any) -> None:
         metavar="N",
         help=f"optimal planner: grid cells along the longer side (default {DEFAULT_CELLS})",
     )
+    p.add_argument(
+        "--avoid-cores",
+        action="store_const",
+        const=True,
+        help="optimal planner: never enter a threat core; trapped when no such route exists",
+    )
     p.set_defaults(func=run)
 
 
 # The same bound a scenario file's ``planner.max_iter`` has (``constraints.Iterations``).
 MAX_ITER = 10_000_000
 PFP_ONLY = ("delta", "step", "tolerance", "max_iter", "escape")
-OPTIMAL_ONLY = ("lam", "cells")
+OPTIMAL_ONLY = ("lam", "cells", "avoid_cores")
 
 
 def _share(text: str) -> float:
@@ -168,6 +174,7 @@ def run(args: argparse.Namespace) -> int:
                 scenario.bounds_tuple(),
                 cells,
                 time.perf_counter,
+                avoid_cores=bool(args.avoid_cores),
             )
         else:
             result = plan(

@@ -38,7 +38,6 @@ from pfp_service.core.threat import Intensity, ThreatField
 
 __all__ = ["DEFAULT_CELLS", "OptimalPath", "OptimalSolver", "plan_optimal"]
 
-DEFAULT_LAMBDA = LAMBDA  # the same constant, under its old name, until the CLI imports metrics.LAMBDA
 DEFAULT_CELLS = 300
 
 
