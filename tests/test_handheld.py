@@ -444,3 +444,168 @@ def test_refuses_to_start_without_a_terminal():
     assert r.stderr.strip() == (
         "pfp handheld: needs a terminal: stdout is not one (it is a terminal UI; run it in a terminal)"
     )
+
+
+# -- issue 16: a handheld that recovers ----------------------------------------------------
+def test_eta_uses_the_speed_it_shows():
+    m = HandheldModel(Settings(unit="u1", speed_mps=1.4, speed_up=10.0), (0.0, 0.0), now=0.0)
+    m.on_direction(_direction(distance=140.0), now=0.0)
+    assert m.eta_speed_mps() == pytest.approx(14.0)
+    assert m.view(0.0).eta_s == pytest.approx(10.0)  # 140 m at the 14 m/s the walk really goes
+    gps = HandheldModel(Settings(unit="u1", speed_mps=1.4, walk=False, gps=True), None, now=0.0)
+    gps.on_direction(_direction(distance=30.0), now=0.0)
+    assert gps.view(0.0).eta_s == pytest.approx(30.0 / 1.4)  # standing: the walking speed
+    gps.on_fix(0.0, 0.0, 0.0)
+    gps.on_fix(3.0, 0.0, 1.0)  # 3 m/s over the ground
+    assert gps.view(1.0).eta_s == pytest.approx(10.0)
+
+
+def _serve(endpoint: str, mission: str):
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    return subprocess.Popen(
+        [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", mission],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+
+
+def _stop(proc) -> None:
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except Exception:
+        proc.kill()
+        proc.wait()
+
+
+def test_starts_with_the_router_down_and_resends_its_goal_to_a_restarted_planner(tmp_path: Path):
+    from pfp_clients.handheld_link import RetryingLink
+
+    from pfp_service.service.config import client_zenoh_config
+
+    mission, uid = "r" + uuid.uuid4().hex[:10], "late"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+
+    async def scenario():
+        link = RetryingLink(lambda: client_zenoh_config([endpoint]), endpoint, mission, uid, retry_s=0.3)
+        procs = []
+        try:
+            settings = Settings(unit=uid, walk=False, goal=(20.0, 0.0), stale_after_s=2.0)
+            app = _app(link, mission, settings)
+            app.model.on_link(False, f"connecting to {endpoint}")
+            async with app.run_test(size=SIZE) as pilot:
+                await _until(pilot, lambda: "no router answers" in _text(app, "note"), "the no-router note")
+                assert "STALE" in _text(app, "age") or "NO UPDATE" in _text(app, "age")
+                assert app.last_view.stale and not link.connected
+                procs.append(_serve(endpoint, mission))  # the router comes up
+                await _until(pilot, lambda: app.last_view.status_label == "EN ROUTE", "guidance", timeout=30)
+                assert _text(app, "note") == "" and not app.last_view.stale
+                _stop(procs.pop())  # the planner restarts: it forgets every goal
+                await _until(pilot, lambda: app.last_view.stale, "stale while it is down", timeout=15)
+                procs.append(_serve(endpoint, mission))
+                # nobody cancelled the goal, so the handheld gives it to the new planner
+                await _until(
+                    pilot, lambda: app.last_view.status_label == "EN ROUTE", "guidance again", timeout=40
+                )
+                assert app.last_view.bearing == "090° E"
+        finally:
+            link.close()
+            for p in procs:
+                _stop(p)
+
+    asyncio.run(scenario())
+
+
+def test_g_sets_the_goal_from_a_prompt(planner):
+    endpoint, mission, _ = planner
+    uid = "prompt"
+
+    async def scenario():
+        with client(endpoint) as s:
+            goals = Inbox(s, keys.unit_goal(mission, uid))
+            with open_link([endpoint], mission, uid) as link:
+                app = _app(link, mission, Settings(unit=uid, walk=False))
+                async with app.run_test(size=SIZE) as pilot:
+                    await _until(pilot, lambda: app.last_view.status_label == "NO GOAL", "no goal yet")
+                    await pilot.press("g")
+                    await pilot.press(*"nonsense", "enter")
+                    await _until(
+                        pilot,
+                        lambda: "expected X,Y" in str(app.screen.query_one("#why").content),
+                        "the reason",
+                    )
+                    field = app.screen.query_one("#goal")
+                    field.value = ""
+                    await pilot.press(*"0,20", "enter")
+                    goal = await _next_msg(pilot, goals, lambda m: True, "the goal on the wire")
+                    assert goal["position"] == [0.0, 20.0]
+                    await _until(pilot, lambda: app.last_view.bearing == "000° N", "a bearing north")
+                    assert "goal set to (0, 20)" in app.model.note
+
+    asyncio.run(scenario())
+
+
+def _gga(utc: str, frame: LocalFrame, x: float, y: float) -> str:
+    lat, lon = frame.to_geodetic(x, y)
+    lat_min, lon_min = (abs(lat) - int(abs(lat))) * 60, (abs(lon) - int(abs(lon))) * 60
+    body = f"GPGGA,{utc},{int(lat):02d}{lat_min:08.5f},N,{int(lon):03d}{lon_min:08.5f},E,1,09,0.8,500.0,M,47.0,M,,"
+    return f"${body}*{_xor(body):02X}\r\n"
+
+
+def _arrivals(reader: NmeaReader, inbox, want: int, timeout: float = 10.0) -> list[float]:
+    from pfp_clients.handheld_link import FixIn
+
+    times = []
+    deadline = time.monotonic() + timeout
+    while len(times) < want and time.monotonic() < deadline:
+        try:
+            item = inbox.get(timeout=0.1)
+        except Exception:
+            continue
+        if isinstance(item, FixIn):
+            times.append(time.monotonic())
+    return times
+
+
+def test_an_nmea_file_is_paced_by_its_own_timestamps_or_by_nmea_rate(tmp_path: Path):
+    import queue
+
+    frame = LocalFrame(48.0, 11.0)
+    log = tmp_path / "walk.nmea"
+    log.write_text("".join(_gga(f"1010{10 + i:02d}.00", frame, 10.0 + i, 50.0) for i in range(4)))
+    inbox: queue.Queue = queue.Queue()
+    reader = NmeaReader(open_nmea(str(log)), frame, inbox)
+    assert reader.paced  # a regular file: a recording to replay
+    reader.start()
+    times = _arrivals(reader, inbox, 4)
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert len(gaps) == 3 and all(0.85 < g < 1.6 for g in gaps), gaps  # one second apart, as recorded
+    inbox2: queue.Queue = queue.Queue()
+    fast = NmeaReader(open_nmea(str(log)), frame, inbox2, rate_hz=20.0)
+    fast.start()
+    times = _arrivals(fast, inbox2, 4)
+    assert len(times) == 4 and times[-1] - times[0] < 0.6
+
+
+def test_a_binary_nmea_file_is_bad_sentences_that_end(tmp_path: Path):
+    import queue
+    import random
+
+    from pfp_clients.handheld_link import NmeaEnded, NmeaRejected
+
+    blob = tmp_path / "firmware.bin"
+    rng = random.Random(7)
+    blob.write_bytes(bytes(rng.getrandbits(8) for _ in range(2_000_000)))
+    inbox: queue.Queue = queue.Queue(maxsize=100_000)
+    reader = NmeaReader(open_nmea(str(blob)), LocalFrame(48.0, 11.0), inbox)
+    t0, cpu0 = time.monotonic(), time.process_time()
+    reader.start()
+    reader.join(timeout=20)
+    assert not reader.is_alive(), "the reader is still going"
+    items = list(inbox.queue)
+    assert isinstance(items[-1], NmeaEnded) and "not NMEA" in items[-1].reason
+    assert sum(isinstance(i, NmeaRejected) for i in items) >= 1000
+    assert time.monotonic() - t0 < 10 and time.process_time() - cpu0 < 10
