@@ -44,6 +44,7 @@ __all__ = [
     "ZONE_VERTICES",
     "check_geojson_path",
     "feature_collection",
+    "preview_reply",
     "scenario_collection",
     "threat_mode",
     "write",
@@ -206,6 +207,24 @@ def feature_collection(
     if name:
         out["name"] = name
     return out
+
+
+def preview_reply(
+    origin: Origin | None,
+    result: PlanResult,
+    threats: Sequence[Threat],
+    start: Sequence[float] | None = None,
+    goal: Sequence[float] | None = None,
+) -> bytes:
+    """The body of a preview reply asked for with ``geojson: true``: the collection as JSON bytes.
+
+    Raises:
+        InputError: at ``$.geojson``, when the planner has no mission origin.
+    """
+    if origin is None:
+        raise InputError("$.geojson", "needs the mission origin (pfp serve --origin LAT,LON)")
+    fc = feature_collection(origin, threats, result, start=start, goal=goal)
+    return json.dumps(fc, ensure_ascii=False).encode()
 
 
 def check_geojson_path(path: str | Path, what: str = "--geojson") -> Path:

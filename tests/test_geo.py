@@ -344,3 +344,50 @@ def test_serve_origin_flag_is_one_line_exit_2():
 
     out = run_pfp("serve", "--origin", "95,0", timeout=60)
     assert out.returncode == 2 and "Traceback" not in out.stderr and "--origin" in out.stderr
+
+
+def test_with_geodetic_without_a_position_uses_the_first_lookahead_point():
+    o = ORIGINS[0]
+    d = m.Direction(
+        unit="u", status=m.DirectionStatus.EN_ROUTE, vector=(0.0, 1.0), lookahead=[(15_000.0, 1.0)]
+    )
+    at_unit = geo.true_bearing_deg(o, (15_000.0, 0.0), (0.0, 1.0))
+    assert abs(geo.with_geodetic(d, o).true_bearing_deg - at_unit) < 1e-4
+    bare = m.Direction(unit="u", status=m.DirectionStatus.EN_ROUTE, vector=(0.0, 1.0))
+    assert geo.with_geodetic(bare, o).true_bearing_deg is None  # no position: not guessed
+
+
+def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres():
+    """Through the wire decoders and the world (the node passes ``cfg.origin`` to the decoders)."""
+    from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+
+    o = ORIGINS[0]
+
+    def ll(x, y):
+        lat, lon = o.to_geodetic(x, y)
+        return {"lat": lat, "lon": lon}
+
+    def run(pos):
+        w = World(WorldSettings())
+        threat = m.decode_threat(
+            json.dumps(
+                {"position": pos(60.0, 55.0), "sigma_range": 8, "sigma_lateral": 5, "facing_deg": 225}
+            ).encode(),
+            origin=o,
+        )
+        goal = m.decode_goal(json.dumps({"position": pos(120.0, 100.0)}).encode(), origin=o)
+        w.apply([ThreatPut("t1", threat), GoalSet("u", goal)], 0.0)
+        out = []
+        for k, (x, y) in enumerate([(0.0, 0.0), (10.0, 8.0), (40.0, 30.0)]):
+            state = m.decode_unit_state(json.dumps({"position": pos(x, y), "seq": k}).encode(), origin=o)
+            out += [d for d in w.apply([StateReported("u", state)], 1.0 + k).directions if d.unit == "u"]
+        return out
+
+    metres, degrees = run(lambda x, y: [x, y]), run(ll)
+    assert len(metres) == len(degrees) == 3
+    for a, b in zip(metres, degrees):
+        assert a.status == b.status and a.seq == b.seq
+        assert (
+            np.allclose(a.vector, b.vector, atol=1e-9) and abs(a.distance_to_goal - b.distance_to_goal) < 1e-6
+        )
+        assert np.allclose(a.lookahead, b.lookahead, atol=1e-6)

@@ -155,3 +155,16 @@ def test_preview_request_geojson_option_is_not_a_what_if():
     assert m.decode_preview_request(b'{"geojson": true}').geojson is True
     assert not m.decode_preview_request(b'{"geojson": true}').what_if
     assert m.decode_preview_request(b'{"geojson": true, "goal": [1, 2]}').what_if
+
+
+def test_preview_reply_body_and_its_refusal_without_an_origin():
+    from pfp_service.errors import InputError
+
+    t = Threat.from_facing((50.0, 50.0), 0.0, 10.0, 10.0, 0.0, 1.0, "a")
+    s = load_scenario(EXAMPLES / "geo-simple.yaml")
+    r = plan(s.start, s.goal, s.schedule(), s.planner.to_params())
+    body = geojson.preview_reply(ORIGIN, r, [t], start=s.start, goal=s.goal)
+    _check(json.loads(body))
+    with pytest.raises(InputError) as e:
+        geojson.preview_reply(None, r, [t])
+    assert e.value.path == "$.geojson" and "origin" in e.value.reason
