@@ -13,6 +13,12 @@ ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _state_home(tmp_path_factory):
+    """Planners started by the tests keep their durable state in a temporary directory."""
+    os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("state-home"))
+
+
 def run_pfp(*args: str, timeout: float = 120, **kw) -> subprocess.CompletedProcess[str]:
     """Run ``pfp ARGS`` in a subprocess, exactly as a user would."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}

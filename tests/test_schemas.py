@@ -95,6 +95,7 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
     "preview_reply": m.decode_plan_result,
     "error_reply": m.decode_error_reply,
     "planner_status": m.decode_planner_status,
+    "world_snapshot": m.decode_world_snapshot,
     "event": m.decode_event,
 }
 
@@ -151,6 +152,18 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "ReplanEvent": ({"kind", "units", "reason"}, {"planner", "t"}),
     "TrappedEvent": ({"kind", "unit", "position"}, {"planner", "t", "reason"}),
     "ArrivedEvent": ({"kind", "unit", "position"}, {"planner", "t", "distance_to_goal"}),
+    # added with the state-machine world
+    "ThreatChange": ({"threat", "change"}, {"position"}),
+    "StaleEvent": ({"kind", "unit", "position"}, {"planner", "t", "reason"}),
+    "ForgottenEvent": ({"kind", "unit"}, {"planner", "t", "stale_s"}),
+    "RestoredEvent": ({"kind"}, {"planner", "t", "threats", "goals", "missions", "expired"}),
+    "ConflictEvent": ({"kind", "other"}, {"planner", "t", "reason"}),
+    "UnitSummary": (
+        {"id"},
+        {"kind", "status", "position", "goal", "last_seen_s", "distance_to_goal", "stale"},
+    ),
+    "ThreatSummary": ({"id", "threat"}, {"ttl_s"}),
+    "WorldSnapshot": ({"planner", "mission"}, {"units", "threats", "units_total", "threats_total"}),
     "PlanResult": (
         {"status", "reason", "steps", "length", "exposure", "peak_threat", "min_clearance"}
         | {"final_distance", "path", "compute_ms", "params"},

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import typing
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
@@ -169,6 +170,11 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         ([{"lat": 0.0}], "[0].lon", "is required"),
         ([[0.0, 0.0]], "[0]", "expected object"),
     ],
+    "changes": [
+        ("t1", "", "expected array"),
+        ([{"threat": "t1", "change": "moved"}], "[0].change", "matching regex"),
+        ([{"change": "put"}], "[0].threat", "is required"),
+    ],
     "ids": [
         ("u1", "", "expected array, got str"),
         (["ok", "a b"], "[1]", "matching regex"),
@@ -244,7 +250,19 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "mission": ("id", REQ),
         "version": ("text", DEF),
         "uptime_s": ("nonneg", REQ),
-        **{c: ("count", DEF) for c in ("units", "units_stale", "threats", "msgs_in", "msgs_out", "rejected")},
+        **{
+            c: ("count", DEF)
+            for c in (
+                "units",
+                "units_stale",
+                "threats",
+                "msgs_in",
+                "msgs_out",
+                "rejected",
+                "deliberating",
+                "overload",
+            )
+        },
         "latency_p50_ms": ("nonneg", OPT),
         "latency_p99_ms": ("nonneg", OPT),
     },
@@ -254,8 +272,16 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "field": ("text", DEF),
         "reason": ("text", REQ),
         "truncated": ("bool", DEF),
+        "suppressed": ("count", DEF),
     },
-    "event.replan": {**EVENT_FIELDS, "units": ("ids", REQ), "reason": ("text", REQ)},
+    "event.replan": {
+        **EVENT_FIELDS,
+        "units": ("ids", REQ),
+        "reason": ("text", REQ),
+        "changes": ("changes", DEF),
+        "more": ("count", DEF),
+        "more_units": ("count", DEF),
+    },
     "event.trapped": {
         **EVENT_FIELDS,
         "unit": ("id", REQ),
@@ -507,7 +533,7 @@ def test_an_unknown_event_kind_names_the_known_ones() -> None:
 
 def test_event_kinds_match_the_union() -> None:
     tags = set()
-    for t in (m.RejectedEvent, m.ReplanEvent, m.TrappedEvent, m.ArrivedEvent):
+    for t in typing.get_args(m.AnyEvent):
         info = msgspec.inspect.type_info(t)
         assert isinstance(info, msgspec.inspect.StructType)
         tags.add(info.tag)
@@ -542,6 +568,7 @@ def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
         "field": "$.sigma_range",
         "reason": "must be >= 0.001",
         "truncated": False,
+        "suppressed": 0,
     }
     assert m.decode_event(m.encode(ev)) == ev
 

@@ -93,6 +93,42 @@ def register(sub: Any) -> None:
     w.add_argument(
         "--multicast", action="store_const", const=True, help="enable Zenoh multicast scouting (default: off)"
     )
+    w.add_argument(
+        "--unit-forget-s",
+        type=positive_float,
+        help="a unit stale this long is forgotten, with an event (default: 600)",
+    )
+    w.add_argument(
+        "--max-units", type=bounded_int(1, 10_000_000), help="units held at most (default: 100000)"
+    )
+    w.add_argument(
+        "--max-threats", type=bounded_int(1, 1_000_000), help="threats held at most (default: 10000)"
+    )
+    d = p.add_argument_group("deliberation and previews, off the planning loop")
+    d.add_argument(
+        "--deliberation-workers",
+        type=bounded_int(1, 64),
+        help="threads for look-ahead and escape searches (default: 1)",
+    )
+    d.add_argument(
+        "--deliberation-budget-s",
+        type=positive_float,
+        help="a deliberation not started within this is dropped; the unit descends (default: 5)",
+    )
+    d.add_argument(
+        "--preview-workers", type=bounded_int(1, 64), help="threads answering previews (default: 2)"
+    )
+    d.add_argument(
+        "--preview-queue",
+        type=bounded_int(1, 100_000),
+        help="previews in flight at most; more are refused as busy (default: 256)",
+    )
+    p.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        help="durable state (threats, goals, missions) in SQLite; 'none' turns it off "
+        "(default: $XDG_STATE_HOME/pfp/MISSION or ~/.local/state/pfp/MISSION)",
+    )
     p.add_argument(
         "--origin",
         type=_origin,
@@ -127,6 +163,14 @@ _FLAG_KEYS = [
     "origin",
     "multicast",
     "zenoh_config",
+    "unit_forget_s",
+    "max_units",
+    "max_threats",
+    "deliberation_workers",
+    "deliberation_budget_s",
+    "preview_workers",
+    "preview_queue",
+    "state_dir",
 ]
 
 

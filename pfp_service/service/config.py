@@ -86,6 +86,9 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     unit_forget_s: Positive | None = 600.0
     max_units: Annotated[int, Meta(ge=1, le=10_000_000)] = 100_000
     max_threats: Annotated[int, Meta(ge=1, le=1_000_000)] = 10_000
+    # durable state: "auto" is a per-mission directory under the user's state directory
+    # (resolved by load_config), "none" turns it off
+    state_dir: str = "auto"
 
     def __post_init__(self) -> None:
         if not 0 <= self.lookahead <= 100:
@@ -179,7 +182,16 @@ def load_config(file: str | Path | None, env: Mapping[str, str], flags: Mapping[
         layers.append((str(path), data))
     layers.append(("env", _from_env(env)))
     layers.append(("flag", {k: v for k, v in flags.items() if v is not None}))
-    return _convert(layers)
+    cfg = _convert(layers)
+    if cfg.state_dir == "auto":
+        cfg = msgspec.structs.replace(cfg, state_dir=str(default_state_dir(env, cfg.mission)))
+    return cfg
+
+
+def default_state_dir(env: Mapping[str, str], mission: str) -> Path:
+    """``$XDG_STATE_HOME/pfp/{mission}``, or ``~/.local/state/pfp/{mission}``."""
+    base = env.get("XDG_STATE_HOME") or str(Path(env.get("HOME") or Path.home()) / ".local" / "state")
+    return Path(base) / "pfp" / mission
 
 
 def build_zenoh_config(

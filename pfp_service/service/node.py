@@ -29,6 +29,7 @@ from pfp_service.errors import InputError
 from pfp_service.service.config import ServeConfig
 from pfp_service.service.log import get_logger
 from pfp_service.service.preview import fit_reply, preview
+from pfp_service.service.store import Store
 from pfp_service.service.world import (
     Deliberated,
     GoalCancelled,
@@ -36,6 +37,7 @@ from pfp_service.service.world import (
     Input,
     InputRejected,
     Job,
+    PeerPlanner,
     StateReported,
     ThreatPut,
     ThreatRemoved,
@@ -47,8 +49,10 @@ from pfp_service.service.world import (
 from pfp_service.wire import (
     ErrorReply,
     Event,
+    ForgottenEvent,
     PlannerStatus,
     RejectedEvent,
+    RestoredEvent,
     decode_goal,
     decode_preview_request,
     decode_threat,
@@ -124,12 +128,19 @@ class PlannerNode:
         session: an open ``zenoh.Session`` (the caller closes it).
         cfg: the service configuration.
         clock: monotonic seconds; the world sees only this.
+        store: durable state (``Store``); goals and threats are committed to it
+            before they are applied, and restored from it at ``start``.
     """
 
     def __init__(
-        self, session: zenoh.Session, cfg: ServeConfig, clock: Callable[[], float] = time.monotonic
+        self,
+        session: zenoh.Session,
+        cfg: ServeConfig,
+        clock: Callable[[], float] = time.monotonic,
+        store: Store | None = None,
     ) -> None:
         self.session = session
+        self.store = store
         self.cfg = cfg
         self.clock = clock
         self.world = World(world_settings(cfg))
@@ -153,6 +164,10 @@ class PlannerNode:
         warm_up(self.world.settings)
         m, p = self.cfg.mission, self.cfg.planner_id
         s = self.session
+        restored = None
+        if self.store is not None:
+            restored = self.store.restore(time.time())
+            self.world.apply(restored.inputs, self.clock())
         self._declared += [
             s.declare_subscriber(keys.unit_states(m), self._on_state),
             s.declare_subscriber(keys.goals(m), self._on_goal),
@@ -161,8 +176,18 @@ class PlannerNode:
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
             s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
+            s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
             s.liveliness().declare_token(keys.alive_planner(m, p)),
         ]
+        if restored is not None:
+            ev = RestoredEvent(
+                planner=p,
+                threats=restored.threats,
+                goals=restored.goals,
+                missions=restored.missions,
+                expired=restored.expired,
+            )
+            self._event(ev)
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p}})
@@ -229,6 +254,13 @@ class PlannerNode:
             return
         self._push(TokenChanged(uid, sample.kind == zenoh.SampleKind.PUT))
 
+    def _on_planner(self, sample: zenoh.Sample) -> None:
+        try:
+            pid = keys.parse(str(sample.key_expr)).id
+        except InputError:
+            return
+        self._push(PeerPlanner(pid, sample.kind == zenoh.SampleKind.PUT))
+
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
             self._queries.append((kind, query, self.clock()))
@@ -254,7 +286,12 @@ class PlannerNode:
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
         batch.append(Tick(now))
         self.counters["msgs_in"] += len(batch) - 1
+        if self.store is not None:
+            batch = self._commit(batch)
+        self._log_inputs(inbox)
         out = self.world.apply(batch, now)
+        if self.store is not None and (out.missions or out.events):
+            self._record(out)
         for d in out.directions:
             self._put(keys.unit_direction(self.cfg.mission, d.unit), encode(d), direction=True)
         for ev in out.events:
@@ -266,6 +303,57 @@ class PlannerNode:
             self.latency.add(done - t_recv)
         for kind, query, t_recv in queries:
             self._answer(kind, query, t_recv)
+
+    def _log_inputs(self, inbox: collections.deque[Input], limit: int = 20) -> None:
+        """One line per goal or threat change, at most ``limit`` a tick and a count of the rest."""
+        shown = 0
+        for inp in inbox:
+            if isinstance(inp, GoalSet):
+                msg, fields = "goal set", {"unit": inp.unit, "goal": list(inp.goal.position)}
+            elif isinstance(inp, GoalCancelled):
+                msg, fields = "goal cancelled", {"unit": inp.unit}
+            elif isinstance(inp, ThreatPut):
+                msg, fields = "threat put", {"threat": inp.threat, "position": list(inp.update.position)}
+            elif isinstance(inp, ThreatRemoved):
+                msg, fields = "threat removed", {"threat": inp.threat}
+            else:
+                continue
+            shown += 1
+            if shown <= limit:
+                log.info(msg, extra={"fields": fields})
+        if shown > limit:
+            log.info("more goal and threat changes", extra={"fields": {"count": shown - limit}})
+
+    def _commit(self, batch: list[Input]) -> list[Input]:
+        """Goals and threats are applied only once committed; if the store fails they are refused."""
+        assert self.store is not None
+        try:
+            self.store.commit_inputs(batch, time.time(), self.cfg.threat_ttl_s)
+            return batch
+        except Exception as exc:
+            log.exception("state store failed; goal and threat changes refused")
+            kept: list[Input] = []
+            m = self.cfg.mission
+            for inp in batch:
+                if isinstance(inp, GoalSet | GoalCancelled):
+                    kept.append(
+                        InputRejected(keys.unit_goal(m, inp.unit), InputError("$", f"not stored: {exc}"))
+                    )
+                elif isinstance(inp, ThreatPut | ThreatRemoved):
+                    kept.append(
+                        InputRejected(keys.threat(m, inp.threat), InputError("$", f"not stored: {exc}"))
+                    )
+                else:
+                    kept.append(inp)
+            return kept
+
+    def _record(self, out: Any) -> None:
+        assert self.store is not None
+        try:
+            self.store.record_missions(out.missions)
+            self.store.forget(e.unit for e in out.events if isinstance(e, ForgottenEvent))
+        except Exception:
+            log.exception("state store failed to record missions")
 
     def _deliberate(self, job: Job) -> None:
         if job.cancelled:

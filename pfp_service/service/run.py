@@ -8,8 +8,10 @@ into one ``ZenohError`` line.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
+from typing import Any
 
 from pfp_service.errors import map_zenoh_errors
 from pfp_service.service.config import DEFAULT_LISTEN, ServeConfig, zenoh_config
@@ -34,39 +36,83 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
     """
     import zenoh
 
-    from pfp_service.service.node import PlannerNode
+    from pfp_service.service.store import Store
 
     log = setup_logging(cfg.log_format, cfg.log_level)
     stop = stop or threading.Event()
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: stop.set())
+    store = None if cfg.state_dir in ("none", "auto") else Store(cfg.state_dir)
     conf = zenoh_config(cfg)
-    with map_zenoh_errors("--connect" if cfg.mode == "client" else "--listen"):
-        session = zenoh.open(conf)
-    with session:
-        node = PlannerNode(session, cfg)
-        node.start()
-        try:
-            endpoints = cfg.listen
-            if endpoints is None:
-                endpoints = [DEFAULT_LISTEN] if cfg.mode == "router" and cfg.zenoh_config is None else []
-            log.info(
-                "serving",
-                extra={
-                    "fields": {
-                        "mode": cfg.mode,
-                        "listen": endpoints,
-                        "connect": cfg.connect,
-                        "mission": cfg.mission,
-                    }
-                },
-            )
-            if ready is not None:
-                ready.set()
-            stop.wait()
-            log.info("shutting down")
-        finally:
-            node.stop()
+    if cfg.mode == "client":  # a router that is down (or restarting) is waited for, not an exit
+        conf.insert_json5("connect/timeout_ms", "-1")
+        conf.insert_json5("connect/exit_on_failure", "false")
+    with contextlib.closing(store) if store is not None else contextlib.nullcontext():
+        session = _open(zenoh, conf, cfg, stop, log)
+        if session is None:  # stopped while waiting for the router
+            log.info("stopped")
+            return 0
+        with session:
+            _run(session, cfg, store, ready, stop, log)
     log.info("stopped")
     return 0
+
+
+def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: Any) -> Any:
+    """Open the session on a thread, logging while a client waits for its router; ``None`` if stopped."""
+    box: dict[str, Any] = {}
+
+    def opener() -> None:
+        try:
+            with map_zenoh_errors("--connect" if cfg.mode == "client" else "--listen"):
+                box["session"] = zenoh.open(conf)
+        except BaseException as exc:  # handed to the caller's thread
+            box["error"] = exc
+
+    t = threading.Thread(target=opener, name="pfp-open", daemon=True)
+    t.start()
+    t.join(2.0)
+    while t.is_alive():
+        log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
+        if stop.wait(5.0):
+            return None
+        t.join(0.1)
+    if "error" in box:
+        raise box["error"]
+    return box["session"]
+
+
+def _run(
+    session: Any,
+    cfg: ServeConfig,
+    store: Any,
+    ready: threading.Event | None,
+    stop: threading.Event,
+    log: Any,
+) -> None:
+    from pfp_service.service.node import PlannerNode
+
+    node = PlannerNode(session, cfg, store=store)
+    node.start()
+    try:
+        endpoints = cfg.listen
+        if endpoints is None:
+            endpoints = [DEFAULT_LISTEN] if cfg.mode == "router" and cfg.zenoh_config is None else []
+        log.info(
+            "serving",
+            extra={
+                "fields": {
+                    "mode": cfg.mode,
+                    "listen": endpoints,
+                    "connect": cfg.connect,
+                    "mission": cfg.mission,
+                }
+            },
+        )
+        if ready is not None:
+            ready.set()
+        stop.wait()
+        log.info("shutting down")
+    finally:
+        node.stop()

@@ -37,12 +37,13 @@ from typing import Literal, Union
 import msgspec
 import numpy as np
 
-from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
+from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
 from pfp_service.core.plan import walk_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
 from pfp_service.wire import (
     ArrivedEvent,
+    ConflictEvent,
     Direction,
     DirectionStatus,
     Event,
@@ -70,7 +71,10 @@ __all__ = [
     "Input",
     "InputRejected",
     "Job",
+    "MissionRecord",
+    "MissionRestored",
     "Outputs",
+    "PeerPlanner",
     "StateReported",
     "ThreatPut",
     "ThreatRemoved",
@@ -156,6 +160,24 @@ class Deliberated:
 
 
 @dataclass(frozen=True, slots=True)
+class MissionRestored:
+    """A unit's mission from durable state: its goal, ``x0`` and resolved parameters, as fixed before."""
+
+    unit: str
+    goal: Goal
+    origin: tuple[float, float]
+    params: Resolved
+
+
+@dataclass(frozen=True, slots=True)
+class PeerPlanner:
+    """Another planner's liveliness token on this mission appeared (``alive``) or went."""
+
+    planner: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
 class Tick:
     """Time passed: run the timers due by ``now``."""
 
@@ -171,6 +193,8 @@ Input = Union[  # noqa: UP007
     TokenChanged,
     InputRejected,
     Deliberated,
+    MissionRestored,
+    PeerPlanner,
     Tick,
 ]
 
@@ -202,16 +226,28 @@ class Job:
         return Deliberated(self.unit, self.token, self.stepper)
 
 
+@dataclass(frozen=True, slots=True)
+class MissionRecord:
+    """A unit's mission was fixed (its first report after a goal): what durable state must keep."""
+
+    unit: str
+    epoch: int
+    origin: tuple[float, float]
+    goal: Goal
+    params: Resolved
+
+
 @dataclass(slots=True)
 class Outputs:
-    """What one ``apply`` must send: directions, events, and deliberation jobs to run."""
+    """What one ``apply`` must send: directions, events, deliberation jobs, and missions to record."""
 
     directions: list[Direction] = field(default_factory=list)
     events: list[Event] = field(default_factory=list)
     jobs: list[Job] = field(default_factory=list)
+    missions: list[MissionRecord] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.directions or self.events or self.jobs)
+        return bool(self.directions or self.events or self.jobs or self.missions)
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,6 +284,7 @@ class WorldSettings:
     unit_forget_s: float | None = 600.0  # stale this long: forgotten (None: never)
     max_units: int = 100_000
     max_threats: int = 10_000
+    cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
 
     def params_for(self, goal: Goal) -> PlannerParams:
         """A unit's planner parameters: service defaults, then the goal's overrides."""
@@ -302,6 +339,7 @@ class World:
         self.overload = 0  # inputs refused at a limit
         self.rejected = 0
         self._reject_window: dict[str, tuple[float, int, int]] = {}  # kind -> (window start, sent, held)
+        self._peers: set[str] = set()
 
     # -- queries (read-only) ------------------------------------------------------
     @property
@@ -391,6 +429,10 @@ class World:
                     self._reject(key, error, now, out)
                 case Deliberated():
                     self._deliberated(inp, dirty)
+                case MissionRestored():
+                    self._restore(inp, now, out)
+                case PeerPlanner(planner, alive):
+                    self._peer(planner, alive, out)
                 case Tick(t):
                     self._run_timers(t, changes, out)
         if changes:
@@ -444,7 +486,7 @@ class World:
             rec.silence_timer = True
             self._timer(now + self.settings.unit_stale_s, "silence", unit_id)
         if rec.goal is not None and rec.stepper is None:
-            self._start(rec)
+            self._start(rec, out)
         dirty.add(unit_id)
 
     def _goal(self, unit_id: str, goal: Goal, now: float, dirty: set[str], out: Outputs) -> None:
@@ -454,9 +496,35 @@ class World:
         self._drop_mission(rec)
         rec.goal = goal
         if rec.position is not None:
-            self._start(rec)
+            self._start(rec, out)
             if not rec.stale:
                 dirty.add(unit_id)
+
+    def _restore(self, m: MissionRestored, now: float, out: Outputs) -> None:
+        rec = self._unit(m.unit, now, out, keys.unit_goal(self.settings.mission, m.unit))
+        if rec is None:
+            return
+        self._drop_mission(rec)
+        rec.goal = m.goal
+        rec.origin = m.origin
+        goal = (m.goal.position[0], m.goal.position[1])
+        rec.stepper = Stepper(m.origin, goal, m.params, self.settings.bounds, rec.key)
+        rec.stepper.defer = self.settings.deliberation == "deferred"
+
+    def _peer(self, planner: str, alive: bool, out: Outputs) -> None:
+        if planner == self.settings.planner_id:
+            return
+        if not alive:
+            self._peers.discard(planner)
+            return
+        if planner in self._peers:
+            return
+        self._peers.add(planner)
+        if not self.settings.cluster:
+            reason = (
+                f"planner {planner!r} also serves mission {self.settings.mission!r}; both answer every unit"
+            )
+            out.events.append(ConflictEvent(planner=self.settings.planner_id, other=planner, reason=reason))
 
     def _cancel(self, unit_id: str, dirty: set[str]) -> None:
         rec = self._units.get(unit_id)
@@ -591,13 +659,14 @@ class World:
         out.events.append(ForgottenEvent(planner=self.settings.planner_id, unit=rec.id, stale_s=stale_s))
 
     # -- planning -------------------------------------------------------------------
-    def _start(self, rec: _Unit) -> None:
+    def _start(self, rec: _Unit, out: Outputs) -> None:
         assert rec.goal is not None and rec.position is not None
         rec.origin = rec.position
         goal = (rec.goal.position[0], rec.goal.position[1])
         resolved = resolve(self.settings.params_for(rec.goal), rec.origin, goal, list(self.field.threats))
         rec.stepper = Stepper(rec.origin, goal, resolved, self.settings.bounds, rec.key)
         rec.stepper.defer = self.settings.deliberation == "deferred"
+        out.missions.append(MissionRecord(rec.id, rec.epoch, rec.origin, rec.goal, resolved))
 
     def _supersede(self, rec: _Unit) -> None:
         if rec.job is not None:

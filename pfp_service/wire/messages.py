@@ -54,6 +54,7 @@ __all__ = [
     "Bounds",
     "Direction",
     "DirectionStatus",
+    "ConflictEvent",
     "ErrorReply",
     "Event",
     "ForgottenEvent",
@@ -64,6 +65,7 @@ __all__ = [
     "PreviewRequest",
     "RejectedEvent",
     "ReplanEvent",
+    "RestoredEvent",
     "StaleEvent",
     "ThreatChange",
     "ThreatSummary",
@@ -409,10 +411,42 @@ class ArrivedEvent(Event, frozen=True, kw_only=True, tag="arrived"):
     distance_to_goal: NonNegative = 0.0
 
 
+class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
+    """A planner started from its durable state: how much it found."""
+
+    threats: Count = 0
+    goals: Count = 0
+    missions: Count = 0
+    expired: Count = 0  # threats whose TTL ran out while the planner was down
+
+
+class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):
+    """Another planner serves the same mission, and scale-out is not configured: both answer every unit."""
+
+    other: Id
+    reason: Text = ""
+
+
 AnyEvent = Union[  # noqa: UP007
-    RejectedEvent, ReplanEvent, TrappedEvent, ArrivedEvent, StaleEvent, ForgottenEvent
+    RejectedEvent,
+    ReplanEvent,
+    TrappedEvent,
+    ArrivedEvent,
+    StaleEvent,
+    ForgottenEvent,
+    RestoredEvent,
+    ConflictEvent,
 ]
-EVENT_KINDS: tuple[str, ...] = ("rejected", "replan", "trapped", "arrived", "stale", "forgotten")
+EVENT_KINDS: tuple[str, ...] = (
+    "rejected",
+    "replan",
+    "trapped",
+    "arrived",
+    "stale",
+    "forgotten",
+    "restored",
+    "conflict",
+)
 
 
 # -- the world queryable ---------------------------------------------------------

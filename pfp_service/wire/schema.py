@@ -279,6 +279,8 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             ("event.arrived", m.ArrivedEvent(unit="ugv-1", position=(9.97, 10.02), distance_to_goal=0.036)),
             ("event.stale", m.StaleEvent(unit="ugv-3", position=(120.0, 40.5), reason="silent for 10 s")),
             ("event.forgotten", m.ForgottenEvent(unit="ugv-3", stale_s=600.0)),
+            ("event.restored", m.RestoredEvent(threats=20, goals=50, missions=48, expired=1)),
+            ("event.conflict", m.ConflictEvent(other="planner-2", reason="a second planner on mission default")),
         ],
     }
 
