@@ -346,3 +346,38 @@ def test_health_and_fleet_commands_connect_with_a_certificate_endpoint(router):
             assert fleet.returncode == 0, fleet.stdout[-2000:] + fleet.stderr[-2000:]
         finally:
             node.stop()
+
+
+# -- the generator itself ---------------------------------------------------------------------
+def test_pfp_acl_keeps_passwords_across_runs_and_hides_them(tmp_path):
+    team = tmp_path / "team.yaml"
+    team.write_text(TEAM)
+    out = tmp_path / "acl"
+    assert pfp_main(["acl", str(team), "--out", str(out), "--quiet"]) == 0
+    first = (out / "credentials.txt").read_text()
+    assert pfp_main(["acl", str(team), "--out", str(out), "--quiet"]) == 0
+    assert (out / "credentials.txt").read_text() == first
+    users = [line.split(":")[0] for line in first.splitlines()]
+    assert users[-2:] == ["unit-u1", "unit-u2"] and "planner" in users
+    for secret in [out / "credentials.txt", *(out / "clients").glob("*.json5")]:
+        assert secret.stat().st_mode & 0o077 == 0, secret
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--role", "x=wizard"], "--role: x=wizard: unknown role (expected one of: planner, fleet,"),
+        (["--role", "unit-u1=observer"], "names starting with 'unit-' are the units'"),
+        (["--role", "nope"], "expected NAME=ROLE[,ROLE...]"),
+        (["--mission", "a/b"], "--mission: 'a/b' is not 1-64 characters"),
+    ],
+)
+def test_pfp_acl_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
+    from tests.conftest import run_pfp
+
+    team = tmp_path / "team.yaml"
+    team.write_text(TEAM)
+    done = run_pfp("acl", str(team), "--out", str(tmp_path / "o"), *args)
+    assert done.returncode == 2
+    assert message in done.stderr and done.stderr.count("\n") == 1, done.stderr
+    assert "Traceback" not in done.stderr

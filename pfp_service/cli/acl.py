@@ -18,7 +18,7 @@ from the team file.  Roles, each a list of grants built from ``wire.keys``
     reporter    put and delete threats
     commander   set and cancel any unit's goal, preview any unit
     observer    read everything of the mission, ask any planner's status and
-                world (``pfp health``, ``pfp status``, ``pfp map``)
+                world (``pfp health``, ``pfp status``)
 
 Everything else is denied: another unit's state, a direction from anyone but
 a planner, a planner token or status queryable from anyone else.  A
@@ -197,6 +197,7 @@ DEFAULT_PRINCIPALS: dict[str, tuple[str, ...]] = {
     "planner": ("planner",),
     "fleet": ("fleet",),
     "injector": ("reporter", "commander", "observer"),
+    "map": ("reporter", "commander", "observer"),  # pfp map shows everything and edits threats and goals
     "reporter": ("reporter",),
     "commander": ("commander",),
     "observer": ("observer",),
