@@ -456,3 +456,14 @@ def test_deferred_trap_escape_is_searched_off_the_loop():
     d = _one(w.apply([out.jobs[0].run(float(k)), _state("u", *pos)], float(k)), "u")
     assert d.status is DirectionStatus.ESCAPING
     assert math.isfinite(d.vector[0])
+
+
+def test_with_an_origin_directions_carry_true_bearing_and_lat_lon_lookahead():
+    from pfp_service.geo import Origin
+
+    w = _world(origin=Origin(lat=59.9, lon=10.7))
+    d = _one(w.apply([_state("u", 0, 0), GoalSet("u", Goal(position=(0, 1000)))], 0.0), "u")
+    assert d.heading_deg == 0.0 and 0.0 <= d.true_bearing_deg < 1e-6
+    assert len(d.lookahead_geo) == len(d.lookahead) == 5
+    assert d.lookahead_geo[0].lat > 59.9 and abs(d.lookahead_geo[0].lon - 10.7) < 1e-6
+    decode_direction(encode(d))

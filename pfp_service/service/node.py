@@ -24,7 +24,7 @@ from typing import Any
 import msgspec
 import zenoh
 
-from pfp_service import __version__
+from pfp_service import __version__, geojson
 from pfp_service.errors import InputError
 from pfp_service.service.config import ServeConfig
 from pfp_service.service.log import get_logger
@@ -84,6 +84,7 @@ def world_settings(cfg: ServeConfig) -> WorldSettings:
         unit_forget_s=cfg.unit_forget_s,
         max_units=cfg.max_units,
         max_threats=cfg.max_threats,
+        origin=cfg.origin,
     )
 
 
@@ -141,6 +142,7 @@ class PlannerNode:
     ) -> None:
         self.session = session
         self.store = store
+        self._origin = cfg.origin
         self.cfg = cfg
         self.clock = clock
         self.world = World(world_settings(cfg))
@@ -217,7 +219,7 @@ class PlannerNode:
         key = str(sample.key_expr)
         try:
             uid = keys.parse(key).id
-            msg = decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds)
+            msg = decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
         except InputError as err:
             self._push(InputRejected(key, err))
             return
@@ -232,7 +234,9 @@ class PlannerNode:
             if sample.kind == zenoh.SampleKind.DELETE:
                 self._push(GoalCancelled(uid))
             else:
-                self._push(GoalSet(uid, decode_goal(sample.payload.to_bytes(), self.cfg.bounds)))
+                self._push(
+                    GoalSet(uid, decode_goal(sample.payload.to_bytes(), self.cfg.bounds, self._origin))
+                )
         except InputError as err:
             self._push(InputRejected(key, err))
 
@@ -243,7 +247,9 @@ class PlannerNode:
             if sample.kind == zenoh.SampleKind.DELETE:
                 self._push(ThreatRemoved(tid))
             else:
-                self._push(ThreatPut(tid, decode_threat(sample.payload.to_bytes(), self.cfg.bounds)))
+                self._push(
+                    ThreatPut(tid, decode_threat(sample.payload.to_bytes(), self.cfg.bounds, self._origin))
+                )
         except InputError as err:
             self._push(InputRejected(key, err))
 
@@ -419,9 +425,15 @@ class PlannerNode:
             if left <= 0:
                 self._reply_err(query, ErrorReply(error="expired: the preview budget passed in the queue"))
                 return
-            request = decode_preview_request(payload, self.cfg.bounds)
+            request = decode_preview_request(payload, self.cfg.bounds, self._origin)
             result = preview(view, request, self.clock, left, self.cfg.preview_max_iter)
-            query.reply(key, fit_reply(result), encoding=_JSON)
+            if request.geojson:
+                body = geojson.preview_reply(
+                    self._origin, result, view.threats, result.path[0], result.path[-1]
+                )
+            else:
+                body = fit_reply(result)
+            query.reply(key, body, encoding=_JSON)
             query.drop()
         except InputError as err:
             self._reply_err(query, ErrorReply.of(err))

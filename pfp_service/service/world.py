@@ -41,6 +41,7 @@ from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threa
 from pfp_service.core.plan import walk_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
+from pfp_service.geo import Origin, with_geodetic
 from pfp_service.wire import (
     ArrivedEvent,
     ConflictEvent,
@@ -285,6 +286,7 @@ class WorldSettings:
     max_units: int = 100_000
     max_threats: int = 10_000
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
+    origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
 
     def params_for(self, goal: Goal) -> PlannerParams:
         """A unit's planner parameters: service defaults, then the goal's overrides."""
@@ -760,7 +762,7 @@ class World:
         heading = None
         if not adv.status.terminal and (adv.dx or adv.dy):
             heading = math.degrees(math.atan2(adv.dx, adv.dy)) % 360.0
-        return Direction(
+        d = Direction(
             unit=rec.id,
             seq=rec.seq,
             status=status,
@@ -772,6 +774,7 @@ class World:
             reason=adv.reason[:1024],
             deliberating=adv.deliberating or rec.job is not None,
         )
+        return with_geodetic(d, self.settings.origin, rec.position) if self.settings.origin is not None else d
 
     def _transition(self, rec: _Unit, status: DirectionStatus, adv: Advice, out: Outputs) -> None:
         assert rec.position is not None
