@@ -314,9 +314,9 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
             say(f"pfp bench fuzz: seed {seed}, {count} inputs per target, planner pid {proc.pid}")
             t_start = time.perf_counter()
             for target, kind, make_key in (
-                ("unit_state", "unit_state", lambda i: keys.unit_state(MISSION, f"fz{i % 50}")),
-                ("goal", "goal", lambda i: keys.unit_goal(MISSION, f"fz{i % 50}")),
-                ("threat", "threat", lambda i: keys.threat(MISSION, f"fz{i % 50}")),
+                ("unit_state", "unit_state", lambda i: keys.unit_state(MISSION, f"fz{i}")),
+                ("goal", "goal", lambda i: keys.unit_goal(MISSION, f"fz{i}")),
+                ("threat", "threat", lambda i: keys.threat(MISSION, f"fz{i}")),
             ):
                 for i in range(count):
                     x = malformed(rng, kind)
@@ -332,13 +332,26 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
                         probe.ask()
                         rss_peak = max(rss_peak, _rss_mb(proc.pid) or 0.0)
                 say(f"  {target}: {count} puts sent")
+            deletes = max(count // 10, 10)
+            for i in range(deletes):
+                target = ("goal", "threat")[i % 2]
+                try:
+                    session.delete(_odd_key(target, _ODD_IDS[i % len(_ODD_IDS)] + str(i)))
+                except zenoh.ZError:
+                    sent["refused_by_zenoh"] += 1
+                    continue
+                sent[f"{target}_delete"] += 1
+            say(f"  goal, threat: {deletes} deletes with odd ids sent")
             for target in ("preview", "status"):
                 pending: list[Any] = []
                 for i in range(count):
                     if target == "preview":
                         x = malformed(rng, "preview")
-                        uid = x.odd_id or f"fz{i % 50}"
-                        key = keys.preview(MISSION, "fz0") if x.odd_id is None else _odd_key("preview", uid)
+                        key = (
+                            keys.preview(MISSION, f"fz{i}")
+                            if x.odd_id is None
+                            else _odd_key("preview", x.odd_id)
+                        )
                         sel, payload = key, x.payload
                         categories[x.category] += 1
                     else:
@@ -365,7 +378,7 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
             say(f"  liveliness: {tokens} tokens with odd ids declared and dropped")
             r["fuzz_s"] = round(time.perf_counter() - t_start, 1)
             # let the planner drain: the rejected counter stops moving
-            expected = sent["unit_state"] + sent["goal"] + sent["threat"]
+            expected = sum(sent[k] for k in ("unit_state", "goal", "threat", "goal_delete", "threat_delete"))
             last, still = -1, time.monotonic()
             while time.monotonic() - still < 2.0 and time.monotonic() - t_start < 600:
                 st = _status(session)
@@ -416,7 +429,7 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
         "same direction after the fuzz": r["probe_before"] is not None
         and r["probe_after"] == r["probe_before"],
         "no probe stalled (5 s)": r["probe_stalls"] == 0,
-        "every put rejected": r["rejected"] == r["rejected_expected"],
+        "every put and delete rejected": r["rejected"] == r["rejected_expected"],
         "every query answered": queries["unanswered"] == 0 and queries["undecodable"] == 0,
         f"memory growth <= {max_rss_growth_mb:g} MB": growth <= max_rss_growth_mb,
         "zero tracebacks in the log": r["tracebacks"] == 0,
@@ -477,7 +490,7 @@ def run(args: argparse.Namespace) -> int:
         return 0 if r["ok"] else 1
     q = r["queries"]
     print(f"  inputs: {r['inputs']} in {r['fuzz_s']} s; by category: {r['categories']}")
-    print(f"  rejected {r['rejected']} of {r['rejected_expected']} puts; queries: {q}")
+    print(f"  rejected {r['rejected']} of {r['rejected_expected']} puts and deletes; queries: {q}")
     print(
         f"  probes: {r['probes']}, p50 {r['probe_p50_ms']} ms, max {r['probe_max_ms']} ms, "
         f"stalls {r['probe_stalls']}; direction before {r['probe_before']}, after {r['probe_after']}"
