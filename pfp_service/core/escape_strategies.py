@@ -33,6 +33,7 @@ acceptable (tier 0: cheap, reactive; tier 1: a search).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -247,16 +248,22 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
     yield NoCandidate(f"the contour found no exit within {tr.budget} steps")
 
 
+# Route searches that found the unit or the goal walled in, per field (a field is immutable).
+_WALLED: weakref.WeakKeyDictionary[
+    ThreatField, list[tuple[tuple[float, float], GridGraph, np.ndarray, str]]
+] = weakref.WeakKeyDictionary()
+
+
 def route_cell(span_m: float, s_min_m: float) -> float:
     """Cell size of a route search over ``span_m``: fine enough for the narrowest threat.
 
-    A twelfth of the narrowest standard deviation (so a gap a fraction of a
+    A sixth of the narrowest standard deviation (so a gap a fraction of a
     standard deviation wide still holds grid nodes), at most ``span / 100``;
     no finer than ``span / ROUTE_MAX_CELLS``, unless that would leave a cell
     wider than 3.5 narrowest standard deviations, past which an edge's probe
     points could step over a core (then up to ``2 * ROUTE_MAX_CELLS``).
     """
-    h = min(span_m / GLOBAL_CELLS, s_min_m / 12.0)
+    h = min(span_m / GLOBAL_CELLS, s_min_m / 6.0)
     h = max(h, span_m / ROUTE_MAX_CELLS)
     return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
 
@@ -271,6 +278,13 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
     stays out of them, and resampled at ``step`` for the stepper to follow.
     """
     gx, gy = tr.goal
+    for goal, known, walled, side in _WALLED.get(tr.field, ()):
+        inside = bool(walled[known.cell_of(tr.x, tr.y)])
+        if goal == tr.goal and inside == (side == "source"):  # the same walled-in component as before
+            return NoCandidate(
+                f"no route to the goal avoids the threat cores: the {'unit' if inside else 'goal'} is "
+                f"walled in (local grid of {known.cell_m:.3g} m cells)"
+            )
     spreads = [t.spread() for t in tr.field.threats] or [tr.step]
     search = Cores.of(tr.field, SEARCH_FRACTION)
     s_min = tr.cores.min_spread_m if math.isfinite(tr.cores.min_spread_m) else tr.dist
@@ -286,10 +300,13 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
         h = route_cell(max(x1 - x0, y1 - y0), s_min)
         grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), cores=search, cell_m=h)
         route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), LAMBDA)
-        if len(route.points):
-            break
+        whole = tr.bounds is not None and ((x0, y0), (x1, y1)) == tr.bounds
+        if len(route.points) or route.sealed or whole:
+            break  # found, walled in, or the whole mission area already: more room cannot help
         pad *= 3.0
-    else:
+    if not len(route.points):
+        if route.walled is not None:  # remembered for the next trap under this field
+            _WALLED.setdefault(tr.field, []).append((tr.goal, grid, route.walled, route.walled_side))
         return NoCandidate(
             f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
         )

@@ -18,17 +18,19 @@ polyline evenly again, for a stepper to follow.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import breadth_first_order, dijkstra
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut"]
+__all__ = ["GridGraph", "Route", "local_level", "resample", "segment_costs", "shortcut"]
 
 _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
@@ -43,6 +45,58 @@ class Route:
 
     points: np.ndarray  # (K, 2) node coordinates, source first
     cost: float
+    sealed: bool = False  # no route, and a larger box would not help: the source or target is walled in
+    walled: np.ndarray | None = None  # then: the walled-in component (a node mask) ...
+    walled_side: str = ""  # ... and whose it is, "source" or "target"
+
+
+@numba.njit(cache=True, nogil=True)
+def _edges(
+    fine: np.ndarray, blocked: np.ndarray, check: bool, nx: int, ny: int, h: float, offsets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every open edge, both ways, as CSR rows: ``(indptr, indices, length, Simpson exposure)``.
+
+    ``fine`` holds the levels at half a cell, ``blocked`` (when ``check``) the
+    cores at a quarter cell, so each edge's ends, midpoint and quarter points
+    are lattice entries.
+    """
+    m = offsets.shape[0]
+    cap = nx * ny * 2 * m
+    indptr = np.zeros(nx * ny + 1, dtype=np.int64)
+    indices = np.empty(cap, dtype=np.int32)
+    length = np.empty(cap)
+    exposure = np.empty(cap)
+    n = 0
+    for i in range(nx):
+        for j in range(ny):
+            src = i * ny + j
+            if check and blocked[4 * i, 4 * j]:
+                indptr[src + 1] = n
+                continue
+            for o in range(2 * m):
+                sign = 1 if o < m else -1
+                di, dj = sign * offsets[o % m, 0], sign * offsets[o % m, 1]
+                ti, tj = i + di, j + dj
+                if ti < 0 or ti >= nx or tj < 0 or tj >= ny:
+                    continue
+                if check and (
+                    blocked[4 * ti, 4 * tj]
+                    or blocked[4 * i + di, 4 * j + dj]
+                    or blocked[4 * i + 2 * di, 4 * j + 2 * dj]
+                    or blocked[4 * i + 3 * di, 4 * j + 3 * dj]
+                ):
+                    continue
+                ln = h * math.sqrt(di * di + dj * dj)
+                indices[n] = ti * ny + tj
+                length[n] = ln
+                exposure[n] = (
+                    ln
+                    * (fine[2 * i, 2 * j] + 4.0 * fine[2 * i + di, 2 * j + dj] + fine[2 * ti, 2 * tj])
+                    / 6.0
+                )
+                n += 1
+            indptr[src + 1] = n
+    return indptr, indices[:n].copy(), length[:n].copy(), exposure[:n].copy()
 
 
 class GridGraph:
@@ -92,34 +146,21 @@ class GridGraph:
             peak = float(np.max(field.packed[:, kernels.SCALE]))
             if peak > 0:
                 kernels.raster_level(field.packed, x0, y0, 0.5 * h, LEVEL_FLOOR * peak, fine)
-        level = fine[::2, ::2].ravel()
         # cores on a lattice of a quarter cell: nodes, and each edge's quarter, mid and
         # three-quarter points, are all on it
         blocked = cores.raster((x0, y0), 0.25 * h, (4 * nx - 3, 4 * ny - 3)) if cores is not None else None
         self.open = ~blocked[::4, ::4].ravel() if blocked is not None else np.ones(nx * ny, dtype=bool)
-        offsets = _KING + (_KNIGHT if connectivity == 16 else ())
-        src, dst, length, exposure = [], [], [], []
-        idx = np.arange(nx * ny).reshape(nx, ny)
-        for di, dj in offsets:
-            sub = idx[max(0, -di) : nx - max(0, di), max(0, -dj) : ny - max(0, dj)]
-            a = sub.ravel()
-            b = a + di * ny + dj
-            ia, ja = np.divmod(a, ny)
-            lm = fine[2 * ia + di, 2 * ja + dj]
-            keep = self.open[a] & self.open[b]
-            if blocked is not None:
-                for q in (1, 2, 3):
-                    keep &= ~blocked[4 * ia + q * di, 4 * ja + q * dj]
-            a, b, lm = a[keep], b[keep], lm[keep]
-            ln = h * math.hypot(di, dj)
-            src.append(a)
-            dst.append(b)
-            length.append(np.full(len(a), ln))
-            exposure.append(ln * (level[a] + 4.0 * lm + level[b]) / 6.0)
-        self._src = np.concatenate(src)
-        self._dst = np.concatenate(dst)
-        self.edge_length = np.concatenate(length)
-        self.edge_exposure = np.concatenate(exposure)
+        offsets = np.array(_KING + (_KNIGHT if connectivity == 16 else ()), dtype=np.int64)
+        lattice = blocked if blocked is not None else np.zeros((1, 1), dtype=np.bool_)
+        self._indptr, self._indices, self.edge_length, self.edge_exposure = _edges(
+            fine, lattice, blocked is not None, nx, ny, h, offsets
+        )
+
+    def cell_of(self, x: float, y: float) -> int:
+        """The node nearest to ``(x, y)``, open or not (clamped to the box)."""
+        i = min(max(round((x - self.origin[0]) / self.cell_m), 0), self.nx - 1)
+        j = min(max(round((y - self.origin[1]) / self.cell_m), 0), self.ny - 1)
+        return int(i * self.ny + j)
 
     def nearest(self, x: float, y: float) -> int:
         """The open node nearest to ``(x, y)``, or -1 if no node is open."""
@@ -140,11 +181,20 @@ class GridGraph:
         The cost of an edge is ``length + lam * exposure``, i.e. the integral of
         ``1 + lam T`` along it.
         """
-        n = len(self.nodes)
-        w = self.edge_length + lam * self.edge_exposure
-        graph = csr_matrix((w, (self._src, self._dst)), shape=(n, n))
-        dist, pred = dijkstra(graph, directed=False, indices=target, return_predecessors=True)
+        dist, pred = dijkstra(
+            self._graph(self.edge_length + lam * self.edge_exposure), indices=target, return_predecessors=True
+        )
         return dist, pred
+
+    def _graph(self, weights: np.ndarray) -> csr_matrix:
+        """The graph with these edge weights (every edge is stored both ways, so it is directed)."""
+        n = len(self.nodes)
+        return csr_matrix((weights, self._indices, self._indptr), shape=(n, n))
+
+    def _touches_border(self, nodes: np.ndarray) -> bool:
+        """Does the node set (a boolean mask) include a node on the box's edge?"""
+        m = nodes.reshape(self.nx, self.ny)
+        return bool(m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any())
 
     def route(self, source: int, target: int, lam: float) -> Route:
         """The cheapest node path from ``source`` to ``target`` (empty if they are not connected)."""
@@ -152,6 +202,14 @@ class GridGraph:
             return Route(np.zeros((0, 2)), math.inf)
         dist, pred = self.cost_to(target, lam)
         if not math.isfinite(dist[source]):
+            comp = np.isfinite(dist)
+            if not self._touches_border(comp):
+                return Route(np.zeros((0, 2)), math.inf, True, comp, "target")
+            seen = breadth_first_order(self._graph(self.edge_length), source, return_predecessors=False)
+            comp = np.zeros(len(self.nodes), dtype=bool)
+            comp[seen] = True
+            if not self._touches_border(comp):
+                return Route(np.zeros((0, 2)), math.inf, True, comp, "source")
             return Route(np.zeros((0, 2)), math.inf)
         chain = [source]
         while chain[-1] != target:
@@ -159,11 +217,44 @@ class GridGraph:
         return Route(self.nodes[chain], float(dist[source]))
 
 
+_REACH: weakref.WeakKeyDictionary[ThreatField, np.ndarray] = weakref.WeakKeyDictionary()
+
+
+def local_level(field: ThreatField, points: np.ndarray) -> np.ndarray:
+    """``field.level(points)`` from only the threats whose ``LEVEL_FLOOR`` box meets the points' box.
+
+    For the route searches' many short segments among many threats; it
+    differs from ``field.level`` only by terms below ``LEVEL_FLOOR`` of the
+    strongest peak.
+    """
+    arr = np.asarray(points, dtype=np.float64)
+    pts = np.ascontiguousarray(arr.reshape(-1, 2))
+    out = np.zeros(len(pts))
+    if not len(field) or not len(pts):
+        return out.reshape(arr.shape[:-1])
+    reach = _REACH.get(field)
+    if reach is None:
+        packed = field.packed
+        scale = packed[:, kernels.SCALE]
+        floor = LEVEL_FLOOR * float(scale.max())
+        qmax = np.where(scale > floor, 2.0 * np.log(np.maximum(scale, floor) / floor), 0.0)
+        det = packed[:, kernels.P00] * packed[:, kernels.P11] - packed[:, kernels.P01] ** 2
+        ex = np.sqrt(qmax * packed[:, kernels.P11] / det)
+        ey = np.sqrt(qmax * packed[:, kernels.P00] / det)
+        cx, cy = packed[:, kernels.XI_X], packed[:, kernels.XI_Y]
+        reach = _REACH[field] = np.stack([cx - ex, cy - ey, cx + ex, cy + ey], axis=1)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    near = (reach[:, 0] <= hi[0]) & (reach[:, 2] >= lo[0]) & (reach[:, 1] <= hi[1]) & (reach[:, 3] >= lo[1])
+    if near.any():
+        kernels.batch_level(np.ascontiguousarray(field.packed[near]), pts, out)
+    return out.reshape(arr.shape[:-1])
+
+
 def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
     """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
     t = np.linspace(0.0, 1.0, _SAMPLES)
     pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
-    lv = field.level(pts) if len(field) else np.zeros(pts.shape[:2])
+    lv = local_level(field, pts)
     w = np.ones(_SAMPLES)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     length = np.hypot(*(b - a).T)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from pfp_service.core.threat import ThreatField
@@ -42,6 +43,23 @@ class PathMetrics:
     min_clearance: float  # inf when no threat was ever in force
 
 
+@numba.njit(cache=True, nogil=True)
+def _clearance(path: np.ndarray, positions: np.ndarray) -> float:
+    best = math.inf
+    for i in range(path.shape[0] - 1):
+        ax, ay = path[i, 0], path[i, 1]
+        bx, by = path[i + 1, 0] - ax, path[i + 1, 1] - ay
+        denom = bx * bx + by * by
+        for j in range(positions.shape[0]):
+            px, py = positions[j, 0] - ax, positions[j, 1] - ay
+            t = (px * bx + py * by) / denom if denom > 0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            d = math.hypot(px - t * bx, py - t * by)
+            if d < best:
+                best = d
+    return best
+
+
 def segment_clearance(path: np.ndarray, positions: np.ndarray) -> float:
     """Smallest distance from any segment of ``path`` to any of ``positions``."""
     if len(positions) == 0:
@@ -49,16 +67,8 @@ def segment_clearance(path: np.ndarray, positions: np.ndarray) -> float:
     if len(path) == 1:
         d = np.hypot(positions[:, 0] - path[0, 0], positions[:, 1] - path[0, 1])
         return float(d.min())
-    a = path[:-1, None, :]
-    ab = (path[1:] - path[:-1])[:, None, :]
-    ap = positions[None, :, :] - a
-    denom = np.einsum("ijk,ijk->ij", ab, ab)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(denom > 0, np.einsum("ijk,ijk->ij", ap, ab) / denom, 0.0)
-    t = np.clip(t, 0.0, 1.0)
-    closest = a + t[..., None] * ab
-    d = np.hypot(positions[None, :, 0] - closest[..., 0], positions[None, :, 1] - closest[..., 1])
-    return float(d.min())
+    pts = np.ascontiguousarray(path, dtype=np.float64)
+    return float(_clearance(pts, np.ascontiguousarray(positions, dtype=np.float64)))
 
 
 def measure(path: np.ndarray, epochs: list[Epoch]) -> PathMetrics:
