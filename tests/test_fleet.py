@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import io
 import queue
+import re
 import uuid
 
 import pytest
@@ -46,9 +48,12 @@ def test_fleet_reaches_its_goals_around_a_threat(tmp_path, mission):
         )
         r = run_pfp(
             "fleet", "--team", str(team), "--connect", endpoint, "--mission", mission,
-            "--speed-up", "20", "--until-arrived", "--duration-s", "120", timeout=60,
+            "--speed-up", "20", "--until-arrived", "--duration-s", "120", "--progress-s", "0.3", timeout=60,
         )  # fmt: skip
         assert r.returncode == 0, r.stdout + r.stderr
+        # no terminal: a progress line every --progress-s, and the last one says where it ended
+        progress = re.findall(r"3 units: (\d+) en route, (\d+) arrived, (\d+) trapped, (\d+) stale", r.stdout)
+        assert len(progress) >= 2 and progress[-1] == ("0", "3", "0", "0"), r.stdout
         # the planner said so, for every unit: the fleet claims nothing of its own
         seen = {arrived.get(timeout=5)["unit"] for _ in range(3)}
         assert seen == {"m1", "r1", "r2"}
@@ -120,3 +125,36 @@ def test_sim_unit_moves_only_when_told_and_arrives_only_when_the_planner_says():
     assert u.position == pytest.approx((1.3, 0.0)) and not u.arrived
     u.on_direction(_d(DirectionStatus.ARRIVED, 4, vector=(0.0, 0.0), dist=0.05), 2.5)
     assert u.arrived and u.arrived_at_s == 2.5
+
+
+def test_progress_is_a_bar_on_a_terminal_and_a_line_every_few_seconds_otherwise():
+    from pfp_clients.progress import Progress
+
+    now = [0.0]
+    pipe = io.StringIO()
+    with Progress(every_s=5.0, stream=pipe, total=3, clock=lambda: now[0], live=False) as p:
+        for t in range(12):
+            now[0] = float(t)
+            p.update(f"summary {t}", t // 4)
+        p.say("m1 arrived")
+    assert pipe.getvalue().splitlines() == [
+        "summary 0",
+        "summary 5",
+        "summary 10",
+        "m1 arrived",
+        "summary 11",
+    ]
+    tty = io.StringIO()
+    with Progress(stream=tty, total=3, live=True) as p:
+        p.update("2 en route, 1 arrived", 1)
+        p.say("r1 arrived at (1, 2)")
+    out = tty.getvalue()
+    assert "r1 arrived at (1, 2)" in out and "2 en route, 1 arrived" in out and "1/3" in out
+
+
+def test_generate_is_capped_with_a_clear_error():
+    r = run_pfp("fleet", "--generate", "100000000", timeout=30)
+    assert r.returncode == 2 and r.stderr.strip() == (
+        "pfp fleet: error: argument --generate: at most 10000 units per fleet process, "
+        "got '100000000' (run several fleets instead)"
+    )

@@ -144,3 +144,27 @@ def test_example_scripts_validate():
     for path in scripts:
         r = run_pfp("inject", str(path), "--check", timeout=30)
         assert r.returncode == 0, r.stderr
+
+
+def test_inject_says_which_entry_it_waits_on_and_for_what(tmp_path, mission):
+    script = tmp_path / "wait.yaml"
+    script.write_text(
+        "duration_s: 3\ntimeline:\n"
+        "  - {do: add_threat, threat: e1, position: [4, 6], sigma_range: 1.0, sigma_lateral: 0.7}\n"
+        "  - {do: remove_threat, threat: e1, when: {unit: u9, within_m: 1, of: [5, 5]}}\n"
+    )
+    with planner_process(mission=mission) as (endpoint, _):
+        r = run_pfp(
+            "inject",
+            str(script),
+            "--connect",
+            endpoint,
+            "--mission",
+            mission,
+            "--progress-s",
+            "0.5",
+            timeout=60,
+        )
+    assert r.returncode == 1  # the trigger never came
+    assert "waiting on timeline[1] (remove threat e1): u9 within 1 m of (5, 5), not seen yet" in r.stdout
+    assert "FAIL  timeline[1] (remove threat e1) never fired" in r.stdout

@@ -1,0 +1,85 @@
+"""``pfp status`` and ``pfp health`` as a user runs them, against a real planner subprocess."""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+import uuid
+
+import pytest
+
+from tests.conftest import run_pfp
+from tests.test_serve import Unit
+from tests.zenoh_util import client, planner_process, put_json
+
+
+@pytest.fixture(scope="module")
+def world():
+    """A planner holding two units (one with a goal) and two threats (one with a TTL)."""
+    mission = "w" + uuid.uuid4().hex[:10]
+    with planner_process(mission=mission) as (endpoint, _), client(endpoint) as s:
+        put_json(
+            s, f"mumt/{mission}/threat/e1", {"position": [4, 6], "sigma_range": 1.0, "sigma_lateral": 0.7}
+        )
+        put_json(
+            s,
+            f"mumt/{mission}/threat/e2",
+            {"position": [7, 3], "sigma_range": 1.0, "sigma_lateral": 0.7, "facing_deg": 90, "ttl_s": 600},
+        )
+        scout = Unit(s, mission, "scout")
+        put_json(s, f"mumt/{mission}/unit/scout/goal", {"position": [10, 10]})
+        time.sleep(0.2)
+        assert scout.report()["status"] in ("en_route", "escaping")
+        idle = Unit(s, mission, "idle", pos=(1.0, 1.0))
+        assert idle.report()["status"] == "no_goal"
+        yield endpoint, mission
+
+
+def test_status_lists_units_and_threats_as_tables(world):
+    endpoint, mission = world
+    r = run_pfp("status", "--connect", endpoint, "--mission", mission, timeout=60)
+    assert r.returncode == 0, r.stderr
+    out = r.stdout
+    assert f"planner planner, mission {mission}: 2 units, 2 threats" in out
+    assert re.search(r"^unit\s+kind\s+status\s+last seen\s+to goal\s+position$", out, re.M)
+    assert re.search(r"^idle\s+-\s+no_goal\s+[\d.]+ s ago\s+-\s+\(1\.0, 1\.0\)$", out, re.M), out
+    assert re.search(
+        r"^scout\s+-\s+(en_route|escaping)\s+[\d.]+ s ago\s+14\.1 m\s+\(0\.0, 0\.0\)$", out, re.M
+    ), out
+    assert re.search(r"^threat\s+position\s+facing\s+TTL left$", out, re.M)
+    assert re.search(r"^e1\s+\(4\.0, 6\.0\)\s+0°\s+no expiry$", out, re.M), out
+    assert re.search(r"^e2\s+\(7\.0, 3\.0\)\s+90°\s+(59\d|600)\.\d s$", out, re.M), out
+
+
+def test_status_json_prints_the_full_lists(world):
+    endpoint, mission = world
+    r = run_pfp("status", "--connect", endpoint, "--mission", mission, "--json", timeout=60)
+    assert r.returncode == 0, r.stderr
+    (snap,) = json.loads(r.stdout)
+    assert [u["id"] for u in snap["units"]] == ["idle", "scout"]
+    assert snap["units"][1]["goal"] == [10.0, 10.0] and snap["units"][1]["distance_to_goal"] > 14
+    assert [t["id"] for t in snap["threats"]] == ["e1", "e2"]
+    assert snap["threats"][0]["ttl_s"] is None and 590 < snap["threats"][1]["ttl_s"] <= 600
+
+
+def test_status_and_health_of_a_mission_nobody_plans_exit_1(world):
+    endpoint, _ = world
+    for command in ("status", "health"):
+        r = run_pfp(command, "--connect", endpoint, "--mission", "nobody", "--timeout", "0.5", timeout=60)
+        assert r.returncode == 1
+        assert r.stderr.strip() == f"pfp {command}: no planner of mission 'nobody' answered within 0.5 s"
+
+
+def test_health_prints_rounded_figures_and_json_for_scripts(world):
+    endpoint, mission = world
+    r = run_pfp("health", "--connect", endpoint, "--mission", mission, timeout=60)
+    assert r.returncode == 0 and "None" not in r.stdout
+    assert re.fullmatch(
+        r"planner ok: mission \w+, up [\d.]+ s, 2 units \(\d stale\), 2 threats; messages in \d+, out \d+, "
+        r"rejected \d+; latency p50 (\d+\.\d\d ms|-), p99 (\d+\.\d\d ms|-)\n",
+        r.stdout,
+    ), r.stdout
+    r = run_pfp("health", "--connect", endpoint, "--mission", mission, "--json", timeout=60)
+    (status,) = json.loads(r.stdout)
+    assert status["planner"] == "planner" and status["units"] == 2 and status["threats"] == 2
