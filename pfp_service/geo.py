@@ -55,6 +55,30 @@ MAX_RANGE_M = 50_000.0
 # Keys whose value is a position, in wire messages and in scenario, team and inject files.
 POSITION_FIELDS = frozenset({"position", "start", "goal", "of"})  # "of": an inject trigger's point
 
+_A_M = 6_378_137.0  # WGS-84 semi-major axis; pymap3d's ellipsoid, named here for the Newton step's radii
+_E2 = (1.0 / 298.257223563) * (2.0 - 1.0 / 298.257223563)
+
+
+def _radii(sin_lat: Any) -> tuple[Any, Any]:
+    """Meridian and prime-vertical radii of curvature, metres (scalars or arrays)."""
+    w = (1.0 - _E2 * sin_lat * sin_lat) ** 0.5
+    return _A_M * (1.0 - _E2) / w**3, _A_M / w
+
+
+class _Wgs84:
+    """pymap3d's WGS-84 ``Ellipsoid``, built once (``Ellipsoid.from_name`` on every call costs)."""
+
+    _ell: Any = None
+
+    @classmethod
+    def get(cls) -> Any:
+        if cls._ell is None:
+            from pymap3d.ellipsoid import Ellipsoid
+
+            cls._ell = Ellipsoid.from_name("wgs84")
+        return cls._ell
+
+
 Latitude = Annotated[float, Meta(ge=-90.0, le=90.0)]
 Longitude = Annotated[float, Meta(ge=-180.0, le=180.0)]
 # The origin's latitude stays off the poles, where east and north are undefined.
@@ -86,7 +110,7 @@ class Origin(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=Tr
         """``(x_east_m, y_north_m)`` of a WGS-84 point on the plane's height."""
         import pymap3d
 
-        e, n, _u = pymap3d.geodetic2enu(lat, lon, self.alt, self.lat, self.lon, self.alt)
+        e, n, _u = pymap3d.geodetic2enu(lat, lon, self.alt, self.lat, self.lon, self.alt, _Wgs84.get())
         return float(e), float(n)
 
     def to_geodetic(self, x_east_m: float, y_north_m: float) -> tuple[float, float]:
@@ -97,24 +121,41 @@ class Origin(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=Tr
         return float(lat), float(lon)
 
     def to_geodetic_many(self, xy: np.ndarray) -> np.ndarray:
-        """``(n, 2)`` of ``[lat, lon]`` degrees for ``(n, 2)`` local metres.
+        """``(n, 2)`` of ``[lat, lon]`` degrees for ``(n, 2)`` local metres: the inverse of ``to_local``.
 
-        ``to_local`` keeps a point's ``(e, n)`` on the ellipsoid at the
-        origin's height; the point with that ``(e, n)`` sits ``u`` below the
-        plane, so two fixed-point passes on ``u`` find it (the error shrinks by
-        about ``(d/R)**2`` a pass: below 1e-7 m within ``MAX_RANGE_M``).
+        Newton's method on pymap3d's ``geodetic2enu`` (at the plane's height),
+        from the origin's radii of curvature; the Jacobian's columns are the
+        point's own north and east axes, scaled by its radii and turned into
+        the origin's frame.  Two or three steps reach 1e-8 m within ``MAX_RANGE_M``.
         """
         import numpy as np
         import pymap3d
 
-        e, n = np.asarray(xy[:, 0], dtype=float), np.asarray(xy[:, 1], dtype=float)
-        u = np.zeros_like(e)
-        for _ in range(3):
-            lat, lon, _h = pymap3d.enu2geodetic(e, n, u, self.lat, self.lon, self.alt)
-            _e, _n, u = pymap3d.geodetic2enu(lat, lon, self.alt, self.lat, self.lon, self.alt)
-        lat, lon, _h = pymap3d.enu2geodetic(e, n, u, self.lat, self.lon, self.alt)
-        lon = (np.asarray(lon) + 180.0) % 360.0 - 180.0
-        return np.column_stack([np.asarray(lat, dtype=float), lon])
+        e = np.asarray(xy[:, 0], dtype=float)
+        n = np.asarray(xy[:, 1], dtype=float)
+        lat0, h = math.radians(self.lat), self.alt
+        m0, n0 = _radii(math.sin(lat0))
+        lat = np.full_like(e, lat0) + n / (m0 + h)
+        lon = np.full_like(e, math.radians(self.lon)) + e / ((n0 + h) * math.cos(lat0))
+        for _ in range(8):
+            ee, nn, _u = pymap3d.geodetic2enu(
+                lat, lon, h, lat0, math.radians(self.lon), h, _Wgs84.get(), deg=False
+            )
+            re, rn = e - ee, n - nn
+            if max(float(np.max(np.abs(re), initial=0.0)), float(np.max(np.abs(rn), initial=0.0))) < 1e-8:
+                break
+            s, c = np.sin(lat), np.cos(lat)
+            mp, np_ = _radii(s)
+            # d(e, n)/d(lat): (M + h) times the point's north axis; d/d(lon): (N + h) cos(lat) its east axis
+            ne, nn_, _ = pymap3d.uvw2enu(-s * np.cos(lon), -s * np.sin(lon), c, self.lat, self.lon)
+            ee_, en, _ = pymap3d.uvw2enu(-np.sin(lon), np.cos(lon), np.zeros_like(lon), self.lat, self.lon)
+            a, b = (mp + h) * ne, (np_ + h) * c * ee_
+            cc, d = (mp + h) * nn_, (np_ + h) * c * en
+            det = a * d - b * cc
+            lat = lat + (d * re - b * rn) / det
+            lon = lon + (a * rn - cc * re) / det
+        lon = (np.degrees(lon) + 180.0) % 360.0 - 180.0
+        return np.column_stack([np.degrees(lat), lon])
 
     def localise_point(self, p: LatLon, path: str = "position") -> tuple[float, float]:
         """``to_local`` of ``p``, refusing one farther than ``MAX_RANGE_M``.
@@ -246,13 +287,16 @@ def true_bearing_deg(origin: Origin, position: tuple[float, float], vector: tupl
     Returns:
         Degrees clockwise from true north, in ``[0, 360)``.
     """
+    lat, lon = origin.to_geodetic(*position)
+    return _bearing_at(origin, lat, lon, vector)
+
+
+def _bearing_at(origin: Origin, lat: float, lon: float, vector: tuple[float, float]) -> float:
     import pymap3d
 
-    lat, lon = origin.to_geodetic(*position)
     u, v, w = pymap3d.enu2uvw(vector[0], vector[1], 0.0, origin.lat, origin.lon)
     e, n, _up = pymap3d.uvw2enu(u, v, w, lat, lon)
-    bearing = math.degrees(math.atan2(e, n)) % 360.0
-    return 0.0 if bearing >= 360.0 else float(bearing)  # a tiny negative angle rounds to 360.0
+    return float(math.degrees(math.atan2(e, n)) % 360.0)
 
 
 def lookahead_geodetic(origin: Origin, points: Iterable[tuple[float, float]]) -> list[LatLon]:
@@ -281,11 +325,18 @@ def with_geodetic(
     """
     if origin is None:
         return direction
+    import numpy as np
+
     dx, dy = direction.vector
     at = position if position is not None else (direction.lookahead[0] if direction.lookahead else None)
-    bearing = None if (dx == 0.0 and dy == 0.0) or at is None else true_bearing_deg(origin, at, (dx, dy))
+    pts = [*([at] if at is not None else []), *direction.lookahead]
+    ll = origin.to_geodetic_many(np.array(pts, dtype=float).reshape(-1, 2)) if pts else np.zeros((0, 2))
+    bearing = None
+    if at is not None and (dx != 0.0 or dy != 0.0):
+        bearing = _bearing_at(origin, float(ll[0, 0]), float(ll[0, 1]), (dx, dy))
+    ahead = ll[1:] if at is not None else ll
     return msgspec.structs.replace(
         direction,
         true_bearing_deg=bearing,
-        lookahead_geo=lookahead_geodetic(origin, direction.lookahead),
+        lookahead_geo=[LatLon(lat=round(float(a), 7), lon=round(float(b), 7)) for a, b in ahead],
     )
