@@ -4,6 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+DEMO_STAMP := $(VENV)/.demo-stamp
 
 .PHONY: install test check demo bench format clean
 
@@ -28,7 +29,16 @@ format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
-demo: $(STAMP)
+# The demo needs a plain install plus matplotlib (the `demo` extra), not the dev tools;
+# a full dev install (make test) already has it.
+$(DEMO_STAMP): pyproject.toml
+	@if [ -f $(STAMP) ] && [ $(STAMP) -nt pyproject.toml ]; then touch $(DEMO_STAMP); else \
+	  $(PYTHON) -m venv $(VENV) && \
+	  $(BIN)/python -m pip install --quiet --upgrade pip && \
+	  $(BIN)/python -m pip install --quiet -e '.[demo]' && \
+	  touch $(DEMO_STAMP); fi
+
+demo: $(DEMO_STAMP)
 	$(BIN)/pfp demo --out demo.png
 
 bench: $(STAMP)
