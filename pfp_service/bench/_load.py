@@ -1,0 +1,378 @@
+"""The parts of ``pfp bench service`` that touch processes and the wire: servers, meters, the load generator.
+
+* ``start_server`` runs the responder in its own process on a free loopback
+  port, in router mode: ``pfp serve`` (the planner) or ``echo_main`` (a
+  trivial Python zenoh responder answering every state with a fixed
+  direction, the transport's own ceiling).
+* ``ProcMeter`` reads a process's CPU time and resident memory from ``/proc``.
+* ``LoadGen`` is the load generator's client session: it paces unit states,
+  moves each unit along the last vector it was given, and timestamps every
+  direction that comes back.  Nothing is analysed while load runs; the
+  callback decodes a few fields and appends, so the generator disturbs the
+  measurement as little as it can.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import IO, Any
+
+import msgspec
+
+from pfp_service.bench.roundtrip import _client, _free_port
+
+__all__ = ["LoadGen", "ProcMeter", "Received", "Server", "echo_main", "start_server"]
+
+MISSION = "bench"
+PLANNER_ID = "planner"
+
+
+class _Dir(msgspec.Struct):
+    """The fields of a direction the bench reads; msgspec skips the rest unparsed."""
+
+    unit: str
+    status: str
+    seq: int | None = None
+    vector: tuple[float, float] = (0.0, 0.0)
+    deliberating: bool = False
+
+
+_DIR = msgspec.json.Decoder(_Dir)
+MOVING = ("en_route", "escaping")
+
+
+@dataclass(frozen=True, slots=True)
+class Received:
+    """One direction as it arrived: local receipt time (``perf_counter``) and what the bench reads of it."""
+
+    t: float
+    unit: str
+    seq: int | None
+    status: str
+    deliberating: bool
+
+
+# -- meters -----------------------------------------------------------------------------
+class ProcMeter:
+    """CPU seconds and memory of one process from ``/proc`` (``None`` figures where there is none)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self._tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+    def cpu_s(self) -> float | None:
+        try:
+            with open(f"/proc/{self.pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            return None
+        return (int(fields[11]) + int(fields[12])) / self._tick  # utime + stime, every thread
+
+    def memory_mb(self) -> dict[str, float | None]:
+        """``rss_mb`` now and ``peak_rss_mb`` (VmHWM) since the process started."""
+        out: dict[str, float | None] = {"rss_mb": None, "peak_rss_mb": None}
+        try:
+            with open(f"/proc/{self.pid}/status") as f:
+                for line in f:
+                    if line.startswith("VmRSS:"):
+                        out["rss_mb"] = int(line.split()[1]) / 1024
+                    elif line.startswith("VmHWM:"):
+                        out["peak_rss_mb"] = int(line.split()[1]) / 1024
+        except OSError:
+            pass
+        return out
+
+
+# -- servers ----------------------------------------------------------------------------
+@dataclass
+class Server:
+    """A responder process on a loopback endpoint; ``log`` holds its stderr."""
+
+    kind: str
+    endpoint: str
+    proc: subprocess.Popen[bytes]
+    log: IO[bytes]
+    meter: ProcMeter = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.meter = ProcMeter(self.proc.pid)
+
+    def stop(self) -> dict[str, Any]:
+        """Terminate it; return its exit code and the error lines of its log."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.log.seek(0)
+        text = self.log.read().decode(errors="replace")
+        self.log.close()
+        bad = [ln for ln in text.splitlines() if "Traceback" in ln or "error" in ln.lower()]
+        return {"exit_code": self.proc.returncode, "error_lines": len(bad), "first_errors": bad[:5]}
+
+
+def start_server(kind: str, escape: str | None = None) -> Server:
+    """Start ``kind`` (``planner`` or ``echo``) in router mode on a free loopback port."""
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    if kind == "planner":
+        cmd = [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", MISSION]
+        # no durable state between runs; units quiet through a storm or fan-out window stay live
+        cmd += ["--planner-id", PLANNER_ID, "--log-level", "warning", "--state-dir", "none"]
+        cmd += ["--unit-stale-s", "60"]
+        if escape is not None:
+            cmd += ["--escape", escape]
+    else:
+        code = "import sys; from pfp_service.bench._load import echo_main; echo_main(sys.argv[1])"
+        cmd = [sys.executable, "-c", code, endpoint]
+    log = tempfile.TemporaryFile()  # noqa: SIM115 -- the Server owns it and closes it in stop()
+    proc = subprocess.Popen(
+        cmd, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdout=subprocess.DEVNULL, stderr=log
+    )
+    return Server(kind, endpoint, proc, log)
+
+
+def echo_main(endpoint: str) -> None:
+    """The echo responder: a router that answers each unit state with a fixed direction.
+
+    It decodes the state and parses its key exactly as the planner does and
+    publishes with the planner's QoS, but plans nothing, so its latency and
+    throughput are the transport's own on this machine.  It answers from the
+    callback (no hand-off to another thread): the least any responder can do.
+    """
+    import signal
+
+    import zenoh
+
+    from pfp_service.wire import Direction, DirectionStatus, PlannerStatus, decode_unit_state, encode, keys
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"router"')
+    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    counters = {"in": 0, "out": 0}
+    started = time.monotonic()
+    jenc = zenoh.Encoding.APPLICATION_JSON
+
+    with zenoh.open(conf) as session:
+
+        def on_state(sample: zenoh.Sample) -> None:
+            try:
+                uid = keys.parse(str(sample.key_expr)).id
+                msg = decode_unit_state(sample.payload.to_bytes(), None)
+            except Exception:
+                return
+            counters["in"] += 1
+            d = Direction(unit=uid, seq=msg.seq, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0))
+            session.put(
+                keys.unit_direction(MISSION, uid),
+                encode(d),
+                encoding=jenc,
+                congestion_control=zenoh.CongestionControl.DROP,
+                priority=zenoh.Priority.INTERACTIVE_HIGH,
+                express=True,
+            )
+            counters["out"] += 1
+
+        def on_status(query: zenoh.Query) -> None:
+            st = PlannerStatus(
+                planner="echo",
+                mission=MISSION,
+                uptime_s=time.monotonic() - started,
+                msgs_in=counters["in"],
+                msgs_out=counters["out"],
+            )
+            query.reply(keys.planner_status(MISSION, PLANNER_ID), encode(st), encoding=jenc)
+
+        sub = session.declare_subscriber(keys.unit_states(MISSION), on_state)
+        qbl = session.declare_queryable(keys.planner_status(MISSION, PLANNER_ID), on_status)
+        try:
+            stop.wait()
+        finally:
+            qbl.undeclare()
+            sub.undeclare()
+
+
+# -- the load generator -----------------------------------------------------------------------
+class LoadGen:
+    """A client session acting as ``n`` units (``u0`` ...), plus anything else the bench puts.
+
+    Args:
+        endpoint: the responder's router.
+        starts: each unit's first position, metres.
+        step_m: how far a unit moves per report along its last vector (its goal's ``step``).
+    """
+
+    def __init__(self, endpoint: str, starts: list[tuple[float, float]], step_m: float) -> None:
+        import zenoh
+
+        from pfp_service.wire import encode, keys, zenoh_encoding
+
+        self._zenoh = zenoh
+        self._encode = encode
+        self._keys = keys
+        self.session = _client(endpoint)
+        self.enc = zenoh_encoding()
+        self.ids = [f"u{i}" for i in range(len(starts))]
+        self.index = {u: i for i, u in enumerate(self.ids)}
+        self.pos = [list(p) for p in starts]
+        self.vec: dict[str, tuple[float, float]] = {}
+        self.step_m = step_m
+        self.seq = 0
+        self._rr = 0  # where the round robin of ``pace`` goes on
+        self.sent: dict[int, float] = {}  # seq -> perf_counter at the put; seq is unique over the run
+        self.seq_unit: dict[int, str] = {}
+        self.recv: list[Received] = []
+        self.events: list[tuple[float, str, dict[str, Any]]] = []
+        self.bad = 0
+        self._state_keys = {u: zenoh.KeyExpr(keys.unit_state(MISSION, u)) for u in self.ids}
+        self._subs = [
+            self.session.declare_subscriber(keys.unit_directions(MISSION), self._on_direction),
+            self.session.declare_subscriber(keys.events(MISSION), self._on_event),
+        ]
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.undeclare()
+        self.session.close()
+
+    # callbacks: decode a few fields and append, nothing more
+    def _on_direction(self, sample: Any) -> None:
+        t = time.perf_counter()
+        try:
+            d = _DIR.decode(sample.payload.to_bytes())
+        except msgspec.DecodeError:
+            self.bad += 1
+            return
+        self.recv.append(Received(t, d.unit, d.seq, d.status, d.deliberating))
+        self.vec[d.unit] = d.vector if d.status in MOVING else (0.0, 0.0)
+
+    def _on_event(self, sample: Any) -> None:
+        try:
+            doc = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        self.events.append((time.perf_counter(), str(sample.key_expr).rsplit("/", 1)[-1], doc))
+
+    # output
+    def put_json(self, key: str, msg: Any) -> None:
+        self.session.put(key, self._encode(msg), encoding=self.enc)
+
+    def status(self, timeout_s: float = 5.0) -> dict[str, Any] | None:
+        """The responder's status reply (``msgs_in``, ``msgs_out``, ...), or ``None`` when none came."""
+        for r in self.session.get(self._keys.planner_status(MISSION, PLANNER_ID), timeout=timeout_s):
+            if r.ok is not None:
+                return dict(json.loads(r.ok.payload.to_bytes()))
+        return None
+
+    def wait_ready(self, timeout_s: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while self.status(1.0) is None:
+            if time.monotonic() > deadline:
+                raise TimeoutError("the responder did not answer its status query")
+            time.sleep(0.1)
+
+    def send_state(self, unit: str, i: int | None) -> int:
+        """Put one state of ``unit`` (``i``: its index, to move it first); return its seq."""
+        from pfp_service.wire import UnitState
+
+        if i is not None:
+            p = self.pos[i]
+            vx, vy = self.vec.get(unit, (0.0, 0.0))
+            p[0] += self.step_m * vx
+            p[1] += self.step_m * vy
+            xy = (p[0], p[1])
+        else:
+            xy = (0.0, 0.0)
+        seq = self.seq
+        self.seq += 1
+        payload = self._encode(UnitState(position=xy, seq=seq))
+        t = time.perf_counter()
+        self.session.put(
+            self._state_keys[unit],
+            payload,
+            encoding=self.enc,
+            congestion_control=self._zenoh.CongestionControl.BLOCK,
+            express=True,
+        )
+        self.sent[seq] = t
+        self.seq_unit[seq] = unit
+        return seq
+
+    def pace(
+        self,
+        rate_per_s: float,
+        duration_s: float,
+        units: list[int],
+        tick: Callable[[float], None] | None = None,
+        extra: tuple[int, float] | None = None,
+        until: Callable[[], bool] | None = None,
+    ) -> tuple[int, int, float]:
+        """Send states of ``units`` round-robin at ``rate_per_s`` in all, for ``duration_s``.
+
+        The round robin carries on where the last call left it.  ``extra`` =
+        (unit index, Hz) adds a unit reporting at its own rate (a bystander).
+        ``tick(fraction done)`` and ``until()`` are called about 5 times a
+        second; ``until()`` true ends the pacing early.
+
+        Returns:
+            (first seq, one past the last seq, seconds actually spent sending).
+        """
+        first = self.seq
+        n = len(units)
+        t0 = time.perf_counter()
+        end = t0 + duration_s
+        k = 0
+        extra_k = 0
+        next_tick = t0
+        while True:
+            now = time.perf_counter()
+            if now >= end:
+                break
+            due = int((now - t0) * rate_per_s) if n else 0
+            while k < due:
+                i = units[(self._rr + k) % n]
+                self.send_state(self.ids[i], i)
+                k += 1
+            if extra is not None and extra_k <= (now - t0) * extra[1]:
+                self.send_state(self.ids[extra[0]], extra[0])
+                extra_k += 1
+            if now >= next_tick:
+                next_tick = now + 0.2
+                if tick is not None:
+                    tick(min((now - t0) / duration_s, 1.0))
+                if until is not None and until():
+                    break
+            gaps = [(k + 1) / rate_per_s] if n else []
+            if extra is not None:
+                gaps.append(extra_k / extra[1])
+            wait = min(gaps, default=0.002) - (time.perf_counter() - t0)
+            if wait > 0:
+                time.sleep(min(wait, 0.002))
+        self._rr += k
+        return first, self.seq, time.perf_counter() - t0
+
+    def settle(self, quiet_s: float = 0.3, cap_s: float = 3.0) -> None:
+        """Wait until no direction has arrived for ``quiet_s`` (at most ``cap_s``)."""
+        deadline = time.perf_counter() + cap_s
+        seen = len(self.recv)
+        last = time.perf_counter()
+        while time.perf_counter() < deadline:
+            time.sleep(0.05)
+            if len(self.recv) != seen:
+                seen = len(self.recv)
+                last = time.perf_counter()
+            elif time.perf_counter() - last >= quiet_s:
+                return

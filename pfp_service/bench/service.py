@@ -1,0 +1,329 @@
+"""Fleet load: the live planner under many units, against the transport's own ceiling (an echo responder).
+
+The responder (``pfp serve``, or with ``--echo`` also a trivial responder
+answering each state with a fixed direction) runs in its own process as the
+router on a free loopback port; this process is the load generator, a client
+session acting as every unit.  ``--rate`` is per unit: the offered load is
+``units × rate`` states a second.  Phases, against the planner:
+
+1. **goal storm**: every unit reports once, then all ``--units`` goals are put
+   at once while a bystander unit reports at 50 Hz: the time until every unit
+   is guided, until every deliberation it started has ended (a direction with
+   ``deliberating`` false after one with true), and the bystander's latency;
+2. **steady load**: ``--duration`` seconds at ``--rate``: position → direction
+   latency p50/p90/p99/max, input and output rates, the unanswered fraction,
+   CPU % and peak RSS of the responder;
+3. **contingency fan-out**: the units go quiet, one threat is put just ahead
+   of their centre; the time until every unit the planner re-plans (its replan
+   event says how many) has a pushed direction, then its deliberated route, and
+   pushes sent (the planner's ``msgs_out`` less the events) against delivered;
+4. ``--find-max``: the highest rate whose p99 ≤ 10 ms with ≤ 0.1 % unanswered.
+
+With ``--echo`` the echo responder gets phases 2 and 4 with the same load, first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from pfp_service.bench._load import MISSION, LoadGen, Server, start_server
+from pfp_service.bench._phases import STEP_M, Bar, RateSearch, fanout, register, steady, storm
+from pfp_service.cli._common import positive_float, positive_int
+from pfp_service.core.params import ESCAPES
+
+AREA_M = 2000.0
+TARGETS = {
+    "steady_p50_ms": 1.0,
+    "steady_p99_vs_echo": 2.0,
+    "unanswered": 0.001,
+    "find_max_vs_echo": 0.8,
+    "storm_guided_s": 1.0,
+    "storm_deliberated_s": 5.0,
+    "storm_bystander_p99_ms": 10.0,
+    "fanout_redirected_ms": 20.0,
+    "fanout_deliberated_s": 1.0,
+    "rss_mb": 300.0,
+}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--units", type=positive_int, default=1000, help="units (default 1000)")
+    p.add_argument(
+        "--rate", type=positive_float, default=10.0, help="state reports per unit per second (default 10)"
+    )
+    p.add_argument("--threats", type=int, default=100, help="threats in the field (default 100)")
+    p.add_argument(
+        "--duration", type=positive_float, default=10.0, help="seconds of steady load (default 10)"
+    )
+    p.add_argument("--escape", choices=ESCAPES, help="the planner's escape strategy (default: its own, auto)")
+    p.add_argument(
+        "--find-max",
+        action="store_true",
+        help="search the highest rate with p99 <= 10 ms, <= 0.1 %% unanswered",
+    )
+    p.add_argument(
+        "--probe-s", type=positive_float, default=4.0, help="seconds per --find-max probe (default 4)"
+    )
+    p.add_argument("--echo", action="store_true", help="run the same load against an echo responder first")
+    p.add_argument("--no-storm", action="store_true", help="skip the goal storm")
+    p.add_argument("--no-fanout", action="store_true", help="skip the contingency fan-out")
+    p.add_argument("--seed", type=int, default=2023, help="layout seed (default 2023)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+# -- the field and the fleet --------------------------------------------------------------------
+def layout(units: int, threats: int, seed: int) -> dict[str, Any]:
+    """Units on the west edge with goals on the east edge, threats in the middle facing west (traps)."""
+    from pfp_service.wire import ThreatUpdate
+
+    rng = np.random.default_rng(seed)
+    starts = np.column_stack([rng.uniform(0, 0.1, units + 1), rng.uniform(0.05, 0.95, units + 1)]) * AREA_M
+    goals = np.column_stack([rng.uniform(0.9, 1.0, units + 1), rng.uniform(0.05, 0.95, units + 1)]) * AREA_M
+    field = []
+    for j in range(threats):
+        xy = (float(rng.uniform(0.25, 0.75) * AREA_M), float(rng.uniform(0.0, 1.0) * AREA_M))
+        facing = float((270.0 + rng.uniform(-45, 45)) % 360)
+        field.append(
+            (
+                f"t{j}",
+                ThreatUpdate(position=xy, facing_deg=facing, sigma_range=40.0, sigma_lateral=28.0, skew=2.0),
+            )
+        )
+    return {
+        "starts": [(float(x), float(y)) for x, y in starts],  # the last one is the bystander's
+        "goals": [(float(x), float(y)) for x, y in goals],
+        "threats": field,
+    }
+
+
+# -- figures ---------------------------------------------------------------------------------
+def machine() -> dict[str, Any]:
+    model = platform.processor() or "cpu"
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    import zenoh
+
+    return {
+        "arch": platform.machine(),
+        "cpu": model,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "zenoh": getattr(zenoh, "__version__", "?"),
+        "loadavg_at_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+    }
+
+
+def _prepare(
+    kind: str, g: LoadGen, srv: Server, args: argparse.Namespace, lay: dict[str, Any], bar: Bar
+) -> dict[str, Any]:
+    """Threats, units and (for the planner) the goal storm, or plain goals with ``--no-storm``."""
+    from pfp_service.wire import Goal, keys
+
+    n = args.units
+    res: dict[str, Any] = {"server": kind}
+    if kind == "planner":
+        t0 = time.perf_counter()
+        for tid, t in lay["threats"]:
+            g.put_json(keys.threat(MISSION, tid), t)
+        res["threats_put_s"] = time.perf_counter() - t0
+    res["registered"] = register(g, n)
+    if kind == "planner" and not args.no_storm:
+        res["storm"] = storm(g, srv, lay, n, bar)
+    elif kind == "planner":
+        for i in range(n + 1):
+            g.put_json(keys.unit_goal(MISSION, g.ids[i]), Goal(position=lay["goals"][i], step=STEP_M))
+        g.settle(0.5, 10.0)
+    return res
+
+
+def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str, dict[str, Any]]:
+    """Both responders alive at once; their steady loads and rate probes take turns, so they share the noise."""
+    kinds = ["echo", "planner"] if args.echo else ["planner"]
+    servers = {k: start_server(k, args.escape if k == "planner" else None) for k in kinds}
+    gens: dict[str, LoadGen] = {}
+    res: dict[str, dict[str, Any]] = {}
+    n = args.units
+    try:
+        for k in kinds:
+            gens[k] = LoadGen(servers[k].endpoint, lay["starts"], STEP_M)
+            gens[k].wait_ready()
+        for k in kinds:
+            idle = servers[k].meter.memory_mb()["rss_mb"]
+            res[k] = _prepare(k, gens[k], servers[k], args, lay, bar) | {"idle_rss_mb": idle}
+        for k in kinds:
+            res[k]["steady"] = steady(gens[k], servers[k], n, args.rate, args.duration, bar, k)
+        if not args.no_fanout:
+            res["planner"]["fanout"] = fanout(gens["planner"], servers["planner"], n, bar)
+        if args.find_max:
+            searches = {k: RateSearch(args.rate) for k in kinds}
+            while any(s.rate is not None for s in searches.values()):
+                for k, s in searches.items():
+                    if s.rate is not None:
+                        s.record(steady(gens[k], servers[k], n, s.rate, args.probe_s, bar, f"{k} find-max"))
+                        gens[k].settle(0.5, 5.0)
+            for k, s in searches.items():
+                res[k]["find_max"] = s.result(n)
+        for k in kinds:
+            res[k]["final_memory"] = servers[k].meter.memory_mb()
+    finally:
+        for g in gens.values():
+            g.close()
+        for k, srv in servers.items():
+            res.setdefault(k, {"server": k})["exit"] = srv.stop()
+    return res
+
+
+def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
+    """Each of the issue's targets this run can judge: what was asked, what was measured, met or not."""
+    p, e = doc["planner"], doc.get("echo")
+    rows: list[dict[str, Any]] = []
+
+    def add(name: str, measured: float | None, limit: float, below: bool = True) -> None:
+        met = None if measured is None else (measured <= limit if below else measured >= limit)
+        rows.append({"target": name, "measured": measured, "limit": limit, "met": met})
+
+    st = p["steady"]
+    add("steady p50 <= 1 ms", st["p50_ms"], TARGETS["steady_p50_ms"])
+    add("steady unanswered <= 0.1 %", st["unanswered_fraction"], TARGETS["unanswered"])
+    if e is not None and st["p99_ms"] is not None and e["steady"]["p99_ms"]:
+        add("steady p99 <= 2x echo p99", st["p99_ms"] / e["steady"]["p99_ms"], TARGETS["steady_p99_vs_echo"])
+    if e is not None and "find_max" in p and "find_max" in e:
+        pm, em = p["find_max"]["max_per_s"], e["find_max"]["max_per_s"]
+        add(
+            "find-max >= 0.8x echo",
+            None if pm is None or not em else pm / em,
+            TARGETS["find_max_vs_echo"],
+            below=False,
+        )
+    if "storm" in p:
+        s = p["storm"]
+        add("storm: every unit guided within 1 s", s["all_guided_s"], TARGETS["storm_guided_s"])
+        add(
+            "storm: every deliberation ended within 5 s",
+            s["all_deliberated_s"],
+            TARGETS["storm_deliberated_s"],
+        )
+        add("storm: bystander p99 <= 10 ms", s["bystander"]["p99_ms"], TARGETS["storm_bystander_p99_ms"])
+    if "fanout" in p:
+        f = p["fanout"]
+        add(
+            "fan-out: every affected unit re-directed within 20 ms",
+            f["all_redirected_ms"],
+            TARGETS["fanout_redirected_ms"],
+        )
+        add("fan-out: deliberated within 1 s", f["all_deliberated_s"], TARGETS["fanout_deliberated_s"])
+    add("planner peak RSS <= 300 MB", p["final_memory"]["peak_rss_mb"], TARGETS["rss_mb"])
+    return rows
+
+
+def measure(args: argparse.Namespace) -> dict[str, Any]:
+    lay = layout(args.units, args.threats, args.seed)
+    doc: dict[str, Any] = {
+        "machine": machine(),
+        "load": {
+            "units": args.units,
+            "rate_hz": args.rate,
+            "offered_per_s": args.units * args.rate,
+            "threats": args.threats,
+            "duration_s": args.duration,
+            "escape": args.escape or "auto (planner default)",
+            "area_m": AREA_M,
+            "step_m": STEP_M,
+            "seed": args.seed,
+            "via": "responder = router in its own process, load generator = one client session, tcp loopback",
+        },
+    }
+    with Bar() as bar:
+        runs = run_all(args, lay, bar)
+    doc["echo"] = runs.get("echo")
+    doc["planner"] = runs["planner"]
+    doc["targets"] = targets(doc)
+    return doc
+
+
+def _f(v: float | None, fmt: str = ".2f") -> str:
+    return "-" if v is None else format(v, fmt)
+
+
+def _print(doc: dict[str, Any]) -> None:
+    m, ld = doc["machine"], doc["load"]
+    print(
+        f"pfp bench service on {m['arch']}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, load avg {m['loadavg_at_start']}"
+    )
+    print(
+        f"  {ld['units']} units x {ld['rate_hz']:g} Hz = {ld['offered_per_s']:g}/s offered, {ld['threats']} threats, escape {ld['escape']}; {ld['via']}"
+    )
+    for kind in ("echo", "planner"):
+        r = doc.get(kind)
+        if r is None:
+            continue
+        st = r["steady"]
+        print(f"\n[{kind}] steady {ld['duration_s']:g} s:")
+        print(
+            f"  latency p50 {_f(st['p50_ms'], '.3f')} ms, p90 {_f(st['p90_ms'], '.3f')}, p99 {_f(st['p99_ms'], '.3f')}, max {_f(st['max_ms'], '.1f')}"
+        )
+        print(
+            f"  input {st['input_per_s']:.0f}/s, output {st['output_per_s']:.0f}/s, unanswered {100 * st['unanswered_fraction']:.3f} %"
+        )
+        print(
+            f"  CPU {_f(st['cpu_percent'], '.0f')} %, RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
+        )
+        if "storm" in r:
+            s = r["storm"]
+            b = s["bystander"]
+            print(
+                f"  goal storm: {s['guided']}/{s['goals']} guided, all in {_f(s['all_guided_s'], '.3f')} s (p50 {_f(s['guided_p50_s'], '.3f')} s); "
+                f"deliberations {s['deliberations_ended']}/{s['deliberations_started']} ended, all in {_f(s['all_deliberated_s'], '.2f')} s; "
+                f"bystander p99 {_f(b['p99_ms'], '.1f')} ms, max {_f(b['max_ms'], '.1f')} ms, unanswered {100 * b['unanswered_fraction']:.1f} %"
+            )
+        if "fanout" in r:
+            f = r["fanout"]
+            print(
+                f"  fan-out: {f['redirected']}/{f['affected']} re-directed, all in {_f(f['all_redirected_ms'], '.1f')} ms (p50 {_f(f['redirected_p50_ms'], '.1f')}); "
+                f"deliberations {f['deliberations_ended']}/{f['deliberations_started']}, all in {_f(f['all_deliberated_s'], '.2f')} s; "
+                f"pushes sent {f['pushes_sent']}, delivered {f['pushes_delivered']}"
+            )
+        if "find_max" in r:
+            fm = r["find_max"]
+            print(
+                f"  find-max: {_f(fm['max_per_s'], '.0f')}/s ({_f(fm['max_rate_hz'], '.2f')} Hz per unit){' (generator-limited)' if fm['generator_limited'] else ''}"
+            )
+            for pr in fm["probes"]:
+                print(
+                    f"    {pr['offered_per_s']:>8.0f}/s: p99 {_f(pr['p99_ms'], '.2f')} ms, unanswered {100 * pr['unanswered_fraction']:.2f} %, CPU {_f(pr['cpu_percent'], '.0f')} % {'ok' if pr['ok'] else 'fail'}"
+                )
+        ex = r["exit"]
+        if ex["error_lines"]:
+            print(f"  {kind} log: {ex['error_lines']} error lines, first: {ex['first_errors'][:2]}")
+    print()
+    for t in doc["targets"]:
+        flag = "n/a" if t["met"] is None else ("ok" if t["met"] else "MISSED")
+        print(f"  [{flag}] {t['target']}: {_f(t['measured'], '.4g')} (limit {t['limit']:g})")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.threats < 0:
+        print("pfp bench service: --threats: must be >= 0", file=sys.stderr)
+        return 2
+    doc = measure(args)
+    if args.json:
+        print(
+            json.dumps(
+                doc, indent=2, default=lambda o: None if isinstance(o, float) and math.isnan(o) else str(o)
+            )
+        )
+    else:
+        _print(doc)
+    return 0

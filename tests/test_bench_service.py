@@ -1,0 +1,47 @@
+"""``pfp bench service`` in small, as a user runs it: the bench keeps working and its JSON keeps its fields.
+
+No timing is asserted: these machines are shared and noisy.  What is checked
+is that every phase ran against a real planner and a real echo responder and
+reported every figure BENCHMARKS.md quotes.
+"""
+
+from __future__ import annotations
+
+import json
+
+from tests.conftest import run_pfp
+
+LATENCY = {"sent", "answered", "unanswered_fraction", "p50_ms", "p90_ms", "p99_ms", "max_ms"}
+STEADY = LATENCY | {"input_per_s", "output_per_s", "cpu_percent", "rss_mb", "peak_rss_mb", "statuses"}
+STORM = {"goals", "guided", "all_guided_s", "deliberations_started", "all_deliberated_s", "bystander"}
+FANOUT = {
+    "affected",
+    "redirected",
+    "all_redirected_ms",
+    "all_deliberated_s",
+    "pushes_sent",
+    "pushes_delivered",
+}
+
+
+def test_bench_service_json_has_every_figure():
+    r = run_pfp(
+        "bench", "service", "--units", "10", "--rate", "10", "--threats", "5", "--duration", "1",
+        "--echo", "--json",
+        timeout=240,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert {"machine", "load", "planner", "echo", "targets"} <= doc.keys()
+    for kind in ("planner", "echo"):
+        steady = doc[kind]["steady"]
+        assert steady.keys() >= STEADY, kind
+        assert steady["sent"] > 0 and steady["answered"] > 0, (kind, steady)
+        assert doc[kind]["exit"]["exit_code"] == 0, doc[kind]["exit"]
+    p = doc["planner"]
+    assert p["storm"].keys() >= STORM
+    assert p["storm"]["guided"] == 10  # every freshly goaled unit got a direction
+    assert p["fanout"].keys() >= FANOUT
+    assert p["fanout"]["affected"] is not None  # the planner's replan event arrived
+    assert p["exit"]["error_lines"] == 0, p["exit"]["first_errors"]
+    assert all({"target", "measured", "limit", "met"} <= t.keys() for t in doc["targets"])
