@@ -34,11 +34,11 @@ def _lines(stream, q: queue.Queue[str]) -> None:
 
 @contextmanager
 def bridge(endpoint: str, *urls: str) -> Iterator[queue.Queue[str]]:
-    """``pfp tak`` as a subprocess; yields a queue of its stderr lines."""
+    """``pfp tak`` as a subprocess (``urls``: COT URLs, then any further flags); yields its stderr lines."""
     args = [sys.executable, "-m", "pfp_service", "tak", "--connect", endpoint, "--mission", MISSION]
     args += ["--origin", f"{ORIGIN.lat},{ORIGIN.lon}", "--rate-s", "0.2", "--refresh-s", "600"]
     for u in urls:
-        args += ["--cot-url", u]
+        args += ["--cot-url", u] if "://" in u else [u]
     proc = subprocess.Popen(
         args, cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stderr=subprocess.PIPE, text=True
     )
@@ -258,3 +258,71 @@ def test_udp_both_ways(planner):
         stop.set()
         rx.close()
         tx.close()
+
+
+class TlsTakServer(TcpTakServer):
+    """The TCP stand-in behind mutual TLS: it asks for the bridge's certificate and checks it against the CA."""
+
+    def __init__(self, certs) -> None:
+        import ssl
+
+        ctx = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH, cafile=str(certs / "ca.pem"))
+        ctx.load_cert_chain(str(certs / "takserver.pem"), str(certs / "takserver-key.pem"))
+        ctx.verify_mode = ssl.CERT_REQUIRED
+        self.ctx = ctx
+        self.peer_cn = ""
+        super().__init__()
+
+    def _serve(self) -> None:
+        raw, _ = self.sock.accept()
+        self.conn = self.ctx.wrap_socket(raw, server_side=True)
+        subject = dict(x[0] for x in self.conn.getpeercert()["subject"])
+        self.peer_cn = subject.get("commonName", "")
+        self.accepted.set()
+        buf = b""
+        while True:
+            try:
+                chunk = self.conn.recv(65536)
+            except OSError:
+                return
+            if not chunk:
+                return
+            buf += chunk
+            while b"</event>" in buf:
+                one, buf = buf.split(b"</event>", 1)
+                self.events.put(one.strip() + b"</event>")
+
+
+def test_tls_to_a_tak_server_with_client_certificates(planner, tmp_path):
+    pytest.importorskip("cryptography")
+    from tests.test_tak_cot import hostile
+
+    certs = tmp_path / "certs"
+    subprocess.run(
+        [sys.executable, str(ROOT / "docker" / "gen-certs.py"), "--out", str(certs), "takserver", "bridge"],
+        check=True,
+        capture_output=True,
+    )
+    server = TlsTakServer(certs)
+    try:
+        url = f"tls://127.0.0.1:{server.port}"
+        tls = ["--tls-cert", str(certs / "bridge.pem"), "--tls-key", str(certs / "bridge-key.pem")]
+        tls += ["--tls-ca", str(certs / "ca.pem")]
+        with bridge(planner, url, *tls) as _lines, client(planner) as s:
+            assert server.accepted.wait(20), "the bridge never completed the TLS handshake"
+            assert server.peer_cn == "bridge"
+            tid = cot.threat_id("tls-marker")
+            inbox = Inbox(s, keys.threat(MISSION, tid))
+            server.send(hostile(uid="tls-marker", t=time.time()))
+            assert inbox.get(timeout=10, where=lambda msg: msg is not None)["sigma_lateral"] == 30.0
+            put_json(
+                s,
+                keys.threat(MISSION, "tls1"),
+                {"position": [5.0, 5.0], "sigma_range": 5, "sigma_lateral": 5},
+            )
+            ev = wait_cot(server.events, lambda e: e.get("uid") == f"pfp.threat.{MISSION}.tls1")
+            assert ev.get("type") == "a-h-G"
+            s.delete(keys.threat(MISSION, "tls1"))
+            s.delete(keys.threat(MISSION, tid))
+    finally:
+        server.close()
