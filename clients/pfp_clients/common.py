@@ -87,8 +87,8 @@ def load_yaml(
         raise InputError(p.name, f"expected a mapping at the top, got {type(obj).__name__}")
     try:
         obj = localise_document(obj)  # {lat, lon} positions to metres from the file's origin
-    except InputError as err:
-        raise located(p, root, err) from None
+    except InputError as bad:
+        raise located(p, root, bad) from None
     try:
         return msgspec.convert(obj, cls), root
     except msgspec.ValidationError as exc:
