@@ -280,7 +280,10 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             ("event.stale", m.StaleEvent(unit="ugv-3", position=(120.0, 40.5), reason="silent for 10 s")),
             ("event.forgotten", m.ForgottenEvent(unit="ugv-3", stale_s=600.0)),
             ("event.restored", m.RestoredEvent(threats=20, goals=50, missions=48, expired=1)),
-            ("event.conflict", m.ConflictEvent(other="planner-2", reason="a second planner on mission default")),
+            (
+                "event.conflict",
+                m.ConflictEvent(other="planner-2", reason="a second planner on mission default"),
+            ),
         ],
     }
 
