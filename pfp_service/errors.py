@@ -174,4 +174,6 @@ def map_zenoh_errors(what: str, about: str = "") -> Iterator[None]:
         if not _is_zenoh(exc):
             raise
         line, unreachable = describe_zenoh_error(str(exc))
-        raise (Unreachable if unreachable else ZenohError)(what, f"{about}: {line}" if about else line) from exc
+        raise (Unreachable if unreachable else ZenohError)(
+            what, f"{about}: {line}" if about else line
+        ) from exc

@@ -133,8 +133,8 @@ def run(args: argparse.Namespace) -> int:
 
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
-    from pfp_service.files import read_text
     from pfp_service.errors import InputError
+    from pfp_service.files import read_text
     from pfp_service.render import summary
     from pfp_service.scenario import load_scenario
 

@@ -41,7 +41,7 @@ def snapshot_lines(snap: Any) -> list[str]:
         f"planner {snap.planner}, mission {snap.mission}: {snap.units_total} units, {snap.threats_total} threats"
     ]
     if snap.units:
-        rows = [("unit", "kind", "status", "last seen", "to goal", "position")]
+        rows: list[tuple[str, ...]] = [("unit", "kind", "status", "last seen", "to goal", "position")]
         for u in snap.units:
             status = "stale" if u.stale else (u.status.value if u.status is not None else "-")
             if u.deliberating:
