@@ -296,7 +296,8 @@ def _bearing_at(origin: Origin, lat: float, lon: float, vector: tuple[float, flo
 
     u, v, w = pymap3d.enu2uvw(vector[0], vector[1], 0.0, origin.lat, origin.lon)
     e, n, _up = pymap3d.uvw2enu(u, v, w, lat, lon)
-    return float(math.degrees(math.atan2(e, n)) % 360.0)
+    bearing = math.degrees(math.atan2(e, n)) % 360.0
+    return 0.0 if bearing >= 360.0 else float(bearing)  # a tiny negative angle rounds to 360.0
 
 
 def lookahead_geodetic(origin: Origin, points: Iterable[tuple[float, float]]) -> list[LatLon]:
