@@ -381,3 +381,19 @@ def test_pfp_acl_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
     assert done.returncode == 2
     assert message in done.stderr and done.stderr.count("\n") == 1, done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_no_unit_goals_leaves_goals_to_commanders():
+    from pfp_service.cli.acl import Mission, principals_for
+
+    def goal_writers(own_goal: bool) -> set[str]:
+        ps = principals_for(Mission("m", "planner", ("u1",), own_goal), {"commander": ("commander",)})
+        return {
+            p.name
+            for p in ps
+            for g in p.grants
+            if g.flow == "ingress" and "put" in g.messages and any(k.endswith("/goal") for k in g.key_exprs)
+        }
+
+    assert goal_writers(True) == {"commander", "unit-u1"}
+    assert goal_writers(False) == {"commander"}
