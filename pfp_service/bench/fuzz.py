@@ -52,7 +52,7 @@ _WRONG = ["abc", {"x": 1}, [[1, 2]], True, [], ["1", "2"], [1], [1, 2, 3], None]
 _NON_FINITE = [b"NaN", b"Infinity", b"-Infinity", b"1e999", b"-1e999", b"nan", b"inf"]
 _HUGE = [b"1" + b"0" * 400, b"-" + b"9" * 400, b"1e308", b"18446744073709551617", b"1e9000000"]
 # Valid Zenoh key chunks that are not valid ids: too long, dots, spaces, non-ASCII.
-_ODD_IDS = ["x" * 65, "a.b", "a b", "ü", "日本", "a~b", "..", "%2F", "-" * 200, "a+b", "é" * 64]
+_ODD_IDS = ["x" * 65, "L" * 20_000, "a.b", "a b", "ü", "日本", "a~b", "..", "%2F", "-" * 200, "a+b", "é" * 64]
 
 
 class Input(NamedTuple):
