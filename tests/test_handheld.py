@@ -609,3 +609,52 @@ def test_a_binary_nmea_file_is_bad_sentences_that_end(tmp_path: Path):
     assert isinstance(items[-1], NmeaEnded) and "not NMEA" in items[-1].reason
     assert sum(isinstance(i, NmeaRejected) for i in items) >= 1000
     assert time.monotonic() - t0 < 10 and time.process_time() - cpu0 < 10
+
+
+def test_the_real_command_in_a_terminal_starts_with_the_router_down_and_quits_on_q():
+    """``pfp handheld`` in a pseudo-terminal, as a soldier starts it before the network is up."""
+    import fcntl
+    import os
+    import select
+    import struct
+    import subprocess
+    import sys
+    import termios
+
+    from tests.conftest import ROOT
+
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 20, 60, 0, 0))
+    env = {**os.environ, "TERM": "xterm-256color", "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, "-m", "pfp_service", "handheld", "--unit", "tty1", "--goal", "10,0"]
+    proc = subprocess.Popen(
+        [*cmd, "--connect", f"tcp/127.0.0.1:{free_port()}"],
+        stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env, close_fds=True,
+    )  # fmt: skip
+    os.close(slave)
+    screen = b""
+
+    def read_until(needle: bytes, timeout: float) -> bool:
+        nonlocal screen
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.2)
+            if ready:
+                try:
+                    screen += os.read(master, 65536)
+                except OSError:
+                    return False
+            if needle in screen:
+                return True
+        return False
+
+    try:
+        assert read_until(b"no router answers", 30), screen[-2000:]
+        assert b"tty1" in screen
+        os.write(master, b"q")
+        assert proc.wait(timeout=15) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        os.close(master)
