@@ -101,3 +101,21 @@ def test_level_raster_differs_from_the_field_only_by_the_floor():
     exact = field.level(nodes)
     assert np.all(out <= exact * (1 + 1e-12) + 1e-300)
     assert np.max(exact - out) <= len(SHAPES) * floor
+
+
+def test_culled_level_drops_only_terms_below_the_floor():
+    from pfp_service.core.threat import LEVEL_FLOOR
+
+    rng = np.random.default_rng(12)
+    threats = [
+        Threat.from_facing(
+            rng.uniform(0, 1000, 2), rng.uniform(0, 360), s, s * rng.uniform(0.3, 1), rng.uniform(0, 3)
+        )
+        for s in rng.uniform(5, 20, 300)
+    ]
+    field = ThreatField(threats)
+    pts = rng.uniform(-100, 1100, (30_000, 2))
+    exact, culled = field.level(pts), field.level_culled(pts)
+    assert np.all(culled <= exact * (1 + 1e-12) + 1e-300)
+    assert np.max(exact - culled) <= len(threats) * LEVEL_FLOOR * float(field.packed[:, kernels.SCALE].max())
+    assert np.array_equal(ThreatField().level_culled(pts[:3]), np.zeros(3))

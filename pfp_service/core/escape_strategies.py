@@ -61,7 +61,7 @@ __all__ = [
 ]
 
 GLOBAL_CELLS = 100  # the coarsest route search: cells along the longer side
-ROUTE_MAX_CELLS = 400
+ROUTE_MAX_CELLS = 300
 _MAX_RAISES = 6  # x1.5 each: up to 11x the trap's level
 _MAX_EXITS = 4
 Bounds = tuple[tuple[float, float], tuple[float, float]]

@@ -18,7 +18,6 @@ polyline evenly again, for a stepper to follow.
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import dataclass
 
 import numba
@@ -28,15 +27,14 @@ from scipy.sparse.csgraph import breadth_first_order, dijkstra
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
-from pfp_service.core.threat import ThreatField
+from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
-__all__ = ["GridGraph", "Route", "local_level", "resample", "segment_costs", "shortcut"]
+__all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut"]
 
 _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
 _WINDOW = 48  # grid edges a shortcut may replace at once
 _SAMPLES = 33  # Simpson points on a candidate shortcut
-LEVEL_FLOOR = 1e-12  # of the strongest threat's peak: smaller terms are left out of the grid's levels
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,44 +215,11 @@ class GridGraph:
         return Route(self.nodes[chain], float(dist[source]))
 
 
-_REACH: weakref.WeakKeyDictionary[ThreatField, np.ndarray] = weakref.WeakKeyDictionary()
-
-
-def local_level(field: ThreatField, points: np.ndarray) -> np.ndarray:
-    """``field.level(points)`` from only the threats whose ``LEVEL_FLOOR`` box meets the points' box.
-
-    For the route searches' many short segments among many threats; it
-    differs from ``field.level`` only by terms below ``LEVEL_FLOOR`` of the
-    strongest peak.
-    """
-    arr = np.asarray(points, dtype=np.float64)
-    pts = np.ascontiguousarray(arr.reshape(-1, 2))
-    out = np.zeros(len(pts))
-    if not len(field) or not len(pts):
-        return out.reshape(arr.shape[:-1])
-    reach = _REACH.get(field)
-    if reach is None:
-        packed = field.packed
-        scale = packed[:, kernels.SCALE]
-        floor = LEVEL_FLOOR * float(scale.max())
-        qmax = np.where(scale > floor, 2.0 * np.log(np.maximum(scale, floor) / floor), 0.0)
-        det = packed[:, kernels.P00] * packed[:, kernels.P11] - packed[:, kernels.P01] ** 2
-        ex = np.sqrt(qmax * packed[:, kernels.P11] / det)
-        ey = np.sqrt(qmax * packed[:, kernels.P00] / det)
-        cx, cy = packed[:, kernels.XI_X], packed[:, kernels.XI_Y]
-        reach = _REACH[field] = np.stack([cx - ex, cy - ey, cx + ex, cy + ey], axis=1)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    near = (reach[:, 0] <= hi[0]) & (reach[:, 2] >= lo[0]) & (reach[:, 1] <= hi[1]) & (reach[:, 3] >= lo[1])
-    if near.any():
-        kernels.batch_level(np.ascontiguousarray(field.packed[near]), pts, out)
-    return out.reshape(arr.shape[:-1])
-
-
 def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
     """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
     t = np.linspace(0.0, 1.0, _SAMPLES)
     pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
-    lv = local_level(field, pts)
+    lv = field.level_culled(pts)
     w = np.ones(_SAMPLES)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     length = np.hypot(*(b - a).T)

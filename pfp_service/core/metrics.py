@@ -103,18 +103,23 @@ def measure(path: np.ndarray, epochs: list[Epoch]) -> PathMetrics:
     return PathMetrics(float(seglen.sum()), exposure, peak, clearance)
 
 
-def exposure(path: np.ndarray, field: ThreatField) -> float:
-    """Simpson exposure of ``path`` (``(K+1, 2)``) walked under one ``field``."""
+def exposure(path: np.ndarray, field: ThreatField, culled: bool = False) -> float:
+    """Simpson exposure of ``path`` (``(K+1, 2)``) walked under one ``field`` (``culled``: ``level_culled``)."""
     if len(path) < 2 or len(field) == 0:
         return 0.0
     a, b = path[:-1], path[1:]
     n = len(a)
-    lv = field.level(np.concatenate([a, 0.5 * (a + b), b]))
+    pts = np.concatenate([a, 0.5 * (a + b), b])
+    lv = field.level_culled(pts) if culled else field.level(pts)
     seglen = np.hypot(*(b - a).T)
     return float(np.sum(seglen * (lv[:n] + 4.0 * lv[n : 2 * n] + lv[2 * n :])) / 6.0)
 
 
 def path_cost(path: np.ndarray, field: ThreatField, lam: float = LAMBDA) -> float:
-    """``J = length + lam * exposure`` of ``path`` walked under one ``field``."""
+    """``J = length + lam * exposure`` of ``path`` walked under one ``field``, to rank ways.
+
+    Exposure from ``ThreatField.level_culled`` (terms below ``LEVEL_FLOOR`` of
+    the strongest peak left out): an estimate for choosing, not a reported metric.
+    """
     pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
-    return float(np.hypot(*np.diff(pts, axis=0).T).sum()) + lam * exposure(pts, field)
+    return float(np.hypot(*np.diff(pts, axis=0).T).sum()) + lam * exposure(pts, field, culled=True)

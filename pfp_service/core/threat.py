@@ -14,6 +14,7 @@ weighted sum and its exact gradient at one point or many, through ``kernels``.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -25,18 +26,22 @@ from scipy.special import ndtr
 
 from pfp_service.core import kernels
 
-__all__ = ["PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
+__all__ = ["LEVEL_FLOOR", "PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
 
 Intensity = Literal["peak", "density"]
 
 # One row of ``ThreatField.packed`` per threat, in the kernels' column order.
 PACKED_COLUMNS = kernels.PACKED_COLUMNS
+# Of the strongest threat's peak: the terms ``level_culled`` and the route grids leave out.
+LEVEL_FLOOR = 1e-12
 
 
+@functools.lru_cache(maxsize=1 << 16)
 def skew_normal_mode(q: float) -> float:
     """Mode of the standard univariate skew-normal with shape ``q >= 0``.
 
-    Solves ``q phi(q v) = v Phi(q v)``; the root lies in ``[0, 2)``.
+    Solves ``q phi(q v) = v Phi(q v)``; the root lies in ``[0, 2)``.  Memoised:
+    a field, its cores and its previews ask for the same threats' modes again.
     """
     if q <= 0.0:
         return 0.0
@@ -178,7 +183,7 @@ class ThreatField:
     Immutable: adding or removing a threat builds a new field (cheap).
     """
 
-    __slots__ = ("__weakref__", "intensity", "packed", "positions", "threats")
+    __slots__ = ("__weakref__", "_reach", "intensity", "packed", "positions", "threats")
 
     def __init__(self, threats: Iterable[Threat] = (), intensity: Intensity = "peak") -> None:
         if intensity not in ("peak", "density"):
@@ -195,6 +200,7 @@ class ThreatField:
             packed[j] = kernels.pack_row(t.xi, t.precision(), t.shape(), scale)
         self.packed = packed
         self.positions = packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
+        self._reach: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.threats)
@@ -221,6 +227,58 @@ class ThreatField:
         out = np.empty(pts.shape[0])
         kernels.batch_level(self.packed, pts, out)
         return out.reshape(arr.shape[:-1])
+
+    def level_culled(self, points: np.ndarray) -> np.ndarray:
+        """``level(points)`` without the terms below ``LEVEL_FLOOR`` of the strongest peak.
+
+        For searches and estimates among many threats: the points are cut into
+        tiles and each tile is summed over only the threats whose
+        ``LEVEL_FLOOR`` box meets it.  Metrics and the stepper use ``level``.
+        """
+        arr = np.asarray(points, dtype=np.float64)
+        pts = np.ascontiguousarray(arr.reshape(-1, 2))
+        out = np.zeros(len(pts))
+        if not len(self.threats) or not len(pts):
+            return out.reshape(arr.shape[:-1])
+        reach = self._reach if self._reach is not None else self._reach_boxes()
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        tiles = min(8, max(1, int(math.sqrt(len(pts) * len(self.threats) / 200_000.0))))
+        size = np.maximum((hi - lo) / tiles, 1e-300)
+        tile = np.minimum(((pts - lo) / size).astype(np.int64), tiles - 1)
+        key = tile[:, 0] * tiles + tile[:, 1]
+        order = np.argsort(key, kind="stable")
+        cuts = np.searchsorted(key[order], np.arange(tiles * tiles + 1))
+        for t in range(tiles * tiles):
+            rows = order[cuts[t] : cuts[t + 1]]
+            if not len(rows):
+                continue
+            sub = pts[rows]
+            tlo, thi = sub.min(axis=0), sub.max(axis=0)
+            near = (
+                (reach[:, 0] <= thi[0])
+                & (reach[:, 2] >= tlo[0])
+                & (reach[:, 1] <= thi[1])
+                & (reach[:, 3] >= tlo[1])
+            )
+            if near.any():
+                vals = np.empty(len(rows))
+                kernels.batch_level(np.ascontiguousarray(self.packed[near]), np.ascontiguousarray(sub), vals)
+                out[rows] = vals
+        return out.reshape(arr.shape[:-1])
+
+    def _reach_boxes(self) -> np.ndarray:
+        """Per threat, the box ``(x0, y0, x1, y1)`` outside which its term is below the floor."""
+        packed = self.packed
+        scale = packed[:, kernels.SCALE]
+        floor = LEVEL_FLOOR * float(scale.max())
+        qmax = np.where(scale > floor, 2.0 * np.log(np.maximum(scale, floor) / max(floor, 1e-300)), 0.0)
+        qmax = np.minimum(qmax, kernels.Q_CUTOFF)
+        det = packed[:, kernels.P00] * packed[:, kernels.P11] - packed[:, kernels.P01] ** 2
+        ex = np.sqrt(qmax * packed[:, kernels.P11] / det)
+        ey = np.sqrt(qmax * packed[:, kernels.P00] / det)
+        cx, cy = packed[:, kernels.XI_X], packed[:, kernels.XI_Y]
+        self._reach = np.stack([cx - ex, cy - ey, cx + ex, cy + ey], axis=1)
+        return self._reach
 
     def clearance(self, points: np.ndarray) -> float:
         """Minimum Euclidean distance from any of ``points`` to any threat position."""
