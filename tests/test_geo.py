@@ -391,3 +391,21 @@ def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metr
             np.allclose(a.vector, b.vector, atol=1e-9) and abs(a.distance_to_goal - b.distance_to_goal) < 1e-6
         )
         assert np.allclose(a.lookahead, b.lookahead, atol=1e-6)
+
+
+def test_serve_config_bounds_may_be_lat_lon_corners(tmp_path):
+    from pfp_service.service.config import load_config
+
+    o = Origin(lat=58.41, lon=15.62)
+    (a, b), (c, d) = o.to_geodetic(-500.0, -400.0), o.to_geodetic(800.0, 900.0)
+    toml = tmp_path / "serve.toml"
+    toml.write_text(
+        "origin = { lat = 58.41, lon = 15.62 }\n"
+        f"bounds = [{{ lat = {a!r}, lon = {b!r} }}, {{ lat = {c!r}, lon = {d!r} }}]\n"
+    )
+    (x0, y0), (x1, y1) = load_config(str(toml), {}, {}).bounds_tuple()
+    assert np.allclose([x0, y0, x1, y1], [-500.0, -400.0, 800.0, 900.0], atol=1e-6)
+    toml.write_text(f"bounds = [{{ lat = {a!r}, lon = {b!r} }}, [800, 900]]\n")
+    with pytest.raises(InputError) as e:
+        load_config(str(toml), {}, {})
+    assert e.value.path.endswith("bounds[0]") and "origin" in e.value.reason

@@ -26,7 +26,7 @@ from pfp_service.core import PlannerParams
 from pfp_service.core.params import Escape
 from pfp_service.errors import InputError, from_validation, map_zenoh_errors
 from pfp_service.files import read_text
-from pfp_service.geo import Origin, parse_origin
+from pfp_service.geo import Origin, localise_document, parse_origin
 from pfp_service.scenario import CHOICES
 
 __all__ = [
@@ -150,6 +150,11 @@ def _convert(layers: list[tuple[str, dict[str, Any]]]) -> ServeConfig:
         for k, v in layer.items():
             merged[k] = v
             origin[k] = where
+    try:
+        merged = localise_document(merged)  # bounds may be {lat, lon} corners once there is an origin
+    except InputError as exc:
+        where = origin.get(exc.path.split(".")[0].split("[")[0], "")
+        raise InputError(f"{where}: {exc.path}" if where else exc.path, exc.reason) from None
     try:
         return msgspec.convert(merged, ServeConfig, strict=False)
     except msgspec.ValidationError as exc:
