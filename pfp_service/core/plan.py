@@ -19,6 +19,7 @@ from enum import StrEnum
 import msgspec
 import numpy as np
 
+from pfp_service.core.cull import CullIndex
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
 from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus, advise_many
@@ -134,7 +135,7 @@ def walk(
 
 
 def walk_many(
-    ghosts: list[Stepper], field: ThreatField, starts: np.ndarray, steps: int
+    ghosts: list[Stepper], field: ThreatField, starts: np.ndarray, steps: int, cull: CullIndex | None = None
 ) -> list[list[tuple[float, float]]]:
     """``walk`` for many ghosts under one field: ``steps`` vectorised advisories each.
 
@@ -151,7 +152,7 @@ def walk_many(
     for _ in range(steps):
         if not live:
             break
-        advs = advise_many([ghosts[i] for i in live], field, pts[live])
+        advs = advise_many([ghosts[i] for i in live], field, pts[live], cull)
         keep = []
         for i, adv in zip(live, advs):
             if adv.status.terminal:

@@ -57,6 +57,7 @@ from typing import NamedTuple
 import numpy as np
 
 from pfp_service.core import foresight, kernels
+from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.escape import Escaper, EscapeRun
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.params import Resolved
@@ -458,13 +459,17 @@ class Stepper:
         return advice
 
 
-def advise_many(steppers: list[Stepper], field: ThreatField, positions: np.ndarray) -> list[Advice]:
+def advise_many(
+    steppers: list[Stepper], field: ThreatField, positions: np.ndarray, cull: CullIndex | None = None
+) -> list[Advice]:
     """``advise`` for many units under one field, with one vectorised kernel call.
 
     Args:
         steppers: one stepper per unit.
         field: the threats in force.
         positions: ``(N, 2)`` reported positions, row i for ``steppers[i]``.
+        cull: ``field``'s cull index: only nearby threats are evaluated, within
+            the bound ``core.cull`` proves (used from ``cull.MIN_THREATS`` threats).
 
     Returns:
         One ``Advice`` per stepper, in order; identical to calling ``advise`` one by one.
@@ -477,7 +482,10 @@ def advise_many(steppers: list[Stepper], field: ThreatField, positions: np.ndarr
         goals[i] = s.goal
         gains[i] = s.goal_gain
     out = np.empty((n, 4))
-    kernels.descent_many(field.packed, pts, goals, gains, out)
+    if cull is not None and len(field) >= MIN_THREATS:
+        cull.descent(pts, goals, gains, out)
+    else:
+        kernels.descent_many(field.packed, pts, goals, gains, out)
     rows = out.tolist()
     coords = pts.tolist()
     result = []

@@ -38,6 +38,7 @@ import msgspec
 import numpy as np
 
 from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
+from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.plan import walk_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
@@ -334,6 +335,7 @@ class World:
         self._units: dict[str, _Unit] = {}
         self._threats: dict[str, _Threat] = {}
         self._field: ThreatField | None = None
+        self._cull: CullIndex | None = None
         self._timers: list[tuple[float, int, str, str]] = []  # (when, seq, kind, id)
         self._timer_seq = 0
         self._stale = 0
@@ -349,6 +351,7 @@ class World:
         if self._field is None:
             ordered = [self._threats[k].threat for k in sorted(self._threats)]
             self._field = ThreatField(ordered, self.settings.planner.intensity)
+            self._cull = CullIndex(self._field.packed) if len(ordered) >= MIN_THREATS else None
         return self._field
 
     def counts(self) -> dict[str, int]:
@@ -709,7 +712,7 @@ class World:
             return
         fld = self.field
         steppers: list[Stepper] = [r.stepper for r in guided]  # type: ignore[misc]
-        advices = advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float))
+        advices = advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), self._cull)
         ahead = self._lookahead(guided, advices, fld)
         for rec, adv, points in zip(guided, advices, ahead):
             out.directions.append(self._direction(rec, adv, points, out))
@@ -743,7 +746,7 @@ class World:
             step = rec.stepper.params.step
             ghosts.append(rec.stepper.ghost())
             starts.append((rec.position[0] + step * adv.dx, rec.position[1] + step * adv.dy))
-        tracks = walk_many(ghosts, fld, starts, n - 1)  # type: ignore[arg-type]
+        tracks = walk_many(ghosts, fld, starts, n - 1, self._cull)  # type: ignore[arg-type]
         for i, track in zip(idx, tracks):
             result[i] = track
         return result

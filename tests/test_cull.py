@@ -1,0 +1,91 @@
+"""Culling: only nearby threats are evaluated, and the direction stays within the proven bound."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pfp_service.core import Threat, ThreatField
+from pfp_service.core.cull import RELATIVE_BOUND, CullIndex
+from pfp_service.core.kernels import descent_many
+
+MAX_ERROR_DEG = 0.1  # what the service promises; the proof gives asin(RELATIVE_BOUND)
+
+
+def _field(seed: int, n: int, extent: float, intensity: str) -> ThreatField:
+    rng = np.random.default_rng(seed)
+    threats = []
+    for j in range(n):
+        s_r = float(rng.uniform(0.002, 0.01) * extent)
+        threats.append(
+            Threat.from_facing(
+                (float(rng.uniform(0, extent)), float(rng.uniform(0, extent))),
+                float(rng.uniform(0, 360)),
+                s_r,
+                float(s_r * rng.uniform(0.25, 4)),
+                float(rng.uniform(0, 50)),
+                float(rng.uniform(0.1, 5)),
+                f"t{j}",
+            )
+        )
+    return ThreatField(threats, intensity)  # type: ignore[arg-type]
+
+
+def _angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    dot = np.einsum("ij,ij->i", a, b)
+    return np.degrees(np.abs(np.arctan2(cross, dot)))  # accurate near 0, where arccos is not
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(40, 400),
+    extent=st.sampled_from([100.0, 5_000.0, 30_000.0]),
+    intensity=st.sampled_from(["peak", "density"]),
+)
+def test_culled_directions_are_within_the_bound(seed, n, extent, intensity):
+    print(f"seed={seed} n={n} extent={extent} intensity={intensity}")
+    field = _field(seed, n, extent, intensity)
+    rng = np.random.default_rng(seed + 1)
+    m = 500
+    pts = rng.uniform(-0.1 * extent, 1.1 * extent, (m, 2))
+    goals = rng.uniform(0, extent, (m, 2))
+    gains = np.full(m, 1.0 / extent**2)
+    full = np.empty((m, 4))
+    culled = np.empty((m, 4))
+    descent_many(field.packed, pts, goals, gains, full)
+    index = CullIndex(field.packed)
+    index.descent(pts, goals, gains, culled)
+    moving = full[:, 3] > 0
+    err = _angles(full[moving, :2], culled[moving, :2])
+    assert err.max(initial=0.0) <= MAX_ERROR_DEG
+    # the proof's own bound, with room for the two sums' rounding
+    assert err.max(initial=0.0) <= math.degrees(math.asin(RELATIVE_BOUND)) + 1e-6
+    assert np.all(np.abs(full[:, 2] - culled[:, 2]) <= index.level_bound + 1e-12 * np.abs(full[:, 2]))
+
+
+def test_culling_skips_far_threats_and_falls_back_where_the_bound_is_loose():
+    field = _field(7, 1000, 20_000.0, "peak")
+    index = CullIndex(field.packed)
+    per_cell = np.diff(index.indptr)
+    assert per_cell.mean() < 100  # each unit sees a few nearby threats, not all 1000
+    # at its goal, far from every threat, the gradient all but vanishes: that unit is evaluated in full
+    pts = np.array([[-60_000.0, -60_000.0], [500.0, 500.0]])
+    goals = pts.copy()
+    out = np.empty((2, 4))
+    assert index.descent(pts, goals, np.ones(2), out) == 1
+    ref = np.empty((2, 4))
+    descent_many(field.packed, pts, goals, np.ones(2), ref)
+    np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-300)
+
+
+def test_an_empty_or_inactive_field_culls_to_the_goal_term():
+    field = ThreatField([], "peak")
+    index = CullIndex(field.packed)
+    out = np.empty((1, 4))
+    index.descent(np.array([[0.0, 0.0]]), np.array([[3.0, 4.0]]), np.array([1.0]), out)
+    np.testing.assert_allclose(out[0], [-6.0, -8.0, 0.0, 10.0])
