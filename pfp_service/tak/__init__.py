@@ -1,1 +1,1 @@
-"""The TAK bridge: Cursor-on-Target in and out (``cot``, sans-I/O) and its Zenoh/pytak driver (``bridge``)."""
+"""The TAK bridge: Cursor-on-Target in and out (``cot``), the bridge's state machine (``state``), both sans-I/O, and their pytak/Zenoh driver (``bridge``)."""
