@@ -227,3 +227,54 @@ def test_the_compose_endpoints_carry_each_services_own_certificate(secrets_volum
     )
     assert client["connect"]["endpoints"] == ["tls/router:7447"]
     assert f"{SECRETS}/clients/planner-tls.json5" in _argv(SERVICES["planner"])
+
+
+def test_the_compose_deployment_runs_as_processes(tmp_path):
+    """Compose's own commands, run here: /etc/pfp is a temp dir, the router a Python session on a free port.
+
+    identities and certs write the secrets, the router loads the ACL with mutual TLS, the
+    planner serves as its client, its healthcheck passes, then the injector plays the
+    contingency while the fleet drives to arrival (both at 10x, here only), each through
+    its own certificate.
+    """
+    from tests.zenoh_util import free_port
+
+    port = free_port()
+    here = f"127.0.0.1:{port}"
+
+    def local(argv: list[str]) -> list[str]:
+        return [a.replace(SECRETS, str(tmp_path)).replace("router:7447", here) for a in argv]
+
+    def pfp(argv: list[str], **kw) -> subprocess.Popen:
+        assert argv[0] == "pfp"
+        return subprocess.Popen([sys.executable, "-m", "pfp_service", *argv[1:]], cwd=ROOT, **kw)
+
+    assert pfp_main([*local(_argv(SERVICES["identities"]))[1:], "--quiet"]) == 0
+    certs = local(_argv(SERVICES["certs"]))
+    assert subprocess.run([sys.executable, *certs[1:]], cwd=ROOT, capture_output=True).returncode == 0
+    conf = zenoh.Config.from_file(str(tmp_path / "zenoh-router-mtls.json5"))
+    conf.insert_json5("listen/endpoints", json.dumps([f"tls/{here}"]))
+    router = zenoh.open(conf)
+    log = (tmp_path / "planner.log").open("w")
+    planner = pfp(local(_argv(SERVICES["planner"])), stdout=log, stderr=subprocess.STDOUT)
+    try:
+        health = local(SERVICES["planner"]["healthcheck"]["test"][1:])
+        for _ in range(60):
+            if pfp(health, stdout=subprocess.DEVNULL).wait(timeout=30) == 0:
+                break
+        else:
+            pytest.fail("the planner never became healthy: " + (tmp_path / "planner.log").read_text()[-2000:])
+        fast = ["--speed-up", "10"]
+        injector = pfp([*local(_argv(SERVICES["injector"])), *fast], stdout=subprocess.PIPE, text=True)
+        fleet_argv = [*local(_argv(SERVICES["fleet"])), *fast, "--duration-s", "120"]
+        fleet = pfp(fleet_argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        fleet_out, _ = fleet.communicate(timeout=180)
+        inject_out, _ = injector.communicate(timeout=60)
+        assert fleet.returncode == 0, fleet_out[-3000:]
+        assert injector.returncode == 0, inject_out[-3000:]
+        assert "Traceback" not in (tmp_path / "planner.log").read_text()
+    finally:
+        planner.terminate()
+        planner.wait(timeout=20)
+        log.close()
+        router.close()
