@@ -50,6 +50,7 @@ __all__ = [
     "ThreatSeen",
     "WorldSeen",
     "eta_s",
+    "merge_deltas",
 ]
 
 
@@ -109,6 +110,11 @@ Input = StateSeen | DirectionSeen | GoalSeen | ThreatSeen | AliveSeen | EventSee
 
 
 # -- what is kept -----------------------------------------------------------------
+def _cm(p: tuple[float, float]) -> tuple[float, float]:
+    """A position rounded to the centimetre: what the page can show, in a third of the JSON."""
+    return (round(p[0], 2), round(p[1], 2))
+
+
 @dataclass(slots=True)
 class _Unit:
     id: str
@@ -129,12 +135,13 @@ class _Unit:
     stale: bool = False
     track: deque[tuple[float, float]] = field(default_factory=deque)
     track_new: list[tuple[float, float]] = field(default_factory=list)
+    track_t: float = -math.inf
 
     def view(self, track: list[tuple[float, float]] | None) -> dict[str, Any]:
         out: dict[str, Any] = {
             "id": self.id,
             "kind": self.kind,
-            "position": self.position,
+            "position": _cm(self.position) if self.position is not None else None,
             "heading_deg": self.heading_deg,
             "speed_mps": self.speed_mps,
             "last_seen": self.last_seen,
@@ -142,7 +149,7 @@ class _Unit:
             "reason": self.reason,
             "distance_to_goal": self.distance_to_goal,
             "threat_level": self.threat_level,
-            "lookahead": self.lookahead,
+            "lookahead": [_cm(p) for p in self.lookahead],
             "goal": self.goal,
             "alive": self.alive,
             "stale": self.stale,
@@ -211,12 +218,20 @@ class MapModel:
         stale_s: a unit silent this long is stale (the planner's ``unit_stale_s``).
         debounce_s: a unit whose liveliness token stays gone this long is stale.
         track_max: positions kept per unit for its track.
+        track_interval_s: at most one track position per this long (10 Hz reports would
+            otherwise make the track a fresh array per unit per frame).
         events_max: events kept for the feed (rejections are aggregated, not counted here).
     """
 
     def __init__(
-        self, stale_s: float = 10.0, debounce_s: float = 2.0, track_max: int = 200, events_max: int = 100
+        self,
+        stale_s: float = 10.0,
+        debounce_s: float = 2.0,
+        track_max: int = 200,
+        events_max: int = 100,
+        track_interval_s: float = 0.5,
     ) -> None:
+        self.track_interval_s = track_interval_s
         self.stale_s = stale_s
         self.debounce_s = debounce_s
         self.track_max = track_max
@@ -258,9 +273,10 @@ class MapModel:
                         u.speed_mps = st.speed_mps
                     if st.heading_deg is not None:
                         u.heading_deg = st.heading_deg
-                    if not u.track or u.track[-1] != pos:
-                        u.track.append(pos)
-                        u.track_new.append(pos)
+                    if now - u.track_t >= self.track_interval_s and (not u.track or u.track[-1] != _cm(pos)):
+                        u.track_t = now
+                        u.track.append(_cm(pos))
+                        u.track_new.append(_cm(pos))
                         if len(u.track) > self.track_max:
                             u.track.popleft()
                 case DirectionSeen(unit_id, d):
@@ -304,8 +320,8 @@ class MapModel:
             u = self._unit(s.id)
             if u.position is None and s.position is not None:
                 u.position = (float(s.position[0]), float(s.position[1]))
-                u.track.append(u.position)
-                u.track_new.append(u.position)
+                u.track.append(_cm(u.position))
+                u.track_new.append(_cm(u.position))
                 u.last_seen = None if s.last_seen_s is None else now - s.last_seen_s
             if u.kind is None and s.kind is not None:
                 u.kind = str(s.kind)
@@ -405,6 +421,54 @@ class MapModel:
         """The unit's last reported speed in m/s (for a preview's ETA), if it reported one."""
         u = self.units.get(unit_id)
         return None if u is None else u.speed_mps
+
+
+def merge_deltas(
+    old: dict[str, Any] | None, new: dict[str, Any], track_max: int = 200, events_max: int = 100
+) -> dict[str, Any]:
+    """One delta saying what ``old`` then ``new`` say, for a browser that has not taken ``old`` yet.
+
+    A unit's or threat's newer view wins, but a unit's new track points add up;
+    a put after a removal cancels it and a removal after a put drops the put, so
+    an id is never both shown and removed.  Events add up to ``events_max``.
+    """
+    if old is None:
+        return new
+    out = dict(old)
+    out["now"] = new["now"]
+    units = dict(old.get("units", {}))
+    removed_units = set(old.get("units_removed", ()))
+    for uid, view in new.get("units", {}).items():
+        prior = units.get(uid)
+        if prior is not None:
+            view = {**view, "track_add": (prior["track_add"] + view["track_add"])[-track_max:]}
+        units[uid] = view
+        removed_units.discard(uid)
+    for uid in new.get("units_removed", ()):
+        units.pop(uid, None)
+        removed_units.add(uid)
+    threats = dict(old.get("threats", {}))
+    removed_threats = set(old.get("threats_removed", ()))
+    for tid, view in new.get("threats", {}).items():
+        threats[tid] = view
+        removed_threats.discard(tid)
+    for tid in new.get("threats_removed", ()):
+        threats.pop(tid, None)
+        removed_threats.add(tid)
+    for name, value in (
+        ("units", units),
+        ("units_removed", sorted(removed_units)),
+        ("threats", threats),
+        ("threats_removed", sorted(removed_threats)),
+        ("events", (old.get("events", []) + new.get("events", []))[-events_max:]),
+        ("rejected", {**old.get("rejected", {}), **new.get("rejected", {})}),
+        ("status", {**old.get("status", {}), **new.get("status", {})}),
+    ):
+        if value:
+            out[name] = value
+        else:
+            out.pop(name, None)
+    return out
 
 
 def eta_s(length_m: float, speed_mps: float | None) -> float | None:

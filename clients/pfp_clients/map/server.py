@@ -2,12 +2,14 @@
 
 Zenoh callbacks decode each sample into a ``model`` input and enqueue it,
 nothing more.  One asyncio task, the pump, wakes ``push_hz`` times a second,
-applies everything queued in one batch, and sends the delta to every browser
-as one JSON text frame; a browser that has just connected gets the snapshot
-in the same tick, after the delta, so it never sees a change twice.  A browser
-that cannot keep up is dropped (it reconnects and gets a fresh snapshot), so
-no backlog grows anywhere: the inbox is drained whole every tick and deltas
-coalesce whatever happened in between.
+applies everything queued in one batch, and offers the delta to every
+browser.  Flow control is per browser: a page acknowledges each frame once it
+has drawn it, and until then the deltas meant for it are merged into one
+(``model.merge_deltas``).  So a page gets at most ``push_hz`` frames a second
+and never more than it can draw, and no backlog grows anywhere: the inbox is
+drained whole every tick, and what waits for a slow page is one merged delta,
+never a queue of them.  A page that has just connected gets the snapshot in
+the tick it joins, after that tick's delta, so it never sees a change twice.
 
 Blocking Zenoh calls (status and world queries, previews, puts) run on the
 default executor, never on the event loop or inside a callback.  The page
@@ -36,6 +38,7 @@ import contextlib
 import logging
 import queue
 import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -57,6 +60,7 @@ from pfp_clients.map.model import (
     ThreatSeen,
     WorldSeen,
     eta_s,
+    merge_deltas,
 )
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
@@ -112,11 +116,13 @@ class MapOptions:
 
 
 class _Browser:
-    """One connected page."""
+    """One connected page: its socket, whether it is drawing a frame, and what waits for it."""
 
     def __init__(self, ws: web.WebSocketResponse) -> None:
         self.ws = ws
         self.dropped = False
+        self.in_flight = False  # sent a frame the page has not acknowledged yet
+        self.pending: dict[str, Any] | None = None
 
 
 class MapServer:
@@ -134,6 +140,10 @@ class MapServer:
         self.clock = clock
         self.model = MapModel(stale_s=opts.stale_s)
         self._inbox: queue.SimpleQueue[Input] = queue.SimpleQueue()
+        # Positions and directions come 10 times a second per unit and only the newest matters to a
+        # 5 Hz page: the callback keeps the latest per unit (and kind), the pump takes them all at once.
+        self._latest: dict[tuple[type, str], Input] = {}
+        self._latest_lock = threading.Lock()
         self._browsers: list[_Browser] = []
         self._joining: list[_Browser] = []
         self._declared: list[Any] = []
@@ -153,8 +163,13 @@ class MapServer:
             except Exception:  # a callback must never die; say so and carry on
                 log.exception("map: cannot read a sample on %s", sample.key_expr)
                 return
-            if item is not None:
-                self.samples_in += 1
+            if item is None:
+                return
+            self.samples_in += 1
+            if isinstance(item, (StateSeen, DirectionSeen)):
+                with self._latest_lock:
+                    self._latest[(type(item), item.unit)] = item
+            else:
                 self._inbox.put(item)
 
         return callback
@@ -257,12 +272,21 @@ class MapServer:
 
     # -- the pump --------------------------------------------------------------------
     def _drain(self) -> list[Input]:
+        """Everything queued, then the newest state and direction of each unit.
+
+        Queued inputs go first: a unit's report after a planner's stale event revives it, and
+        the planner says stale only after a silence, so no report precedes it in one tick.
+        """
         batch: list[Input] = []
         while True:
             try:
                 batch.append(self._inbox.get_nowait())
             except queue.Empty:
-                return batch
+                break
+        with self._latest_lock:
+            latest, self._latest = self._latest, {}
+        batch.extend(latest.values())
+        return batch
 
     def config_view(self) -> dict[str, Any]:
         """What the page needs to draw: the mission, editing, and the frame (metres or lat/lon)."""
@@ -280,8 +304,9 @@ class MapServer:
     def stats(self) -> dict[str, Any]:
         """How the server keeps up: samples taken, what waits in the inbox, tick cost, frames sent."""
         return {
+            "cpu_s": time.process_time(),  # this process's CPU seconds, threads included
             "samples_in": self.samples_in,
-            "backlog": self._inbox.qsize(),
+            "backlog": self._inbox.qsize() + len(self._latest),
             "ticks": self.ticks,
             "tick_ms_mean": self.tick_ms_total / self.ticks if self.ticks else None,
             "tick_ms_max": self.tick_ms_max,
@@ -295,6 +320,7 @@ class MapServer:
         return {**self.model.snapshot(self.clock()), "config": self.config_view()}
 
     async def _send(self, browser: _Browser, text: str) -> None:
+        browser.in_flight = True
         try:
             await asyncio.wait_for(browser.ws.send_str(text), _SEND_TIMEOUT_S)
             self.frames_sent += 1
@@ -304,14 +330,23 @@ class MapServer:
                 await browser.ws.close()
 
     async def tick(self) -> None:
-        """One pump step: apply what came, send the delta, then the snapshots to newcomers."""
+        """One pump step: apply what came, send each idle page its delta, then snapshots to newcomers."""
         now = self.clock()
         self.model.apply(self._drain(), now)
         delta = self.model.take_delta(now)
         sends = []
-        if delta is not None and self._browsers:
-            text = msgspec.json.encode(delta).decode()
-            sends += [self._send(b, text) for b in self._browsers]
+        shared: dict[str, str] = {}  # pages in step get the same text, encoded once
+        for b in self._browsers:
+            if delta is not None:
+                b.pending = (
+                    delta if b.pending is None else merge_deltas(b.pending, delta, self.model.track_max)
+                )
+            if b.pending is not None and not b.in_flight:
+                key = "delta" if b.pending is delta else str(id(b))
+                text = shared.get(key) or msgspec.json.encode(b.pending).decode()
+                shared[key] = text
+                b.pending = None
+                sends.append(self._send(b, text))
         if self._joining:
             text = msgspec.json.encode(self.snapshot()).decode()
             sends += [self._send(b, text) for b in self._joining]
@@ -373,8 +408,10 @@ class MapServer:
         await ws.prepare(request)
         browser = _Browser(ws)
         self._joining.append(browser)
-        async for msg in ws:  # the page sends nothing; read until it closes
-            if msg.type == WSMsgType.ERROR:
+        async for msg in ws:  # the page says only "ack": it has drawn the last frame
+            if msg.type == WSMsgType.TEXT and msg.data == "ack":
+                browser.in_flight = False
+            elif msg.type == WSMsgType.ERROR:
                 break
         browser.dropped = True
         return ws

@@ -14,6 +14,7 @@ const STATUS_COLOURS = {
   stale: "#9e9e9e",
 };
 const TRACK_MAX = 200;
+const DOTS_MAX_UNITS = 200; // above this many units only the selected one shows its look-ahead points
 const EVENTS_SHOWN = 60;
 
 const state = {
@@ -190,39 +191,57 @@ function unitSvg(d) {
   );
 }
 
+// Only what changed touches the DOM or the canvas: a thousand units at 5 frames a second.
+function setAttr(el, name, value, cache, key) {
+  if (cache[key] === value) return;
+  cache[key] = value;
+  el.setAttribute(name, value);
+}
+
 function paintUnit(u) {
   const d = u.data;
-  const el = u.marker.getElement();
-  if (!el) return;
-  el.classList.toggle("stale", !!d.stale);
-  el.classList.toggle("selected", state.selectedUnit === d.id);
-  el.dataset.status = d.stale ? "stale" : d.status || "unknown";
-  el.dataset.kind = d.kind || "";
-  el.querySelector(".shape").setAttribute("fill", unitColour(d));
-  el.querySelector(".shape").setAttribute("opacity", d.stale ? "0.55" : "1");
-  const arrow = el.querySelector(".arrow");
-  if (d.heading_deg === null || d.heading_deg === undefined || d.stale) arrow.setAttribute("visibility", "hidden");
-  else {
-    arrow.setAttribute("visibility", "visible");
-    arrow.setAttribute("transform", `rotate(${d.heading_deg})`);
+  const dom = u.dom;
+  if (!dom) return;
+  const c = u.painted;
+  const status = d.stale ? "stale" : d.status || "unknown";
+  const selected = state.selectedUnit === d.id;
+  if (c.status !== status) {
+    c.status = status;
+    dom.el.dataset.status = status;
+    dom.el.classList.toggle("stale", !!d.stale);
   }
+  if (c.selected !== selected) {
+    c.selected = selected;
+    dom.el.classList.toggle("selected", selected);
+  }
+  if (c.kind !== (d.kind || "")) dom.el.dataset.kind = c.kind = d.kind || "";
+  setAttr(dom.shape, "fill", unitColour(d), c, "fill");
+  setAttr(dom.shape, "opacity", d.stale ? "0.55" : "1", c, "opacity");
+  const hidden = d.heading_deg === null || d.heading_deg === undefined || d.stale;
+  setAttr(dom.arrow, "visibility", hidden ? "hidden" : "visible", c, "visibility");
+  if (!hidden) setAttr(dom.arrow, "transform", `rotate(${Math.round(d.heading_deg)})`, c, "transform");
   const age = d.last_seen === null || d.last_seen === undefined ? null : serverNow() - d.last_seen;
-  el.querySelector(".label").textContent = d.stale ? `${d.id} · ${ageText(age)}` : d.id;
+  const label = d.stale ? `${d.id} · ${ageText(age)}` : d.id;
+  if (c.label !== label) dom.label.textContent = c.label = label;
 }
 
 function upsertUnit(d, full) {
   let u = state.units.get(d.id);
   if (!u) {
-    u = { data: d, marker: null, track: null, look: null, lookDots: [], goal: null, points: [] };
+    u = { data: d, marker: null, dom: null, painted: {}, track: null, trackLL: [], look: null, lookDots: [], goal: null, colour: null };
     state.units.set(d.id, u);
   }
   const goalMoved = JSON.stringify(u.data.goal) !== JSON.stringify(d.goal);
   u.data = d;
   if (goalMoved && state.selectedUnit === d.id) schedulePreview();
-  if (full) u.points = (d.track || []).slice(-TRACK_MAX);
-  else if (d.track_add && d.track_add.length) {
-    u.points.push(...d.track_add);
-    if (u.points.length > TRACK_MAX) u.points.splice(0, u.points.length - TRACK_MAX);
+  let trackMoved = false;
+  if (full) {
+    u.trackLL = (d.track || []).slice(-TRACK_MAX).map(toLatLng);
+    trackMoved = true;
+  } else if (d.track_add && d.track_add.length) {
+    for (const p of d.track_add) u.trackLL.push(toLatLng(p));
+    if (u.trackLL.length > TRACK_MAX) u.trackLL.splice(0, u.trackLL.length - TRACK_MAX);
+    trackMoved = true;
   }
   if (!d.position) return; // heard of (a token, a direction) but never seen: nothing to draw yet
   const ll = toLatLng(d.position);
@@ -233,27 +252,40 @@ function upsertUnit(d, full) {
       L.DomEvent.stopPropagation(e);
       selectUnit(d.id);
     });
-    u.marker.getElement().dataset.unit = d.id;
+    const el = u.marker.getElement();
+    el.dataset.unit = d.id;
+    u.dom = { el, shape: el.querySelector(".shape"), arrow: el.querySelector(".arrow"), label: el.querySelector(".label") };
   } else {
     u.marker.setLatLng(ll);
   }
   const colour = unitColour(d);
-  const trackLL = u.points.map(toLatLng);
-  if (!u.track) u.track = L.polyline(trackLL, { color: colour, weight: 2, opacity: 0.6, renderer: state.renderer, interactive: false }).addTo(state.layers.tracks);
-  else u.track.setLatLngs(trackLL).setStyle({ color: colour });
-  const lookLL = d.stale ? [] : [ll, ...(d.lookahead || []).map(toLatLng)];
+  const recoloured = colour !== u.colour;
+  u.colour = colour;
+  if (!u.track) u.track = L.polyline(u.trackLL, { color: colour, weight: 2, opacity: 0.6, renderer: state.renderer, interactive: false }).addTo(state.layers.tracks);
+  else {
+    if (trackMoved) u.track.setLatLngs(u.trackLL);
+    if (recoloured) u.track.setStyle({ color: colour });
+  }
+  const ahead = d.stale ? [] : (d.lookahead || []).map(toLatLng);
+  const lookLL = ahead.length ? [ll, ...ahead] : [];
   if (!u.look) u.look = L.polyline(lookLL, { color: colour, weight: 2, dashArray: "3 4", opacity: 0.9, renderer: state.renderer, interactive: false }).addTo(state.layers.look);
-  else u.look.setLatLngs(lookLL).setStyle({ color: colour });
-  const dots = d.stale ? [] : d.lookahead || [];
+  else {
+    u.look.setLatLngs(lookLL);
+    if (recoloured) u.look.setStyle({ color: colour });
+  }
+  // the points themselves: for every unit in a small mission, for the selected one in a big one
+  const dots = state.units.size <= DOTS_MAX_UNITS || state.selectedUnit === d.id ? ahead : [];
   while (u.lookDots.length > dots.length) state.layers.look.removeLayer(u.lookDots.pop());
   dots.forEach((p, i) => {
-    if (i < u.lookDots.length) u.lookDots[i].setLatLng(toLatLng(p)).setStyle({ color: colour });
-    else u.lookDots.push(L.circleMarker(toLatLng(p), { radius: 2, color: colour, weight: 1, fillOpacity: 1, renderer: state.renderer, interactive: false }).addTo(state.layers.look));
+    if (i < u.lookDots.length) {
+      u.lookDots[i].setLatLng(p);
+      if (recoloured) u.lookDots[i].setStyle({ color: colour });
+    } else u.lookDots.push(L.circleMarker(p, { radius: 2, color: colour, weight: 1, fillOpacity: 1, renderer: state.renderer, interactive: false }).addTo(state.layers.look));
   });
   if (d.goal) {
     const gl = toLatLng(d.goal);
     if (!u.goal) u.goal = L.circleMarker(gl, { radius: 5, color: "#000", weight: 2, fill: false, renderer: state.renderer }).bindTooltip(`goal of ${esc(d.id)}`).addTo(state.layers.goals);
-    else u.goal.setLatLng(gl);
+    else if (goalMoved) u.goal.setLatLng(gl);
   } else if (u.goal) {
     state.layers.goals.removeLayer(u.goal);
     u.goal = null;
@@ -633,6 +665,16 @@ function connect() {
     p.bytes += ev.data.length;
     p.applyMsTotal += ms;
     p.applyMsMax = Math.max(p.applyMsMax, ms);
+    // drawn (Leaflet paints on the next animation frame): ask for the next one; a hidden tab has
+    // no animation frames, so it asks once a second instead
+    let acked = false;
+    const ack = () => {
+      if (acked || ws.readyState !== WebSocket.OPEN) return;
+      acked = true;
+      ws.send("ack");
+    };
+    requestAnimationFrame(ack);
+    setTimeout(ack, 1000);
   };
   ws.onclose = () => {
     $("conn").textContent = "reconnecting";
