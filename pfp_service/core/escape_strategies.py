@@ -254,17 +254,19 @@ _WALLED: weakref.WeakKeyDictionary[
 ] = weakref.WeakKeyDictionary()
 
 
-def route_cell(span_m: float, s_min_m: float) -> float:
+def route_cell(span_m: float, s_min_m: float, fine: bool = True) -> float:
     """Cell size of a route search over ``span_m``: fine enough for the narrowest threat.
 
-    A sixth of the narrowest standard deviation (so a gap a fraction of a
-    standard deviation wide still holds grid nodes), at most ``span / 100``;
-    no finer than ``span / ROUTE_MAX_CELLS``, unless that would leave a cell
-    wider than 3.5 narrowest standard deviations, past which an edge's probe
-    points could step over a core (then up to ``2 * ROUTE_MAX_CELLS``).
+    Fine: a sixth of the narrowest standard deviation (so a gap a fraction of
+    a standard deviation wide still holds grid nodes), at most ``span / 100``,
+    no finer than ``span / ROUTE_MAX_CELLS``.  Coarse (``fine=False``): a third,
+    and half the cells.  Either way never wider than 3.5 narrowest standard
+    deviations, past which an edge's probe points could step over a core
+    (then up to ``2 * ROUTE_MAX_CELLS``).
     """
-    h = min(span_m / GLOBAL_CELLS, s_min_m / 6.0)
-    h = max(h, span_m / ROUTE_MAX_CELLS)
+    most = ROUTE_MAX_CELLS if fine else ROUTE_MAX_CELLS // 2
+    h = min(span_m / GLOBAL_CELLS, s_min_m / (6.0 if fine else 3.0))
+    h = max(h, span_m / most)
     return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
 
 
@@ -273,9 +275,11 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
 
     Dijkstra cost-to-go, cost ``1 + LAMBDA T``, on a local grid without the
     search cores (``cores.SEARCH_FRACTION``: the check's cores and a sliver,
-    so a route between grid nodes never clips one) at ``route_cell``'s
-    resolution; then shortcut wherever a straight segment costs no more and
-    stays out of them, and resampled at ``step`` for the stepper to follow.
+    so a route between grid nodes never clips one), coarse to fine: the
+    coarse ``route_cell`` first, and the fine one only when the coarse grid
+    finds no route (a gap too narrow for it, or no way at all); then shortcut
+    wherever a straight segment costs no more and stays out of them, and
+    resampled at ``step`` for the stepper to follow.
     """
     gx, gy = tr.goal
     for goal, known, walled, side in _WALLED.get(tr.field, ()):
@@ -297,9 +301,13 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
         if tr.bounds is not None:
             (bx0, by0), (bx1, by1) = tr.bounds
             x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
-        h = route_cell(max(x1 - x0, y1 - y0), s_min)
-        grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), cores=search, cell_m=h)
-        route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), LAMBDA)
+        span = max(x1 - x0, y1 - y0)
+        coarse, fine = route_cell(span, s_min, fine=False), route_cell(span, s_min)
+        for h in (coarse, fine) if coarse > 1.01 * fine else (fine,):
+            grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), cores=search, cell_m=h)
+            route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), LAMBDA)
+            if len(route.points):
+                break
         whole = tr.bounds is not None and ((x0, y0), (x1, y1)) == tr.bounds
         if len(route.points) or route.sealed or whole:
             break  # found, walled in, or the whole mission area already: more room cannot help
