@@ -8,6 +8,7 @@ answered is a push.  Nothing is analysed while load runs.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -15,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.bench._load import MISSION, LoadGen, Received, Server
+from pfp_service.bench._load import MISSION, LoadGen, ProcMeter, Received, Server
 
 __all__ = ["Bar", "RateSearch", "fanout", "register", "steady", "storm"]
 
@@ -59,13 +60,19 @@ def latency(g: LoadGen, seqs: range | list[int], recv: list[Received]) -> dict[s
 
 @contextmanager
 def metered(g: LoadGen, srv: Server) -> Iterator[dict[str, Any]]:
-    """CPU %, memory and the responder's own in/out counters over the block."""
+    """CPU % (responder and load generator), memory and the responder's own in/out counters over the block.
+
+    ``loadavg`` (1 min, at the end) says how busy the shared machine was.
+    """
     out: dict[str, Any] = {}
-    cpu0, st0, t0 = srv.meter.cpu_s(), g.status(), time.perf_counter()
+    me = ProcMeter(os.getpid())
+    cpu0, gen0, st0, t0 = srv.meter.cpu_s(), me.cpu_s(), g.status(), time.perf_counter()
     yield out
-    cpu1, st1, t1 = srv.meter.cpu_s(), g.status(), time.perf_counter()
+    cpu1, gen1, st1, t1 = srv.meter.cpu_s(), me.cpu_s(), g.status(), time.perf_counter()
     wall = t1 - t0
     out["cpu_percent"] = None if cpu0 is None or cpu1 is None else 100 * (cpu1 - cpu0) / wall
+    out["generator_cpu_percent"] = None if gen0 is None or gen1 is None else 100 * (gen1 - gen0) / wall
+    out["loadavg"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     out.update(srv.meter.memory_mb())
     if st0 is not None and st1 is not None:
         out["server_msgs_in"] = st1["msgs_in"] - st0["msgs_in"]

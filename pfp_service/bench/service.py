@@ -278,7 +278,7 @@ def _print(doc: dict[str, Any]) -> None:
             f"  input {st['input_per_s']:.0f}/s, output {st['output_per_s']:.0f}/s, unanswered {100 * st['unanswered_fraction']:.3f} %"
         )
         print(
-            f"  CPU {_f(st['cpu_percent'], '.0f')} %, RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
+            f"  CPU {_f(st['cpu_percent'], '.0f')} % (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
         )
         if "storm" in r:
             s = r["storm"]
