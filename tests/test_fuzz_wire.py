@@ -6,6 +6,7 @@ failure) plus hypothesis over raw bytes and text.
 
 from __future__ import annotations
 
+import json
 import random
 
 import pytest
@@ -125,3 +126,35 @@ def test_every_category_is_generated():
     rng = random.Random(1)
     seen = {malformed(rng, "goal").category for _ in range(3000)}
     assert seen == set(CATEGORIES)
+
+
+def test_lat_lon_junk_is_refused_before_it_is_walked():
+    """The lat/lon path walks the document in Python; hostile ones are refused by counting first."""
+    origin = wm.Origin(lat=48.0, lon=11.0)
+    junk = [{"lat": 48.001, "lon": 11.001}] * 8000
+    with pytest.raises(InputError, match="more lat/lon positions than the 1"):
+        wm.decode_unit_state(json.dumps({"position": [1, 2], "x": junk}).encode(), None, origin)
+    nested = {"position": {"lat": 48.0, "lon": 11.0}, "x": [[[]] * 50] * 100}
+    with pytest.raises(InputError, match="more JSON objects and arrays"):
+        wm.decode_unit_state(json.dumps(nested).encode(), None, origin)
+    threats = [
+        {
+            "id": f"t{i}",
+            "position": {"lat": 48.0, "lon": 11.0 + i * 1e-5},
+            "sigma_range": 1,
+            "sigma_lateral": 1,
+        }
+        for i in range(300)
+    ]
+    with pytest.raises(InputError, match="more lat/lon positions than the 258"):
+        wm.decode_preview_request(json.dumps({"threats": threats}).encode(), None, origin)
+    with pytest.raises(InputError, match=r"\$\.threats: length must be <= 256"):  # within the count: typed
+        wm.decode_preview_request(json.dumps({"threats": threats[:257]}).encode(), None, origin)
+    # what a real message holds still decodes, unknown fields and all
+    full = {"start": {"lat": 48.0, "lon": 11.0}, "goal": [5, 5], "threats": threats[:256], "future": [[1]]}
+    req = wm.decode_preview_request(json.dumps(full).encode(), None, origin)
+    assert len(req.threats) == wm.MAX_WHATIF_THREATS and req.start == pytest.approx((0.0, 0.0), abs=1e-6)
+    state = wm.decode_unit_state(
+        memoryview(b'{"position": {"lat": 48.0, "lon": 11.0}, "x": {"a": [1]}}'), None, origin
+    )
+    assert state.position == pytest.approx((0.0, 0.0), abs=1e-6)
