@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import copy
 import json
-import typing
 import subprocess
 import sys
+import typing
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -261,6 +261,8 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
                 "rejected",
                 "deliberating",
                 "overload",
+                "pushes",
+                "pushes_resent",
             )
         },
         "latency_p50_ms": ("nonneg", OPT),

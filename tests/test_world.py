@@ -171,6 +171,8 @@ def test_stale_units_are_forgotten_with_an_event_and_their_memory():
         "deliberating": 0,
         "overload": 0,
         "rejected": 0,
+        "pushes": 0,
+        "pushes_resent": 0,
     }
     assert not w._units and not w._timers  # nothing left behind
 
@@ -290,7 +292,9 @@ def test_a_preview_k_steps_into_an_escape_matches_the_live_track(escape):
     pv = preview(w.view("u"), None, lambda: 0.0, 60.0, 100_000)
     live, last = _walk_live(w, "u", pos, step, 100_000, t0=1e5)
     # the same verdict (global on this horseshoe may hand over too early: that is path quality, not this)
-    assert {"reached": DirectionStatus.ARRIVED, "trapped": DirectionStatus.TRAPPED}[pv.status.value] is last.status
+    assert {"reached": DirectionStatus.ARRIVED, "trapped": DirectionStatus.TRAPPED}[
+        pv.status.value
+    ] is last.status
     assert pv.escape_steps > 0 or escape == "auto"
     assert len(pv.path) == len(live) + 1, (len(pv.path), len(live))
     err = np.max(np.hypot(*(np.array(pv.path[1:]) - np.array(live)).T))
@@ -468,3 +472,36 @@ def test_with_an_origin_directions_carry_true_bearing_and_lat_lon_lookahead():
     assert len(d.lookahead_geo) == len(d.lookahead) == 5
     assert d.lookahead_geo[0].lat > 59.9 and abs(d.lookahead_geo[0].lon - 10.7) < 1e-6
     decode_direction(encode(d))
+
+
+def test_a_threat_change_redirects_only_the_units_it_can_reach():
+    w = _world()
+    w.apply([_state("near", 0, 0), GoalSet("near", Goal(position=(10, 10)))], 0.0)
+    w.apply([_state("far", 5000, 5000), GoalSet("far", Goal(position=(5100, 5000)))], 0.0)
+    out = w.apply([ThreatPut("e1", ThreatUpdate(position=(4, 6), **T))], 1.0)
+    assert [d.unit for d in out.directions] == ["near"]
+    assert _events(out, ReplanEvent)[0].units == ["near"]
+    # the far unit's next direction is what the full field says, all the same
+    d = _one(w.apply([_state("far", 5000, 5000)], 2.0), "far")
+    assert d.vector == (1.0, 0.0) or math.isclose(d.vector[0], 1.0)
+    out = w.apply([ThreatRemoved("e1")], 3.0)
+    assert [d.unit for d in out.directions] == ["near"]
+    out = w.apply([ThreatPut("e2", ThreatUpdate(position=(5050, 5001), **T))], 4.0)
+    assert [d.unit for d in out.directions] == ["far"]
+
+
+def test_a_push_is_sent_again_until_the_unit_reports():
+    w = _world(push_retry_s=0.25, push_retries=3)
+    w.apply([_state("u", 0, 0), GoalSet("u", Goal(position=(10, 10)))], 0.0)
+    out = w.apply([ThreatPut("e1", ThreatUpdate(position=(4, 6), **T))], 1.0)
+    (push,) = out.directions
+    assert w.counts()["pushes"] == 1
+    assert _one(w.apply([Tick(1.25)], 1.25), "u") == push  # the same direction again
+    assert _one(w.apply([Tick(1.5)], 1.5), "u") == push
+    d = _one(w.apply([_state("u", 0, 0, 9)], 1.6), "u")  # answered: no more re-sends
+    assert d.seq == 9
+    assert not w.apply([Tick(2.0)], 2.0).directions and w.counts()["pushes_resent"] == 2
+    w.apply([ThreatPut("e2", ThreatUpdate(position=(6, 4), **T))], 3.0)
+    for t in (3.25, 3.5, 3.75, 4.0, 4.25):
+        w.apply([Tick(t)], t)
+    assert w.counts()["pushes_resent"] == 5  # at most push_retries each

@@ -37,7 +37,7 @@ import numpy as np
 from pfp_service.core import kernels
 from pfp_service.core.kernels import A_X, A_Y, ACTIVE, P00, P01, P11, SCALE, XI_X, XI_Y
 
-__all__ = ["MIN_THREATS", "Q_CUT", "RELATIVE_BOUND", "CullIndex"]
+__all__ = ["MIN_THREATS", "Q_CUT", "RELATIVE_BOUND", "CullIndex", "corridors_meet", "influence_boxes"]
 
 Q_CUT = 80.0
 RELATIVE_BOUND = 1e-6  # sin of the largest direction error a culled answer may carry (0.00006 deg)
@@ -202,3 +202,35 @@ def _culled_descent(
         out[i, 2] = val
         out[i, 3] = norm
         flags[i] = not (norm >= need)  # also true for a NaN norm: the full kernel decides
+
+
+def influence_boxes(packed: np.ndarray, q_cut: float = Q_CUT) -> np.ndarray:
+    """``(M, 4)`` boxes ``(x0, y0, x1, y1)`` outside which each threat's ``q >= q_cut`` (it is culled there)."""
+    p00, p01, p11 = packed[:, P00], packed[:, P01], packed[:, P11]
+    det = p00 * p11 - p01 * p01
+    ex = np.sqrt(q_cut * p11 / det)
+    ey = np.sqrt(q_cut * p00 / det)
+    return np.stack(
+        [packed[:, XI_X] - ex, packed[:, XI_Y] - ey, packed[:, XI_X] + ex, packed[:, XI_Y] + ey], axis=1
+    )
+
+
+def corridors_meet(
+    starts: np.ndarray, ends: np.ndarray, boxes: np.ndarray, widen: float = 0.25
+) -> np.ndarray:
+    """Which units' corridors meet any box: ``(N,)`` booleans.
+
+    A unit's corridor is the bounding box of its straight segment ``start -> end``,
+    widened on every side by ``widen`` times the segment's length: descent bends
+    round threats, but not farther than that from the straight line in any
+    field it would arrive in.
+    """
+    lo = np.minimum(starts, ends)
+    hi = np.maximum(starts, ends)
+    pad = widen * np.hypot(*(ends - starts).T)[:, None]
+    lo = lo - pad
+    hi = hi + pad
+    hit = np.zeros(starts.shape[0], dtype=bool)
+    for x0, y0, x1, y1 in boxes:
+        hit |= (lo[:, 0] <= x1) & (hi[:, 0] >= x0) & (lo[:, 1] <= y1) & (hi[:, 1] >= y0)
+    return hit

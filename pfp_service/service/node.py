@@ -467,4 +467,6 @@ class PlannerNode:
             latency_p99_ms=p99,
             deliberating=c["deliberating"],
             overload=c["overload"] + self.counters["overload"],
+            pushes=c["pushes"],
+            pushes_resent=c["pushes_resent"],
         )

@@ -38,7 +38,7 @@ import msgspec
 import numpy as np
 
 from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
-from pfp_service.core.cull import MIN_THREATS, CullIndex
+from pfp_service.core.cull import MIN_THREATS, CullIndex, corridors_meet, influence_boxes
 from pfp_service.core.plan import walk_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
@@ -286,6 +286,8 @@ class WorldSettings:
     unit_forget_s: float | None = 600.0  # stale this long: forgotten (None: never)
     max_units: int = 100_000
     max_threats: int = 10_000
+    push_retry_s: float = 0.25  # a push (a direction no report asked for) is sent again after this
+    push_retries: int = 4  # ... this many times, until the unit's next report is answered
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
     origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
 
@@ -315,6 +317,8 @@ class _Unit:
     last_distance: float | None = None
     last_vector: tuple[float, float] | None = None
     job: Job | None = None
+    push: Direction | None = None  # the last push, until a report is answered
+    push_tries: int = 0
 
     def token(self) -> tuple[int, int]:
         return (self.epoch, self.stepper.version if self.stepper is not None else -1)
@@ -336,12 +340,15 @@ class World:
         self._threats: dict[str, _Threat] = {}
         self._field: ThreatField | None = None
         self._cull: CullIndex | None = None
+        self._touched: list[Threat] = []
         self._timers: list[tuple[float, int, str, str]] = []  # (when, seq, kind, id)
         self._timer_seq = 0
         self._stale = 0
         self._deliberating = 0
         self.overload = 0  # inputs refused at a limit
         self.rejected = 0
+        self.pushes = 0  # directions sent without a report asking
+        self.pushes_resent = 0
         self._reject_window: dict[str, tuple[float, int, int]] = {}  # kind -> (window start, sent, held)
         self._peers: set[str] = set()
 
@@ -363,6 +370,8 @@ class World:
             "deliberating": self._deliberating,
             "overload": self.overload,
             "rejected": self.rejected,
+            "pushes": self.pushes,
+            "pushes_resent": self.pushes_resent,
         }
 
     def view(self, unit_id: str) -> UnitView:
@@ -415,6 +424,7 @@ class World:
         out = Outputs()
         dirty: set[str] = set()
         changes: list[ThreatChange] = []
+        self._touched = []  # threats put, moved or gone in this batch (old and new)
         for inp in inputs:
             match inp:
                 case StateReported(unit, state):
@@ -426,8 +436,12 @@ class World:
                 case ThreatPut(tid, update):
                     self._threat_put(tid, update, now, changes, out)
                 case ThreatRemoved(tid):
-                    if self._threats.pop(tid, None) is not None:
-                        changes.append(ThreatChange(threat=tid, change="removed"))
+                    gone = self._threats.pop(tid, None)
+                    if gone is not None:
+                        self._touched.append(gone.threat)
+                        changes.append(
+                            ThreatChange(threat=tid, change="removed", position=gone.update.position)
+                        )
                 case TokenChanged(unit, alive):
                     self._token(unit, alive, now)
                 case InputRejected(key, error):
@@ -442,7 +456,9 @@ class World:
                     self._run_timers(t, changes, out)
         if changes:
             dirty |= self._world_changed()
+        first = len(out.directions)  # before: pushes sent again by the timers
         self._directions(dirty, now, out)
+        self._pushes(out.directions[first:], now)
         if changes:
             guided = sorted(d.unit for d in out.directions if d.status is not DirectionStatus.NO_GOAL)
             shown = changes[:MAX_EVENT_ITEMS]
@@ -487,6 +503,7 @@ class World:
             rec.stale_since = None
             self._stale -= 1
         rec.token_gone_since = None  # a report is proof of life, whatever the token says
+        rec.push = None  # it is answered now
         if not rec.silence_timer:
             rec.silence_timer = True
             self._timer(now + self.settings.unit_stale_s, "silence", unit_id)
@@ -560,7 +577,11 @@ class World:
             return
         ttl = msg.ttl_s if msg.ttl_s is not None else self.settings.threat_ttl_s
         expires = None if ttl is None else now + ttl
-        self._threats[tid] = _Threat(msg, msg.to_threat(tid), expires)
+        old = self._threats.get(tid)
+        if old is not None:
+            self._touched.append(old.threat)
+        self._threats[tid] = new = _Threat(msg, msg.to_threat(tid), expires)
+        self._touched.append(new.threat)
         if expires is not None:
             self._timer(expires, "expire", tid)
         changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
@@ -620,6 +641,7 @@ class World:
                 t = self._threats.get(ident)
                 if t is not None and t.expires_at is not None and t.expires_at <= now:
                     del self._threats[ident]
+                    self._touched.append(t.threat)
                     changes.append(ThreatChange(threat=ident, change="expired", position=t.update.position))
                 continue
             rec = self._units.get(ident)
@@ -635,8 +657,32 @@ class World:
                 gone = rec.token_gone_since
                 if gone is not None and now - gone >= s.liveliness_debounce_s:
                     self._go_stale(rec, now, "liveliness token gone", out)
+            elif kind == "push" and rec.push is not None and rec.push_tries > 0 and not rec.stale:
+                rec.push_tries -= 1
+                self.pushes_resent += 1
+                out.directions.append(rec.push)
+                if rec.push_tries:
+                    self._timer(now + s.push_retry_s, "push", ident)
             elif kind == "forget" and self._forgettable(rec, now):
                 self._forget(rec, now, out)
+
+    def _pushes(self, fresh: list[Direction], now: float) -> None:
+        """Directions no report asked for (a world change, a route landing) are sent again until answered.
+
+        Directions go out with congestion control DROP, so a burst may lose
+        some; a pushed unit gets the same direction again every
+        ``push_retry_s``, up to ``push_retries`` times, until its next report
+        is answered.
+        """
+        for d in fresh:
+            rec = self._units.get(d.unit)
+            if rec is None or rec.last_seen >= now:  # answering a report of this batch
+                continue
+            if (rec.push is None or rec.push_tries == 0) and self.settings.push_retries > 0:
+                self._timer(now + self.settings.push_retry_s, "push", rec.id)
+            rec.push = d
+            rec.push_tries = self.settings.push_retries
+            self.pushes += 1
 
     def _forgettable(self, rec: _Unit, now: float) -> bool:
         limit = self.settings.unit_forget_s
@@ -680,13 +726,32 @@ class World:
             self._deliberating -= 1
 
     def _world_changed(self) -> set[str]:
+        """The threats changed: re-judge and re-direct the units the change can reach.
+
+        A unit is reached when a touched threat's influence box (where it is
+        not culled, ``cull.influence_boxes``) meets the unit's corridor to its
+        goal (``cull.corridors_meet``), or when it is escaping or deliberating
+        (its route or its job was judged under the old field).  Every other
+        unit's direction is unchanged within the cull bound, and it is left
+        alone: a contingency costs what it touches, not the whole fleet.
+        """
         self._field = None
+        guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
+        if not guided:
+            return set()
+        touched = ThreatField(self._touched, self.settings.planner.intensity)
+        boxes = influence_boxes(touched.packed)
+        starts = np.array([r.position for r in guided], dtype=float)
+        ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
+        reached = corridors_meet(starts, ends, boxes)
         dirty = set()
-        for rec in self._units.values():
-            if rec.stepper is not None:
-                rec.stepper.world_changed()
-                self._supersede(rec)
-            if rec.goal is not None and rec.position is not None and not rec.stale:
+        for rec, hit in zip(guided, reached.tolist()):
+            assert rec.stepper is not None
+            if not (hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None):
+                continue
+            rec.stepper.world_changed()
+            self._supersede(rec)
+            if not rec.stale:
                 dirty.add(rec.id)
         return dirty
 

@@ -329,6 +329,8 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     latency_p99_ms: NonNegative | None = None
     deliberating: Count = 0
     overload: Count = 0
+    pushes: Count = 0  # directions sent without a report asking (world changes, routes landing)
+    pushes_resent: Count = 0  # ... sent again, because no report has been answered since
 
 
 # -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
