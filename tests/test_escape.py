@@ -328,3 +328,31 @@ def test_optimal_with_avoid_cores_traps_an_enclosure_and_never_enters_a_core():
     assert r.status.value == "trapped" and "avoids the threat cores" in r.reason
     free = plan_optimal(START, GOAL, [Scheduled(t) for t in block()], avoid_cores=True)
     assert free.status.value == "reached" and not _core_entry(block(), free.path)
+
+
+def _needle_wedge(sr=6.0, half_deg=30.0, tip=(65.0, 0.0)):
+    out = []
+    for side in (1.0, -1.0):
+        a = math.radians(180.0 - side * half_deg)
+        for k in range(4):
+            d = (k + 0.5) * 1.6 * sr
+            xy = (tip[0] + d * math.cos(a), tip[1] + d * math.sin(a))
+            out.append(
+                Threat.from_facing(
+                    xy, (90.0 - math.degrees(a)) % 360, sr, 0.05 * sr, 20.0, 1.0, f"n{len(out)}"
+                )
+            )
+    return out
+
+
+def test_needles_in_a_wedge_are_resolved_and_gone_round():
+    from pfp_service.core.escape_strategies import route_cell
+
+    threats = _needle_wedge()
+    r = _plan(threats, "auto", goal=(100.0, 0.0))
+    assert r.status.value == "reached" and not _core_entry(threats, r.path)
+    s_min = min(t.min_sigma() for t in threats)
+    for span in (50.0, 160.0, 5000.0):
+        fine, coarse = route_cell(span, s_min), route_cell(span, s_min, fine=False)
+        assert fine <= coarse <= max(3.5 * s_min, span / 600)
+        assert span / fine <= 600 + 1e-9

@@ -77,8 +77,9 @@ class Row:
     escape_steps: int
     length_rel: float  # length / start-goal distance
     exposure_rel: float  # exposure / start-goal distance
-    compute_ms: float
+    compute_ms: float  # wall clock, median of the runs
     core_entry: str
+    cpu_ms: float = math.nan  # process CPU time, median of the runs
     gap: float | None = None
     gap_shorter: float | None = None
     gap_less_exposed: float | None = None
@@ -108,10 +109,12 @@ def _pareto(length: float, exposure: float, opts: list[tuple[float, float]]) -> 
     return best
 
 
-def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float]:
+def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float, float]:
+    """The plan, and the medians over ``repeat`` runs of its wall-clock and process CPU milliseconds."""
     sched = [Scheduled(t) for t in case.threats]
-    times, result = [], None
+    times, cpu, result = [], [], None
     for _ in range(repeat):
+        c0 = time.process_time()
         result = plan(
             case.start,
             case.goal,
@@ -120,8 +123,9 @@ def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float]:
             case.bounds,
             time.perf_counter,
         )
+        cpu.append(1e3 * (time.process_time() - c0))
         times.append(result.compute_ms)
-    return result, statistics.median(times)
+    return result, statistics.median(times), statistics.median(cpu)
 
 
 def measure_suite(count: int, seed: int, modes: list[str], cells: int, log: bool = False) -> Report:
@@ -146,7 +150,7 @@ def measure_suite(count: int, seed: int, modes: list[str], cells: int, log: bool
             j_star = ref.solve(LAMBDA).cost
         cores = Cores(fieldm)
         for mode in modes:
-            r, ms = _timed_plan(case, mode, 3 if mode in ("none", "auto") else 1)
+            r, ms, cpu_ms = _timed_plan(case, mode, 3 if mode in ("none", "auto") else 1)
             row = Row(
                 case.name,
                 case.kind,
@@ -159,6 +163,7 @@ def measure_suite(count: int, seed: int, modes: list[str], cells: int, log: bool
                 r.exposure / d0,  # type: ignore[attr-defined]
                 ms,
                 cores.first_hit(np.asarray(r.path)),  # type: ignore[attr-defined]
+                cpu_ms=cpu_ms,
             )
             if row.status == "reached":
                 row.gap, row.gap_shorter, row.gap_less_exposed = _pareto(
@@ -194,8 +199,10 @@ TARGETS = {
     "j_median": ("J / J* median <= 1.02", 1.02),
     "j_p90": ("J / J* 90th percentile <= 1.10", 1.10),
     "j_worst": ("J / J* worst <= 1.5", 1.5),
-    "ms_median": ("plan compute median <= 20 ms", 20.0),
-    "ms_worst": ("plan compute worst <= 500 ms", 500.0),
+    "ms_median": ("plan compute median <= 20 ms (wall clock)", 20.0),
+    "ms_worst": ("plan compute worst <= 500 ms (wall clock)", 500.0),
+    "cpu_median": ("plan compute median <= 20 ms (process CPU time)", 20.0),
+    "cpu_worst": ("plan compute worst <= 500 ms (process CPU time)", 500.0),
 }
 
 
@@ -205,6 +212,7 @@ def _targets(rep: Report) -> dict[str, object]:
     encl = [r for r in auto if r.case in rep.enclosed]
     js = [r.j_ratio for r in reach if r.j_ratio is not None]
     ms = [r.compute_ms for r in auto]
+    cpu = [r.cpu_ms for r in auto]
     measured: dict[str, float] = {
         "reach": sum(r.status == "reached" for r in reach) / len(reach) if reach else math.nan,
         "false_reached": sum(r.status == "reached" for r in encl),
@@ -214,6 +222,8 @@ def _targets(rep: Report) -> dict[str, object]:
         "j_worst": max(js, default=math.nan),
         "ms_median": _med(ms),
         "ms_worst": max(ms, default=math.nan),
+        "cpu_median": _med(cpu),
+        "cpu_worst": max(cpu, default=math.nan),
     }
     met = {}
     for key, (_label, goal) in TARGETS.items():
@@ -242,8 +252,9 @@ def render(rep: Report, modes: list[str]) -> str:
         ),
         "",
         "| escape | reached (reachable) | honest trapped (enclosed) | paths entering a core | median / worst length "
-        "(x D0) | median / worst exposure (x D0) | median / worst Pareto gap | median / max compute ms |",
-        "|---|---|---|---|---|---|---|---|",
+        "(x D0) | median / worst exposure (x D0) | median / worst Pareto gap | median / max compute ms | "
+        "median / max CPU ms |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for mode in modes:
         rows = [r for r in rep.rows if r.mode == mode]
@@ -258,7 +269,8 @@ def render(rep: Report, modes: list[str]) -> str:
             f"{_fmt(_med([r.length_rel for r in ok]))} / {_fmt(max((r.length_rel for r in ok), default=None))} | "
             f"{_fmt(_med([r.exposure_rel for r in ok]))} / {_fmt(max((r.exposure_rel for r in ok), default=None))} | "
             f"{_fmt(_med(gaps), True)} / {_fmt(max(gaps, default=None), True)} | "
-            f"{_fmt(_med([r.compute_ms for r in rows]))} / {_fmt(max(r.compute_ms for r in rows))} |"
+            f"{_fmt(_med([r.compute_ms for r in rows]))} / {_fmt(max(r.compute_ms for r in rows))} | "
+            f"{_fmt(_med([r.cpu_ms for r in rows]))} / {_fmt(max(r.cpu_ms for r in rows))} |"
         )
     t = rep.targets
     measured, met = t["measured"], t["met"]
@@ -278,8 +290,8 @@ def render(rep: Report, modes: list[str]) -> str:
         "",
         "`auto` by kind:",
         "",
-        "| kind | scenarios | reached | trapped | escapes used | median gap | median / worst J / J* | median / worst ms |",
-        "|---|---|---|---|---|---|---|---|",
+        "| kind | scenarios | reached | trapped | escapes used | median gap | median / worst J / J* | median / worst ms | median / worst CPU ms |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for kind, rows in by_kind.items():
         used = sorted({e for r in rows for e in r.escapes})
@@ -289,14 +301,17 @@ def render(rep: Report, modes: list[str]) -> str:
             f"| {kind} | {len(rows)} | {sum(r.status == 'reached' for r in rows)} | "
             f"{sum(r.status == 'trapped' for r in rows)} | {', '.join(used) or '-'} | {_fmt(_med(gaps), True)} | "
             f"{_fmt(_med(js))} / {_fmt(max(js, default=None))} | "
-            f"{_fmt(_med([r.compute_ms for r in rows]))} / {_fmt(max(r.compute_ms for r in rows))} |"
+            f"{_fmt(_med([r.compute_ms for r in rows]))} / {_fmt(max(r.compute_ms for r in rows))} | "
+            f"{_fmt(_med([r.cpu_ms for r in rows]))} / {_fmt(max(r.cpu_ms for r in rows))} |"
         )
     lines += [
         "",
         "A Pareto gap of 0 means that no path of the optimal planner's lambda sweep (cores ignored) is both "
         f"shorter and less exposed. J / J* compares `length + {LAMBDA:g} exposure` with the core-avoiding "
         "optimum's (`--planner optimal --avoid-cores`; below 1 where the grid reference is itself slightly "
-        "off the optimum).",
+        "off the optimum). Compute is wall clock (`compute_ms`) and the planning process's CPU time, each the "
+        "median of 3 runs for none and auto: the 2-core machine is shared, and wall clock under contention "
+        "runs 3-6x the CPU time.",
     ]
     return "\n".join(lines)
 
