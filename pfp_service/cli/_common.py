@@ -11,6 +11,7 @@ import argparse
 import math
 from typing import Any
 
+from pfp_service.errors import FINITE_LIMIT  # the file fields' bound: numeric flags share it
 from pfp_service.service.config import DEFAULT_CONNECT, DEFAULT_LISTEN
 
 MODES = ("router", "peer", "client")
@@ -21,8 +22,10 @@ def positive_float(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    if not (math.isfinite(value) and 0 < value <= FINITE_LIMIT):
+        raise argparse.ArgumentTypeError(
+            f"must be a finite number > 0 (at most {FINITE_LIMIT:g}), got {text!r}"
+        )
     return value
 
 
@@ -61,8 +64,10 @@ def non_negative_float(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    if not (math.isfinite(value) and 0 <= value <= FINITE_LIMIT):
+        raise argparse.ArgumentTypeError(
+            f"must be a finite number >= 0 (at most {FINITE_LIMIT:g}), got {text!r}"
+        )
     return value
 
 
