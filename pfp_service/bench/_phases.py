@@ -304,7 +304,7 @@ class RateSearch:
         self.lo: float | None = None
         self.hi: float | None = None
         self.left = max_probes
-        self.limited = False
+        self.short = 0
         self.probes: list[dict[str, Any]] = []
 
     def record(self, r: dict[str, Any]) -> None:
@@ -315,8 +315,9 @@ class RateSearch:
             and r["p99_ms"] <= MAX_P99_MS
             and r["unanswered_fraction"] <= MAX_UNANSWERED
         )
-        short = r["sent"] < 0.9 * r["offered_per_s"] * r["spent_s"] - 2  # the generator could not offer it
-        self.limited |= short
+        # fewer states went out than offered: the responder's back-pressure (puts BLOCK) or the generator's CPU
+        short = r["sent"] < 0.9 * r["offered_per_s"] * r["spent_s"] - 2
+        self.short += short
         self.probes.append({k: r[k] for k in self.KEEP} | {"ok": ok and not short})
         if ok and not short:
             self.lo = rate
@@ -336,7 +337,7 @@ class RateSearch:
         return {
             "max_rate_hz": self.lo,
             "max_per_s": None if self.lo is None else self.lo * n,
-            "generator_limited": self.limited,
+            "short_probes": self.short,
             "probes": self.probes,
         }
 

@@ -297,8 +297,9 @@ def _print(doc: dict[str, Any]) -> None:
             )
         if "find_max" in r:
             fm = r["find_max"]
+            short = f" ({fm['short_probes']} probes could not offer their rate)" if fm["short_probes"] else ""
             print(
-                f"  find-max: {_f(fm['max_per_s'], '.0f')}/s ({_f(fm['max_rate_hz'], '.2f')} Hz per unit){' (generator-limited)' if fm['generator_limited'] else ''}"
+                f"  find-max: {_f(fm['max_per_s'], '.0f')}/s ({_f(fm['max_rate_hz'], '.2f')} Hz per unit){short}"
             )
             for pr in fm["probes"]:
                 print(
