@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import signal
+import threading
 import time
 import uuid
 
@@ -266,3 +267,47 @@ def test_status_and_world_replies_come_from_the_planners_own_keys(planner, missi
         assert str(r.ok.key_expr) == f"mumt/{mission}/planner/planner/status"
         status = json.loads(r.ok.payload.to_bytes())
         assert status["units"] == 1 and status["threats"] == 1
+
+
+def test_a_preview_storm_is_answered_in_time_and_directions_keep_flowing(planner, mission):
+    """Heavy what-ifs, garbage and huge max_iter, all at once: every query gets a reply or an error."""
+    endpoint, _ = planner
+    heavy = {
+        "goal": [5000, 5000],
+        "step": 0.01,
+        "max_iter": 10_000_000,
+        "threats": [
+            {"id": f"w{i}", "position": [i, 2 * i], "sigma_range": 0.001, "sigma_lateral": 0.002}
+            for i in range(50)
+        ],
+    }
+    bodies = [json.dumps(heavy), "{not json", json.dumps({"max_iter": 10**7, "step": 0.001}), "[" * 5000]
+    with client(endpoint) as s:
+        _setup(s, mission, {"e1": E1, "e2": E2})
+        u = Unit(s, mission, "u1")
+        u.report()
+        put_json(s, f"mumt/{mission}/unit/u1/goal", {"position": [10, 10]})
+        u.inbox.get(where=lambda d: d["status"] == "en_route")
+        replies: list = []
+        lock = threading.Lock()
+
+        def ask(body):
+            t0 = time.monotonic()
+            got = list(s.get(f"mumt/{mission}/preview/u1", payload=body, timeout=10))
+            with lock:
+                replies.append((time.monotonic() - t0, got))
+
+        threads = [threading.Thread(target=ask, args=(bodies[i % len(bodies)],)) for i in range(40)]
+        for t in threads:
+            t.start()
+        gaps = []
+        for _ in range(20):  # the live unit keeps getting answers while the storm runs
+            t0 = time.monotonic()
+            u.report()
+            gaps.append(time.monotonic() - t0)
+        for t in threads:
+            t.join(timeout=30)
+        assert len(replies) == 40
+        for took, got in replies:
+            assert len(got) == 1 and took < 10.0, (took, got)
+        assert max(gaps) < 2.0, gaps  # generous: a bound, not a timing target

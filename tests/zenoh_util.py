@@ -41,7 +41,7 @@ def client(endpoint: str):
         session.close()
 
 
-def wait_for_planner(endpoint: str, mission: str, timeout: float = 20.0) -> None:
+def wait_for_planner(endpoint: str, mission: str, timeout: float = 60.0) -> None:
     deadline = time.monotonic() + timeout
     last: Exception | None = None
     while time.monotonic() < deadline:
