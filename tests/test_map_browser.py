@@ -82,13 +82,21 @@ class Page:
         self.page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
         self.page.on("pageerror", lambda e: self.errors.append(f"uncaught: {e}"))
         self.page.goto(url)
-        self.page.wait_for_function("() => window.pfpMap && window.pfpMap.map !== null", timeout=10_000)
+        self.wait("() => window.pfpMap && window.pfpMap.map !== null")
 
     def js(self, expression: str, arg: Any = None) -> Any:
         return self.page.evaluate(expression, arg)
 
     def wait(self, predicate: str, arg: Any = None, timeout_s: float = 10.0) -> None:
-        self.page.wait_for_function(predicate, arg=arg, timeout=timeout_s * 1000)
+        """Wait for ``predicate`` in the page; on a timeout, say what the page logged."""
+        from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+        try:
+            self.page.wait_for_function(predicate, arg=arg, timeout=timeout_s * 1000)
+        except PlaywrightTimeout:
+            raise AssertionError(
+                f"not within {timeout_s} s: {predicate}; page errors: {self.errors}"
+            ) from None
 
     def view(self, x0: float, y0: float, x1: float, y1: float) -> None:
         """Show mission metres ``[x0, x1] x [y0, y1]``, as an operator zooming there would."""
@@ -174,8 +182,8 @@ def map_process(endpoint: str, mission: str, *extra: str) -> Iterator[str]:
             except queue.Empty:
                 raise AssertionError(f"pfp map did not start: {seen}") from None
             seen.append(line)
-            if " on http://" in line:
-                url = line.split(" on ", 1)[1].split()[0]
+            if " at http://" in line:
+                url = line.split(" at ", 1)[1].split()[0]
         yield url
     finally:
         _stop(proc)
@@ -247,8 +255,9 @@ def test_the_map_shows_units_threats_staleness_and_a_preview(playwright, tmp_pat
             page.wait(
                 "() => ['m1', 'r1', 'u3'].every((u) => { const el = document.querySelector(`[data-unit='${u}']`); return el && el.dataset.status !== 'unknown'; })"
             )
-            assert page.status_of("m1") in ("en_route", "escaping")
-            assert page.status_of("r1") in ("en_route", "escaping")
+            # a unit's first report can beat its goal to the planner: no_goal, then on its way
+            moving = "['en_route', 'escaping'].includes(document.querySelector(`[data-unit='${u}']`).dataset.status)"
+            page.wait(f"() => ['m1', 'r1'].every((u) => {moving})")
             assert page.status_of("u3") == "no_goal"
             kinds = page.js(
                 "() => Object.fromEntries([...document.querySelectorAll('.unit-icon')].map((e) => [e.dataset.unit, e.dataset.kind]))"
@@ -343,6 +352,14 @@ def test_the_map_shows_units_threats_staleness_and_a_preview(playwright, tmp_pat
 
             _screenshot(page, tmp_path, "map.png")
             assert page.errors == []
+
+            # a map started late learns what was put before it from the planner's world query
+            with map_process(endpoint, mission) as late_url, page_at(playwright, late_url) as late:
+                late.wait("() => pfpMap.threats.has('e1') && pfpMap.threats.has('e2')", timeout_s=5)
+                ttl_left = late.js("() => pfpMap.threats.get('e2').data.expires_at - pfpMap.state_now()")
+                assert 400 < ttl_left < 500  # the TTL left, not the TTL put
+                late.wait("() => ['m1', 'r1', 'u3'].every((u) => pfpMap.units.has(u))")
+                assert late.errors == []
             assert fleet.poll() is None
 
 

@@ -506,11 +506,10 @@ async def serve(
         host, port = runner.addresses[0][:2]
         shown = f"[{host}]" if ":" in host else host
         answered = await loop.run_in_executor(None, server.ask_world)
-        say(
-            f"pfp map: mission {opts.mission} on http://{shown}:{port}/"
-            + (" (editing on)" if opts.allow_edit else "")
-            + (f"; {answered} planner(s) sent their world" if answered else "")
-        )
+        notes = ["editing on" if opts.allow_edit else "read-only"]
+        if answered:
+            notes.append(f"world from {answered} planner{'s' if answered > 1 else ''}")
+        say(f"pfp map: mission {opts.mission} at http://{shown}:{port}/ ({', '.join(notes)})")
         tasks = [asyncio.create_task(server.pump()), asyncio.create_task(server.poll_status())]
         await stop.wait()
     finally:

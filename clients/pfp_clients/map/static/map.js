@@ -35,6 +35,7 @@ const state = {
   dropCount: 0,
 };
 window.pfpMap = state; // for tests and the curious: read-only by convention
+state.state_now = () => serverNow(); // the server's clock, as the page estimates it
 
 const $ = (id) => document.getElementById(id);
 const serverNow = () => Date.now() / 1000 + state.offset;
