@@ -34,7 +34,7 @@ __all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut"]
 _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
 _WINDOW = 48  # grid edges a shortcut may replace at once
-_SAMPLES = 33  # Simpson points on a candidate shortcut
+_SAMPLES = 17  # Simpson points on a candidate shortcut
 
 
 @dataclass(frozen=True, slots=True)

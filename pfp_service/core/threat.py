@@ -33,7 +33,7 @@ Intensity = Literal["peak", "density"]
 # One row of ``ThreatField.packed`` per threat, in the kernels' column order.
 PACKED_COLUMNS = kernels.PACKED_COLUMNS
 # Of the strongest threat's peak: the terms ``level_culled`` and the route grids leave out.
-LEVEL_FLOOR = 1e-12
+LEVEL_FLOOR = 1e-9
 
 
 @functools.lru_cache(maxsize=1 << 16)
