@@ -175,3 +175,35 @@ def test_the_map_runs_from_a_plain_install_as_a_separate_process():
         timeout=60,
     )
     assert r.returncode == 0 and "--allow-edit" in r.stdout
+
+
+def test_the_map_embeds_in_another_program_on_its_own_thread(router):
+    """What ``pfp demo --map`` needs: start, get the URL, keep running, close cleanly."""
+    from pfp_clients.map.embed import MapThread
+    from pfp_clients.map.server import MapOptions
+
+    from pfp_service.service.config import client_zenoh_config
+
+    mission = "emb" + uuid.uuid4().hex[:8]
+    with (
+        client(router) as s,
+        MapThread(client_zenoh_config([router]), MapOptions(mission=mission, port=0)) as url,
+    ):
+        assert url.startswith("http://127.0.0.1:")
+        put_json(s, keys.unit_state(mission, "e1"), {"position": [4, 5]})
+        deadline = time.monotonic() + 5
+        while "e1" not in _http("GET", url + "api/state")[1]["units"]:
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+    with pytest.raises(urllib.error.URLError):
+        urllib.request.urlopen(url + "api/state", timeout=2)  # closed with the block
+
+
+def test_an_embedded_map_that_cannot_start_raises_in_the_caller():
+    from pfp_clients.map.embed import MapThread
+    from pfp_clients.map.server import MapOptions
+
+    from pfp_service.service.config import client_zenoh_config
+
+    with pytest.raises(Exception, match=r"(?i)connect|unable"):
+        MapThread(client_zenoh_config([f"tcp/127.0.0.1:{free_port()}"]), MapOptions(port=0)).start()

@@ -479,8 +479,12 @@ async def serve(
     opts: MapOptions,
     stop: asyncio.Event | None = None,
     say: Callable[[str], None] = print,
+    ready: Callable[[str], None] | None = None,
 ) -> int:
     """Serve the map on an open session until ``stop`` is set (or SIGTERM/SIGINT); returns 0.
+
+    Args:
+        ready: called with the page's URL once it is served (``embed`` waits on it).
 
     Raises:
         InputError: ``--http``, when the address cannot be bound.
@@ -509,7 +513,10 @@ async def serve(
         notes = ["editing on" if opts.allow_edit else "read-only"]
         if answered:
             notes.append(f"world from {answered} planner{'s' if answered > 1 else ''}")
-        say(f"pfp map: mission {opts.mission} at http://{shown}:{port}/ ({', '.join(notes)})")
+        url = f"http://{shown}:{port}/"
+        say(f"pfp map: mission {opts.mission} at {url} ({', '.join(notes)})")
+        if ready is not None:
+            ready(url)
         tasks = [asyncio.create_task(server.pump()), asyncio.create_task(server.poll_status())]
         await stop.wait()
     finally:
