@@ -387,7 +387,7 @@ def test_no_unit_goals_leaves_goals_to_commanders():
     from pfp_service.cli.acl import Mission, principals_for
 
     def goal_writers(own_goal: bool) -> set[str]:
-        ps = principals_for(Mission("m", "planner", ("u1",), own_goal), {"commander": ("commander",)})
+        ps = principals_for(Mission("m", ("planner",), ("u1",), own_goal), {"commander": ("commander",)})
         return {
             p.name
             for p in ps
@@ -397,3 +397,40 @@ def test_no_unit_goals_leaves_goals_to_commanders():
 
     assert goal_writers(True) == {"commander", "unit-u1"}
     assert goal_writers(False) == {"commander"}
+
+
+def test_planners_sharing_a_mission_each_hold_only_their_own_token(tmp_path):
+    """--planner-id twice (scale-out): each planner's identity holds its own token and not the other's."""
+    port = free_port()
+    team = tmp_path / "team.yaml"
+    team.write_text(TEAM)
+    out = tmp_path / "acl"
+    argv = ["acl", str(team), "--out", str(out), "--mission", M, "--quiet", "--planner-id", "p1"]
+    argv += ["--planner-id", "p2", "--listen", f"tcp/127.0.0.1:{port}", "--connect-host", f"127.0.0.1:{port}"]
+    assert pfp_main(argv) == 0
+    r = Router(out, port, tls=False)
+    try:
+        with r.as_("p1") as p1, r.as_("p2") as p2, r.as_("observer") as obs:
+            seen: queue.Queue[str] = queue.Queue()
+            sub = obs.liveliness().declare_subscriber(
+                f"mumt/{M}/alive/planner/*", lambda s: seen.put(str(s.key_expr)), history=True
+            )
+            _settle()
+            spoof = p1.liveliness().declare_token(f"mumt/{M}/alive/planner/p2")
+            with pytest.raises(queue.Empty):  # p1 cannot stand in for p2
+                seen.get(timeout=NOT_DELIVERED_S)
+            own = p2.liveliness().declare_token(f"mumt/{M}/alive/planner/p2")
+            assert seen.get(timeout=5) == f"mumt/{M}/alive/planner/p2"
+            mine = p1.liveliness().declare_token(f"mumt/{M}/alive/planner/p1")
+            assert seen.get(timeout=5) == f"mumt/{M}/alive/planner/p1"
+            # each planner sees the other's token (how two planners on one mission notice each other)
+            other = [
+                str(r.ok.key_expr)
+                for r in p2.liveliness().get(f"mumt/{M}/alive/planner/*", timeout=2)
+                if r.ok
+            ]
+            assert f"mumt/{M}/alive/planner/p1" in other
+            for h in (spoof, own, mine, sub):
+                h.undeclare()
+    finally:
+        r.session.close()

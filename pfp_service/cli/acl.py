@@ -175,26 +175,31 @@ def observer_grants(mission: str) -> list[Grant]:
 
 @dataclass(frozen=True)
 class Mission:
-    """What a role needs to know: the mission, its planner, the team's units and the goal policy."""
+    """What a role needs to know: the mission, its planners' ids, the team's units and the goal policy."""
 
     mission: str
-    planner: str
+    planners: tuple[str, ...]
     units: tuple[str, ...]
     own_goal: bool = True
 
 
-# The mission-wide roles a principal can be given with --role; ``unit`` is per team unit.
-ROLES: dict[str, Callable[[Mission], list[Grant]]] = {
-    "planner": lambda t: planner_grants(t.mission, t.planner),
-    "fleet": lambda t: fleet_grants(t.mission, t.units, t.own_goal),
-    "reporter": lambda t: reporter_grants(t.mission),
-    "commander": lambda t: commander_grants(t.mission),
-    "observer": lambda t: observer_grants(t.mission),
+def _planner_role(t: Mission, name: str) -> list[Grant]:
+    # a principal named after a planner id holds that planner's token and queryables
+    return planner_grants(t.mission, name if name in t.planners else t.planners[0])
+
+
+# The mission-wide roles a principal (by name) can be given with --role; ``unit`` is per team unit.
+ROLES: dict[str, Callable[[Mission, str], list[Grant]]] = {
+    "planner": _planner_role,
+    "fleet": lambda t, _name: fleet_grants(t.mission, t.units, t.own_goal),
+    "reporter": lambda t, _name: reporter_grants(t.mission),
+    "commander": lambda t, _name: commander_grants(t.mission),
+    "observer": lambda t, _name: observer_grants(t.mission),
 }
 
-# Who gets an identity when --role is not given: one per role, plus `pfp inject`'s needs.
+# Who gets an identity when --role is not given: each --planner-id (role planner), then one
+# per role, plus what `pfp inject` and `pfp map` need.
 DEFAULT_PRINCIPALS: dict[str, tuple[str, ...]] = {
-    "planner": ("planner",),
     "fleet": ("fleet",),
     "injector": ("reporter", "commander", "observer"),
     "map": ("reporter", "commander", "observer"),  # pfp map shows everything and edits threats and goals
@@ -229,7 +234,7 @@ def principals_for(team: Mission, roles: dict[str, tuple[str, ...]]) -> list[Pri
         for r in rs:
             if r not in ROLES:
                 raise InputError("--role", f"{name}={r}: unknown role (expected one of: {', '.join(ROLES)})")
-            grants += ROLES[r](team)
+            grants += ROLES[r](team, name)
         out.append(Principal(name, tuple(rs), tuple(grants + _matching(team.mission))))
     for u in team.units:
         grants = unit_grants(team.mission, u, team.own_goal) + _matching(team.mission)
@@ -368,9 +373,9 @@ def _write(path: Path, text: str, private: bool = False) -> None:
         path.write_text(text)
 
 
-def _parse_roles(specs: Sequence[str] | None) -> dict[str, tuple[str, ...]]:
+def _parse_roles(specs: Sequence[str] | None, planners: Sequence[str]) -> dict[str, tuple[str, ...]]:
     if not specs:
-        return dict(DEFAULT_PRINCIPALS)
+        return {**{p: ("planner",) for p in planners}, **DEFAULT_PRINCIPALS}
     out: dict[str, tuple[str, ...]] = {}
     for spec in specs:
         name, sep, rest = spec.partition("=")
@@ -387,12 +392,17 @@ def register(sub: Any) -> None:
     p.add_argument("team", metavar="TEAM.yaml", help="team file: one unit identity per unit")
     p.add_argument("--out", default="acl", metavar="DIR", help="where to write (default ./acl)")
     p.add_argument("--mission", default=keys.DEFAULT_MISSION)
-    p.add_argument("--planner-id", default="planner", metavar="ID", help="the planner's id (default planner)")
+    p.add_argument(
+        "--planner-id",
+        action="append",
+        metavar="ID",
+        help="a planner's id, repeatable for planners sharing the mission (default: planner)",
+    )
     p.add_argument(
         "--role",
         action="append",
         metavar="NAME=ROLE[,ROLE]",
-        help=f"a principal and its roles ({', '.join(ROLES)}); repeat; default: "
+        help=f"a principal and its roles ({', '.join(ROLES)}); repeat; default: each planner id as planner, "
         + " ".join(f"{n}={','.join(r)}" for n, r in DEFAULT_PRINCIPALS.items()),
     )
     p.add_argument("--no-unit-goals", action="store_true", help="units may not set their own goal")
@@ -419,15 +429,17 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.team import load_team
 
     keys.check_chunk(args.mission, "--mission")
-    keys.check_chunk(args.planner_id, "--planner-id")
+    planners = tuple(dict.fromkeys(args.planner_id or ["planner"]))
+    for pid in planners:
+        keys.check_chunk(pid, "--planner-id")
     team_file = load_team(args.team)
     team = Mission(
         mission=args.mission,
-        planner=args.planner_id,
+        planners=planners,
         units=tuple(u.id for u in team_file.units),
         own_goal=not args.no_unit_goals,
     )
-    principals = principals_for(team, _parse_roles(args.role))
+    principals = principals_for(team, _parse_roles(args.role, planners))
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError("--out", f"{out} is not a directory")
