@@ -123,7 +123,9 @@ class CullIndex:
             How many units needed every threat (the bound did not hold for them).
         """
         flags = np.zeros(points.shape[0], dtype=np.bool_)
-        _culled_descent(
+        pairs = points.shape[0] * (self.indices.size / max(self.nx * self.ny, 1) + 1.0)
+        kernel = _culled_descent_parallel if pairs >= kernels.PARALLEL_MIN_PAIRS else _culled_descent
+        kernel(
             self.packed,
             points,
             goals,
@@ -158,8 +160,54 @@ def _fill(i0: np.ndarray, i1: np.ndarray, k0: np.ndarray, k1: np.ndarray, nx: in
                 n += 1
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@numba.njit(cache=True, nogil=True)
 def _culled_descent(
+    packed: np.ndarray,
+    points: np.ndarray,
+    goals: np.ndarray,
+    gains: np.ndarray,
+    ox: float,
+    oy: float,
+    cell: float,
+    nx: int,
+    ny: int,
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    cell_need: np.ndarray,
+    need_outside: float,
+    out: np.ndarray,
+    flags: np.ndarray,
+) -> None:
+    for i in range(points.shape[0]):
+        x = points[i, 0]
+        y = points[i, 1]
+        val = 0.0
+        gx = 0.0
+        gy = 0.0
+        inside = math.isfinite(x) and math.isfinite(y)
+        ci = math.floor((x - ox) / cell) if inside else -1
+        ck = math.floor((y - oy) / cell) if inside else -1
+        need = need_outside
+        if 0 <= ci < nx and 0 <= ck < ny:
+            c = ck * nx + ci
+            need = cell_need[c]
+            for p in range(indptr[c], indptr[c + 1]):
+                v, dx, dy = kernels.threat_term(packed, indices[p], x, y, 0.0, True)
+                val += v
+                gx += dx
+                gy += dy
+        fx = gx - 2.0 * gains[i] * (goals[i, 0] - x)
+        fy = gy - 2.0 * gains[i] * (goals[i, 1] - y)
+        norm = math.sqrt(fx * fx + fy * fy)
+        out[i, 0] = fx
+        out[i, 1] = fy
+        out[i, 2] = val
+        out[i, 3] = norm
+        flags[i] = not (norm >= need)  # also true for a NaN norm: the full kernel decides
+
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def _culled_descent_parallel(
     packed: np.ndarray,
     points: np.ndarray,
     goals: np.ndarray,

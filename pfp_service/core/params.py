@@ -37,12 +37,21 @@ from __future__ import annotations
 import math
 import statistics
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 from pfp_service.core.escape_strategies import STRATEGIES
 from pfp_service.core.threat import Intensity, Threat
 
-__all__ = ["ESCAPES", "MAX_ITER_DERIVED", "Escape", "PlannerParams", "Resolved", "resolve"]
+__all__ = [
+    "ESCAPES",
+    "MAX_ITER_DERIVED",
+    "Escape",
+    "FieldStats",
+    "PlannerParams",
+    "Resolved",
+    "field_stats",
+    "resolve",
+]
 
 MAX_ITER_DERIVED = 1_000_000
 
@@ -95,17 +104,42 @@ def _peak_level(t: Threat, intensity: Intensity) -> float:
     return t.weight if intensity == "peak" else t.weight * t.peak_density()
 
 
+class FieldStats(NamedTuple):
+    """What ``resolve`` needs of a threat set, whatever the start and goal: compute once per set."""
+
+    min_sigma: float  # the narrowest standard deviation, metres (inf without threats)
+    median_ratio: dict[
+        str, float | None
+    ]  # by intensity: median peak level / spread (None: no weighted threat)
+
+
+def field_stats(threats: tuple[Threat, ...] | list[Threat]) -> FieldStats:
+    """``resolve``'s threat-set figures, so a goal storm pays O(threats) once, not per goal."""
+    spreads = [t.spread() for t in threats]
+    s_min = min((t.min_sigma() for t in threats), default=math.inf)
+    medians: dict[str, float | None] = {}
+    for intensity in ("peak", "density"):
+        ratios = [_peak_level(t, intensity) / s for t, s in zip(threats, spreads) if t.weight > 0]  # type: ignore[arg-type]
+        medians[intensity] = statistics.median(ratios) if ratios else None
+    return FieldStats(s_min, medians)
+
+
 def resolve(
     params: PlannerParams,
     start: tuple[float, float],
     goal: tuple[float, float],
     threats: tuple[Threat, ...] | list[Threat] = (),
+    stats: FieldStats | None = None,
 ) -> Resolved:
-    """Fill in what ``params`` leaves open for this start, goal and threat set."""
+    """Fill in what ``params`` leaves open for this start, goal and threat set.
+
+    ``stats`` is ``field_stats(threats)``, when the caller keeps it for many goals.
+    """
     d0 = math.hypot(goal[0] - start[0], goal[1] - start[1])
     scale = d0 if d0 > 0 else 1.0
-    spreads = [t.spread() for t in threats]
-    s_min = min((t.min_sigma() for t in threats), default=math.inf)  # resolve the narrowest axis
+    if stats is None:
+        stats = field_stats(threats)
+    s_min = stats.min_sigma  # resolve the narrowest axis
     step = params.step
     if step is None:
         step = min(scale / 150.0, s_min / 4.0)
@@ -116,8 +150,8 @@ def resolve(
         max_iter = min(max(300, math.ceil(8.0 * scale / step)), MAX_ITER_DERIVED)
     delta = params.delta
     if delta is None:
-        ratios = [_peak_level(t, params.intensity) / s for t, s in zip(threats, spreads) if t.weight > 0]
-        delta = 0.15 * scale * statistics.median(ratios) if ratios else 1.0
+        median = stats.median_ratio[params.intensity]
+        delta = 0.15 * scale * median if median is not None else 1.0
     return Resolved(
         delta=float(delta),
         step=float(step),

@@ -19,13 +19,14 @@ from enum import StrEnum
 import msgspec
 import numpy as np
 
-from pfp_service.core.cull import CullIndex
+from pfp_service.core import kernels
+from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
 from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus, advise_many
 from pfp_service.core.threat import Threat, ThreatField
 
-__all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan", "walk", "walk_many"]
+__all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan", "predict_many", "walk", "walk_many"]
 
 
 class PlanStatus(StrEnum):
@@ -164,6 +165,72 @@ def walk_many(
             pts[i] = (x, y)
             keep.append(i)
         live = keep
+    return tracks
+
+
+def predict_many(
+    steppers: list[Stepper],
+    field: ThreatField,
+    starts: np.ndarray,
+    steps: int,
+    cull: CullIndex | None = None,
+) -> list[list[tuple[float, float]]]:
+    """The direction look-ahead: each unit's next ``steps + 1`` positions from ``starts``, as its stepper moves.
+
+    A unit following an escape route walks a ghost of its stepper
+    (``walk_many``).  A unit in plain descent is stepped by the batched
+    kernel alone, ``steps`` vectorised calls for all of them: the same
+    direction, arrival and bounds rules as ``Stepper.advise``, without its
+    trap watch (a prediction this short never fills the trap window; a
+    trap is judged when the unit gets there).
+
+    Returns:
+        One track per unit, its start first, ending early at the goal or the bounds.
+    """
+    pts0 = np.array(starts, dtype=np.float64).reshape(-1, 2)
+    tracks: list[list[tuple[float, float]]] = [[] for _ in steppers]
+    esc = [i for i, s in enumerate(steppers) if s.escaping or s.check_terminal()]
+    if esc:
+        for i, t in zip(esc, walk_many([steppers[i].ghost() for i in esc], field, pts0[esc], steps, cull)):
+            tracks[i] = t
+    plain = np.array(sorted(set(range(len(steppers))) - set(esc)), dtype=np.int64)
+    if plain.size == 0:
+        return tracks
+    m = plain.size
+    pts = pts0[plain].copy()
+    goals = np.array([steppers[i].goal for i in plain.tolist()], dtype=np.float64)
+    gains = np.array([steppers[i].goal_gain for i in plain.tolist()], dtype=np.float64)
+    step = np.array([steppers[i].params.step for i in plain.tolist()], dtype=np.float64)
+    tol = np.array([steppers[i].params.tolerance for i in plain.tolist()], dtype=np.float64)
+    lo = np.full((m, 2), -np.inf)
+    hi = np.full((m, 2), np.inf)
+    for row, i in enumerate(plain.tolist()):
+        b = steppers[i].bounds
+        if b is not None:
+            lo[row], hi[row] = b[0], b[1]
+    out = np.empty((m, 4))
+    trail = np.full((steps + 1, m, 2), np.nan)
+    trail[0] = pts
+    alive = np.ones(m, dtype=bool)
+    for k in range(steps):
+        at_goal = np.hypot(goals[:, 0] - pts[:, 0], goals[:, 1] - pts[:, 1]) <= tol
+        outside = np.any((pts < lo) | (pts > hi), axis=1)
+        alive &= ~at_goal & ~outside
+        if not alive.any():
+            break
+        if cull is not None and len(field) >= MIN_THREATS:
+            cull.descent(pts, goals, gains, out)
+        else:
+            kernels.descent_many(field.packed, pts, goals, gains, out)
+        norm = out[:, 3]
+        alive &= np.isfinite(norm) & (norm > 0.0)
+        safe = np.where(alive, norm, 1.0)
+        pts = np.where(alive[:, None], pts - step[:, None] * out[:, :2] / safe[:, None], pts)
+        trail[k + 1] = np.where(alive[:, None], pts, np.nan)
+    rows = np.transpose(trail, (1, 0, 2)).tolist()
+    for r, i in enumerate(plain.tolist()):
+        track = rows[r]
+        tracks[i] = [(p[0], p[1]) for p in track if p[0] == p[0]]  # nan marks where it stopped
     return tracks
 
 

@@ -407,6 +407,10 @@ class Stepper:
         """Following a committed escape route."""
         return self._run is not None
 
+    def check_terminal(self) -> bool:
+        """A standing verdict (trapped) that ``check`` would repeat, so a prediction must ask the stepper."""
+        return self._terminal is not None
+
     def _escaping(self, field: ThreatField, x: float, y: float) -> Advice:
         run = self._run
         assert run is not None

@@ -39,7 +39,8 @@ import numpy as np
 
 from pfp_service.core import PlannerParams, Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
 from pfp_service.core.cull import MIN_THREATS, CullIndex, corridors_meet, influence_boxes
-from pfp_service.core.plan import walk_many
+from pfp_service.core.params import FieldStats, field_stats
+from pfp_service.core.plan import predict_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
 from pfp_service.geo import Origin, with_geodetic
@@ -340,6 +341,7 @@ class World:
         self._threats: dict[str, _Threat] = {}
         self._field: ThreatField | None = None
         self._cull: CullIndex | None = None
+        self._stats: FieldStats | None = None
         self._touched: list[Threat] = []
         self._timers: list[tuple[float, int, str, str]] = []  # (when, seq, kind, id)
         self._timer_seq = 0
@@ -359,6 +361,7 @@ class World:
             ordered = [self._threats[k].threat for k in sorted(self._threats)]
             self._field = ThreatField(ordered, self.settings.planner.intensity)
             self._cull = CullIndex(self._field.packed) if len(ordered) >= MIN_THREATS else None
+            self._stats = field_stats(ordered)
         return self._field
 
     def counts(self) -> dict[str, int]:
@@ -714,7 +717,8 @@ class World:
         assert rec.goal is not None and rec.position is not None
         rec.origin = rec.position
         goal = (rec.goal.position[0], rec.goal.position[1])
-        resolved = resolve(self.settings.params_for(rec.goal), rec.origin, goal, list(self.field.threats))
+        fld = self.field  # builds the stats with it
+        resolved = resolve(self.settings.params_for(rec.goal), rec.origin, goal, fld.threats, self._stats)
         rec.stepper = Stepper(rec.origin, goal, resolved, self.settings.bounds, rec.key)
         rec.stepper.defer = self.settings.deliberation == "deferred"
         out.missions.append(MissionRecord(rec.id, rec.epoch, rec.origin, rec.goal, resolved))
@@ -803,15 +807,15 @@ class World:
         idx = [i for i, a in enumerate(advices) if not a.status.terminal]
         if not idx:
             return result
-        ghosts = []
+        steppers = []
         starts = []
         for i in idx:
             rec, adv = guided[i], advices[i]
             assert rec.stepper is not None and rec.position is not None
             step = rec.stepper.params.step
-            ghosts.append(rec.stepper.ghost())
+            steppers.append(rec.stepper)
             starts.append((rec.position[0] + step * adv.dx, rec.position[1] + step * adv.dy))
-        tracks = walk_many(ghosts, fld, starts, n - 1, self._cull)  # type: ignore[arg-type]
+        tracks = predict_many(steppers, fld, np.array(starts), n - 1, self._cull)
         for i, track in zip(idx, tracks):
             result[i] = track
         return result
