@@ -834,6 +834,7 @@ class World:
         heading = None
         if not adv.status.terminal and (adv.dx or adv.dy):
             heading = math.degrees(math.atan2(adv.dx, adv.dy)) % 360.0
+            heading = 0.0 if heading >= 360.0 else heading  # -1e-300 % 360 is 360.0
         d = Direction(
             unit=rec.id,
             seq=rec.seq,
