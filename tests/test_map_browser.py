@@ -167,8 +167,9 @@ def running(*args: str) -> Iterator[subprocess.Popen[str]]:
 
 @contextmanager
 def map_process(endpoint: str, mission: str, *extra: str) -> Iterator[str]:
-    """``pfp map`` on a free port; yields the page's URL once it serves."""
-    proc = _pfp("map", "--connect", endpoint, "--mission", mission, "--http", "127.0.0.1:0", *extra)
+    """``pfp map`` on a free port; yields the page's URL once it serves (no ``endpoint``: ``extra`` says)."""
+    connect = ["--connect", endpoint] if endpoint else []
+    proc = _pfp("map", *connect, "--mission", mission, "--http", "127.0.0.1:0", *extra)
     lines: queue.Queue[str] = queue.Queue()
     assert proc.stdout is not None
     threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
