@@ -1,7 +1,6 @@
-"""The map's two edges: Zenoh in (subscribers, queries, puts) and HTTP out (one page, a WebSocket, a small API).
+"""The map's web side: one page, a WebSocket of deltas and a small API, over the Zenoh ``feed``.
 
-Zenoh callbacks decode each sample into a ``model`` input and enqueue it,
-nothing more.  One asyncio task, the pump, wakes ``push_hz`` times a second,
+One asyncio task, the pump, wakes ``push_hz`` times a second,
 applies everything queued in one batch, and offers the delta to every
 browser.  Flow control is per browser: a page acknowledges each frame once it
 has drawn it, and until then the deltas meant for it are merged into one
@@ -11,8 +10,8 @@ drained whole every tick, and what waits for a slow page is one merged delta,
 never a queue of them.  A page that has just connected gets the snapshot in
 the tick it joins, after that tick's delta, so it never sees a change twice.
 
-Blocking Zenoh calls (status and world queries, previews, puts) run on the
-default executor, never on the event loop or inside a callback.  The page
+Blocking Zenoh calls (status and world queries, previews, puts: ``Feed``)
+run on the default executor, never on the event loop.  The page
 talks to the planner only through this server, and this server only through
 the keys every other client uses: edits are the same puts as ``pfp inject``.
 
@@ -36,9 +35,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import queue
 import signal
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -48,36 +45,11 @@ from typing import Any
 import msgspec
 from aiohttp import WSMsgType, web
 
-from pfp_clients.map.model import (
-    AliveSeen,
-    DirectionSeen,
-    EventSeen,
-    GoalSeen,
-    Input,
-    MapModel,
-    StateSeen,
-    StatusSeen,
-    ThreatSeen,
-    WorldSeen,
-    eta_s,
-    merge_deltas,
-)
+from pfp_clients.map.feed import Feed, PreviewError
+from pfp_clients.map.model import MapModel, eta_s, merge_deltas
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.wire import (
-    decode_direction,
-    decode_error_reply,
-    decode_event,
-    decode_goal,
-    decode_plan_result,
-    decode_planner_status,
-    decode_threat,
-    decode_unit_state,
-    decode_world_snapshot,
-    encode,
-    keys,
-    zenoh_encoding,
-)
+from pfp_service.wire import decode_goal, decode_threat, keys
 
 __all__ = ["STATIC_DIR", "MapOptions", "MapServer", "serve"]
 
@@ -126,7 +98,7 @@ class _Browser:
 
 
 class MapServer:
-    """The map's Zenoh subscriptions, its model and its web app, on one open session.
+    """The map's feed, its model and its web app, on one open session.
 
     Args:
         session: an open ``zenoh.Session`` (the caller closes it).
@@ -135,159 +107,18 @@ class MapServer:
     """
 
     def __init__(self, session: Any, opts: MapOptions, clock: Callable[[], float] = time.time) -> None:
-        self.session = session
         self.opts = opts
         self.clock = clock
+        self.feed = Feed(session, opts.mission, opts.query_timeout_s)
         self.model = MapModel(stale_s=opts.stale_s)
-        self._inbox: queue.SimpleQueue[Input] = queue.SimpleQueue()
-        # Positions and directions come 10 times a second per unit and only the newest matters to a
-        # 5 Hz page: the callback keeps the latest per unit (and kind), the pump takes them all at once.
-        self._latest: dict[tuple[type, str], Input] = {}
-        self._latest_lock = threading.Lock()
         self._browsers: list[_Browser] = []
         self._joining: list[_Browser] = []
-        self._declared: list[Any] = []
         self.frames_sent = 0
-        self.samples_in = 0
         self.ticks = 0
         self.tick_ms_max = 0.0
         self.tick_ms_total = 0.0
 
-    # -- Zenoh in: decode and enqueue, nothing more ---------------------------------
-    def _enqueue(self, make: Callable[[Any], Input | None]) -> Callable[[Any], None]:
-        def callback(sample: Any) -> None:
-            try:
-                item = make(sample)
-            except InputError:
-                return  # not ours to judge: the planner publishes its own rejections
-            except Exception:  # a callback must never die; say so and carry on
-                log.exception("map: cannot read a sample on %s", sample.key_expr)
-                return
-            if item is None:
-                return
-            self.samples_in += 1
-            if isinstance(item, (StateSeen, DirectionSeen)):
-                with self._latest_lock:
-                    self._latest[(type(item), item.unit)] = item
-            else:
-                self._inbox.put(item)
-
-        return callback
-
-    def declare(self) -> None:
-        """Subscribe to the mission: states, directions, goals, threats, events and liveliness."""
-        import zenoh
-
-        m = keys.check_chunk(self.opts.mission, "--mission")
-        s = self.session
-
-        def chunk(sample: Any) -> str:
-            return keys.parse(str(sample.key_expr)).id
-
-        def is_delete(sample: Any) -> bool:
-            return bool(sample.kind == zenoh.SampleKind.DELETE)
-
-        def on_state(smp: Any) -> Input:
-            return StateSeen(chunk(smp), decode_unit_state(smp.payload.to_bytes()))
-
-        def on_direction(smp: Any) -> Input:
-            return DirectionSeen(chunk(smp), decode_direction(smp.payload.to_bytes()))
-
-        def on_goal(smp: Any) -> Input:
-            return GoalSeen(chunk(smp), None if is_delete(smp) else decode_goal(smp.payload.to_bytes()))
-
-        def on_threat(smp: Any) -> Input:
-            return ThreatSeen(chunk(smp), None if is_delete(smp) else decode_threat(smp.payload.to_bytes()))
-
-        def on_event(smp: Any) -> Input:
-            return EventSeen(decode_event(smp.payload.to_bytes()))
-
-        def on_alive(smp: Any) -> Input:
-            return AliveSeen(chunk(smp), not is_delete(smp))
-
-        self._declared = [
-            s.declare_subscriber(keys.unit_states(m), self._enqueue(on_state)),
-            s.declare_subscriber(keys.unit_directions(m), self._enqueue(on_direction)),
-            s.declare_subscriber(keys.goals(m), self._enqueue(on_goal)),
-            s.declare_subscriber(keys.threats(m), self._enqueue(on_threat)),
-            s.declare_subscriber(keys.events(m), self._enqueue(on_event)),
-            s.liveliness().declare_subscriber(keys.alive_units(m), self._enqueue(on_alive), history=True),
-        ]
-
-    def undeclare(self) -> None:
-        for d in self._declared:
-            with contextlib.suppress(Exception):  # the session may already be closing
-                d.undeclare()
-        self._declared = []
-
-    # -- blocking Zenoh calls, run on the executor ----------------------------------
-    def _ask(self, selector: str) -> list[Any]:
-        return list(self.session.get(selector, timeout=self.opts.query_timeout_s))
-
-    def ask_world(self) -> int:
-        """Ask every planner what it holds, and enqueue the answers; returns how many answered."""
-        n = 0
-        for reply in self._ask(keys.worlds(self.opts.mission)):
-            if reply.ok is None:
-                continue
-            try:
-                self._inbox.put(WorldSeen(decode_world_snapshot(reply.ok.payload.to_bytes())))
-                n += 1
-            except InputError as exc:
-                log.warning("map: unreadable world reply: %s", exc)
-        return n
-
-    def ask_status(self) -> None:
-        for reply in self._ask(keys.planner_statuses(self.opts.mission)):
-            if reply.ok is None:
-                continue
-            with contextlib.suppress(InputError):
-                self._inbox.put(StatusSeen(decode_planner_status(reply.ok.payload.to_bytes())))
-
-    def ask_preview(self, unit: str) -> tuple[int, dict[str, Any]]:
-        """The planner's preview of ``unit`` as (HTTP status, JSON body).
-
-        A planner that refuses (no goal, busy) or does not answer is still a 200 whose body
-        has ``error``: it is news for the operator, not a fault of the page, and browsers
-        log every non-2xx response as a console error.
-        """
-        selector = keys.preview(self.opts.mission, unit)
-        replies = self._ask(selector)
-        for reply in replies:
-            if reply.ok is not None:
-                result = decode_plan_result(reply.ok.payload.to_bytes())
-                body = msgspec.to_builtins(result)
-                body["eta_s"] = eta_s(result.length, self.model.speed_of(unit))
-                body["speed_mps"] = self.model.speed_of(unit)
-                return 200, {"unit": unit, "preview": body}
-        for reply in replies:
-            if reply.err is not None:
-                data = reply.err.payload.to_bytes()
-                try:
-                    err = decode_error_reply(data)
-                    return 200, {"unit": unit, "error": err.error, "field": err.field}
-                except InputError:
-                    return 200, {"unit": unit, "error": data.decode(errors="replace") or "no answer"}
-        return 200, {"unit": unit, "error": "no planner of this mission answered"}
-
     # -- the pump --------------------------------------------------------------------
-    def _drain(self) -> list[Input]:
-        """Everything queued, then the newest state and direction of each unit.
-
-        Queued inputs go first: a unit's report after a planner's stale event revives it, and
-        the planner says stale only after a silence, so no report precedes it in one tick.
-        """
-        batch: list[Input] = []
-        while True:
-            try:
-                batch.append(self._inbox.get_nowait())
-            except queue.Empty:
-                break
-        with self._latest_lock:
-            latest, self._latest = self._latest, {}
-        batch.extend(latest.values())
-        return batch
-
     def config_view(self) -> dict[str, Any]:
         """What the page needs to draw: the mission, editing, and the frame (metres or lat/lon)."""
         o = self.opts
@@ -305,8 +136,8 @@ class MapServer:
         """How the server keeps up: samples taken, what waits in the inbox, tick cost, frames sent."""
         return {
             "cpu_s": time.process_time(),  # this process's CPU seconds, threads included
-            "samples_in": self.samples_in,
-            "backlog": self._inbox.qsize() + len(self._latest),
+            "samples_in": self.feed.samples_in,
+            "backlog": self.feed.backlog(),
             "ticks": self.ticks,
             "tick_ms_mean": self.tick_ms_total / self.ticks if self.ticks else None,
             "tick_ms_max": self.tick_ms_max,
@@ -332,7 +163,7 @@ class MapServer:
     async def tick(self) -> None:
         """One pump step: apply what came, send each idle page its delta, then snapshots to newcomers."""
         now = self.clock()
-        self.model.apply(self._drain(), now)
+        self.model.apply(self.feed.drain(), now)
         delta = self.model.take_delta(now)
         sends = []
         shared: dict[str, str] = {}  # pages in step get the same text, encoded once
@@ -374,7 +205,7 @@ class MapServer:
         loop = asyncio.get_running_loop()
         while True:
             try:
-                await loop.run_in_executor(None, self.ask_status)
+                await loop.run_in_executor(None, self.feed.ask_status)
             except Exception as exc:  # a router restart: keep asking
                 log.warning("map: status query failed: %s", exc)
             await asyncio.sleep(self.opts.status_period_s)
@@ -424,10 +255,18 @@ class MapServer:
             return web.json_response({"error": exc.reason, "field": "unit"}, status=400)
         loop = asyncio.get_running_loop()
         try:
-            status, body = await loop.run_in_executor(None, self.ask_preview, unit)
+            answer = await loop.run_in_executor(None, self.feed.ask_preview, unit)
         except InputError as exc:
             return web.json_response({"unit": unit, "error": str(exc)}, status=502)
-        return web.json_response(body, status=status)
+        # A planner that refuses (no goal, busy) or does not answer is still a 200 whose body
+        # has ``error``: news for the operator, not a fault of the page (and browsers log every
+        # non-2xx response as a console error).
+        if isinstance(answer, PreviewError):
+            return web.json_response({"unit": unit, "error": answer.error, "field": answer.field})
+        body = msgspec.to_builtins(answer)
+        speed = self.model.speed_of(unit)
+        body["eta_s"], body["speed_mps"] = eta_s(answer.length, speed), speed
+        return web.json_response({"unit": unit, "preview": body})
 
     def _edit_refused(self, request: web.Request) -> web.Response | None:
         if not self.opts.allow_edit:
@@ -451,13 +290,7 @@ class MapServer:
         except InputError as exc:
             return web.json_response({"error": exc.reason, "field": exc.path}, status=400)
         loop = asyncio.get_running_loop()
-        if msg is None:
-            await loop.run_in_executor(None, self.session.delete, key)
-        else:
-            payload = encode(msg)
-            await loop.run_in_executor(
-                None, lambda: self.session.put(key, payload, encoding=zenoh_encoding())
-            )
+        await loop.run_in_executor(None, self.feed.send, key, msg)
         log.info("map: %s %s", "put" if msg is not None else "delete", key)
         return web.json_response({"ok": True, "key": key})
 
@@ -495,7 +328,7 @@ async def serve(
         with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):  # not the main thread
             loop.add_signal_handler(sig, stop.set)
     server = MapServer(session, opts)
-    server.declare()
+    server.feed.declare()
     runner = web.AppRunner(server.app(), handle_signals=False, access_log=None)
     await runner.setup()
     tasks: list[asyncio.Task[None]] = []
@@ -509,7 +342,7 @@ async def serve(
             ) from None
         host, port = runner.addresses[0][:2]
         shown = f"[{host}]" if ":" in host else host
-        answered = await loop.run_in_executor(None, server.ask_world)
+        answered = await loop.run_in_executor(None, server.feed.ask_world)
         notes = ["editing on" if opts.allow_edit else "read-only"]
         if answered:
             notes.append(f"world from {answered} planner{'s' if answered > 1 else ''}")
@@ -526,5 +359,5 @@ async def serve(
             with contextlib.suppress(asyncio.CancelledError):
                 await t
         await runner.cleanup()
-        server.undeclare()
+        server.feed.undeclare()
     return 0
