@@ -51,6 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--quick", action="store_true", help="only MAXITER 300 rows and a small scale grid (a smoke run)"
     )
     p.add_argument("--no-scale", action="store_true", help="skip the fleet-scale tick and log-log grid")
+    p.add_argument("--scale-only", action="store_true", help="only the fleet-scale tick and log-log grid")
 
 
 def table_threats(size: int, count: int) -> list[Any]:
@@ -374,11 +375,18 @@ def _opt(v: float | None) -> str:
 def run(args: argparse.Namespace) -> int:
     from pfp_service.core import kernels
 
+    machine = f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {kernels.numba.get_num_threads()}"
+    if args.scale_only:
+        scale = scale_table(args.repeat, args.quick)
+        if args.json:
+            print(json.dumps({"machine": machine, "scale": scale}, indent=2))
+        else:
+            _print_scale(scale)
+        return 0
     rows = run_rows(args.repeat, args.baseline_repeat, args.quick)
     path = natural_path_ms(args.repeat)
     fleet = fleet_ms(args.repeat)
     scale = None if args.no_scale else scale_table(args.repeat, args.quick)
-    machine = f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {kernels.numba.get_num_threads()}"
     checks = {
         "every row >= 1000x the paper": all(r.vs_paper >= TARGET_VS_PAPER for r in rows),
         "every row >= 50x the baseline": all(r.vs_baseline >= TARGET_VS_BASELINE for r in rows),

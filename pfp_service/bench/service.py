@@ -107,20 +107,36 @@ def layout(units: int, threats: int, seed: int) -> dict[str, Any]:
 
 # -- figures ---------------------------------------------------------------------------------
 def machine() -> dict[str, Any]:
+    """What ran: the machine, its load when the run began, the versions and the source tree."""
+    import subprocess
+    from importlib.metadata import PackageNotFoundError, version
+
     model = platform.processor() or "cpu"
     try:
         with open("/proc/cpuinfo") as f:
             model = next(ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name"))
     except (OSError, StopIteration):
         pass
-    import zenoh
-
+    try:
+        zenoh_version = version("eclipse-zenoh")
+    except PackageNotFoundError:
+        zenoh_version = "?"
+    try:
+        git = ["git", "-C", os.path.dirname(os.path.abspath(__file__))]
+        head = subprocess.run(
+            [*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
+        dirty = subprocess.run([*git, "status", "--porcelain", "-uno"], capture_output=True, text=True).stdout
+        tree = f"{head}{' + uncommitted changes' if dirty.strip() else ''}" if head else None
+    except OSError:
+        tree = None
     return {
         "arch": platform.machine(),
         "cpu": model,
         "cores": os.cpu_count(),
         "python": platform.python_version(),
-        "zenoh": getattr(zenoh, "__version__", "?"),
+        "zenoh": zenoh_version,
+        "tree": tree,
         "loadavg_at_start": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
 
@@ -260,7 +276,8 @@ def _f(v: float | None, fmt: str = ".2f") -> str:
 def _print(doc: dict[str, Any]) -> None:
     m, ld = doc["machine"], doc["load"]
     print(
-        f"pfp bench service on {m['arch']}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, load avg {m['loadavg_at_start']}"
+        f"pfp bench service on {m['arch']}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, zenoh {m['zenoh']}, "
+        f"tree {m['tree']}, load avg {[round(x, 1) for x in m['loadavg_at_start'] or []]}"
     )
     print(
         f"  {ld['units']} units x {ld['rate_hz']:g} Hz = {ld['offered_per_s']:g}/s offered, {ld['threats']} threats, escape {ld['escape']}; {ld['via']}"
