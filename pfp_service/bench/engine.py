@@ -377,11 +377,11 @@ def run(args: argparse.Namespace) -> int:
 
     machine = f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {kernels.numba.get_num_threads()}"
     if args.scale_only:
-        scale = scale_table(args.repeat, args.quick)
+        only = scale_table(args.repeat, args.quick)
         if args.json:
-            print(json.dumps({"machine": machine, "scale": scale}, indent=2))
+            print(json.dumps({"machine": machine, "scale": only}, indent=2))
         else:
-            _print_scale(scale)
+            _print_scale(only)
         return 0
     rows = run_rows(args.repeat, args.baseline_repeat, args.quick)
     path = natural_path_ms(args.repeat)
