@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from pfp_service.cli._common import positive_float
+from pfp_service.cli._common import add_session_args, positive_float, session_config
 
 MAX_PUSH_HZ = 10.0
 
@@ -46,18 +46,12 @@ def push_rate(text: str) -> float:
 
 def register(sub: Any) -> None:
     p = sub.add_parser("map", help="serve a live web map of the mission", description=__doc__)
-    p.add_argument(
-        "--connect",
-        action="append",
-        metavar="ENDPOINT",
-        help="router, repeatable (default: tcp/127.0.0.1:7447)",
-    )
+    add_session_args(p)
     p.add_argument(
         "--zenoh-config",
         metavar="JSON5",
-        help="client config to start from, e.g. one `pfp acl` wrote (credentials); --connect overrides its endpoints",
+        help="Zenoh client config to start from, e.g. one `pfp acl` wrote (its credentials); flags override it",
     )
-    p.add_argument("--mission", default="default", help="mission name, the {mission} key chunk")
     p.add_argument(
         "--http",
         type=http_address,
@@ -92,35 +86,24 @@ def register(sub: Any) -> None:
 def _zenoh_config(args: argparse.Namespace) -> Any:
     import json
 
-    import zenoh
-
-    from pfp_service.errors import InputError
-    from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
+    from pfp_service.service.config import DEFAULT_CONNECT, build_zenoh_config
 
     if args.zenoh_config is None:
-        return client_zenoh_config(args.connect)
-    try:
-        conf = zenoh.Config.from_file(args.zenoh_config)
-        if args.connect:
-            conf.insert_json5("connect/endpoints", json.dumps(list(args.connect)))
-        elif conf.get_json("connect/endpoints") in ("[]", "null", None):
-            conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
-        conf.insert_json5("mode", '"client"')
-        conf.insert_json5("scouting/multicast/enabled", "false")
-    except Exception as exc:  # zenoh's own error type: one line at the edge
-        raise InputError("--zenoh-config", f"{args.zenoh_config}: {exc}") from None
+        return session_config(args)
+    conf = build_zenoh_config(
+        mode=args.mode, listen=args.listen, connect=args.connect, file=args.zenoh_config
+    )
+    if conf.get_json("connect/endpoints") in ("[]", "null"):  # neither the file nor a flag says where
+        conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
     return conf
 
 
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
-    import zenoh
-
+    from pfp_clients.common import open_session
     from pfp_service.errors import InputError
-    from pfp_service.wire import keys
 
-    keys.check_chunk(args.mission, "--mission")
     if args.tiles is not None and args.origin is None:
         raise InputError("--tiles", "tiles need --origin: without one the map is drawn in plain metres")
     try:
@@ -139,12 +122,5 @@ def run(args: argparse.Namespace) -> int:
         tiles=args.tiles,
     )
     conf = _zenoh_config(args)
-    try:
-        session = zenoh.open(conf)
-    except Exception as exc:  # zenoh's own error type: one line at the edge
-        where = ", ".join(args.connect or ["the configured endpoints"])
-        raise InputError("--connect", f"cannot reach {where}: {exc}") from None
-    try:
+    with open_session(conf) as session:
         return asyncio.run(serve(session, opts))
-    finally:
-        session.close()
