@@ -96,6 +96,7 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
     "error_reply": m.decode_error_reply,
     "planner_status": m.decode_planner_status,
     "world_snapshot": m.decode_world_snapshot,
+    "mission": m.decode_mission,
     "event": m.decode_event,
 }
 
@@ -164,6 +165,12 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     ),
     "ThreatSummary": ({"id", "threat"}, {"ttl_s"}),
     "WorldSnapshot": ({"planner", "mission"}, {"units", "threats", "units_total", "threats_total"}),
+    # added with scale-out
+    "Mission": ({"goal", "origin", "params"}, {"planner"}),
+    "MissionParams": (
+        {"delta", "step", "max_iter", "tolerance", "intensity", "escape", "trap_window", "progress_window"},
+        {"seed"},
+    ),
     "PlanResult": (
         {"status", "reason", "steps", "length", "exposure", "peak_threat", "min_clearance"}
         | {"final_distance", "path", "compute_ms", "params"},

@@ -163,6 +163,22 @@ BUILT: dict[str, list[dict[str, Any]]] = {
         {"kind": "forgotten", "unit": "ugv-7", "stale_s": 600},
     ],
     "preview_reply": [],  # only planners build these; the example stands in
+    "mission": [
+        {
+            "goal": {"position": [10, 10]},
+            "origin": [0, 0],
+            "params": {
+                "delta": 1.0,
+                "step": 0.1,
+                "max_iter": 1000,
+                "tolerance": 0.075,
+                "intensity": "peak",
+                "escape": "auto",
+                "trap_window": 20,
+                "progress_window": 200,
+            },
+        }
+    ],
     "world_snapshot": [
         {"planner": "p-1", "mission": MISSION},
         {

@@ -22,6 +22,7 @@ BUILDERS = {
     KeyKind.UNIT_STATE: (keys.unit_state, keys.unit_states, "mumt/m1/unit/u1/state"),
     KeyKind.UNIT_GOAL: (keys.unit_goal, keys.goals, "mumt/m1/unit/u1/goal"),
     KeyKind.UNIT_DIRECTION: (keys.unit_direction, keys.unit_directions, "mumt/m1/unit/u1/direction"),
+    KeyKind.UNIT_MISSION: (keys.unit_mission, keys.unit_missions, "mumt/m1/unit/u1/mission"),
     KeyKind.THREAT: (keys.threat, keys.threats, "mumt/m1/threat/u1"),
     KeyKind.PREVIEW: (keys.preview, keys.previews, "mumt/m1/preview/u1"),
     KeyKind.PLANNER_STATUS: (keys.planner_status, keys.planner_statuses, "mumt/m1/planner/u1/status"),

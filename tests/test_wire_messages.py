@@ -241,6 +241,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "lookahead": ("points", DEF),
         "reason": ("text", DEF),
         "deliberating": ("bool", DEF),
+        "planner": ("id", OPT),
         "true_bearing_deg": ("angle", OPT),
         "lookahead_geo": ("latlons", DEF),
     },
@@ -261,6 +262,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
                 "rejected",
                 "deliberating",
                 "overload",
+                "units_owned",
                 "pushes",
                 "pushes_resent",
             )

@@ -171,6 +171,7 @@ def test_stale_units_are_forgotten_with_an_event_and_their_memory():
         "deliberating": 0,
         "overload": 0,
         "rejected": 0,
+        "units_owned": 0,
         "pushes": 0,
         "pushes_resent": 0,
     }

@@ -124,6 +124,13 @@ def register(sub: Any) -> None:
         help="previews in flight at most; more are refused as busy (default: 256)",
     )
     p.add_argument(
+        "--cluster",
+        action="store_const",
+        const=True,
+        help="share the mission with other planners started with --cluster: each guides the units "
+        "rendezvous hashing gives it, and takes over a failed planner's units (default: off)",
+    )
+    p.add_argument(
         "--state-dir",
         metavar="DIR",
         help="durable state (threats, goals, missions) in SQLite; 'none' turns it off "
@@ -171,6 +178,7 @@ _FLAG_KEYS = [
     "preview_workers",
     "preview_queue",
     "state_dir",
+    "cluster",
 ]
 
 

@@ -89,6 +89,8 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     # durable state: "auto" is a per-mission directory under the user's state directory
     # (resolved by load_config), "none" turns it off
     state_dir: str = "auto"
+    # scale-out: several planners share the mission, each guiding the units rendezvous hashing gives it
+    cluster: bool = False
 
     def __post_init__(self) -> None:
         if not 0 <= self.lookahead <= 100:

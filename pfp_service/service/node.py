@@ -27,6 +27,7 @@ import msgspec
 import zenoh
 
 from pfp_service import __version__, geojson
+from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
 from pfp_service.service.config import ServeConfig
 from pfp_service.service.log import get_logger
@@ -39,6 +40,8 @@ from pfp_service.service.world import (
     Input,
     InputRejected,
     Job,
+    MissionRestored,
+    MissionShared,
     PeerPlanner,
     StateReported,
     ThreatPut,
@@ -47,6 +50,7 @@ from pfp_service.service.world import (
     TokenChanged,
     World,
     WorldSettings,
+    mission_message,
 )
 from pfp_service.wire import (
     ErrorReply,
@@ -56,12 +60,15 @@ from pfp_service.wire import (
     RejectedEvent,
     RestoredEvent,
     decode_goal,
+    decode_mission,
     decode_preview_request,
     decode_threat,
     decode_unit_state,
+    decode_world_snapshot,
     encode,
     keys,
 )
+from pfp_service.wire.messages import Goal
 
 __all__ = ["PlannerNode"]
 
@@ -89,6 +96,7 @@ def world_settings(cfg: ServeConfig) -> WorldSettings:
         max_units=cfg.max_units,
         max_threats=cfg.max_threats,
         origin=cfg.origin,
+        cluster=cfg.cluster,
     )
 
 
@@ -216,8 +224,11 @@ class PlannerNode:
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
             s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
             s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
-            s.liveliness().declare_token(keys.alive_planner(m, p)),
         ]
+        if self.cfg.cluster:
+            self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
+        self._join(s)
+        self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
             ev = RestoredEvent(
                 planner=p,
@@ -297,6 +308,49 @@ class PlannerNode:
             return
         self._push(TokenChanged(uid, sample.kind == zenoh.SampleKind.PUT))
 
+    def _join(self, s: zenoh.Session) -> None:
+        """What the planners already serving this mission hold: threats, goals and missions, applied at once.
+
+        A planner started after threats and goals were published then guides
+        correctly from its first direction.  No reply (a lone planner) costs ~1 ms.
+        """
+        inputs: list[Input] = []
+        for reply in s.get(keys.worlds(self.cfg.mission), timeout=2.0):
+            if reply.ok is None:
+                continue
+            try:
+                snap = decode_world_snapshot(reply.ok.payload.to_bytes())
+            except InputError:
+                continue
+            if snap.planner == self.cfg.planner_id:
+                continue
+            for t in snap.threats:
+                update = (
+                    t.threat
+                    if t.ttl_s is None
+                    else msgspec.structs.replace(t.threat, ttl_s=max(t.ttl_s, 1e-3))
+                )
+                inputs.append(ThreatPut(t.id, update))
+            for u in snap.units:
+                if u.mission is not None:
+                    params = Resolved(**msgspec.structs.asdict(u.mission.params))  # type: ignore[arg-type]
+                    inputs.append(MissionRestored(u.id, u.mission.goal, tuple(u.mission.origin), params))  # type: ignore[arg-type]
+                elif u.goal is not None:
+                    inputs.append(GoalSet(u.id, Goal(position=u.goal)))
+        if inputs:
+            self.world.apply(inputs, self.clock())
+            log.info("joined the mission's planners", extra={"fields": {"inputs": len(inputs)}})
+        if self.cfg.cluster:  # let the liveliness history name the peers before the first direction
+            time.sleep(0.3)
+
+    def _on_mission(self, sample: zenoh.Sample) -> None:
+        try:
+            uid = keys.parse(str(sample.key_expr)).id
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._push(MissionShared(uid, decode_mission(sample.payload.to_bytes())))
+        except InputError as err:
+            self._push(InputRejected(str(sample.key_expr), err))
+
     def _on_planner(self, sample: zenoh.Sample) -> None:
         try:
             pid = keys.parse(str(sample.key_expr)).id
@@ -339,6 +393,12 @@ class PlannerNode:
             self._put(keys.unit_direction(self.cfg.mission, d.unit), encode(d), direction=True)
         for ev in out.events:
             self._event(ev)
+        if self.cfg.cluster:
+            for rec in out.missions:
+                self._put(
+                    keys.unit_mission(self.cfg.mission, rec.unit),
+                    encode(mission_message(rec, self.cfg.planner_id)),
+                )
         for job in out.jobs:
             self._deliberators.submit(self._deliberate, job)
         done = self.clock()
@@ -450,10 +510,14 @@ class PlannerNode:
             key = str(query.key_expr)
             answer = _Answer(query, t_recv + self.cfg.preview_budget_ms / 1e3)
             try:
-                view = self.world.view(keys.parse(key).id)
+                uid = keys.parse(key).id
             except InputError as err:
                 answer.error(ErrorReply.of(err))
                 return
+            if not self.world.owns(uid):  # scale-out: the unit's owner answers, once; what-ifs too
+                query.drop()
+                return
+            view = self.world.view(uid)
             self._pending[id(answer)] = answer
             heapq.heappush(self._deadlines, (answer.deadline, id(answer), answer))
             payload = query.payload.to_bytes() if query.payload is not None else b""
@@ -504,6 +568,7 @@ class PlannerNode:
             latency_p50_ms=p50,
             latency_p99_ms=p99,
             deliberating=c["deliberating"],
+            units_owned=c["units_owned"],
             overload=c["overload"] + self.counters["overload"],
             pushes=c["pushes"],
             pushes_resent=c["pushes_resent"],

@@ -28,6 +28,7 @@ heap, so a tick costs O(what is due), never a scan of every unit.
 from __future__ import annotations
 
 import copy
+import hashlib
 import heapq
 import math
 import zlib
@@ -52,6 +53,8 @@ from pfp_service.wire import (
     Event,
     ForgottenEvent,
     Goal,
+    Mission,
+    MissionParams,
     RejectedEvent,
     ReplanEvent,
     StaleEvent,
@@ -76,6 +79,7 @@ __all__ = [
     "Job",
     "MissionRecord",
     "MissionRestored",
+    "MissionShared",
     "Outputs",
     "PeerPlanner",
     "StateReported",
@@ -86,6 +90,7 @@ __all__ = [
     "UnitView",
     "World",
     "WorldSettings",
+    "mission_message",
     "unit_key",
 ]
 
@@ -173,6 +178,14 @@ class MissionRestored:
 
 
 @dataclass(frozen=True, slots=True)
+class MissionShared:
+    """Another planner fixed a unit's mission (``unit/{u}/mission``): kept for when this one takes it over."""
+
+    unit: str
+    mission: Mission
+
+
+@dataclass(frozen=True, slots=True)
 class PeerPlanner:
     """Another planner's liveliness token on this mission appeared (``alive``) or went."""
 
@@ -197,6 +210,7 @@ Input = Union[  # noqa: UP007
     InputRejected,
     Deliberated,
     MissionRestored,
+    MissionShared,
     PeerPlanner,
     Tick,
 ]
@@ -320,6 +334,8 @@ class _Unit:
     job: Job | None = None
     push: Direction | None = None  # the last push, until a report is answered
     push_tries: int = 0
+    owned: bool = True  # this planner guides it (scale-out: rendezvous over the live planners)
+    shared: tuple[Goal, tuple[float, float], Resolved] | None = None  # a mission another planner fixed
 
     def token(self) -> tuple[int, int]:
         return (self.epoch, self.stepper.version if self.stepper is not None else -1)
@@ -373,6 +389,7 @@ class World:
             "deliberating": self._deliberating,
             "overload": self.overload,
             "rejected": self.rejected,
+            "units_owned": sum(1 for r in self._units.values() if r.owned),
             "pushes": self.pushes,
             "pushes_resent": self.pushes_resent,
         }
@@ -405,6 +422,7 @@ class World:
                     stale=r.stale,
                     deliberating=r.job is not None,
                     reason=r.last_reason[:1024],
+                    mission=_mission(r.shared, self.settings.planner_id if r.owned else None),
                 )
             )
         threats = []
@@ -453,8 +471,10 @@ class World:
                     self._deliberated(inp, dirty)
                 case MissionRestored():
                     self._restore(inp, now, out)
+                case MissionShared(unit, mission):
+                    self._shared(unit, mission, now, out)
                 case PeerPlanner(planner, alive):
-                    self._peer(planner, alive, out)
+                    self._peer(planner, alive, now, dirty, out)
                 case Tick(t):
                     self._run_timers(t, changes, out)
         if changes:
@@ -491,6 +511,7 @@ class World:
                 )
                 return None
             rec = self._units[unit_id] = _Unit(unit_id, unit_key(unit_id))
+            rec.owned = self.owns(unit_id)
         return rec
 
     def _state(self, unit_id: str, msg: UnitState, now: float, dirty: set[str], out: Outputs) -> None:
@@ -510,6 +531,8 @@ class World:
         if not rec.silence_timer:
             rec.silence_timer = True
             self._timer(now + self.settings.unit_stale_s, "silence", unit_id)
+        if not rec.owned:  # another planner guides it; its report keeps it fresh here too
+            return
         if rec.goal is not None and rec.stepper is None:
             self._start(rec, out)
         dirty.add(unit_id)
@@ -518,9 +541,12 @@ class World:
         rec = self._unit(unit_id, now, out, keys.unit_goal(self.settings.mission, unit_id))
         if rec is None:
             return
+        # a peer's mission for this very goal may have come first: keep it for a takeover
+        keep = rec.shared if not rec.owned and rec.shared is not None and rec.shared[0] == goal else None
         self._drop_mission(rec)
         rec.goal = goal
-        if rec.position is not None:
+        rec.shared = keep
+        if rec.position is not None and rec.owned:
             self._start(rec, out)
             if not rec.stale:
                 dirty.add(unit_id)
@@ -531,25 +557,67 @@ class World:
             return
         self._drop_mission(rec)
         rec.goal = m.goal
-        rec.origin = m.origin
-        goal = (m.goal.position[0], m.goal.position[1])
-        rec.stepper = Stepper(m.origin, goal, m.params, self.settings.bounds, rec.key)
-        rec.stepper.defer = self.settings.deliberation == "deferred"
+        rec.shared = (m.goal, m.origin, m.params)
+        if rec.owned:
+            self._start(rec, out, record=False)
 
-    def _peer(self, planner: str, alive: bool, out: Outputs) -> None:
+    def _peer(self, planner: str, alive: bool, now: float, dirty: set[str], out: Outputs) -> None:
         if planner == self.settings.planner_id:
             return
         if not alive:
-            self._peers.discard(planner)
+            if planner in self._peers:
+                self._peers.discard(planner)
+                self._rebalance(now, dirty, out)
             return
         if planner in self._peers:
             return
         self._peers.add(planner)
-        if not self.settings.cluster:
+        if self.settings.cluster:
+            self._rebalance(now, dirty, out)
+        else:
             reason = (
                 f"planner {planner!r} also serves mission {self.settings.mission!r}; both answer every unit"
             )
             out.events.append(ConflictEvent(planner=self.settings.planner_id, other=planner, reason=reason))
+
+    # -- scale-out -------------------------------------------------------------------
+    def owns(self, unit_id: str) -> bool:
+        """Whether this planner guides ``unit_id``: rendezvous hashing of unit x planner, highest wins.
+
+        Without ``cluster`` it owns every unit.  A planner joining takes about
+        1/K of each planner's units; one leaving hands over only its own.
+        """
+        if not self.settings.cluster or not self._peers:
+            return True
+        me = self.settings.planner_id
+        best = max((*self._peers, me), key=lambda p: (_weight(unit_id, p), p))
+        return best == me
+
+    def _rebalance(self, now: float, dirty: set[str], out: Outputs) -> None:
+        if not self.settings.cluster:
+            return
+        for rec in self._units.values():
+            owned = self.owns(rec.id)
+            if owned == rec.owned:
+                continue
+            rec.owned = owned
+            if owned:  # taken over: guided from the mission its last owner fixed, told at once
+                if rec.goal is not None and rec.position is not None:
+                    self._start(rec, out)
+                if rec.position is not None and not rec.stale:
+                    dirty.add(rec.id)
+            else:  # handed over: the new owner guides it now
+                self._supersede(rec)
+                rec.stepper = None
+                rec.push = None
+                rec.last_status = None
+
+    def _shared(self, unit_id: str, mission: Mission, now: float, out: Outputs) -> None:
+        rec = self._unit(unit_id, now, out, keys.unit_mission(self.settings.mission, unit_id))
+        if rec is None or rec.owned:
+            return  # our own missions come back to us too: ours stands
+        params = Resolved(**msgspec.structs.asdict(mission.params))  # type: ignore[arg-type]
+        rec.shared = (mission.goal, (mission.origin[0], mission.origin[1]), params)
 
     def _cancel(self, unit_id: str, dirty: set[str]) -> None:
         rec = self._units.get(unit_id)
@@ -567,6 +635,7 @@ class World:
         rec.last_reason = ""
         rec.last_distance = None
         rec.last_vector = None
+        rec.shared = None
         rec.epoch += 1
         self._supersede(rec)
 
@@ -713,15 +782,28 @@ class World:
         out.events.append(ForgottenEvent(planner=self.settings.planner_id, unit=rec.id, stale_s=stale_s))
 
     # -- planning -------------------------------------------------------------------
-    def _start(self, rec: _Unit, out: Outputs) -> None:
-        assert rec.goal is not None and rec.position is not None
-        rec.origin = rec.position
+    def _start(self, rec: _Unit, out: Outputs, record: bool = True) -> None:
+        """Fix the unit's mission (x0 and parameters) and give it a stepper.
+
+        A mission restored or shared for this very goal is kept, so a restart or
+        a takeover guides the unit exactly as before; otherwise x0 is where the
+        unit is now.
+        """
+        assert rec.goal is not None
         goal = (rec.goal.position[0], rec.goal.position[1])
-        fld = self.field  # builds the stats with it
-        resolved = resolve(self.settings.params_for(rec.goal), rec.origin, goal, fld.threats, self._stats)
-        rec.stepper = Stepper(rec.origin, goal, resolved, self.settings.bounds, rec.key)
+        if rec.shared is not None and rec.shared[0] == rec.goal:
+            origin, resolved = rec.shared[1], rec.shared[2]
+        else:
+            assert rec.position is not None
+            origin = rec.position
+            fld = self.field  # builds the stats with it
+            resolved = resolve(self.settings.params_for(rec.goal), origin, goal, fld.threats, self._stats)
+            rec.shared = (rec.goal, origin, resolved)
+        rec.origin = origin
+        rec.stepper = Stepper(origin, goal, resolved, self.settings.bounds, rec.key)
         rec.stepper.defer = self.settings.deliberation == "deferred"
-        out.missions.append(MissionRecord(rec.id, rec.epoch, rec.origin, rec.goal, resolved))
+        if record:
+            out.missions.append(MissionRecord(rec.id, rec.epoch, origin, rec.goal, resolved))
 
     def _supersede(self, rec: _Unit) -> None:
         if rec.job is not None:
@@ -768,12 +850,18 @@ class World:
         guided: list[_Unit] = []
         for uid in sorted(unit_ids):
             rec = self._units.get(uid)
-            if rec is None or rec.stale or rec.position is None:
+            if rec is None or rec.stale or rec.position is None or not rec.owned:
                 continue
             if rec.stepper is None:
                 rec.last_status = DirectionStatus.NO_GOAL
                 out.directions.append(
-                    Direction(unit=uid, seq=rec.seq, status=DirectionStatus.NO_GOAL, vector=(0.0, 0.0))
+                    Direction(
+                        unit=uid,
+                        seq=rec.seq,
+                        status=DirectionStatus.NO_GOAL,
+                        vector=(0.0, 0.0),
+                        planner=self.settings.planner_id,
+                    )
                 )
             else:
                 guided.append(rec)
@@ -846,6 +934,7 @@ class World:
             lookahead=points,
             reason=adv.reason[:1024],
             deliberating=adv.deliberating or rec.job is not None,
+            planner=self.settings.planner_id,
         )
         return with_geodetic(d, self.settings.origin, rec.position) if self.settings.origin is not None else d
 
@@ -860,3 +949,27 @@ class World:
             out.events.append(
                 TrappedEvent(planner=p, unit=rec.id, position=rec.position, reason=adv.reason[:1024])
             )
+
+
+def _weight(unit_id: str, planner: str) -> int:
+    """The rendezvous weight of a unit on a planner: stable across processes and restarts."""
+    digest = hashlib.blake2b(f"{unit_id}\0{planner}".encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "big")
+
+
+def _mission(
+    shared: tuple[Goal, tuple[float, float], Resolved] | None, planner: str | None
+) -> Mission | None:
+    """A unit's fixed mission on the wire (``None`` until it is fixed)."""
+    if shared is None:
+        return None
+    goal, origin, params = shared
+    wire = MissionParams(**{k: getattr(params, k) for k in MissionParams.__struct_fields__})
+    return Mission(goal=goal, origin=origin, params=wire, planner=planner)
+
+
+def mission_message(record: MissionRecord, planner: str) -> Mission:
+    """What the node publishes on ``unit/{u}/mission`` for a record of ``Outputs.missions``."""
+    m = _mission((record.goal, record.origin, record.params), planner)
+    assert m is not None
+    return m

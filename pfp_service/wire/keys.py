@@ -5,6 +5,7 @@ No other module spells a topic string.  The layout (one mission per prefix):
     mumt/{m}/unit/{u}/state        unit -> planner      UnitState
     mumt/{m}/unit/{u}/goal         any -> planner       Goal (DELETE cancels)
     mumt/{m}/unit/{u}/direction    planner -> unit      Direction
+    mumt/{m}/unit/{u}/mission      planner -> planners  Mission (x0 and parameters, for failover)
     mumt/{m}/threat/{t}            any -> planner       ThreatUpdate (DELETE removes)
     mumt/{m}/preview/{u}           queryable            PreviewRequest -> PlanResult
     mumt/{m}/planner/{p}/status    queryable            -> PlannerStatus
@@ -55,6 +56,8 @@ __all__ = [
     "unit_direction",
     "unit_directions",
     "unit_goal",
+    "unit_mission",
+    "unit_missions",
     "unit_state",
     "unit_states",
     "world",
@@ -76,6 +79,7 @@ class KeyKind(StrEnum):
     UNIT_STATE = "unit_state"
     UNIT_GOAL = "unit_goal"
     UNIT_DIRECTION = "unit_direction"
+    UNIT_MISSION = "unit_mission"
     THREAT = "threat"
     PREVIEW = "preview"
     PLANNER_STATUS = "planner_status"
@@ -91,6 +95,7 @@ TEMPLATES: dict[KeyKind, str] = {
     KeyKind.UNIT_STATE: PREFIX + "/{mission}/unit/{id}/state",
     KeyKind.UNIT_GOAL: PREFIX + "/{mission}/unit/{id}/goal",
     KeyKind.UNIT_DIRECTION: PREFIX + "/{mission}/unit/{id}/direction",
+    KeyKind.UNIT_MISSION: PREFIX + "/{mission}/unit/{id}/mission",
     KeyKind.THREAT: PREFIX + "/{mission}/threat/{id}",
     KeyKind.PREVIEW: PREFIX + "/{mission}/preview/{id}",
     KeyKind.PLANNER_STATUS: PREFIX + "/{mission}/planner/{id}/status",
@@ -105,6 +110,7 @@ ID_NAMES: dict[KeyKind, str] = {
     KeyKind.UNIT_STATE: "unit",
     KeyKind.UNIT_GOAL: "unit",
     KeyKind.UNIT_DIRECTION: "unit",
+    KeyKind.UNIT_MISSION: "unit",
     KeyKind.THREAT: "threat",
     KeyKind.PREVIEW: "unit",
     KeyKind.PLANNER_STATUS: "planner",
@@ -179,6 +185,11 @@ def unit_direction(mission: str, unit: str) -> str:
     return _build(KeyKind.UNIT_DIRECTION, mission, unit, "unit")
 
 
+def unit_mission(mission: str, unit: str) -> str:
+    """``mumt/{mission}/unit/{unit}/mission``: a unit's fixed mission (planner -> planners)."""
+    return _build(KeyKind.UNIT_MISSION, mission, unit, "unit")
+
+
 def threat(mission: str, threat_id: str) -> str:
     """``mumt/{mission}/threat/{threat_id}``: a threat; DELETE removes it."""
     return _build(KeyKind.THREAT, mission, threat_id, "threat")
@@ -228,6 +239,11 @@ def goals(mission: str) -> str:
 def unit_directions(mission: str) -> str:
     """``mumt/{mission}/unit/*/direction``."""
     return _wild(KeyKind.UNIT_DIRECTION, mission)
+
+
+def unit_missions(mission: str) -> str:
+    """``mumt/{mission}/unit/*/mission``."""
+    return _wild(KeyKind.UNIT_MISSION, mission)
 
 
 def threats(mission: str) -> str:

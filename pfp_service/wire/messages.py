@@ -59,6 +59,8 @@ __all__ = [
     "Event",
     "ForgottenEvent",
     "Goal",
+    "Mission",
+    "MissionParams",
     "LatLon",
     "Origin",
     "PlannerStatus",
@@ -82,6 +84,7 @@ __all__ = [
     "decode_error_reply",
     "decode_event",
     "decode_goal",
+    "decode_mission",
     "decode_plan_result",
     "decode_planner_status",
     "decode_preview_request",
@@ -285,6 +288,7 @@ class Direction(_Message, frozen=True, kw_only=True):
         lookahead_geo: ``lookahead`` as ``[{"lat", "lon"}, ...]`` when the mission has an origin.
         deliberating: a route for this unit is being computed off the planning
             loop; until it is adopted the vector is plain steepest descent.
+        planner: the planner that computed it (several may share a mission).
     """
 
     unit: Id
@@ -297,6 +301,7 @@ class Direction(_Message, frozen=True, kw_only=True):
     lookahead: Annotated[list[Point], Meta(max_length=MAX_LOOKAHEAD)] = []
     reason: Text = ""
     deliberating: bool = False
+    planner: Id | None = None
     true_bearing_deg: Angle | None = None
     lookahead_geo: Annotated[list[LatLon], Meta(max_length=MAX_LOOKAHEAD)] = []
 
@@ -329,6 +334,7 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     latency_p99_ms: NonNegative | None = None
     deliberating: Count = 0
     overload: Count = 0
+    units_owned: Count = 0  # units this planner guides (all of them unless several share the mission)
     pushes: Count = 0  # directions sent without a report asking (world changes, routes landing)
     pushes_resent: Count = 0  # ... sent again, because no report has been answered since
 
@@ -451,6 +457,34 @@ EVENT_KINDS: tuple[str, ...] = (
 )
 
 
+# -- shared between planners -----------------------------------------------------
+class MissionParams(_Message, frozen=True, kw_only=True):
+    """The planner parameters resolved for one unit's goal (``core.params.Resolved``)."""
+
+    delta: Positive
+    step: Positive
+    max_iter: Iterations
+    tolerance: Positive
+    intensity: Annotated[str, Meta(pattern="^(peak|density)$")]
+    escape: Annotated[str, Meta(pattern="^[a-z]{1,16}$")]
+    trap_window: Annotated[int, Meta(ge=2, le=1_000_000)]
+    progress_window: Annotated[int, Meta(ge=2, le=10_000_000)]
+    seed: Annotated[int, Meta(ge=0, le=2**63 - 1)] = 0
+
+
+class Mission(_Message, frozen=True, kw_only=True):
+    """A unit's mission as fixed by its planner: published on ``mumt/{m}/unit/{u}/mission``.
+
+    Planners that share a mission keep it, so whichever owns the unit next
+    guides it from the same ``x0`` and parameters.
+    """
+
+    goal: Goal
+    origin: Point
+    params: MissionParams
+    planner: Id | None = None
+
+
 # -- the world queryable ---------------------------------------------------------
 class UnitSummary(_Message, frozen=True, kw_only=True):
     """One unit as the planner holds it (``WorldSnapshot.units``)."""
@@ -465,6 +499,7 @@ class UnitSummary(_Message, frozen=True, kw_only=True):
     stale: bool = False
     deliberating: bool = False
     reason: Text = ""
+    mission: Mission | None = None  # its full goal, x0 and parameters, once fixed
 
 
 class ThreatSummary(_Message, frozen=True, kw_only=True):
@@ -504,6 +539,7 @@ _DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
         PlannerStatus,
         AnyEvent,
         WorldSnapshot,
+        Mission,
     )
 }
 M = TypeVar("M")
@@ -693,6 +729,11 @@ def decode_direction(data: bytes | bytearray | memoryview | None) -> Direction:
 def decode_planner_status(data: bytes | bytearray | memoryview | None) -> PlannerStatus:
     """A ``PlannerStatus`` status-query reply."""
     return decode(PlannerStatus, data)
+
+
+def decode_mission(data: bytes | bytearray | memoryview | None) -> Mission:
+    """A ``Mission`` another planner published."""
+    return decode(Mission, data)
 
 
 def decode_world_snapshot(data: bytes | bytearray | memoryview | None) -> WorldSnapshot:

@@ -65,6 +65,15 @@ MESSAGES: tuple[MessageSpec, ...] = (
     ),
     MessageSpec("direction", m.Direction, KeyKind.UNIT_DIRECTION, "put", "planner", "unit"),
     MessageSpec(
+        "mission",
+        m.Mission,
+        KeyKind.UNIT_MISSION,
+        "put",
+        "planner",
+        "planner",
+        "a unit's x0 and resolved parameters, so another planner can take it over",
+    ),
+    MessageSpec(
         "preview_request",
         m.PreviewRequest,
         KeyKind.PREVIEW,
@@ -214,6 +223,26 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                     rejected=3,
                     latency_p50_ms=0.21,
                     latency_p99_ms=0.9,
+                ),
+            )
+        ],
+        "mission": [
+            (
+                "mission",
+                m.Mission(
+                    goal=m.Goal(position=(100.0, 50.0)),
+                    origin=(0.0, 0.0),
+                    params=m.MissionParams(
+                        delta=1.2,
+                        step=0.75,
+                        max_iter=1200,
+                        tolerance=0.5625,
+                        intensity="peak",
+                        escape="auto",
+                        trap_window=20,
+                        progress_window=200,
+                    ),
+                    planner="planner-1",
                 ),
             )
         ],
