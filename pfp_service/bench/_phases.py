@@ -80,6 +80,9 @@ def metered(g: LoadGen, srv: Server) -> Iterator[dict[str, Any]]:
         out["server_overload"] = st1.get("overload", 0)
         out["server_deliberating"] = st1.get("deliberating", 0)
         out["server_latency_p99_ms"] = st1.get("latency_p99_ms")
+        for k in ("pushes", "pushes_resent"):  # planners that count their pushes
+            if k in st1 and k in st0:
+                out[f"server_{k}"] = st1[k] - st0[k]
 
 
 # -- phases ----------------------------------------------------------------------------------
@@ -250,9 +253,12 @@ def fanout(g: LoadGen, srv: Server, n: int, bar: Bar) -> dict[str, Any]:
                     affected = len(doc.get("units", [])) + int(doc.get("more_units", 0))
             if affected is not None and len(first) >= affected:
                 break
-        g.settle(0.3, 2.0)
+        g.settle(0.6, 3.0)  # past the planner's re-sends of the pushes not yet answered
     task(0.2)
     pushes = g.recv[mark:]
+    for r in pushes:  # the units are quiet: every direction since the put is a push, re-sends too
+        if r.unit in ids:
+            first.setdefault(r.unit, r.t)
     events = len(g.events) - ev_mark
     watch = _Deliberation(g, ids, mark)
     watch.scan()
@@ -275,8 +281,10 @@ def fanout(g: LoadGen, srv: Server, n: int, bar: Bar) -> dict[str, Any]:
         "all_redirected_ms": 1e3 * told[-1] if complete else None,
         "redirected_p50_ms": 1e3 * told[len(told) // 2] if told else None,
         **watch.figures(t_put),
-        "pushes_sent": None if sent is None else sent - events,
+        "pushes_sent": None if sent is None else sent - events,  # every copy, re-sends included
         "pushes_delivered": len(pushes),
+        "pushes_first_copies": wave.get("server_pushes"),
+        "pushes_resent": wave.get("server_pushes_resent"),
         "events_received": events,
         **wave,
     }
