@@ -15,6 +15,7 @@ import re
 import shlex
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -277,4 +278,38 @@ def test_the_compose_deployment_runs_as_processes(tmp_path):
         planner.terminate()
         planner.wait(timeout=20)
         log.close()
+        router.close()
+
+
+@pytest.mark.parametrize("name", ["zenoh-router.json5", "zenoh-router-mtls.json5"])
+def test_the_shipped_router_config_itself_denies_a_spoof(name, secrets_volume):
+    """docker/'s file as shipped (only /etc/pfp -> the secrets the one-shots wrote, and a free port)."""
+    from tests.zenoh_util import Inbox, free_port, put_json
+
+    tls = "mtls" in name
+    port = free_port()
+    text = (DOCKER / name).read_text().replace(SECRETS, str(secrets_volume))
+    conf = zenoh.Config.from_json5(text)
+    conf.insert_json5("listen/endpoints", json.dumps([f"{'tls' if tls else 'tcp'}/127.0.0.1:{port}"]))
+    router = zenoh.open(conf)
+
+    def as_(who: str) -> zenoh.Session:
+        path = secrets_volume / "clients" / f"{who}{'-tls' if tls else ''}.json5"
+        c = zenoh.Config.from_json5(path.read_text().replace(SECRETS, str(secrets_volume)))
+        c.insert_json5("connect/endpoints", json.dumps([f"{'tls' if tls else 'tcp'}/127.0.0.1:{port}"]))
+        return zenoh.open(c)
+
+    sessions = [as_("planner"), as_("unit-m1"), as_("unit-m2")]
+    try:
+        planner, m1, m2 = sessions
+        inbox = Inbox(planner, "mumt/default/unit/*/state")
+        time.sleep(0.3)  # the subscription reaches the router
+        put_json(m2, "mumt/default/unit/m1/state", {"position": [9, 9], "seq": 666})
+        put_json(m1, "mumt/default/unit/m1/state", {"position": [1, 1], "seq": 1})
+        assert inbox.get()["seq"] == 1
+        with pytest.raises(TimeoutError):
+            inbox.get(timeout=0.6)
+    finally:
+        for s in sessions:
+            s.close()
         router.close()
