@@ -95,6 +95,7 @@ def test_the_map_as_injector_sees_the_unit_and_edits_through_the_acl(acl):
             while "planner" not in _state(url)["status"]:  # the planners' status: an observer may ask
                 assert time.monotonic() < deadline
                 time.sleep(0.2)
+            assert "x1" in _state(url)["threats"]  # an observer asks the planner's world at start
             t2 = {"position": [7, 7], "sigma_range": 1, "sigma_lateral": 1}
             assert _http("PUT", url + "api/threat/x2", t2, EDIT)[0] == 200  # a put is fire-and-forget
             with pytest.raises(TimeoutError):
