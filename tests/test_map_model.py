@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pfp_clients.map.geometry import CORE_FRACTION, ZONE_FRACTION, outline, peak_point
 from pfp_clients.map.model import (
+    MAX_REJECTED_GROUPS,
     AliveSeen,
     DirectionSeen,
     EventSeen,
@@ -228,6 +229,19 @@ def test_rejections_are_aggregated_per_key_kind_field_and_reason():
     m.apply([EventSeen(bad[0])], 101.0)
     (group,) = m.take_delta(101.0)["rejected"].values()
     assert group["count"] == 51
+
+
+def test_rejection_groups_are_bounded_when_reasons_quote_values():
+    m = MapModel()
+    flood = [
+        RejectedEvent(
+            key="mumt/m/unit/u1/state", field="$.position", reason=f"[{i}, 0] lies outside the bounds"
+        )
+        for i in range(MAX_REJECTED_GROUPS + 50)
+    ]
+    m.apply([EventSeen(e) for e in flood], now=1.0)
+    assert len(m.rejected) == MAX_REJECTED_GROUPS + 1
+    assert m.rejected["unit_state|*|other reasons"]["count"] == 50
 
 
 def test_events_feed_keeps_the_latest_and_forgotten_units_leave_the_map():

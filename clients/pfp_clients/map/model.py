@@ -39,6 +39,7 @@ from pfp_service.wire import (
 )
 
 __all__ = [
+    "MAX_REJECTED_GROUPS",
     "AliveSeen",
     "DirectionSeen",
     "EventSeen",
@@ -202,6 +203,9 @@ def _threat_of(threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: flo
     )
 
 
+MAX_REJECTED_GROUPS = 100
+
+
 def _rejected_group(ev: RejectedEvent) -> tuple[str, str]:
     """Rejections are counted per (kind of key, field, reason): a flood of one mistake is one line."""
     try:
@@ -339,13 +343,18 @@ class MapModel:
         t = ev.t if ev.t is not None else now
         if isinstance(ev, RejectedEvent):
             group, what = _rejected_group(ev)
+            field_path, reason = ev.field, ev.reason
+            if group not in self.rejected and len(self.rejected) >= MAX_REJECTED_GROUPS:
+                # reasons that quote the value (a position outside the bounds) make new groups
+                # without end: past the cap, count them per kind of key
+                group, field_path, reason = f"{what}|*|other reasons", "*", "other reasons"
             agg = self.rejected.get(group)
             if agg is None:
                 agg = self.rejected[group] = {
                     "id": group,
                     "key_kind": what,
-                    "field": ev.field,
-                    "reason": ev.reason,
+                    "field": field_path,
+                    "reason": reason,
                     "count": 0,
                     "first_t": t,
                 }
