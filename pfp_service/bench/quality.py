@@ -345,19 +345,23 @@ def run(args: argparse.Namespace) -> int:
         modes.insert(0, "none")
     if "auto" not in modes:
         modes.insert(1, "auto")
+    import os
+
+    load0 = os.getloadavg()[0]
     rep = measure_suite(args.scenarios, args.seed, modes, args.cells, log=not args.json)
+    load1 = os.getloadavg()[0]
     body = render(rep, modes)
     if args.json:
         sys.stdout.write(msgspec.json.encode(rep).decode() + "\n")
     else:
         print(body)
     if args.write:
-        import os
         import platform
 
         _write(
             args.write,
             body,
-            f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+            f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+            f"; 1-minute load average {load0:.1f} at the start and {load1:.1f} at the end (the machine is shared)",
         )
     return 0
