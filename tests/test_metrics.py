@@ -52,3 +52,18 @@ def test_epochs_count_threats_from_appearance():
     assert 0 < half.exposure < all_in.exposure
     assert half.exposure == pytest.approx(all_in.exposure / 2, rel=1e-6)  # symmetric about x = 5
     assert half.min_clearance == pytest.approx(1.0)
+
+
+def test_compiled_clearance_is_the_segment_distance():
+    rng = np.random.default_rng(21)
+    path = np.cumsum(rng.normal(0, 3, (60, 2)), axis=0)
+    path[10] = path[9]  # a zero-length segment
+    positions = rng.uniform(-40, 40, (35, 2))
+    a, ab = path[:-1, None, :], (path[1:] - path[:-1])[:, None, :]
+    ap = positions[None, :, :] - a
+    denom = np.einsum("ijk,ijk->ij", ab, ab)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip(np.where(denom > 0, np.einsum("ijk,ijk->ij", ap, ab) / denom, 0.0), 0.0, 1.0)
+    ref = float(np.hypot(*(ap - t[..., None] * ab).transpose(2, 0, 1)).min())
+    assert abs(segment_clearance(path, positions) - ref) <= 1e-12 * max(1.0, ref)
+    assert segment_clearance(path, np.zeros((0, 2))) == math.inf
