@@ -186,8 +186,8 @@ function unitSvg(d) {
       : `<circle class="body" r="8" />`;
   return (
     `<svg width="24" height="24" viewBox="-12 -12 24 24">` +
-    `<g class="arrow"><line x1="0" y1="0" x2="0" y2="-19" stroke="#111" stroke-width="2"/>` +
-    `<path d="M -4 -15 L 0 -22 L 4 -15 Z" fill="#111"/></g>` +
+    `<g class="arrow"><line x1="0" y1="0" x2="0" y2="-24" stroke="#111" stroke-width="2.5"/>` +
+    `<path d="M -5 -21 L 0 -30 L 5 -21 Z" fill="#111"/></g>` +
     `<g class="shape" stroke="#fff" stroke-width="2">${body}</g></svg><span class="label"></span>`
   );
 }
