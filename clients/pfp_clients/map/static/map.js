@@ -15,6 +15,7 @@ const STATUS_COLOURS = {
 };
 const TRACK_MAX = 200;
 const DOTS_MAX_UNITS = 200; // above this many units only the selected one shows its look-ahead points
+const CULL_MIN_UNITS = 200; // above this many units, those far outside the view are drawn when it gets there
 const EVENTS_SHOWN = 60;
 
 const state = {
@@ -155,6 +156,15 @@ function createMap(config) {
   };
   state.renderer = L.canvas({ padding: 0.2 });
   map.on("click", onMapClick);
+  map.on("moveend", () => {
+    const view = map.getBounds().pad(0.3);
+    state.units.forEach((u) => {
+      if (u.offscreen && u.data.position) {
+        const ll = toLatLng(u.data.position);
+        if (view.contains(ll)) drawUnit(u, ll);
+      }
+    });
+  });
   const moved = () => (state.userMoved = true);
   map.on("dragstart", moved);
   map.getContainer().addEventListener("wheel", moved, { passive: true });
@@ -245,7 +255,22 @@ function upsertUnit(d, full) {
     trackMoved = true;
   }
   if (!d.position) return; // heard of (a token, a direction) but never seen: nothing to draw yet
+  u.trackMoved = u.trackMoved || trackMoved;
+  u.goalMoved = u.goalMoved || goalMoved;
   const ll = toLatLng(d.position);
+  // in a big mission, a unit far outside the view waits until the view comes to it
+  if (u.marker && state.cull && !state.cull.contains(ll) && state.selectedUnit !== d.id) {
+    u.offscreen = true;
+    return;
+  }
+  drawUnit(u, ll);
+}
+
+function drawUnit(u, ll) {
+  const d = u.data;
+  const trackMoved = u.trackMoved;
+  const goalMoved = u.goalMoved;
+  u.trackMoved = u.goalMoved = u.offscreen = false;
   if (!u.marker) {
     const icon = L.divIcon({ className: "unit-icon", html: unitSvg(d), iconSize: [24, 24], iconAnchor: [12, 12] });
     u.marker = L.marker(ll, { icon, keyboard: false, riseOnHover: true }).addTo(state.layers.units);
@@ -631,6 +656,7 @@ function apply(msg) {
     state.rejected.clear();
   }
   const full = msg.type === "snapshot";
+  state.cull = !full && state.units.size > CULL_MIN_UNITS ? state.map.getBounds().pad(0.3) : null;
   Object.values(msg.threats || {}).forEach(upsertThreat);
   (msg.threats_removed || []).forEach((id) => removeThreat(id, false));
   Object.values(msg.units || {}).forEach((d) => upsertUnit(d, full));
