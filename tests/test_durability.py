@@ -111,7 +111,7 @@ def _planner(endpoint, mission, state_dir):
     return subprocess.Popen(
         [sys.executable, "-m", "pfp_service", "serve", "--mode", "client", "--connect", endpoint,
          "--mission", mission, "--state-dir", str(state_dir), "--intensity", "density", "--delta", "0.08"],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
     )  # fmt: skip
 
 

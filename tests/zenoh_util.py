@@ -8,6 +8,7 @@ import queue
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -63,12 +64,14 @@ def planner_process(*extra: str, mission: str = "default"):
     """``pfp serve`` as a subprocess on a free loopback port; yields (endpoint, process)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    # Output goes to a file, never a pipe nobody reads: a full pipe would block the planner's logging.
+    log = tempfile.TemporaryFile("w+")
     proc = subprocess.Popen(
         [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", mission, *extra],
         cwd=ROOT,
         env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        stdout=log,
+        stderr=subprocess.STDOUT,
         text=True,
     )
     try:
@@ -82,6 +85,7 @@ def planner_process(*extra: str, mission: str = "default"):
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+        log.close()
 
 
 class Inbox:

@@ -16,7 +16,7 @@ import json
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import msgspec
 from msgspec import Meta
@@ -28,6 +28,9 @@ from pfp_service.errors import InputError, from_validation, map_zenoh_errors
 from pfp_service.files import read_text
 from pfp_service.geo import Origin, localise_document, parse_origin
 from pfp_service.scenario import CHOICES
+
+if TYPE_CHECKING:
+    from pfp_service.service.events import WorldSettings
 
 __all__ = [
     "DEFAULT_CONNECT",
@@ -101,6 +104,28 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
             (x0, y0), (x1, y1) = self.bounds
             if not (x0 < x1 and y0 < y1):
                 raise ValueError("bounds: must be [[xmin, ymin], [xmax, ymax]] with xmin < xmax, ymin < ymax")
+
+    def world_settings(self) -> WorldSettings:
+        """What the live world needs of this configuration (deliberation is always deferred in the daemon)."""
+        from pfp_service.service.events import WorldSettings
+
+        return WorldSettings(
+            planner=self.planner_params(),
+            threat_ttl_s=self.threat_ttl_s,
+            unit_stale_s=self.unit_stale_s,
+            liveliness_debounce_s=self.liveliness_debounce_s,
+            lookahead=self.lookahead,
+            bounds=self.bounds_tuple(),
+            mission=self.mission,
+            planner_id=self.planner_id,
+            deliberation="deferred",
+            deliberation_budget_s=self.deliberation_budget_s,
+            unit_forget_s=self.unit_forget_s,
+            max_units=self.max_units,
+            max_threats=self.max_threats,
+            origin=self.origin,
+            cluster=self.cluster,
+        )
 
     def bounds_tuple(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
         if self.bounds is None:

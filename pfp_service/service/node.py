@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import dataclasses
-import heapq
 import sys
 import threading
 import time
@@ -26,21 +24,17 @@ from typing import Any
 import msgspec
 import zenoh
 
-from pfp_service import __version__, geojson
-from pfp_service.core.params import Resolved
+from pfp_service import __version__
 from pfp_service.errors import InputError
 from pfp_service.service.config import ServeConfig
-from pfp_service.service.log import get_logger
-from pfp_service.service.preview import fit_reply, preview
-from pfp_service.service.store import Store
-from pfp_service.service.world import (
+from pfp_service.service.desk import PreviewDesk, warm_up
+from pfp_service.service.events import (
     Deliberated,
     GoalCancelled,
     GoalSet,
     Input,
     InputRejected,
     Job,
-    MissionRestored,
     MissionShared,
     PeerPlanner,
     StateReported,
@@ -48,10 +42,12 @@ from pfp_service.service.world import (
     ThreatRemoved,
     Tick,
     TokenChanged,
-    World,
-    WorldSettings,
+    inputs_from_snapshot,
     mission_message,
 )
+from pfp_service.service.log import get_logger
+from pfp_service.service.store import Store
+from pfp_service.service.world import World
 from pfp_service.wire import (
     ErrorReply,
     Event,
@@ -61,90 +57,19 @@ from pfp_service.wire import (
     RestoredEvent,
     decode_goal,
     decode_mission,
-    decode_preview_request,
     decode_threat,
     decode_unit_state,
     decode_world_snapshot,
     encode,
     keys,
 )
-from pfp_service.wire.messages import Goal
 
 __all__ = ["PlannerNode"]
 
 log = get_logger("node")
 _JSON = zenoh.Encoding.APPLICATION_JSON
-EXPIRY_GRACE_S = 0.05  # a preview still computing this long past its deadline is answered "expired"
 SWITCH_INTERVAL_S = 0.0005  # the GIL is handed over this often, so pool threads cannot hold up the loop
 INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
-
-
-def world_settings(cfg: ServeConfig) -> WorldSettings:
-    """The world's settings from the service configuration."""
-    return WorldSettings(
-        planner=cfg.planner_params(),
-        threat_ttl_s=cfg.threat_ttl_s,
-        unit_stale_s=cfg.unit_stale_s,
-        liveliness_debounce_s=cfg.liveliness_debounce_s,
-        lookahead=cfg.lookahead,
-        bounds=cfg.bounds_tuple(),
-        mission=cfg.mission,
-        planner_id=cfg.planner_id,
-        deliberation="deferred",
-        deliberation_budget_s=cfg.deliberation_budget_s,
-        unit_forget_s=cfg.unit_forget_s,
-        max_units=cfg.max_units,
-        max_threats=cfg.max_threats,
-        origin=cfg.origin,
-        cluster=cfg.cluster,
-    )
-
-
-def warm_up(settings: WorldSettings) -> None:
-    """Load (or compile) the numba kernels before serving, so no first direction or preview pays for it."""
-    from pfp_service.wire import Goal, ThreatUpdate, UnitState
-
-    w = World(dataclasses.replace(settings, deliberation="inline", bounds=None))
-    threat = ThreatUpdate(position=(5.0, 5.0), sigma_range=1.0, sigma_lateral=0.7)
-    out = w.apply(
-        [
-            ThreatPut("w", threat),
-            StateReported("w", UnitState(position=(0.0, 0.0))),
-            GoalSet("w", Goal(position=(10.0, 10.0))),
-        ],
-        0.0,
-    )
-    preview(w.view("w"), None, time.monotonic, 5.0, 10_000)
-    assert out.directions
-
-
-class _Answer:
-    """One preview query, answered exactly once: by its worker, or by the loop once its deadline passed."""
-
-    def __init__(self, query: zenoh.Query, deadline: float) -> None:
-        self.query = query
-        self.deadline = deadline
-        self.done = False
-        self._lock = threading.Lock()
-
-    def _claim(self) -> bool:
-        with self._lock:
-            if self.done:
-                return False
-            self.done = True
-            return True
-
-    def reply(self, key: str, body: bytes) -> None:
-        if self._claim():
-            with contextlib.suppress(Exception):  # the querier may be gone
-                self.query.reply(key, body, encoding=_JSON)
-                self.query.drop()
-
-    def error(self, err: ErrorReply) -> None:
-        if self._claim():
-            with contextlib.suppress(Exception):
-                self.query.reply_err(encode(err), encoding=_JSON)
-                self.query.drop()
 
 
 class _Latency:
@@ -186,7 +111,7 @@ class PlannerNode:
         self._origin = cfg.origin
         self.cfg = cfg
         self.clock = clock
-        self.world = World(world_settings(cfg))
+        self.world = World(cfg.world_settings())
         self.started = clock()
         self.counters = {"msgs_in": 0, "msgs_out": 0, "overload": 0}
         self.latency = _Latency()
@@ -199,9 +124,15 @@ class PlannerNode:
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
         self._deliberators = ThreadPoolExecutor(cfg.deliberation_workers, thread_name_prefix="pfp-deliberate")
-        self._previewers = ThreadPoolExecutor(cfg.preview_workers, thread_name_prefix="pfp-preview")
-        self._pending: dict[int, _Answer] = {}  # previews not yet expired by the loop
-        self._deadlines: list[tuple[float, int, _Answer]] = []
+        self._desk = PreviewDesk(
+            cfg.preview_workers,
+            cfg.preview_queue,
+            cfg.preview_budget_ms / 1e3,
+            cfg.preview_max_iter,
+            clock,
+            cfg.bounds_tuple(),
+            cfg.origin,
+        )
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
@@ -228,6 +159,8 @@ class PlannerNode:
         if self.cfg.cluster:
             self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
         self._join(s)
+        if self.cfg.cluster:  # let the liveliness history name the peers before the first direction
+            time.sleep(0.3)
         self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
             ev = RestoredEvent(
@@ -248,7 +181,7 @@ class PlannerNode:
         if self._loop_thread is not None:
             self._loop_thread.join(timeout=2.0)
         self._deliberators.shutdown(wait=False, cancel_futures=True)
-        self._previewers.shutdown(wait=False, cancel_futures=True)
+        self._desk.shutdown()
         for d in self._declared:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
                 d.undeclare()
@@ -309,39 +242,16 @@ class PlannerNode:
         self._push(TokenChanged(uid, sample.kind == zenoh.SampleKind.PUT))
 
     def _join(self, s: zenoh.Session) -> None:
-        """What the planners already serving this mission hold: threats, goals and missions, applied at once.
-
-        A planner started after threats and goals were published then guides
-        correctly from its first direction.  No reply (a lone planner) costs ~1 ms.
-        """
+        """Apply what the planners already serving the mission hold (none: ~1 ms)."""
         inputs: list[Input] = []
         for reply in s.get(keys.worlds(self.cfg.mission), timeout=2.0):
-            if reply.ok is None:
-                continue
-            try:
-                snap = decode_world_snapshot(reply.ok.payload.to_bytes())
-            except InputError:
-                continue
-            if snap.planner == self.cfg.planner_id:
-                continue
-            for t in snap.threats:
-                update = (
-                    t.threat
-                    if t.ttl_s is None
-                    else msgspec.structs.replace(t.threat, ttl_s=max(t.ttl_s, 1e-3))
-                )
-                inputs.append(ThreatPut(t.id, update))
-            for u in snap.units:
-                if u.mission is not None:
-                    params = Resolved(**msgspec.structs.asdict(u.mission.params))  # type: ignore[arg-type]
-                    inputs.append(MissionRestored(u.id, u.mission.goal, tuple(u.mission.origin), params))  # type: ignore[arg-type]
-                elif u.goal is not None:
-                    inputs.append(GoalSet(u.id, Goal(position=u.goal)))
+            with contextlib.suppress(InputError):
+                if reply.ok is not None:
+                    snap = decode_world_snapshot(reply.ok.payload.to_bytes())
+                    inputs += inputs_from_snapshot(snap, self.cfg.planner_id)
         if inputs:
             self.world.apply(inputs, self.clock())
             log.info("joined the mission's planners", extra={"fields": {"inputs": len(inputs)}})
-        if self.cfg.cluster:  # let the liveliness history name the peers before the first direction
-            time.sleep(0.3)
 
     def _on_mission(self, sample: zenoh.Sample) -> None:
         try:
@@ -383,12 +293,12 @@ class PlannerNode:
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
         batch.append(Tick(now))
         self.counters["msgs_in"] += len(batch) - 1
-        if self.store is not None:
-            batch = self._commit(batch)
+        if self.store is not None:  # applied only once committed
+            batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
         self._log_inputs(inbox)
         out = self.world.apply(batch, now)
         if self.store is not None and (out.missions or out.events):
-            self._record(out)
+            self.store.record(out.missions, [e.unit for e in out.events if isinstance(e, ForgottenEvent)])
         for d in out.directions:
             self._put(keys.unit_direction(self.cfg.mission, d.unit), encode(d), direction=True)
         for ev in out.events:
@@ -406,8 +316,7 @@ class PlannerNode:
             self.latency.add(done - t_recv)
         for kind, query, t_recv in queries:
             self._answer(kind, query, t_recv)
-        if self._deadlines:
-            self._expire_previews(self.clock())
+        self._desk.expire(self.clock())
 
     def _log_inputs(self, inbox: collections.deque[Input], limit: int = 20) -> None:
         """One line per goal or threat change, at most ``limit`` a tick and a count of the rest."""
@@ -428,37 +337,6 @@ class PlannerNode:
                 log.info(msg, extra={"fields": fields})
         if shown > limit:
             log.info("more goal and threat changes", extra={"fields": {"count": shown - limit}})
-
-    def _commit(self, batch: list[Input]) -> list[Input]:
-        """Goals and threats are applied only once committed; if the store fails they are refused."""
-        assert self.store is not None
-        try:
-            self.store.commit_inputs(batch, time.time(), self.cfg.threat_ttl_s)
-            return batch
-        except Exception as exc:
-            log.exception("state store failed; goal and threat changes refused")
-            kept: list[Input] = []
-            m = self.cfg.mission
-            for inp in batch:
-                if isinstance(inp, GoalSet | GoalCancelled):
-                    kept.append(
-                        InputRejected(keys.unit_goal(m, inp.unit), InputError("$", f"not stored: {exc}"))
-                    )
-                elif isinstance(inp, ThreatPut | ThreatRemoved):
-                    kept.append(
-                        InputRejected(keys.threat(m, inp.threat), InputError("$", f"not stored: {exc}"))
-                    )
-                else:
-                    kept.append(inp)
-            return kept
-
-    def _record(self, out: Any) -> None:
-        assert self.store is not None
-        try:
-            self.store.record_missions(out.missions)
-            self.store.forget(e.unit for e in out.events if isinstance(e, ForgottenEvent))
-        except Exception:
-            log.exception("state store failed to record missions")
 
     def _deliberate(self, job: Job) -> None:
         if job.cancelled:
@@ -504,52 +382,17 @@ class PlannerNode:
         elif kind == "world":
             query.reply(keys.world(m, p), encode(self.world.snapshot(self.clock())), encoding=_JSON)
             query.drop()
-        elif len(self._pending) >= self.cfg.preview_queue:
-            _Answer(query, 0.0).error(ErrorReply(error="planner busy: too many previews queued"))
         else:
             key = str(query.key_expr)
-            answer = _Answer(query, t_recv + self.cfg.preview_budget_ms / 1e3)
             try:
                 uid = keys.parse(key).id
             except InputError as err:
-                answer.error(ErrorReply.of(err))
+                self._desk.refuse(query, ErrorReply.of(err))
                 return
             if not self.world.owns(uid):  # scale-out: the unit's owner answers, once; what-ifs too
                 query.drop()
                 return
-            view = self.world.view(uid)
-            self._pending[id(answer)] = answer
-            heapq.heappush(self._deadlines, (answer.deadline, id(answer), answer))
-            payload = query.payload.to_bytes() if query.payload is not None else b""
-            self._previewers.submit(self._preview, answer, key, view, payload)
-
-    def _expire_previews(self, now: float) -> None:
-        """Answer every preview past its deadline with ``expired``, computed or not (a stuck one included)."""
-        while self._deadlines and self._deadlines[0][0] + EXPIRY_GRACE_S <= now:
-            _, ident, answer = heapq.heappop(self._deadlines)
-            self._pending.pop(ident, None)
-            answer.error(ErrorReply(error="expired: the preview's deadline passed before it was computed"))
-
-    def _preview(self, answer: _Answer, key: str, view: Any, payload: bytes) -> None:
-        try:
-            left = answer.deadline - self.clock()
-            if left <= 0 or answer.done:
-                answer.error(ErrorReply(error="expired: the preview's deadline passed in the queue"))
-                return
-            request = decode_preview_request(payload, self.cfg.bounds, self._origin)
-            result = preview(view, request, self.clock, 0.9 * left, self.cfg.preview_max_iter)
-            if request.geojson:
-                body = geojson.preview_reply(
-                    self._origin, result, view.threats, result.path[0], result.path[-1]
-                )
-            else:
-                body = fit_reply(result)
-            answer.reply(key, body)
-        except InputError as err:
-            answer.error(ErrorReply.of(err))
-        except Exception:
-            log.exception("preview failed", extra={"fields": {"key": key}})
-            answer.error(ErrorReply(error="internal error while previewing", field="$"))
+            self._desk.submit(query, key, self.world.view(uid), t_recv)
 
     def _status(self) -> PlannerStatus:
         p50, p99 = self.latency.quantiles_ms()

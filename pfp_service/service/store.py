@@ -27,16 +27,17 @@ import msgspec
 
 from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
-from pfp_service.service.world import (
+from pfp_service.service.events import (
     GoalCancelled,
     GoalSet,
     Input,
+    InputRejected,
     MissionRecord,
     MissionRestored,
     ThreatPut,
     ThreatRemoved,
 )
-from pfp_service.wire import Goal, ThreatUpdate, decode, encode
+from pfp_service.wire import Goal, ThreatUpdate, decode, encode, keys
 
 __all__ = ["Restored", "Store"]
 
@@ -113,6 +114,34 @@ class Store:
         except BaseException:
             db.execute("ROLLBACK")
             raise
+
+    def commit_batch(
+        self, batch: list[Input], wall_now: float, default_ttl_s: float | None, mission: str
+    ) -> list[Input]:
+        """``commit_inputs``, or, if the store fails, the batch with its goal and threat changes refused.
+
+        Nothing is applied that was not committed: a refused change becomes an
+        ``InputRejected`` naming the storage error, and the rest goes on.
+        """
+        try:
+            self.commit_inputs(batch, wall_now, default_ttl_s)
+            return batch
+        except (OSError, sqlite3.Error) as exc:
+            err = InputError("$", f"not stored: {exc}")
+            kept: list[Input] = []
+            for inp in batch:
+                if isinstance(inp, GoalSet | GoalCancelled):
+                    kept.append(InputRejected(keys.unit_goal(mission, inp.unit), err))
+                elif isinstance(inp, ThreatPut | ThreatRemoved):
+                    kept.append(InputRejected(keys.threat(mission, inp.threat), err))
+                else:
+                    kept.append(inp)
+            return kept
+
+    def record(self, missions: Iterable[MissionRecord], forgotten: Iterable[str]) -> None:
+        """After an ``apply``: the missions it fixed, and the units it forgot."""
+        self.record_missions(missions)
+        self.forget(forgotten)
 
     def record_missions(self, missions: Iterable[MissionRecord]) -> None:
         """Record units' missions (``x0`` and resolved parameters) once they are fixed."""

@@ -1,0 +1,307 @@
+"""What goes into ``World.apply`` and what comes out: the world's inputs, outputs and settings.
+
+Inputs are one tagged union of frozen dataclasses (``Input``), each carrying
+its ids; ``Outputs`` holds the directions, events, deliberation jobs and
+missions one ``apply`` returns.  Pure values: no zenoh, no clock.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import zlib
+from dataclasses import dataclass, field
+from typing import Literal, Union
+
+import msgspec
+
+from pfp_service.core import PlannerParams, Resolved, Stepper, Threat, ThreatField
+from pfp_service.errors import InputError
+from pfp_service.geo import Origin
+from pfp_service.wire import (
+    Direction,
+    Event,
+    Goal,
+    Mission,
+    MissionParams,
+    ThreatUpdate,
+    UnitState,
+    WorldSnapshot,
+    keys,
+)
+
+__all__ = [
+    "Deliberated",
+    "GoalCancelled",
+    "GoalSet",
+    "Input",
+    "InputRejected",
+    "Job",
+    "MissionRecord",
+    "MissionRestored",
+    "MissionShared",
+    "Outputs",
+    "PeerPlanner",
+    "StateReported",
+    "ThreatPut",
+    "ThreatRemoved",
+    "Tick",
+    "TokenChanged",
+    "UnitView",
+    "WorldSettings",
+    "inputs_from_snapshot",
+    "mission_message",
+    "mission_of",
+    "rendezvous_weight",
+    "unit_key",
+]
+
+
+def unit_key(unit_id: str) -> int:
+    """The seed of a unit's random escapes: stable across restarts, previews and planners."""
+    return zlib.crc32(unit_id.encode())
+
+
+# -- inputs -------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class StateReported:
+    """A unit said where it is (``unit/{u}/state``)."""
+
+    unit: str
+    state: UnitState
+
+
+@dataclass(frozen=True, slots=True)
+class GoalSet:
+    unit: str
+    goal: Goal
+
+
+@dataclass(frozen=True, slots=True)
+class GoalCancelled:
+    unit: str
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatPut:
+    threat: str
+    update: ThreatUpdate
+
+
+@dataclass(frozen=True, slots=True)
+class ThreatRemoved:
+    threat: str
+
+
+@dataclass(frozen=True, slots=True)
+class TokenChanged:
+    """A unit's liveliness token appeared (``alive``) or went."""
+
+    unit: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class InputRejected:
+    """A message that failed to decode: the world counts it and says so, rate-limited."""
+
+    key: str
+    error: InputError
+
+
+@dataclass(frozen=True, slots=True)
+class Deliberated:
+    """A finished ``Job``: ``stepper`` is its copy after ``deliberate()`` (``None``: past its deadline)."""
+
+    unit: str
+    token: tuple[int, int]
+    stepper: Stepper | None
+
+
+@dataclass(frozen=True, slots=True)
+class MissionRestored:
+    """A unit's mission from durable state: its goal, ``x0`` and resolved parameters, as fixed before."""
+
+    unit: str
+    goal: Goal
+    origin: tuple[float, float]
+    params: Resolved
+
+
+@dataclass(frozen=True, slots=True)
+class MissionShared:
+    """Another planner fixed a unit's mission (``unit/{u}/mission``): kept for when this one takes it over."""
+
+    unit: str
+    mission: Mission
+
+
+@dataclass(frozen=True, slots=True)
+class PeerPlanner:
+    """Another planner's liveliness token on this mission appeared (``alive``) or went."""
+
+    planner: str
+    alive: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Tick:
+    """Time passed: run the timers due by ``now``."""
+
+    now: float
+
+
+Input = Union[  # noqa: UP007
+    StateReported,
+    GoalSet,
+    GoalCancelled,
+    ThreatPut,
+    ThreatRemoved,
+    TokenChanged,
+    InputRejected,
+    Deliberated,
+    MissionRestored,
+    MissionShared,
+    PeerPlanner,
+    Tick,
+]
+
+
+# -- outputs ------------------------------------------------------------------------
+@dataclass(slots=True)
+class Job:
+    """Deliberation for one unit, to run off the planning loop.
+
+    ``run()`` needs nothing from the world: it works on a detached copy of the
+    unit's stepper under the field in force when it was asked.  ``cancelled``
+    is set by the world when a newer goal or world supersedes it, so a pool
+    can skip it; a late result is discarded by its ``token`` in any case.
+    """
+
+    unit: str
+    token: tuple[int, int]
+    kind: str
+    stepper: Stepper
+    field: ThreatField
+    deadline: float
+    cancelled: bool = False
+
+    def run(self, now: float | None = None) -> Deliberated:
+        """Deliberate; ``now`` past the deadline gives up without computing."""
+        if now is not None and now > self.deadline:
+            return Deliberated(self.unit, self.token, None)
+        self.stepper.deliberate(self.field)
+        return Deliberated(self.unit, self.token, self.stepper)
+
+
+@dataclass(frozen=True, slots=True)
+class MissionRecord:
+    """A unit's mission was fixed (its first report after a goal): what durable state must keep."""
+
+    unit: str
+    epoch: int
+    origin: tuple[float, float]
+    goal: Goal
+    params: Resolved
+
+
+@dataclass(slots=True)
+class Outputs:
+    """What one ``apply`` must send: directions, events, deliberation jobs, and missions to record."""
+
+    directions: list[Direction] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
+    jobs: list[Job] = field(default_factory=list)
+    missions: list[MissionRecord] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.directions or self.events or self.jobs or self.missions)
+
+
+@dataclass(frozen=True, slots=True)
+class UnitView:
+    """A detached copy of one unit and the threats in force, for a preview off the loop."""
+
+    unit: str
+    position: tuple[float, float] | None
+    goal: Goal | None
+    origin: tuple[float, float] | None
+    stepper: Stepper | None
+    threats: tuple[Threat, ...]
+    settings: WorldSettings
+    last_vector: tuple[float, float] | None = None  # the direction given at ``position``, if moving
+
+    def params_for(self, goal: Goal) -> PlannerParams:
+        return self.settings.params_for(goal)
+
+
+@dataclass(frozen=True)
+class WorldSettings:
+    """What the world model needs from the service configuration."""
+
+    planner: PlannerParams = field(default_factory=PlannerParams)
+    threat_ttl_s: float | None = None  # default TTL for threats that carry none
+    unit_stale_s: float = 10.0  # silence after which a unit is stale
+    liveliness_debounce_s: float = 2.0  # a token DELETE counts after this long
+    lookahead: int = 5  # predicted positions per direction
+    bounds: tuple[tuple[float, float], tuple[float, float]] | None = None  # mission bounds
+    mission: str = keys.DEFAULT_MISSION
+    planner_id: str = "planner"
+    deliberation: Literal["inline", "deferred"] = "inline"
+    deliberation_budget_s: float = 5.0  # a job not started by then is dropped
+    unit_forget_s: float | None = 600.0  # stale this long: forgotten (None: never)
+    max_units: int = 100_000
+    max_threats: int = 10_000
+    push_retry_s: float = 0.25  # a push (a direction no report asked for) is sent again after this
+    push_retries: int = 4  # ... this many times, until the unit's next report is answered
+    cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
+    origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
+
+    def params_for(self, goal: Goal) -> PlannerParams:
+        """A unit's planner parameters: service defaults, then the goal's overrides."""
+        return self.planner.merged(delta=goal.delta, tolerance=goal.tolerance, step=goal.step)
+
+
+def rendezvous_weight(unit_id: str, planner: str) -> int:
+    """The rendezvous weight of a unit on a planner: stable across processes and restarts."""
+    digest = hashlib.blake2b(f"{unit_id}\0{planner}".encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "big")
+
+
+def mission_of(
+    shared: tuple[Goal, tuple[float, float], Resolved] | None, planner: str | None
+) -> Mission | None:
+    """A unit's fixed mission on the wire (``None`` until it is fixed)."""
+    if shared is None:
+        return None
+    goal, origin, params = shared
+    wire = MissionParams(**{k: getattr(params, k) for k in MissionParams.__struct_fields__})
+    return Mission(goal=goal, origin=origin, params=wire, planner=planner)
+
+
+def mission_message(record: MissionRecord, planner: str) -> Mission:
+    """What the node publishes on ``unit/{u}/mission`` for a record of ``Outputs.missions``."""
+    m = mission_of((record.goal, record.origin, record.params), planner)
+    assert m is not None
+    return m
+
+
+def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
+    """What a peer planner's world reply says, as inputs: its threats (with the TTL left), goals and missions.
+
+    A planner started after threats and goals were published applies these
+    and guides correctly from its first direction.  Its own reply is skipped.
+    """
+    if snap.planner == me:
+        return []
+    inputs: list[Input] = []
+    for t in snap.threats:
+        update = t.threat if t.ttl_s is None else msgspec.structs.replace(t.threat, ttl_s=max(t.ttl_s, 1e-3))
+        inputs.append(ThreatPut(t.id, update))
+    for u in snap.units:
+        if u.mission is not None:
+            params = Resolved(**msgspec.structs.asdict(u.mission.params))  # type: ignore[arg-type]
+            origin = (u.mission.origin[0], u.mission.origin[1])
+            inputs.append(MissionRestored(u.id, u.mission.goal, origin, params))
+        elif u.goal is not None:
+            inputs.append(GoalSet(u.id, Goal(position=u.goal)))
+    return inputs
