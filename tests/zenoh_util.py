@@ -65,7 +65,7 @@ def planner_process(*extra: str, mission: str = "default"):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     # Output goes to a file, never a pipe nobody reads: a full pipe would block the planner's logging.
-    log = tempfile.TemporaryFile("w+")
+    log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - closed in the finally below, after the process
     proc = subprocess.Popen(
         [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", mission, *extra],
         cwd=ROOT,
