@@ -255,10 +255,13 @@ def fanout(g: LoadGen, srv: Server, n: int, bar: Bar) -> dict[str, Any]:
                 break
         g.settle(0.6, 3.0)  # past the planner's re-sends of the pushes not yet answered
     task(0.2)
-    pushes = g.recv[mark:]
+    pushes = [r for r in g.recv[mark:] if r.t >= t_put]
     for r in pushes:  # the units are quiet: every direction since the put is a push, re-sends too
         if r.unit in ids:
             first.setdefault(r.unit, r.t)
+    for _t, kind, doc in g.events[ev_mark:]:  # a replan event later than the first second
+        if kind == "replan" and affected is None:
+            affected = len(doc.get("units", [])) + int(doc.get("more_units", 0))
     events = len(g.events) - ev_mark
     watch = _Deliberation(g, ids, mark)
     watch.scan()
