@@ -102,5 +102,7 @@ def test_many_units_at_10_hz_leave_no_backlog(playwright, router):  # noqa: F811
         # at most push_hz; fewer when the page is starved of CPU (1,000 units beside the load
         # generator and the router on two cores), but they keep coming: merged, never queued
         assert (1.0 if UNITS <= 250 else 0.2) <= frames <= 5.5, report
-        assert perf["applyMsTotal"] / max(perf["frames"], 1) < 150, report
+        # a frame costs the page milliseconds at the default size; the opt-in 1,000 units share two
+        # cores with their load generator and router, so there only a bound that catches a stall
+        assert perf["applyMsTotal"] / max(perf["frames"], 1) < (150 if UNITS <= 250 else 2000), report
         assert page.errors == []
