@@ -151,6 +151,7 @@ def test_the_planner_is_a_client_of_the_router_with_a_state_volume():
     argv = _argv(SERVICES["planner"])
     assert argv[:2] == ["pfp", "serve"] and argv[argv.index("--mode") + 1] == "client"
     assert "pfp-state:/var/lib/pfp" in SERVICES["planner"]["volumes"]
+    assert argv[argv.index("--state-dir") + 1].startswith("/var/lib/pfp/")
     assert "XDG_STATE_HOME=/var/lib/pfp" in DOCKERFILE
     assert "ports" not in SERVICES["planner"]  # only the router is published
 
@@ -244,7 +245,10 @@ def test_the_compose_deployment_runs_as_processes(tmp_path):
     here = f"127.0.0.1:{port}"
 
     def local(argv: list[str]) -> list[str]:
-        return [a.replace(SECRETS, str(tmp_path)).replace("router:7447", here) for a in argv]
+        swap = ((SECRETS, str(tmp_path)), ("router:7447", here), ("/var/lib/pfp", str(tmp_path / "state")))
+        for a, b in swap:
+            argv = [x.replace(a, b) for x in argv]
+        return argv
 
     def pfp(argv: list[str], **kw) -> subprocess.Popen:
         assert argv[0] == "pfp"
