@@ -356,3 +356,17 @@ def test_needles_in_a_wedge_are_resolved_and_gone_round():
         fine, coarse = route_cell(span, s_min), route_cell(span, s_min, fine=False)
         assert fine <= coarse <= max(3.5 * s_min, span / 600)
         assert span / fine <= 600 + 1e-9
+
+
+def test_routes_never_clip_a_sharply_skewed_core():
+    """Pancakes with skew 10-50 have a rear far thinner than their sigmas: grid edges are re-checked densely."""
+    from pfp_service.bench.cases import KINDS, generate
+    from pfp_service.core.optimal import plan_optimal
+
+    cases = [c for c in generate(4 * len(KINDS), 7) if c.kind == "anisotropic"]
+    for case in cases:
+        sched = [Scheduled(t) for t in case.threats]
+        r = plan(case.start, case.goal, sched, PlannerParams(escape="auto"))
+        assert r.status.value == "reached" and not _core_entry(case.threats, r.path), case.name
+        o = plan_optimal(case.start, case.goal, sched, avoid_cores=True)
+        assert o.status.value == "reached" and not _core_entry(case.threats, o.path), case.name

@@ -119,3 +119,18 @@ def test_culled_level_drops_only_terms_below_the_floor():
     assert np.all(culled <= exact * (1 + 1e-12) + 1e-300)
     assert np.max(exact - culled) <= len(threats) * LEVEL_FLOOR * float(field.packed[:, kernels.SCALE].max())
     assert np.array_equal(ThreatField().level_culled(pts[:3]), np.zeros(3))
+
+
+def test_segment_hits_are_first_hit_per_segment():
+    rng = np.random.default_rng(2)
+    threats = [
+        Threat.from_facing(
+            rng.uniform(0, 50, 2), rng.uniform(0, 360), rng.uniform(1, 3), rng.uniform(0.2, 3), k
+        )
+        for k in rng.uniform(0, 40, 12)
+    ]
+    cores = Cores(ThreatField(threats))
+    path = np.cumsum(rng.normal(0, 4, (80, 2)), axis=0) + 25.0
+    hits = cores.segment_hits(path)
+    assert hits.shape == (79,) and hits.any() and not hits.all()
+    assert hits.tolist() == [bool(cores.first_hit(path[i : i + 2])) for i in range(79)]

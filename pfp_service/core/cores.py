@@ -166,6 +166,24 @@ class Cores:
         hits = np.flatnonzero(ratio >= self.fraction)
         return self.ids[int(idx[hits[0]])] if len(hits) else ""
 
+    def segment_hits(self, path: np.ndarray) -> np.ndarray:
+        """Per segment of the polyline ``path``: does it enter a core (sampled as ``first_hit`` samples it)?"""
+        pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        if len(pts) < 2 or not len(self.packed):
+            return np.zeros(max(len(pts) - 1, 0), dtype=bool)
+        seg = np.diff(pts, axis=0)
+        if math.isfinite(self.min_spread_m):
+            n = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / (self.min_spread_m / 4.0))).astype(
+                np.int64
+            )
+        else:
+            n = np.ones(len(seg), dtype=np.int64)
+        which = np.repeat(np.arange(len(seg)), n + 1)  # every sample of a segment, both ends included
+        k = np.arange(len(which)) - np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
+        t = (k / n[which])[:, None]
+        inside = self.inside(pts[:-1][which] + t * seg[which])
+        return np.logical_or.reduceat(inside, np.cumsum(n + 1) - (n + 1))
+
     def densify(self, path: np.ndarray) -> np.ndarray:
         """``path`` with every segment split to at most a quarter of the narrowest standard deviation."""
         if len(path) < 2 or not math.isfinite(self.min_spread_m):

@@ -35,6 +35,7 @@ _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
 _WINDOW = 48  # grid edges a shortcut may replace at once
 _SAMPLES = 17  # Simpson points on a candidate shortcut
+_REPAIRS = 8  # route searches after dropping edges that clip a core
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,6 +47,7 @@ class Route:
     sealed: bool = False  # no route, and a larger box would not help: the source or target is walled in
     walled: np.ndarray | None = None  # then: the walled-in component (a node mask) ...
     walled_side: str = ""  # ... and whose it is, "source" or "target"
+    nodes: np.ndarray | None = None  # the node indices of ``points``
 
 
 @numba.njit(cache=True, nogil=True)
@@ -153,6 +155,7 @@ class GridGraph:
         self._indptr, self._indices, self.edge_length, self.edge_exposure = _edges(
             fine, lattice, blocked is not None, nx, ny, h, offsets
         )
+        self.cores = cores
 
     def cell_of(self, x: float, y: float) -> int:
         """The node nearest to ``(x, y)``, open or not (clamped to the box)."""
@@ -194,8 +197,41 @@ class GridGraph:
         m = nodes.reshape(self.nx, self.ny)
         return bool(m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any())
 
+    def _drop(self, pairs: list[tuple[int, int]]) -> None:
+        """Remove the edges ``a - b`` (both ways) from the graph."""
+        keep = np.ones(len(self._indices), dtype=bool)
+        for a, b in pairs:
+            for u, v in ((a, b), (b, a)):
+                lo, hi = self._indptr[u], self._indptr[u + 1]
+                keep[lo + np.flatnonzero(self._indices[lo:hi] == v)] = False
+        rows = np.repeat(np.arange(len(self.nodes)), np.diff(self._indptr))
+        counts = np.bincount(rows[keep], minlength=len(self.nodes))
+        self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self._indices = self._indices[keep]
+        self.edge_length = self.edge_length[keep]
+        self.edge_exposure = self.edge_exposure[keep]
+
     def route(self, source: int, target: int, lam: float) -> Route:
-        """The cheapest node path from ``source`` to ``target`` (empty if they are not connected)."""
+        """The cheapest node path from ``source`` to ``target`` (empty if they are not connected).
+
+        With cores, each edge of the path is then checked densely, as the
+        judge checks a path (``Cores.segment_hits``); an edge that clips a
+        core between its probe points (a skewed threat's sharp rear can be
+        far thinner than its standard deviations) is dropped and the search
+        run again, up to ``_REPAIRS`` times.
+        """
+        for _ in range(_REPAIRS):
+            found = self._route(source, target, lam)
+            if self.cores is None or len(found.points) < 2:
+                return found
+            bad = np.flatnonzero(self.cores.segment_hits(found.points))
+            if not len(bad):
+                return found
+            chain = found.nodes
+            self._drop([(int(chain[i]), int(chain[i + 1])) for i in bad])
+        return self._route(source, target, lam)
+
+    def _route(self, source: int, target: int, lam: float) -> Route:
         if source < 0 or target < 0:
             return Route(np.zeros((0, 2)), math.inf)
         dist, pred = self.cost_to(target, lam)
@@ -212,7 +248,7 @@ class GridGraph:
         chain = [source]
         while chain[-1] != target:
             chain.append(int(pred[chain[-1]]))
-        return Route(self.nodes[chain], float(dist[source]))
+        return Route(self.nodes[chain], float(dist[source]), nodes=np.array(chain))
 
 
 def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
