@@ -27,7 +27,7 @@ FANOUT = {
 def test_bench_service_json_has_every_figure():
     r = run_pfp(
         "bench", "service", "--units", "10", "--rate", "10", "--threats", "5", "--duration", "1",
-        "--echo", "--json",
+        "--echo", "--find-max", "--probe-s", "0.5", "--json",
         timeout=240,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
@@ -44,4 +44,8 @@ def test_bench_service_json_has_every_figure():
     assert p["fanout"].keys() >= FANOUT
     assert p["fanout"]["affected"] is not None  # the planner's replan event arrived
     assert p["exit"]["error_lines"] == 0, p["exit"]["first_errors"]
+    for kind in ("planner", "echo"):
+        fm = doc[kind]["find_max"]
+        assert fm["probes"] and {"rate_hz", "p99_ms", "unanswered_fraction", "ok"} <= fm["probes"][0].keys()
+        assert "max_per_s" in fm
     assert all({"target", "measured", "limit", "met"} <= t.keys() for t in doc["targets"])
