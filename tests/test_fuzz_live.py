@@ -12,4 +12,5 @@ def test_a_planner_survives_malformed_input_on_every_key_and_queryable():
     assert not failed, f"seed {seed}: {failed}; {r}"
     assert r["inputs"] >= 1500
     assert r["rejected"] + r["shed_overload"] == r["rejected_expected"] == 900 + 30  # 300 per key, 30 deletes
-    assert r["queries"]["error_replies"] == r["queries"]["status_replies"] == 300
+    q = r["queries"]
+    assert q["error_replies"] + q["preview_replies"] == q["status_replies"] == q["world_replies"] == 300

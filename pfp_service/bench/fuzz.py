@@ -3,7 +3,8 @@
 Starts ``pfp serve`` as its own process on a free loopback port (JSON log to a
 file), then sends ``--count`` malformed inputs on each of: unit states, goals,
 threats (puts with congestion control BLOCK, so none is dropped on the way),
-preview queries and status queries, plus liveliness tokens with odd ids.  The
+preview, status and world queries, plus unit and planner liveliness tokens
+with odd ids.  The
 inputs, from one seeded generator: random bytes, truncated JSON, deep nesting,
 wrong types, NaN and Infinity, huge numbers, out-of-range values, bad UTF-8,
 non-objects, impossible lat/lon positions (the planner has an origin), megabyte
@@ -283,7 +284,7 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
     """Run the whole fuzz against a fresh ``pfp serve`` subprocess; return the figures and ``ok``."""
     import zenoh
 
-    from pfp_service.wire import decode_error_reply, decode_planner_status, keys
+    from pfp_service.wire import keys
 
     rng = random.Random(seed)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
@@ -304,7 +305,8 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
     block = zenoh.CongestionControl.BLOCK
     sent: Counter[str] = Counter()
     categories: Counter[str] = Counter()
-    queries = {"sent": 0, "error_replies": 0, "status_replies": 0, "unanswered": 0, "undecodable": 0}
+    queries = {"sent": 0, "error_replies": 0, "unanswered": 0, "undecodable": 0}
+    queries |= {f"{t}_replies": 0 for t in _REPLY_DECODERS}
     r: dict[str, Any] = {"count_per_target": count, "seed": seed}
     try:
         deadline = time.monotonic() + 30
@@ -359,7 +361,7 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
                     continue
                 sent[f"{target}_delete"] += 1
             say(f"  goal, threat: {deletes} deletes with odd ids sent")
-            for target in ("preview", "status"):
+            for target in _REPLY_DECODERS:
                 pending: list[Any] = []
                 for i in range(count):
                     if target == "preview":
@@ -371,8 +373,9 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
                         )
                         sel, payload = key, x.payload
                         categories[x.category] += 1
-                    else:
-                        sel = keys.planner_status(MISSION, "planner") + rng.choice(
+                    else:  # status or world: the planner's own key, any selector and body
+                        own = keys.planner_status if target == "status" else keys.world
+                        sel = own(MISSION, "planner") + rng.choice(
                             ["", "?a=b", "?;;;", "?" + "x" * 2000, "?max_iter=1e99"]
                         )
                         payload = malformed(rng, "preview").payload
@@ -380,19 +383,20 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
                     queries["sent"] += 1
                     if len(pending) >= 64 or i == count - 1:
                         for handler in pending:
-                            _collect(handler, target, queries, decode_error_reply, decode_planner_status)
+                            _collect(handler, target, queries)
                         pending.clear()
                     if i % 1000 == 999:
                         probe.ask()
                         rss_peak = max(rss_peak, _rss_mb(proc.pid) or 0.0)
                 say(f"  {target}: {count} queries sent")
             tokens = max(count // 10, 10)
-            for i in range(tokens):
+            for i in range(tokens):  # unit and planner tokens: the planner watches both
                 odd = _ODD_IDS[i % len(_ODD_IDS)] + str(i)
-                tok = session.liveliness().declare_token(_odd_key("alive_unit", odd))
+                kind = ("alive_unit", "alive_planner")[i % 2]
+                tok = session.liveliness().declare_token(_odd_key(kind, odd))
                 tok.undeclare()
-            sent["alive_unit"] += tokens
-            say(f"  liveliness: {tokens} tokens with odd ids declared and dropped")
+                sent[kind] += 1
+            say(f"  liveliness: {tokens} unit and planner tokens with odd ids declared and dropped")
             r["fuzz_s"] = round(time.perf_counter() - t_start, 1)
             # let the planner drain: the rejected counter stops moving
             expected = sum(sent[k] for k in ("unit_state", "goal", "threat", "goal_delete", "threat_delete"))
@@ -469,11 +473,21 @@ def _odd_key(target: str, odd: str) -> str:
 
     kind = {"unit_state": keys.KeyKind.UNIT_STATE, "goal": keys.KeyKind.UNIT_GOAL}.get(target)
     kind = kind or {"threat": keys.KeyKind.THREAT, "preview": keys.KeyKind.PREVIEW}.get(target)
-    kind = kind or keys.KeyKind.ALIVE_UNIT
+    kind = kind or {"alive_planner": keys.KeyKind.ALIVE_PLANNER}.get(target, keys.KeyKind.ALIVE_UNIT)
     return keys.TEMPLATES[kind].format(mission=MISSION, id=odd)
 
 
-def _collect(handler: Any, target: str, queries: dict[str, int], dec_err: Any, dec_status: Any) -> None:
+# The queryables fuzzed, and the decoder of each one's replies.
+_REPLY_DECODERS: dict[str, str] = {
+    "preview": "decode_plan_result",
+    "status": "decode_planner_status",
+    "world": "decode_world_snapshot",
+}
+
+
+def _collect(handler: Any, target: str, queries: dict[str, int]) -> None:
+    """Count one query's answers: a reply that decodes as ``target``'s, or an error reply that decodes."""
+    from pfp_service import wire
     from pfp_service.errors import InputError
 
     replies = list(handler)
@@ -484,10 +498,10 @@ def _collect(handler: Any, target: str, queries: dict[str, int], dec_err: Any, d
     for rep in good:
         try:
             if rep.ok is not None:
-                dec_status(rep.ok.payload.to_bytes()) if target == "status" else None
-                queries["status_replies" if target == "status" else "error_replies"] += 1
+                getattr(wire, _REPLY_DECODERS[target])(rep.ok.payload.to_bytes())
+                queries[f"{target}_replies"] += 1
             else:
-                dec_err(rep.err.payload.to_bytes())
+                wire.decode_error_reply(rep.err.payload.to_bytes())
                 queries["error_replies"] += 1
         except InputError:
             queries["undecodable"] += 1
