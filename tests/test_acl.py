@@ -430,6 +430,14 @@ def test_planners_sharing_a_mission_each_hold_only_their_own_token(tmp_path):
                 if r.ok
             ]
             assert f"mumt/{M}/alive/planner/p1" in other
+            # scale-out: a planner shares a unit's mission with the other; a unit cannot
+            missions = Inbox(p2, f"mumt/{M}/unit/*/mission")
+            _settle()
+            with r.as_("unit-u1") as u1:
+                put_json(u1, f"mumt/{M}/unit/u1/mission", {"from": "u1"})
+                put_json(p1, f"mumt/{M}/unit/u1/mission", {"from": "p1"})
+                assert missions.get() == {"from": "p1"}
+                _never(missions, "a unit's own mission record")
             for h in (spoof, own, mine, sub):
                 h.undeclare()
     finally:

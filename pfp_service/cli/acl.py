@@ -14,7 +14,7 @@ from the team file.  Roles, each a list of grants built from ``wire.keys``
     planner     read states, goals, threats and unit tokens; publish
                 directions and events; serve previews, its status and its
                 world; hold its own planner token; see other planners'
-                tokens, status and world
+                tokens, status and world; share units' missions with them
     reporter    put and delete threats
     commander   set and cancel any unit's goal, preview any unit
     observer    read everything of the mission, ask any planner's status and
@@ -146,6 +146,9 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
         *_subscribe(keys.unit_states(mission), keys.goals(mission), keys.threats(mission)),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
         *_publish(keys.unit_directions(mission), keys.events(mission)),
+        # scale-out (`pfp serve --cluster`): planners share each unit's fixed mission
+        *_publish(keys.unit_missions(mission)),
+        *_subscribe(keys.unit_missions(mission)),
         # its own status and world queryables; replies also on the wildcards that
         # `pfp health` and `pfp status` ask with
         Grant(INGRESS, ("declare_queryable",), (keys.previews(mission), *own)),
