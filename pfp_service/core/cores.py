@@ -107,7 +107,7 @@ class Cores:
         fraction: the share of each threat's peak that bounds its core.
     """
 
-    __slots__ = ("fraction", "ids", "min_spread_m", "packed")
+    __slots__ = ("boxes", "fraction", "ids", "min_spread_m", "packed")
 
     def __init__(self, field: ThreatField, fraction: float = CORE_FRACTION) -> None:
         self.fraction = fraction
@@ -119,6 +119,14 @@ class Cores:
         self.packed = packed
         self.ids = [field.threats[j].id or f"#{j + 1}" for j in keep]
         self.min_spread_m = min((field.threats[j].min_sigma() for j in keep), default=math.inf)
+        # per threat, the box outside which its core cannot reach (as in ``_raster``)
+        scale = packed[:, kernels.SCALE]
+        qmax = 2.0 * np.log(np.maximum(scale, fraction) / fraction)
+        det = packed[:, kernels.P00] * packed[:, kernels.P11] - packed[:, kernels.P01] ** 2
+        ex = np.sqrt(qmax * packed[:, kernels.P11] / det) if len(packed) else np.zeros(0)
+        ey = np.sqrt(qmax * packed[:, kernels.P00] / det) if len(packed) else np.zeros(0)
+        cx, cy = packed[:, kernels.XI_X], packed[:, kernels.XI_Y]
+        self.boxes = np.stack([cx - ex, cy - ey, cx + ex, cy + ey], axis=1)
 
     @classmethod
     def of(cls, field: ThreatField, fraction: float = CORE_FRACTION) -> Cores:
@@ -138,11 +146,39 @@ class Cores:
         return ratio, idx
 
     def inside(self, points: np.ndarray) -> np.ndarray:
-        """Boolean mask: which points lie in some threat's core."""
+        """Boolean mask: which points lie in some threat's core.
+
+        Exact at any size; many points among many threats are cut into tiles,
+        each tested against only the threats whose core box meets it.
+        """
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.zeros(len(pts), dtype=np.bool_)
-        if len(self.packed) and len(pts):
+        if not (len(self.packed) and len(pts)):
+            return out
+        tiles = min(16, int(math.sqrt(len(pts) * len(self.packed) / 20_000.0)))
+        if tiles < 2:
             _inside(self.packed, pts, self.fraction, out)
+            return out
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        size = np.maximum((hi - lo) / tiles, 1e-300)
+        cell = np.minimum(((pts - lo) / size).astype(np.int64), tiles - 1)
+        key = cell[:, 0] * tiles + cell[:, 1]
+        order = np.argsort(key, kind="stable")
+        cuts = np.searchsorted(key[order], np.arange(tiles * tiles + 1))
+        b = self.boxes
+        for t in range(tiles * tiles):
+            rows = order[cuts[t] : cuts[t + 1]]
+            if not len(rows):
+                continue
+            sub = pts[rows]
+            tlo, thi = sub.min(axis=0), sub.max(axis=0)
+            near = (b[:, 0] <= thi[0]) & (b[:, 2] >= tlo[0]) & (b[:, 1] <= thi[1]) & (b[:, 3] >= tlo[1])
+            if near.any():
+                hit = np.zeros(len(rows), dtype=np.bool_)
+                _inside(
+                    np.ascontiguousarray(self.packed[near]), np.ascontiguousarray(sub), self.fraction, hit
+                )
+                out[rows] = hit
         return out
 
     def raster(self, origin: tuple[float, float], cell_m: float, shape: tuple[int, int]) -> np.ndarray:
@@ -162,9 +198,11 @@ class Cores:
         pts = self.densify(np.asarray(path, dtype=np.float64).reshape(-1, 2))
         if not len(self.packed) or not len(pts):
             return ""
-        ratio, idx = self.ratio(pts)
-        hits = np.flatnonzero(ratio >= self.fraction)
-        return self.ids[int(idx[hits[0]])] if len(hits) else ""
+        hits = np.flatnonzero(self.inside(pts))
+        if not len(hits):
+            return ""
+        _, idx = self.ratio(pts[hits[0] : hits[0] + 1])  # the deepest core at the first point inside
+        return self.ids[int(idx[0])]
 
     def segment_hits(self, path: np.ndarray) -> np.ndarray:
         """Per segment of the polyline ``path``: does it enter a core (sampled as ``first_hit`` samples it)?"""

@@ -228,6 +228,7 @@ class GridGraph:
             if not len(bad):
                 return found
             chain = found.nodes
+            assert chain is not None
             self._drop([(int(chain[i]), int(chain[i + 1])) for i in bad])
         return self._route(source, target, lam)
 
