@@ -121,14 +121,22 @@ class Server:
         return {"exit_code": self.proc.returncode, "error_lines": len(bad), "first_errors": bad[:5]}
 
 
-def start_server(kind: str, escape: str | None = None) -> Server:
-    """Start ``kind`` (``planner`` or ``echo``) in router mode on a free loopback port."""
+def start_server(
+    kind: str, escape: str | None = None, stale_s: float = 60.0, forget_s: float | None = None
+) -> Server:
+    """Start ``kind`` (``planner`` or ``echo``) in router mode on a free loopback port.
+
+    The planner's ``unit_stale_s`` is ``stale_s`` (the bench's quiet windows must not make units
+    stale) and its ``unit_forget_s`` is ``forget_s`` (``None``: its default).
+    """
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     if kind == "planner":
         cmd = [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", MISSION]
         # no durable state between runs; units quiet through a storm or fan-out window stay live
         cmd += ["--planner-id", PLANNER_ID, "--log-level", "warning", "--state-dir", "none"]
-        cmd += ["--unit-stale-s", "60"]
+        cmd += ["--unit-stale-s", f"{stale_s:g}"]
+        if forget_s is not None:
+            cmd += ["--unit-forget-s", f"{forget_s:g}"]
         if escape is not None:
             cmd += ["--escape", escape]
     else:

@@ -18,7 +18,7 @@ import numpy as np
 
 from pfp_service.bench._load import MISSION, LoadGen, ProcMeter, Received, Server
 
-__all__ = ["Bar", "RateSearch", "fanout", "register", "steady", "storm"]
+__all__ = ["Bar", "RateSearch", "fanout", "forget", "register", "steady", "storm"]
 
 STEP_M = 1.0  # a unit's move per report, and its goal's step, so stall detection sees honest motion
 BYSTANDER_HZ = 50.0
@@ -290,6 +290,33 @@ def fanout(g: LoadGen, srv: Server, n: int, bar: Bar) -> dict[str, Any]:
         "pushes_resent": wave.get("server_pushes_resent"),
         "events_received": events,
         **wave,
+    }
+
+
+def forget(g: LoadGen, srv: Server, bar: Bar, idle_rss_mb: float | None, cap_s: float) -> dict[str, Any]:
+    """Every unit goes quiet; wait until the planner holds none (stale, then forgotten), then read its RSS."""
+    task = bar.task("units going stale and forgotten")
+    before = srv.meter.memory_mb()["rss_mb"]
+    t0 = time.perf_counter()
+    units: int | None = None
+    while time.perf_counter() < t0 + cap_s:
+        st = g.status(2.0)
+        units = None if st is None else int(st["units"])
+        task(min((time.perf_counter() - t0) / cap_s, 1.0))
+        if units == 0:
+            break
+        time.sleep(1.0)
+    gone_s = time.perf_counter() - t0
+    time.sleep(2.0)  # what the allocator gives back comes back soon or not at all
+    after = srv.meter.memory_mb()["rss_mb"]
+    task(1.0)
+    return {
+        "units_left": units,
+        "all_forgotten_s": gone_s if units == 0 else None,
+        "rss_before_mb": before,
+        "rss_after_mb": after,
+        "idle_rss_mb": idle_rss_mb,
+        "after_vs_idle": None if after is None or not idle_rss_mb else after / idle_rss_mb,
     }
 
 

@@ -36,11 +36,23 @@ from typing import Any
 import numpy as np
 
 from pfp_service.bench._load import MISSION, LoadGen, Server, start_server
-from pfp_service.bench._phases import MAX_P99_MS, STEP_M, Bar, RateSearch, fanout, register, steady, storm
+from pfp_service.bench._phases import (
+    MAX_P99_MS,
+    STEP_M,
+    Bar,
+    RateSearch,
+    fanout,
+    forget,
+    register,
+    steady,
+    storm,
+)
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
 AREA_M = 2000.0
+FORGET_STALE_S = 20.0  # with --forget: silence before stale (longer than any quiet window of the phases)
+FORGET_AFTER_S = 5.0  # ... and stale this long before forgotten
 TARGETS = {
     "steady_p50_ms": 1.0,
     "steady_p99_vs_echo": 2.0,
@@ -52,6 +64,7 @@ TARGETS = {
     "fanout_redirected_ms": 20.0,
     "fanout_deliberated_s": 1.0,
     "rss_mb": 300.0,
+    "rss_vs_idle": 1.1,
 }
 
 
@@ -76,6 +89,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--echo", action="store_true", help="run the same load against an echo responder first")
     p.add_argument("--no-storm", action="store_true", help="skip the goal storm")
     p.add_argument("--no-fanout", action="store_true", help="skip the contingency fan-out")
+    p.add_argument(
+        "--forget",
+        action="store_true",
+        help="end with every unit quiet until the planner forgets them (unit_stale_s 20, unit_forget_s 5), then its RSS",
+    )
     p.add_argument("--seed", type=int, default=2023, help="layout seed (default 2023)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -167,7 +185,8 @@ def _prepare(
 def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str, dict[str, Any]]:
     """Both responders alive at once; their steady loads and rate probes take turns, so they share the noise."""
     kinds = ["echo", "planner"] if args.echo else ["planner"]
-    servers = {k: start_server(k, args.escape if k == "planner" else None) for k in kinds}
+    stale_s, forget_s = (FORGET_STALE_S, FORGET_AFTER_S) if args.forget else (60.0, None)
+    servers = {k: start_server(k, args.escape if k == "planner" else None, stale_s, forget_s) for k in kinds}
     gens: dict[str, LoadGen] = {}
     res: dict[str, dict[str, Any]] = {}
     n = args.units
@@ -193,6 +212,11 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
                 res[k]["find_max"] = s.result(n)
         for k in kinds:
             res[k]["final_memory"] = servers[k].meter.memory_mb()
+        if args.forget:
+            cap = FORGET_STALE_S + FORGET_AFTER_S + 60.0
+            res["planner"]["forget"] = forget(
+                gens["planner"], servers["planner"], bar, res["planner"]["idle_rss_mb"], cap
+            )
     finally:
         for g in gens.values():
             g.close()
@@ -246,6 +270,12 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
         )
         add("fan-out: deliberated within 1 s", f["all_deliberated_s"], TARGETS["fanout_deliberated_s"])
     add("planner peak RSS <= 300 MB", p["final_memory"]["peak_rss_mb"], TARGETS["rss_mb"])
+    if "forget" in p:
+        add(
+            "RSS back within 10 % of idle once forgotten",
+            p["forget"]["after_vs_idle"],
+            TARGETS["rss_vs_idle"],
+        )
     return rows
 
 
@@ -316,6 +346,12 @@ def _print(doc: dict[str, Any]) -> None:
                 f"  fan-out: {f['redirected']}/{f['affected']} re-directed, all in {_f(f['all_redirected_ms'], '.1f')} ms (p50 {_f(f['redirected_p50_ms'], '.1f')}); "
                 f"deliberations {f['deliberations_ended']}/{f['deliberations_started']}, all in {_f(f['all_deliberated_s'], '.2f')} s; "
                 f"pushes sent {f['pushes_sent']} (first copies {f['pushes_first_copies']}, re-sent {f['pushes_resent']}), delivered {f['pushes_delivered']}"
+            )
+        if "forget" in r:
+            fg = r["forget"]
+            print(
+                f"  forgotten: {fg['units_left']} units left after {_f(fg['all_forgotten_s'], '.1f')} s; RSS "
+                f"{_f(fg['rss_before_mb'], '.0f')} -> {_f(fg['rss_after_mb'], '.0f')} MB (idle {_f(fg['idle_rss_mb'], '.0f')} MB)"
             )
         if "find_max" in r:
             fm = r["find_max"]
