@@ -17,7 +17,9 @@ session acting as every unit.  ``--rate`` is per unit: the offered load is
    of their centre; the time until every unit the planner re-plans (its replan
    event says how many) has a pushed direction, then its deliberated route, and
    pushes sent (the planner's ``msgs_out`` less the events) against delivered;
-4. ``--find-max``: the highest rate whose p99 ≤ 10 ms with ≤ 0.1 % unanswered.
+4. ``--find-max``: the highest rate whose p99 ≤ 10 ms with ≤ 0.1 % unanswered;
+5. ``--forget``: every unit goes quiet until the planner has forgotten them all,
+   and its RSS is read against its idle RSS.
 
 With ``--echo`` the echo responder gets phases 2 and 4 with the same load, first.
 """
