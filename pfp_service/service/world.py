@@ -211,7 +211,7 @@ class World:
     def view(self, unit_id: str) -> UnitView:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec = self._units.get(unit_id)
-        threats = tuple(self.field.threats)
+        threats = self.field.threats  # the same tuple while the field stands: a desk can cache it
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, self.settings)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
