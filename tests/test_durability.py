@@ -194,3 +194,52 @@ def test_a_client_planner_waits_for_its_router(tmp_path):
         proc.terminate()
         proc.wait(timeout=10)
     assert proc.returncode == 0
+
+
+def test_the_fleet_puts_its_goals_again_for_a_planner_that_lost_them(tmp_path):
+    """Belt and braces: a planner restarted without durable state answers no_goal; the fleet re-puts."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    mission = "f" + uuid.uuid4().hex[:8]
+    team = tmp_path / "team.yaml"
+    team.write_text(
+        "name: t\nunits:\n  - {id: r1, kind: unmanned, start: [0, 0], goal: [400, 0], speed_mps: 2}\n"
+    )
+
+    def planner():
+        return subprocess.Popen(
+            [sys.executable, "-m", "pfp_service", "serve", "--mode", "client", "--connect", endpoint,
+             "--mission", mission, "--state-dir", "none"],
+            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+        )  # fmt: skip
+
+    with _router(endpoint):
+        p = planner()
+        wait_for_planner(endpoint, mission)
+        fleet = subprocess.Popen(
+            [sys.executable, "-m", "pfp_service", "fleet", "--team", str(team), "--connect", endpoint,
+             "--mission", mission, "--rate-hz", "5", "--speed-up", "5", "--duration-s", "600"],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        )  # fmt: skip
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [lines.put(x) for x in fleet.stdout], daemon=True).start()  # type: ignore[union-attr]
+        try:
+            time.sleep(3.0)
+            p.send_signal(signal.SIGKILL)
+            p.wait(timeout=10)
+            p = planner()  # no durable state: it knows no goal
+            deadline = time.monotonic() + 90
+            seen = []
+            while time.monotonic() < deadline:
+                try:
+                    line = lines.get(timeout=1.0)
+                except queue.Empty:
+                    continue
+                seen.append(line)
+                if "goal put again" in line:
+                    break
+            else:
+                raise AssertionError("".join(seen[-20:]))
+        finally:
+            for proc in (fleet, p):
+                proc.terminate()
+                proc.wait(timeout=10)

@@ -27,7 +27,7 @@ from typing import Any
 from pfp_clients.sim import SimUnit
 from pfp_clients.team import Team
 from pfp_service.errors import InputError
-from pfp_service.wire import Direction, Goal, decode_direction, encode, keys, zenoh_encoding
+from pfp_service.wire import Direction, DirectionStatus, Goal, decode_direction, encode, keys, zenoh_encoding
 
 __all__ = ["FleetOptions", "FleetResult", "run_fleet", "summary_lines"]
 
@@ -113,8 +113,37 @@ def run_fleet(
         except InputError:
             pass  # not ours to judge: the planner's own rejections are events
 
+    new_planner = threading.Event()
+
+    def on_planner(sample: zenoh.Sample) -> None:  # a planner (re)started: goals are put again
+        if sample.kind == zenoh.SampleKind.PUT:
+            new_planner.set()
+
+    cancelled: set[str] = set()  # goals someone cancelled on the wire are not put again
+
+    def on_goal(sample: zenoh.Sample) -> None:
+        with contextlib.suppress(InputError):
+            uid = keys.parse(str(sample.key_expr)).id
+            if sample.kind == zenoh.SampleKind.DELETE:
+                cancelled.add(uid)
+
     enc = zenoh_encoding()
-    declared: list[Any] = [session.declare_subscriber(keys.unit_directions(m), on_direction)]
+    declared: list[Any] = [
+        session.declare_subscriber(keys.unit_directions(m), on_direction),
+        session.liveliness().declare_subscriber(keys.alive_planners(m), on_planner),
+        session.declare_subscriber(keys.goals(m), on_goal),
+    ]
+    reput_at: dict[str, float] = {}
+
+    def reput(u: SimUnit, why: str) -> None:
+        """Belt and braces: a planner that lost a unit's goal gets it again (at most every 2 s)."""
+        goal = _goal_of(u, dt_s) if opts.set_goals and not u.arrived and u.id not in cancelled else None
+        if goal is None or clock() - reput_at.get(u.id, -1e9) < 2.0:
+            return
+        reput_at[u.id] = clock()
+        session.put(keys.unit_goal(m, u.id), encode(goal), encoding=enc)
+        say(f"t={t_s:7.2f}s  {u.id} goal put again ({why})")
+
     tokens = [session.liveliness().declare_token(keys.alive_unit(m, u.id)) for u in units]
     pubs = {u.id: session.declare_publisher(keys.unit_state(m, u.id), encoding=enc) for u in units}
     t_s, tick, late = 0.0, 0, 0
@@ -136,6 +165,8 @@ def run_fleet(
             line = by_id[uid].on_direction(d, t_s)
             if line is not None:
                 say(f"t={t_s:7.2f}s  {line}")
+            if d.status is DirectionStatus.NO_GOAL and tick > 0:
+                reput(by_id[uid], "the planner answered no_goal")
 
     say(f"fleet {team.name}: {len(units)} units, {opts.rate_hz:g} Hz, speed-up x{opts.speed_up:g}")
     try:
@@ -149,6 +180,10 @@ def run_fleet(
                         session.put(keys.unit_goal(m, u.id), encode(goal), encoding=enc)
                         gx, gy = goal.position
                         say(f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal ({gx:.1f}, {gy:.1f})")
+            if new_planner.is_set() and tick > 0:
+                new_planner.clear()
+                for u in units:
+                    reput(u, "a planner started")
             for u in units:
                 pubs[u.id].put(encode(u.state(t_s)))
             # pace the tick, then (lockstep) wait a while longer for answers still missing
