@@ -104,3 +104,11 @@ def test_degenerate_threat_is_one_line(tmp_path):
     assert out.returncode == 2
     assert "Traceback" not in out.stderr
     assert "sigma_range" in out.stderr
+
+
+def test_optimal_plan_reports_no_descent_parameters_rather_than_placeholders():
+    r = run_pfp("plan", str(EXAMPLES / "paper-simple.yaml"), "--planner", "optimal", "--json")
+    assert r.returncode in (0, 1), r.stderr
+    params = json.loads(r.stdout)["params"]
+    assert params["delta"] is None and params["max_iter"] is None and params["tolerance"] is None
+    assert params["step"] > 0  # the grid cell

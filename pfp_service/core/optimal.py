@@ -128,7 +128,7 @@ def plan_optimal(
     field = ThreatField([s.threat for s in schedule], intensity)
     solver = OptimalSolver(field, start, goal, bounds, cells, avoid_cores)
     found = solver.solve(lam)
-    used = UsedParams(0.0, solver.graph.cell_m, 0, 0.0, intensity, "none")
+    used = UsedParams(None, solver.graph.cell_m, None, None, intensity, "none")  # no descent parameters
     ms = ((clock() - t0) * 1e3) if clock else 0.0
     if not len(found.path):
         cell = f"{solver.graph.cell_m:.4g} m grid"

@@ -53,10 +53,13 @@ class Scheduled(msgspec.Struct, frozen=True):
 
 
 class UsedParams(msgspec.Struct, frozen=True):
-    delta: float
+    """The parameters a plan used.  The optimal planner has no delta, max_iter or
+    tolerance: those are null for it, and ``step`` is its grid cell in metres."""
+
+    delta: float | None
     step: float
-    max_iter: int
-    tolerance: float
+    max_iter: int | None
+    tolerance: float | None
     intensity: str
     escape: str
 
