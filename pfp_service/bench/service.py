@@ -7,21 +7,24 @@ session acting as every unit.  ``--rate`` is per unit: the offered load is
 ``units × rate`` states a second.  Phases, against the planner:
 
 1. **goal storm**: every unit reports once, then all ``--units`` goals are put
-   at once while a bystander unit reports at 50 Hz: the time until every unit
-   is guided, until every deliberation it started has ended (a direction with
-   ``deliberating`` false after one with true), and the bystander's latency;
+   at once while every unit reports at 1 Hz and a guided bystander at 50 Hz:
+   the time until every unit is guided, until every deliberation it started
+   has ended (a direction with ``deliberating`` false after one with true),
+   and the bystander's latency;
 2. **steady load**: ``--duration`` seconds at ``--rate``: position → direction
    latency p50/p90/p99/max, input and output rates, the unanswered fraction,
    CPU % and peak RSS of the responder;
 3. **contingency fan-out**: the units go quiet, one threat is put just ahead
    of their centre; the time until every unit the planner re-plans (its replan
-   event says how many) has a pushed direction, then its deliberated route, and
-   pushes sent (the planner's ``msgs_out`` less the events) against delivered;
+   event says how many) has a pushed direction, pushes sent (the planner's
+   ``msgs_out`` less its events) against delivered, then, the units reporting
+   at 1 Hz again, the time until each deliberation the wave started has ended;
 4. ``--find-max``: the highest rate whose p99 ≤ 10 ms with ≤ 0.1 % unanswered;
 5. ``--forget``: every unit goes quiet until the planner has forgotten them all,
    and its RSS is read against its idle RSS.
 
-With ``--echo`` the echo responder gets phases 2 and 4 with the same load, first.
+With ``--echo`` the echo responder runs alongside and gets phases 2 and 4
+with the same load; the two take turns, so they share the machine's noise.
 """
 
 from __future__ import annotations
