@@ -88,6 +88,52 @@ def _settle() -> None:
     time.sleep(0.3)  # declarations reach the router; nothing here waits on data with it
 
 
+def _drain(inbox: Inbox) -> list:
+    out = []
+    while True:
+        try:
+            out.append(inbox.q.get_nowait()[1])
+        except queue.Empty:
+            return out
+
+
+def _denied(inbox: Inbox, legit, hostile, is_hostile, what: str, timeout: float = 10.0) -> None:
+    """``hostile()`` is dropped by the router while ``legit()`` gets through on the same path.
+
+    The path is proved first (``legit`` repeated until it arrives: the subscription is in
+    place), then ``hostile`` and ``legit`` are sent once more and every sample is kept
+    until the second legitimate one and ``NOT_DELIVERED_S`` after it.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        legit()
+        try:
+            inbox.get(timeout=0.5)
+            break
+        except TimeoutError:
+            assert time.monotonic() < deadline, f"the legitimate path never carried anything ({what})"
+    time.sleep(0.1)
+    _drain(inbox)
+    hostile()
+    legit()
+    seen = [inbox.get(timeout=timeout)]
+    while not any(not is_hostile(m) for m in seen):
+        seen.append(inbox.get(timeout=timeout))
+    time.sleep(NOT_DELIVERED_S)
+    seen += _drain(inbox)
+    assert not [m for m in seen if is_hostile(m)], f"{what} was delivered: {seen}"
+
+
+def _answers(session: zenoh.Session, selector: str, timeout: float = 10.0) -> list:
+    """The decoded ok replies to ``selector``, asking again until there is one (a new queryable propagates)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        got = [json.loads(r.ok.payload.to_bytes()) for r in session.get(selector, timeout=2.0) if r.ok]
+        if got or time.monotonic() > deadline:
+            return got
+        time.sleep(0.1)
+
+
 def _never(inbox: Inbox, what: str, where=lambda msg: True) -> None:
     with pytest.raises(TimeoutError):
         got = inbox.get(timeout=NOT_DELIVERED_S, where=where)
@@ -103,45 +149,61 @@ DIRECTION = {"unit": "u1", "status": "en_route", "vector": [1.0, 0.0]}
 def test_a_unit_cannot_spoof_another_units_state(router):
     with router.as_("observer") as obs, router.as_("unit-u1") as u1, router.as_("unit-u2") as u2:
         inbox = Inbox(obs, f"mumt/{M}/unit/*/state")
-        _settle()
-        put_json(u2, f"mumt/{M}/unit/u1/state", {**STATE, "seq": 666})  # spoof
-        put_json(u1, f"mumt/{M}/unit/u1/state", STATE)
-        assert inbox.get(where=lambda m: m["seq"] == 1)["position"] == [1.0, 2.0]
-        _never(inbox, "u2's state for u1")
+        _denied(
+            inbox,
+            lambda: put_json(u1, f"mumt/{M}/unit/u1/state", STATE),
+            lambda: put_json(u2, f"mumt/{M}/unit/u1/state", {**STATE, "seq": 666}),
+            lambda m: m["seq"] == 666,
+            "u2's state for u1",
+        )
 
 
 def test_a_unit_cannot_set_another_units_goal(router):
     with router.as_("observer") as obs, router.as_("unit-u2") as u2, router.as_("commander") as cmd:
         inbox = Inbox(obs, f"mumt/{M}/unit/*/goal")
-        _settle()
-        put_json(u2, f"mumt/{M}/unit/u1/goal", {"position": [999, 999]})
-        u2.delete(f"mumt/{M}/unit/u1/goal")
-        put_json(cmd, f"mumt/{M}/unit/u1/goal", {"position": [10, 10]})
-        assert inbox.get() == {"position": [10, 10]}
-        _never(inbox, "u2's goal for u1")
+
+        def spoof() -> None:
+            put_json(u2, f"mumt/{M}/unit/u1/goal", {"position": [999, 999]})
+            u2.delete(f"mumt/{M}/unit/u1/goal")  # a DELETE arrives as None
+
+        _denied(
+            inbox,
+            lambda: put_json(cmd, f"mumt/{M}/unit/u1/goal", {"position": [10, 10]}),
+            spoof,
+            lambda m: m != {"position": [10, 10]},
+            "u2's goal for u1",
+        )
 
 
 @pytest.mark.parametrize("who", ["unit-u1", "commander", "observer"])
 def test_only_a_reporter_publishes_threats(router, who):
     with router.as_("observer") as obs, router.as_(who) as bad, router.as_("reporter") as rep:
         inbox = Inbox(obs, f"mumt/{M}/threat/*")
-        _settle()
-        put_json(bad, f"mumt/{M}/threat/fake", THREAT)
-        bad.delete(f"mumt/{M}/threat/real")
-        put_json(rep, f"mumt/{M}/threat/real", THREAT)
-        assert inbox.get()["sigma_range"] == 1.0
-        _never(inbox, f"a threat from {who}")
+
+        def spoof() -> None:
+            put_json(bad, f"mumt/{M}/threat/fake", {**THREAT, "weight": 9})
+            bad.delete(f"mumt/{M}/threat/real")
+
+        _denied(
+            inbox,
+            lambda: put_json(rep, f"mumt/{M}/threat/real", THREAT),
+            spoof,
+            lambda m: m != THREAT,
+            f"a threat from {who}",
+        )
 
 
 @pytest.mark.parametrize("who", ["unit-u2", "unit-u1", "reporter", "commander", "fleet"])
 def test_only_the_planner_publishes_directions(router, who):
     with router.as_("unit-u1") as u1, router.as_(who) as bad, router.as_("planner") as planner:
         inbox = Inbox(u1, f"mumt/{M}/unit/u1/direction")
-        _settle()
-        put_json(bad, f"mumt/{M}/unit/u1/direction", {**DIRECTION, "vector": [-1.0, 0.0]})
-        put_json(planner, f"mumt/{M}/unit/u1/direction", DIRECTION)
-        assert inbox.get()["vector"] == [1.0, 0.0]
-        _never(inbox, f"a direction from {who}")
+        _denied(
+            inbox,
+            lambda: put_json(planner, f"mumt/{M}/unit/u1/direction", DIRECTION),
+            lambda: put_json(bad, f"mumt/{M}/unit/u1/direction", {**DIRECTION, "vector": [-1.0, 0.0]}),
+            lambda m: m["vector"] != [1.0, 0.0],
+            f"a direction from {who}",
+        )
 
 
 def test_a_unit_reads_only_its_own_direction(router):
@@ -188,8 +250,7 @@ def test_no_fake_planner_token_or_status(router):
                 ),
             ]
             assert tokens.get(timeout=5) == f"mumt/{M}/alive/planner/planner"
-            replies = [r.ok for r in obs.get(f"mumt/{M}/planner/*/status", timeout=2.0) if r.ok is not None]
-            assert [json.loads(r.payload.to_bytes()) for r in replies] == [{"ok": 1}]
+            assert _answers(obs, f"mumt/{M}/planner/*/status") == [{"ok": 1}]
             for h in held:
                 h.undeclare()
         sub.undeclare()
@@ -295,10 +356,8 @@ def test_a_real_planner_answers_a_unit_through_the_acl(router):
                 assert d is not None and d["status"] == "en_route"
                 assert d["vector"][0] == pytest.approx(1.0, abs=1e-6)
                 # the unit previews its own path; the planner's status answers an observer
-                replies = [r.ok for r in u1.get(f"mumt/{M}/preview/u1", timeout=5.0) if r.ok is not None]
-                assert json.loads(replies[0].payload.to_bytes())["status"] == "reached"
-                status = [r.ok for r in obs.get(f"mumt/{M}/planner/*/status", timeout=2.0) if r.ok]
-                assert json.loads(status[0].payload.to_bytes())["planner"] == "planner"
+                assert _answers(u1, f"mumt/{M}/preview/u1")[0]["status"] == "reached"
+                assert _answers(obs, f"mumt/{M}/planner/*/status")[0]["planner"] == "planner"
                 # a reporter's threat makes the planner replan and say so on events
                 with router.as_("reporter") as rep:
                     put_json(rep, f"mumt/{M}/threat/e1", {**THREAT, "position": [5, 3]})
