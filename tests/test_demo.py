@@ -7,7 +7,7 @@ import subprocess
 import sys
 import time
 
-from tests.conftest import run_pfp
+from tests.conftest import ROOT, run_pfp
 
 
 def test_demo_quick_runs_and_writes_summary_and_png(tmp_path):
@@ -116,3 +116,28 @@ def test_demo_runs_on_one_clock_while_both_cores_are_busy(tmp_path):
         for b in burners:
             b.kill()
             b.wait()
+
+
+def test_demo_serves_the_live_map_while_it_runs(tmp_path):
+    """`pfp demo --map`: the URL is printed and the page answers while the demo runs."""
+    import urllib.request
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pfp_service", "demo", "--quick", "--map", "--out", str(tmp_path / "d.png")],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        url = None
+        for line in proc.stdout:  # type: ignore[union-attr]
+            if line.startswith("map: "):
+                url = line.split("map: ", 1)[1].strip()
+                break
+        assert url is not None and url.startswith("http://127.0.0.1:")
+        with urllib.request.urlopen(url, timeout=10) as r:
+            page = r.read().decode()
+        assert r.status == 200 and "leaflet" in page.lower()
+        rest = proc.stdout.read()  # type: ignore[union-attr]
+        assert proc.wait(timeout=300) == 0, rest[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()

@@ -61,6 +61,7 @@ class DemoOptions:
     team: Path = DEMO_TEAM
     script: Path = DEMO_SCRIPT
     progress_every_s: float = 1.0  # wall seconds between progress lines
+    map_port: int | None = None  # serve the live map on 127.0.0.1 at this port (0: any free one)
 
 
 def _free_port() -> int:
@@ -186,6 +187,14 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
         node.start()
         stack.callback(node.stop)
         sessions = [stack.enter_context(open_session(client_config([endpoint]))) for _ in range(2)]
+        if opts.map_port is not None:  # the operator's live map of this very demo
+            from pfp_clients.map.embed import MapThread
+            from pfp_clients.map.server import MapOptions
+
+            url = stack.enter_context(
+                MapThread(client_config([endpoint]), MapOptions(mission=MISSION, port=opts.map_port))
+            )
+            say(f"map: {url}")
         stack.callback(stop.set)
 
         def inject() -> None:

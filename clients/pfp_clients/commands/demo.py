@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import Any
 
 from pfp_service.cli._common import positive_float
+from pfp_service.errors import InputError
 
 
 def register(sub: Any) -> None:
@@ -16,6 +18,15 @@ def register(sub: Any) -> None:
     p.add_argument("--quick", action="store_true", help="shortened: run at x15 (used by the tests)")
     p.add_argument("--team", metavar="YAML", help="team file (default examples/demo-team.yaml)")
     p.add_argument("--script", metavar="YAML", help="injection script (default examples/demo-inject.yaml)")
+    p.add_argument(
+        "--map",
+        nargs="?",
+        const=0,
+        type=int,
+        metavar="PORT",
+        help="serve the live map (the map extra) while the demo runs and print its URL; "
+        "PORT on 127.0.0.1, a free one if left out (default: no map)",
+    )
     p.set_defaults(func=run)
 
 
@@ -25,9 +36,11 @@ def run(args: argparse.Namespace) -> int:
     speed_up = args.speed_up or (15.0 if args.quick else 5.0)
     from pfp_service.render import check_png_path
 
-    opts = DemoOptions(out=check_png_path(args.out, "--out"), speed_up=speed_up)
+    if args.map is not None and not 0 <= args.map <= 65535:
+        raise InputError("--map", f"{args.map} is not a port (0-65535)")
+    opts = DemoOptions(out=check_png_path(args.out, "--out"), speed_up=speed_up, map_port=args.map)
     if args.team:
-        opts = DemoOptions(out=opts.out, speed_up=speed_up, team=Path(args.team), script=opts.script)
+        opts = dataclasses.replace(opts, team=Path(args.team))
     if args.script:
-        opts = DemoOptions(out=opts.out, speed_up=speed_up, team=opts.team, script=Path(args.script))
+        opts = dataclasses.replace(opts, script=Path(args.script))
     return run_demo(opts, lambda s: print(s, flush=True))
