@@ -117,6 +117,7 @@ def test_the_shipped_router_configs_load_in_zenoh_and_deny_by_default(name):
     assert ac["enabled"] is True and ac["default_permission"] == "deny"
     assert {r["permission"] for r in ac["rules"]} == {"allow"}
     assert conf["transport"]["link"]["rx"]["max_message_size"] == 512 * 1024
+    assert conf["transport"]["shared_memory"]["enabled"] is False  # else same-host payloads skip the limit
     if "mtls" in name:
         assert conf["transport"]["link"]["tls"]["enable_mtls"] is True
         assert all("cert_common_names" in s and "usernames" not in s for s in ac["subjects"])
