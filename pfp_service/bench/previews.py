@@ -17,6 +17,7 @@ live p99 during the storm is at most ``--max-p99-ms``.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import threading
 import time
@@ -25,6 +26,7 @@ from typing import Any
 from pfp_service.bench._load import MISSION, start_server
 from pfp_service.bench.roundtrip import _client
 from pfp_service.cli._common import positive_float, positive_int
+from pfp_service.wire import keys
 
 __all__ = ["add_arguments", "run", "storm"]
 
@@ -102,15 +104,15 @@ def _storm(session: Any, queries: int, threads: int, timeout_s: float, rate_hz: 
             cond.notify_all()
 
     deadline = time.monotonic() + 120
-    while not any(r.ok is not None for r in session.get(f"mumt/{m}/planner/*/status", timeout=1.0)):
+    while not any(r.ok is not None for r in session.get(keys.planner_statuses(m), timeout=1.0)):
         if time.monotonic() > deadline:
             raise RuntimeError("the planner never answered its status")
         time.sleep(0.2)
-    sub = session.declare_subscriber(f"mumt/{m}/unit/{unit}/direction", on_direction)
+    sub = session.declare_subscriber(keys.unit_direction(m, unit), on_direction)
     for i, pos in enumerate([(40.0, 60.0), (70.0, 30.0), (50.0, 50.0)]):
         threat = {"position": list(pos), "sigma_range": 10.0, "sigma_lateral": 7.0, "facing_deg": 225.0}
-        session.put(f"mumt/{m}/threat/t{i}", json.dumps(threat))
-    session.put(f"mumt/{m}/unit/{unit}/goal", json.dumps({"position": [100.0, 100.0]}))
+        session.put(keys.threat(m, f"t{i}"), json.dumps(threat))
+    session.put(keys.unit_goal(m, unit), json.dumps({"position": [100.0, 100.0]}))
     sent: dict[int, float] = {}
     stop = threading.Event()
     phase = {"name": "before"}
@@ -123,9 +125,10 @@ def _storm(session: Any, queries: int, threads: int, timeout_s: float, rate_hz: 
             seq += 1
             now = time.monotonic()
             sent[seq] = now
-            session.put(f"mumt/{m}/unit/{unit}/state", json.dumps({"position": [x, y], "seq": seq}))
+            session.put(keys.unit_state(m, unit), json.dumps({"position": [x, y], "seq": seq}))
+            answered = functools.partial(dict.__contains__, got, seq)
             with cond:
-                cond.wait_for(lambda s=seq: s in got, timeout=2.0)
+                cond.wait_for(answered, timeout=2.0)
             name = phase["name"]
             if seq in got:
                 lat[name].append(got[seq] - sent[seq])
@@ -150,7 +153,7 @@ def _storm(session: Any, queries: int, threads: int, timeout_s: float, rate_hz: 
                 k = todo.pop()
             t0 = time.monotonic()
             replies = list(
-                session.get(f"mumt/{m}/preview/{unit}", payload=bodies[k % len(bodies)], timeout=timeout_s)
+                session.get(keys.preview(m, unit), payload=bodies[k % len(bodies)], timeout=timeout_s)
             )
             took = time.monotonic() - t0
             kind = "none"
