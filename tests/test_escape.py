@@ -370,3 +370,12 @@ def test_routes_never_clip_a_sharply_skewed_core():
         assert r.status.value == "reached" and not _core_entry(case.threats, r.path), case.name
         o = plan_optimal(case.start, case.goal, sched, avoid_cores=True)
         assert o.status.value == "reached" and not _core_entry(case.threats, o.path), case.name
+
+
+def test_a_plan_that_starts_inside_a_core_says_so_in_its_events():
+    t = Threat.from_facing((0.0, 0.0), 0.0, 10.0, 10.0, 0.0, 1.0, "e1")
+    r = plan((1.0, 1.0), (100.0, 100.0), [Scheduled(t)], PlannerParams())
+    assert r.status.value == "reached" and r.escapes[0] == "leave core e1"
+    assert r.events[0] == "start inside the core of threat e1: left it by the shortest way out"
+    clear = plan((60.0, 60.0), (100.0, 100.0), [Scheduled(t)], PlannerParams())
+    assert not any("core" in e for e in clear.events)

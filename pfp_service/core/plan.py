@@ -329,6 +329,12 @@ def plan(
         break
     x, y = track[-1]
     epochs.append(Epoch(epoch_start, k, field))
+    for name in stepper.escapes:  # a start inside a core is left first: say so
+        if name.startswith("leave core "):
+            events.insert(
+                0,
+                f"start inside the core of threat {name[len('leave core ') :]}: left it by the shortest way out",
+            )
     path = np.array(track)
     m = measure(path, epochs)
     final = math.hypot(goal[0] - x, goal[1] - y)
