@@ -435,8 +435,12 @@ def test_a_job_past_its_deadline_is_not_computed_and_the_unit_descends():
     (job,) = out.jobs
     done = job.run(5.0)
     assert done.stepper is None
-    d = _one(w.apply([done, _state("u", 0, 0)], 5.0), "u")
-    assert d.status is DirectionStatus.EN_ROUTE and not d.deliberating
+    out = w.apply([done, _state("u", 0, 0)], 5.0)
+    d = _one(out, "u")
+    # it descends meanwhile, and the dropped look-ahead is asked again behind the queue
+    assert d.status is DirectionStatus.EN_ROUTE and d.deliberating
+    (again,) = out.jobs
+    assert again.kind == "foresee" and again.deadline == 6.0
 
 
 def test_deliberated_for_an_unknown_unit_is_ignored():

@@ -407,6 +407,11 @@ class Stepper:
         """Following a committed escape route."""
         return self._run is not None
 
+    def look_ahead_again(self) -> None:
+        """A look-ahead asked for was dropped (its deadline passed): ask again at the next advisory."""
+        self.pending = None
+        self._foresee = self.params.escape == "auto" and not self._ghost
+
     def check_terminal(self) -> bool:
         """A standing verdict (trapped) that ``check`` would repeat, so a prediction must ask the stepper."""
         return self._terminal is not None

@@ -505,12 +505,16 @@ class World:
         rec = self._units.get(done.unit)
         if rec is None or rec.job is None or rec.job.token != done.token:
             return  # superseded: a newer goal or world is in force
+        kind = rec.job.kind
         rec.job = None
         self._deliberating -= 1
         if rec.stepper is None or rec.token() != done.token:
             return
-        if done.stepper is None:  # ran past its deadline: descend, and ask again at the next need
-            rec.stepper.pending = None
+        if done.stepper is None:  # ran past its deadline: descend meanwhile, and ask again
+            if kind == "foresee":
+                rec.stepper.look_ahead_again()  # at its next report, behind the queue
+            else:
+                rec.stepper.pending = None  # a trap is asked again by the trap watch itself
         elif rec.stepper.adopt(done.stepper) and rec.position is not None and not rec.stale:
             dirty.add(rec.id)  # a route or a verdict: told at once, not at its next report
 
