@@ -130,11 +130,7 @@ class CullIndex:
             points,
             goals,
             gains,
-            self.origin[0],
-            self.origin[1],
-            self.cell,
-            self.nx,
-            self.ny,
+            (self.origin[0], self.origin[1], self.cell, self.nx, self.ny),
             self.indptr,
             self.indices,
             self.cell_bound / RELATIVE_BOUND,
@@ -160,96 +156,66 @@ def _fill(i0: np.ndarray, i1: np.ndarray, k0: np.ndarray, k1: np.ndarray, nx: in
                 n += 1
 
 
-@numba.njit(cache=True, nogil=True)
-def _culled_descent(
+@numba.njit(cache=True, nogil=True, inline="always")
+def _culled_row(
     packed: np.ndarray,
     points: np.ndarray,
     goals: np.ndarray,
     gains: np.ndarray,
-    ox: float,
-    oy: float,
-    cell: float,
-    nx: int,
-    ny: int,
+    grid: tuple[float, float, float, int, int],
     indptr: np.ndarray,
     indices: np.ndarray,
     cell_need: np.ndarray,
     need_outside: float,
     out: np.ndarray,
     flags: np.ndarray,
+    i: int,
 ) -> None:
+    """Unit ``i``: the threats its cell lists, the goal term, and whether the bound holds there."""
+    ox, oy, cell, nx, ny = grid
+    x = points[i, 0]
+    y = points[i, 1]
+    val = 0.0
+    gx = 0.0
+    gy = 0.0
+    inside = math.isfinite(x) and math.isfinite(y)
+    ci = math.floor((x - ox) / cell) if inside else -1
+    ck = math.floor((y - oy) / cell) if inside else -1
+    need = need_outside
+    if 0 <= ci < nx and 0 <= ck < ny:
+        c = ck * nx + ci
+        need = cell_need[c]
+        for p in range(indptr[c], indptr[c + 1]):
+            v, dx, dy = kernels.threat_term(packed, indices[p], x, y, 0.0, True)
+            val += v
+            gx += dx
+            gy += dy
+    fx = gx - 2.0 * gains[i] * (goals[i, 0] - x)
+    fy = gy - 2.0 * gains[i] * (goals[i, 1] - y)
+    norm = math.sqrt(fx * fx + fy * fy)
+    out[i, 0] = fx
+    out[i, 1] = fy
+    out[i, 2] = val
+    out[i, 3] = norm
+    flags[i] = not (norm >= need)  # also true for a NaN norm: the full kernel decides
+
+
+@numba.njit(cache=True, nogil=True)
+def _culled_descent(packed, points, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags):  # type: ignore[no-untyped-def]
     for i in range(points.shape[0]):
-        x = points[i, 0]
-        y = points[i, 1]
-        val = 0.0
-        gx = 0.0
-        gy = 0.0
-        inside = math.isfinite(x) and math.isfinite(y)
-        ci = math.floor((x - ox) / cell) if inside else -1
-        ck = math.floor((y - oy) / cell) if inside else -1
-        need = need_outside
-        if 0 <= ci < nx and 0 <= ck < ny:
-            c = ck * nx + ci
-            need = cell_need[c]
-            for p in range(indptr[c], indptr[c + 1]):
-                v, dx, dy = kernels.threat_term(packed, indices[p], x, y, 0.0, True)
-                val += v
-                gx += dx
-                gy += dy
-        fx = gx - 2.0 * gains[i] * (goals[i, 0] - x)
-        fy = gy - 2.0 * gains[i] * (goals[i, 1] - y)
-        norm = math.sqrt(fx * fx + fy * fy)
-        out[i, 0] = fx
-        out[i, 1] = fy
-        out[i, 2] = val
-        out[i, 3] = norm
-        flags[i] = not (norm >= need)  # also true for a NaN norm: the full kernel decides
+        _culled_row(
+            packed, points, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags, i
+        )
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
 def _culled_descent_parallel(
-    packed: np.ndarray,
-    points: np.ndarray,
-    goals: np.ndarray,
-    gains: np.ndarray,
-    ox: float,
-    oy: float,
-    cell: float,
-    nx: int,
-    ny: int,
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    cell_need: np.ndarray,
-    need_outside: float,
-    out: np.ndarray,
-    flags: np.ndarray,
-) -> None:
+    packed, points, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags
+):  # type: ignore[no-untyped-def]
     for i in numba.prange(points.shape[0]):
-        x = points[i, 0]
-        y = points[i, 1]
-        val = 0.0
-        gx = 0.0
-        gy = 0.0
-        inside = math.isfinite(x) and math.isfinite(y)
-        ci = math.floor((x - ox) / cell) if inside else -1
-        ck = math.floor((y - oy) / cell) if inside else -1
-        need = need_outside
-        if 0 <= ci < nx and 0 <= ck < ny:
-            c = ck * nx + ci
-            need = cell_need[c]
-            for p in range(indptr[c], indptr[c + 1]):
-                v, dx, dy = kernels.threat_term(packed, indices[p], x, y, 0.0, True)
-                val += v
-                gx += dx
-                gy += dy
-        fx = gx - 2.0 * gains[i] * (goals[i, 0] - x)
-        fy = gy - 2.0 * gains[i] * (goals[i, 1] - y)
-        norm = math.sqrt(fx * fx + fy * fy)
-        out[i, 0] = fx
-        out[i, 1] = fy
-        out[i, 2] = val
-        out[i, 3] = norm
-        flags[i] = not (norm >= need)  # also true for a NaN norm: the full kernel decides
+        _culled_row(
+            packed, points, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags, i
+        )
 
 
 def influence_boxes(packed: np.ndarray, q_cut: float = Q_CUT) -> np.ndarray:
