@@ -145,7 +145,18 @@ def test_kill_9_mid_mission_then_restart_and_every_unit_arrives(tmp_path):
                     for u in pos:
                         if last.get(u) == "arrived":
                             continue
-                        d = inboxes[u].get(where=lambda m, q=seq: m.get("seq") == q, timeout=20)
+                        d = None
+                        for _attempt in range(6):  # a state or its answer lost in transit: report again
+                            try:
+                                d = inboxes[u].get(where=lambda m, q=seq: m.get("seq") == q, timeout=10)
+                                break
+                            except TimeoutError:
+                                put_json(
+                                    s,
+                                    f"mumt/{mission}/unit/{u}/state",
+                                    {"position": list(pos[u]), "seq": seq},
+                                )
+                        assert d is not None, f"{u} got no answer to seq {seq}"
                         last[u] = d["status"]
                         if d["status"] in ("en_route", "escaping"):
                             step = 0.0667  # the planner's step for this scale; exactness is not the point
