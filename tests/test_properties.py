@@ -5,13 +5,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from pfp_service.core import PlannerParams, PlanStatus, Scheduled, Threat, plan
 
 SETTINGS = settings(
-    max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+    max_examples=30,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
 
 coord = st.floats(-8.0, 18.0)
@@ -71,11 +74,32 @@ def _same_path(got, want: np.ndarray, base) -> None:
     assert np.abs(np.array(got.path) - want).max() < TOL * d0
 
 
+def _well_conditioned(start, goal, threats, base) -> bool:
+    """Whether ``base`` survives a nudge of its start by 1e-9 of the distance.
+
+    Plain descent that grazes a saddle is chaotic: rounding at 1e-16 grows
+    along the path until the track (or the step that ends it) differs.  No
+    transform is exact in floating point, so equivariance is only asked of
+    paths that a far larger nudge leaves where they were.
+    """
+    d0 = math.hypot(goal[0] - start[0], goal[1] - start[1]) or 1.0
+    nudged = _run((start[0] + 1e-9 * d0, start[1] - 1e-9 * d0), goal, threats)
+    if nudged.status is not base.status or abs(nudged.steps - base.steps) > (
+        20 if base.status.value == "trapped" else 0
+    ):
+        return False
+    n = min(len(nudged.path), len(base.path))
+    return bool(np.abs(np.array(nudged.path[:n]) - np.array(base.path[:n])).max() < 0.1 * TOL * d0) and (
+        math.isclose(nudged.exposure, base.exposure, rel_tol=1e-5, abs_tol=1e-10)
+    )
+
+
 @SETTINGS
 @given(world_st, st.floats(-1e4, 1e4), st.floats(-1e4, 1e4))
 def test_translation_equivariance(world, dx, dy):
     start, goal, threats = world
     base = _run(start, goal, threats)
+    assume(_well_conditioned(start, goal, threats, base))
     f = lambda p: (p[0] + dx, p[1] + dy)
     moved = _run(f(start), f(goal), [t.translated(dx, dy) for t in threats])
     _same_path(moved, np.array(base.path) + [dx, dy], base)
@@ -90,6 +114,7 @@ def test_rotation_equivariance(world, rot):
     c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
     f = lambda p: (c * p[0] - s * p[1], s * p[0] + c * p[1])
     base = _run(start, goal, threats)
+    assume(_well_conditioned(start, goal, threats, base))
     turned = _run(f(start), f(goal), [_transform(t, f, rot, 1.0) for t in threats])
     _same_path(turned, np.array([f(p) for p in base.path]), base)
     if turned.steps == base.steps:
@@ -102,6 +127,7 @@ def test_uniform_scaling_equivariance(world, k):
     start, goal, threats = world
     f = lambda p: (k * p[0], k * p[1])
     base = _run(start, goal, threats)
+    assume(_well_conditioned(start, goal, threats, base))
     big = _run(f(start), f(goal), [_transform(t, f, 0.0, k) for t in threats])
     _same_path(big, np.array(base.path) * k, base)
     if big.steps == base.steps:
