@@ -69,6 +69,8 @@ __all__ = ["PlannerNode"]
 log = get_logger("node")
 _JSON = zenoh.Encoding.APPLICATION_JSON
 SWITCH_INTERVAL_S = 0.0005  # the GIL is handed over this often, so pool threads cannot hold up the loop
+QUERIES_MAX = 4096  # status, world and preview queries waiting for the loop; more are shed
+EVENT_LOG_LINES = 20  # log lines per kind of event per tick; the rest are counted in one line
 INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
 
 
@@ -171,7 +173,7 @@ class PlannerNode:
                 missions=restored.missions,
                 expired=restored.expired,
             )
-            self._event(ev)
+            self._event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p}})
@@ -271,6 +273,10 @@ class PlannerNode:
 
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
+            if len(self._queries) >= QUERIES_MAX:  # a query flood: shed, counted, never queued unbounded
+                self.counters["overload"] += 1
+                query.drop()
+                return
             self._queries.append((kind, query, self.clock()))
         self._wake.set()
 
@@ -302,8 +308,12 @@ class PlannerNode:
             self.store.record(out.missions, [e.unit for e in out.events if isinstance(e, ForgottenEvent)])
         for d in out.directions:
             self._put(keys.unit_direction(self.cfg.mission, d.unit), encode(d), direction=True)
+        logged: collections.Counter[str] = collections.Counter()
         for ev in out.events:
-            self._event(ev)
+            self._event(ev, logged)
+        for kind, n in logged.items():
+            if n > EVENT_LOG_LINES:  # a storm (5,000 units stale at once) is one line, not 5,000
+                log.warning("more events", extra={"fields": {"kind": kind, "count": n - EVENT_LOG_LINES}})
         if self.cfg.cluster:
             for rec in out.missions:
                 self._put(
@@ -364,10 +374,13 @@ class PlannerNode:
             self.session.put(key, payload, encoding=_JSON)
         self.counters["msgs_out"] += 1
 
-    def _event(self, ev: Event) -> None:
+    def _event(self, ev: Event, logged: collections.Counter[str]) -> None:
         ev = msgspec.structs.replace(ev, t=time.time())  # wall-clock time; planning never reads it
         kind = ev.__struct_config__.tag
         self._put(keys.event(self.cfg.mission, str(kind)), encode(ev))
+        logged[str(kind)] += 1
+        if logged[str(kind)] > EVENT_LOG_LINES:
+            return
         fields = {k: v for k, v in msgspec.structs.asdict(ev).items() if k not in ("t", "planner")}
         if isinstance(ev, RejectedEvent):
             log.warning("rejected input", extra={"fields": fields})
