@@ -42,6 +42,11 @@ def test_status_lists_units_and_threats_as_tables(world):
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert f"planner planner, mission {mission}: 2 units, 2 threats" in out
+    # the live planners first: this one owns both units
+    assert re.search(
+        r"^planner\s+owns\s+units\s+stale\s+threats\s+p50\s+p99\s+deliberating\s+overload$", out, re.M
+    )
+    assert re.search(r"^planner\s+2\s+2\s+0\s+2\s", out, re.M), out
     assert re.search(r"^unit\s+kind\s+status\s+last seen\s+to goal\s+position$", out, re.M)
     assert re.search(r"^idle\s+-\s+no_goal\s+[\d.]+ s ago\s+-\s+\(1\.0, 1\.0\)$", out, re.M), out
     assert re.search(

@@ -1,7 +1,9 @@
 """``pfp status``: list what each planner of the mission holds: its units and the threats in force.
 
-Asks the world queryable (``mumt/{m}/planner/*/world``) of every planner.
-Without ``--json``, two tables per planner: units (id, kind, status, last
+Asks the world queryable (``mumt/{m}/planner/*/world``) and the status of
+every planner.  Without ``--json``, a table of the live planners first (units
+owned, latency, deliberations, overload: several share a mission under
+``--cluster``), then two tables per planner: units (id, kind, status, last
 seen, distance to goal) and threats (id, position, TTL left).  With
 ``--json``, one JSON array of every planner's full ``WorldSnapshot``.
 Exit codes: 0 a planner answered; 1 none did; 2 a bad flag.
@@ -10,6 +12,7 @@ Exit codes: 0 a planner answered; 1 none did; 2 a bad flag.
 from __future__ import annotations
 
 import argparse
+import contextlib
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,6 +36,28 @@ def _table(rows: Sequence[Sequence[str]]) -> list[str]:
 
 def _num(value: float | None, unit: str = "", digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f}{unit}"
+
+
+def planner_lines(statuses: Sequence[Any]) -> list[str]:
+    """The live planners as a table: who guides how many units, how fast, and how loaded."""
+    rows: list[tuple[str, ...]] = [
+        ("planner", "owns", "units", "stale", "threats", "p50", "p99", "deliberating", "overload")
+    ]
+    for st in statuses:
+        rows.append(
+            (
+                st.planner,
+                str(st.units_owned),
+                str(st.units),
+                str(st.units_stale),
+                str(st.threats),
+                _num(st.latency_p50_ms, " ms", 2),
+                _num(st.latency_p99_ms, " ms", 2),
+                str(st.deliberating),
+                str(st.overload),
+            )
+        )
+    return _table(rows)
 
 
 def snapshot_lines(snap: Any) -> list[str]:
@@ -79,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     import zenoh
 
     from pfp_service.errors import InputError, Unreachable, map_zenoh_errors
-    from pfp_service.wire import decode_world_snapshot, keys
+    from pfp_service.wire import decode_planner_status, decode_world_snapshot, keys
 
     conf = session_config(args)
     try:
@@ -89,7 +114,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"pfp status: {exc}", file=sys.stderr)
         return 1
     found = []
+    statuses = []
     with session:
+        for reply in session.get(keys.planner_statuses(args.mission), timeout=args.timeout):
+            if reply.ok is not None:
+                with contextlib.suppress(InputError):
+                    statuses.append(decode_planner_status(reply.ok.payload.to_bytes()))
         for reply in session.get(keys.worlds(args.mission), timeout=args.timeout):
             if reply.ok is None:
                 continue
@@ -107,6 +137,9 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
     if not args.json:
+        if statuses:
+            print("\n".join(planner_lines(sorted(statuses, key=lambda st: st.planner))))
+            print()
         for i, snap in enumerate(found):
             if i:
                 print()
