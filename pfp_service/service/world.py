@@ -11,8 +11,9 @@ fires and why, status transitions, staleness, expiry, limits.  The node only
 decodes, enqueues, applies and publishes; it never reads the world's records.
 
 The reactive part of ``apply`` is bounded: plain steepest descent for the
-units touched, in one vectorised call, plus their look-ahead points
-(``plan.walk_many`` on ghosts).  Everything unbounded -- ``auto``'s trap
+units touched, in one vectorised call (culled, ``core.cull``), plus their
+look-ahead points (``plan.predict_many``: batched kernel steps, ghosts for
+units on a route).  Everything unbounded -- ``auto``'s trap
 look-ahead and the escape-route searches -- is *deliberation*: with
 ``deliberation="deferred"`` a unit's stepper records what it needs, the world
 emits a ``Job`` holding a detached copy, and the driver runs ``job.run()``
@@ -21,8 +22,10 @@ adopted only if it was computed for the unit's goal and world version still
 in force (latest wins); until then the unit gets plain descent with
 ``deliberating`` set.  ``"inline"`` runs the same work inside ``apply``.
 
-Timers (threat expiry, unit silence, token debounce, forgetting) sit in one
-heap, so a tick costs O(what is due), never a scan of every unit.
+Timers (threat expiry, unit silence, token debounce, forgetting, push
+re-sends) sit in one heap, so a tick costs O(what is due), never a scan of
+every unit.  Under ``cluster`` each unit is guided by the one live planner
+rendezvous hashing gives it (``owns``); the others keep its mission.
 """
 
 from __future__ import annotations
