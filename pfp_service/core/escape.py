@@ -308,6 +308,7 @@ class Escaper:
             budget=int(min(8000, max(10 * p.trap_window, math.ceil(6.0 * dist / p.step)))),
             bounds=self.bounds,
             rng=np.random.default_rng([p.seed & 0xFFFFFFFF, self.unit_key & 0xFFFFFFFF, self.traps]),
+            unit_key=self.unit_key,
         )
 
     def _first_pass(self, tr: Trap, name: str, refusals: list[str]) -> tuple[float, np.ndarray] | None:

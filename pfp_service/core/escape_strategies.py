@@ -43,8 +43,9 @@ import numpy as np
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
-from pfp_service.core.grid import GridGraph, resample, shortcut
+from pfp_service.core.grid import GridGraph, resample
 from pfp_service.core.metrics import LAMBDA
+from pfp_service.core.routes import ROUTES, Ask, RouteCache
 from pfp_service.core.threat import ThreatField
 
 __all__ = [
@@ -140,6 +141,7 @@ class Trap:
     budget: int  # most points an escape polyline may have
     bounds: Bounds | None
     rng: np.random.Generator
+    unit_key: int = 0  # which unit: units with one goal share its route search (``routes``)
 
     def cut(self, poly: np.ndarray) -> np.ndarray:
         """``poly`` up to its first point clearly closer to the goal than the trap."""
@@ -271,7 +273,7 @@ def route_cell(span_m: float, s_min_m: float, fine: bool = True) -> float:
     return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
 
 
-def global_route(tr: Trap) -> np.ndarray | NoCandidate:
+def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoCandidate:
     """The whole way from the trap point to the goal, or why there is none.
 
     Dijkstra cost-to-go, cost ``1 + LAMBDA T``, on a local grid without the
@@ -281,7 +283,11 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
     finds no route (a gap too narrow for it, or no way at all); then shortcut
     wherever a straight segment costs no more and stays out of them, and
     resampled at ``step`` for the stepper to follow.
+
+    The search comes from ``routes`` (default ``routes.ROUTES``): units with
+    one goal under one field share it, and each walks its own way down it.
     """
+    cache = ROUTES if routes is None else routes
     gx, gy = tr.goal
     for goal, known, walled, side in _WALLED.get(tr.field, ()):
         inside = bool(walled[known.cell_of(tr.x, tr.y)])
@@ -305,23 +311,32 @@ def global_route(tr: Trap) -> np.ndarray | NoCandidate:
         span = max(x1 - x0, y1 - y0)
         coarse, fine = route_cell(span, s_min, fine=False), route_cell(span, s_min)
         for h in (coarse, fine) if coarse > 1.01 * fine else (fine,):
-            grid = GridGraph(tr.field, ((x0, y0), (x1, y1)), cores=search, cell_m=h)
-            route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(gx, gy), LAMBDA)
-            if len(route.points):
+            ask = Ask(
+                tr.field,
+                search,
+                (tr.x, tr.y),
+                tr.goal,
+                LAMBDA,
+                ((x0, y0), (x1, y1)),
+                h,
+                tr.bounds,
+                tr.unit_key,
+            )
+            found = cache.find(ask)
+            if len(found.polyline):
                 break
         whole = tr.bounds is not None and ((x0, y0), (x1, y1)) == tr.bounds
-        if len(route.points) or route.sealed or whole:
+        if len(found.polyline) or found.route.sealed or whole:
             break  # found, walled in, or the whole mission area already: more room cannot help
         pad *= 3.0
-    if not len(route.points):
+    if not len(found.polyline):
+        route, grid = found.route, found.grid
         if route.walled is not None:  # remembered for the next trap under this field
             _WALLED.setdefault(tr.field, []).append((tr.goal, grid, route.walled, route.walled_side))
         return NoCandidate(
             f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
         )
-    pts = np.concatenate([[[tr.x, tr.y]], route.points, [[gx, gy]]])
-    pts = pts[np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])]
-    return resample(shortcut(tr.field, pts, LAMBDA, search), tr.step)
+    return resample(found.polyline, tr.step)
 
 
 def _global(tr: Trap) -> Iterator[Candidate]:

@@ -29,7 +29,7 @@ from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
 from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
-__all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut"]
+__all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut", "shortcut_kept"]
 
 _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
@@ -222,20 +222,39 @@ class GridGraph:
         """
         for _ in range(_REPAIRS):
             found = self._route(source, target, lam)
-            if self.cores is None or len(found.points) < 2:
+            if not self.drop_clipping(found):
                 return found
-            bad = np.flatnonzero(self.cores.segment_hits(found.points))
-            if not len(bad):
-                return found
-            chain = found.nodes
-            assert chain is not None
-            self._drop([(int(chain[i]), int(chain[i + 1])) for i in bad])
         return self._route(source, target, lam)
+
+    def drop_clipping(self, found: Route) -> bool:
+        """Drop the edges of ``found`` that clip a core (``Cores.segment_hits``); were there any?
+
+        After a drop every cost-to-go computed on this graph is stale: search again.
+        """
+        if self.cores is None or len(found.points) < 2:
+            return False
+        bad = np.flatnonzero(self.cores.segment_hits(found.points))
+        if not len(bad):
+            return False
+        chain = found.nodes
+        assert chain is not None
+        self._drop([(int(chain[i]), int(chain[i + 1])) for i in bad])
+        return True
 
     def _route(self, source: int, target: int, lam: float) -> Route:
         if source < 0 or target < 0:
             return Route(np.zeros((0, 2)), math.inf)
         dist, pred = self.cost_to(target, lam)
+        return self.walk(source, target, dist, pred)
+
+    def walk(self, source: int, target: int, dist: np.ndarray, pred: np.ndarray) -> Route:
+        """The node path from ``source`` down a cost-to-go to ``target`` (``cost_to(target, ...)``).
+
+        With no path, ``Route.sealed`` says whether a larger box could not
+        help: the target's or the source's component misses the box's edge.
+        """
+        if source < 0 or target < 0:
+            return Route(np.zeros((0, 2)), math.inf)
         if not math.isfinite(dist[source]):
             comp = np.isfinite(dist)
             if not self._touches_border(comp):
@@ -251,6 +270,12 @@ class GridGraph:
             chain.append(int(pred[chain[-1]]))
         return Route(self.nodes[chain], float(dist[source]), nodes=np.array(chain))
 
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the graph's arrays."""
+        arrays = (self.nodes, self.open, self._indptr, self._indices, self.edge_length, self.edge_exposure)
+        return sum(a.nbytes for a in arrays)
+
 
 def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
     """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
@@ -265,8 +290,17 @@ def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) 
 
 def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
     """Greedily replace runs of segments by straight ones that cost no more."""
+    return pts[shortcut_kept(field, pts, lam, cores)]
+
+
+def shortcut_kept(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
+    """The indices of ``pts`` that ``shortcut`` keeps, first and last included.
+
+    Greedy and forward-looking: which points are kept from index ``i`` on
+    depends only on ``pts[i:]``.
+    """
     if len(pts) < 3:
-        return pts
+        return np.arange(len(pts))
     seg = segment_costs(field, pts[:-1], pts[1:], lam)
     prefix = np.concatenate([[0.0], np.cumsum(seg)])
     keep = [0]
@@ -284,7 +318,7 @@ def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | Non
                     break
         keep.append(best)
         i = best
-    return pts[keep]
+    return np.array(keep)
 
 
 def resample(pts: np.ndarray, spacing: float) -> np.ndarray:

@@ -1,0 +1,378 @@
+"""Shared route searches: one cost-to-go field per goal and world version, walked by every unit going there.
+
+A route search (``escape_strategies.global_route``) is one Dijkstra run *from
+the goal* over a local grid (``grid.GridGraph.cost_to``): the cost-to-go from
+every node and the next node towards the goal.  Any unit inside that grid then
+gets its route by walking predecessors, so ``RouteCache`` keeps the searches
+and hands them out.  A platoon of 200 units with one objective costs one
+search, not 200.
+
+Keys.  A search is kept under ``(field, goal, lambda, bounds)``.  A
+``ThreatField`` is immutable and replaced on every world change, so the field
+*is* the world version: a new field never meets an old field's search.  Fields
+are held weakly (as ``escape_strategies._WALLED`` and ``Cores.of`` do).
+
+Box and cell.  A request (``Ask``) names the box and the cell its own search
+would use (``route_cell``).  A kept grid serves it when the grid covers that
+box and its cell is at most ``1 + CELL_SLACK`` times the asked one: the cell
+rule's span-derived part is a cost cap, not a resolution a route needs, and
+its threat-derived part (a sixth of the narrowest sigma, 3.5 sigma at most)
+is the same for every unit under one field.  On a miss the grid is built for
+the request, tight, exactly as an uncached search would be.  Once a goal is
+known to be shared (a second unit, by ``Ask.unit``, asked for it, under this field or an
+earlier one) a miss builds with ``ROOM`` of the box's span to spare on every
+side, at the asked cell, so the rest of the group lands inside it.  A lone
+unit thus pays nothing extra; a platoon pays one tight search the first time
+it is seen and one search per world change after that.
+
+Shortcut tails.  ``grid.shortcut`` is greedy and forward-looking: what it keeps
+from a node on depends only on the node path from there to the goal, which is
+the same for every unit whose walk passes that node.  Each kept grid remembers,
+per kept node, the shortcut polyline from it to the goal; a later walk that
+meets one shortcuts only its own prefix up to that node and appends the tail.
+Every segment is still either a grid edge checked against the cores or a
+straight shortcut that costs no more ``J`` and enters no core.
+
+Bounds.  At most ``max_entries`` grids and ``max_nodes`` nodes in all (LRU:
+the least recently used grid goes first; a single grid over ``max_nodes`` is
+used once and not kept); grids of fields that have gone are dropped on the
+next insert.  ``RouteCache(max_entries=0)`` keeps nothing and builds every
+search tight: one search per request, as before this module.
+
+Threads.  One lock guards the registry and the counters; each key has its own
+lock, held while its grid is built, searched or repaired, so concurrent asks
+for one goal wait for the one search instead of each running it, while other
+goals go on in parallel.  Shortcuts run outside both locks.  Processes share
+nothing: a process pool pays one search per goal and process, so send a
+group's jobs to one worker where that matters.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import weakref
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from pfp_service.core.cores import Cores
+from pfp_service.core.grid import GridGraph, Route, shortcut_kept
+from pfp_service.core.threat import ThreatField
+
+__all__ = ["CELL_SLACK", "ROOM", "ROUTES", "Ask", "Found", "RouteCache", "RouteStats"]
+
+Box = tuple[tuple[float, float], tuple[float, float]]
+
+ROOM = 0.25  # a shared goal's grid: this share of the asked box's span to spare on every side
+REFINE = 2.0  # a shared goal's grid: its cell this much finer than the asked one (the search is paid once)
+CELL_SLACK = 0.25  # a kept grid's cell may be this much coarser than the asked one
+ROOM_MAX_NODES = 160_000  # a shared goal's grid stays under this (or the asked grid's size): ~50 MB
+MAX_ENTRIES = 16
+MAX_NODES = 1_000_000  # ~300 B a node with its edges: ~300 MB of kept grids at most
+_MAX_TAILS = 4096  # shortcut tails remembered per grid
+_SHARED_GOALS = 1024  # goals remembered as shared, across fields
+_REPAIRS = 8  # as grid.GridGraph.route: searches after dropping edges that clip a core
+_EPS = 1e-9
+
+
+@dataclass(frozen=True, slots=True)
+class Ask:
+    """One unit's route request: what its own search would be.
+
+    Attributes:
+        field: the threats (the world version).
+        cores: the cores the grid leaves out (``Cores.of(field, SEARCH_FRACTION)``).
+        source: the unit, in metres.
+        goal: the goal, in metres.
+        lam: ``lambda`` of the cost ``length + lambda * exposure``.
+        box: the area its own search would cover.
+        cell_m: the cell its own search would use.
+        bounds: the mission bounds (a grid never reaches past them), if any.
+        unit: which unit asks (``Stepper.unit_key``): a goal asked for by two
+            units is shared, one unit asking again from elsewhere is not.
+    """
+
+    field: ThreatField
+    cores: Cores
+    source: tuple[float, float]
+    goal: tuple[float, float]
+    lam: float
+    box: Box
+    cell_m: float
+    bounds: Box | None = None
+    unit: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Found:
+    """The answer to an ``Ask``.
+
+    Attributes:
+        route: the node path from the unit's nearest open node to the goal's
+            (``points`` empty when there is none; ``sealed`` and ``walled`` as
+            ``GridGraph.walk`` says).
+        grid: the grid it was walked on (shared: read, never change it).
+        polyline: when there is a route, the whole way from ``source`` to the
+            goal, shortcut (not resampled); else empty.
+        shared: the grid had been searched before this ask (a hit).
+    """
+
+    route: Route
+    grid: GridGraph
+    polyline: np.ndarray
+    shared: bool
+
+
+@dataclass(frozen=True, slots=True)
+class RouteStats:
+    """A snapshot of a cache's counters.
+
+    Attributes:
+        searches: Dijkstra runs, a repair's included (one per grid built, plus repairs).
+        hits: asks served by a kept grid.
+        misses: asks that built a grid.
+        tails: walks that ended on a remembered shortcut tail.
+        evictions: grids dropped to keep the bounds (or because their field went).
+        entries: grids kept now.
+        nodes: their nodes in all.
+    """
+
+    searches: int
+    hits: int
+    misses: int
+    tails: int
+    evictions: int
+    entries: int
+    nodes: int
+
+
+class _Entry:
+    """One searched grid: a cost-to-go to one goal under one field."""
+
+    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "pred", "tails", "target")
+
+    def __init__(self, field: ThreatField, grid: GridGraph, box: Box, target: int, lam: float) -> None:
+        self.field = weakref.ref(field)
+        self.grid = grid
+        self.box = box
+        self.cell_m = grid.cell_m
+        self.target = target
+        none = (np.full(len(grid.nodes), np.inf), np.full(len(grid.nodes), -9999, dtype=np.int32))
+        self.dist: np.ndarray
+        self.pred: np.ndarray
+        self.dist, self.pred = grid.cost_to(target, lam) if target >= 0 else none
+        self.tails: dict[int, np.ndarray] = {}  # kept node -> shortcut polyline from it to the goal
+        self.generation = 0  # bumped by a repair: tails computed before it are not stored
+
+    def serves(self, ask: Ask) -> bool:
+        (ax0, ay0), (ax1, ay1) = ask.box
+        (ex0, ey0), (ex1, ey1) = self.box
+        tol = _EPS * max(1.0, abs(ex1 - ex0), abs(ey1 - ey0))
+        covers = ex0 <= ax0 + tol and ey0 <= ay0 + tol and ex1 >= ax1 - tol and ey1 >= ay1 - tol
+        return covers and self.cell_m <= ask.cell_m * (1.0 + CELL_SLACK) * (1.0 + _EPS)
+
+
+class _Slot:
+    """The grids of one key, and the lock that makes one search serve every ask for it."""
+
+    __slots__ = ("entries", "lock", "units")
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.entries: list[_Entry] = []
+        self.units: set[int] = set()  # up to two: is the goal shared?
+
+
+class RouteCache:
+    """Cost-to-go searches kept per ``(field, goal, lambda, bounds)`` and shared by every unit that asks.
+
+    Args:
+        max_entries: grids kept at most (0: keep none, every ask searches tight).
+        max_nodes: grid nodes kept at most, in all.
+        room: a shared goal's grid: the share of the asked span to spare on every side.
+    """
+
+    def __init__(
+        self, max_entries: int = MAX_ENTRIES, max_nodes: int = MAX_NODES, room: float = ROOM
+    ) -> None:
+        self.max_entries = max_entries
+        self.max_nodes = max_nodes
+        self.room = room if max_entries > 0 else 0.0
+        self._lock = threading.Lock()
+        self._slots: weakref.WeakKeyDictionary[ThreatField, dict[tuple[object, ...], _Slot]] = (
+            weakref.WeakKeyDictionary()
+        )
+        self._lru: OrderedDict[int, tuple[_Slot, _Entry]] = OrderedDict()
+        self._shared: OrderedDict[tuple[object, ...], None] = OrderedDict()
+        self._nodes = 0
+        self._searches = self._hits = self._misses = self._tails = self._evictions = 0
+
+    def stats(self) -> RouteStats:
+        """The counters now."""
+        with self._lock:
+            return RouteStats(
+                self._searches,
+                self._hits,
+                self._misses,
+                self._tails,
+                self._evictions,
+                len(self._lru),
+                self._nodes,
+            )
+
+    def clear(self) -> None:
+        """Forget every kept grid (the counters stay)."""
+        with self._lock:
+            self._slots = weakref.WeakKeyDictionary()
+            self._lru.clear()
+            self._shared.clear()
+            self._nodes = 0
+
+    def find(self, ask: Ask) -> Found:
+        """The route for ``ask``: from a kept search where one serves it, else from a new one.
+
+        Returns:
+            a ``Found``; no route is a value (``Found.route.points`` empty), never an exception.
+        """
+        goal_key = (ask.goal, ask.lam, ask.bounds, ask.cores.fraction)
+        slot = self._slot(ask.field, goal_key)
+        with slot.lock:
+            entry = min((e for e in slot.entries if e.serves(ask)), key=lambda e: e.cell_m, default=None)
+            shared = entry is not None
+            if entry is None:
+                entry = self._build(ask, slot, goal_key)
+            else:
+                self._touch(entry)
+            grid = entry.grid
+            route = self._walk(entry, grid.nearest(*ask.source), ask.lam)
+            if not len(route.points):
+                return Found(route, grid, np.zeros((0, 2)), shared)
+            assert route.nodes is not None
+            chain = route.nodes
+            at = next((k for k, n in enumerate(chain.tolist()) if n in entry.tails), -1)
+            tail = entry.tails[int(chain[at])] if at >= 0 else None
+            generation = entry.generation
+        nodes = chain if tail is None else chain[: at + 1]  # with a tail, its node ends the prefix
+        end = np.array([ask.goal]) if tail is None else np.zeros((0, 2))
+        ids = np.concatenate([[-1], nodes, np.full(len(end), -1)]).astype(np.int64)
+        pts = np.concatenate([[ask.source], grid.nodes[nodes], end])
+        keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])
+        pts, ids = pts[keep], ids[keep]
+        kept = shortcut_kept(ask.field, pts, ask.lam, ask.cores)
+        head = pts[kept]
+        polyline = head if tail is None else np.concatenate([head, tail[1:]])
+        if self.max_entries > 0:
+            self._remember(slot, entry, generation, ids[kept], polyline, tail is not None)
+        return Found(route, grid, polyline, shared)
+
+    # -- inside -----------------------------------------------------------------------------
+    def _slot(self, field: ThreatField, goal_key: tuple[object, ...]) -> _Slot:
+        with self._lock:
+            per_field = self._slots.setdefault(field, {})
+            slot = per_field.get(goal_key)
+            if slot is None:
+                slot = per_field[goal_key] = _Slot()
+            return slot
+
+    def _build(self, ask: Ask, slot: _Slot, goal_key: tuple[object, ...]) -> _Entry:
+        """A new search for ``ask`` (its slot's lock held): tight, or with room when the goal is shared."""
+        with self._lock:
+            self._misses += 1
+            if len(slot.units) < 2:
+                slot.units.add(ask.unit)
+            shared = len(slot.units) > 1 or goal_key in self._shared
+            if shared:
+                self._shared[goal_key] = None
+                self._shared.move_to_end(goal_key)
+                while len(self._shared) > _SHARED_GOALS:
+                    self._shared.popitem(last=False)
+        box, cell = self._shape(ask) if shared and self.room > 0 else (ask.box, ask.cell_m)
+        grid = GridGraph(ask.field, box, cores=ask.cores, cell_m=cell)
+        entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam)
+        with self._lock:
+            self._searches += 1 if entry.target >= 0 else 0
+            n = len(grid.nodes)
+            if self.max_entries <= 0 or n > self.max_nodes:
+                return entry  # used for this ask only
+            slot.entries.append(entry)
+            self._lru[id(entry)] = (slot, entry)
+            self._nodes += n
+            self._evict()
+        return entry
+
+    def _shape(self, ask: Ask) -> tuple[Box, float]:
+        """A shared goal's grid: the asked box with room on every side, at a finer cell, within the node cap.
+
+        The options are tried in order, ``(ROOM, REFINE)`` first and the
+        asked box and cell last; the first under ``max(ROOM_MAX_NODES, the
+        asked grid's nodes)`` is taken.
+        """
+        (x0, y0), (x1, y1) = ask.box
+        span = max(x1 - x0, y1 - y0)
+
+        def nodes(pad: float, h: float) -> int:
+            return (math.ceil((x1 - x0 + 2 * pad) / h) + 1) * (math.ceil((y1 - y0 + 2 * pad) / h) + 1)
+
+        cap = max(ROOM_MAX_NODES, nodes(0.0, ask.cell_m))
+        room, refine = self.room, REFINE
+        options = ((room, refine), (room, math.sqrt(refine)), (room, 1.0), (room / 2, 1.0), (0.0, 1.0))
+        room, refine = next((r, f) for r, f in options if nodes(r * span, ask.cell_m / f) <= cap)
+        pad = room * span
+        bx0, by0, bx1, by1 = x0 - pad, y0 - pad, x1 + pad, y1 + pad
+        if ask.bounds is not None:
+            (lx0, ly0), (lx1, ly1) = ask.bounds
+            bx0, by0, bx1, by1 = max(bx0, lx0), max(by0, ly0), min(bx1, lx1), min(by1, ly1)
+        return ((bx0, by0), (bx1, by1)), ask.cell_m / refine
+
+    def _walk(self, entry: _Entry, source: int, lam: float) -> Route:
+        """Down the entry's cost-to-go from ``source``; an edge that clips a core is dropped and searched again."""
+        grid = entry.grid
+        for _ in range(_REPAIRS):
+            route = grid.walk(source, entry.target, entry.dist, entry.pred)
+            if not grid.drop_clipping(route):
+                return route
+            entry.dist, entry.pred = grid.cost_to(entry.target, lam)
+            entry.tails.clear()
+            entry.generation += 1
+            with self._lock:
+                self._searches += 1
+        return grid.walk(source, entry.target, entry.dist, entry.pred)
+
+    def _touch(self, entry: _Entry) -> None:
+        with self._lock:
+            self._hits += 1
+            if id(entry) in self._lru:
+                self._lru.move_to_end(id(entry))
+
+    def _evict(self) -> None:
+        """Drop grids of gone fields, then the least recently used, until within the bounds (lock held)."""
+        for key in [k for k, (_, e) in self._lru.items() if e.field() is None]:
+            self._drop(key)
+        while self._lru and (len(self._lru) > self.max_entries or self._nodes > self.max_nodes):
+            self._drop(next(iter(self._lru)))
+
+    def _drop(self, key: int) -> None:
+        slot, entry = self._lru.pop(key)
+        self._nodes -= len(entry.grid.nodes)
+        self._evictions += 1
+        slot.entries = [e for e in slot.entries if e is not entry]  # rebound: a reader's list stays whole
+
+    def _remember(
+        self, slot: _Slot, entry: _Entry, generation: int, ids: np.ndarray, polyline: np.ndarray, tailed: bool
+    ) -> None:
+        """Store the shortcut tail from each kept node of a walk (unless a repair came in between)."""
+        with slot.lock:
+            if tailed:
+                with self._lock:
+                    self._tails += 1
+            if entry.generation != generation or len(entry.tails) >= _MAX_TAILS:
+                return
+            for k, node in enumerate(ids.tolist()):
+                if node >= 0 and node not in entry.tails:
+                    entry.tails[int(node)] = polyline[k:]
+
+
+ROUTES = RouteCache()
+"""The process's shared cache, used by ``escape_strategies.global_route`` unless it is given another."""
