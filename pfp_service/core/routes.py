@@ -13,17 +13,21 @@ Keys.  A search is kept under ``(field, goal, lambda, bounds)``.  A
 are held weakly (as ``escape_strategies._WALLED`` and ``Cores.of`` do).
 
 Box and cell.  A request (``Ask``) names the box and the cell its own search
-would use (``route_cell``).  A kept grid serves it when the grid covers that
-box and its cell is at most ``1 + CELL_SLACK`` times the asked one: the cell
-rule's span-derived part is a cost cap, not a resolution a route needs, and
-its threat-derived part (a sixth of the narrowest sigma, 3.5 sigma at most)
-is the same for every unit under one field.  On a miss the grid is built for
-the request, tight, exactly as an uncached search would be.  Once a goal is
-known to be shared (a second unit, by ``Ask.unit``, asked for it, under this field or an
-earlier one) a miss builds with ``ROOM`` of the box's span to spare on every
-side, at the asked cell, so the rest of the group lands inside it.  A lone
-unit thus pays nothing extra; a platoon pays one tight search the first time
-it is seen and one search per world change after that.
+would use (``route_cell``).  On a miss the grid is built for the request,
+tight, exactly as an uncached search would be, and it serves that unit only
+(a lone unit pays nothing extra, and gets what it got before).  Once a goal is
+known to be shared (a second unit, by ``Ask.unit``, asked for it under this
+field or an earlier one) a miss builds a grid for everyone: ``ROOM`` of the
+box's span to spare on every side, so the rest of the group lands inside it,
+at ``1 / REFINE`` of the asked cell, since the search is paid once, within
+``ROOM_MAX_NODES`` (room and refinement are given up, in that order, to stay
+under it).  It serves any unit whose own box it covers at a cell at most
+``1 + CELL_SLACK`` times the unit's own: the cell rule's span-derived part is
+a cost cap rather than a resolution a route needs, and its threat-derived part
+(a sixth of the narrowest sigma, 3.5 sigma at most) is the same for every unit
+under one field.  A platoon thus pays two searches the first time its goal is
+seen (the first unit's own, then the shared one) and one per world change
+after that.
 
 Shortcut tails.  ``grid.shortcut`` is greedy and forward-looking: what it keeps
 from a node on depends only on the node path from there to the goal, which is
@@ -151,10 +155,13 @@ class RouteStats:
 class _Entry:
     """One searched grid: a cost-to-go to one goal under one field."""
 
-    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "pred", "tails", "target")
+    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "owner", "pred", "tails", "target")
 
-    def __init__(self, field: ThreatField, grid: GridGraph, box: Box, target: int, lam: float) -> None:
+    def __init__(
+        self, field: ThreatField, grid: GridGraph, box: Box, target: int, lam: float, owner: int | None
+    ) -> None:
         self.field = weakref.ref(field)
+        self.owner = owner  # a tight grid serves the unit it was built for only; None: anyone
         self.grid = grid
         self.box = box
         self.cell_m = grid.cell_m
@@ -171,7 +178,8 @@ class _Entry:
         (ex0, ey0), (ex1, ey1) = self.box
         tol = _EPS * max(1.0, abs(ex1 - ex0), abs(ey1 - ey0))
         covers = ex0 <= ax0 + tol and ey0 <= ay0 + tol and ex1 >= ax1 - tol and ey1 >= ay1 - tol
-        return covers and self.cell_m <= ask.cell_m * (1.0 + CELL_SLACK) * (1.0 + _EPS)
+        fine = self.cell_m <= ask.cell_m * (1.0 + CELL_SLACK) * (1.0 + _EPS)
+        return covers and fine and self.owner in (None, ask.unit)
 
 
 class _Slot:
@@ -290,7 +298,8 @@ class RouteCache:
                     self._shared.popitem(last=False)
         box, cell = self._shape(ask) if shared and self.room > 0 else (ask.box, ask.cell_m)
         grid = GridGraph(ask.field, box, cores=ask.cores, cell_m=cell)
-        entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam)
+        owner = None if shared and self.room > 0 else ask.unit
+        entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam, owner)
         with self._lock:
             self._searches += 1 if entry.target >= 0 else 0
             n = len(grid.nodes)

@@ -1,0 +1,183 @@
+"""Units that share a goal share its route search (``routes.RouteCache``), and get routes as good as their own."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from pfp_service.core import PlannerParams, Threat, ThreatField, resolve
+from pfp_service.core.cores import SEARCH_FRACTION, Cores
+from pfp_service.core.escape import Escaper
+from pfp_service.core.escape_strategies import NoCandidate, Trap, global_route, route_cell
+from pfp_service.core.grid import GridGraph, resample, shortcut
+from pfp_service.core.metrics import LAMBDA, path_cost
+from pfp_service.core.routes import ROUTES, Ask, RouteCache
+from pfp_service.core.stepper import Stepper, StepStatus
+
+START, GOAL = (0.0, 0.0), (100.0, 100.0)
+SEED = 20261201
+TOLERANCE = 0.03  # a shared route may cost this much more J than the unit's own search
+
+
+def trap_rich(seed: int = SEED) -> list[Threat]:
+    """A horseshoe open towards the start, its back to the goal, among seeded threats off the start and goal."""
+    out = []
+    for k in range(9):
+        b = math.radians(-55 + 200 * k / 8)
+        xy = (60 + 12 * math.sin(b), 60 + 12 * math.cos(b))
+        out.append(Threat.from_facing(xy, 225, 4.0, 4.0, 0.5, 1.0, f"h{k}"))
+    rng = np.random.default_rng(seed)
+    while len(out) < 24:
+        xy = rng.uniform(10.0, 110.0, 2)
+        if min(math.dist(xy, START), math.dist(xy, GOAL), math.dist(xy, (60, 60))) > 22.0:
+            out.append(Threat.from_facing(tuple(xy), rng.uniform(0, 360), 4.0, 3.0, 1.0, 1.0, f"r{len(out)}"))
+    return out
+
+
+def platoon(n: int, seed: int = SEED, spread_m: float = 8.0) -> list[tuple[float, float]]:
+    """``n`` units within ``spread_m`` of the start (the trip is 141 m)."""
+    rng = np.random.default_rng(seed + 1)
+    return [(float(x), float(y)) for x, y in START + rng.uniform(-spread_m, spread_m, (n, 2))]
+
+
+def traps(field: ThreatField, units: list[tuple[float, float]], goal=GOAL) -> list[Trap]:
+    params = resolve(PlannerParams(escape="auto"), START, goal, list(field.threats))
+    out = []
+    for key, (x, y) in enumerate(units, start=1):
+        esc = Escaper(params, goal, params.delta / math.dist((x, y), goal) ** 2, None, unit_key=key)
+        out.append(esc._trap(field, x, y))
+    return out
+
+
+def routes(trs: list[Trap], cache: RouteCache) -> list[np.ndarray]:
+    found = [global_route(tr, cache) for tr in trs]
+    assert not any(isinstance(p, NoCandidate) for p in found), found
+    return found  # type: ignore[return-value]
+
+
+def test_a_platoon_walks_one_search_and_each_route_is_as_good_as_its_own():
+    field = ThreatField(trap_rich())
+    units = platoon(24)
+    own = RouteCache(max_entries=0)  # one search per unit: what every unit did before
+    mine = routes(traps(field, units), own)
+    assert own.stats().searches == len(units)
+    shared = RouteCache()
+    ours = routes(traps(field, units), shared)
+    st = shared.stats()
+    # first sight of the goal: the first unit's own search, then one for the group
+    assert st.searches == 2, (SEED, st)
+    assert st.hits == len(units) - 2
+    cores = Cores.of(field)
+    for k, (a, b) in enumerate(zip(mine, ours)):
+        assert math.dist(b[0], units[k]) == 0.0 and math.dist(b[-1], GOAL) == 0.0
+        assert not cores.first_hit(b), (SEED, k)
+        assert path_cost(b, field) <= (1.0 + TOLERANCE) * path_cost(a, field), (SEED, k)
+    # the world changes: the goal is known to be shared, so one search serves the platoon
+    moved = ThreatField(trap_rich())
+    before = shared.stats().searches
+    again = routes(traps(moved, units), shared)
+    assert shared.stats().searches - before == 1
+    for k, b in enumerate(again):
+        assert path_cost(b, moved) <= (1.0 + TOLERANCE) * path_cost(mine[k], field), (SEED, k)
+
+
+def test_a_lone_unit_gets_exactly_the_route_its_own_search_gave():
+    field = ThreatField(trap_rich())
+    (tr,) = traps(field, platoon(1))
+    got = global_route(tr, RouteCache())
+    # the search as it was before routes.py: one grid around the unit and the goal
+    s_min = tr.cores.min_spread_m
+    pad = max(0.3 * tr.dist, 3.0 * max(t.spread() for t in field.threats))
+    box = (
+        (min(tr.x, GOAL[0]) - pad, min(tr.y, GOAL[1]) - pad),
+        (max(tr.x, GOAL[0]) + pad, max(tr.y, GOAL[1]) + pad),
+    )
+    span = max(box[1][0] - box[0][0], box[1][1] - box[0][1])
+    search = Cores.of(field, SEARCH_FRACTION)
+    grid = GridGraph(field, box, cores=search, cell_m=route_cell(span, s_min, fine=False))
+    route = grid.route(grid.nearest(tr.x, tr.y), grid.nearest(*GOAL), LAMBDA)
+    assert len(route.points)
+    pts = np.concatenate([[[tr.x, tr.y]], route.points, [GOAL]])
+    pts = pts[np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])]
+    want = resample(shortcut(field, pts, LAMBDA, search), tr.step)
+    assert isinstance(got, np.ndarray) and np.array_equal(got, want)
+
+
+def test_a_new_field_never_uses_an_old_fields_search():
+    threats = trap_rich()
+    units = platoon(6)
+    cache = RouteCache()
+    first = routes(traps(ThreatField(threats), units), cache)
+    # a threat put across the platoon's way: the same goal, a new world version
+    mid = first[0][len(first[0]) // 2]
+    blocker = Threat.from_facing(tuple(mid), 0, 4.0, 4.0, 0.0, 1.0, "blocker")
+    field = ThreatField([*threats, blocker])
+    before = cache.stats()
+    after = routes(traps(field, units), cache)
+    st = cache.stats()
+    assert st.misses > before.misses and st.searches > before.searches
+    cores = Cores.of(field)
+    for k, poly in enumerate(after):
+        assert not cores.first_hit(poly), k  # routed round the new threat's core
+        assert not np.array_equal(poly, first[k])
+
+
+def test_the_bounds_on_grids_and_nodes_hold():
+    field = ThreatField(trap_rich())
+    goals = [(100.0, 100.0), (110.0, 40.0), (40.0, 110.0), (90.0, 70.0), (70.0, 95.0), (105.0, 85.0)]
+    cache = RouteCache(max_entries=3)
+    for goal in goals:
+        routes(traps(field, platoon(1), goal), cache)
+        assert cache.stats().entries <= 3
+    st = cache.stats()
+    assert st.entries == 3 and st.evictions == len(goals) - 3 and st.searches == len(goals)
+    # the oldest goal went first: asking for it again searches again, the newest does not
+    routes(traps(field, platoon(1), goals[-1]), cache)
+    assert cache.stats().searches == len(goals)
+    routes(traps(field, platoon(1), goals[0]), cache)
+    assert cache.stats().searches == len(goals) + 1
+    # nodes: each grid here has about 10,000; a bound of 25,000 keeps two at most
+    small = RouteCache(max_nodes=25_000)
+    for goal in goals:
+        routes(traps(field, platoon(1), goal), small)
+        assert small.stats().nodes <= 25_000
+    assert 1 <= small.stats().entries <= 2
+
+
+def test_concurrent_asks_for_one_goal_wait_for_one_search():
+    field = ThreatField(trap_rich())
+    trs = traps(field, platoon(16))
+    cache = RouteCache()
+    global_route(trs[0], cache)  # the first unit's own; the goal is not known to be shared yet
+    out: list[object] = [None] * len(trs)
+    start = threading.Barrier(4)
+
+    def worker(k0: int) -> None:
+        start.wait()
+        for k in range(k0, len(trs), 4):
+            out[k] = global_route(trs[k], cache)
+
+    threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert all(isinstance(p, np.ndarray) for p in out)
+    assert cache.stats().searches == 2  # the first unit's own, then one for the rest
+
+
+@pytest.mark.parametrize("n", [8])
+def test_steppers_of_a_platoon_foresee_through_the_process_cache(n):
+    field = ThreatField(trap_rich())
+    params = resolve(PlannerParams(escape="auto"), START, GOAL, list(field.threats))
+    before = ROUTES.stats()
+    going_round = 0
+    for key, (x, y) in enumerate(platoon(n), start=100):
+        adv = Stepper((x, y), GOAL, params, None, key).advise(field, x, y)
+        going_round += adv.status is StepStatus.ESCAPING
+    st = ROUTES.stats()
+    assert going_round >= n // 2  # the horseshoe is foreseen and gone round
+    assert st.searches - before.searches <= 2 and st.hits - before.hits >= going_round - 2
