@@ -48,6 +48,8 @@ __all__ = [
     "MAX_PAYLOAD_BYTES",
     "MAX_SNAPSHOT_ITEMS",
     "MAX_WHATIF_THREATS",
+    "MAX_WORLD_QUERY_CHARS",
+    "SNAPSHOT_PAGE_BYTES",
     "TEXT_MAX_CHARS",
     "AnyEvent",
     "ArrivedEvent",
@@ -77,6 +79,7 @@ __all__ = [
     "UnitState",
     "UnitSummary",
     "WhatIfThreat",
+    "WorldQuery",
     "WorldSnapshot",
     "check_bounds",
     "decode",
@@ -90,6 +93,7 @@ __all__ = [
     "decode_preview_request",
     "decode_threat",
     "decode_unit_state",
+    "decode_world_query",
     "decode_world_snapshot",
     "encode",
     "fit_text",
@@ -103,7 +107,11 @@ MAX_PAYLOAD_BYTES = 256 * 1024
 MAX_WHATIF_THREATS = 256
 MAX_LOOKAHEAD = 1000
 MAX_EVENT_ITEMS = 64  # ids listed in one event; the rest are counted
-MAX_SNAPSHOT_ITEMS = 1000  # units or threats listed in one world reply
+MAX_SNAPSHOT_ITEMS = 1000  # units or threats listed in one world reply (one page)
+# A world reply's units and threats stop short of this many bytes of JSON, so a page always
+# decodes (MAX_PAYLOAD_BYTES) with room for the envelope: 1,000 units with missions are ~680 KB.
+SNAPSHOT_PAGE_BYTES = 192 * 1024
+MAX_WORLD_QUERY_CHARS = 1024  # the longest world query parameters read; longer is refused
 
 # ((xmin, ymin), (xmax, ymax)) in metres, the same shape as core.stepper.Bounds.
 Bounds = tuple[tuple[float, float], tuple[float, float]]
@@ -511,10 +519,16 @@ class ThreatSummary(_Message, frozen=True, kw_only=True):
 
 
 class WorldSnapshot(_Message, frozen=True, kw_only=True):
-    """Reply of ``mumt/{m}/planner/{p}/world``: the units and threats a planner holds.
+    """Reply of ``mumt/{m}/planner/{p}/world``: one page of the units and threats a planner holds.
 
-    Lists are sorted by id and capped at ``MAX_SNAPSHOT_ITEMS``; ``units_total``
-    and ``threats_total`` say how many there are in all.
+    Lists are sorted by id, each capped at ``MAX_SNAPSHOT_ITEMS`` (or the query's
+    ``limit``) and both together at ``SNAPSHOT_PAGE_BYTES`` of JSON; ``units_total``
+    and ``threats_total`` say how many there are in all.  ``next_unit`` and
+    ``next_threat`` are where the next page starts: ask again with
+    ``?units_from=<next_unit>;threats_from=<next_threat>`` (``WorldQuery``; a
+    list already complete is left out with ``units_limit=0`` or
+    ``threats_limit=0``); null means that list is complete in this page, or was
+    left out.
     """
 
     planner: Id
@@ -523,6 +537,34 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     threats: Annotated[list[ThreatSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
     units_total: Count = 0
     threats_total: Count = 0
+    next_unit: Id | None = None
+    next_threat: Id | None = None
+
+
+class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """The parameters of a world query: which page (``…/world?units_from=ID;threats_from=ID``).
+
+    Not a payload: Zenoh selector parameters, ``;``-separated, each at most
+    once.  ``units_from`` and ``threats_from`` are the first ids the page lists
+    (a reply's ``next_unit`` and ``next_threat``); without one a list starts at
+    its first id.  ``units_limit`` and ``threats_limit`` cap each list (0 to
+    ``MAX_SNAPSHOT_ITEMS``; 0 leaves it out, for a list already complete).
+    An unknown, repeated or malformed parameter is refused (``decode_world_query``).
+    """
+
+    units_from: Id | None = None
+    threats_from: Id | None = None
+    units_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
+    threats_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
+
+    def selector_parameters(self) -> str:
+        """These parameters as a selector's ``?…`` part, without the ``?`` (empty: all defaults)."""
+        default = WorldQuery()
+        return ";".join(
+            f"{name}={getattr(self, name)}"
+            for name in self.__struct_fields__
+            if getattr(self, name) != getattr(default, name)
+        )
 
 
 # -- encoding and decoding -------------------------------------------------------
@@ -739,6 +781,36 @@ def decode_mission(data: bytes | bytearray | memoryview | None) -> Mission:
 def decode_world_snapshot(data: bytes | bytearray | memoryview | None) -> WorldSnapshot:
     """A ``WorldSnapshot`` world-query reply."""
     return decode(WorldSnapshot, data)
+
+
+def decode_world_query(parameters: str) -> WorldQuery:
+    """A world query's selector parameters (``query.parameters``: ``a=1;b=2``), validated.
+
+    Raises:
+        InputError: too long, not ``name=value``, a name repeated or unknown, or a
+            bad value; the path names the parameter (``$.limit``).
+    """
+    if len(parameters) > MAX_WORLD_QUERY_CHARS:
+        raise InputError("$", f"query parameters longer than {MAX_WORLD_QUERY_CHARS} characters")
+    doc: dict[str, str] = {}
+    for part in parameters.split(";"):
+        if not part:
+            continue
+        name, eq, value = part.partition("=")
+        if not eq:
+            raise InputError("$", f"expected name=value, got {fit_text(part, 64)!r}")
+        if name in doc:
+            raise InputError(_rooted(name), "parameter given twice")
+        if name not in WorldQuery.__struct_fields__:
+            raise InputError(
+                _rooted(name) if re.fullmatch(r"[A-Za-z_]\w{0,63}", name) else "$",
+                f"unknown parameter (expected one of {', '.join(WorldQuery.__struct_fields__)})",
+            )
+        doc[name] = value
+    try:
+        return msgspec.convert(doc, WorldQuery, strict=False)
+    except msgspec.ValidationError as exc:
+        raise _wire_error(exc) from exc
 
 
 def decode_error_reply(data: bytes | bytearray | memoryview | None) -> ErrorReply:

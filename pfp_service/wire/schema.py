@@ -99,7 +99,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "reply_err",
         "planner",
         "any",
-        "answer to a bad preview or status query",
+        "answer to a bad preview, status or world query",
     ),
     MessageSpec("planner_status", m.PlannerStatus, KeyKind.PLANNER_STATUS, "reply", "planner", "any"),
     MessageSpec(
@@ -109,7 +109,10 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "reply",
         "planner",
         "any",
-        "units and threats the planner holds; `pfp status` asks every planner",
+        "units and threats the planner holds, a page at a time: `next_unit`/`next_threat` say where "
+        "the next page starts, asked with `?units_from=ID;threats_from=ID` (and `units_limit`, "
+        "`threats_limit`: 0 to 1000, 0 leaves a list out); a bad parameter gets an error_reply; "
+        "`pfp status` asks every planner",
     ),
     MessageSpec(
         "event", m.AnyEvent, KeyKind.EVENT, "put", "planner", "any", "`kind` repeats the key's last chunk"
