@@ -14,7 +14,7 @@ from pfp_service.core.escape import Escaper
 from pfp_service.core.escape_strategies import NoCandidate, Trap, global_route, route_cell
 from pfp_service.core.grid import GridGraph, resample, shortcut
 from pfp_service.core.metrics import LAMBDA, path_cost
-from pfp_service.core.routes import ROUTES, Ask, RouteCache
+from pfp_service.core.routes import ROUTES, RouteCache
 from pfp_service.core.stepper import Stepper, StepStatus
 
 START, GOAL = (0.0, 0.0), (100.0, 100.0)
@@ -181,3 +181,17 @@ def test_steppers_of_a_platoon_foresee_through_the_process_cache(n):
     st = ROUTES.stats()
     assert going_round >= n // 2  # the horseshoe is foreseen and gone round
     assert st.searches - before.searches <= 2 and st.hits - before.hits >= going_round - 2
+
+
+def test_nearest_open_node_is_the_nearest_of_all_open_nodes():
+    field = ThreatField(trap_rich())
+    rng = np.random.default_rng(SEED)
+    for cell in (0.7, 2.3):
+        grid = GridGraph(field, ((-10.0, -10.0), (130.0, 120.0)), cores=Cores.of(field, 0.05), cell_m=cell)
+        opened, closed = np.flatnonzero(grid.open), np.flatnonzero(~grid.open)
+        assert len(closed) > 100
+        probes = grid.nodes[rng.choice(closed, 400)] + rng.uniform(-cell, cell, (400, 2))
+        probes = np.concatenate([probes, rng.uniform(-40.0, 160.0, (100, 2))])  # and outside the box
+        for x, y in probes:
+            d = np.hypot(grid.nodes[opened, 0] - x, grid.nodes[opened, 1] - y)
+            assert grid.nearest(x, y) == opened[int(np.argmin(d))], (SEED, cell, x, y)

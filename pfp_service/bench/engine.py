@@ -7,7 +7,9 @@ bookkeeping and path metrics included.  More figures: a natural 300-step,
 8-threat plan; one vectorised call stepping 10,000 units against 100
 threats; and fleet scale -- one tick of 10,000 units x 1,000 threats through
 the raw kernel (every pair, and culled) and through ``World.apply``, with a
-log-log grid of 100 to 10,000 units by 100 to 10,000 threats.
+log-log grid of 100 to 10,000 units by 100 to 10,000 threats; and a
+platoon of 200 units with one objective, its route searches shared
+(``core.routes``) against one search per unit.
 """
 
 from __future__ import annotations
@@ -200,6 +202,97 @@ def fleet_ms(repeat: int) -> dict[str, Any]:
     return out
 
 
+# -- shared route searches: a platoon with one objective ----------------------------------
+PLATOON_UNITS = 200
+
+
+def platoon_routes(units: int = PLATOON_UNITS, seed: int = 5) -> dict[str, Any]:
+    """A platoon within 300 m, one objective 3.9 km off through 60 threats: its route searches, shared and not.
+
+    Every unit asks ``global_route`` (what ``auto``'s look-ahead asks when
+    descent is foreseen to be trapped), once with one search per unit
+    (``RouteCache(max_entries=0)``: as before routes were shared), once through
+    a fresh shared cache, and once more after a world change (a new field, the
+    same threats: the goal is then known to be shared).  ``cost_ratio``: each
+    shared route's ``J`` over the unit's own search's, worst and median.
+    """
+    from pfp_service.core import PlannerParams, Threat, ThreatField, resolve
+    from pfp_service.core.escape import Escaper
+    from pfp_service.core.escape_strategies import NoCandidate, global_route
+    from pfp_service.core.metrics import path_cost
+    from pfp_service.core.routes import RouteCache
+
+    rng = np.random.default_rng(seed)
+    threats = [
+        Threat.from_facing(
+            tuple(rng.uniform(0, 3000, 2)), rng.uniform(0, 360), 300.0, 210.0, 2.0, 1.0, f"t{j}"
+        )
+        for j in range(60)
+    ]
+    goal = (2900.0, 2900.0)
+    pos = rng.uniform(100.0, 400.0, (units, 2))
+    params = resolve(PlannerParams(escape="auto"), (250.0, 250.0), goal, threats)
+
+    def traps(field: Any) -> list[Any]:
+        out = []
+        for key, (x, y) in enumerate(pos.tolist(), start=1):
+            esc = Escaper(params, goal, params.delta / ((goal[0] - x) ** 2 + (goal[1] - y) ** 2), None, key)
+            out.append(esc._trap(field, x, y))
+        return out
+
+    def run(cache: Any, field: Any) -> tuple[dict[str, Any], list[Any]]:
+        trs = traps(field)
+        before = cache.stats().searches
+        t0 = time.perf_counter()
+        polys = [global_route(tr, cache) for tr in trs]
+        total = time.perf_counter() - t0
+        return {
+            "searches": cache.stats().searches - before,
+            "total_s": total,
+            "ms_per_unit": total * 1e3 / units,
+            "no_route": sum(isinstance(p, NoCandidate) for p in polys),
+        }, polys
+
+    field = ThreatField(threats)
+    own, mine = run(RouteCache(max_entries=0), field)
+    cache = RouteCache()
+    first, ours = run(cache, field)
+    again, _ = run(cache, ThreatField(threats))
+    ratios = [
+        path_cost(b, field) / path_cost(a, field)
+        for a, b in zip(mine, ours)
+        if not isinstance(a, NoCandidate) and not isinstance(b, NoCandidate)
+    ]
+    st = cache.stats()
+    return {
+        "units": units,
+        "threats": len(threats),
+        "one_search_per_unit": own,
+        "shared_first_sight": first,
+        "shared_after_world_change": again,
+        "speedup": own["total_s"] / first["total_s"],
+        "speedup_after_world_change": own["total_s"] / again["total_s"],
+        "cost_ratio_max": max(ratios, default=math.nan),
+        "cost_ratio_median": statistics.median(ratios) if ratios else math.nan,
+        "kept_grids": st.entries,
+        "kept_nodes": st.nodes,
+    }
+
+
+def _print_platoon(pl: dict[str, Any]) -> None:
+    own, first, again = pl["one_search_per_unit"], pl["shared_first_sight"], pl["shared_after_world_change"]
+    print(
+        f"\nplatoon of {pl['units']} units, one objective ({pl['threats']} threats): route searches and time\n"
+        f"  one search per unit: {own['searches']} searches, {own['total_s']:.2f} s ({own['ms_per_unit']:.1f} ms a unit)\n"
+        f"  shared, first sight: {first['searches']} searches, {first['total_s']:.2f} s ({first['ms_per_unit']:.1f} ms a unit), "
+        f"{pl['speedup']:.1f}x faster\n"
+        f"  shared, after a world change: {again['searches']} searches, {again['total_s']:.2f} s "
+        f"({again['ms_per_unit']:.1f} ms a unit), {pl['speedup_after_world_change']:.1f}x faster\n"
+        f"  J of a shared route over the unit's own: median {pl['cost_ratio_median']:.3f}, worst {pl['cost_ratio_max']:.3f}; "
+        f"kept {pl['kept_grids']} grids, {pl['kept_nodes']:,} nodes"
+    )
+
+
 # -- fleet scale: one tick of the live world, and how it grows ------------------------------
 SCALE_SIZES = (100, 1_000, 10_000)
 TARGET_TICK_MS = 20.0  # issue 10: one tick, 10,000 units x 1,000 threats, with culling
@@ -386,6 +479,7 @@ def run(args: argparse.Namespace) -> int:
     rows = run_rows(args.repeat, args.baseline_repeat, args.quick)
     path = natural_path_ms(args.repeat)
     fleet = fleet_ms(args.repeat)
+    platoon = platoon_routes(50 if args.quick else PLATOON_UNITS)
     scale = None if args.no_scale else scale_table(args.repeat, args.quick)
     checks = {
         "every row >= 1000x the paper": all(r.vs_paper >= TARGET_VS_PAPER for r in rows),
@@ -393,6 +487,11 @@ def run(args: argparse.Namespace) -> int:
         "300-step 8-threat path <= 2 ms": path["median_ms"] <= TARGET_PATH_MS,
         "10,000 units x 100 threats <= 20 ms (dense kernel call)": fleet["dense_kernel_ms"]
         <= TARGET_FLEET_MS,
+        "a platoon with one objective: <= 2 route searches, 1 after a world change": platoon[
+            "shared_first_sight"
+        ]["searches"]
+        <= 2
+        and platoon["shared_after_world_change"]["searches"] == 1,
     }
     if scale is not None and not args.quick:
         h = scale["headline"]["spread"]
@@ -406,6 +505,7 @@ def run(args: argparse.Namespace) -> int:
             "rows": [asdict(r) for r in rows],
             "path": path,
             "fleet": fleet,
+            "platoon": platoon,
             "scale": scale,
             "checks": checks,
         }
@@ -434,6 +534,7 @@ def run(args: argparse.Namespace) -> int:
         "escape auto look-ahead, once per goal or world change, median per unit: "
         f"spread {fleet['spread_foresight_ms_per_unit']:.2f} ms, dense {fleet['dense_foresight_ms_per_unit']:.2f} ms"
     )
+    _print_platoon(platoon)
     if scale is not None:
         _print_scale(scale)
     print()

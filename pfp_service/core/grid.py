@@ -18,6 +18,7 @@ polyline evenly again, for a stepper to follow.
 from __future__ import annotations
 
 import math
+from collections.abc import Container
 from dataclasses import dataclass
 
 import numba
@@ -164,12 +165,33 @@ class GridGraph:
         return int(i * self.ny + j)
 
     def nearest(self, x: float, y: float) -> int:
-        """The open node nearest to ``(x, y)``, or -1 if no node is open."""
-        i = min(max(round((x - self.origin[0]) / self.cell_m), 0), self.nx - 1)
-        j = min(max(round((y - self.origin[1]) / self.cell_m), 0), self.ny - 1)
+        """The open node nearest to ``(x, y)``, or -1 if no node is open.
+
+        Looked for in growing windows round ``(x, y)``: a window of half-width
+        ``k`` cells holds every node within ``k`` cells, so an open node found
+        that near is the nearest; the whole grid is scanned only past that.
+        """
+        fi = (x - self.origin[0]) / self.cell_m
+        fj = (y - self.origin[1]) / self.cell_m
+        i = min(max(round(fi), 0), self.nx - 1)
+        j = min(max(round(fj), 0), self.ny - 1)
         k = i * self.ny + j
         if self.open[k]:
             return int(k)
+        grid_open = self.open.reshape(self.nx, self.ny)
+        w = 2
+        while w < max(self.nx, self.ny):
+            i0, i1, j0, j1 = max(i - w, 0), min(i + w + 1, self.nx), max(j - w, 0), min(j + w + 1, self.ny)
+            oi, oj = np.nonzero(grid_open[i0:i1, j0:j1])
+            if len(oi):
+                d = np.hypot(
+                    self.nodes[(oi + i0) * self.ny + oj + j0, 0] - x,
+                    self.nodes[(oi + i0) * self.ny + oj + j0, 1] - y,
+                )
+                best = int(np.argmin(d))
+                if d[best] <= (w - 0.5) * self.cell_m:  # nothing outside the window is nearer
+                    return int((oi[best] + i0) * self.ny + oj[best] + j0)
+            w *= 2
         opened = np.flatnonzero(self.open)
         if not len(opened):
             return -1
@@ -247,11 +269,15 @@ class GridGraph:
         dist, pred = self.cost_to(target, lam)
         return self.walk(source, target, dist, pred)
 
-    def walk(self, source: int, target: int, dist: np.ndarray, pred: np.ndarray) -> Route:
+    def walk(
+        self, source: int, target: int, dist: np.ndarray, pred: np.ndarray, stop: Container[int] = ()
+    ) -> Route:
         """The node path from ``source`` down a cost-to-go to ``target`` (``cost_to(target, ...)``).
 
-        With no path, ``Route.sealed`` says whether a larger box could not
-        help: the target's or the source's component misses the box's edge.
+        The path ends early at the first node in ``stop`` (``cost`` is still
+        the whole way's).  With no path, ``Route.sealed`` says whether a
+        larger box could not help: the target's or the source's component
+        misses the box's edge.
         """
         if source < 0 or target < 0:
             return Route(np.zeros((0, 2)), math.inf)
@@ -266,7 +292,7 @@ class GridGraph:
                 return Route(np.zeros((0, 2)), math.inf, True, comp, "source")
             return Route(np.zeros((0, 2)), math.inf)
         chain = [source]
-        while chain[-1] != target:
+        while chain[-1] != target and chain[-1] not in stop:
             chain.append(int(pred[chain[-1]]))
         return Route(self.nodes[chain], float(dist[source]), nodes=np.array(chain))
 

@@ -114,8 +114,9 @@ class Found:
     """The answer to an ``Ask``.
 
     Attributes:
-        route: the node path from the unit's nearest open node to the goal's
-            (``points`` empty when there is none; ``sealed`` and ``walled`` as
+        route: the node path from the unit's nearest open node to the goal's,
+            or to the first node a remembered tail goes on from (``points``
+            empty when there is none; ``sealed`` and ``walled`` as
             ``GridGraph.walk`` says).
         grid: the grid it was walked on (shared: read, never change it).
         polyline: when there is a route, the whole way from ``source`` to the
@@ -259,8 +260,8 @@ class RouteCache:
                 return Found(route, grid, np.zeros((0, 2)), shared)
             assert route.nodes is not None
             chain = route.nodes
-            at = next((k for k, n in enumerate(chain.tolist()) if n in entry.tails), -1)
-            tail = entry.tails[int(chain[at])] if at >= 0 else None
+            tail = entry.tails.get(int(chain[-1]))
+            at = len(chain) - 1
             generation = entry.generation
         nodes = chain if tail is None else chain[: at + 1]  # with a tail, its node ends the prefix
         end = np.array([ask.goal]) if tail is None else np.zeros((0, 2))
@@ -336,10 +337,14 @@ class RouteCache:
         return ((bx0, by0), (bx1, by1)), ask.cell_m / refine
 
     def _walk(self, entry: _Entry, source: int, lam: float) -> Route:
-        """Down the entry's cost-to-go from ``source``; an edge that clips a core is dropped and searched again."""
+        """Down the entry's cost-to-go from ``source`` to the goal or a remembered tail's node.
+
+        An edge of it that clips a core is dropped and the search run again
+        (a tail's own edges were checked by the walk that made it).
+        """
         grid = entry.grid
         for _ in range(_REPAIRS):
-            route = grid.walk(source, entry.target, entry.dist, entry.pred)
+            route = grid.walk(source, entry.target, entry.dist, entry.pred, entry.tails)
             if not grid.drop_clipping(route):
                 return route
             entry.dist, entry.pred = grid.cost_to(entry.target, lam)
@@ -347,7 +352,7 @@ class RouteCache:
             entry.generation += 1
             with self._lock:
                 self._searches += 1
-        return grid.walk(source, entry.target, entry.dist, entry.pred)
+        return grid.walk(source, entry.target, entry.dist, entry.pred, entry.tails)
 
     def _touch(self, entry: _Entry) -> None:
         with self._lock:
