@@ -22,19 +22,23 @@ SEED = 20261201
 TOLERANCE = 0.03  # a shared route may cost this much more J than the unit's own search
 
 
-def trap_rich(seed: int = SEED) -> list[Threat]:
-    """A horseshoe open towards the start, its back to the goal, among seeded threats off the start and goal."""
+def trap_rich_specs(seed: int = SEED) -> list[tuple[tuple[float, float], float, float, float, float]]:
+    """``(position, facing_deg, sigma_range, sigma_lateral, skew)``: a horseshoe open towards the start,
+    its back to the goal, among seeded threats off the start and the goal."""
     out = []
     for k in range(9):
         b = math.radians(-55 + 200 * k / 8)
-        xy = (60 + 12 * math.sin(b), 60 + 12 * math.cos(b))
-        out.append(Threat.from_facing(xy, 225, 4.0, 4.0, 0.5, 1.0, f"h{k}"))
+        out.append(((60 + 12 * math.sin(b), 60 + 12 * math.cos(b)), 225.0, 4.0, 4.0, 0.5))
     rng = np.random.default_rng(seed)
     while len(out) < 24:
-        xy = rng.uniform(10.0, 110.0, 2)
-        if min(math.dist(xy, START), math.dist(xy, GOAL), math.dist(xy, (60, 60))) > 22.0:
-            out.append(Threat.from_facing(tuple(xy), rng.uniform(0, 360), 4.0, 3.0, 1.0, 1.0, f"r{len(out)}"))
+        x, y = rng.uniform(10.0, 110.0, 2)
+        if min(math.dist((x, y), START), math.dist((x, y), GOAL), math.dist((x, y), (60, 60))) > 22.0:
+            out.append(((float(x), float(y)), float(rng.uniform(0, 360)), 4.0, 3.0, 1.0))
     return out
+
+
+def trap_rich(seed: int = SEED) -> list[Threat]:
+    return [Threat.from_facing(*spec, 1.0, f"t{k}") for k, spec in enumerate(trap_rich_specs(seed))]
 
 
 def platoon(n: int, seed: int = SEED, spread_m: float = 8.0) -> list[tuple[float, float]]:
@@ -195,3 +199,27 @@ def test_nearest_open_node_is_the_nearest_of_all_open_nodes():
         for x, y in probes:
             d = np.hypot(grid.nodes[opened, 0] - x, grid.nodes[opened, 1] - y)
             assert grid.nearest(x, y) == opened[int(np.argmin(d))], (SEED, cell, x, y)
+
+
+def test_a_platoons_deliberation_jobs_in_the_world_share_one_route_search():
+    from pfp_service.service.world import GoalSet, Input, StateReported, ThreatPut, World, WorldSettings
+    from pfp_service.wire import Goal, ThreatUpdate, UnitState
+
+    world = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_forget_s=None))
+    puts: list[Input] = [
+        ThreatPut(f"t{k}", ThreatUpdate(position=p, facing_deg=f, sigma_range=sr, sigma_lateral=sl, skew=a))
+        for k, (p, f, sr, sl, a) in enumerate(trap_rich_specs())
+    ]
+    world.apply(puts, 0.0)
+    units = platoon(20)
+    first: list[Input] = [StateReported(f"u{k}", UnitState(position=p, seq=0)) for k, p in enumerate(units)]
+    first += [GoalSet(f"u{k}", Goal(position=GOAL)) for k in range(len(units))]
+    out = world.apply(first, 1.0)
+    assert len(out.jobs) == len(units)
+    before = ROUTES.stats()
+    for job in out.jobs:
+        job.run()
+    st = ROUTES.stats()
+    asks = st.hits + st.misses - before.hits - before.misses
+    assert asks >= len(units) // 2  # most foresee the horseshoe, or a dear descent, and ask for a route
+    assert st.searches - before.searches <= 2, (asks, st)
