@@ -279,14 +279,18 @@ def platoon_routes(units: int = PLATOON_UNITS, seed: int = 5) -> dict[str, Any]:
     }
 
 
+def _searches(n: int) -> str:
+    return f"{n} search" if n == 1 else f"{n} searches"
+
+
 def _print_platoon(pl: dict[str, Any]) -> None:
     own, first, again = pl["one_search_per_unit"], pl["shared_first_sight"], pl["shared_after_world_change"]
     print(
         f"\nplatoon of {pl['units']} units, one objective ({pl['threats']} threats): route searches and time\n"
-        f"  one search per unit: {own['searches']} searches, {own['total_s']:.2f} s ({own['ms_per_unit']:.1f} ms a unit)\n"
-        f"  shared, first sight: {first['searches']} searches, {first['total_s']:.2f} s ({first['ms_per_unit']:.1f} ms a unit), "
+        f"  one search per unit: {_searches(own['searches'])}, {own['total_s']:.2f} s ({own['ms_per_unit']:.1f} ms a unit)\n"
+        f"  shared, first sight: {_searches(first['searches'])}, {first['total_s']:.2f} s ({first['ms_per_unit']:.1f} ms a unit), "
         f"{pl['speedup']:.1f}x faster\n"
-        f"  shared, after a world change: {again['searches']} searches, {again['total_s']:.2f} s "
+        f"  shared, after a world change: {_searches(again['searches'])}, {again['total_s']:.2f} s "
         f"({again['ms_per_unit']:.1f} ms a unit), {pl['speedup_after_world_change']:.1f}x faster\n"
         f"  J of a shared route over the unit's own: median {pl['cost_ratio_median']:.3f}, worst {pl['cost_ratio_max']:.3f}; "
         f"kept {pl['kept_grids']} grids, {pl['kept_nodes']:,} nodes"
