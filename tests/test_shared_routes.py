@@ -132,23 +132,29 @@ def test_a_new_field_never_uses_an_old_fields_search():
 def test_the_bounds_on_grids_and_nodes_hold():
     field = ThreatField(trap_rich())
     goals = [(100.0, 100.0), (110.0, 40.0), (40.0, 110.0), (90.0, 70.0), (70.0, 95.0), (105.0, 85.0)]
+    pair = platoon(3)
     cache = RouteCache(max_entries=3)
-    for goal in goals:
-        routes(traps(field, platoon(1), goal), cache)
+    for goal in goals:  # two units each: the first one's own search, then the pair's, which is kept
+        routes(traps(field, pair[:2], goal), cache)
         assert cache.stats().entries <= 3
     st = cache.stats()
-    assert st.entries == 3 and st.evictions == len(goals) - 3 and st.searches == len(goals)
-    # the oldest goal went first: asking for it again searches again, the newest does not
-    routes(traps(field, platoon(1), goals[-1]), cache)
-    assert cache.stats().searches == len(goals)
-    routes(traps(field, platoon(1), goals[0]), cache)
-    assert cache.stats().searches == len(goals) + 1
-    # nodes: each grid here has about 10,000; a bound of 25,000 keeps two at most
-    small = RouteCache(max_nodes=25_000)
+    assert st.entries == 3 and st.evictions == len(goals) - 3 and st.searches == 2 * len(goals)
+    # the oldest goal went first: a third unit for it searches again (once: it is known shared),
+    # a third unit for the newest does not
+    routes(traps(field, pair, goals[-1])[2:], cache)
+    assert cache.stats().searches == 2 * len(goals)
+    routes(traps(field, pair, goals[0])[2:], cache)
+    assert cache.stats().searches == 2 * len(goals) + 1
+    # a lone unit's search is used once and never kept
+    lone = RouteCache()
+    routes(traps(field, pair[:1], (95.0, 95.0)), lone)
+    assert lone.stats().entries == 0 and lone.stats().searches == 1
+    # nodes: without room each grid here has about 22,500; a bound of 50,000 keeps two at most
+    small = RouteCache(max_nodes=50_000, room=0.0)
     for goal in goals:
-        routes(traps(field, platoon(1), goal), small)
-        assert small.stats().nodes <= 25_000
-    assert 1 <= small.stats().entries <= 2
+        routes(traps(field, pair[:2], goal), small)
+        assert small.stats().nodes <= 50_000
+    assert small.stats().entries == 2
 
 
 def test_concurrent_asks_for_one_goal_wait_for_one_search():

@@ -14,8 +14,9 @@ are held weakly (as ``escape_strategies._WALLED`` and ``Cores.of`` do).
 
 Box and cell.  A request (``Ask``) names the box and the cell its own search
 would use (``route_cell``).  On a miss the grid is built for the request,
-tight, exactly as an uncached search would be, and it serves that unit only
-(a lone unit pays nothing extra, and gets what it got before).  Once a goal is
+tight, exactly as an uncached search would be, used for that ask and not kept
+(a lone unit pays nothing extra, gets what it got before, and takes no room
+from a group's grid).  Once a goal is
 known to be shared (a second unit, by ``Ask.unit``, asked for it under this
 field or an earlier one) a miss builds a grid for everyone: ``ROOM`` of the
 box's span to spare on every side, so the rest of the group lands inside it,
@@ -40,7 +41,7 @@ straight shortcut that costs no more ``J`` and enters no core.
 Bounds.  At most ``max_entries`` grids and ``max_nodes`` nodes in all (LRU:
 the least recently used grid goes first; a single grid over ``max_nodes`` is
 used once and not kept); grids of fields that have gone are dropped on the
-next insert.  ``RouteCache(max_entries=0)`` keeps nothing and builds every
+next insert, and at most ``MAX_SLOTS`` (field, goal) keys are remembered.  ``RouteCache(max_entries=0)`` keeps nothing and builds every
 search tight: one search per request, as before this module.
 
 Threads.  One lock guards the registry and the counters; each key has its own
@@ -77,6 +78,7 @@ MAX_ENTRIES = 16
 MAX_NODES = 1_000_000  # ~300 B a node with its edges: ~300 MB of kept grids at most
 _MAX_TAILS = 4096  # shortcut tails remembered per grid
 _SHARED_GOALS = 1024  # goals remembered as shared, across fields
+MAX_SLOTS = 4096  # (field, goal) keys remembered, with who asked
 _REPAIRS = 8  # as grid.GridGraph.route: searches after dropping edges that clip a core
 _EPS = 1e-9
 
@@ -156,13 +158,10 @@ class RouteStats:
 class _Entry:
     """One searched grid: a cost-to-go to one goal under one field."""
 
-    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "owner", "pred", "tails", "target")
+    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "pred", "tails", "target")
 
-    def __init__(
-        self, field: ThreatField, grid: GridGraph, box: Box, target: int, lam: float, owner: int | None
-    ) -> None:
+    def __init__(self, field: ThreatField, grid: GridGraph, box: Box, target: int, lam: float) -> None:
         self.field = weakref.ref(field)
-        self.owner = owner  # a tight grid serves the unit it was built for only; None: anyone
         self.grid = grid
         self.box = box
         self.cell_m = grid.cell_m
@@ -180,7 +179,7 @@ class _Entry:
         tol = _EPS * max(1.0, abs(ex1 - ex0), abs(ey1 - ey0))
         covers = ex0 <= ax0 + tol and ey0 <= ay0 + tol and ex1 >= ax1 - tol and ey1 >= ay1 - tol
         fine = self.cell_m <= ask.cell_m * (1.0 + CELL_SLACK) * (1.0 + _EPS)
-        return covers and fine and self.owner in (None, ask.unit)
+        return covers and fine
 
 
 class _Slot:
@@ -210,9 +209,7 @@ class RouteCache:
         self.max_nodes = max_nodes
         self.room = room if max_entries > 0 else 0.0
         self._lock = threading.Lock()
-        self._slots: weakref.WeakKeyDictionary[ThreatField, dict[tuple[object, ...], _Slot]] = (
-            weakref.WeakKeyDictionary()
-        )
+        self._slots: OrderedDict[tuple[object, ...], _Slot] = OrderedDict()  # (field ref, goal key): LRU
         self._lru: OrderedDict[int, tuple[_Slot, _Entry]] = OrderedDict()
         self._shared: OrderedDict[tuple[object, ...], None] = OrderedDict()
         self._nodes = 0
@@ -234,7 +231,7 @@ class RouteCache:
     def clear(self) -> None:
         """Forget every kept grid (the counters stay)."""
         with self._lock:
-            self._slots = weakref.WeakKeyDictionary()
+            self._slots.clear()
             self._lru.clear()
             self._shared.clear()
             self._nodes = 0
@@ -278,11 +275,18 @@ class RouteCache:
 
     # -- inside -----------------------------------------------------------------------------
     def _slot(self, field: ThreatField, goal_key: tuple[object, ...]) -> _Slot:
+        # a weak reference as the key: equal to another only while both fields live (so by identity),
+        # and a gone field's key never equals a new field's, whatever its id
+        key = (weakref.ref(field), *goal_key)
         with self._lock:
-            per_field = self._slots.setdefault(field, {})
-            slot = per_field.get(goal_key)
+            slot = self._slots.get(key)
             if slot is None:
-                slot = per_field[goal_key] = _Slot()
+                slot = self._slots[key] = _Slot()
+                while len(self._slots) > MAX_SLOTS:  # the least recently asked goal goes, with its grids
+                    _, old = self._slots.popitem(last=False)
+                    for entry in old.entries:
+                        self._drop(id(entry))
+            self._slots.move_to_end(key)
             return slot
 
     def _build(self, ask: Ask, slot: _Slot, goal_key: tuple[object, ...]) -> _Entry:
@@ -299,13 +303,12 @@ class RouteCache:
                     self._shared.popitem(last=False)
         box, cell = self._shape(ask) if shared and self.room > 0 else (ask.box, ask.cell_m)
         grid = GridGraph(ask.field, box, cores=ask.cores, cell_m=cell)
-        owner = None if shared and self.room > 0 else ask.unit
-        entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam, owner)
+        entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam)
         with self._lock:
             self._searches += 1 if entry.target >= 0 else 0
             n = len(grid.nodes)
-            if self.max_entries <= 0 or n > self.max_nodes:
-                return entry  # used for this ask only
+            if not shared or self.max_entries <= 0 or n > self.max_nodes:
+                return entry  # used for this ask only: a lone unit's, or too big to keep
             slot.entries.append(entry)
             self._lru[id(entry)] = (slot, entry)
             self._nodes += n
@@ -368,6 +371,8 @@ class RouteCache:
             self._drop(next(iter(self._lru)))
 
     def _drop(self, key: int) -> None:
+        if key not in self._lru:
+            return
         slot, entry = self._lru.pop(key)
         self._nodes -= len(entry.grid.nodes)
         self._evictions += 1
