@@ -5,51 +5,53 @@ the goal* over a local grid (``grid.GridGraph.cost_to``): the cost-to-go from
 every node and the next node towards the goal.  Any unit inside that grid then
 gets its route by walking predecessors, so ``RouteCache`` keeps the searches
 and hands them out.  A platoon of 200 units with one objective costs one
-search, not 200.
+search per world version, not 200 (two the first time its goal is seen).
 
 Keys.  A search is kept under ``(field, goal, lambda, bounds)``.  A
 ``ThreatField`` is immutable and replaced on every world change, so the field
-*is* the world version: a new field never meets an old field's search.  Fields
-are held weakly (as ``escape_strategies._WALLED`` and ``Cores.of`` do).
+*is* the world version: a new field never meets an old field's search.  The
+key holds the field by a weak reference, which equals another only while both
+fields live (identity), so a gone field's key never matches a new field's.
 
 Box and cell.  A request (``Ask``) names the box and the cell its own search
 would use (``route_cell``).  On a miss the grid is built for the request,
-tight, exactly as an uncached search would be, used for that ask and not kept
-(a lone unit pays nothing extra, gets what it got before, and takes no room
-from a group's grid).  Once a goal is
-known to be shared (a second unit, by ``Ask.unit``, asked for it under this
-field or an earlier one) a miss builds a grid for everyone: ``ROOM`` of the
-box's span to spare on every side, so the rest of the group lands inside it,
-at ``1 / REFINE`` of the asked cell, since the search is paid once, within
-``ROOM_MAX_NODES`` (room and refinement are given up, in that order, to stay
-under it).  It serves any unit whose own box it covers at a cell at most
-``1 + CELL_SLACK`` times the unit's own: the cell rule's span-derived part is
-a cost cap rather than a resolution a route needs, and its threat-derived part
-(a sixth of the narrowest sigma, 3.5 sigma at most) is the same for every unit
-under one field.  A platoon thus pays two searches the first time its goal is
-seen (the first unit's own, then the shared one) and one per world change
-after that.
+tight, exactly as an uncached search would be, used for that ask and not kept:
+a lone unit pays nothing extra, gets what it got before, and takes no room
+from a group's grid.  Once a goal is known to be shared (a second unit, by
+``Ask.unit``, asked for it under this field or an earlier one) a miss builds a
+grid for everyone: ``ROOM`` of the box's span to spare on every side, so the
+rest of the group lands inside it, at ``1 / REFINE`` of the asked cell, since
+the search is paid once; within ``ROOM_MAX_NODES`` (refinement, then room, is
+given up to stay under it).  It serves any unit whose own box it covers at a
+cell at most ``1 + CELL_SLACK`` times the unit's own: the cell rule's
+span-derived part is a cost cap rather than a resolution a route needs, and
+its threat-derived part (a sixth of the narrowest sigma, 3.5 sigma at most) is
+the same for every unit under one field.  A platoon thus pays two searches the
+first time its goal is seen (the first unit's own, then the shared one) and
+one per world change after that.
 
 Shortcut tails.  ``grid.shortcut`` is greedy and forward-looking: what it keeps
 from a node on depends only on the node path from there to the goal, which is
 the same for every unit whose walk passes that node.  Each kept grid remembers,
-per kept node, the shortcut polyline from it to the goal; a later walk that
-meets one shortcuts only its own prefix up to that node and appends the tail.
+per kept node, the shortcut polyline from it to the goal; a later walk stops at
+the first such node, shortcuts only its own prefix and appends the tail.
 Every segment is still either a grid edge checked against the cores or a
 straight shortcut that costs no more ``J`` and enters no core.
 
 Bounds.  At most ``max_entries`` grids and ``max_nodes`` nodes in all (LRU:
 the least recently used grid goes first; a single grid over ``max_nodes`` is
 used once and not kept); grids of fields that have gone are dropped on the
-next insert, and at most ``MAX_SLOTS`` (field, goal) keys are remembered.  ``RouteCache(max_entries=0)`` keeps nothing and builds every
-search tight: one search per request, as before this module.
+next insert, and at most ``MAX_SLOTS`` (field, goal) keys are remembered.
+``RouteCache(max_entries=0)`` keeps nothing and builds every search tight: one
+search per request, as before this module.
 
 Threads.  One lock guards the registry and the counters; each key has its own
 lock, held while its grid is built, searched or repaired, so concurrent asks
 for one goal wait for the one search instead of each running it, while other
 goals go on in parallel.  Shortcuts run outside both locks.  Processes share
-nothing: a process pool pays one search per goal and process, so send a
-group's jobs to one worker where that matters.
+nothing: each worker process has its own ``ROUTES``, so a pool pays the
+searches once per goal and worker; send a group's jobs to one worker where
+that matters.
 """
 
 from __future__ import annotations
