@@ -103,3 +103,45 @@ def test_trapped_unit_walked_away_is_guided_again():
     assert b == a
     (c,) = advise_many([_trapped_stepper()[0]], field, np.array([[x, y]]))
     assert c.status is StepStatus.TRAPPED and math.isclose(c.level, field.level_grad_at(x, y)[0])
+
+
+def test_route_ahead_is_what_a_ghost_walks():
+    """The compiled look-ahead along a committed route gives a ghost's own track, point for point."""
+    from pfp_service.bench.service import layout
+    from pfp_service.core.plan import walk_many
+    from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+    from pfp_service.wire import Goal, UnitState
+
+    n = 40
+    lay = layout(n, 100, 7)
+    w = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_stale_s=1e9))
+    w.apply([ThreatPut(t, u) for t, u in lay["threats"]], 0.0)
+    ids = [f"u{i}" for i in range(n)]
+    pos = np.array(lay["starts"][:n])
+    w.apply([StateReported(u, UnitState(position=tuple(p), seq=0)) for u, p in zip(ids, pos)], 0.1)
+    out = w.apply([GoalSet(u, Goal(position=g)) for u, g in zip(ids, lay["goals"][:n])], 0.2)
+    out = w.apply([j.run() for j in out.jobs], 0.3)
+    vec = {d.unit: d.vector for d in out.directions}
+    compared = ended = 0
+    for k in range(80):
+        pos += 5.0 * np.array([vec.get(u, (0.0, 0.0)) for u in ids])
+        states = [
+            StateReported(u, UnitState(position=(float(x), float(y)), seq=k + 1))
+            for u, (x, y) in zip(ids, pos)
+        ]
+        out = w.apply(states, 1.0 + 0.1 * k)
+        w.apply([j.run() for j in out.jobs], 1.0 + 0.1 * k)
+        vec.update({d.unit: d.vector for d in out.directions})
+        for u, (x, y) in zip(ids, pos.tolist()):
+            s = w.view(u).stepper
+            if s is None or not s.escaping:
+                continue
+            ahead = s.route_ahead(x, y, 6)
+            ghost = walk_many([s.ghost()], w.field, np.array([[x, y]]), 6)[0]
+            if ahead is None:  # the route may end within the steps: the caller walks a ghost
+                ended += 1
+                continue
+            compared += 1
+            assert len(ahead) == len(ghost)
+            assert np.allclose(ahead, ghost, rtol=0.0, atol=1e-9)
+    assert compared > 500, (compared, ended)  # the layout keeps most units on routes

@@ -81,6 +81,34 @@ def test_builders_refuse_bad_chunks(bad: str) -> None:
         keys.unit_states(bad)
 
 
+@given(kind=st.sampled_from(list(KeyKind)), mission=chunk, ident=chunk)
+def test_key_of_agrees_with_parse_and_the_builders(kind: KeyKind, mission: str, ident: str) -> None:
+    build, _, _ = BUILDERS[kind]
+    of = keys.KeyOf(kind, mission)
+    assert of.key(ident) == build(mission, ident)
+    assert of.id(build(mission, ident)) == ident
+
+
+@pytest.mark.parametrize(
+    "key",
+    [
+        "mumt/m1/unit/a b/state",
+        "mumt/m1/unit//state",
+        "mumt/m1/unit/u1/goal",  # another kind
+        "mumt/m2/unit/u1/state",  # another mission
+        "mumt/m1/unit/" + "u" * 65 + "/state",
+        "mumt/m1/unit/" + "u/" * 200 + "/state",
+        "mumt/m1/threat/t1",
+    ],
+)
+def test_key_of_refuses_what_is_not_its_kind(key: str) -> None:
+    with pytest.raises(InputError) as e:
+        keys.KeyOf(KeyKind.UNIT_STATE, "m1").id(key)
+    assert e.value.path == "key"
+    with pytest.raises(InputError):
+        keys.KeyOf(KeyKind.UNIT_DIRECTION, "m1").key("a b")
+
+
 def test_the_longest_chunks_are_fine() -> None:
     assert keys.parse(keys.threat("m" * 64, "t" * 64)).id == "t" * 64
 

@@ -108,7 +108,7 @@ def register(sub: Any) -> None:
     d.add_argument(
         "--deliberation-workers",
         type=bounded_int(1, 64),
-        help="threads for look-ahead and escape searches (default: 1)",
+        help="worker processes for look-ahead and escape searches (default: 1)",
     )
     d.add_argument(
         "--deliberation-budget-s",
@@ -116,7 +116,7 @@ def register(sub: Any) -> None:
         help="a deliberation not started within this is dropped; the unit descends (default: 5)",
     )
     d.add_argument(
-        "--preview-workers", type=bounded_int(1, 64), help="threads answering previews (default: 2)"
+        "--preview-workers", type=bounded_int(1, 64), help="worker processes answering previews (default: 2)"
     )
     d.add_argument(
         "--preview-queue",

@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from pfp_service.core.cores import Cores
@@ -90,7 +91,7 @@ class EscapeRun:
     stronger than the goal's pull.
     """
 
-    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step", "to_goal")
+    __slots__ = ("_array", "advisories", "cursor", "limit", "name", "path", "step", "to_goal")
 
     def __init__(self, name: str, path: np.ndarray, step: float, to_goal: bool = False) -> None:
         self.name = name
@@ -100,6 +101,7 @@ class EscapeRun:
         self.limit = 2 * len(self.path) + 20
         self.step = step
         self.to_goal = to_goal
+        self._array: np.ndarray | None = None  # ``path`` as an array, made at the first ``ahead``
 
     def then(self, other: EscapeRun | None) -> EscapeRun:
         """This run followed by ``other`` (which starts where this one ends)."""
@@ -108,6 +110,36 @@ class EscapeRun:
         pts = np.array(self.path + other.path[1:])
         return EscapeRun(f"{self.name}, then {other.name}", pts, self.step, other.to_goal)
 
+    def ahead(
+        self,
+        x: float,
+        y: float,
+        steps: int,
+        move: float,
+        goal: tuple[float, float],
+        tolerance: float,
+        bounds: tuple[tuple[float, float], tuple[float, float]] | None,
+    ) -> list[tuple[float, float]] | None:
+        """The next ``steps`` positions of a unit at ``(x, y)`` steering along this run, each ``move`` on.
+
+        Exactly what a ghost stepper walks (``Stepper.advise`` then ``direction``
+        each step: arrival within ``tolerance`` of ``goal`` or leaving ``bounds``
+        ends the track), in one compiled loop, without moving this run's
+        cursor.  ``None`` when the run would end within those steps (its exit,
+        or its advisory limit): plain descent takes over there, so walk a ghost.
+        """
+        if self._array is None:
+            self._array = np.array(self.path, dtype=np.float64).reshape(-1, 2)
+        (x0, y0), (x1, y1) = bounds if bounds is not None else ((-math.inf, -math.inf), (math.inf, math.inf))
+        out = np.empty((steps + 1, 2))
+        n = _ahead(
+            self._array, self.cursor, self.advisories, self.limit, self.step, self.to_goal,
+            x, y, steps, move, goal[0], goal[1], tolerance, x0, y0, x1, y1, out,
+        )  # fmt: skip
+        if n < 0:
+            return None
+        return list(map(tuple, out[:n].tolist()))
+
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """Unit heading towards the path ahead, or ``None`` once at the exit (or abandoned)."""
         self.advisories += 1
@@ -115,8 +147,12 @@ class EscapeRun:
             return None
         p = self.path
         i = self.cursor
-        window = p[i : i + 16]
-        i += min(range(len(window)), key=lambda k: (window[k][0] - x) ** 2 + (window[k][1] - y) ** 2)
+        best = math.inf
+        for k in range(i, min(i + 16, len(p))):  # the nearest of the next 16 points, the first on a tie
+            px, py = p[k]
+            d = (px - x) * (px - x) + (py - y) * (py - y)
+            if d < best:
+                best, i = d, k
         self.cursor = i
         ex, ey = p[-1]
         if i >= len(p) - 2 and math.hypot(ex - x, ey - y) <= self.step and not self.to_goal:
@@ -127,6 +163,64 @@ class EscapeRun:
         if n <= 1e-9 * self.step:
             return None
         return dx / n, dy / n
+
+
+@numba.njit(cache=True, nogil=True)
+def _ahead(
+    path: np.ndarray,
+    cursor: int,
+    advisories: int,
+    limit: int,
+    step: float,
+    to_goal: bool,
+    x: float,
+    y: float,
+    steps: int,
+    move: float,
+    gx: float,
+    gy: float,
+    tolerance: float,
+    x0: float,
+    y0: float,
+    x1: float,
+    y1: float,
+    out: np.ndarray,
+) -> int:
+    """``EscapeRun.ahead``'s loop: positions written to ``out``, or -1 where the run would end."""
+    n = path.shape[0]
+    out[0, 0] = x
+    out[0, 1] = y
+    for k in range(steps):
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return k + 1
+        if math.hypot(gx - x, gy - y) <= tolerance:
+            return k + 1
+        if not (x0 <= x <= x1 and y0 <= y <= y1):
+            return k + 1
+        advisories += 1
+        if advisories > limit:
+            return -1
+        best = math.inf
+        i = cursor
+        for j in range(cursor, min(cursor + 16, n)):
+            d = (path[j, 0] - x) * (path[j, 0] - x) + (path[j, 1] - y) * (path[j, 1] - y)
+            if d < best:
+                best = d
+                i = j
+        cursor = i
+        if i >= n - 2 and math.hypot(path[n - 1, 0] - x, path[n - 1, 1] - y) <= step and not to_goal:
+            return -1
+        t = min(i + 2, n - 1)
+        dx = path[t, 0] - x
+        dy = path[t, 1] - y
+        norm = math.hypot(dx, dy)
+        if norm <= 1e-9 * step:
+            return -1
+        x = x + move * (dx / norm)
+        y = y + move * (dy / norm)
+        out[k + 1, 0] = x
+        out[k + 1, 1] = y
+    return steps + 1
 
 
 class _Site:

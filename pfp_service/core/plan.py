@@ -192,11 +192,20 @@ def predict_many(
     """
     pts0 = np.array(starts, dtype=np.float64).reshape(-1, 2)
     tracks: list[list[tuple[float, float]]] = [[] for _ in steppers]
-    esc = [i for i, s in enumerate(steppers) if s.escaping or s.check_terminal()]
+    esc = []
+    for i, s in enumerate(steppers):
+        if s.escaping or s.check_terminal():
+            track = s.route_ahead(float(pts0[i, 0]), float(pts0[i, 1]), steps)  # compiled, when it can
+            if track is None:
+                esc.append(i)  # a ghost walks it
+            else:
+                tracks[i] = track
     if esc:
         for i, t in zip(esc, walk_many([steppers[i].ghost() for i in esc], field, pts0[esc], steps, cull)):
             tracks[i] = t
-    plain = np.array(sorted(set(range(len(steppers))) - set(esc)), dtype=np.int64)
+    plain = np.array(
+        [i for i, s in enumerate(steppers) if not (s.escaping or s.check_terminal())], dtype=np.int64
+    )
     if plain.size == 0:
         return tracks
     m = plain.size
@@ -230,10 +239,10 @@ def predict_many(
         safe = np.where(alive, norm, 1.0)
         pts = np.where(alive[:, None], pts - step[:, None] * out[:, :2] / safe[:, None], pts)
         trail[k + 1] = np.where(alive[:, None], pts, np.nan)
-    rows = np.transpose(trail, (1, 0, 2)).tolist()
+    rows = np.ascontiguousarray(np.transpose(trail, (1, 0, 2))).tolist()
+    lengths = (~np.isnan(trail[:, :, 0])).sum(axis=0).tolist()  # a unit stopped stays stopped (nan after)
     for r, i in enumerate(plain.tolist()):
-        track = rows[r]
-        tracks[i] = [(p[0], p[1]) for p in track if p[0] == p[0]]  # nan marks where it stopped
+        tracks[i] = list(map(tuple, rows[r][: lengths[r]]))
     return tracks
 
 

@@ -78,9 +78,11 @@ class StepStatus(StrEnum):
     OUT_OF_BOUNDS = "out_of_bounds"
     INVALID = "invalid"
 
-    @property
-    def terminal(self) -> bool:
-        return self not in (StepStatus.EN_ROUTE, StepStatus.ESCAPING)
+    terminal: bool  # the unit is no longer moving: set on each member below (read per advice, so no property)
+
+
+for _status in StepStatus:
+    _status.terminal = _status not in (StepStatus.EN_ROUTE, StepStatus.ESCAPING)
 
 
 class Advice(NamedTuple):
@@ -177,10 +179,13 @@ class Stepper:
     def __deepcopy__(self, memo: dict[int, object]) -> Stepper:
         """A detached copy (previews, deliberation): shares the immutable parts, copies the state."""
         new = Stepper.__new__(Stepper)
-        shared = ("params", "bounds", "goal", "origin", "_terminal", "pending")
-        for name in Stepper.__slots__:
-            value = getattr(self, name)
-            setattr(new, name, value if name in shared else copy.deepcopy(value, memo))
+        for name in Stepper.__slots__:  # numbers, tuples, flags and the parameters: immutable, shared
+            setattr(new, name, getattr(self, name))
+        new._recent = deque(self._recent, maxlen=self._recent.maxlen)
+        if self._escaper is not None:
+            new._escaper = copy.deepcopy(self._escaper, memo)
+        if self._run is not None:  # its path is never changed, only its cursor: shared
+            new._run = copy.copy(self._run)
         return new
 
     def ghost(self) -> Stepper:
@@ -407,6 +412,16 @@ class Stepper:
         """Following a committed escape route."""
         return self._run is not None
 
+    def route_ahead(self, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
+        """A ghost's next ``steps`` positions from ``(x, y)`` on the committed route (``EscapeRun.ahead``).
+
+        ``None`` when there is no route, a standing verdict, or the route may
+        end within those steps: then walk a ghost (``plan.walk_many``).
+        """
+        if self._run is None or self._terminal is not None:
+            return None
+        return self._run.ahead(x, y, steps, self.params.step, self.goal, self.params.tolerance, self.bounds)
+
     def look_ahead_again(self) -> None:
         """A look-ahead asked for was dropped (its deadline passed): ask again at the next advisory."""
         self.pending = None
@@ -416,7 +431,8 @@ class Stepper:
         """A standing verdict (trapped) that ``check`` would repeat, so a prediction must ask the stepper."""
         return self._terminal is not None
 
-    def _escaping(self, field: ThreatField, x: float, y: float) -> Advice:
+    def _escaping(self, field: ThreatField, x: float, y: float, level: float | None = None) -> Advice:
+        """Steer along the committed route; ``level`` is the threat level here when the caller has it."""
         run = self._run
         assert run is not None
         heading = run.direction(x, y)
@@ -432,7 +448,8 @@ class Stepper:
         self.advisories += 1
         if self._escaper is not None:  # a ghost has none: it only predicts
             self._escaper.escape_steps += 1
-        level = field.level_grad_at(x, y)[0]
+        if level is None:  # a ghost only predicts positions: the level it would report is never read
+            level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
         return Advice(StepStatus.ESCAPING, heading[0], heading[1], level, dist, f"escape: {run.name}")
 
@@ -502,8 +519,14 @@ def advise_many(
         early = s.check(x, y)
         if early is not None:
             result.append(early._replace(level=level) if early.status is StepStatus.TRAPPED else early)
-        elif s._run is not None or s._foresee:  # escaping, or looking ahead: not the batch's descent
+        elif s._foresee and not s.defer:  # looking ahead inline (a preview): not the batch's descent
             result.append(s.advise(field, x, y))
         else:
-            result.append(s.follow(x, y, fx, fy, level, norm, field))
+            if s._foresee:  # deferred: ask for the look-ahead and descend meanwhile, as ``advise`` does
+                s._foresee = False
+                s.pending = Need("foresee", x, y)
+            if s._run is not None:  # on a route: the batch gave this position's level
+                result.append(s._escaping(field, x, y, level))
+            else:
+                result.append(s.follow(x, y, fx, fy, level, norm, field))
     return result

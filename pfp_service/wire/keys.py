@@ -36,6 +36,7 @@ __all__ = [
     "TEMPLATES",
     "Key",
     "KeyKind",
+    "KeyOf",
     "alive_planner",
     "alive_planners",
     "alive_unit",
@@ -305,6 +306,44 @@ def parse(key: str) -> Key:
                 raise InputError("key", f"{_shown(text)}: a chunk is not 1-64 characters of [A-Za-z0-9_-]")
             return Key(kind, m["mission"], m["id"])
     raise InputError("key", f"{_shown(text)} is not a key of the pfp wire contract")
+
+
+class KeyOf:
+    """The keys of one kind in one mission, without matching every pattern: for the hot paths.
+
+    ``KeyOf(KeyKind.UNIT_STATE, "m").id(key)`` is ``parse(key).id`` for a
+    unit state key (a subscriber knows which kind it gets), and ``key(unit)``
+    builds one; both refuse what ``parse`` and the builders refuse.
+    """
+
+    __slots__ = ("_head", "_tail")
+
+    def __init__(self, kind: KeyKind, mission: str) -> None:
+        head, tail = TEMPLATES[kind].format(mission=check_chunk(mission, "mission"), id="\0").split("\0")
+        self._head, self._tail = head, tail
+
+    def id(self, key: str) -> str:
+        """The id chunk of a received key of this kind.
+
+        Raises:
+            InputError: as ``parse`` does, for any other key.
+        """
+        head, tail = self._head, self._tail
+        if len(key) <= MAX_KEY_CHARS and key.startswith(head) and key.endswith(tail):
+            ident = key[len(head) : len(key) - len(tail)]
+            if _CHUNK.match(ident):
+                return ident
+        got = parse(key)  # the precise reason, or a key of another kind or mission
+        raise InputError(
+            "key", f"{_shown(key)} is a {got.kind.value} key of mission {got.mission!r}, not {self}"
+        )
+
+    def __str__(self) -> str:
+        return f"{self._head}*{self._tail}"
+
+    def key(self, ident: str) -> str:
+        """This kind's key for ``ident`` (checked as the builders check it)."""
+        return self._head + check_chunk(ident, "unit") + self._tail
 
 
 def _shown(text: str) -> str:

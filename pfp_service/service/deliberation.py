@@ -1,0 +1,233 @@
+"""Deliberation off the loop: the world's jobs run in worker processes, latest wins.
+
+The world emits a ``Job`` (a detached stepper copy, the field it was asked
+under, a deadline) whenever a unit needs its look-ahead or an escape search.
+The loop hands the tick's jobs to ``Deliberators.submit`` and calls
+``feed()`` every tick:
+
+* jobs wait here, not in the pool: escape searches (a unit is trapped now)
+  before look-aheads, oldest first.  At most ``workers * AHEAD`` chunks are
+  in the pool at once, so a job superseded while it waits (a newer goal or
+  world: ``Job.cancelled``) is dropped before it costs anything, and one
+  still waiting at its deadline is answered ``Deliberated(..., None)``
+  unrun, which the world takes as "ask again later";
+* a chunk is up to ``CHUNK`` jobs under one field, so a storm of 1,000 costs
+  125 round trips, not 1,000;
+* each field's threats are pickled once and cached in the workers, so a job
+  ships only its stepper copy;
+* results come back through ``deliver`` (the node's inbox) and are applied at
+  the next tick, where the world adopts them only if their token is still in
+  force.
+
+Why processes: a look-ahead or a route search is seconds of Python and numpy
+under a storm, and a thread running it shares the GIL with the loop, the
+Zenoh callbacks and the publishing (measured: with the deliberation thread
+busy, the loop held the GIL 46 % of the time and the deliberation 30 %, and
+the planner answered 30 % of 10,000 states/s).  In its own process it
+shares only the machine's cores.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import heapq
+import multiprocessing
+import pickle
+import time
+import traceback
+from collections.abc import Callable
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from pfp_service.core import ThreatField
+from pfp_service.core.stepper import Stepper
+from pfp_service.service.events import Deliberated, Job
+from pfp_service.service.log import get_logger
+
+__all__ = ["AHEAD", "CHUNK", "Deliberators"]
+
+log = get_logger("deliberation")
+CHUNK = 8  # jobs per round trip to a worker
+AHEAD = 2  # chunks in the pool per worker; the rest wait here, where cancelling is free
+_PRIORITY = {"escape": 0, "foresee": 1}  # a unit trapped now before a look-ahead
+
+
+class Deliberators:
+    """Worker processes for the world's deliberation jobs.
+
+    Args:
+        workers: processes.
+        clock: the node's monotonic clock (job deadlines are on it).
+        deliver: called with each ``Deliberated`` from a pool thread (the node's inbox).
+    """
+
+    def __init__(
+        self, workers: int, clock: Callable[[], float], deliver: Callable[[Deliberated], None]
+    ) -> None:
+        self._workers = workers
+        self._clock = clock
+        self._deliver = deliver
+        self._waiting: list[tuple[int, int, Job]] = []  # (priority, seq, job)
+        self._seq = 0
+        self._in_flight = 0  # chunks in the pool (only the loop thread changes it, in feed and _done)
+        self._fields: dict[int, tuple[ThreatField, int, bytes]] = {}  # id(field) -> (field, version, blob)
+        self._version = 0
+        self.ran = 0
+        self.dropped = 0  # superseded before they ran
+        self.expired = 0  # still waiting at their deadline
+        self.failed = 0
+        self._closed = False
+        self._logged_at = -float("inf")
+        self._unlogged = 0
+        self._finished: list[int] = []  # chunks done since the last feed (appended by pool threads)
+        self._pool = self._new_pool()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        ctx = multiprocessing.get_context("spawn")  # never fork a process holding a zenoh session
+        pool = ProcessPoolExecutor(self._workers, mp_context=ctx, initializer=_worker_init)
+        self._started = [pool.submit(_noop) for _ in range(self._workers)]
+        return pool
+
+    def wait_ready(self, timeout_s: float = 120.0) -> None:
+        """Block until every worker has loaded the kernels."""
+        for f in self._started:
+            f.result(timeout=timeout_s)
+
+    @property
+    def waiting(self) -> int:
+        return len(self._waiting)
+
+    def submit(self, jobs: list[Job]) -> None:
+        """Queue the tick's jobs (the loop thread); ``feed`` sends them on."""
+        for job in jobs:
+            self._seq += 1
+            heapq.heappush(self._waiting, (_PRIORITY.get(job.kind, 1), self._seq, job))
+
+    def feed(self) -> None:
+        """Send waiting jobs to the pool while it has room; drop superseded ones, answer late ones."""
+        while self._finished:
+            self._finished.pop()
+            self._in_flight -= 1
+        now = self._clock()
+        while self._waiting and self._in_flight < self._workers * AHEAD:
+            field: ThreatField | None = None
+            chunk: list[Job] = []
+            while self._waiting and len(chunk) < CHUNK:
+                job = self._waiting[0][2]
+                if job.cancelled:
+                    heapq.heappop(self._waiting)
+                    self.dropped += 1
+                    continue
+                if now > job.deadline:
+                    heapq.heappop(self._waiting)
+                    self.expired += 1
+                    self._deliver(Deliberated(job.unit, job.token, None))
+                    continue
+                if field is not None and job.field is not field:
+                    break  # a chunk runs under one field
+                field = job.field
+                chunk.append(heapq.heappop(self._waiting)[2])
+            if not chunk:
+                break
+            self._send(chunk, now)
+
+    def _send(self, chunk: list[Job], now: float) -> None:
+        version, blob = self._blob(chunk[0].field)
+        items = [(j.stepper, j.deadline - now) for j in chunk]
+        try:
+            future = self._pool.submit(_run_chunk, version, blob, items)
+        except BrokenProcessPool:  # a worker died: a fresh pool, and these are asked again later
+            log.error("deliberation workers died; starting new ones")
+            self._pool = self._new_pool()
+            self.failed += len(chunk)
+            for j in chunk:
+                self._deliver(Deliberated(j.unit, j.token, None))
+            return
+        self._in_flight += 1
+        future.add_done_callback(functools.partial(self._done, chunk=chunk))
+
+    def _blob(self, field: ThreatField) -> tuple[int, bytes]:
+        got = self._fields.get(id(field))
+        if got is None or got[0] is not field:
+            self._version += 1
+            blob = pickle.dumps((field.threats, field.intensity), protocol=pickle.HIGHEST_PROTOCOL)
+            got = (field, self._version, blob)
+            self._fields = {id(field): got}  # one field at a time: older jobs are superseded anyway
+        return got[1], got[2]
+
+    def _done(self, future: Future[list[tuple[Stepper | None, str]]], *, chunk: list[Job]) -> None:
+        if self._closed:
+            return
+        try:
+            results = future.result()
+        except Exception as exc:  # a worker died mid-chunk, or the pool shut down
+            results = [(None, f"{type(exc).__name__}: {exc}")] * len(chunk)
+            if isinstance(exc, BrokenProcessPool):
+                with contextlib.suppress(Exception):
+                    self._pool = self._new_pool()
+        for job, (stepper, error) in zip(chunk, results):
+            if error:
+                self.failed += 1
+                self._log_failure(job, error)
+            else:
+                self.ran += 1
+            self._deliver(Deliberated(job.unit, job.token, stepper))
+        self._finished.append(1)
+
+    def _log_failure(self, job: Job, error: str) -> None:
+        """At most one line a second, with how many failed since the last (a failing job is asked again)."""
+        now = time.monotonic()
+        self._unlogged += 1
+        if now - self._logged_at < 1.0:
+            return
+        fields = {"unit": job.unit, "kind": job.kind, "failed": self._unlogged, "error": error}
+        log.error("deliberation failed", extra={"fields": fields})
+        self._logged_at, self._unlogged = now, 0
+
+    def shutdown(self) -> None:
+        """Stop at once: a worker inside a search is terminated, not waited for."""
+        self._closed = True
+        processes = list(getattr(self._pool, "_processes", {}).values())  # no public handle on them
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for proc in processes:
+            with contextlib.suppress(Exception):
+                proc.terminate()
+
+
+# -- in the worker processes -------------------------------------------------------
+_FIELD: dict[str, Any] = {}  # version -> field, one cached
+
+
+def _worker_init() -> None:
+    from pfp_service.service.desk import warm_up
+
+    warm_up(None)
+
+
+def _noop() -> None:
+    return None
+
+
+def _run_chunk(
+    version: int, blob: bytes, items: list[tuple[Stepper, float]]
+) -> list[tuple[Stepper | None, str]]:
+    """Deliberate each stepper under the field; ``(None, "")`` for one whose deadline passed first."""
+    started = time.monotonic()
+    if _FIELD.get("version") != version:
+        threats, intensity = pickle.loads(blob)
+        _FIELD.clear()
+        _FIELD.update(version=version, field=ThreatField(threats, intensity))
+    field = _FIELD["field"]
+    out: list[tuple[Stepper | None, str]] = []
+    for stepper, left_s in items:
+        if time.monotonic() - started > left_s:
+            out.append((None, ""))
+            continue
+        try:
+            stepper.deliberate(field)
+            out.append((stepper, ""))
+        except Exception:
+            out.append((None, traceback.format_exc(limit=3)))
+    return out
