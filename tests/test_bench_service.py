@@ -49,3 +49,22 @@ def test_bench_service_json_has_every_figure():
         assert fm["probes"] and {"rate_hz", "p99_ms", "unanswered_fraction", "ok"} <= fm["probes"][0].keys()
         assert "max_per_s" in fm
     assert all({"target", "measured", "limit", "met"} <= t.keys() for t in doc["targets"])
+
+
+def test_bench_service_planners_compares_one_with_k_and_counts_doubles():
+    r = run_pfp(
+        "bench", "service", "--units", "12", "--rate", "5", "--threats", "3", "--duration", "1",
+        "--no-storm", "--no-fanout", "--planners", "2", "--json",
+        timeout=240,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    so = json.loads(r.stdout)["scale_out"]
+    assert so["planners"] == 2 and [run["planners"] for run in so["runs"]] == [1, 2]
+    for run in so["runs"]:
+        st = run["steady"]
+        assert st.keys() >= STEADY | {"answered_per_s", "answered_twice", "units_answered_by_two"}, run
+        assert st["answered"] > 0 and st["answered_twice"] == 0 and st["units_answered_by_two"] == 0, st
+        assert run["ownership_settled_s"] is not None  # the planners owned every unit between them
+        assert run["exit"]["exit_code"] == 0 and run["exit"]["error_lines"] == 0, run["exit"]
+    assert sum(so["runs"][1]["steady"]["units_per_planner"].values()) == 12
+    assert set(so["vs_one"]) >= {"answered_per_s", "p50_ms", "p99_ms"}

@@ -3,7 +3,9 @@
 * ``start_server`` runs the responder in its own process on a free loopback
   port, in router mode: ``pfp serve`` (the planner) or ``echo_main`` (a
   trivial Python zenoh responder answering every state with a fixed
-  direction, the transport's own ceiling).
+  direction, the transport's own ceiling).  ``start_cluster`` runs a plain
+  router (``router_main``) and ``--cluster`` planners as its clients, for
+  ``--planners``.
 * ``ProcMeter`` reads a process's CPU time and resident memory from ``/proc``.
 * ``LoadGen`` is the load generator's client session: it paces unit states,
   moves each unit along the last vector it was given, and timestamps every
@@ -29,7 +31,17 @@ import msgspec
 
 from pfp_service.bench.roundtrip import _client, _free_port
 
-__all__ = ["LoadGen", "ProcMeter", "Received", "Server", "echo_main", "start_server"]
+__all__ = [
+    "Cluster",
+    "LoadGen",
+    "ProcMeter",
+    "Received",
+    "Server",
+    "echo_main",
+    "router_main",
+    "start_cluster",
+    "start_server",
+]
 
 MISSION = "bench"
 PLANNER_ID = "planner"
@@ -43,9 +55,11 @@ class _Dir(msgspec.Struct):
     seq: int | None = None
     vector: tuple[float, float] = (0.0, 0.0)
     deliberating: bool = False
+    planner: str | None = None
 
 
 _DIR = msgspec.json.Decoder(_Dir)
+_SUMMED = ("msgs_in", "msgs_out", "overload", "deliberating", "pushes", "pushes_resent", "units_owned")
 MOVING = ("en_route", "escaping")
 
 
@@ -58,6 +72,7 @@ class Received:
     seq: int | None
     status: str
     deliberating: bool
+    planner: str | None = None  # which planner sent it (several share a mission under --planners)
 
 
 # -- meters -----------------------------------------------------------------------------
@@ -122,31 +137,126 @@ class Server:
 
 
 def start_server(
-    kind: str, escape: str | None = None, stale_s: float = 60.0, forget_s: float | None = None
+    kind: str,
+    escape: str | None = None,
+    stale_s: float = 60.0,
+    forget_s: float | None = None,
+    connect: str | None = None,
+    planner_id: str = PLANNER_ID,
 ) -> Server:
-    """Start ``kind`` (``planner`` or ``echo``) in router mode on a free loopback port.
+    """Start ``kind`` (``planner``, ``echo`` or ``router``) in router mode on a free loopback port.
 
     The planner's ``unit_stale_s`` is ``stale_s`` (the bench's quiet windows must not make units
-    stale) and its ``unit_forget_s`` is ``forget_s`` (``None``: its default).
+    stale) and its ``unit_forget_s`` is ``forget_s`` (``None``: its default).  With ``connect``
+    the planner is instead a ``--cluster`` client of the router there, named ``planner_id``.
     """
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = connect or f"tcp/127.0.0.1:{_free_port()}"
     if kind == "planner":
-        cmd = [sys.executable, "-m", "pfp_service", "serve", "--listen", endpoint, "--mission", MISSION]
+        cmd = [sys.executable, "-m", "pfp_service", "serve", "--mission", MISSION]
+        if connect is None:
+            cmd += ["--listen", endpoint]
+        else:
+            cmd += ["--mode", "client", "--connect", connect, "--cluster"]
         # no durable state between runs; units quiet through a storm or fan-out window stay live
-        cmd += ["--planner-id", PLANNER_ID, "--log-level", "warning", "--state-dir", "none"]
+        cmd += ["--planner-id", planner_id, "--log-level", "warning", "--state-dir", "none"]
         cmd += ["--unit-stale-s", f"{stale_s:g}"]
         if forget_s is not None:
             cmd += ["--unit-forget-s", f"{forget_s:g}"]
         if escape is not None:
             cmd += ["--escape", escape]
     else:
-        code = "import sys; from pfp_service.bench._load import echo_main; echo_main(sys.argv[1])"
+        main = "echo_main" if kind == "echo" else "router_main"
+        code = f"import sys; from pfp_service.bench._load import {main}; {main}(sys.argv[1])"
         cmd = [sys.executable, "-c", code, endpoint]
     log = tempfile.TemporaryFile()  # noqa: SIM115 -- the Server owns it and closes it in stop()
     proc = subprocess.Popen(
         cmd, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdout=subprocess.DEVNULL, stderr=log
     )
     return Server(kind, endpoint, proc, log)
+
+
+class _SumMeter:
+    """``ProcMeter``'s figures summed over several processes (a cluster: its planners and its router)."""
+
+    def __init__(self, meters: list[ProcMeter]) -> None:
+        self.meters = meters
+
+    def cpu_s(self) -> float | None:
+        each = [m.cpu_s() for m in self.meters]
+        return None if any(c is None for c in each) else sum(c for c in each if c is not None)
+
+    def memory_mb(self) -> dict[str, float | None]:
+        out: dict[str, float | None] = {"rss_mb": 0.0, "peak_rss_mb": 0.0}
+        for m in self.meters:
+            for k, v in m.memory_mb().items():
+                out[k] = None if v is None or out[k] is None else out[k] + v  # type: ignore[operator]
+        return out
+
+
+@dataclass
+class Cluster:
+    """A router process and ``--cluster`` planners, its clients: one ``Server`` to the phases.
+
+    ``meter`` sums CPU and memory over every process (planners and router), so a
+    cluster's CPU is all it costs the machine.
+    """
+
+    router: Server
+    planners: list[Server]
+    kind: str = "cluster"
+    meter: Any = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.meter = _SumMeter([s.meter for s in (self.router, *self.planners)])
+
+    @property
+    def endpoint(self) -> str:
+        return self.router.endpoint
+
+    @property
+    def ids(self) -> tuple[str, ...]:
+        return tuple(cluster_ids(len(self.planners)))
+
+    def stop(self) -> dict[str, Any]:
+        """Stop the planners, then the router; their exit codes and error lines together."""
+        each = [s.stop() for s in self.planners] + [self.router.stop()]
+        return {
+            "exit_code": next((e["exit_code"] for e in each if e["exit_code"]), 0),  # the first failure
+            "error_lines": sum(e["error_lines"] for e in each),
+            "first_errors": [ln for e in each for ln in e["first_errors"]][:5],
+        }
+
+
+def cluster_ids(k: int) -> list[str]:
+    """The planner ids of a ``k``-planner cluster (the first is ``PLANNER_ID``)."""
+    return [PLANNER_ID] + [f"{PLANNER_ID}-{i}" for i in range(1, k)]
+
+
+def start_cluster(k: int, escape: str | None = None, stale_s: float = 60.0) -> Cluster:
+    """A plain router on a free loopback port and ``k`` ``--cluster`` planners connected to it."""
+    router = start_server("router")
+    planners = [
+        start_server("planner", escape, stale_s, connect=router.endpoint, planner_id=pid)
+        for pid in cluster_ids(k)
+    ]
+    return Cluster(router, planners)
+
+
+def router_main(endpoint: str) -> None:
+    """A plain Zenoh router on ``endpoint`` until SIGTERM: the hub of a cluster's planners and the load."""
+    import signal
+
+    import zenoh
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"router"')
+    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf):
+        stop.wait()
 
 
 def echo_main(endpoint: str) -> None:
@@ -223,7 +333,13 @@ class LoadGen:
         step_m: how far a unit moves per report along its last vector (its goal's ``step``).
     """
 
-    def __init__(self, endpoint: str, starts: list[tuple[float, float]], step_m: float) -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        starts: list[tuple[float, float]],
+        step_m: float,
+        planners: tuple[str, ...] = (PLANNER_ID,),
+    ) -> None:
         import zenoh
 
         from pfp_service.wire import encode, keys, zenoh_encoding
@@ -238,6 +354,7 @@ class LoadGen:
         self.pos = [list(p) for p in starts]
         self.vec: dict[str, tuple[float, float]] = {}
         self.step_m = step_m
+        self.planners = planners
         self.seq = 0
         self._rr = 0  # where the round robin of ``pace`` goes on
         self.sent: dict[int, float] = {}  # seq -> perf_counter at the put; seq is unique over the run
@@ -264,7 +381,7 @@ class LoadGen:
         except msgspec.DecodeError:
             self.bad += 1
             return
-        self.recv.append(Received(t, d.unit, d.seq, d.status, d.deliberating))
+        self.recv.append(Received(t, d.unit, d.seq, d.status, d.deliberating, d.planner))
         self.vec[d.unit] = d.vector if d.status in MOVING else (0.0, 0.0)
 
     def _on_event(self, sample: Any) -> None:
@@ -279,11 +396,29 @@ class LoadGen:
         self.session.put(key, self._encode(msg), encoding=self.enc)
 
     def status(self, timeout_s: float = 5.0) -> dict[str, Any] | None:
-        """The responder's status reply (``msgs_in``, ``msgs_out``, ...), or ``None`` when none came."""
-        for r in self.session.get(self._keys.planner_status(MISSION, PLANNER_ID), timeout=timeout_s):
-            if r.ok is not None:
-                return dict(json.loads(r.ok.payload.to_bytes()))
-        return None
+        """The responder's status reply (``msgs_in``, ``msgs_out``, ...), or ``None`` when none came.
+
+        With several planners, their counters summed (``None`` unless every one answered).
+        """
+        replies = []
+        for pid in self.planners:
+            got = None
+            for r in self.session.get(self._keys.planner_status(MISSION, pid), timeout=timeout_s):
+                if r.ok is not None:
+                    got = dict(json.loads(r.ok.payload.to_bytes()))
+            if got is None:
+                return None
+            replies.append(got)
+        if len(replies) == 1:
+            return replies[0]
+        summed = dict(replies[0])
+        for k in _SUMMED:
+            if all(k in r for r in replies):
+                summed[k] = sum(r[k] for r in replies)
+        p99 = [r["latency_p99_ms"] for r in replies if r.get("latency_p99_ms") is not None]
+        summed["latency_p99_ms"] = max(p99) if p99 else None
+        summed["units_owned_each"] = {r["planner"]: r.get("units_owned") for r in replies}
+        return summed
 
     def wait_ready(self, timeout_s: float = 60.0) -> None:
         deadline = time.monotonic() + timeout_s

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.bench._load import MISSION, LoadGen, ProcMeter, Received, Server
+from pfp_service.bench._load import MISSION, Cluster, LoadGen, ProcMeter, Received, Server
 
 __all__ = ["Bar", "RateSearch", "fanout", "forget", "register", "steady", "storm"]
 
@@ -59,7 +59,7 @@ def latency(g: LoadGen, seqs: range | list[int], recv: list[Received]) -> dict[s
 
 
 @contextmanager
-def metered(g: LoadGen, srv: Server) -> Iterator[dict[str, Any]]:
+def metered(g: LoadGen, srv: Server | Cluster) -> Iterator[dict[str, Any]]:
     """CPU % (responder and load generator), memory and the responder's own in/out counters over the block.
 
     ``loadavg`` (1 min, at the end) says how busy the shared machine was.
@@ -96,7 +96,7 @@ def register(g: LoadGen, n: int) -> int:
 
 
 def steady(
-    g: LoadGen, srv: Server, n: int, rate_hz: float, duration_s: float, bar: Bar, label: str
+    g: LoadGen, srv: Server | Cluster, n: int, rate_hz: float, duration_s: float, bar: Bar, label: str
 ) -> dict[str, Any]:
     mark = len(g.recv)
     task = bar.task(f"{label}: {n} units x {rate_hz:g} Hz")
@@ -106,8 +106,17 @@ def steady(
     recv = g.recv[mark:]
     lat = latency(g, range(first, end), recv)
     last: dict[str, str] = {}
+    by_seq: dict[int | None, set[str | None]] = {}
+    by_unit: dict[str, set[str | None]] = {}
     for r in recv:
         last[r.unit] = r.status
+        by_seq.setdefault(r.seq, set()).add(r.planner)
+        by_unit.setdefault(r.unit, set()).add(r.planner)
+    shares: dict[str, int] = {}
+    for ps in by_unit.values():
+        if len(ps) == 1:
+            name = str(next(iter(ps)))
+            shares[name] = shares.get(name, 0) + 1
     statuses: dict[str, int] = {}
     for s in last.values():
         statuses[s] = statuses.get(s, 0) + 1
@@ -118,10 +127,15 @@ def steady(
         "offered_per_s": n * rate_hz,
         "spent_s": spent,
         "input_per_s": (end - first) / spent,
+        "answered_per_s": lat["answered"] / spent,
         "output_per_s": len(recv) / spent,
         **lat,
         **meter,
         "statuses": statuses,
+        # several planners (--planners): each state must be answered by one, each unit guided by one
+        "answered_twice": sum(1 for s, ps in by_seq.items() if s is not None and len(ps) > 1),
+        "units_answered_by_two": sum(1 for ps in by_unit.values() if len(ps) > 1),
+        "units_per_planner": dict(sorted(shares.items())),
     }
 
 
@@ -168,7 +182,7 @@ class _Deliberation:
         }
 
 
-def storm(g: LoadGen, srv: Server, lay: dict[str, Any], n: int, bar: Bar) -> dict[str, Any]:
+def storm(g: LoadGen, srv: Server | Cluster, lay: dict[str, Any], n: int, bar: Bar) -> dict[str, Any]:
     """All goals at once while the units report at 1 Hz and a guided bystander (index n) at 50 Hz."""
     from pfp_service.wire import Goal, keys
 
@@ -216,7 +230,7 @@ def storm(g: LoadGen, srv: Server, lay: dict[str, Any], n: int, bar: Bar) -> dic
     }
 
 
-def fanout(g: LoadGen, srv: Server, n: int, bar: Bar) -> dict[str, Any]:
+def fanout(g: LoadGen, srv: Server | Cluster, n: int, bar: Bar) -> dict[str, Any]:
     """One threat just ahead of the live units' centre: the push wave, then their deliberations.
 
     The units go quiet for the wave, so every direction in it is a push and
@@ -293,7 +307,9 @@ def fanout(g: LoadGen, srv: Server, n: int, bar: Bar) -> dict[str, Any]:
     }
 
 
-def forget(g: LoadGen, srv: Server, bar: Bar, idle_rss_mb: float | None, cap_s: float) -> dict[str, Any]:
+def forget(
+    g: LoadGen, srv: Server | Cluster, bar: Bar, idle_rss_mb: float | None, cap_s: float
+) -> dict[str, Any]:
     """Every unit goes quiet; wait until the planner holds none (stale, then forgotten), then read its RSS."""
     task = bar.task("units going stale and forgotten")
     before = srv.meter.memory_mb()["rss_mb"]

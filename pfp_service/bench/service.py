@@ -21,7 +21,12 @@ session acting as every unit.  ``--rate`` is per unit: the offered load is
    at 1 Hz again, the time until each deliberation the wave started has ended;
 4. ``--find-max``: the highest rate whose p99 ≤ 10 ms with ≤ 0.1 % unanswered;
 5. ``--forget``: every unit goes quiet until the planner has forgotten them all,
-   and its RSS is read against its idle RSS.
+   and its RSS is read against its idle RSS;
+6. ``--planners K`` (K > 1), scale-out: two clusters, each a plain router in
+   its own process with ``--cluster`` planners as its clients, one with 1
+   planner and one with K, get the same steady load in turn: the answered
+   rate, latency and unanswered states of 1 against K planners on this
+   machine, every state answered by exactly one planner (doubles counted).
 
 With ``--echo`` the echo responder runs alongside and gets phases 2 and 4
 with the same load; the two take turns, so they share the machine's noise.
@@ -40,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.bench._load import MISSION, LoadGen, Server, start_server
+from pfp_service.bench._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
 from pfp_service.bench._phases import (
     MAX_P99_MS,
     STEP_M,
@@ -98,6 +103,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--forget",
         action="store_true",
         help="end with every unit quiet until the planner forgets them (unit_stale_s 20, unit_forget_s 5), then its RSS",
+    )
+    p.add_argument(
+        "--planners",
+        type=positive_int,
+        default=1,
+        help="with K > 1, also run the steady load against 1 and against K --cluster planners "
+        "behind a separate router, in turn: what the other K-1 processes buy (default 1: no scale-out)",
     )
     p.add_argument("--seed", type=int, default=2023, help="layout seed (default 2023)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -165,7 +177,7 @@ def machine() -> dict[str, Any]:
 
 
 def _prepare(
-    kind: str, g: LoadGen, srv: Server, args: argparse.Namespace, lay: dict[str, Any], bar: Bar
+    kind: str, g: LoadGen, srv: Server | Cluster, args: argparse.Namespace, lay: dict[str, Any], bar: Bar
 ) -> dict[str, Any]:
     """Threats, units and (for the planner) the goal storm, or plain goals with ``--no-storm``."""
     from pfp_service.wire import Goal, keys
@@ -230,6 +242,67 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
     return res
 
 
+def _owned_settled(g: LoadGen, units: int, cap_s: float = 30.0) -> float | None:
+    """Wait until the cluster's planners own ``units`` between them; the seconds it took (``None``: never)."""
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < cap_s:
+        st = g.status(2.0)
+        if st is not None and st.get("units_owned") == units:
+            return time.perf_counter() - t0
+        time.sleep(0.2)
+    return None
+
+
+def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str, Any]:
+    """The steady load against 1 planner and against ``--planners`` K, each behind its own router.
+
+    Both clusters are up at once and take their steady loads in turn, so they
+    share the machine's noise; compare their figures with each other, not with
+    the planner-as-router run above.
+    """
+    k = args.planners
+    sizes = [1, k]
+    clusters: dict[int, Cluster] = {}
+    gens: dict[int, LoadGen] = {}
+    runs: list[dict[str, Any]] = []
+    plain = argparse.Namespace(**{**vars(args), "no_storm": True})  # goals put plainly: no storm here
+    try:
+        for n in sizes:
+            clusters[n] = start_cluster(n, args.escape)
+        for n in sizes:
+            gens[n] = LoadGen(clusters[n].endpoint, lay["starts"], STEP_M, clusters[n].ids)
+            gens[n].wait_ready()
+        prepared = {}
+        for n in sizes:
+            prepared[n] = _prepare("planner", gens[n], clusters[n], plain, lay, bar)
+            prepared[n]["ownership_settled_s"] = _owned_settled(gens[n], args.units + 1)
+        for n in sizes:
+            st = steady(gens[n], clusters[n], args.units, args.rate, args.duration, bar, f"{n} planner(s)")
+            runs.append({"planners": n, **prepared[n], "steady": st})
+    finally:
+        for g in gens.values():
+            g.close()
+        for n, c in clusters.items():
+            for r in runs:
+                if r["planners"] == n:
+                    r["exit"] = c.stop()
+                    break
+            else:
+                c.stop()
+    one, many = runs[0]["steady"], runs[1]["steady"]
+
+    def ratio(key: str) -> float | None:
+        a, b = one.get(key), many.get(key)
+        return None if a is None or b is None or not a else b / a
+
+    return {
+        "planners": k,
+        "via": "a plain router in its own process; the planners --cluster clients of it; the same load generator",
+        "runs": runs,
+        "vs_one": {key: ratio(key) for key in ("answered_per_s", "p50_ms", "p99_ms", "cpu_percent")},
+    }
+
+
 def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
     """Each of the issue's targets this run can judge: what was asked, what was measured, met or not."""
     p, e = doc["planner"], doc.get("echo")
@@ -275,6 +348,15 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
         )
         add("fan-out: deliberated within 1 s", f["all_deliberated_s"], TARGETS["fanout_deliberated_s"])
     add("planner peak RSS <= 300 MB", p["final_memory"]["peak_rss_mb"], TARGETS["rss_mb"])
+    if "scale_out" in doc:
+        for r in doc["scale_out"]["runs"]:
+            st = r["steady"]
+            add(f"scale-out, {r['planners']} planner(s): no state answered twice", st["answered_twice"], 0)
+            add(
+                f"scale-out, {r['planners']} planner(s): no unit guided by two",
+                st["units_answered_by_two"],
+                0,
+            )
     if "forget" in p:
         add(
             "RSS back within 10 % of idle once forgotten",
@@ -303,6 +385,8 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     }
     with Bar() as bar:
         runs = run_all(args, lay, bar)
+        if args.planners > 1:
+            doc["scale_out"] = scale_out(args, lay, bar)
     doc["echo"] = runs.get("echo")
     doc["planner"] = runs["planner"]
     doc["targets"] = targets(doc)
@@ -371,11 +455,32 @@ def _print(doc: dict[str, Any]) -> None:
         ex = r["exit"]
         if ex["error_lines"]:
             print(f"  {kind} log: {ex['error_lines']} error lines, first: {ex['first_errors'][:2]}")
+    if "scale_out" in doc:
+        _print_scale_out(doc["scale_out"], ld)
     print()
     for t in doc["targets"]:
         flag = "n/a" if t["met"] is None else ("ok" if t["met"] else "MISSED")
         note = f"; {t['note']}" if "note" in t else ""
         print(f"  [{flag}] {t['target']}: {_f(t['measured'], '.4g')} (limit {t['limit']:g}{note})")
+
+
+def _print_scale_out(so: dict[str, Any], ld: dict[str, Any]) -> None:
+    print(f"\n[scale-out] steady {ld['duration_s']:g} s, 1 vs {so['planners']} planners; {so['via']}:")
+    print(
+        "  planners  answered/s  p50 ms   p99 ms   unanswered  answered twice  units by two  CPU % (all)  units per planner"
+    )
+    for r in so["runs"]:
+        st = r["steady"]
+        print(
+            f"  {r['planners']:>8}  {st['answered_per_s']:>10.0f}  {_f(st['p50_ms'], '.2f'):>7}  {_f(st['p99_ms'], '.1f'):>7}"
+            f"  {100 * st['unanswered_fraction']:>9.2f} %  {st['answered_twice']:>14}  {st['units_answered_by_two']:>12}"
+            f"  {_f(st['cpu_percent'], '.0f'):>11}  {st['units_per_planner']}"
+        )
+    v = so["vs_one"]
+    print(
+        f"  {so['planners']} vs 1: answered/s x{_f(v['answered_per_s'], '.2f')}, p50 x{_f(v['p50_ms'], '.2f')}, "
+        f"p99 x{_f(v['p99_ms'], '.2f')}, CPU x{_f(v['cpu_percent'], '.2f')} (load avg {_f(so['runs'][-1]['steady']['loadavg'], '.1f')})"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
