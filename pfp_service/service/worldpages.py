@@ -1,0 +1,165 @@
+"""The world queryable in pages: answering one page, and a joining planner fetching every page.
+
+A ``WorldSnapshot`` lists at most ``MAX_SNAPSHOT_ITEMS`` units and threats and
+stops short of ``SNAPSHOT_PAGE_BYTES`` of JSON, so every reply decodes; its
+``next_unit`` and ``next_threat`` say where the next page starts, and the
+query's parameters (``WorldQuery``: ``?units_from=ID;threats_from=ID``) ask
+for it.  Ids are cursors, not offsets, so a unit added or forgotten between
+two pages shifts nothing: each id present throughout is listed exactly once.
+
+A planner joining a mission (``fetch_world``) asks every planner once, then
+pages through the one holding the most, falling back to another from the same
+cursor if it stops answering: every planner takes every goal and threat, so
+one peer's pages are the whole world.  The fetch is bounded by a page count
+and a deadline, and says whether it got everything.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from pfp_service.errors import InputError
+from pfp_service.service.events import Input, inputs_from_snapshot
+from pfp_service.wire import (
+    ErrorReply,
+    WorldQuery,
+    WorldSnapshot,
+    decode_world_query,
+    decode_world_snapshot,
+    encode,
+    keys,
+)
+
+if TYPE_CHECKING:
+    from pfp_service.service.world import World
+
+__all__ = ["JOIN_DEADLINE_S", "JOIN_MAX_PAGES", "Joined", "answer_world", "fetch_world"]
+
+JOIN_MAX_PAGES = 1024  # 100,000 units (max_units) with missions are about 350 pages
+JOIN_DEADLINE_S = 30.0
+JOIN_PAGE_TIMEOUT_S = 2.0
+
+# ask(selector, timeout_s) -> the payloads of the replies that came (``ok`` ones only)
+Ask = Callable[[str, float], list[bytes]]
+
+
+def answer_world(query: Any, world: World, now: float, mission: str, planner: str) -> None:
+    """Reply to one world query with the page its parameters ask for, or a structured error.
+
+    Args:
+        query: the ``zenoh.Query`` (``parameters``, ``reply``, ``reply_err``).
+        world: the planner's world (only its ``snapshot`` is read).
+        now: the loop's clock.
+        mission, planner: name the reply's key.
+    """
+    from pfp_service.wire import zenoh_encoding
+
+    try:
+        q = decode_world_query(str(query.parameters))
+    except InputError as err:
+        query.reply_err(encode(ErrorReply.of(err)), encoding=zenoh_encoding())
+        return
+    page = world.snapshot(now, q.units_limit, q.units_from, q.threats_from, threats_limit=q.threats_limit)
+    query.reply(keys.world(mission, planner), encode(page), encoding=zenoh_encoding())
+
+
+@dataclass
+class Joined:
+    """What a joining planner learnt: the inputs to apply, and how the fetch went."""
+
+    inputs: list[Input] = field(default_factory=list)
+    peers: int = 0  # planners that answered the first ask
+    pages: int = 0
+    complete: bool = True  # every page of the peer paged through came (or there was no peer)
+    units: int = 0  # units and threats listed, over every page
+    threats: int = 0
+
+    def fields(self) -> dict[str, Any]:
+        return {
+            "peers": self.peers,
+            "pages": self.pages,
+            "complete": self.complete,
+            "units": self.units,
+            "threats": self.threats,
+            "inputs": len(self.inputs),
+        }
+
+
+def _decode(payloads: list[bytes], me: str) -> list[WorldSnapshot]:
+    out = []
+    for p in payloads:
+        try:
+            snap = decode_world_snapshot(p)
+        except InputError:
+            continue
+        if snap.planner != me:
+            out.append(snap)
+    return out
+
+
+def fetch_world(
+    ask: Ask,
+    mission: str,
+    me: str,
+    clock: Callable[[], float] = time.monotonic,
+    deadline_s: float = JOIN_DEADLINE_S,
+    max_pages: int = JOIN_MAX_PAGES,
+    page_timeout_s: float = JOIN_PAGE_TIMEOUT_S,
+) -> Joined:
+    """Every page of the world the mission's other planners hold, as inputs.
+
+    Args:
+        ask: sends a query and returns the ``ok`` reply payloads.
+        mission: the mission.
+        me: this planner's id (its own reply, if any, is skipped).
+        clock, deadline_s: the fetch stops after ``deadline_s`` seconds ...
+        max_pages: ... or this many pages, first ones included.
+        page_timeout_s: each query's own timeout.
+
+    Returns:
+        The inputs, in page order, and the figures; ``complete`` false when a
+        bound or every peer's silence cut it short.
+    """
+    end = clock() + deadline_s
+    got = Joined()
+    first = _decode(ask(keys.worlds(mission), page_timeout_s), me)
+    got.peers = len(first)
+
+    def take(page: WorldSnapshot) -> None:
+        got.inputs.extend(inputs_from_snapshot(page, me))
+        got.pages += 1
+        got.units += len(page.units)
+        got.threats += len(page.threats)
+
+    for page in first:
+        take(page)
+    if not first:
+        return got
+    # the fullest peer first; the others, in turn, if it stops answering
+    peers = sorted(first, key=lambda p: (-(p.units_total + p.threats_total), p.planner))
+    units_next, threats_next = peers[0].next_unit, peers[0].next_threat
+    for peer in peers:
+        while units_next is not None or threats_next is not None:
+            if got.pages >= max_pages or clock() >= end:
+                got.complete = False
+                return got
+            q = WorldQuery(
+                units_from=units_next,
+                threats_from=threats_next,
+                units_limit=WorldQuery().units_limit if units_next is not None else 0,
+                threats_limit=WorldQuery().threats_limit if threats_next is not None else 0,
+            )
+            sel = f"{keys.world(mission, peer.planner)}?{q.selector_parameters()}"
+            pages = [p for p in _decode(ask(sel, page_timeout_s), me) if p.planner == peer.planner]
+            if not pages:
+                break  # this peer is gone or will not answer: the next one, from the same cursor
+            page = pages[0]
+            take(page)
+            units_next, threats_next = page.next_unit, page.next_threat  # a list left out has none
+        else:
+            return got
+    got.complete = False
+    return got
