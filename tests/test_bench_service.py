@@ -65,6 +65,7 @@ def test_bench_service_planners_compares_one_with_k_and_counts_doubles():
         assert st.keys() >= STEADY | {"answered_per_s", "answered_twice", "units_answered_by_two"}, run
         assert st["answered"] > 0 and st["answered_twice"] == 0 and st["units_answered_by_two"] == 0, st
         assert run["ownership_settled_s"] is not None  # the planners owned every unit between them
+        assert len(st["cpu_percent_by_process"]) == run["planners"] + 1  # the router and each planner
         assert run["exit"]["exit_code"] == 0 and run["exit"]["error_lines"] == 0, run["exit"]
     assert sum(so["runs"][1]["steady"]["units_per_planner"].values()) == 12
     assert set(so["vs_one"]) >= {"answered_per_s", "p50_ms", "p99_ms"}

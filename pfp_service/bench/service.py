@@ -277,7 +277,15 @@ def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[s
             prepared[n] = _prepare("planner", gens[n], clusters[n], plain, lay, bar)
             prepared[n]["ownership_settled_s"] = _owned_settled(gens[n], args.units + 1)
         for n in sizes:
+            procs = {"router": clusters[n].router, **dict(zip(clusters[n].ids, clusters[n].planners))}
+            cpu0, t0 = {k: v.meter.cpu_s() for k, v in procs.items()}, time.perf_counter()
             st = steady(gens[n], clusters[n], args.units, args.rate, args.duration, bar, f"{n} planner(s)")
+            wall = time.perf_counter() - t0
+            each = {k: (v.meter.cpu_s(), cpu0[k]) for k, v in procs.items()}
+            # where the cluster's CPU went: its router and each planner (every planner decodes every state)
+            st["cpu_percent_by_process"] = {
+                k: None if a is None or b is None else 100 * (a - b) / wall for k, (a, b) in each.items()
+            }
             runs.append({"planners": n, **prepared[n], "steady": st})
     finally:
         for g in gens.values():
@@ -476,6 +484,8 @@ def _print_scale_out(so: dict[str, Any], ld: dict[str, Any]) -> None:
             f"  {100 * st['unanswered_fraction']:>9.2f} %  {st['answered_twice']:>14}  {st['units_answered_by_two']:>12}"
             f"  {_f(st['cpu_percent'], '.0f'):>11}  {st['units_per_planner']}"
         )
+        cpu = ", ".join(f"{k} {_f(v, '.0f')} %" for k, v in st["cpu_percent_by_process"].items())
+        print(f"            CPU by process: {cpu}")
     v = so["vs_one"]
     print(
         f"  {so['planners']} vs 1: answered/s x{_f(v['answered_per_s'], '.2f')}, p50 x{_f(v['p50_ms'], '.2f')}, "
