@@ -89,3 +89,47 @@ def test_an_empty_or_inactive_field_culls_to_the_goal_term():
     out = np.empty((1, 4))
     index.descent(np.array([[0.0, 0.0]]), np.array([[3.0, 4.0]]), np.array([1.0]), out)
     np.testing.assert_allclose(out[0], [-6.0, -8.0, 0.0, 10.0])
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.sampled_from([0, 5, 40, 300]), culled=st.booleans())
+def test_predict_is_descent_stepped_one_call_at_a_time(seed, n, culled):
+    """The compiled look-ahead gives, bit for bit, the positions of stepping ``descent`` by hand."""
+    from pfp_service.core.cull import predict
+
+    extent = 5000.0
+    field = _field(seed, n, extent, "peak")
+    index = CullIndex(field.packed) if culled and n else None
+    rng = np.random.default_rng(seed)
+    m, steps = 60, 6
+    pts = rng.uniform(0, extent, (m, 2))
+    pts[0] = (np.nan, 1.0)  # a position that is not finite stops at once
+    goals = rng.uniform(0, extent, (m, 2))
+    goals[1] = pts[1]  # already at its goal
+    gains = rng.uniform(1e-8, 1e-5, m)
+    step = rng.uniform(1.0, 200.0, m)
+    tol = rng.uniform(0.5, 50.0, m)
+    lo = np.full((m, 2), 500.0)
+    hi = np.full((m, 2), extent - 500.0)
+    trail, lengths = predict(field.packed, index, pts, goals, gains, step, tol, lo, hi, steps)
+    for i in range(m):
+        track = [tuple(pts[i])]
+        x, y = pts[i]
+        for _ in range(steps):
+            if math.hypot(goals[i, 0] - x, goals[i, 1] - y) <= tol[i]:
+                break
+            if not (lo[i, 0] <= x <= hi[i, 0] and lo[i, 1] <= y <= hi[i, 1]):
+                break
+            out = np.empty((1, 4))
+            args = (np.array([[x, y]]), goals[i : i + 1], gains[i : i + 1], out)
+            index.descent(*args) if index is not None else descent_many(field.packed, *args)
+            norm = out[0, 3]
+            if not (math.isfinite(norm) and norm > 0.0):
+                break
+            x, y = x - step[i] * out[0, 0] / norm, y - step[i] * out[0, 1] / norm
+            track.append((x, y))
+        got = [tuple(p) for p in trail[i, : lengths[i]].tolist()]
+        assert len(got) == len(track), i
+        np.testing.assert_array_equal(np.array(got), np.array(track))
+    assert lengths[0] == 1 and lengths[1] == 1
+    assert lengths.max() == steps + 1  # most units walked every step

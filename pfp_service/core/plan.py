@@ -19,8 +19,8 @@ from enum import StrEnum
 import msgspec
 import numpy as np
 
-from pfp_service.core import kernels
 from pfp_service.core.cull import MIN_THREATS, CullIndex
+from pfp_service.core.cull import predict as cull_predict
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
 from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus, advise_many
@@ -209,40 +209,22 @@ def predict_many(
     if plain.size == 0:
         return tracks
     m = plain.size
-    pts = pts0[plain].copy()
-    goals = np.array([steppers[i].goal for i in plain.tolist()], dtype=np.float64)
-    gains = np.array([steppers[i].goal_gain for i in plain.tolist()], dtype=np.float64)
-    step = np.array([steppers[i].params.step for i in plain.tolist()], dtype=np.float64)
-    tol = np.array([steppers[i].params.tolerance for i in plain.tolist()], dtype=np.float64)
+    idx = plain.tolist()
+    goals = np.array([steppers[i].goal for i in idx], dtype=np.float64)
+    gains = np.array([steppers[i].goal_gain for i in idx], dtype=np.float64)
+    step = np.array([steppers[i].params.step for i in idx], dtype=np.float64)
+    tol = np.array([steppers[i].params.tolerance for i in idx], dtype=np.float64)
     lo = np.full((m, 2), -np.inf)
     hi = np.full((m, 2), np.inf)
-    for row, i in enumerate(plain.tolist()):
+    for row, i in enumerate(idx):
         b = steppers[i].bounds
         if b is not None:
             lo[row], hi[row] = b[0], b[1]
-    out = np.empty((m, 4))
-    trail = np.full((steps + 1, m, 2), np.nan)
-    trail[0] = pts
-    alive = np.ones(m, dtype=bool)
-    for k in range(steps):
-        at_goal = np.hypot(goals[:, 0] - pts[:, 0], goals[:, 1] - pts[:, 1]) <= tol
-        outside = np.any((pts < lo) | (pts > hi), axis=1)
-        alive &= ~at_goal & ~outside
-        if not alive.any():
-            break
-        if cull is not None and len(field) >= MIN_THREATS:
-            cull.descent(pts, goals, gains, out)
-        else:
-            kernels.descent_many(field.packed, pts, goals, gains, out)
-        norm = out[:, 3]
-        alive &= np.isfinite(norm) & (norm > 0.0)
-        safe = np.where(alive, norm, 1.0)
-        pts = np.where(alive[:, None], pts - step[:, None] * out[:, :2] / safe[:, None], pts)
-        trail[k + 1] = np.where(alive[:, None], pts, np.nan)
-    rows = np.ascontiguousarray(np.transpose(trail, (1, 0, 2))).tolist()
-    lengths = (~np.isnan(trail[:, :, 0])).sum(axis=0).tolist()  # a unit stopped stays stopped (nan after)
-    for r, i in enumerate(plain.tolist()):
-        tracks[i] = list(map(tuple, rows[r][: lengths[r]]))
+    index = cull if cull is not None and len(field) >= MIN_THREATS else None
+    trail, lengths = cull_predict(field.packed, index, pts0[plain], goals, gains, step, tol, lo, hi, steps)
+    rows = trail.tolist()
+    for r, (i, n) in enumerate(zip(idx, lengths.tolist())):
+        tracks[i] = list(map(tuple, rows[r][:n]))
     return tracks
 
 
