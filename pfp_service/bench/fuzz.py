@@ -503,6 +503,7 @@ def _collect(handler: Any, target: str, queries: dict[str, int]) -> None:
             else:
                 wire.decode_error_reply(rep.err.payload.to_bytes())
                 queries["error_replies"] += 1
+                queries[f"{target}_error_replies"] = queries.get(f"{target}_error_replies", 0) + 1
         except InputError:
             queries["undecodable"] += 1
 
