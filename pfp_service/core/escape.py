@@ -259,6 +259,18 @@ class Escaper:
         self.log: list[str] = []
         self._sites: list[_Site] = []
 
+    def __deepcopy__(self, memo: dict[int, object]) -> Escaper:
+        """A detached copy (deliberation, previews): the parameters and goal shared, the history copied."""
+        new = Escaper.__new__(Escaper)
+        new.__dict__.update(self.__dict__)
+        new.log = list(self.log)
+        new._sites = []
+        for site in self._sites:
+            twin = _Site(site.x, site.y)
+            twin.tried = set(site.tried)
+            new._sites.append(twin)
+        return new
+
     def forget_sites(self) -> None:
         """The world changed: what failed at a trap before may work now."""
         self._sites.clear()
