@@ -5,7 +5,9 @@ every planner.  Without ``--json``, a table of the live planners first (units
 owned, latency, deliberations, overload: several share a mission under
 ``--cluster``), then two tables per planner: units (id, kind, status, last
 seen, distance to goal) and threats (id, position, TTL left).  With
-``--json``, one JSON array of every planner's full ``WorldSnapshot``.
+``--json``, one JSON array of every planner's full ``WorldSnapshot``: every page
+of it, merged (``service.worldpages.whole_world``); the tables show a planner's
+first page (up to 1,000 units and threats) and count the rest.
 Exit codes: 0 a planner answered; 1 none did; 2 a bad flag.
 """
 
@@ -84,7 +86,7 @@ def snapshot_lines(snap: Any) -> list[str]:
             )
         lines += ["", *_table(rows)]
         if snap.units_total > len(snap.units):
-            lines.append(f"... and {snap.units_total - len(snap.units)} more units (see --json for the cap)")
+            lines.append(f"... and {snap.units_total - len(snap.units)} more units (--json lists them all)")
     if snap.threats:
         rows = [("threat", "position", "facing", "TTL left")]
         for t in snap.threats:
@@ -93,8 +95,29 @@ def snapshot_lines(snap: Any) -> list[str]:
             rows.append((t.id, f"({x:.1f}, {y:.1f})", f"{t.threat.facing_deg:g}°", ttl))
         lines += ["", *_table(rows)]
         if snap.threats_total > len(snap.threats):
-            lines.append(f"... and {snap.threats_total - len(snap.threats)} more threats")
+            lines.append(
+                f"... and {snap.threats_total - len(snap.threats)} more threats (--json lists them all)"
+            )
     return lines
+
+
+def _whole(session: Any, args: argparse.Namespace, first: Any) -> Any:
+    """Every page of one planner's world after ``first``; a line on stderr if it stopped short."""
+    import sys
+
+    from pfp_service.service.worldpages import whole_world
+
+    def ask(selector: str, timeout_s: float) -> list[bytes]:
+        return [r.ok.payload.to_bytes() for r in session.get(selector, timeout=timeout_s) if r.ok is not None]
+
+    merged, complete = whole_world(ask, args.mission, first, page_timeout_s=args.timeout)
+    if not complete:
+        print(
+            f"pfp status: planner {first.planner}: stopped after {len(merged.units)} units and "
+            f"{len(merged.threats)} threats (of {merged.units_total} and {merged.threats_total})",
+            file=sys.stderr,
+        )
+    return merged
 
 
 def run(args: argparse.Namespace) -> int:
@@ -127,6 +150,8 @@ def run(args: argparse.Namespace) -> int:
                 found.append(decode_world_snapshot(reply.ok.payload.to_bytes()))
             except InputError as exc:
                 print(f"pfp status: {reply.ok.key_expr}: {exc}", file=sys.stderr)
+        if args.json:
+            found = [_whole(session, args, snap) for snap in found]
     found.sort(key=lambda s: s.planner)
     if args.json:
         print(msgspec.json.encode(found).decode())

@@ -21,6 +21,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import msgspec
+
 from pfp_service.errors import InputError
 from pfp_service.service.events import Input, inputs_from_snapshot
 from pfp_service.wire import (
@@ -36,7 +38,7 @@ from pfp_service.wire import (
 if TYPE_CHECKING:
     from pfp_service.service.world import World
 
-__all__ = ["JOIN_DEADLINE_S", "JOIN_MAX_PAGES", "Joined", "answer_world", "fetch_world"]
+__all__ = ["JOIN_DEADLINE_S", "JOIN_MAX_PAGES", "Joined", "answer_world", "fetch_world", "whole_world"]
 
 JOIN_MAX_PAGES = 1024  # 100,000 units (max_units) with missions are about 350 pages
 JOIN_DEADLINE_S = 30.0
@@ -100,6 +102,57 @@ def _decode(payloads: list[bytes], me: str) -> list[WorldSnapshot]:
     return out
 
 
+def _next_page(
+    ask: Ask, mission: str, planner: str, units_next: str | None, threats_next: str | None, timeout_s: float
+) -> WorldSnapshot | None:
+    """The page of ``planner``'s world from these cursors (a list whose cursor is ``None`` left out)."""
+    q = WorldQuery(
+        units_from=units_next,
+        threats_from=threats_next,
+        units_limit=WorldQuery().units_limit if units_next is not None else 0,
+        threats_limit=WorldQuery().threats_limit if threats_next is not None else 0,
+    )
+    sel = f"{keys.world(mission, planner)}?{q.selector_parameters()}"
+    pages = [p for p in _decode(ask(sel, timeout_s), "") if p.planner == planner]
+    return pages[0] if pages else None
+
+
+def whole_world(
+    ask: Ask,
+    mission: str,
+    first: WorldSnapshot,
+    clock: Callable[[], float] = time.monotonic,
+    deadline_s: float = JOIN_DEADLINE_S,
+    max_pages: int = JOIN_MAX_PAGES,
+    page_timeout_s: float = JOIN_PAGE_TIMEOUT_S,
+) -> tuple[WorldSnapshot, bool]:
+    """One planner's whole world: ``first`` and every page after it, merged (for ``pfp status``).
+
+    Returns:
+        The merged snapshot (its lists may be longer than one page's) with the
+        cursors of where it stopped, and whether it is complete; a bound or the
+        planner's silence cuts it short.
+    """
+    end = clock() + deadline_s
+    units, threats = list(first.units), list(first.threats)
+    units_next, threats_next = first.next_unit, first.next_threat
+    pages = 1
+    while units_next is not None or threats_next is not None:
+        if pages >= max_pages or clock() >= end:
+            break
+        page = _next_page(ask, mission, first.planner, units_next, threats_next, page_timeout_s)
+        if page is None:
+            break
+        pages += 1
+        units += page.units
+        threats += page.threats
+        units_next, threats_next = page.next_unit, page.next_threat
+    merged = msgspec.structs.replace(
+        first, units=units, threats=threats, next_unit=units_next, next_threat=threats_next
+    )
+    return merged, units_next is None and threats_next is None
+
+
 def fetch_world(
     ask: Ask,
     mission: str,
@@ -146,19 +199,11 @@ def fetch_world(
             if got.pages >= max_pages or clock() >= end:
                 got.complete = False
                 return got
-            q = WorldQuery(
-                units_from=units_next,
-                threats_from=threats_next,
-                units_limit=WorldQuery().units_limit if units_next is not None else 0,
-                threats_limit=WorldQuery().threats_limit if threats_next is not None else 0,
-            )
-            sel = f"{keys.world(mission, peer.planner)}?{q.selector_parameters()}"
-            pages = [p for p in _decode(ask(sel, page_timeout_s), me) if p.planner == peer.planner]
-            if not pages:
+            more = _next_page(ask, mission, peer.planner, units_next, threats_next, page_timeout_s)
+            if more is None:
                 break  # this peer is gone or will not answer: the next one, from the same cursor
-            page = pages[0]
-            take(page)
-            units_next, threats_next = page.next_unit, page.next_threat  # a list left out has none
+            take(more)
+            units_next, threats_next = more.next_unit, more.next_threat  # a list left out has none
         else:
             return got
     got.complete = False
