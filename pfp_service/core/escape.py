@@ -91,23 +91,25 @@ class EscapeRun:
     stronger than the goal's pull.
     """
 
-    __slots__ = ("_array", "advisories", "cursor", "limit", "name", "path", "step", "to_goal")
+    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step", "to_goal")
 
     def __init__(self, name: str, path: np.ndarray, step: float, to_goal: bool = False) -> None:
         self.name = name
-        self.path: list[tuple[float, float]] = [(float(a), float(b)) for a, b in path]
+        # (K, 2) float64, never changed once made (copies share it): 16 bytes a point, where a
+        # list of float tuples took about 110 (a thousand units on routes of 300 points: 33 MB)
+        self.path: np.ndarray = np.array(path, dtype=np.float64).reshape(-1, 2)
+        self.path.flags.writeable = False
         self.cursor = 0
         self.advisories = 0
         self.limit = 2 * len(self.path) + 20
         self.step = step
         self.to_goal = to_goal
-        self._array: np.ndarray | None = None  # ``path`` as an array, made at the first ``ahead``
 
     def then(self, other: EscapeRun | None) -> EscapeRun:
         """This run followed by ``other`` (which starts where this one ends)."""
         if other is None:
             return self
-        pts = np.array(self.path + other.path[1:])
+        pts = np.concatenate([self.path, other.path[1:]])
         return EscapeRun(f"{self.name}, then {other.name}", pts, self.step, other.to_goal)
 
     def ahead(
@@ -128,12 +130,10 @@ class EscapeRun:
         cursor.  ``None`` when the run would end within those steps (its exit,
         or its advisory limit): plain descent takes over there, so walk a ghost.
         """
-        if self._array is None:
-            self._array = np.array(self.path, dtype=np.float64).reshape(-1, 2)
         (x0, y0), (x1, y1) = bounds if bounds is not None else ((-math.inf, -math.inf), (math.inf, math.inf))
         out = np.empty((steps + 1, 2))
         n = _ahead(
-            self._array, self.cursor, self.advisories, self.limit, self.step, self.to_goal,
+            self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal,
             x, y, steps, move, goal[0], goal[1], tolerance, x0, y0, x1, y1, out,
         )  # fmt: skip
         if n < 0:
@@ -142,27 +142,41 @@ class EscapeRun:
 
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """Unit heading towards the path ahead, or ``None`` once at the exit (or abandoned)."""
-        self.advisories += 1
-        if self.advisories > self.limit:
-            return None
-        p = self.path
-        i = self.cursor
-        best = math.inf
-        for k in range(i, min(i + 16, len(p))):  # the nearest of the next 16 points, the first on a tie
-            px, py = p[k]
-            d = (px - x) * (px - x) + (py - y) * (py - y)
-            if d < best:
-                best, i = d, k
-        self.cursor = i
-        ex, ey = p[-1]
-        if i >= len(p) - 2 and math.hypot(ex - x, ey - y) <= self.step and not self.to_goal:
-            return None
-        tx, ty = p[min(i + 2, len(p) - 1)]
-        dx, dy = tx - x, ty - y
-        n = math.hypot(dx, dy)
-        if n <= 1e-9 * self.step:
-            return None
-        return dx / n, dy / n
+        ok, self.cursor, self.advisories, dx, dy = _steer(
+            self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal, x, y
+        )
+        return (dx, dy) if ok else None
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _steer(
+    path: np.ndarray, cursor: int, advisories: int, limit: int, step: float, to_goal: bool, x: float, y: float
+) -> tuple[bool, int, int, float, float]:
+    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy)``; not ``ok`` at the exit or past the limit.
+
+    The cursor moves to the nearest of the next 16 points (the first on a
+    tie), and the unit heads for the point two beyond it.
+    """
+    advisories += 1
+    if advisories > limit:
+        return False, cursor, advisories, 0.0, 0.0
+    n = path.shape[0]
+    best = math.inf
+    i = cursor
+    for j in range(cursor, min(cursor + 16, n)):
+        d = (path[j, 0] - x) * (path[j, 0] - x) + (path[j, 1] - y) * (path[j, 1] - y)
+        if d < best:
+            best = d
+            i = j
+    if i >= n - 2 and math.hypot(path[n - 1, 0] - x, path[n - 1, 1] - y) <= step and not to_goal:
+        return False, i, advisories, 0.0, 0.0
+    t = min(i + 2, n - 1)
+    dx = path[t, 0] - x
+    dy = path[t, 1] - y
+    norm = math.hypot(dx, dy)
+    if norm <= 1e-9 * step:
+        return False, i, advisories, 0.0, 0.0
+    return True, i, advisories, dx / norm, dy / norm
 
 
 @numba.njit(cache=True, nogil=True)
@@ -187,7 +201,6 @@ def _ahead(
     out: np.ndarray,
 ) -> int:
     """``EscapeRun.ahead``'s loop: positions written to ``out``, or -1 where the run would end."""
-    n = path.shape[0]
     out[0, 0] = x
     out[0, 1] = y
     for k in range(steps):
@@ -197,27 +210,11 @@ def _ahead(
             return k + 1
         if not (x0 <= x <= x1 and y0 <= y <= y1):
             return k + 1
-        advisories += 1
-        if advisories > limit:
+        ok, cursor, advisories, dx, dy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
+        if not ok:
             return -1
-        best = math.inf
-        i = cursor
-        for j in range(cursor, min(cursor + 16, n)):
-            d = (path[j, 0] - x) * (path[j, 0] - x) + (path[j, 1] - y) * (path[j, 1] - y)
-            if d < best:
-                best = d
-                i = j
-        cursor = i
-        if i >= n - 2 and math.hypot(path[n - 1, 0] - x, path[n - 1, 1] - y) <= step and not to_goal:
-            return -1
-        t = min(i + 2, n - 1)
-        dx = path[t, 0] - x
-        dy = path[t, 1] - y
-        norm = math.hypot(dx, dy)
-        if norm <= 1e-9 * step:
-            return -1
-        x = x + move * (dx / norm)
-        y = y + move * (dy / norm)
+        x = x + move * dx
+        y = y + move * dy
         out[k + 1, 0] = x
         out[k + 1, 1] = y
     return steps + 1
