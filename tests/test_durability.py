@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 import queue
 import signal
 import subprocess
@@ -254,3 +256,59 @@ def test_the_fleet_puts_its_goals_again_for_a_planner_that_lost_them(tmp_path):
             for proc in (fleet, p):
                 proc.terminate()
                 proc.wait(timeout=10)
+
+
+def _children(pid: int) -> set[int]:
+    """Every live process whose parent is ``pid`` (from /proc: no dependency for one test)."""
+    import pathlib
+
+    kids = set()
+    for stat in pathlib.Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            kids.add(int(stat.parent.name))
+    return kids
+
+
+def _cmdline(pid: int) -> bytes:
+    import pathlib
+
+    try:
+        return pathlib.Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
+def _alive(pid: int) -> bool:
+    import pathlib
+
+    try:
+        return pathlib.Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_a_planner_killed_takes_its_worker_processes_with_it():
+    """Preview and deliberation workers watch their planner: SIGKILL leaves no orphan running."""
+    from tests.zenoh_util import planner_process
+
+    with planner_process("--state-dir", "none", mission="orphans") as (_endpoint, proc):
+        deadline = time.monotonic() + 60
+        workers: set[int] = set()
+        while time.monotonic() < deadline and len(workers) < 3:  # 2 preview workers, 1 deliberation
+            workers = {k for k in _children(proc.pid) if b"spawn_main" in _cmdline(k)}
+            time.sleep(0.2)
+        assert len(workers) >= 3, workers
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and any(_alive(w) for w in workers):
+            time.sleep(0.2)
+        left = [w for w in workers if _alive(w)]
+        for w in left:  # never leave them behind, whatever the verdict
+            with contextlib.suppress(OSError):
+                os.kill(w, signal.SIGKILL)
+        assert not left, f"workers still running after their planner was killed: {left}"

@@ -32,7 +32,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import heapq
-import multiprocessing
 import pickle
 import time
 import traceback
@@ -45,6 +44,7 @@ from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Stepper
 from pfp_service.service.events import Deliberated, Job
 from pfp_service.service.log import get_logger
+from pfp_service.service.workers import spawn_pool, stop_pool
 
 __all__ = ["AHEAD", "CHUNK", "Deliberators"]
 
@@ -85,9 +85,7 @@ class Deliberators:
         self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        ctx = multiprocessing.get_context("spawn")  # never fork a process holding a zenoh session
-        pool = ProcessPoolExecutor(self._workers, mp_context=ctx, initializer=_worker_init)
-        self._started = [pool.submit(_noop) for _ in range(self._workers)]
+        pool, self._started = spawn_pool(self._workers)
         return pool
 
     def wait_ready(self, timeout_s: float = 120.0) -> None:
@@ -189,25 +187,11 @@ class Deliberators:
     def shutdown(self) -> None:
         """Stop at once: a worker inside a search is terminated, not waited for."""
         self._closed = True
-        processes = list(getattr(self._pool, "_processes", {}).values())  # no public handle on them
-        self._pool.shutdown(wait=False, cancel_futures=True)
-        for proc in processes:
-            with contextlib.suppress(Exception):
-                proc.terminate()
+        stop_pool(self._pool)
 
 
 # -- in the worker processes -------------------------------------------------------
 _FIELD: dict[str, Any] = {}  # version -> field, one cached
-
-
-def _worker_init() -> None:
-    from pfp_service.service.desk import warm_up
-
-    warm_up(None)
-
-
-def _noop() -> None:
-    return None
 
 
 def _run_chunk(

@@ -22,7 +22,6 @@ import contextlib
 import dataclasses
 import functools
 import heapq
-import multiprocessing
 import pickle
 import threading
 import time
@@ -39,6 +38,7 @@ from pfp_service.geo import Origin
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings
 from pfp_service.service.log import get_logger
 from pfp_service.service.preview import fit_reply, preview
+from pfp_service.service.workers import spawn_pool, stop_pool
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds
 
@@ -112,10 +112,7 @@ class PreviewDesk:
         self._deadlines: list[tuple[float, int, _Answer]] = []
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        ctx = multiprocessing.get_context("spawn")  # never fork a process holding a zenoh session
-        pool = ProcessPoolExecutor(self._workers, mp_context=ctx, initializer=_worker_init)
-        # start (and warm) the workers now, not at the first preview
-        self._started = [pool.submit(_noop) for _ in range(self._workers)]
+        pool, self._started = spawn_pool(self._workers)  # started (and warmed) now, not at the first preview
         return pool
 
     def wait_ready(self, timeout_s: float = 120.0) -> None:
@@ -125,11 +122,7 @@ class PreviewDesk:
 
     def shutdown(self) -> None:
         """Stop at once: a worker still inside a preview is terminated, not waited for."""
-        processes = list(getattr(self._pool, "_processes", {}).values())  # no public handle on them
-        self._pool.shutdown(wait=False, cancel_futures=True)
-        for proc in processes:
-            with contextlib.suppress(Exception):
-                proc.terminate()
+        stop_pool(self._pool)
 
     def _threats_blob(self, threats: tuple[Any, ...]) -> tuple[int, bytes]:
         if self._threats_key is None or self._threats_key[0] is not threats:
@@ -187,14 +180,6 @@ class PreviewDesk:
 
 # -- in the worker processes -------------------------------------------------------
 _FIELD: dict[str, Any] = {}  # version -> threats, one field cached
-
-
-def _worker_init() -> None:
-    warm_up(None)
-
-
-def _noop() -> None:
-    return None
 
 
 def _compute(job: tuple[Any, ...], left_s: float, max_iter: int) -> tuple[str, bytes]:
