@@ -27,7 +27,8 @@ acceptable (tier 0: cheap, reactive; tier 1: a search).
 * ``global``: Dijkstra cost-to-go, cost ``1 + lambda T``, on a local grid with
   the cores left out, shortcut where that costs no more; the route is cut at
   the first exit from which descent works (``global_route`` is the whole of
-  it, which ``auto`` follows when the stepper foresees a trap).
+  it, which ``auto`` follows when the stepper foresees a trap).  Units with
+  one goal under one field share its search (``routes.RouteCache``).
 """
 
 from __future__ import annotations
