@@ -160,7 +160,7 @@ class RouteStats:
 class _Entry:
     """One searched grid: a cost-to-go to one goal under one field."""
 
-    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "pred", "tails", "target")
+    __slots__ = ("box", "cell_m", "dist", "field", "generation", "grid", "kept", "pred", "tails", "target")
 
     def __init__(self, field: ThreatField, grid: GridGraph, box: Box, target: int, lam: float) -> None:
         self.field = weakref.ref(field)
@@ -174,6 +174,7 @@ class _Entry:
         self.dist, self.pred = grid.cost_to(target, lam) if target >= 0 else none
         self.tails: dict[int, np.ndarray] = {}  # kept node -> shortcut polyline from it to the goal
         self.generation = 0  # bumped by a repair: tails computed before it are not stored
+        self.kept = False  # in the cache (else used for one ask only)
 
     def serves(self, ask: Ask) -> bool:
         (ax0, ay0), (ax1, ay1) = ask.box
@@ -258,20 +259,18 @@ class RouteCache:
             if not len(route.points):
                 return Found(route, grid, np.zeros((0, 2)), shared)
             assert route.nodes is not None
-            chain = route.nodes
+            chain = route.nodes  # to the goal's node, or to the first node with a tail
             tail = entry.tails.get(int(chain[-1]))
-            at = len(chain) - 1
             generation = entry.generation
-        nodes = chain if tail is None else chain[: at + 1]  # with a tail, its node ends the prefix
         end = np.array([ask.goal]) if tail is None else np.zeros((0, 2))
-        ids = np.concatenate([[-1], nodes, np.full(len(end), -1)]).astype(np.int64)
-        pts = np.concatenate([[ask.source], grid.nodes[nodes], end])
+        ids = np.concatenate([[-1], chain, np.full(len(end), -1)]).astype(np.int64)
+        pts = np.concatenate([[ask.source], grid.nodes[chain], end])
         keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])
         pts, ids = pts[keep], ids[keep]
         kept = shortcut_kept(ask.field, pts, ask.lam, ask.cores)
         head = pts[kept]
         polyline = head if tail is None else np.concatenate([head, tail[1:]])
-        if self.max_entries > 0:
+        if entry.kept:
             self._remember(slot, entry, generation, ids[kept], polyline, tail is not None)
         return Found(route, grid, polyline, shared)
 
@@ -311,6 +310,7 @@ class RouteCache:
             n = len(grid.nodes)
             if not shared or self.max_entries <= 0 or n > self.max_nodes:
                 return entry  # used for this ask only: a lone unit's, or too big to keep
+            entry.kept = True
             slot.entries.append(entry)
             self._lru[id(entry)] = (slot, entry)
             self._nodes += n
