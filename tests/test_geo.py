@@ -409,3 +409,28 @@ def test_serve_config_bounds_may_be_lat_lon_corners(tmp_path):
     with pytest.raises(InputError) as e:
         load_config(str(toml), {}, {})
     assert e.value.path.endswith("bounds[0]") and "origin" in e.value.reason
+
+
+def test_a_tick_of_directions_gets_the_lat_lon_each_would_get_alone():
+    """``with_geodetic_many`` (one conversion for a tick) against the one-point conversions."""
+    from pfp_service.wire import Direction, DirectionStatus
+
+    origin = geo.Origin(lat=59.3, lon=18.0, alt=40.0)
+    rng = np.random.default_rng(5)
+    directions, positions = [], []
+    for k in range(60):
+        pts = [tuple(p) for p in rng.uniform(-20_000, 20_000, (k % 6, 2)).tolist()]
+        vec = (0.0, 0.0) if k % 7 == 0 else (float(rng.normal()), float(rng.normal()))
+        directions.append(
+            Direction(unit=f"u{k}", seq=k, status=DirectionStatus.EN_ROUTE, vector=vec, lookahead=pts)
+        )
+        positions.append(None if k % 5 == 0 else tuple(rng.uniform(-20_000, 20_000, 2).tolist()))
+    got = geo.with_geodetic_many(directions, origin, positions)
+    for d, at, g in zip(directions, positions, got, strict=True):
+        assert g.lookahead_geo == geo.lookahead_geodetic(origin, d.lookahead)
+        here = at if at is not None else (d.lookahead[0] if d.lookahead else None)
+        if here is None or d.vector == (0.0, 0.0):
+            assert g.true_bearing_deg is None
+        else:
+            assert g.true_bearing_deg == pytest.approx(geo.true_bearing_deg(origin, here, d.vector), abs=1e-9)
+    assert geo.with_geodetic_many(directions, None, positions) == directions
