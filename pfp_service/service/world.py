@@ -33,6 +33,7 @@ from __future__ import annotations
 import copy
 import heapq
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import msgspec
@@ -44,7 +45,7 @@ from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.plan import predict_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
-from pfp_service.geo import with_geodetic
+from pfp_service.geo import with_geodetic_many
 from pfp_service.service.events import (
     Deliberated,
     GoalCancelled,
@@ -186,6 +187,7 @@ class World:
         self.pushes_resent = 0
         self._reject_window: dict[str, tuple[float, int, int]] = {}  # kind -> (window start, sent, held)
         self._peers: set[str] = set()
+        self._peers_gone: dict[str, float] = {}  # peer -> when its token went, until the debounce ends
 
     # -- queries (read-only) ------------------------------------------------------
     @property
@@ -222,31 +224,81 @@ class World:
             unit_id, rec.position, rec.goal, rec.origin, stepper, threats, self.settings, rec.last_vector
         )
 
-    def snapshot(self, now: float, limit: int = MAX_SNAPSHOT_ITEMS) -> WorldSnapshot:
-        """What the planner holds, for the world queryable: units and threats sorted by id, capped."""
-        units = []
-        for uid in sorted(self._units)[:limit]:
-            r = self._units[uid]
-            units.append(
-                UnitSummary(
-                    id=uid,
-                    kind=UnitKind(r.kind) if r.kind is not None else None,
-                    status=r.last_status,
-                    position=r.position,
-                    goal=r.goal.position if r.goal is not None else None,
-                    last_seen_s=max(now - r.last_seen, 0.0) if math.isfinite(r.last_seen) else None,
-                    distance_to_goal=r.last_distance,
-                    stale=r.stale,
-                    deliberating=r.job is not None,
-                    reason=r.last_reason[:1024],
-                    mission=mission_of(r.shared, self.settings.planner_id if r.owned else None),
-                )
-            )
-        threats = []
-        for tid in sorted(self._threats)[:limit]:
-            t = self._threats[tid]
+    def snapshot(
+        self,
+        now: float,
+        limit: int = MAX_SNAPSHOT_ITEMS,
+        units_from: str | None = None,
+        threats_from: str | None = None,
+        max_bytes: int | None = None,
+        threats_limit: int | None = None,
+    ) -> WorldSnapshot:
+        """One page of what the planner holds, for the world queryable: threats, then units, sorted by id.
+
+        Args:
+            now: the clock, for TTLs left and time since last seen.
+            limit: at most this many units, and this many threats unless
+                ``threats_limit`` says otherwise.
+            units_from, threats_from: the first ids listed (a former page's
+                ``next_unit`` and ``next_threat``); ``None``: from the first.
+            max_bytes: the page's items stop short of this much JSON
+                (default ``SNAPSHOT_PAGE_BYTES``, so a reply always decodes).
+
+        Returns:
+            The page; its ``next_unit`` and ``next_threat`` say where the next
+            one starts (``None``: that list is complete, or was not asked for
+            with a limit of 0).  A page with room for nothing still lists one
+            item, so paging always ends.
+        """
+        import bisect
+
+        from pfp_service.wire.messages import SNAPSHOT_PAGE_BYTES
+
+        room = SNAPSHOT_PAGE_BYTES if max_bytes is None else max_bytes
+
+        def fits(item: msgspec.Struct) -> bool:
+            nonlocal room
+            size = len(msgspec.json.encode(item)) + 1  # and its comma
+            if size > room and (units or threats):
+                return False
+            room -= size
+            return True
+
+        units: list[UnitSummary] = []
+        threats: list[ThreatSummary] = []
+        tids = sorted(self._threats)
+        i = bisect.bisect_left(tids, threats_from) if threats_from is not None else 0
+        tlimit = limit if threats_limit is None else threats_limit
+        while i < len(tids) and len(threats) < tlimit:
+            t = self._threats[tids[i]]
             ttl = None if t.expires_at is None else max(t.expires_at - now, 0.0)
-            threats.append(ThreatSummary(id=tid, threat=t.update, ttl_s=ttl))
+            summary = ThreatSummary(id=tids[i], threat=t.update, ttl_s=ttl)
+            if not fits(summary):
+                break
+            threats.append(summary)
+            i += 1
+        next_threat = tids[i] if i < len(tids) and tlimit else None
+        uids = sorted(self._units)
+        j = bisect.bisect_left(uids, units_from) if units_from is not None else 0
+        while j < len(uids) and len(units) < limit:
+            r = self._units[uids[j]]
+            unit = UnitSummary(
+                id=uids[j],
+                kind=UnitKind(r.kind) if r.kind is not None else None,
+                status=r.last_status,
+                position=r.position,
+                goal=r.goal.position if r.goal is not None else None,
+                last_seen_s=max(now - r.last_seen, 0.0) if math.isfinite(r.last_seen) else None,
+                distance_to_goal=r.last_distance,
+                stale=r.stale,
+                deliberating=r.job is not None,
+                reason=r.last_reason[:1024],
+                mission=mission_of(r.shared, self.settings.planner_id if r.owned else None),
+            )
+            if not fits(unit):
+                break
+            units.append(unit)
+            j += 1
         return WorldSnapshot(
             planner=self.settings.planner_id,
             mission=self.settings.mission,
@@ -254,6 +306,8 @@ class World:
             threats=threats,
             units_total=len(self._units),
             threats_total=len(self._threats),
+            next_unit=uids[j] if j < len(uids) and limit else None,
+            next_threat=next_threat,
         )
 
     # -- the one way in -----------------------------------------------------------
@@ -293,7 +347,7 @@ class World:
                 case PeerPlanner(planner, alive):
                     self._peer(planner, alive, now, dirty, out)
                 case Tick(t):
-                    self._run_timers(t, changes, out)
+                    self._run_timers(t, changes, out, dirty)
         if changes:
             dirty |= self._world_changed()
         first = len(out.directions)  # before: pushes sent again by the timers
@@ -318,21 +372,21 @@ class World:
         return out
 
     # -- inputs ---------------------------------------------------------------------
-    def _unit(self, unit_id: str, now: float, out: Outputs, key: str) -> _Unit | None:
+    def _unit(self, unit_id: str, now: float, out: Outputs, key: Callable[[str, str], str]) -> _Unit | None:
+        """The unit's record, made at its first input; ``key`` names the input's key for a refusal."""
         rec = self._units.get(unit_id)
         if rec is None:
             if len(self._units) >= self.settings.max_units:
                 self.overload += 1
-                self._reject(
-                    key, InputError("$", f"planner at max_units ({self.settings.max_units})"), now, out
-                )
+                err = InputError("$", f"planner at max_units ({self.settings.max_units})")
+                self._reject(key(self.settings.mission, unit_id), err, now, out)
                 return None
             rec = self._units[unit_id] = _Unit(unit_id, unit_key(unit_id))
             rec.owned = self.owns(unit_id)
         return rec
 
     def _state(self, unit_id: str, msg: UnitState, now: float, dirty: set[str], out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_state(self.settings.mission, unit_id))
+        rec = self._unit(unit_id, now, out, keys.unit_state)
         if rec is None:
             return
         rec.position = (msg.position[0], msg.position[1])
@@ -355,7 +409,7 @@ class World:
         dirty.add(unit_id)
 
     def _goal(self, unit_id: str, goal: Goal, now: float, dirty: set[str], out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_goal(self.settings.mission, unit_id))
+        rec = self._unit(unit_id, now, out, keys.unit_goal)
         if rec is None:
             return
         # a peer's mission for this very goal may have come first: keep it for a takeover
@@ -369,7 +423,7 @@ class World:
                 dirty.add(unit_id)
 
     def _restore(self, m: MissionRestored, now: float, out: Outputs) -> None:
-        rec = self._unit(m.unit, now, out, keys.unit_goal(self.settings.mission, m.unit))
+        rec = self._unit(m.unit, now, out, keys.unit_goal)
         if rec is None:
             return
         self._drop_mission(rec)
@@ -381,13 +435,13 @@ class World:
     def _peer(self, planner: str, alive: bool, now: float, dirty: set[str], out: Outputs) -> None:
         if planner == self.settings.planner_id:
             return
-        if not alive:
-            if planner in self._peers:
-                self._peers.discard(planner)
-                self._rebalance(now, dirty, out)
+        if not alive:  # acted on only if still gone after the debounce (a router restart flaps every token)
+            if planner in self._peers and planner not in self._peers_gone:
+                self._peers_gone[planner] = now
+                self._timer(now + self.settings.liveliness_debounce_s, "peer", planner)
             return
-        if planner in self._peers:
-            return
+        if self._peers_gone.pop(planner, None) is not None or planner in self._peers:
+            return  # back within the debounce, or known: nothing moves
         self._peers.add(planner)
         if self.settings.cluster:
             self._rebalance(now, dirty, out)
@@ -430,7 +484,7 @@ class World:
                 rec.last_status = None
 
     def _shared(self, unit_id: str, mission: Mission, now: float, out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_mission(self.settings.mission, unit_id))
+        rec = self._unit(unit_id, now, out, keys.unit_mission)
         if rec is None or rec.owned:
             return  # our own missions come back to us too: ours stands
         params = Resolved(**msgspec.structs.asdict(mission.params))  # type: ignore[arg-type]
@@ -526,10 +580,17 @@ class World:
         self._timer_seq += 1
         heapq.heappush(self._timers, (when, self._timer_seq, kind, ident))
 
-    def _run_timers(self, now: float, changes: list[ThreatChange], out: Outputs) -> None:
+    def _run_timers(self, now: float, changes: list[ThreatChange], out: Outputs, dirty: set[str]) -> None:
         s = self.settings
         while self._timers and self._timers[0][0] <= now:
             _, _, kind, ident = heapq.heappop(self._timers)
+            if kind == "peer":  # a peer planner's token gone for the whole debounce: its units move
+                gone = self._peers_gone.get(ident)
+                if gone is not None and now - gone >= s.liveliness_debounce_s:
+                    del self._peers_gone[ident]
+                    self._peers.discard(ident)
+                    self._rebalance(now, dirty, out)
+                continue
             if kind == "expire":
                 t = self._threats.get(ident)
                 if t is not None and t.expires_at is not None and t.expires_at <= now:
@@ -692,10 +753,15 @@ class World:
         steppers: list[Stepper] = [r.stepper for r in guided]  # type: ignore[misc]
         advices = advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), self._cull)
         ahead = self._lookahead(guided, advices, fld)
+        first = len(out.directions)
         for rec, adv, points in zip(guided, advices, ahead):
             out.directions.append(self._direction(rec, adv, points, out))
             if rec.stepper is not None and rec.stepper.pending is not None and rec.job is None:
                 self._ask(rec, fld, now, out)
+        if self.settings.origin is not None:  # lat/lon for the whole tick in one conversion
+            out.directions[first:] = with_geodetic_many(
+                out.directions[first:], self.settings.origin, [r.position for r in guided]
+            )
 
     def _ask(self, rec: _Unit, fld: ThreatField, now: float, out: Outputs) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
@@ -757,7 +823,7 @@ class World:
             deliberating=adv.deliberating or rec.job is not None,
             planner=self.settings.planner_id,
         )
-        return with_geodetic(d, self.settings.origin, rec.position) if self.settings.origin is not None else d
+        return d
 
     def _transition(self, rec: _Unit, status: DirectionStatus, adv: Advice, out: Outputs) -> None:
         assert rec.position is not None
