@@ -88,3 +88,29 @@ def test_health_prints_rounded_figures_and_json_for_scripts(world):
     r = run_pfp("health", "--connect", endpoint, "--mission", mission, "--json", timeout=60)
     (status,) = json.loads(r.stdout)
     assert status["planner"] == "planner" and status["units"] == 2 and status["threats"] == 2
+
+
+def test_status_json_merges_every_page_of_a_big_world():
+    """1,050 threats are two pages of the world reply: --json has them all, the tables the first page."""
+    mission = "p" + uuid.uuid4().hex[:10]
+    with planner_process("--escape", "none", mission=mission) as (endpoint, _), client(endpoint) as s:
+        for j in range(1050):
+            put_json(
+                s,
+                f"mumt/{mission}/threat/t{j:04d}",
+                {"position": [100.0 + j, 50.0], "sigma_range": 1.0, "sigma_lateral": 0.7},
+            )
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            (r,) = [r for r in s.get(f"mumt/{mission}/planner/planner/status", timeout=2.0) if r.ok]
+            if json.loads(r.ok.payload.to_bytes())["threats"] == 1050:
+                break
+            time.sleep(0.2)
+        r = run_pfp("status", "--connect", endpoint, "--mission", mission, "--json", timeout=60)
+        assert r.returncode == 0, r.stderr
+        (snap,) = json.loads(r.stdout)
+        assert [t["id"] for t in snap["threats"]] == [f"t{j:04d}" for j in range(1050)]
+        assert snap["next_threat"] is None and snap["threats_total"] == 1050
+        r = run_pfp("status", "--connect", endpoint, "--mission", mission, timeout=60)
+        assert r.returncode == 0, r.stderr
+        assert "... and 50 more threats (--json lists them all)" in r.stdout, r.stdout[-500:]
