@@ -15,6 +15,7 @@ from pfp_service.service.world import (
     GoalCancelled,
     GoalSet,
     InputRejected,
+    PeerPlanner,
     StateReported,
     ThreatPut,
     ThreatRemoved,
@@ -510,3 +511,36 @@ def test_a_push_is_sent_again_until_the_unit_reports():
     for t in (3.25, 3.5, 3.75, 4.0, 4.25):
         w.apply([Tick(t)], t)
     assert w.counts()["pushes_resent"] == 5  # at most push_retries each
+
+
+def test_a_peer_planner_gone_is_acted_on_only_after_the_debounce():
+    """A router restart or a brief loss flaps the token: units move only if it stays gone."""
+    w = _world(cluster=True, planner_id="p0", liveliness_debounce_s=1.0, unit_stale_s=60.0)
+    w.apply([PeerPlanner("p1", True)], 0.0)
+    units = [f"u{i}" for i in range(40)]
+    w.apply([_state(u, 0.1 * i, 0) for i, u in enumerate(units)], 0.0)
+    w.apply([GoalSet(u, Goal(position=(10, 10))) for u in units], 0.0)
+    theirs = [u for u in units if not w.owns(u)]
+    assert theirs and w.counts()["units_owned"] == len(units) - len(theirs)
+
+    def answered(t: float) -> set[str]:
+        out = w.apply([_state(u, 0.1 * i, 0) for i, u in enumerate(units)] + [Tick(t)], t)
+        return {d.unit for d in out.directions}
+
+    w.apply([PeerPlanner("p1", False)], 1.0)
+    assert not answered(1.5) & set(theirs)  # gone, but within the debounce: still p1's
+    w.apply([PeerPlanner("p1", True)], 1.8)  # back: the debounce is cancelled
+    out = w.apply([Tick(3.0)], 3.0)  # the first loss's timer is due: nothing moves
+    assert not out.directions and w.counts()["units_owned"] == len(units) - len(theirs)
+    assert not answered(3.1) & set(theirs)
+
+    w.apply([PeerPlanner("p1", False)], 4.0)
+    w.apply([PeerPlanner("p1", False)], 4.5)  # a repeated DELETE does not restart the debounce
+    assert not w.apply([Tick(4.99)], 4.99).directions
+    out = w.apply([Tick(5.0)], 5.0)  # gone for the whole debounce: its units are taken over, told at once
+    assert {d.unit for d in out.directions} == set(theirs)
+    assert all(d.status is DirectionStatus.EN_ROUTE and d.planner == "p0" for d in out.directions)
+    assert w.counts()["units_owned"] == len(units) and answered(5.1) == set(units)
+
+    w.apply([PeerPlanner("p1", True)], 6.0)  # a real comeback takes its share back at once
+    assert w.counts()["units_owned"] == len(units) - len(theirs)
