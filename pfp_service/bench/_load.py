@@ -294,13 +294,12 @@ def echo_main(endpoint: str) -> None:
                 return
             counters["in"] += 1
             d = Direction(unit=uid, seq=msg.seq, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0))
-            session.put(
+            session.put(  # the planner's QoS for directions (service/node.py)
                 keys.unit_direction(MISSION, uid),
                 encode(d),
                 encoding=jenc,
                 congestion_control=zenoh.CongestionControl.DROP,
                 priority=zenoh.Priority.INTERACTIVE_HIGH,
-                express=True,
             )
             counters["out"] += 1
 
