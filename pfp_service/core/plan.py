@@ -180,11 +180,12 @@ def predict_many(
 ) -> list[list[tuple[float, float]]]:
     """The direction look-ahead: each unit's next ``steps + 1`` positions from ``starts``, as its stepper moves.
 
-    A unit following an escape route walks a ghost of its stepper
-    (``walk_many``).  A unit in plain descent is stepped by the batched
-    kernel alone, ``steps`` vectorised calls for all of them: the same
-    direction, arrival and bounds rules as ``Stepper.advise``, without its
-    trap watch (a prediction this short never fills the trap window; a
+    A unit following an escape route looks ahead along it in one compiled
+    loop (``Stepper.route_ahead``), or walks a ghost of its stepper
+    (``walk_many``) where the route may end within the steps.  Every unit in
+    plain descent is stepped in one compiled call (``cull.predict``): the
+    same direction, arrival and bounds rules as ``Stepper.advise``, without
+    its trap watch (a prediction this short never fills the trap window; a
     trap is judged when the unit gets there).
 
     Returns:

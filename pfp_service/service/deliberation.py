@@ -74,10 +74,6 @@ class Deliberators:
         self._in_flight = 0  # chunks in the pool (only the loop thread changes it, in feed and _done)
         self._fields: dict[int, tuple[ThreatField, int, bytes]] = {}  # id(field) -> (field, version, blob)
         self._version = 0
-        self.ran = 0
-        self.dropped = 0  # superseded before they ran
-        self.expired = 0  # still waiting at their deadline
-        self.failed = 0
         self._closed = False
         self._logged_at = -float("inf")
         self._unlogged = 0
@@ -85,17 +81,8 @@ class Deliberators:
         self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        pool, self._started = spawn_pool(self._workers)
+        pool, _warming = spawn_pool(self._workers)  # jobs sent meanwhile wait for the workers
         return pool
-
-    def wait_ready(self, timeout_s: float = 120.0) -> None:
-        """Block until every worker has loaded the kernels."""
-        for f in self._started:
-            f.result(timeout=timeout_s)
-
-    @property
-    def waiting(self) -> int:
-        return len(self._waiting)
 
     def submit(self, jobs: list[Job]) -> None:
         """Queue the tick's jobs (the loop thread); ``feed`` sends them on."""
@@ -116,11 +103,9 @@ class Deliberators:
                 job = self._waiting[0][2]
                 if job.cancelled:
                     heapq.heappop(self._waiting)
-                    self.dropped += 1
                     continue
                 if now > job.deadline:
                     heapq.heappop(self._waiting)
-                    self.expired += 1
                     self._deliver(Deliberated(job.unit, job.token, None))
                     continue
                 if field is not None and job.field is not field:
@@ -133,13 +118,12 @@ class Deliberators:
 
     def _send(self, chunk: list[Job], now: float) -> None:
         version, blob = self._blob(chunk[0].field)
-        items = [(j.stepper, j.deadline - now) for j in chunk]
+        items = [(j.unit, j.token, j.kind, j.stepper, j.deadline - now) for j in chunk]
         try:
             future = self._pool.submit(_run_chunk, version, blob, items)
         except BrokenProcessPool:  # a worker died: a fresh pool, and these are asked again later
             log.error("deliberation workers died; starting new ones")
             self._pool = self._new_pool()
-            self.failed += len(chunk)
             for j in chunk:
                 self._deliver(Deliberated(j.unit, j.token, None))
             return
@@ -155,7 +139,7 @@ class Deliberators:
             self._fields = {id(field): got}  # one field at a time: older jobs are superseded anyway
         return got[1], got[2]
 
-    def _done(self, future: Future[list[tuple[Stepper | None, str]]], *, chunk: list[Job]) -> None:
+    def _done(self, future: Future[list[tuple[Deliberated | None, str]]], *, chunk: list[Job]) -> None:
         if self._closed:
             return
         try:
@@ -165,13 +149,10 @@ class Deliberators:
             if isinstance(exc, BrokenProcessPool):
                 with contextlib.suppress(Exception):
                     self._pool = self._new_pool()
-        for job, (stepper, error) in zip(chunk, results):
+        for job, (done, error) in zip(chunk, results):
             if error:
-                self.failed += 1
                 self._log_failure(job, error)
-            else:
-                self.ran += 1
-            self._deliver(Deliberated(job.unit, job.token, stepper))
+            self._deliver(done if done is not None else Deliberated(job.unit, job.token, None))
         self._finished.append(1)
 
     def _log_failure(self, job: Job, error: str) -> None:
@@ -195,23 +176,19 @@ _FIELD: dict[str, Any] = {}  # version -> field, one cached
 
 
 def _run_chunk(
-    version: int, blob: bytes, items: list[tuple[Stepper, float]]
-) -> list[tuple[Stepper | None, str]]:
-    """Deliberate each stepper under the field; ``(None, "")`` for one whose deadline passed first."""
+    version: int, blob: bytes, items: list[tuple[str, tuple[int, int], str, Stepper, float]]
+) -> list[tuple[Deliberated | None, str]]:
+    """``Job.run`` for each item under the field, each by its own deadline; an error comes back as text."""
     started = time.monotonic()
     if _FIELD.get("version") != version:
         threats, intensity = pickle.loads(blob)
         _FIELD.clear()
         _FIELD.update(version=version, field=ThreatField(threats, intensity))
     field = _FIELD["field"]
-    out: list[tuple[Stepper | None, str]] = []
-    for stepper, left_s in items:
-        if time.monotonic() - started > left_s:
-            out.append((None, ""))
-            continue
+    out: list[tuple[Deliberated | None, str]] = []
+    for unit, token, kind, stepper, left_s in items:
         try:
-            stepper.deliberate(field)
-            out.append((stepper, ""))
+            out.append((Job(unit, token, kind, stepper, field, started + left_s).run(time.monotonic()), ""))
         except Exception:
             out.append((None, traceback.format_exc(limit=3)))
     return out

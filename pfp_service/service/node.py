@@ -256,7 +256,7 @@ class PlannerNode:
             self._inbox.append(item)
         self._wake.set()
 
-    def _on_state(self, sample: zenoh.Sample, received: float) -> None:
+    def _state(self, sample: zenoh.Sample, received: float) -> None:
         """One state from the ring (the loop thread): decoded, latest-wins per unit."""
         key = str(sample.key_expr)
         try:
@@ -349,7 +349,7 @@ class PlannerNode:
             if sample is None:
                 break
             got += 1
-            self._on_state(sample, now)
+            self._state(sample, now)
         return got
 
     def _loop(self) -> None:
