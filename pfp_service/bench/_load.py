@@ -242,8 +242,8 @@ def start_cluster(k: int, escape: str | None = None, stale_s: float = 60.0) -> C
     return Cluster(router, planners)
 
 
-def router_main(endpoint: str) -> None:
-    """A plain Zenoh router on ``endpoint`` until SIGTERM: the hub of a cluster's planners and the load."""
+def _router_until_signal(endpoint: str) -> tuple[threading.Event, Any]:
+    """A router's Zenoh config on ``endpoint`` (multicast off), and an event SIGTERM or SIGINT sets."""
     import signal
 
     import zenoh
@@ -255,6 +255,14 @@ def router_main(endpoint: str) -> None:
     conf.insert_json5("mode", '"router"')
     conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    return stop, conf
+
+
+def router_main(endpoint: str) -> None:
+    """A plain Zenoh router on ``endpoint`` until SIGTERM: the hub of a cluster's planners and the load."""
+    import zenoh
+
+    stop, conf = _router_until_signal(endpoint)
     with zenoh.open(conf):
         stop.wait()
 
@@ -267,19 +275,12 @@ def echo_main(endpoint: str) -> None:
     throughput are the transport's own on this machine.  It answers from the
     callback (no hand-off to another thread): the least any responder can do.
     """
-    import signal
 
     import zenoh
 
     from pfp_service.wire import Direction, DirectionStatus, PlannerStatus, decode_unit_state, encode, keys
 
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"router"')
-    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    stop, conf = _router_until_signal(endpoint)
     counters = {"in": 0, "out": 0}
     started = time.monotonic()
     jenc = zenoh.Encoding.APPLICATION_JSON
