@@ -316,11 +316,11 @@ class KeyOf:
     builds one; both refuse what ``parse`` and the builders refuse.
     """
 
-    __slots__ = ("_head", "_tail")
+    __slots__ = ("_head", "_tail", "_what")
 
     def __init__(self, kind: KeyKind, mission: str) -> None:
         head, tail = TEMPLATES[kind].format(mission=check_chunk(mission, "mission"), id="\0").split("\0")
-        self._head, self._tail = head, tail
+        self._head, self._tail, self._what = head, tail, ID_NAMES[kind]
 
     def id(self, key: str) -> str:
         """The id chunk of a received key of this kind.
@@ -343,7 +343,7 @@ class KeyOf:
 
     def key(self, ident: str) -> str:
         """This kind's key for ``ident`` (checked as the builders check it)."""
-        return self._head + check_chunk(ident, "unit") + self._tail
+        return self._head + check_chunk(ident, self._what) + self._tail
 
 
 def _shown(text: str) -> str:
