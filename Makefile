@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO_STAMP := $(VENV)/.demo-stamp
 
-.PHONY: install test check demo bench format clean
+.PHONY: install test test-fast test-proc check demo bench format clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,9 +16,18 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# Every tier (tests/conftest.py names them): what CI runs, after `make check`.
 test: $(STAMP)
 	@sh .ci/ensure-chromium
 	$(BIN)/python -m pytest -q
+
+# The in-process tiers (unit and net): under a minute on 2 cores; run it on every change.
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "unit or net"
+
+# The tiers that start processes but no browser: run before a commit that touches the service or a client.
+test-proc: $(STAMP)
+	$(BIN)/python -m pytest -q -m "proc or multi"
 
 check: $(STAMP)
 	$(BIN)/ruff format --check .

@@ -22,6 +22,8 @@ import zenoh
 from pfp_service.cli import main as pfp_main
 from tests.zenoh_util import ROOT, Inbox, free_port, put_json
 
+pytestmark = pytest.mark.proc
+
 M = "acl"
 UNITS = ("u1", "u2")
 GEN_CERTS = ROOT / "docker" / "gen-certs.py"

@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tests.conftest import run_pfp
+
+pytestmark = pytest.mark.proc
 
 LATENCY = {"sent", "answered", "unanswered_fraction", "p50_ms", "p90_ms", "p99_ms", "max_ms"}
 STEADY = LATENCY | {"input_per_s", "output_per_s", "cpu_percent", "rss_mb", "peak_rss_mb", "statuses"}

@@ -6,6 +6,8 @@ import pytest
 
 from tests.conftest import run_pfp
 
+pytestmark = pytest.mark.proc
+
 
 @pytest.mark.parametrize(
     ("args", "fragment"),

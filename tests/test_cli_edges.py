@@ -17,6 +17,8 @@ import pytest
 from tests.conftest import EXAMPLES, ROOT, run_pfp
 from tests.zenoh_util import free_port
 
+pytestmark = pytest.mark.unit
+
 # Every command that reads a file, with the argument list around the file (FILE is replaced).
 FILE_TAKERS = {
     "plan": ["plan", "FILE"],
@@ -55,6 +57,7 @@ def _one_line_exit_2(r: subprocess.CompletedProcess[str]) -> str:
     return lines[0]
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize("kind", ["missing", "directory", "binary", "non-utf8", "huge"])
 @pytest.mark.parametrize("command", sorted(FILE_TAKERS))
 def test_every_bad_file_is_one_line_exit_2(tmp_path, command, kind):
@@ -91,6 +94,7 @@ BAD_FLAGS = [
 ]
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize(("args", "fragment"), BAD_FLAGS, ids=[" ".join(a) for a, _ in BAD_FLAGS])
 def test_every_bad_flag_is_one_line_exit_2(args, fragment):
     subst = {"S": str(EXAMPLES / "paper-simple.yaml"), "T": str(EXAMPLES / "demo-team.yaml")}
@@ -99,6 +103,7 @@ def test_every_bad_flag_is_one_line_exit_2(args, fragment):
     assert fragment in line, line
 
 
+@pytest.mark.proc
 def test_a_port_in_use_is_one_line_without_source_paths():
     port = free_port()
     import socket
@@ -110,6 +115,7 @@ def test_a_port_in_use_is_one_line_without_source_paths():
     assert line == f"pfp serve: --listen: cannot listen on tcp/127.0.0.1:{port}: address already in use"
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize("command", ["health", "status"])
 def test_no_router_is_exit_1_and_one_line(command):
     r = run_pfp(command, "--connect", f"tcp/127.0.0.1:{free_port()}", timeout=60)
@@ -117,6 +123,7 @@ def test_no_router_is_exit_1_and_one_line(command):
     assert r.stderr.strip().startswith(f"pfp {command}: --connect: no router answers at tcp/127.0.0.1:")
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize(
     "args",
     [["plan", str(EXAMPLES / "paper-simple.yaml")], ["plan", str(EXAMPLES / "paper-simple.yaml"), "--json"]],
@@ -133,6 +140,7 @@ def test_a_closed_pipe_is_one_line_exit_2(args):
     assert lines[:-1] == ["pfp plan: stdout: the reader closed the pipe before the output was written"]
 
 
+@pytest.mark.proc
 def test_pfp_alone_prints_help():
     r = run_pfp(timeout=60)
     assert r.returncode == 0 and r.stderr == ""
@@ -179,6 +187,7 @@ def test_every_flag_has_help_and_shows_its_default():
     assert checked > 80
 
 
+@pytest.mark.proc
 def test_plan_exit_codes_say_whether_the_goal_was_reached(tmp_path):
     assert run_pfp("plan", str(EXAMPLES / "paper-simple.yaml"), timeout=60).returncode == 0
     trap = tmp_path / "trap.yaml"

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from tests.conftest import EXAMPLES, run_pfp
+
+pytestmark = pytest.mark.proc
 
 KEYS = {
     "status",

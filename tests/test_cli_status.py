@@ -13,6 +13,8 @@ from tests.conftest import run_pfp
 from tests.test_serve import Unit
 from tests.zenoh_util import client, planner_process, put_json
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.fixture(scope="module")
 def world():
@@ -36,6 +38,7 @@ def world():
         yield endpoint, mission
 
 
+@pytest.mark.proc
 def test_status_lists_units_and_threats_as_tables(world):
     endpoint, mission = world
     r = run_pfp("status", "--connect", endpoint, "--mission", mission, timeout=60)
@@ -57,6 +60,7 @@ def test_status_lists_units_and_threats_as_tables(world):
     assert re.search(r"^e2\s+\(7\.0, 3\.0\)\s+90°\s+(59\d|600)\.\d s$", out, re.M), out
 
 
+@pytest.mark.proc
 def test_status_json_prints_the_full_lists(world):
     endpoint, mission = world
     r = run_pfp("status", "--connect", endpoint, "--mission", mission, "--json", timeout=60)
@@ -68,6 +72,7 @@ def test_status_json_prints_the_full_lists(world):
     assert snap["threats"][0]["ttl_s"] is None and 590 < snap["threats"][1]["ttl_s"] <= 600
 
 
+@pytest.mark.proc
 def test_status_and_health_of_a_mission_nobody_plans_exit_1(world):
     endpoint, _ = world
     for command in ("status", "health"):
@@ -76,6 +81,7 @@ def test_status_and_health_of_a_mission_nobody_plans_exit_1(world):
         assert r.stderr.strip() == f"pfp {command}: no planner of mission 'nobody' answered within 0.5 s"
 
 
+@pytest.mark.proc
 def test_health_prints_rounded_figures_and_json_for_scripts(world):
     endpoint, mission = world
     r = run_pfp("health", "--connect", endpoint, "--mission", mission, timeout=60)
@@ -90,6 +96,7 @@ def test_health_prints_rounded_figures_and_json_for_scripts(world):
     assert status["planner"] == "planner" and status["units"] == 2 and status["threats"] == 2
 
 
+@pytest.mark.proc
 def test_status_json_merges_every_page_of_a_big_world():
     """1,050 threats are two pages of the world reply: --json has them all, the tables the first page."""
     mission = "p" + uuid.uuid4().hex[:10]

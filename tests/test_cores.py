@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pfp_service.core import PlannerParams, Threat, ThreatField, resolve
 from pfp_service.core.cores import Cores
+
+pytestmark = pytest.mark.unit
 
 
 def test_thin_threats_are_resolved_by_their_narrow_axis():

@@ -5,12 +5,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pfp_service.core import Threat, ThreatField
 from pfp_service.core.cull import RELATIVE_BOUND, CullIndex
 from pfp_service.core.kernels import descent_many
+
+pytestmark = pytest.mark.unit
 
 MAX_ERROR_DEG = 0.1  # what the service promises; the proof gives asin(RELATIVE_BOUND)
 

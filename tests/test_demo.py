@@ -7,7 +7,11 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from tests.conftest import ROOT, run_pfp
+
+pytestmark = pytest.mark.proc
 
 
 def test_demo_quick_runs_and_writes_summary_and_png(tmp_path):

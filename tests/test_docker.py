@@ -25,6 +25,8 @@ import zenoh
 from pfp_service.cli import build_parser
 from pfp_service.cli import main as pfp_main
 
+pytestmark = pytest.mark.proc
+
 ROOT = Path(__file__).resolve().parent.parent
 DOCKER = ROOT / "docker"
 COMPOSE = yaml.safe_load((DOCKER / "compose.yaml").read_text())

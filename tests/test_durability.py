@@ -14,6 +14,7 @@ import threading
 import time
 import uuid
 
+import pytest
 import zenoh
 
 from pfp_service.core import PlannerParams
@@ -30,6 +31,8 @@ from pfp_service.service.world import (
 )
 from pfp_service.wire import Goal, ThreatUpdate, UnitState
 from tests.zenoh_util import ROOT, Inbox, client, free_port, put_json, wait_for_planner
+
+pytestmark = pytest.mark.proc
 
 T = dict(facing_deg=225.0, sigma_range=1.0, sigma_lateral=0.7, skew=2.0)
 

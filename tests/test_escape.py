@@ -12,6 +12,8 @@ from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, plan
 from pfp_service.core.cores import CORE_FRACTION, Cores
 from pfp_service.core.stepper import Stepper, StepStatus, advise_many
 
+pytestmark = pytest.mark.unit
+
 START, GOAL = (0.0, 0.0), (100.0, 100.0)
 
 

@@ -13,6 +13,8 @@ from pfp_service.core.cores import Cores
 from pfp_service.core.optimal import plan_optimal
 from pfp_service.core.stepper import Stepper, StepStatus, advise_many
 
+pytestmark = pytest.mark.unit
+
 START, GOAL = (0.0, 0.0), (100.0, 100.0)
 
 

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import types
 
+import pytest
+
 import pfp_service.wire as wire
 from pfp_service.wire import messages
+
+pytestmark = pytest.mark.unit
 
 EXPECTED = [
     "CONTENT_TYPE",

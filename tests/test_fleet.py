@@ -17,6 +17,8 @@ from pfp_service.wire import Direction, DirectionStatus, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
+pytestmark = pytest.mark.unit
+
 TEAM = """\
 name: mixed
 units:
@@ -31,6 +33,7 @@ def mission():
     return "f" + uuid.uuid4().hex[:10]
 
 
+@pytest.mark.proc
 def test_fleet_reaches_its_goals_around_a_threat(tmp_path, mission):
     team = tmp_path / "team.yaml"
     team.write_text(TEAM)
@@ -67,6 +70,7 @@ def test_fleet_reaches_its_goals_around_a_threat(tmp_path, mission):
         assert {u for u, up in tokens if not up} == {"m1", "r1", "r2"}  # withdrawn at exit
 
 
+@pytest.mark.proc
 def test_fleet_without_planner_answers_stops_at_duration_and_says_so(mission):
     with planner_process(mission=mission) as (endpoint, _):
         r = run_pfp(
@@ -78,6 +82,7 @@ def test_fleet_without_planner_answers_stops_at_duration_and_says_so(mission):
     assert "arrived " not in r.stdout.split("fleet stops")[0]
 
 
+@pytest.mark.proc
 def test_bad_team_file_is_one_line_exit_2(tmp_path):
     bad = tmp_path / "team.yaml"
     bad.write_text("units:\n  - {id: u1, start: [0, 0]}\n  - {id: u2, start: [1, 1], speed_mps: -3}\n")
@@ -152,6 +157,7 @@ def test_progress_is_a_bar_on_a_terminal_and_a_line_every_few_seconds_otherwise(
     assert "r1 arrived at (1, 2)" in out and "2 en route, 1 arrived" in out and "1/3" in out
 
 
+@pytest.mark.proc
 def test_generate_is_capped_with_a_clear_error():
     r = run_pfp("fleet", "--generate", "100000000", timeout=30)
     assert r.returncode == 2 and r.stderr.strip() == (

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import pytest
+
 from pfp_service.bench.fuzz import fuzz
+
+pytestmark = pytest.mark.proc
 
 
 def test_a_planner_survives_malformed_input_on_every_key_and_queryable():

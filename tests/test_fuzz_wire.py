@@ -18,6 +18,8 @@ from pfp_service.errors import InputError
 from pfp_service.wire import RejectedEvent, decode_event, encode, keys
 from pfp_service.wire import messages as wm
 
+pytestmark = pytest.mark.unit
+
 DECODERS = [
     wm.decode_unit_state,
     wm.decode_goal,

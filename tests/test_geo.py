@@ -16,6 +16,8 @@ from pfp_service.errors import InputError
 from pfp_service.geo import LatLon, Origin
 from pfp_service.wire import messages as m
 
+pytestmark = pytest.mark.unit
+
 WGS84 = Geodesic.WGS84
 ORIGINS = [
     Origin(lat=59.3293, lon=18.0686),
@@ -339,6 +341,7 @@ def test_serve_config_takes_an_origin_from_file_env_and_flag(tmp_path):
     assert e.value.path == "PFP_ORIGIN"
 
 
+@pytest.mark.proc
 def test_serve_origin_flag_is_one_line_exit_2():
     from tests.conftest import run_pfp
 

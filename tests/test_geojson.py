@@ -17,6 +17,8 @@ from pfp_service.geo import Origin
 from pfp_service.scenario import load_scenario
 from tests.conftest import EXAMPLES, run_pfp
 
+pytestmark = pytest.mark.unit
+
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 
 
@@ -121,6 +123,7 @@ def test_threats_only_and_weightless_threats():
         geojson.feature_collection(ORIGIN, ts, level=1.0)
 
 
+@pytest.mark.proc
 def test_plan_cli_writes_geojson(tmp_path):
     out = tmp_path / "plan.geojson"
     r = run_pfp("plan", str(EXAMPLES / "geo-simple.yaml"), "--geojson", str(out), "--zone-level", "0.2")
@@ -131,6 +134,7 @@ def test_plan_cli_writes_geojson(tmp_path):
     assert zones and all(f["properties"]["level"] == 0.2 for f in zones)
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [

@@ -29,6 +29,8 @@ from pfp_service.wire import Direction, DirectionStatus, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, free_port, planner_process, put_json
 
+pytestmark = pytest.mark.unit
+
 SIZE = (50, 20)
 
 
@@ -263,6 +265,7 @@ def _app(link, mission: str, settings: Settings, **kw) -> HandheldApp:
     return HandheldApp(model, link, mission=mission, publish_hz=5.0, **kw)
 
 
+@pytest.mark.net
 def test_arrow_and_bearing_follow_the_planner(planner, tmp_path: Path):
     endpoint, mission, _ = planner
     uid = "arrow"
@@ -316,6 +319,7 @@ def test_arrow_and_bearing_follow_the_planner(planner, tmp_path: Path):
     asyncio.run(scenario())
 
 
+@pytest.mark.net
 def test_arrow_keys_nudge_the_published_position(planner):
     endpoint, mission, _ = planner
     uid = "nudge"
@@ -351,6 +355,7 @@ def _alive(session, mission: str) -> set[str]:
     return {str(r.ok.key_expr) for r in replies if r.ok is not None}
 
 
+@pytest.mark.net
 def test_nmea_file_drives_the_position(planner, tmp_path: Path):
     endpoint, mission, _ = planner
     uid = "gps"
@@ -398,6 +403,7 @@ def _xor(body: str) -> int:
     return value
 
 
+@pytest.mark.proc
 def test_stale_warning_when_the_planner_goes_quiet(tmp_path: Path):
     mission = "s" + uuid.uuid4().hex[:10]
     uid = "stale"
@@ -424,6 +430,7 @@ def test_stale_warning_when_the_planner_goes_quiet(tmp_path: Path):
 
 
 # -- the command line ------------------------------------------------------------------
+@pytest.mark.proc
 def test_cli_errors_are_one_line():
     r = run_pfp("handheld", "--unit", "u1", "--nmea", "-")
     assert r.returncode == 2 and r.stderr.strip() == (
@@ -437,6 +444,7 @@ def test_cli_errors_are_one_line():
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.proc
 def test_refuses_to_start_without_a_terminal():
     """A pipe on stdout would get escape codes: one line instead, and nothing drawn."""
     r = run_pfp("handheld", "--unit", "u1", "--connect", f"tcp/127.0.0.1:{free_port()}")
@@ -481,6 +489,7 @@ def _stop(proc) -> None:
         proc.wait()
 
 
+@pytest.mark.proc
 def test_starts_with_the_router_down_and_resends_its_goal_to_a_restarted_planner(tmp_path: Path):
     from pfp_clients.handheld_link import RetryingLink
 
@@ -519,6 +528,7 @@ def test_starts_with_the_router_down_and_resends_its_goal_to_a_restarted_planner
     asyncio.run(scenario())
 
 
+@pytest.mark.net
 def test_g_sets_the_goal_from_a_prompt(planner):
     endpoint, mission, _ = planner
     uid = "prompt"
@@ -611,6 +621,7 @@ def test_a_binary_nmea_file_is_bad_sentences_that_end(tmp_path: Path):
     assert time.monotonic() - t0 < 10 and time.process_time() - cpu0 < 10
 
 
+@pytest.mark.proc
 def test_the_real_command_in_a_terminal_starts_with_the_router_down_and_quits_on_q():
     """``pfp handheld`` in a pseudo-terminal, as a soldier starts it before the network is up."""
     import fcntl

@@ -15,6 +15,8 @@ from pfp_service.errors import InputError
 from tests.conftest import EXAMPLES, ROOT, run_pfp
 from tests.zenoh_util import client, planner_process
 
+pytestmark = pytest.mark.unit
+
 SPEED_UP = "10"
 
 
@@ -48,6 +50,7 @@ def _wait_for_line(proc: subprocess.Popen[str], needle: str, timeout: float = 20
     raise AssertionError(f"{needle!r} never printed; got {seen}")
 
 
+@pytest.mark.proc
 def test_figure_8_expectations_hold_and_a_failing_one_exits_1(tmp_path, mission):
     failing = tmp_path / "strict.yaml"
     text = (EXAMPLES / "figure8-inject.yaml").read_text()
@@ -86,6 +89,7 @@ def test_figure_8_expectations_hold_and_a_failing_one_exits_1(tmp_path, mission)
     assert "FAILED" in s_out
 
 
+@pytest.mark.proc
 def test_bad_script_is_one_line_exit_2_and_nothing_is_sent(tmp_path, mission):
     bad = tmp_path / "bad.yaml"
     bad.write_text(
@@ -138,6 +142,7 @@ def test_script_errors_name_the_line_and_field(tmp_path, body, message):
     assert message in str(info.value)
 
 
+@pytest.mark.proc
 def test_example_scripts_validate():
     scripts = sorted(EXAMPLES.glob("*inject*.yaml"))
     assert scripts
@@ -146,6 +151,7 @@ def test_example_scripts_validate():
         assert r.returncode == 0, r.stderr
 
 
+@pytest.mark.proc
 def test_inject_says_which_entry_it_waits_on_and_for_what(tmp_path, mission):
     script = tmp_path / "wait.yaml"
     script.write_text(

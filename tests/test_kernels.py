@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pfp_service.core import Threat, ThreatField, kernels
 from pfp_service.core.cores import Cores
+
+pytestmark = pytest.mark.unit
 
 SHAPES = [
     ((0.0, 0.0), 0.0, 2.0, 1.0, 0.0, 1.0),

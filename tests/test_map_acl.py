@@ -19,6 +19,8 @@ from tests.test_map_browser import map_process
 from tests.test_map_cli import EDIT, _http
 from tests.zenoh_util import Inbox, free_port, put_json
 
+pytestmark = pytest.mark.net
+
 M = "mapacl"
 TEAM = "name: map-acl\nunits:\n  - {id: u1, start: [0, 0], goal: [10, 0]}\n"
 
@@ -46,6 +48,7 @@ def _state(url: str) -> dict:
     return _http("GET", url + "api/state")[1]
 
 
+@pytest.mark.proc
 def test_the_map_as_injector_sees_the_unit_and_edits_through_the_acl(acl):
     from pfp_service.service.config import ServeConfig
     from pfp_service.service.node import PlannerNode

@@ -34,6 +34,8 @@ from pfp_service.wire import keys
 from tests.conftest import ROOT
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
+pytestmark = pytest.mark.browser
+
 CHROMIUM = os.environ.get("PFP_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_ARGS = [
     "--headless",

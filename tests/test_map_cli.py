@@ -20,6 +20,8 @@ from tests.conftest import ROOT, run_pfp
 from tests.test_map_browser import map_process
 from tests.zenoh_util import Inbox, client, free_port, put_json
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.fixture
 def router():
@@ -42,6 +44,7 @@ def _one_line_exit_2(r: subprocess.CompletedProcess[str]) -> str:
     return r.stderr.strip()
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize(
     ("args", "fragment"),
     [
@@ -59,12 +62,15 @@ def test_bad_flags_are_one_line_exit_2(args, fragment):
     assert fragment in line and line.startswith("pfp map"), line
 
 
+@pytest.mark.proc
 def test_no_router_is_one_line():
     r = run_pfp("map", "--connect", f"tcp/127.0.0.1:{free_port()}", "--http", "127.0.0.1:0", timeout=60)
     line = _one_line_exit_2(r)
     assert line.startswith("pfp map: --connect:"), line
 
 
+@pytest.mark.net
+@pytest.mark.net
 def test_a_port_in_use_is_one_line(router):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -104,6 +110,8 @@ def _http(method: str, url: str, body: Any = None, headers: dict[str, str] | Non
 EDIT = {"X-PFP-Edit": "1", "Content-Type": "application/json"}
 
 
+@pytest.mark.net
+@pytest.mark.net
 def test_the_api_puts_through_the_same_keys_and_validates_first(router):
     mission = "api" + uuid.uuid4().hex[:8]
     with client(router) as s, map_process(router, mission, "--allow-edit") as url:
@@ -166,6 +174,7 @@ def test_the_api_puts_through_the_same_keys_and_validates_first(router):
         assert stats["samples_in"] >= 5 and stats["backlog"] == 0
 
 
+@pytest.mark.proc
 def test_the_map_runs_from_a_plain_install_as_a_separate_process():
     r = subprocess.run(
         [sys.executable, "-m", "pfp_service", "map", "--help"],
@@ -177,6 +186,8 @@ def test_the_map_runs_from_a_plain_install_as_a_separate_process():
     assert r.returncode == 0 and "--allow-edit" in r.stdout
 
 
+@pytest.mark.net
+@pytest.mark.net
 def test_the_map_embeds_in_another_program_on_its_own_thread(router):
     """What ``pfp demo --map`` needs: start, get the URL, keep running, close cleanly."""
     from pfp_clients.map.embed import MapThread
@@ -199,6 +210,7 @@ def test_the_map_embeds_in_another_program_on_its_own_thread(router):
         urllib.request.urlopen(url + "api/state", timeout=2)  # closed with the block
 
 
+@pytest.mark.net
 def test_an_embedded_map_that_cannot_start_raises_in_the_caller():
     from pfp_clients.map.embed import MapThread
     from pfp_clients.map.server import MapOptions

@@ -43,6 +43,8 @@ from pfp_service.wire import (
 )
 from tests.conftest import ROOT
 
+pytestmark = pytest.mark.unit
+
 M = "m1"
 
 

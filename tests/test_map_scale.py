@@ -18,9 +18,13 @@ import time
 import urllib.request
 import uuid
 
+import pytest
+
 from tests.conftest import ROOT
 from tests.test_map_browser import map_process, page_at, playwright  # noqa: F401 (fixture)
 from tests.test_map_cli import router  # noqa: F401 (fixture)
+
+pytestmark = pytest.mark.browser
 
 UNITS = int(os.environ.get("PFP_MAP_SCALE_UNITS", "250"))
 RATE_HZ = 10.0

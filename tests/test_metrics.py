@@ -11,6 +11,8 @@ from scipy.integrate import quad
 from pfp_service.core import Threat, ThreatField
 from pfp_service.core.metrics import Epoch, measure, segment_clearance
 
+pytestmark = pytest.mark.unit
+
 
 def test_exposure_matches_adaptive_quadrature():
     field = ThreatField(

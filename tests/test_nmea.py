@@ -13,6 +13,8 @@ from pfp_clients.nmea import IGNORED, Fix, LocalFrame, nmea_checksum, parse_gga,
 
 from pfp_service.errors import InputError
 
+pytestmark = pytest.mark.unit
+
 # Published examples with their receivers' own checksums (not computed by the code under test).
 CLASSIC = "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47"
 DUBLIN = "$GPGGA,092750.000,5321.6802,N,00630.3372,W,1,8,1.03,61.7,M,55.2,M,,*76"

@@ -13,6 +13,8 @@ import pytest
 from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, plan
 from pfp_service.core.optimal import OptimalSolver, plan_optimal
 
+pytestmark = pytest.mark.unit
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
@@ -48,6 +50,7 @@ def test_core_free_grid_says_when_no_way_avoids_the_cores():
     assert len(s.solve(0.0).path) == 0
 
 
+@pytest.mark.proc
 def test_cli_optimal_prints_the_same_json_object():
     args = [sys.executable, "-m", "pfp_service", "plan", str(EXAMPLES / "paper-simple.yaml"), "--json"]
     pfp = json.loads(subprocess.run(args, capture_output=True, text=True, check=True).stdout)
@@ -61,6 +64,7 @@ def test_cli_optimal_prints_the_same_json_object():
     assert opt["length"] + 10 * opt["exposure"] <= pfp["length"] + 10 * pfp["exposure"]
 
 
+@pytest.mark.proc
 def test_cli_avoid_cores_is_a_safe_reference(tmp_path):
     ring = "\n".join(
         f"  - {{position: [{20 + 14 * math.sin(a):.6f}, {20 + 14 * math.cos(a):.6f}], facing_deg: 0, "

@@ -11,6 +11,8 @@ from pfp_service.core import PlanStatus, Scheduled, plan
 from pfp_service.scenario import load_scenario
 from tests.conftest import EXAMPLES
 
+pytestmark = pytest.mark.unit
+
 
 def _plan(scn, **over):
     params = scn.planner.to_params().merged(**over)

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
+
 from pfp_service.core import PlannerParams, resolve
 from pfp_service.core.params import MAX_ITER_DERIVED
+
+pytestmark = pytest.mark.unit
 
 
 def test_derived_max_iter_is_capped_explicit_is_kept():

@@ -5,10 +5,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from pfp_service.core import PlannerParams, PlanStatus, Scheduled, Threat, plan
+
+pytestmark = pytest.mark.unit
 
 SETTINGS = settings(
     max_examples=30,

@@ -5,11 +5,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from pfp_service.bench.cases import KINDS, generate, reachability
 from pfp_service.bench.quality import _pareto, measure_suite, render
 from pfp_service.core import ThreatField
 from pfp_service.core.cores import Cores
+
+pytestmark = pytest.mark.unit
 
 
 def test_suite_is_seeded_and_spans_the_brief():

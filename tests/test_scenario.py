@@ -10,6 +10,8 @@ import pytest
 from pfp_service.errors import InputError
 from pfp_service.scenario import decode_scenario, load_scenario
 
+pytestmark = pytest.mark.unit
+
 GOOD = {
     "name": "t",
     "start": [0, 0],

@@ -16,6 +16,8 @@ from pfp_service.cli import main
 from pfp_service.wire import messages as m
 from pfp_service.wire import schema
 
+pytestmark = pytest.mark.unit
+
 ROOT = Path(__file__).resolve().parent.parent
 SCHEMAS = ROOT / "schemas"
 
@@ -26,6 +28,7 @@ def pfp(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
     )
 
 
+@pytest.mark.proc
 def test_committed_schemas_are_current() -> None:
     """The CI gate: fails when a message changed and nobody ran ``pfp schemas``."""
     r = pfp("schemas", "--check")
@@ -40,6 +43,7 @@ def copy(tmp_path: Path) -> Path:
     return target
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize(
     ("damage", "line"),
     [
@@ -68,6 +72,7 @@ def test_regenerating_into_an_empty_directory_writes_everything(tmp_path: Path) 
     assert all((target / rel).read_text() == (SCHEMAS / rel).read_text() for rel in written)
 
 
+@pytest.mark.proc
 def test_a_file_as_dir_is_one_line_and_exit_2(tmp_path: Path) -> None:
     f = tmp_path / "f"
     f.write_text("x")
@@ -76,6 +81,7 @@ def test_a_file_as_dir_is_one_line_and_exit_2(tmp_path: Path) -> None:
     assert r.stderr == f"pfp schemas: {f}: is not a directory\n"
 
 
+@pytest.mark.proc
 def test_a_bad_flag_is_one_line_and_exit_2() -> None:
     r = pfp("schemas", "--chek")
     assert r.returncode == 2

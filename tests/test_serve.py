@@ -15,6 +15,8 @@ import pytest
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
+pytestmark = pytest.mark.proc
+
 E1 = {"position": [4, 6], "facing_deg": 225, "sigma_range": 1.0, "sigma_lateral": 0.7, "skew": 2}
 E2 = {"position": [7, 3], "facing_deg": 225, "sigma_range": 1.0, "sigma_lateral": 0.7, "skew": 2}
 E3 = {"position": [6.0, 7.0], "facing_deg": 225, "sigma_range": 1.0, "sigma_lateral": 0.7, "skew": 2}

@@ -18,6 +18,8 @@ from tests.conftest import ROOT, run_pfp
 from tests.test_serve import Unit
 from tests.zenoh_util import client, free_port, put_json, wait_for_planner
 
+pytestmark = pytest.mark.proc
+
 
 def test_precedence_defaults_file_env_flags(tmp_path):
     toml = tmp_path / "pfp.toml"

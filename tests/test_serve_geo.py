@@ -13,6 +13,8 @@ from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
+pytestmark = pytest.mark.unit
+
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 MISSION = "geo"
 
@@ -28,6 +30,7 @@ def planner():
         yield endpoint
 
 
+@pytest.mark.net
 def test_a_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres(planner):
     with client(planner) as s:
         put_json(
@@ -70,6 +73,7 @@ def test_a_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres(pl
         s.delete(keys.threat(MISSION, "ridge"))
 
 
+@pytest.mark.proc
 def test_without_an_origin_lat_lon_is_rejected_with_its_path():
     with planner_process(mission="geo0") as (endpoint, _p), client(endpoint) as s:
         rejected = Inbox(s, keys.event("geo0", "rejected"))

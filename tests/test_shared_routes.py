@@ -17,6 +17,8 @@ from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.routes import ROUTES, RouteCache
 from pfp_service.core.stepper import Stepper, StepStatus
 
+pytestmark = pytest.mark.unit
+
 START, GOAL = (0.0, 0.0), (100.0, 100.0)
 SEED = 20261201
 TOLERANCE = 0.03  # a shared route may cost this much more J than the unit's own search

@@ -5,9 +5,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
 from pfp_service.core.stepper import advise_many
+
+pytestmark = pytest.mark.unit
 
 
 def _stepper(start=(0.0, 0.0), goal=(10.0, 10.0), threats=(), bounds=None, **kw):

@@ -23,6 +23,8 @@ from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from tests.zenoh_util import ROOT, Inbox, client, free_port, planner_process, put_json
 
+pytestmark = pytest.mark.proc
+
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 MISSION = "tak"
 

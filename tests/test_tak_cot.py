@@ -13,6 +13,8 @@ from pfp_service.tak.state import BridgeSettings, BridgeState, ZenohDelete, Zeno
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 
+pytestmark = pytest.mark.unit
+
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 T0 = 1_796_000_000.0  # a fixed clock: nothing here reads the real one
 

@@ -11,6 +11,8 @@ from scipy.stats import multivariate_normal, norm
 from pfp_service.core import Threat, ThreatField
 from pfp_service.core.threat import skew_normal_mode
 
+pytestmark = pytest.mark.unit
+
 SHAPES = [
     ((0.0, 0.0), 0.0, 1.0, 1.0, 0.0),
     ((4.0, 6.0), 225.0, 1.0, 0.7, 2.0),

@@ -21,6 +21,8 @@ from typing import Any
 import pytest
 import zenoh
 
+pytestmark = pytest.mark.net
+
 ROOT = Path(__file__).resolve().parent.parent
 SCHEMAS = ROOT / "schemas"
 TIMEOUT_S = 5.0

@@ -15,6 +15,8 @@ from pfp_service.errors import InputError
 from pfp_service.wire import keys
 from pfp_service.wire.keys import Key, KeyKind
 
+pytestmark = pytest.mark.unit
+
 ROOT = Path(__file__).resolve().parent.parent
 chunk = st.from_regex(r"\A[A-Za-z0-9_-]{1,64}\Z")
 

@@ -17,6 +17,8 @@ from pfp_service.errors import InputError
 from pfp_service.wire import messages as m
 from pfp_service.wire.schema import examples
 
+pytestmark = pytest.mark.unit
+
 BIG = 7.77e77  # written as 1e999 on the wire: parses to infinity
 MISSING = object()
 REQ, OPT, DEF = "required", "optional (null allowed)", "defaulted (null not allowed)"
@@ -595,6 +597,7 @@ def test_the_preview_reply_is_what_pfp_plan_json_prints(capsys: pytest.CaptureFi
     assert m.encode(result).decode() == out.strip()
 
 
+@pytest.mark.proc
 def test_wire_modules_import_without_zenoh_or_numpy() -> None:
     code = (
         "import sys, pfp_service.wire.messages, pfp_service.wire.keys, pfp_service.wire;"

@@ -45,6 +45,8 @@ from pfp_service.wire import (
     keys,
 )
 
+pytestmark = pytest.mark.unit
+
 T = dict(facing_deg=225.0, sigma_range=1.0, sigma_lateral=0.7, skew=2.0)
 
 
