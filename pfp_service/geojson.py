@@ -30,7 +30,7 @@ import msgspec
 import numpy as np
 
 from pfp_service.core.cores import CORE_FRACTION, Cores
-from pfp_service.core.threat import Threat, ThreatField, skew_normal_mode
+from pfp_service.core.threat import Threat, ThreatField
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 
@@ -46,7 +46,6 @@ __all__ = [
     "feature_collection",
     "preview_reply",
     "scenario_collection",
-    "threat_mode",
     "write",
     "zone_ring",
 ]
@@ -67,18 +66,6 @@ METRICS = (
 )
 
 
-def threat_mode(t: Threat) -> tuple[float, float]:
-    """Where a threat's density peaks: ``xi + Omega a v / q`` (see ``Threat.peak_density``)."""
-    (o00, o01), (_, o11) = t.omega
-    ax, ay = t.shape()
-    oax, oay = o00 * ax + o01 * ay, o01 * ax + o11 * ay
-    q = math.sqrt(max(ax * oax + ay * oay, 0.0))
-    if q == 0.0:
-        return t.xi
-    v = skew_normal_mode(q)
-    return t.xi[0] + oax * v / q, t.xi[1] + oay * v / q
-
-
 def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndarray:
     """The boundary of ``{x : t(x) >= level * max t}`` as ``(vertices, 2)`` metres, counter-clockwise.
 
@@ -95,7 +82,7 @@ def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndar
     if not t.weight > 0.0:
         raise ValueError(f"threat {t.id!r}: a threat of weight 0 has no zone")
     cores = Cores(ThreatField([t]))
-    mx, my = threat_mode(t)
+    mx, my = t.mode()
     theta = 2.0 * math.pi * np.arange(vertices) / vertices  # from east, counter-clockwise
     d = np.column_stack([np.cos(theta), np.sin(theta)])
     (o00, _), (_, o11) = t.omega

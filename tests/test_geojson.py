@@ -106,11 +106,11 @@ def test_skewed_zone_boundaries_sit_at_their_level_and_hold_the_core():
     zone, core = geojson.zone_ring(t, 0.1), geojson.zone_ring(t, 0.5)
     assert np.allclose(cores.ratio(zone)[0], 0.1, atol=1e-9)
     assert np.allclose(cores.ratio(core)[0], 0.5, atol=1e-9)
-    assert cores.inside(core * 0.999 + 0.001 * np.array(geojson.threat_mode(t))).all()
+    assert cores.inside(core * 0.999 + 0.001 * np.array(t.mode())).all()
     area = lambda r: 0.5 * abs(np.sum(r[:, 0] * np.roll(r[:, 1], -1) - np.roll(r[:, 0], -1) * r[:, 1]))
     assert area(core) < area(zone)
     # the mode lies forward of the enemy position: skew pushes the zone along the facing (60 deg)
-    mx, my = geojson.threat_mode(t)
+    mx, my = t.mode()
     assert mx > 0 and my > 0 and math.isclose(math.degrees(math.atan2(mx, my)), 60.0, abs_tol=1e-6)
 
 

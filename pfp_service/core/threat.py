@@ -138,21 +138,30 @@ class Threat:
         (o00, o01), (_, o11) = self.omega
         return 2.0 / (2.0 * math.pi * math.sqrt(o00 * o11 - o01 * o01))
 
-    def peak_density(self) -> float:
-        """Maximum of the unweighted density.
+    def mode(self) -> tuple[float, float]:
+        """Where the density peaks, in metres: the one place a threat's mode is computed.
 
-        Setting the gradient to zero gives ``z* = Omega a v / q`` with
+        Setting the gradient to zero gives ``x* = xi + Omega a v / q`` with
         ``q = sqrt(a^T Omega a)`` and ``v`` the mode of the univariate
-        skew-normal of shape ``q``.
+        skew-normal of shape ``q``; an unskewed threat peaks at ``xi``.
+        The map, GeoJSON and ``peak_density`` all ask here.
         """
         (o00, o01), (_, o11) = self.omega
         ax, ay = self.shape()
         oax, oay = o00 * ax + o01 * ay, o01 * ax + o11 * ay
         q = math.sqrt(max(ax * oax + ay * oay, 0.0))
         if q == 0.0:
-            return self.density_scale() * 0.5
+            return self.xi
         v = skew_normal_mode(q)
-        zx, zy = oax * v / q, oay * v / q
+        return self.xi[0] + oax * v / q, self.xi[1] + oay * v / q
+
+    def peak_density(self) -> float:
+        """Maximum of the unweighted density: its value at ``mode()``."""
+        ax, ay = self.shape()
+        mx, my = self.mode()
+        zx, zy = mx - self.xi[0], my - self.xi[1]
+        if zx == 0.0 and zy == 0.0:
+            return self.density_scale() * 0.5
         p00, p01, p11 = self.precision()
         quad = p00 * zx * zx + 2 * p01 * zx * zy + p11 * zy * zy
         return self.density_scale() * math.exp(-0.5 * quad) * float(ndtr(ax * zx + ay * zy))
