@@ -42,7 +42,7 @@ def delete(target: str, t=T0) -> bytes:
 def test_a_hostile_marker_becomes_a_threat():
     ev = cot.read_event(hostile())
     assert (ev.uid, ev.type, ev.course_deg, ev.callsign) == ("ANDROID-7f.h1", "a-h-G-U-C", 225.0, "H1")
-    change = cot.to_threat_change(ev, cot.ThreatDefaults(sigma_range_m=80, sigma_lateral_m=40, skew=1))
+    change = cot.to_threat_change(ev, cot.ThreatDefaults(sigma_range_m=80, sigma_lateral_m=40, skew=1), T0)
     assert isinstance(change, cot.ThreatPut)
     assert change.id == cot.threat_id("ANDROID-7f.h1") and change.id.startswith("ANDROID-7f_h1-")
     assert change.body["ttl_s"] == pytest.approx(600.0)
@@ -80,14 +80,18 @@ def test_bad_cot_is_a_cot_error_with_a_reason(data, fragment):
 
 def test_deletes_stale_markers_and_other_types():
     d = cot.ThreatDefaults()
-    assert cot.to_threat_change(cot.read_event(delete("ANDROID-7f.h1")), d) == cot.ThreatRemoved(
+    assert cot.to_threat_change(cot.read_event(delete("ANDROID-7f.h1")), d, T0) == cot.ThreatRemoved(
         id=cot.threat_id("ANDROID-7f.h1"), uid="ANDROID-7f.h1"
     )
-    assert isinstance(cot.to_threat_change(cot.read_event(hostile(ttl=0)), d), cot.ThreatRemoved)
-    assert cot.to_threat_change(cot.read_event(hostile(typ="a-f-G-U-C")), d) is None  # friendly
-    assert cot.to_threat_change(cot.read_event(hostile(typ="a-h-A")), d) is None  # hostile air
-    assert cot.to_threat_change(cot.read_event(hostile(uid="pfp.threat.default.x")), d) is None  # our echo
-    no_course = cot.to_threat_change(cot.read_event(hostile(course=None)), cot.ThreatDefaults(facing_deg=90))
+    assert isinstance(cot.to_threat_change(cot.read_event(hostile(ttl=0)), d, T0), cot.ThreatRemoved)
+    assert cot.to_threat_change(cot.read_event(hostile(typ="a-f-G-U-C")), d, T0) is None  # friendly
+    assert cot.to_threat_change(cot.read_event(hostile(typ="a-h-A")), d, T0) is None  # hostile air
+    assert (
+        cot.to_threat_change(cot.read_event(hostile(uid="pfp.threat.default.x")), d, T0) is None
+    )  # our echo
+    no_course = cot.to_threat_change(
+        cot.read_event(hostile(course=None)), cot.ThreatDefaults(facing_deg=90), T0
+    )
     assert isinstance(no_course, cot.ThreatPut) and no_course.body["facing_deg"] == 90
 
 

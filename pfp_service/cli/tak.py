@@ -1,13 +1,14 @@
 """``pfp tak``: bridge a TAK network (ATAK, WinTAK, iTAK, a TAK server) and the planner, in Cursor-on-Target.
 
 Hostile ground markers (``a-h-G*``) become threats (the uid is the id, the
-marker's stale time its TTL, its course its facing, the shape from the
-flags); a marker deleted in TAK removes its threat.  The planner's threats,
+time left to the marker's stale time its TTL, its course its facing, the
+shape from the flags); a marker deleted in TAK removes its threat, and a TAK
+server's replay of it does not bring it back before its stale time.  The planner's threats,
 each unit (with its direction as course and its status) and each unit's
 planned route go back to TAK.  Needs the ``[tak]`` extra (pytak) and the
 mission origin, the same as ``pfp serve --origin``.
 
-Exit codes: 0 stopped; 2 a bad flag, or the extra is missing; 130 interrupted.
+Exit codes: 0 stopped (SIGTERM); 2 a bad flag, or the extra is missing; 130 interrupted (SIGINT).
 """
 
 from __future__ import annotations
@@ -83,8 +84,13 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _terminated(_signum: int, _frame: Any) -> None:
+    raise SystemExit(0)  # SIGTERM before the bridge's loop is up: a clean stop all the same
+
+
 def run(args: argparse.Namespace) -> int:
     import logging
+    import signal
     import sys
 
     from pfp_service.cli._common import session_config
@@ -129,6 +135,6 @@ def run(args: argparse.Namespace) -> int:
     )
     tls = TlsFiles(args.tls_cert, args.tls_key, args.tls_ca, args.tls_dont_verify)
     urls = args.cot_url or [DEFAULT_COT_URL]
+    signal.signal(signal.SIGTERM, _terminated)
     print(f"pfp tak: mission {args.mission}, links {', '.join(urls)}", file=sys.stderr, flush=True)
-    bridge(settings, urls, session_config(args), tls)
-    return 0
+    return bridge(settings, urls, session_config(args), tls)

@@ -8,12 +8,19 @@ then drains three queues until stopped:
   (``call_soon_threadsafe``), never decode or publish there;
 - each TAK link (a pytak ``COT_URL``: ``udp://239.2.3.1:6969`` multicast,
   ``tcp://host:8087``, ``tls://host:8089`` with ``TlsFiles``, ``+wo``/``+ro``
-  for one direction only) has pytak's TX and RX workers; what they read
-  goes through ``BridgeState.on_cot``;
-- a ticker every ``TICK_S`` sends held-back and refreshed events and asks for routes.
+  for one direction only) is opened by pytak and written by pytak's TX
+  worker.  A TCP/TLS stream is read by ``framing.EventFramer``, not pytak's
+  RX worker: an event over ``cot.MAX_EVENT_BYTES`` is skipped and the link
+  stays up (pytak's 64 KiB ``readuntil`` limit dropped it, and a server that
+  keeps the event replays it on every connection).  UDP datagrams go through
+  pytak's RX worker.  What is read goes through ``BridgeState.on_cot``;
+- a ticker every ``TICK_S`` sends held-back and refreshed events, pictures
+  due to a link, and asks for routes.
 
 A route is the unit's live preview, queried on a worker thread with a
-timeout.  A link that fails is logged and reconnected after ``RECONNECT_S``.
+timeout.  A link that fails is logged and reconnected after ``RECONNECT_S``;
+once up it gets the whole picture.  SIGTERM stops the bridge with exit code
+0 and SIGINT with 130, after the subscribers are undeclared and the session closed.
 ``pytak`` is imported only here, so the rest of the package works without the ``[tak]`` extra.
 """
 
@@ -22,13 +29,16 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import signal
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from configparser import ConfigParser
 from dataclasses import dataclass
 from typing import Any
 
 from pfp_service.errors import InputError
+from pfp_service.tak import cot
+from pfp_service.tak.framing import EventFramer
 from pfp_service.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
@@ -39,6 +49,9 @@ log = logging.getLogger("pfp.tak")
 TICK_S = 0.1
 RECONNECT_S = 2.0
 PREVIEW_TIMEOUT_S = 2.0
+READ_CHUNK = 64 * 1024
+RX_BACKLOG = 10_000  # events read and not yet handled; past it the link waits (TCP backpressure)
+EXIT_TERMINATED, EXIT_INTERRUPTED = 0, 130
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,16 +83,25 @@ def link_config(url: str, tls: TlsFiles | None = None) -> Any:
 
 
 class _Link:
-    """One TAK transport: pytak's workers for ``url``, reconnected when they fail."""
+    """One TAK transport: opened by pytak, read in bounded frames, reconnected when it fails."""
 
-    def __init__(self, url: str, tls: TlsFiles | None, rx: asyncio.Queue[tuple[str, bytes]]) -> None:
-        self.url, self.tls, self.rx = url, tls, rx
+    def __init__(
+        self,
+        url: str,
+        tls: TlsFiles | None,
+        rx: asyncio.Queue[tuple[str, bytes]],
+        on_up: Callable[[str], None] = lambda _url: None,
+    ) -> None:
+        self.url, self.tls, self.rx, self.on_up = url, tls, rx, on_up
         self.tx: asyncio.Queue[bytes] = asyncio.Queue(maxsize=1000)
         self.connected = asyncio.Event()
+        self.write_only = "+wo" in url.split("://", 1)[0].lower()
+        self.connects = 0  # how many times it has connected
+        self.skipped = 0  # events skipped as too large
 
     def send(self, data: bytes) -> None:
         if not self.connected.is_set():
-            return  # nobody to tell; markers are refreshed once it is back
+            return  # nobody to tell; it gets the whole picture once it is back
         if self.tx.full():
             self.tx.get_nowait()  # drop the oldest, as pytak does
         self.tx.put_nowait(data)
@@ -93,14 +115,18 @@ class _Link:
             tasks: list[asyncio.Task[Any]] = []
             try:
                 reader, writer = await pytak.protocol_factory(section)
-                rx_queue: asyncio.Queue[bytes] = asyncio.Queue()
                 if writer is not None:
                     tasks.append(asyncio.create_task(pytak.TXWorker(self.tx, section, writer).run()))
-                if reader is not None:
+                if isinstance(reader, asyncio.StreamReader):
+                    tasks.append(asyncio.create_task(self._read_stream(reader)))
+                elif reader is not None:
+                    rx_queue: asyncio.Queue[bytes] = asyncio.Queue(maxsize=RX_BACKLOG)
                     tasks.append(asyncio.create_task(pytak.RXWorker(rx_queue, section, reader).run()))
                     tasks.append(asyncio.create_task(self._forward(rx_queue)))
+                self.connects += 1
                 self.connected.set()
                 log.info("tak: connected %s", self.url)
+                self.on_up(self.url)
                 done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_EXCEPTION)
                 for t in done:
                     if t.exception() is not None:
@@ -122,6 +148,26 @@ class _Link:
                             close()
             await asyncio.sleep(RECONNECT_S)
 
+    async def _read_stream(self, reader: asyncio.StreamReader) -> None:
+        framer = EventFramer(cot.MAX_EVENT_BYTES)
+        while True:
+            chunk = await reader.read(READ_CHUNK)
+            if not chunk:
+                raise ConnectionError("the server closed the connection")
+            framed = framer.feed(chunk)
+            if framed.skipped:
+                self.skipped += framed.skipped
+                log.warning(
+                    "tak: skipped %d CoT event(s) over %d bytes from %s; the link stays up",
+                    framed.skipped,
+                    cot.MAX_EVENT_BYTES,
+                    self.url,
+                )
+            if self.write_only:
+                continue  # drained so the server never blocks on us, and dropped
+            for event in framed.events:
+                await self.rx.put((self.url, event))
+
     async def _forward(self, rx_queue: asyncio.Queue[bytes]) -> None:
         while True:
             data = await rx_queue.get()
@@ -135,12 +181,23 @@ async def _main(
     session: Any,
     stop: asyncio.Event,
     ready: asyncio.Event | None,
-) -> None:
+) -> int:
     loop = asyncio.get_running_loop()
     state = BridgeState(settings, log=lambda text: log.warning("tak: %s", text))
     inbox: asyncio.Queue[tuple[str, str, bytes | None]] = asyncio.Queue()
-    rx: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue()
-    links = [_Link(u, tls, rx) for u in urls]
+    rx: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize=RX_BACKLOG)
+    links = [_Link(u, tls, rx, on_up=lambda url: emit(state.on_link_up(url, time.time()))) for u in urls]
+    by_url = {lk.url: lk for lk in links}
+    exit_code = EXIT_TERMINATED
+
+    def stop_with(code: int) -> None:
+        nonlocal exit_code
+        exit_code = code
+        stop.set()
+
+    for sig, code in ((signal.SIGTERM, EXIT_TERMINATED), (signal.SIGINT, EXIT_INTERRUPTED)):
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):  # not the main thread
+            loop.add_signal_handler(sig, stop_with, code)
     mission = settings.mission
     fetching: set[asyncio.Task[None]] = set()  # route queries in flight (a reference keeps each alive)
 
@@ -160,15 +217,20 @@ async def _main(
         session.declare_subscriber(keys.events(mission), enqueue("event")),
     ]
 
+    def publish(action: ZenohPut | ZenohDelete) -> None:
+        if isinstance(action, ZenohPut):
+            session.put(action.key, action.payload, encoding=_encoding())
+        else:
+            session.delete(action.key)
+
     def emit(out: Outputs) -> None:
         for data in out.cot:
             for link in links:
                 link.send(data)
+        for url, data in out.to_link:
+            by_url[url].send(data)
         for action in out.zenoh:
-            if isinstance(action, ZenohPut):
-                session.put(action.key, action.payload, encoding=_encoding())
-            elif isinstance(action, ZenohDelete):
-                session.delete(action.key)
+            publish(action)
         for unit in out.routes:
             task = asyncio.create_task(fetch_route(unit))
             fetching.add(task)
@@ -223,11 +285,16 @@ async def _main(
             ready.set()
         await stop.wait()
     finally:
-        for t in tasks:
+        pending = [*tasks, *fetching]
+        for t in pending:
             t.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        await asyncio.gather(*pending, return_exceptions=True)
         for sub in subs:
             sub.undeclare()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.remove_signal_handler(sig)
+    return exit_code
 
 
 def _encoding() -> Any:
@@ -243,8 +310,8 @@ def run(
     tls: TlsFiles | None = None,
     stop: asyncio.Event | None = None,
     ready: asyncio.Event | None = None,
-) -> None:
-    """Run the bridge until ``stop`` is set (or forever, until interrupted).
+) -> int:
+    """Run the bridge until ``stop`` is set, SIGTERM (returns 0) or SIGINT (returns 130).
 
     Args:
         settings: mission, origin, threat defaults and rates.
@@ -253,6 +320,9 @@ def run(
         tls: certificate files for ``tls://`` links.
         stop: set it (from the loop's thread) to end the bridge.
         ready: set once every link has connected the first time.
+
+    Returns:
+        the exit code: 0 stopped or terminated, 130 interrupted.
 
     Raises:
         ZenohError: the session could not be opened.
@@ -264,4 +334,4 @@ def run(
     with map_zenoh_errors("--connect"):
         session = zenoh.open(zenoh_conf)
     with session:
-        asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready))
+        return asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready))

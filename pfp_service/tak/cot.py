@@ -5,17 +5,21 @@ and ``to_threat_change`` maps it onto the planner's world:
 
 - a hostile ground marker (type ``a-h-G`` or below it) becomes a ``ThreatPut``:
   ``uid`` is the threat id (``threat_id``), the marker's point the position,
-  ``<track course>`` the facing, ``stale - time`` the TTL, and the shape
+  ``<track course>`` the facing, ``stale - now`` the TTL (a marker the server
+  replays long after it was sent keeps only what is left of its life), and the shape
   (sigmas, skew, weight) comes from ``ThreatDefaults``;
 - a delete (``t-x-d-d``) names its target in ``<link uid>`` and becomes a ``ThreatRemoved``;
+- a device's own position report (``<takv>`` or ``<__group>`` in its detail) is
+  flagged ``CotEvent.device``: a device that just joined gets the routes;
 - anything else, and our own markers echoed back, map to ``None``.
 
 Outbound, the builders return XML bytes: ``threat_event`` (``a-h-G``),
 ``unit_event`` (``a-f-G-U-C`` manned, ``a-f-G-E-V`` unmanned, the direction
 as ``<track course>``, the status in ``<remarks>``), ``route_event`` (``b-m-r``
 with ordered ``<link>`` waypoints ``b-m-p-w`` at the ends and control points
-``b-m-p-c`` between) and ``delete_event``.  Points carry full float precision:
-pytak's helpers round to 4 decimals, about 11 m.
+``b-m-p-c`` between) and ``delete_event``.  Points carry full float precision
+(pytak's helpers round to 4 decimals, about 11 m) and a height ``hae``, the
+mission origin's altitude, as the planner works in the plane.
 
 ``RateLimiter`` holds back a uid's events to one per ``interval_s`` and sends
 the latest when its turn comes, so nothing is lost but the intermediate ones.
@@ -75,6 +79,7 @@ class CotEvent:
         course_deg: ``<track course>``, true degrees, if present.
         link_uids: the ``uid`` of each ``<link>`` in ``<detail>``, in order.
         callsign: ``<contact callsign>``, if present.
+        device: the detail has ``<takv>`` or ``<__group>``: a TAK device's own report.
     """
 
     uid: str
@@ -86,6 +91,7 @@ class CotEvent:
     course_deg: float | None = None
     link_uids: tuple[str, ...] = ()
     callsign: str = ""
+    device: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,7 +170,9 @@ def read_event(data: bytes) -> CotEvent:
     course = None
     links: tuple[str, ...] = ()
     callsign = ""
+    device = False
     if detail is not None:
+        device = detail.find("takv") is not None or detail.find("__group") is not None
         track = detail.find("track")
         if track is not None and track.get("course") not in (None, ""):
             course = _number(track.get("course"), "track.course", -360.0, 360.0) % 360.0
@@ -181,6 +189,7 @@ def read_event(data: bytes) -> CotEvent:
         course_deg=course,
         link_uids=links,
         callsign=callsign,
+        device=device,
     )
 
 
@@ -201,17 +210,19 @@ def _is_hostile_ground(typ: str) -> bool:
     return typ == "a-h-G" or typ.startswith("a-h-G-")
 
 
-def to_threat_change(ev: CotEvent, defaults: ThreatDefaults) -> ThreatPut | ThreatRemoved | None:
-    """What a CoT event means for the planner's threats, if anything.
+def to_threat_change(ev: CotEvent, defaults: ThreatDefaults, now: float) -> ThreatPut | ThreatRemoved | None:
+    """What a CoT event means for the planner's threats, if anything, at ``now`` (Unix s).
 
-    A hostile marker already stale (``stale <= time``) is a removal: its TTL has run out.
+    The TTL is ``stale - now``: a TAK server replays a kept marker with its
+    first ``time``, and ``stale - time`` would give it its whole life again.
+    A hostile marker already stale (``stale <= now``) is a removal.
     """
     if ev.type == "t-x-d-d":
         targets = [u for u in ev.link_uids if u and not u.startswith(UID_PREFIX)]
         return ThreatRemoved(id=threat_id(targets[0]), uid=targets[0]) if targets else None
     if ev.uid.startswith(UID_PREFIX) or not _is_hostile_ground(ev.type):
         return None
-    ttl_s = ev.stale - ev.time
+    ttl_s = ev.stale - now
     if not ttl_s > 0.0:
         return ThreatRemoved(id=threat_id(ev.uid), uid=ev.uid)
     body: dict[str, object] = {
@@ -233,7 +244,14 @@ def iso(t: float) -> str:
 
 
 def _event(
-    uid: str, typ: str, lat: float, lon: float, now: float, stale_s: float, how: str = "m-g"
+    uid: str,
+    typ: str,
+    lat: float,
+    lon: float,
+    now: float,
+    stale_s: float,
+    how: str = "m-g",
+    hae: float = 0.0,
 ) -> ET.Element:
     ev = ET.Element(
         "event",
@@ -254,7 +272,7 @@ def _event(
         {
             "lat": repr(float(lat)),
             "lon": repr(float(lon)),
-            "hae": "0.0",
+            "hae": repr(float(hae)),
             "ce": _UNKNOWN_ERR,
             "le": _UNKNOWN_ERR,
         },
@@ -275,9 +293,10 @@ def threat_event(
     facing_deg: float,
     remarks: str,
     callsign: str,
+    hae: float = 0.0,
 ) -> bytes:
     """A hostile ground marker (``a-h-G``) for one of the planner's threats."""
-    ev = _event(uid, "a-h-G", lat, lon, now, stale_s, how="h-e")
+    ev = _event(uid, "a-h-G", lat, lon, now, stale_s, how="h-e", hae=hae)
     d = ET.SubElement(ev, "detail")
     ET.SubElement(d, "track", {"course": repr(float(facing_deg) % 360.0), "speed": "0.0"})
     ET.SubElement(d, "contact", {"callsign": callsign})
@@ -296,9 +315,10 @@ def unit_event(
     speed_mps: float,
     remarks: str,
     callsign: str,
+    hae: float = 0.0,
 ) -> bytes:
     """A unit's friendly marker: ``a-f-G-U-C`` manned, ``a-f-G-E-V`` unmanned; its direction as the course."""
-    ev = _event(uid, "a-f-G-U-C" if manned else "a-f-G-E-V", lat, lon, now, stale_s)
+    ev = _event(uid, "a-f-G-U-C" if manned else "a-f-G-E-V", lat, lon, now, stale_s, hae=hae)
     d = ET.SubElement(ev, "detail")
     if course_deg is not None:
         ET.SubElement(
@@ -316,8 +336,9 @@ def route_event(
     stale_s: float,
     callsign: str,
     remarks: str,
+    hae: float = 0.0,
 ) -> bytes:
-    """A route (``b-m-r``): ``waypoints`` as ``(lat, lon)`` in order, each a ``<link>``.
+    """A route (``b-m-r``): ``waypoints`` as ``(lat, lon)`` in order, each a ``<link>``, all at ``hae``.
 
     Raises:
         ValueError: fewer than two waypoints.
@@ -325,7 +346,7 @@ def route_event(
     if len(waypoints) < 2:
         raise ValueError("route_event: a route needs at least two waypoints")
     lat0, lon0 = waypoints[0]
-    ev = _event(uid, "b-m-r", lat0, lon0, now, stale_s, how="h-e")
+    ev = _event(uid, "b-m-r", lat0, lon0, now, stale_s, how="h-e", hae=hae)
     d = ET.SubElement(ev, "detail")
     last = len(waypoints) - 1
     for i, (lat, lon) in enumerate(waypoints):
@@ -337,7 +358,7 @@ def route_event(
                 "uid": f"{uid}.{i}",
                 "callsign": ("start" if i == 0 else "goal") if end else f"CP{i}",
                 "type": "b-m-p-w" if end else "b-m-p-c",
-                "point": f"{float(lat)!r},{float(lon)!r},0.0",
+                "point": f"{float(lat)!r},{float(lon)!r},{float(hae)!r}",
                 "remarks": "",
                 "relation": "c",
             },
@@ -362,9 +383,11 @@ def route_event(
     return _bytes(ev)
 
 
-def delete_event(uid: str, target_uid: str, target_type: str, lat: float, lon: float, now: float) -> bytes:
+def delete_event(
+    uid: str, target_uid: str, target_type: str, lat: float, lon: float, now: float, hae: float = 0.0
+) -> bytes:
     """``t-x-d-d``: tell TAK clients to remove the marker ``target_uid``."""
-    ev = _event(uid, "t-x-d-d", lat, lon, now, 20.0, how="h-g-i-g-o")
+    ev = _event(uid, "t-x-d-d", lat, lon, now, 20.0, how="h-g-i-g-o", hae=hae)
     d = ET.SubElement(ev, "detail")
     ET.SubElement(d, "link", {"uid": target_uid, "relation": "none", "type": target_type})
     ET.SubElement(d, "__forcedelete")

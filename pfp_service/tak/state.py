@@ -13,7 +13,18 @@ Rules:
 - markers are sent again every ``refresh_s`` so TAK clients do not grey them out;
 - a unit's route is fetched when it first gets a direction, when its status
   changes, and when the planner replans it, at most once per ``route_min_s``;
-  it is sent only when it changed.
+  it is sent only when it changed;
+- a marker deleted in TAK (``t-x-d-d``, or a version already stale) leaves a
+  tombstone until the marker's stale time: a TAK server keeps markers and
+  replays them on every connection, ignoring deletes, and a replayed version
+  (sent no later than the one deleted) must not come back as a threat.  A
+  version sent after the delete is a new marker and lifts the tombstone;
+- a link that (re)connects, and a TAK device first heard of (its own position
+  report), get the whole picture at once on that link (``Outputs.to_link``):
+  threats, units and every unit's route, at most once per ``announce_min_s``.
+  A TAK server does not keep routes, so a device that joins late would
+  otherwise see none until the next refresh;
+- every point carries the origin's altitude as ``hae``.
 """
 
 from __future__ import annotations
@@ -31,7 +42,7 @@ from pfp_service.tak import cot
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 
-__all__ = ["BridgeSettings", "BridgeState", "Outputs", "ZenohDelete", "ZenohPut"]
+__all__ = ["BridgeSettings", "BridgeState", "Outputs", "Tombstone", "ZenohDelete", "ZenohPut"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +58,9 @@ class BridgeSettings:
         stale_s: how long a marker stays fresh in TAK clients without a refresh.
         route_points: the most waypoints a route is thinned to.
         route_min_s: a unit's route is fetched at most this often.
+        announce_min_s: the whole picture goes to one link at most this often.
+        device_forget_s: a device silent this long is new again when next heard.
+        tombstone_s: how long a tombstone lasts when the deleted marker's stale time is unknown.
     """
 
     mission: str
@@ -57,6 +71,9 @@ class BridgeSettings:
     stale_s: float = 90.0
     route_points: int = 50
     route_min_s: float = 2.0
+    announce_min_s: float = 1.0
+    device_forget_s: float = 60.0
+    tombstone_s: float = 86_400.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,16 +89,39 @@ class ZenohDelete:
 
 @dataclass
 class Outputs:
-    """What one input produced."""
+    """What one input produced: CoT for every link, CoT for one link (``(link, bytes)``), Zenoh actions, routes to fetch."""
 
     cot: list[bytes] = field(default_factory=list)
     zenoh: list[ZenohPut | ZenohDelete] = field(default_factory=list)
     routes: list[str] = field(default_factory=list)
+    to_link: list[tuple[str, bytes]] = field(default_factory=list)
 
     def extend(self, other: Outputs) -> None:
         self.cot += other.cot
         self.zenoh += other.zenoh
         self.routes += other.routes
+        self.to_link += other.to_link
+
+
+@dataclass(frozen=True, slots=True)
+class Tombstone:
+    """A deleted marker: versions sent at or before ``after`` are refused until ``until`` (Unix s)."""
+
+    after: float
+    until: float
+
+
+@dataclass(frozen=True, slots=True)
+class _Marker:
+    """A hostile marker TAK gave us: its uid, and the send and stale times of its latest version."""
+
+    uid: str
+    time: float
+    stale: float
+
+
+MAX_TOMBSTONES = 10_000  # a flood of deletes costs memory up to here; the oldest-ending go first
+MAX_DEVICES = 10_000
 
 
 @dataclass
@@ -111,7 +151,13 @@ class BridgeState:
         self.s = settings
         self.log = log
         self.limiter = cot.RateLimiter(settings.rate_s)
-        self.from_tak: dict[str, str] = {}  # threat id -> marker uid, for threats TAK gave us
+        self.from_tak: dict[str, _Marker] = {}  # threat id -> its marker, for threats TAK gave us
+        self.tombstones: dict[str, Tombstone] = {}  # marker uid -> what a replay must not revive
+        self.devices: dict[str, float] = {}  # TAK device uid -> when last heard
+        self._announce_due: dict[str, float] = {}  # link -> when it gets the whole picture
+        self._announced: dict[str, float] = {}  # link -> when it last got it
+        self.refused_replays = 0
+        self._last_forget = -1e18
         self.threats: dict[str, m.ThreatUpdate] = {}  # threats we show in TAK
         self.units: dict[str, _Unit] = {}
         self._last_refresh = -1e18
@@ -124,22 +170,96 @@ class BridgeState:
     def _send(self, uid: str, data: bytes, now: float) -> list[bytes]:
         return self.limiter.offer(uid, data, now)
 
+    @property
+    def _hae(self) -> float:
+        return float(self.s.origin.alt)
+
+    # -- links and devices -----------------------------------------------------------
+    def on_link_up(self, link: str, now: float) -> Outputs:
+        """A TAK link (re)connected: it gets the whole picture at the next tick."""
+        self._announce_due[link] = now
+        return Outputs()
+
+    def _heard_device(self, uid: str, link: str, now: float) -> None:
+        last = self.devices.get(uid)
+        self.devices[uid] = now
+        if last is None or now - last >= self.s.device_forget_s:
+            due = max(now, self._announced.get(link, -1e18) + self.s.announce_min_s)
+            self._announce_due[link] = min(due, self._announce_due.get(link, due))
+        if len(self.devices) > MAX_DEVICES:
+            oldest = min(self.devices, key=self.devices.__getitem__)
+            del self.devices[oldest]
+
+    def picture(self, now: float) -> list[bytes]:
+        """Every marker and route this bridge shows, as of ``now``, past the rate limiter."""
+        out = [self._threat_cot(tid, t, now) for tid, t in self.threats.items()]
+        for unit, u in self.units.items():
+            data = None if u.direction is None else self._unit_cot(unit, u, u.direction, now)
+            if data is not None:
+                out.append(data)
+            if len(u.route) >= 2:
+                out.append(self._route_cot(unit, u, now))
+        return out
+
+    # -- tombstones ----------------------------------------------------------------
+    def _bury(self, uid: str, after: float, until: float, now: float) -> None:
+        if until <= now:
+            return
+        old = self.tombstones.get(uid)
+        if old is not None:
+            after, until = max(after, old.after), max(until, old.until)
+        self.tombstones[uid] = Tombstone(after, until)
+        if len(self.tombstones) > MAX_TOMBSTONES:
+            first = min(self.tombstones, key=lambda k: self.tombstones[k].until)
+            del self.tombstones[first]
+
+    def _forget(self, now: float) -> None:
+        if now - self._last_forget < 1.0:
+            return  # a scan a second is plenty for what lives minutes
+        self._last_forget = now
+        for uid in [u for u, t in self.tombstones.items() if t.until <= now]:
+            del self.tombstones[uid]
+        for uid in [u for u, t in self.devices.items() if now - t >= self.s.device_forget_s]:
+            del self.devices[uid]
+        for tid in [i for i, mk in self.from_tak.items() if mk.stale <= now]:
+            del self.from_tak[tid]  # the planner lets it go by its TTL
+
+    def restore_tombstones(self, saved: dict[str, Tombstone], now: float) -> None:
+        """Tombstones kept from an earlier run (the driver loads them); expired ones are dropped."""
+        for uid, t in saved.items():
+            self._bury(uid, t.after, t.until, now)
+
     # -- TAK -> planner --------------------------------------------------------
     def on_cot(self, data: bytes, now: float, source: str = "TAK") -> Outputs:
         """A CoT event from TAK: a hostile marker puts a threat, a delete removes it."""
         out = Outputs()
         try:
-            change = cot.to_threat_change(cot.read_event(data), self.s.defaults)
+            ev = cot.read_event(data)
+            change = cot.to_threat_change(ev, self.s.defaults, now)
         except cot.CotError as exc:
             self.dropped += 1
             self.log(f"dropped a CoT event from {source}: {exc}")
             return out
+        if not ev.uid.startswith(cot.UID_PREFIX) and (ev.device or ev.type.startswith("a-f-")):
+            self._heard_device(ev.uid, source, now)
         if isinstance(change, cot.ThreatRemoved):
-            if self.from_tak.pop(change.id, None) is not None:
+            seen = self.from_tak.pop(change.id, None)
+            if seen is not None:
                 out.zenoh.append(ZenohDelete(keys.threat(self.s.mission, change.id)))
+                self._bury(change.uid, max(ev.time, seen.time), max(ev.stale, seen.stale), now)
+            else:
+                self._bury(change.uid, ev.time, max(ev.stale, now + self.s.tombstone_s), now)
             return out
         if change is None:
             return out
+        tomb = self.tombstones.get(change.uid)
+        if tomb is not None:
+            if ev.time <= tomb.after:
+                self.refused_replays += 1  # the server's copy of a deleted marker
+                if ev.stale > tomb.until:
+                    self.tombstones[change.uid] = Tombstone(tomb.after, ev.stale)
+                return out
+            del self.tombstones[change.uid]  # sent after the delete: a new marker
         body = dict(change.body)
         try:
             body["position"] = list(self.s.origin.localise_point(m.LatLon(**body["position"])))  # type: ignore[arg-type]
@@ -148,7 +268,7 @@ class BridgeState:
             self.dropped += 1
             self.log(f"dropped hostile marker {change.uid!r} from {source}: {exc}")
             return out
-        self.from_tak[change.id] = change.uid
+        self.from_tak[change.id] = _Marker(change.uid, ev.time, ev.stale)
         out.zenoh.append(ZenohPut(keys.threat(self.s.mission, change.id), m.encode(update)))
         return out
 
@@ -161,7 +281,7 @@ class BridgeState:
             f"skew {t.skew:g}, weight {t.weight:g}"
         )
         return cot.threat_event(
-            self._uid("threat", tid), lat, lon, now, stale, t.facing_deg, remarks, f"threat {tid}"
+            self._uid("threat", tid), lat, lon, now, stale, t.facing_deg, remarks, f"threat {tid}", self._hae
         )
 
     def on_threat(self, key: str, payload: bytes | None, now: float) -> Outputs:
@@ -176,7 +296,7 @@ class BridgeState:
                 lat, lon = self.s.origin.to_geodetic(*t.position)
                 uid = self._uid("threat", tid)
                 out.cot += self._send(
-                    uid, cot.delete_event(f"{uid}.delete", uid, "a-h-G", lat, lon, now), now
+                    uid, cot.delete_event(f"{uid}.delete", uid, "a-h-G", lat, lon, now, self._hae), now
                 )
             return out
         try:
@@ -226,6 +346,7 @@ class BridgeState:
             u.speed_mps,
             "; ".join(parts),
             unit,
+            self._hae,
         )
 
     def on_direction(self, key: str, payload: bytes, now: float) -> Outputs:
@@ -287,14 +408,22 @@ class BridgeState:
 
     def _route_cot(self, unit: str, u: _Unit, now: float) -> bytes:
         uid = self._uid("route", unit)
-        return cot.route_event(uid, u.route, now, self.s.stale_s, f"route {unit}", u.route_remarks)
+        return cot.route_event(uid, u.route, now, self.s.stale_s, f"route {unit}", u.route_remarks, self._hae)
 
     def tick(self, now: float) -> Outputs:
-        """Held-back events whose turn came, the periodic refresh, and routes asked for too soon."""
+        """Held-back events whose turn came, pictures due, the periodic refresh, routes asked for too soon."""
         out = Outputs(cot=self.limiter.due(now))
         for unit, u in self.units.items():
             if u.route_pending and now - u.route_asked >= self.s.route_min_s:
                 out.routes += self._ask_route(unit, now)
+        due = [link for link, t in self._announce_due.items() if t <= now]
+        if due:
+            picture = self.picture(now)
+            for link in due:
+                del self._announce_due[link]
+                self._announced[link] = now
+                out.to_link += [(link, data) for data in picture]
+        self._forget(now)
         if now - self._last_refresh < self.s.refresh_s:
             return out
         self._last_refresh = now
