@@ -140,26 +140,35 @@ class EscapeRun:
             return None
         return list(map(tuple, out[:n].tolist()))
 
-    def direction(self, x: float, y: float) -> tuple[float, float] | None:
-        """Unit heading towards the path ahead, or ``None`` once at the exit (or abandoned)."""
-        ok, self.cursor, self.advisories, dx, dy = _steer(
+    def direction(self, x: float, y: float) -> tuple[float, float, float] | None:
+        """``(dx, dy, reach)``: the heading towards the path ahead, and how far at most to move along it.
+
+        ``reach`` is the distance left to the goal on the final approach of a
+        ``to_goal`` run (a full step would overshoot the goal, then bounce
+        across it and never come within a tolerance under half a step), else
+        infinite.  ``None`` once at the exit (or abandoned).
+        """
+        ok, self.cursor, self.advisories, dx, dy, reach = _steer(
             self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal, x, y
         )
-        return (dx, dy) if ok else None
+        return (dx, dy, reach) if ok else None
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _steer(
     path: np.ndarray, cursor: int, advisories: int, limit: int, step: float, to_goal: bool, x: float, y: float
-) -> tuple[bool, int, int, float, float]:
-    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy)``; not ``ok`` at the exit or past the limit.
+) -> tuple[bool, int, int, float, float, float]:
+    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy, reach)``; not ``ok`` at the exit or past the limit.
 
     The cursor moves to the nearest of the next 16 points (the first on a
-    tie), and the unit heads for the point two beyond it.
+    tie), and the unit heads for the point two beyond it.  Heading for the
+    last point of a ``to_goal`` run (the goal), ``reach`` is the distance to
+    it, so the last step ends on the goal instead of overshooting it; else
+    infinite.
     """
     advisories += 1
     if advisories > limit:
-        return False, cursor, advisories, 0.0, 0.0
+        return False, cursor, advisories, 0.0, 0.0, math.inf
     n = path.shape[0]
     best = math.inf
     i = cursor
@@ -169,14 +178,15 @@ def _steer(
             best = d
             i = j
     if i >= n - 2 and math.hypot(path[n - 1, 0] - x, path[n - 1, 1] - y) <= step and not to_goal:
-        return False, i, advisories, 0.0, 0.0
+        return False, i, advisories, 0.0, 0.0, math.inf
     t = min(i + 2, n - 1)
     dx = path[t, 0] - x
     dy = path[t, 1] - y
     norm = math.hypot(dx, dy)
     if norm <= 1e-9 * step:
-        return False, i, advisories, 0.0, 0.0
-    return True, i, advisories, dx / norm, dy / norm
+        return False, i, advisories, 0.0, 0.0, math.inf
+    reach = norm if to_goal and t == n - 1 else math.inf
+    return True, i, advisories, dx / norm, dy / norm, reach
 
 
 @numba.njit(cache=True, nogil=True)
@@ -210,11 +220,12 @@ def _ahead(
             return k + 1
         if not (x0 <= x <= x1 and y0 <= y <= y1):
             return k + 1
-        ok, cursor, advisories, dx, dy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
+        ok, cursor, advisories, dx, dy, reach = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
         if not ok:
             return -1
-        x = x + move * dx
-        y = y + move * dy
+        m = min(move, reach)  # the last step onto the goal is shortened, as Stepper's drivers do
+        x = x + m * dx
+        y = y + m * dy
         out[k + 1, 0] = x
         out[k + 1, 1] = y
     return steps + 1

@@ -6,7 +6,8 @@ whole-path answer (``pfp plan``, the preview queryable) built on ``walk``.
 It uses the very ``Stepper`` the live daemon uses -- given one, the live
 unit's own detached copy, mid-escape included -- so a preview is what the
 live stream will do for a unit that moves exactly ``step`` along each
-direction.  The live direction's look-ahead points are ``walk_many`` on
+direction (or ``Advice.reach``, when less: a route's last step ends on the
+goal).  The live direction's look-ahead points are ``walk_many`` on
 ghosts of the live steppers.
 """
 
@@ -130,8 +131,9 @@ def walk(
         adv = stepper.advise(field, x, y)
         if adv.status.terminal:
             return adv, k
-        x += step * adv.dx
-        y += step * adv.dy
+        move = min(step, adv.reach)  # a route's last step ends on the goal
+        x += move * adv.dx
+        y += move * adv.dy
         track.append((x, y))
         if deadline is not None and (k + 1) % 64 == 0 and deadline():
             return None, k + 1
@@ -161,9 +163,9 @@ def walk_many(
         for i, adv in zip(live, advs):
             if adv.status.terminal:
                 continue
-            step = ghosts[i].params.step
+            move = min(ghosts[i].params.step, adv.reach)
             x, y = tracks[i][-1]
-            x, y = x + step * adv.dx, y + step * adv.dy
+            x, y = x + move * adv.dx, y + move * adv.dy
             tracks[i].append((x, y))
             pts[i] = (x, y)
             keep.append(i)

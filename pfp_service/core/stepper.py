@@ -90,7 +90,9 @@ class Advice(NamedTuple):
 
     ``dx, dy`` is a unit vector (``0, 0`` when the status is terminal);
     ``level`` is the weighted threat level at the position; ``distance`` is the
-    distance to the goal in metres.
+    distance to the goal in metres.  ``reach`` is how far at most to move
+    along it: a route's final approach stops on the goal (``EscapeRun.direction``);
+    infinite otherwise, where a driver moves a full step.
     """
 
     status: StepStatus
@@ -100,6 +102,7 @@ class Advice(NamedTuple):
     distance: float
     reason: str = ""
     deliberating: bool = False
+    reach: float = math.inf
 
 
 class Need(NamedTuple):
@@ -451,7 +454,9 @@ class Stepper:
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
-        return Advice(StepStatus.ESCAPING, heading[0], heading[1], level, dist, f"escape: {run.name}")
+        return Advice(
+            StepStatus.ESCAPING, heading[0], heading[1], level, dist, f"escape: {run.name}", reach=heading[2]
+        )
 
     def _watch(self, x: float, y: float, dist: float) -> str:
         p = self.params
