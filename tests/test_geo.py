@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from pfp_service import geo
 from pfp_service.errors import InputError
 from pfp_service.geo import LatLon, Origin
+from pfp_service.wire import geodetic
 from pfp_service.wire import messages as m
 
 pytestmark = pytest.mark.unit
@@ -197,8 +198,8 @@ def test_with_geodetic_fills_bearing_and_lat_lon_lookahead():
         heading_deg=math.degrees(math.atan2(0.6, 0.8)),
         lookahead=[(10.6, 20.8), (11.2, 21.6)],
     )
-    assert geo.with_geodetic(d, None, (10.0, 20.0)) is d
-    g = geo.with_geodetic(d, o, (10.0, 20.0))
+    assert geodetic.with_geodetic(d, None, (10.0, 20.0)) is d
+    g = geodetic.with_geodetic(d, o, (10.0, 20.0))
     assert (
         g.true_bearing_deg is not None and abs(g.true_bearing_deg - d.heading_deg) < 0.01
     )  # near the origin
@@ -208,7 +209,7 @@ def test_with_geodetic_fills_bearing_and_lat_lon_lookahead():
     back = m.decode_direction(m.encode(g))
     assert back == g and isinstance(back.lookahead_geo[0], LatLon)
     still = m.Direction(unit="u1", status=m.DirectionStatus.ARRIVED, vector=(0.0, 0.0))
-    assert geo.with_geodetic(still, o, (0.0, 0.0)).true_bearing_deg is None
+    assert geodetic.with_geodetic(still, o, (0.0, 0.0)).true_bearing_deg is None
 
 
 # -- scenario files ---------------------------------------------------------------
@@ -355,9 +356,9 @@ def test_with_geodetic_without_a_position_uses_the_first_lookahead_point():
         unit="u", status=m.DirectionStatus.EN_ROUTE, vector=(0.0, 1.0), lookahead=[(15_000.0, 1.0)]
     )
     at_unit = geo.true_bearing_deg(o, (15_000.0, 0.0), (0.0, 1.0))
-    assert abs(geo.with_geodetic(d, o).true_bearing_deg - at_unit) < 1e-4
+    assert abs(geodetic.with_geodetic(d, o).true_bearing_deg - at_unit) < 1e-4
     bare = m.Direction(unit="u", status=m.DirectionStatus.EN_ROUTE, vector=(0.0, 1.0))
-    assert geo.with_geodetic(bare, o).true_bearing_deg is None  # no position: not guessed
+    assert geodetic.with_geodetic(bare, o).true_bearing_deg is None  # no position: not guessed
 
 
 def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres():
@@ -428,7 +429,7 @@ def test_a_tick_of_directions_gets_the_lat_lon_each_would_get_alone():
             Direction(unit=f"u{k}", seq=k, status=DirectionStatus.EN_ROUTE, vector=vec, lookahead=pts)
         )
         positions.append(None if k % 5 == 0 else tuple(rng.uniform(-20_000, 20_000, 2).tolist()))
-    got = geo.with_geodetic_many(directions, origin, positions)
+    got = geodetic.with_geodetic_many(directions, origin, positions)
     for d, at, g in zip(directions, positions, got, strict=True):
         assert g.lookahead_geo == geo.lookahead_geodetic(origin, d.lookahead)
         here = at if at is not None else (d.lookahead[0] if d.lookahead else None)
@@ -436,4 +437,4 @@ def test_a_tick_of_directions_gets_the_lat_lon_each_would_get_alone():
             assert g.true_bearing_deg is None
         else:
             assert g.true_bearing_deg == pytest.approx(geo.true_bearing_deg(origin, here, d.vector), abs=1e-9)
-    assert geo.with_geodetic_many(directions, None, positions) == directions
+    assert geodetic.with_geodetic_many(directions, None, positions) == directions

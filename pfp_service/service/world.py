@@ -45,7 +45,7 @@ from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.plan import predict_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
-from pfp_service.geo import with_geodetic_many
+from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.service.events import (
     Deliberated,
     GoalCancelled,
