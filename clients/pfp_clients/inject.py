@@ -42,7 +42,6 @@ from pfp_service.wire import (
     decode_unit_state,
     encode,
     keys,
-    zenoh_encoding,
 )
 
 __all__ = ["Fired", "InjectReport", "Verdict", "judge", "main", "report_lines", "run_inject"]
@@ -118,15 +117,16 @@ class _Runner:
     """The script's state machine; the Zenoh parts are the two callables it is given."""
 
     def __init__(self, script: Script, session: Any, mission: str, say: Callable[[str], None]) -> None:
+        from pfp_service.wire.delivery import Deliverer
+
         self.script = script
-        self.s = session
+        self.s = Deliverer(session, mission, say)  # goals and threats reach a planner that starts later
         self.m = mission
         self.say = say
         self.watch = Watch()
         self.index = 0
         self.wait_until: float | None = None
         self.fired: list[Fired] = []
-        self.enc = zenoh_encoding()
 
     def due(self, step: Step, t_s: float) -> bool:
         if step.at_s is not None and t_s < step.at_s:
@@ -190,7 +190,7 @@ class _Runner:
         s, m, w = self.s, self.m, self.watch
         if isinstance(step, AddThreat):
             update = step.update()
-            s.put(keys.threat(m, step.threat), encode(update), encoding=self.enc)
+            s.put(keys.threat(m, step.threat), encode(update))
             w.threat_put(step.threat, update, t_s)
         elif isinstance(step, MoveThreat):
             old = w.current(step.threat)
@@ -207,13 +207,13 @@ class _Runner:
                 weight=old.update.weight,
                 ttl_s=old.update.ttl_s,
             )
-            s.put(keys.threat(m, step.threat), encode(moved), encoding=self.enc)
+            s.put(keys.threat(m, step.threat), encode(moved))
             w.threat_put(step.threat, moved, t_s)
         elif isinstance(step, RemoveThreat):
             s.delete(keys.threat(m, step.threat))
             w.threat_removed(step.threat, t_s)
         elif isinstance(step, SetGoal):
-            s.put(keys.unit_goal(m, step.unit), encode(step.goal()), encoding=self.enc)
+            s.put(keys.unit_goal(m, step.unit), encode(step.goal()))
         elif isinstance(step, CancelGoal):
             s.delete(keys.unit_goal(m, step.unit))
 
@@ -307,8 +307,8 @@ def run_inject(
                 ready.set()
             if on_wait is not None:
                 on_wait(t_s, run.index, run.waiting_on(t_s))
-            if run.index >= len(script.timeline) and _settled(script, w, t_s):
-                reason = "timeline done, expectations settled"
+            if run.index >= len(script.timeline) and _settled(script, w, t_s) and not run.s.pending():
+                reason = "timeline done, expectations settled"  # and every write taken by a planner
                 break
             if t_s >= script.duration_s:
                 reason = f"duration {script.duration_s:g} s reached"
@@ -317,6 +317,7 @@ def run_inject(
                 reason = "stopped"
                 break
     finally:
+        run.s.close()
         for sub in subs:
             with contextlib.suppress(Exception):  # already gone with the session
                 sub.undeclare()
@@ -338,22 +339,36 @@ def report_lines(rep: InjectReport) -> list[str]:
     return out
 
 
-def main(script: Script, mission: str, speed_up: float, conf: Any, progress_s: float = 5.0) -> int:
+def main(
+    script: Script,
+    mission: str,
+    speed_up: float,
+    conf: Any,
+    progress_s: float = 5.0,
+    stop: threading.Event | None = None,
+) -> int:
     """``pfp inject``: open a session from ``conf``, play with progress, print the report; 0 iff all held.
+
+    ``stop`` ends the script early (SIGTERM, SIGINT): the report then judges what was seen.
 
     Raises:
         ZenohError: the session cannot be opened (``Unreachable`` when no router answers).
     """
-    from pfp_clients.common import open_session
+    from pfp_clients.common import open_session_waiting
     from pfp_clients.progress import Progress
 
     total = len(script.timeline)
-    with open_session(conf) as session, Progress(progress_s, total=total) as progress:
+    session = open_session_waiting(conf, print, stop)  # started before `pfp serve`: wait for its router
+    if session is None:  # stopped while waiting
+        return 1
+    with session, Progress(progress_s, total=total) as progress:
 
         def on_wait(t_s: float, done: int, what: str) -> None:
             progress.update(f"t={t_s:7.2f}s  {what}", done)
 
-        rep = run_inject(session, script, mission, speed_up, say=progress.say, on_wait=on_wait)
+        if stop is not None and stop.is_set():  # a signal while the session opened
+            return 1
+        rep = run_inject(session, script, mission, speed_up, say=progress.say, stop=stop, on_wait=on_wait)
     for line in report_lines(rep):
         print(line)
     return 0 if rep.ok else 1

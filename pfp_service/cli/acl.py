@@ -88,6 +88,16 @@ def _publish(*key_exprs: str, delete: bool = False) -> list[Grant]:
     return [Grant(INGRESS, msgs, key_exprs)]
 
 
+def _acked_write(mission: str, *key_exprs: str) -> list[Grant]:
+    """Acknowledged writes of goals and threats (``wire.delivery``): put, delete, ask a planner to take
+    them, and watch for planners starting."""
+    return [
+        *_publish(*key_exprs, delete=True),
+        *_ask(*key_exprs),
+        *_watch_tokens(keys.alive_planners(mission)),
+    ]
+
+
 def _matching(mission: str) -> list[Grant]:
     """Every principal learns which keys of the mission have subscribers and queryables.
 
@@ -130,7 +140,7 @@ def unit_grants(mission: str, unit: str, own_goal: bool = True) -> list[Grant]:
         *_ask(keys.preview(mission, unit)),
     ]
     if own_goal:
-        out += _publish(keys.unit_goal(mission, unit), delete=True)
+        out += _acked_write(mission, keys.unit_goal(mission, unit))
     return out
 
 
@@ -145,6 +155,7 @@ def fleet_grants(mission: str, units: Sequence[str], own_goal: bool = True) -> l
 def planner_grants(mission: str, planner: str) -> list[Grant]:
     own = (keys.planner_status(mission, planner), keys.world(mission, planner))
     every = (keys.planner_statuses(mission), keys.worlds(mission))
+    writes = (keys.goals(mission), keys.threats(mission))
     return [
         *_subscribe(keys.unit_states(mission), keys.goals(mission), keys.threats(mission)),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
@@ -154,9 +165,10 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
         *_subscribe(keys.unit_missions(mission)),
         # its own status and world queryables; replies also on the wildcards that
         # `pfp health` and `pfp status` ask with
-        Grant(INGRESS, ("declare_queryable",), (keys.previews(mission), *own)),
-        Grant(INGRESS, ("reply",), (keys.previews(mission), *every)),
-        Grant(EGRESS, ("query",), (keys.previews(mission), *every)),
+        # ... and the goal and threat queryables that acknowledge writes (wire.delivery)
+        Grant(INGRESS, ("declare_queryable",), (keys.previews(mission), *own, *writes)),
+        Grant(INGRESS, ("reply",), (keys.previews(mission), *every, *writes)),
+        Grant(EGRESS, ("query",), (keys.previews(mission), *every, *writes)),
         *_token(keys.alive_planner(mission, planner)),
         # other planners' status and world: conflict detection, `pfp health` with the planner's identity
         *_ask(*every),
@@ -164,11 +176,11 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
 
 
 def reporter_grants(mission: str) -> list[Grant]:
-    return _publish(keys.threats(mission), delete=True)
+    return _acked_write(mission, keys.threats(mission))
 
 
 def commander_grants(mission: str) -> list[Grant]:
-    return [*_publish(keys.goals(mission), delete=True), *_ask(keys.previews(mission))]
+    return [*_acked_write(mission, keys.goals(mission)), *_ask(keys.previews(mission))]
 
 
 def observer_grants(mission: str) -> list[Grant]:

@@ -70,6 +70,7 @@ from pfp_service.wire import (
     encode,
     keys,
 )
+from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
 
 __all__ = ["PlannerNode"]
 
@@ -87,6 +88,18 @@ TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
 TRIM_AFTER = 256  # units forgotten before freed memory is handed back to the OS
 TRIM_QUIET_S = 1.0  # ... once no unit was forgotten for this long
 TRIM_EVERY_S = 10.0  # ... or this often while they go on being forgotten
+WRITES_MAX = 20_000  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
+PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
+PEER_MISSES = 3  # a same-id peer that did not answer this many asks in a row is gone
+
+
+class _Write:
+    """A goal or threat write from a put (``query`` None) or an acknowledged-write query."""
+
+    __slots__ = ("input", "key", "mark", "query", "received")
+
+    def __init__(self, key: str, mark: WriteMark | None, inp: Input, received: float, query: Any) -> None:
+        self.key, self.mark, self.input, self.received, self.query = key, mark, inp, received, query
 
 
 class _Latency:
@@ -169,6 +182,10 @@ class PlannerNode:
         self._lock = threading.Lock()
         self._states: dict[str, tuple[Any, float]] = {}
         self._inbox: collections.deque[Input] = collections.deque()
+        self._writes: collections.deque[_Write] = collections.deque()
+        self._order = WriteOrder()
+        self.zid = str(session.info.zid())
+        self._same_id: dict[str, int] = {}  # planners with this id on other sessions -> asks missed
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -208,6 +225,9 @@ class PlannerNode:
             self._state_ring,
             s.declare_subscriber(keys.goals(m), self._on_goal),
             s.declare_subscriber(keys.threats(m), self._on_threat),
+            # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
+            s.declare_queryable(keys.goals(m), self._on_goal_query),
+            s.declare_queryable(keys.threats(m), self._on_threat_query),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
@@ -268,31 +288,63 @@ class PlannerNode:
         with self._lock:
             self._states[uid] = (msg, received)
 
-    def _on_goal(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
+    def _goal_input(self, key: str, delete: bool, payload: bytes) -> Input:
         try:
             uid = keys.parse(key).id
-            if sample.kind == zenoh.SampleKind.DELETE:
-                self._push(GoalCancelled(uid))
-            else:
-                self._push(
-                    GoalSet(uid, decode_goal(sample.payload.to_bytes(), self.cfg.bounds, self._origin))
-                )
+            if delete:
+                return GoalCancelled(uid)
+            return GoalSet(uid, decode_goal(payload, self.cfg.bounds, self._origin))
         except InputError as err:
-            self._push(InputRejected(key, err))
+            return InputRejected(key, err)
 
-    def _on_threat(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
+    def _threat_input(self, key: str, delete: bool, payload: bytes) -> Input:
         try:
             tid = keys.parse(key).id
-            if sample.kind == zenoh.SampleKind.DELETE:
-                self._push(ThreatRemoved(tid))
-            else:
-                self._push(
-                    ThreatPut(tid, decode_threat(sample.payload.to_bytes(), self.cfg.bounds, self._origin))
-                )
+            if delete:
+                return ThreatRemoved(tid)
+            return ThreatPut(tid, decode_threat(payload, self.cfg.bounds, self._origin))
         except InputError as err:
-            self._push(InputRejected(key, err))
+            return InputRejected(key, err)
+
+    def _push_write(self, write: _Write) -> None:
+        with self._lock:
+            if len(self._writes) >= WRITES_MAX:  # shed: a writer asks again, a put is counted lost
+                self.counters["overload"] += 1
+                if write.query is not None:
+                    write.query.drop()
+                return
+            self._writes.append(write)
+        self._wake.set()
+
+    def _on_sample_write(self, sample: zenoh.Sample, make: Callable[[str, bool, bytes], Input]) -> None:
+        key = str(sample.key_expr)
+        att = sample.attachment
+        mark = decode_mark(att.to_bytes() if att is not None else None)
+        inp = make(key, sample.kind == zenoh.SampleKind.DELETE, sample.payload.to_bytes())
+        self._push_write(_Write(key, mark, inp, time.time(), None))
+
+    def _on_query_write(self, query: zenoh.Query, make: Callable[[str, bool, bytes], Input]) -> None:
+        key = str(query.key_expr)
+        att = query.attachment
+        mark = decode_mark(att.to_bytes() if att is not None else None)
+        if mark is None:  # not a write: a plain get on a goal or threat key has nothing to learn here
+            query.drop()
+            return
+        body = query.payload
+        inp = make(key, mark.delete, body.to_bytes() if body is not None else b"")
+        self._push_write(_Write(key, mark, inp, time.time(), query))
+
+    def _on_goal(self, sample: zenoh.Sample) -> None:
+        self._on_sample_write(sample, self._goal_input)
+
+    def _on_threat(self, sample: zenoh.Sample) -> None:
+        self._on_sample_write(sample, self._threat_input)
+
+    def _on_goal_query(self, query: zenoh.Query) -> None:
+        self._on_query_write(query, self._goal_input)
+
+    def _on_threat_query(self, query: zenoh.Query) -> None:
+        self._on_query_write(query, self._threat_input)
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
@@ -380,9 +432,14 @@ class PlannerNode:
             else:  # the longest waiting first (a unit reporting again keeps its place: latest wins)
                 states = {u: self._states.pop(u) for u in list(itertools.islice(self._states, TICK_UNITS))}
             queries, self._queries = self._queries, collections.deque()
-            if self._inbox or self._states:
+            if len(self._writes) <= TICK_INPUTS:
+                writes, self._writes = self._writes, collections.deque()
+            else:
+                writes = collections.deque(self._writes.popleft() for _ in range(TICK_INPUTS))
+            if self._inbox or self._states or self._writes:
                 self._wake.set()  # the rest at once, in the next tick
         now = self.clock()
+        acks = self._admit(writes, inbox)
         batch: list[Input] = list(inbox)
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
         batch.append(Tick(now))
@@ -391,6 +448,7 @@ class PlannerNode:
             batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
         self._log_inputs(inbox)
         out = self.world.apply(batch, now)
+        self._acknowledge(acks, batch)
         forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
         if self.store is not None and (out.missions or forgotten):
             self.store.record(out.missions, forgotten)
@@ -402,6 +460,8 @@ class PlannerNode:
         logged: collections.Counter[str] = collections.Counter()
         for ev in out.events:
             self._event(ev, logged)
+        for fault in out.faults:  # the world's bulkheads: once a minute per key, never a traceback
+            log.error("input failed inside the planner", extra={"fields": fault.fields()})
         for kind, n in logged.items():
             if n > EVENT_LOG_LINES:  # a storm (5,000 units stale at once) is one line, not 5,000
                 log.warning("more events", extra={"fields": {"kind": kind, "count": n - EVENT_LOG_LINES}})
@@ -419,6 +479,45 @@ class PlannerNode:
         for kind, query, t_recv in queries:
             self._answer(kind, query, t_recv)
         self._desk.expire(self.clock())
+
+    def _admit(
+        self, writes: collections.deque[_Write], inbox: collections.deque[Input]
+    ) -> list[tuple[_Write, str]]:
+        """The writes newer than the last applied on their key join ``inbox``; the outcome of each write.
+
+        A write's put and its query carry one mark: the second is a duplicate.
+        An older write asked again (a put while no planner ran, then a delete
+        from another writer) is superseded, never applied over the newer one.
+        """
+        acks: list[tuple[_Write, str]] = []
+        for w in writes:
+            if isinstance(w.input, InputRejected):
+                outcome = "rejected"  # never ordered: a bad write supersedes nothing
+                if w.query is None:
+                    inbox.append(w.input)  # the rejected event comes from the put; the writer's ask hears why
+            else:
+                outcome = self._order.admit(w.key, w.mark, w.received)
+                if outcome == "applied":
+                    inbox.append(w.input)
+            if w.query is not None:
+                acks.append((w, outcome))
+        return acks
+
+    def _acknowledge(self, acks: list[tuple[_Write, str]], applied: list[Input]) -> None:
+        """Answer each acknowledged-write query, once its write is committed and applied (or refused)."""
+        if not acks:
+            return
+        kept = {id(inp) for inp in applied}
+        for w, outcome in acks:
+            reason = ""
+            if isinstance(w.input, InputRejected):
+                reason = f"{w.input.error.path}: {w.input.error.reason}"
+            elif outcome == "applied" and id(w.input) not in kept:  # the store refused it
+                outcome, reason = "rejected", "not stored (see the planner's rejected event)"
+            ack = WriteAck(planner=self.cfg.planner_id, session=self.zid, outcome=outcome, reason=reason)  # type: ignore[arg-type]
+            with contextlib.suppress(Exception):  # the writer gave up waiting: nothing to answer
+                w.query.reply(w.key, msgspec.json.encode(ack), encoding=_JSON)
+            w.query.drop()
 
     def _log_inputs(self, inbox: collections.deque[Input], limit: int = 20) -> None:
         """One line per goal or threat change, at most ``limit`` a tick and a count of the rest."""
@@ -513,4 +612,5 @@ class PlannerNode:
             overload=c["overload"] + self.counters["overload"],
             pushes=c["pushes"],
             pushes_resent=c["pushes_resent"],
+            faults=c["faults"],
         )
