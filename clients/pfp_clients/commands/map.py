@@ -37,6 +37,23 @@ def origin(text: str) -> Any:
         raise argparse.ArgumentTypeError(exc.reason) from None
 
 
+def allowed_host(text: str) -> str:
+    """``--allowed-host NAME``: a host name or IP address a browser may use for the map."""
+    import ipaddress
+    import re
+
+    name = text.strip().lower().rstrip(".")
+    bare = name[1:-1] if name.startswith("[") and name.endswith("]") else name
+    try:
+        ipaddress.ip_address(bare)
+        return bare
+    except ValueError:
+        pass
+    if not re.fullmatch(r"[a-z0-9_]([a-z0-9_-]*[a-z0-9_])?(\.[a-z0-9_]([a-z0-9_-]*[a-z0-9_])?)*", name):
+        raise argparse.ArgumentTypeError(f"expected a host name or IP address, e.g. map.local, got {text!r}")
+    return name
+
+
 def push_rate(text: str) -> float:
     value = positive_float(text)
     if value > MAX_PUSH_HZ:
@@ -60,6 +77,14 @@ def register(sub: Any) -> None:
         help="where to serve the page (default: 127.0.0.1:8080; port 0: any free port)",
     )
     p.add_argument("--allow-edit", action="store_true", help="let the page put and delete threats and goals")
+    p.add_argument(
+        "--allowed-host",
+        type=allowed_host,
+        action="append",
+        metavar="NAME",
+        help="a host name the page may be opened by besides the --http address, repeatable; any other "
+        "Host header is refused (DNS rebinding) (default: the --http address, and localhost on loopback)",
+    )
     p.add_argument(
         "--origin",
         type=origin,
@@ -120,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
         stale_s=args.stale_s,
         origin=args.origin,
         tiles=args.tiles,
+        allowed_hosts=tuple(args.allowed_host or ()),
     )
     conf = _zenoh_config(args)
     with open_session(conf) as session:

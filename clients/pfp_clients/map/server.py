@@ -28,16 +28,23 @@ HTTP API (JSON):
 Edits need the header ``X-PFP-Edit: 1``: a custom header cannot be sent
 cross-origin without a CORS preflight, which this server never grants, so
 another web page open in the operator's browser cannot edit the mission.
+
+Every request, the WebSocket included, must name a host this server serves
+in its ``Host`` header (``host_allowed``), or it gets 421 and an empty body:
+a DNS-rebinding page (evil.example resolved to 127.0.0.1) reaches the port
+but names its own host, so it can neither read the mission nor edit it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import logging
 import signal
+import socket
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -51,12 +58,57 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_goal, decode_threat, keys
 
-__all__ = ["STATIC_DIR", "MapOptions", "MapServer", "serve"]
+__all__ = ["STATIC_DIR", "MapOptions", "MapServer", "host_allowed", "serve"]
 
 log = logging.getLogger("pfp.map")
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 _EDIT_HEADER = "X-PFP-Edit"
 _SEND_TIMEOUT_S = 2.0  # a browser that takes longer to accept one frame is dropped
+_LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+_WILDCARDS = ("", "0.0.0.0", "::")
+
+
+def _host_name(header: str) -> str:
+    """The name in a ``Host`` header (``name``, ``name:port``, ``[v6]:port``), lower-case, no final dot."""
+    text = header.strip().lower()
+    if text.startswith("["):
+        name = text[1 : text.find("]")] if "]" in text else ""
+    else:
+        name = text.rsplit(":", 1)[0] if text.count(":") == 1 else text
+    return name.rstrip(".")
+
+
+def _ip(name: str) -> ipaddress.IPv4Address | ipaddress.IPv6Address | None:
+    try:
+        return ipaddress.ip_address(name)
+    except ValueError:
+        return None
+
+
+def host_allowed(header: str | None, bind_host: str, extra: Iterable[str] = ()) -> bool:
+    """Whether a request's ``Host`` header names a host this server serves.
+
+    Allowed: the address it is bound to; for a loopback bind also ``localhost``,
+    ``127.0.0.1`` and ``::1``; for a wildcard bind (``0.0.0.0``, ``::``) any IP
+    address and this machine's name (an address is no DNS name, so it cannot be
+    rebound); and every name in ``extra`` (``--allowed-host``).  A missing
+    header is refused.
+    """
+    if not header:
+        return False
+    name = _host_name(header)
+    if not name:
+        return False
+    bind = bind_host.strip("[]").lower()
+    allowed = {bind, *(_host_name(h) for h in extra)}
+    bind_ip = _ip(bind)
+    if bind == "localhost" or (bind_ip is not None and bind_ip.is_loopback):
+        allowed.update(_LOOPBACK_NAMES)
+    if bind in _WILDCARDS:
+        if _ip(name) is not None:
+            return True
+        allowed.update((*_LOOPBACK_NAMES, socket.gethostname().lower()))
+    return name in allowed
 
 
 @dataclass(frozen=True)
@@ -73,6 +125,7 @@ class MapOptions:
         query_timeout_s: how long a status, world or preview query waits.
         origin: the mission origin (the planner's (0, 0)); None draws plain metres.
         tiles: a tile URL template for an offline tile server (lat/lon only).
+        allowed_hosts: names a browser may use for this server besides ``host`` (``--allowed-host``).
     """
 
     mission: str = keys.DEFAULT_MISSION
@@ -85,6 +138,7 @@ class MapOptions:
     query_timeout_s: float = 2.0
     origin: Origin | None = None
     tiles: str | None = None
+    allowed_hosts: tuple[str, ...] = ()
 
 
 class _Browser:
@@ -117,6 +171,7 @@ class MapServer:
         self.ticks = 0
         self.tick_ms_max = 0.0
         self.tick_ms_total = 0.0
+        self.refused_hosts = 0
 
     # -- the pump --------------------------------------------------------------------
     def config_view(self) -> dict[str, Any]:
@@ -142,6 +197,7 @@ class MapServer:
             "tick_ms_mean": self.tick_ms_total / self.ticks if self.ticks else None,
             "tick_ms_max": self.tick_ms_max,
             "frames_sent": self.frames_sent,
+            "refused_hosts": self.refused_hosts,
             "browsers": len(self._browsers),
             "units": len(self.model.units),
             "threats": len(self.model.threats),
@@ -211,8 +267,20 @@ class MapServer:
             await asyncio.sleep(self.opts.status_period_s)
 
     # -- HTTP --------------------------------------------------------------------------
+    @web.middleware
+    async def _host_guard(
+        self, request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]
+    ) -> web.StreamResponse:
+        header = request.headers.get("Host")
+        if host_allowed(header, self.opts.host, self.opts.allowed_hosts):
+            return await handler(request)
+        self.refused_hosts += 1
+        if self.refused_hosts <= 10:  # a rebinding page may knock often: the first few say enough
+            log.warning("map: refused a request for host %r (not one this map serves)", (header or "")[:80])
+        return web.Response(status=421, body=b"")
+
     def app(self) -> web.Application:
-        app = web.Application(client_max_size=64 * 1024)
+        app = web.Application(client_max_size=64 * 1024, middlewares=[self._host_guard])
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._ws)
         app.router.add_get("/api/state", self._state)
