@@ -196,3 +196,22 @@ def test_points_carry_the_origin_altitude():
         for lk in ev.findall("detail/link"):
             assert float(lk.get("point").split(",")[2]) == 123.5
     s.on_threat(keys.threat("m", "t1"), None, T0 + 5)
+
+
+# -- tombstones on disk ---------------------------------------------------------------------
+def test_tombstones_survive_in_a_file_and_a_damaged_file_is_set_aside(tmp_path):
+    from pfp_service.tak import tombfile
+
+    path = tmp_path / "m" / tombfile.FILE_NAME
+    assert tombfile.load(path, T0) == tombfile.Loaded()  # none yet
+    kept = {"a": Tombstone(T0, T0 + 100), "gone": Tombstone(T0 - 50, T0 - 1)}
+    assert tombfile.save(path, kept) is None
+    assert tombfile.load(path, T0).tombstones == {"a": Tombstone(T0, T0 + 100)}
+    for junk in (b"\x00\xff garbage", b'{"a": [1, "x"]}', b'{"a": [1, NaN]}', b"[]"):
+        path.write_bytes(junk)
+        loaded = tombfile.load(path, T0)
+        assert loaded.tombstones == {} and "unreadable" in (loaded.note or ""), junk
+        assert not path.exists() and (path.parent / f"{path.name}.corrupt-{int(T0)}").exists()
+    (tmp_path / "file").write_text("x")
+    note = tombfile.save(tmp_path / "file" / tombfile.FILE_NAME, kept)  # a file where the folder goes
+    assert note is not None and "cannot save tombstones" in note

@@ -3,7 +3,8 @@
 Hostile ground markers (``a-h-G*``) become threats (the uid is the id, the
 time left to the marker's stale time its TTL, its course its facing, the
 shape from the flags); a marker deleted in TAK removes its threat, and a TAK
-server's replay of it does not bring it back before its stale time.  The planner's threats,
+server's replay of it does not bring it back before its stale time, even
+after a restart (the tombstones are kept in --state-dir).  The planner's threats,
 each unit (with its direction as course and its status) and each unit's
 planned route go back to TAK.  Needs the ``[tak]`` extra (pytak) and the
 mission origin, the same as ``pfp serve --origin``.
@@ -81,6 +82,12 @@ def register(sub: Any) -> None:
     r.add_argument(
         "--route-points", type=positive_int, default=50, metavar="N", help="waypoints per route, at most"
     )
+    p.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        help="where deleted markers' tombstones outlive a restart; 'none' keeps them in memory only "
+        "(default: $XDG_STATE_HOME/pfp/MISSION or ~/.local/state/pfp/MISSION)",
+    )
     p.set_defaults(func=run)
 
 
@@ -133,8 +140,27 @@ def run(args: argparse.Namespace) -> int:
         stale_s=args.stale_s,
         route_points=args.route_points,
     )
+    tombstones = _tombstone_file(args)
     tls = TlsFiles(args.tls_cert, args.tls_key, args.tls_ca, args.tls_dont_verify)
     urls = args.cot_url or [DEFAULT_COT_URL]
     signal.signal(signal.SIGTERM, _terminated)
     print(f"pfp tak: mission {args.mission}, links {', '.join(urls)}", file=sys.stderr, flush=True)
-    return bridge(settings, urls, session_config(args), tls)
+    code = bridge(settings, urls, session_config(args), tls, tombstones=tombstones)
+    print("pfp tak: stopped", file=sys.stderr, flush=True)
+    return code
+
+
+def _tombstone_file(args: argparse.Namespace) -> Any:
+    import os
+    from pathlib import Path
+
+    from pfp_service.errors import InputError
+    from pfp_service.service.config import default_state_dir
+    from pfp_service.tak.tombfile import FILE_NAME
+
+    if args.state_dir == "none":
+        return None
+    folder = Path(args.state_dir) if args.state_dir else default_state_dir(os.environ, args.mission)
+    if folder.exists() and not folder.is_dir():
+        raise InputError("--state-dir", f"{folder} is not a directory")
+    return folder / FILE_NAME

@@ -34,10 +34,11 @@ import time
 from collections.abc import Callable, Sequence
 from configparser import ConfigParser
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from pfp_service.errors import InputError
-from pfp_service.tak import cot
+from pfp_service.tak import cot, tombfile
 from pfp_service.tak.framing import EventFramer
 from pfp_service.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
 from pfp_service.wire import keys
@@ -181,9 +182,30 @@ async def _main(
     session: Any,
     stop: asyncio.Event,
     ready: asyncio.Event | None,
+    tomb_path: Path | None,
 ) -> int:
     loop = asyncio.get_running_loop()
     state = BridgeState(settings, log=lambda text: log.warning("tak: %s", text))
+    saved_version, save_failed = -1, False
+    if tomb_path is not None:
+        loaded = tombfile.load(tomb_path, time.time())
+        if loaded.note:
+            log.warning("tak: %s", loaded.note)
+        state.restore_tombstones(loaded.tombstones, time.time())
+        if loaded.tombstones:
+            log.info("tak: %d tombstone(s) of deleted markers from %s", len(state.tombstones), tomb_path)
+        saved_version = state.tombstones_version
+
+    def keep_tombstones() -> None:
+        nonlocal saved_version, save_failed
+        if tomb_path is None or state.tombstones_version == saved_version:
+            return
+        saved_version = state.tombstones_version
+        note = tombfile.save(tomb_path, state.tombstones)
+        if note is not None and not save_failed:
+            log.warning("tak: %s", note)  # said once; they stay in memory, and the next change tries again
+        save_failed = note is not None
+
     inbox: asyncio.Queue[tuple[str, str, bytes | None]] = asyncio.Queue()
     rx: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize=RX_BACKLOG)
     links = [_Link(u, tls, rx, on_up=lambda url: emit(state.on_link_up(url, time.time()))) for u in urls]
@@ -274,6 +296,7 @@ async def _main(
     async def ticker() -> None:
         while True:
             emit(state.tick(time.time()))
+            keep_tombstones()
             await asyncio.sleep(TICK_S)
 
     tasks = [
@@ -291,6 +314,8 @@ async def _main(
         await asyncio.gather(*pending, return_exceptions=True)
         for sub in subs:
             sub.undeclare()
+        keep_tombstones()
+        log.info("tak: stopped: links closed, subscribers undeclared")
         for sig in (signal.SIGTERM, signal.SIGINT):
             with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
                 loop.remove_signal_handler(sig)
@@ -310,6 +335,7 @@ def run(
     tls: TlsFiles | None = None,
     stop: asyncio.Event | None = None,
     ready: asyncio.Event | None = None,
+    tombstones: Path | None = None,
 ) -> int:
     """Run the bridge until ``stop`` is set, SIGTERM (returns 0) or SIGINT (returns 130).
 
@@ -320,6 +346,7 @@ def run(
         tls: certificate files for ``tls://`` links.
         stop: set it (from the loop's thread) to end the bridge.
         ready: set once every link has connected the first time.
+        tombstones: the file deleted markers' tombstones are kept in across restarts (None: memory only).
 
     Returns:
         the exit code: 0 stopped or terminated, 130 interrupted.
@@ -334,4 +361,4 @@ def run(
     with map_zenoh_errors("--connect"):
         session = zenoh.open(zenoh_conf)
     with session:
-        return asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready))
+        return asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready, tombstones))

@@ -157,6 +157,7 @@ class BridgeState:
         self._announce_due: dict[str, float] = {}  # link -> when it gets the whole picture
         self._announced: dict[str, float] = {}  # link -> when it last got it
         self.refused_replays = 0
+        self.tombstones_version = 0  # bumped on every change: the driver saves them when it moves
         self._last_forget = -1e18
         self.threats: dict[str, m.ThreatUpdate] = {}  # threats we show in TAK
         self.units: dict[str, _Unit] = {}
@@ -209,6 +210,7 @@ class BridgeState:
         if old is not None:
             after, until = max(after, old.after), max(until, old.until)
         self.tombstones[uid] = Tombstone(after, until)
+        self.tombstones_version += 1
         if len(self.tombstones) > MAX_TOMBSTONES:
             first = min(self.tombstones, key=lambda k: self.tombstones[k].until)
             del self.tombstones[first]
@@ -219,6 +221,7 @@ class BridgeState:
         self._last_forget = now
         for uid in [u for u, t in self.tombstones.items() if t.until <= now]:
             del self.tombstones[uid]
+            self.tombstones_version += 1
         for uid in [u for u, t in self.devices.items() if now - t >= self.s.device_forget_s]:
             del self.devices[uid]
         for tid in [i for i, mk in self.from_tak.items() if mk.stale <= now]:
@@ -258,8 +261,10 @@ class BridgeState:
                 self.refused_replays += 1  # the server's copy of a deleted marker
                 if ev.stale > tomb.until:
                     self.tombstones[change.uid] = Tombstone(tomb.after, ev.stale)
+                    self.tombstones_version += 1
                 return out
             del self.tombstones[change.uid]  # sent after the delete: a new marker
+            self.tombstones_version += 1
         body = dict(change.body)
         try:
             body["position"] = list(self.s.origin.localise_point(m.LatLon(**body["position"])))  # type: ignore[arg-type]

@@ -1,0 +1,93 @@
+"""The bridge's tombstones on disk, so a restarted ``pfp tak`` does not revive a deleted marker.
+
+A TAK server keeps every marker until its stale time and replays it on each
+connection, deletes or not; the tombstones (``state.Tombstone``) are what
+refuses those replays.  In memory they survive a link's reconnect; in this
+file they survive the process.  One JSON object, ``{uid: [after, until]}``
+(Unix seconds), written whole to a temporary file and renamed over the old
+one, so a crash leaves the old file or the new one, never half of either.
+
+A file that cannot be read (damaged, not ours) is moved aside as
+``<name>.corrupt-<unix s>`` and the bridge starts without it; every failure
+is a value (``Loaded.note``), never an exception, and the bridge carries on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import msgspec
+
+from pfp_service.tak.state import Tombstone
+
+__all__ = ["FILE_NAME", "Loaded", "load", "save"]
+
+FILE_NAME = "tak-tombstones.json"
+_MAX_BYTES = 16 * 1024 * 1024  # far above MAX_TOMBSTONES entries; more is not our file
+
+
+@dataclass(frozen=True, slots=True)
+class Loaded:
+    """What ``load`` found: the tombstones, and one line to log when something was wrong."""
+
+    tombstones: dict[str, Tombstone] = field(default_factory=dict)
+    note: str | None = None
+
+
+def _decode(data: bytes) -> dict[str, Tombstone]:
+    raw = msgspec.json.decode(data, type=dict[str, tuple[float, float]])
+    out = {}
+    for uid, (after, until) in raw.items():
+        if not (uid and math.isfinite(after) and math.isfinite(until)):
+            raise ValueError(f"{uid!r}: not a uid with two finite times")
+        out[uid] = Tombstone(after, until)
+    return out
+
+
+def load(path: Path, now: float) -> Loaded:
+    """The tombstones kept in ``path`` (none if it does not exist); a damaged file is moved aside."""
+    try:
+        data = path.read_bytes() if path.stat().st_size <= _MAX_BYTES else None
+    except FileNotFoundError:
+        return Loaded()
+    except OSError as exc:
+        return Loaded(note=f"{path}: cannot read ({exc.strerror or exc}); starting without tombstones")
+    try:
+        if data is None:
+            raise ValueError(f"larger than {_MAX_BYTES} bytes")
+        kept = _decode(data)
+    except (msgspec.DecodeError, msgspec.ValidationError, ValueError) as exc:
+        return Loaded(note=_set_aside(path, now, str(exc)))
+    return Loaded({uid: t for uid, t in kept.items() if t.until > now})
+
+
+def _set_aside(path: Path, now: float, reason: str) -> str:
+    aside = path.with_name(f"{path.name}.corrupt-{int(now)}")
+    try:
+        os.replace(path, aside)
+        where = f"moved aside to {aside.name}"
+    except OSError as exc:
+        where = f"cannot move it aside: {exc.strerror or exc}"
+    return f"{path}: unreadable ({reason[:120]}); {where}; starting without tombstones"
+
+
+def save(path: Path, tombstones: dict[str, Tombstone]) -> str | None:
+    """Write ``tombstones`` to ``path`` atomically; returns None, or one line saying why not."""
+    data = msgspec.json.encode({uid: (t.after, t.until) for uid, t in tombstones.items()})
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        return f"{path}: cannot save tombstones ({exc.strerror or exc})"
+    return None
