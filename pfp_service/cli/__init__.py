@@ -18,6 +18,7 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import sys
 from collections.abc import Iterator, Sequence
 from importlib.metadata import entry_points
@@ -50,12 +51,20 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {shown})"
 
 
+# A word that starts with "-" and a digit (or "-." and a digit) is a value, never a flag: argparse's own
+# pattern takes only plain numbers, so ``--origin -33.9,151.2`` or ``--goal -10,5`` were refused as
+# "expected one argument".  No flag of ours starts with a digit, so nothing is shadowed.
+NEGATIVE_VALUE = re.compile(r"^-\.?\d")
+
+
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line and exit code 2, and help shows defaults."""
+    """argparse, but a usage error is one line and exit code 2, help shows defaults, and a value
+    may start with a minus sign (``--origin -33.9,-70.6``) in every command, as in every coordinate flag."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
