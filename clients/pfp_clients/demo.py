@@ -147,8 +147,12 @@ def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> N
     )
 
 
-def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
-    """Run the demo; 0 iff every unit arrived and every expectation held."""
+def run_demo(opts: DemoOptions, say_line: Any = print, stop: threading.Event | None = None) -> int:
+    """Run the demo; 0 iff every unit arrived and every expectation held.
+
+    ``stop`` (SIGTERM, SIGINT) ends it early: everything it opened is closed, no
+    summary or plot is made, and it returns 1.
+    """
     import zenoh
 
     lock = threading.Lock()
@@ -178,7 +182,7 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
         mission_s[0] = t_s
         latest.append((t_s, units))
 
-    stop = threading.Event()
+    stop = stop or threading.Event()
     ready = threading.Event()
     with map_zenoh_errors("demo router"):
         router = zenoh.open(zenoh_config(cfg))
@@ -228,7 +232,9 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
 
         threads = [threading.Thread(target=inject, name="demo-inject", daemon=True)]
         threads[0].start()
-        ready.wait(10.0)  # the known threats are in before any goal is set
+        ready_by = time.monotonic() + 10.0  # the known threats are in before any goal is set
+        while not ready.wait(0.05) and not stop.is_set() and time.monotonic() < ready_by:
+            pass
         threads.append(threading.Thread(target=fleet, name="demo-fleet", daemon=True))
         threads[1].start()
         next_line = time.monotonic() + opts.progress_every_s
@@ -237,12 +243,16 @@ def run_demo(opts: DemoOptions, say_line: Any = print) -> int:
             if time.monotonic() >= next_line and latest:
                 say(_progress(*latest[-1]))
                 next_line += opts.progress_every_s
+        stopped_early = stop.is_set()  # a signal: the fleet stopped short of its end
         # mission time stops with the fleet: the script only has the last answers left to see
-        threads[0].join(timeout=INJECT_GRACE_S)
+        threads[0].join(timeout=0 if stopped_early else INJECT_GRACE_S)
         stop.set()
         threads[0].join(timeout=5.0)
     if errors:
         raise errors[0]
+    if stopped_early:
+        say(f"demo stopped after {time.monotonic() - wall0:.1f} s wall; no summary, no plot")
+        return 1
     fleet_result: FleetResult = results["fleet"]
     rep: InjectReport = results["inject"]
     say("")

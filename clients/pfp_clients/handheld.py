@@ -9,6 +9,8 @@ the terminal.  Keys: arrows nudge, space pauses the walk, g sets the goal
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import math
 import queue
 import time
@@ -37,6 +39,7 @@ from pfp_clients.handheld_link import (
     WireRejected,
 )
 from pfp_clients.handheld_model import HandheldModel, Severity, View, format_duration, threat_bar
+from pfp_service.signals import SIGNALS, SignalStop
 
 __all__ = ["GoalPrompt", "HandheldApp", "parse_goal"]
 
@@ -133,8 +136,10 @@ class HandheldApp(App[int]):
         tick_s: float = 0.1,
         clock: Callable[[], float] = time.monotonic,
         wallclock: Callable[[], float] = time.time,
+        stopping: SignalStop | None = None,
     ) -> None:
         super().__init__()
+        self.stopping = stopping  # SIGTERM and SIGINT end the app (and say which came)
         self.model = model
         self.link = link
         self.mission = mission
@@ -161,10 +166,22 @@ class HandheldApp(App[int]):
 
     def on_mount(self) -> None:
         self._home = self.screen  # the goal prompt goes on top; the readouts stay on this one
+        if self.stopping is not None:
+            loop = asyncio.get_running_loop()
+            for sig in SIGNALS:
+                with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):  # not main thread
+                    loop.add_signal_handler(sig, self._signalled, sig)
+            if self.stopping.signalled:  # while the app started
+                self.exit()
         if self.nmea is not None:
             self.nmea.start()
         self.set_interval(self.tick_s, self.tick)
         self.tick()
+
+    def _signalled(self, signum: int) -> None:
+        assert self.stopping is not None
+        self.stopping.note(signum)
+        self.exit()
 
     # -- actions ------------------------------------------------------------------
     def action_nudge(self, east: int, north: int) -> None:

@@ -1,8 +1,10 @@
-"""What several subcommands share: argument types checked at the edge, and the Zenoh session flags.
+"""What several subcommands share: argument types checked at the edge, the Zenoh session flags, extras.
 
-``add_session_args(parser)`` declares ``--connect``, ``--listen``, ``--mode``
-and ``--mission`` the same way for every command that opens a session, and
-``session_config(args)`` turns them into a ``zenoh.Config``.
+``add_session_args(parser)`` declares ``--connect``, ``--listen``, ``--mode``,
+``--mission`` and ``--zenoh-config`` the same way for every command that opens
+a session, and ``session_config(args)`` turns them into a ``zenoh.Config``.
+``require_extra("tui", "textual")`` refuses to start a command whose optional
+dependencies are missing, with the one ``pip install`` line that fixes it.
 """
 
 from __future__ import annotations
@@ -134,14 +136,70 @@ def add_session_args(parser: argparse.ArgumentParser, *, serve: bool = False) ->
     g.add_argument(
         "--mission", type=mission_chunk, default="default", help="mission name, the {mission} key chunk"
     )
+    g.add_argument(
+        "--zenoh-config",
+        metavar="JSON5",
+        help="Zenoh configuration to start from, e.g. a client file `pfp acl` wrote (its user and "
+        "password); --mode, --listen and --connect override it (default: none)",
+    )
 
 
 def session_config(args: argparse.Namespace) -> Any:
     """The ``zenoh.Config`` of a client command's session flags (see ``add_session_args``).
 
     Raises:
-        ZenohError: naming ``--connect`` or ``--listen``, when Zenoh rejects an endpoint.
+        ZenohError: naming ``--zenoh-config`` (unreadable or invalid), ``--connect`` or ``--listen``.
     """
     from pfp_service.service.config import client_zenoh_config
 
-    return client_zenoh_config(args.connect, mode=args.mode, listen=args.listen)
+    return client_zenoh_config(
+        args.connect, mode=args.mode, listen=args.listen, file=getattr(args, "zenoh_config", None)
+    )
+
+
+def pip_hint(extra: str) -> str:
+    """The command that installs ``extra`` into the Python running now, as a user would type it.
+
+    The venv's own pip (``.venv/bin/pip`` when the venv is under the working
+    directory), and ``-e 'DIR[extra]'`` for a source checkout, else the package
+    from the index.
+    """
+    import sys
+    from pathlib import Path
+
+    def shown(path: Path) -> str:
+        try:
+            return str(path.relative_to(Path.cwd()))
+        except ValueError:
+            return str(path)
+
+    python = Path(sys.executable)
+    pip = python.with_name("pip")
+    command = shown(pip) if pip.exists() else f"{shown(python)} -m pip"
+    if pip.exists() and "/" not in command:  # a bare "pip" would be whatever pip the PATH finds first
+        command = f"./{command}"
+    source = Path(__file__).resolve().parents[2]
+    if (source / "pyproject.toml").is_file():
+        where = shown(source)
+        target = f"-e '{'.' if where == '.' else where}[{extra}]'"
+    else:
+        target = f"'pfp-service[{extra}]'"
+    return f"{command} install {target}"
+
+
+def require_extra(extra: str, *modules: str) -> None:
+    """Check that the modules an optional feature needs import, before the command starts.
+
+    Raises:
+        InputError: one line, ``needs the EXTRA extra: PIP install ...``, printed as
+            ``pfp COMMAND: needs the tui extra: .venv/bin/pip install -e '.[tui]'`` (exit 2).
+    """
+    import importlib
+
+    from pfp_service.errors import InputError
+
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            raise InputError("", f"needs the {extra} extra: {pip_hint(extra)}") from None

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from pfp_service.service.events import WorldSettings
 
 __all__ = [
+    "CONNECT_RETRY",
     "DEFAULT_CONNECT",
     "DEFAULT_ENDPOINT",
     "DEFAULT_LISTEN",
@@ -47,6 +48,11 @@ __all__ = [
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 DEFAULT_LISTEN = DEFAULT_ENDPOINT
 DEFAULT_CONNECT = DEFAULT_ENDPOINT
+# How often a session retries its connect endpoints while nothing answers there.  Zenoh's default
+# backoff grows to several seconds: a planner started before its router answered 8.1 s after the
+# router came up.  Capped at 1 s, it answers within about a second (the whole object is inserted:
+# Zenoh refuses the dotted keys one by one).
+CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 1.5}
 LogFormat = Literal["human", "json"]
 LogLevel = Literal["debug", "info", "warning", "error"]
 Mode = Literal["router", "peer", "client"]
@@ -233,8 +239,12 @@ def build_zenoh_config(
     connect: Sequence[str] | None = None,
     multicast: bool = False,
     file: str | None = None,
+    file_setting: str = "zenoh_config",
 ) -> Any:
     """A ``zenoh.Config``: the JSON5 ``file`` if any, then ``mode``, ``listen`` and ``connect`` over it.
+
+    Args:
+        file_setting: what a bad ``file`` is reported as (the setting or flag that named it).
 
     Raises:
         ZenohError: naming the file, ``--listen`` or ``--connect``, in Zenoh's words made readable.
@@ -242,7 +252,7 @@ def build_zenoh_config(
     import zenoh
 
     if file is not None:
-        with map_zenoh_errors("zenoh_config", about=file):
+        with map_zenoh_errors(file_setting, about=file):
             conf = zenoh.Config.from_file(file)
     else:
         conf = zenoh.Config()
@@ -255,6 +265,8 @@ def build_zenoh_config(
             conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if not multicast:
         conf.insert_json5("scouting/multicast/enabled", "false")
+    if conf.get_json("connect/retry") == "null":  # a file's own retry settings win
+        conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return conf
 
 
@@ -273,13 +285,26 @@ def client_zenoh_config(
     multicast: bool = False,
     mode: str = "client",
     listen: Sequence[str] | None = None,
+    file: str | None = None,
 ) -> Any:
-    """A ``zenoh.Config`` for a client program: ``mode`` (client by default) joining ``connect``
-    (default ``DEFAULT_CONNECT``) only.
+    """A ``zenoh.Config`` for a client program: ``mode`` (client by default) joining ``connect``.
+
+    Args:
+        connect: endpoints to join; else the file's ``connect/endpoints``; else ``DEFAULT_CONNECT``.
+        file: a Zenoh JSON5 file to start from (``--zenoh-config``), e.g. one ``pfp acl`` wrote with
+            the client's user and password; ``mode``, ``listen`` and ``connect`` override it.
 
     Raises:
-        ZenohError: ``--connect`` or ``--listen``, when zenoh rejects an endpoint.
+        ZenohError: ``--zenoh-config`` (unreadable or invalid file), ``--connect`` or ``--listen``.
     """
-    return build_zenoh_config(
-        mode=mode, listen=listen, connect=list(connect or [DEFAULT_CONNECT]), multicast=multicast
+    conf = build_zenoh_config(
+        mode=mode,
+        listen=listen,
+        connect=connect,
+        multicast=multicast,
+        file=file,
+        file_setting="--zenoh-config",
     )
+    if conf.get_json("connect/endpoints") in ("[]", "null"):  # neither a flag nor the file says where
+        conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
+    return conf

@@ -9,15 +9,18 @@ into one ``ZenohError`` line.
 from __future__ import annotations
 
 import contextlib
-import signal
 import threading
+import time
 from typing import Any
 
 from pfp_service.errors import map_zenoh_errors
 from pfp_service.service.config import DEFAULT_LISTEN, ServeConfig, zenoh_config
 from pfp_service.service.log import setup_logging
+from pfp_service.signals import SignalStop
 
 __all__ = ["serve"]
+
+WAITING_LOG_S = 5.0  # while a client-mode planner waits for its router, one line this often
 
 
 def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threading.Event | None = None) -> int:
@@ -29,20 +32,24 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
         stop: set it to stop; on the main thread SIGTERM and SIGINT set it too.
 
     Returns:
-        0 after a clean stop.
+        0 after a clean stop or SIGTERM, 130 after SIGINT (``pfp_service.signals``).
 
     Raises:
         ZenohError: the session could not be opened (``--listen`` in use, ``--connect`` unreachable ...).
     """
+    log = setup_logging(cfg.log_format, cfg.log_level)
+    signals = SignalStop(stop)  # on the main thread, SIGTERM and SIGINT set stop too
+    stop = signals.event
+    with signals:
+        return signals.exit_code(_serve(cfg, ready, stop, log))
+
+
+def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Event, log: Any) -> int:
     import zenoh
 
     from pfp_service.service.store import Store
 
-    log = setup_logging(cfg.log_format, cfg.log_level)
-    stop = stop or threading.Event()
     if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, lambda *_: stop.set())
         _few_arenas()
     store = None if cfg.state_dir in ("none", "auto") else Store(cfg.state_dir)
     conf = zenoh_config(cfg)
@@ -74,11 +81,14 @@ def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: A
     t = threading.Thread(target=opener, name="pfp-open", daemon=True)
     t.start()
     t.join(2.0)
-    while t.is_alive():
-        log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
-        if stop.wait(5.0):
+    next_log = 0.0
+    while t.is_alive():  # joined in short slices: the session is used the moment it opens
+        if time.monotonic() >= next_log:
+            log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
+            next_log = time.monotonic() + WAITING_LOG_S
+        if stop.is_set():
             return None
-        t.join(0.1)
+        t.join(0.05)
     if "error" in box:
         raise box["error"]
     return box["session"]

@@ -43,4 +43,8 @@ def run(args: argparse.Namespace) -> int:
         opts = dataclasses.replace(opts, team=Path(args.team))
     if args.script:
         opts = dataclasses.replace(opts, script=Path(args.script))
-    return run_demo(opts, lambda s: print(s, flush=True))
+    from pfp_service.signals import SignalStop
+
+    with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the demo has closed
+        code = run_demo(opts, lambda s: print(s, flush=True), stop=stopping.event)
+    return stopping.exit_code(code)

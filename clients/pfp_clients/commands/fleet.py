@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import signal
-import threading
 from typing import Any
 
 from pfp_service.cli._common import add_session_args, positive_float, positive_int, session_config
+from pfp_service.signals import SignalStop
 
 # Each unit costs a publisher, a token and a Python object per tick: past this one fleet process
 # cannot keep up (ZENOH-NOTES: ~10 000 updates/s per process), so run several instead.
@@ -86,7 +85,6 @@ def run(args: argparse.Namespace) -> int:
         reply_timeout_s=args.reply_timeout_s,
     )
     conf = session_config(args)
-    stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
-    return main(team, opts, conf, stop, progress_s=args.progress_s)
+    with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the fleet has closed
+        code = main(team, opts, conf, stopping.event, progress_s=args.progress_s)
+    return stopping.exit_code(code)

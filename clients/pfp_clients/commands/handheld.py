@@ -115,7 +115,10 @@ def check_terminal(nmea: str | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pfp_service.cli._common import require_extra
+
     check_flags(args)
+    require_extra("tui", "textual")
     check_terminal(args.nmea)
 
     import time
@@ -125,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.handheld_model import HandheldModel, Settings
     from pfp_clients.nmea import LocalFrame
     from pfp_service.service.config import DEFAULT_CONNECT
+    from pfp_service.signals import SignalStop
 
     gps = args.nmea is not None
     settings = Settings(
@@ -143,23 +147,26 @@ def run(args: argparse.Namespace) -> int:
     stream = open_nmea(args.nmea, args.nmea_baud) if gps else None
     where = ", ".join(args.connect or [DEFAULT_CONNECT])
     link = RetryingLink(lambda: session_config(args), where, args.mission, args.unit)
-    try:
-        reader = None
-        if stream is not None and frame is not None:
-            reader = NmeaReader(stream, frame, link.inbox, rate_hz=args.nmea_rate)
-        model = HandheldModel(settings, None if gps else args.start, time.monotonic())
-        model.on_link(False, f"connecting to {where}")
-        app = HandheldApp(
-            model,
-            link,
-            mission=args.mission,
-            source="nmea" if gps else "sim",
-            nmea=reader,
-            publish_hz=args.rate_hz,
-        )
-        app.run()
-        if reader is not None:
-            reader.stop()
-    finally:
-        link.close()
-    return 0
+    with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the link has closed
+        try:
+            reader = None
+            if stream is not None and frame is not None:
+                reader = NmeaReader(stream, frame, link.inbox, rate_hz=args.nmea_rate)
+            model = HandheldModel(settings, None if gps else args.start, time.monotonic())
+            model.on_link(False, f"connecting to {where}")
+            app = HandheldApp(
+                model,
+                link,
+                mission=args.mission,
+                source="nmea" if gps else "sim",
+                nmea=reader,
+                publish_hz=args.rate_hz,
+                stopping=stopping,
+            )
+            app.run()
+            stopping.install()  # the app's closed loop put the default handlers back
+            if reader is not None:
+                reader.stop()
+        finally:
+            link.close()
+    return stopping.exit_code(0)

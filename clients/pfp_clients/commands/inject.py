@@ -34,5 +34,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.script}: ok, {len(script.timeline)} actions, {len(script.expect)} expectations")
         return 0
     from pfp_clients.inject import main
+    from pfp_service.signals import SignalStop
 
-    return main(script, args.mission, args.speed_up, session_config(args), args.progress_s)
+    conf = session_config(args)
+    with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the script has stopped
+        code = main(script, args.mission, args.speed_up, conf, args.progress_s, stop=stopping.event)
+    return stopping.exit_code(code)

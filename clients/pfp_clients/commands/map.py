@@ -6,9 +6,11 @@ Registered under the ``pfp_service.commands`` entry-point group in pyproject.tom
 from __future__ import annotations
 
 import argparse
+import asyncio
 from typing import Any
 
 from pfp_service.cli._common import add_session_args, positive_float, session_config
+from pfp_service.signals import SignalStop
 
 MAX_PUSH_HZ = 10.0
 
@@ -65,11 +67,6 @@ def register(sub: Any) -> None:
     p = sub.add_parser("map", help="serve a live web map of the mission", description=__doc__)
     add_session_args(p)
     p.add_argument(
-        "--zenoh-config",
-        metavar="JSON5",
-        help="Zenoh client config to start from, e.g. one `pfp acl` wrote (its credentials); flags override it",
-    )
-    p.add_argument(
         "--http",
         type=http_address,
         default=("127.0.0.1", 8080),
@@ -108,33 +105,16 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-def _zenoh_config(args: argparse.Namespace) -> Any:
-    import json
-
-    from pfp_service.service.config import DEFAULT_CONNECT, build_zenoh_config
-
-    if args.zenoh_config is None:
-        return session_config(args)
-    conf = build_zenoh_config(
-        mode=args.mode, listen=args.listen, connect=args.connect, file=args.zenoh_config
-    )
-    if conf.get_json("connect/endpoints") in ("[]", "null"):  # neither the file nor a flag says where
-        conf.insert_json5("connect/endpoints", json.dumps([DEFAULT_CONNECT]))
-    return conf
-
-
 def run(args: argparse.Namespace) -> int:
-    import asyncio
-
     from pfp_clients.common import open_session
+    from pfp_service.cli._common import require_extra
     from pfp_service.errors import InputError
 
     if args.tiles is not None and args.origin is None:
         raise InputError("--tiles", "tiles need --origin: without one the map is drawn in plain metres")
-    try:
-        from pfp_clients.map.server import MapOptions, serve
-    except ImportError as exc:
-        raise InputError("pfp map", f"needs the map extra: pip install 'pfp-service[map]' ({exc})") from None
+    require_extra("map", "aiohttp")
+    from pfp_clients.map.server import MapOptions
+
     host, port = args.http
     opts = MapOptions(
         mission=args.mission,
@@ -147,6 +127,31 @@ def run(args: argparse.Namespace) -> int:
         tiles=args.tiles,
         allowed_hosts=tuple(args.allowed_host or ()),
     )
-    conf = _zenoh_config(args)
-    with open_session(conf) as session:
-        return asyncio.run(serve(session, opts))
+    conf = session_config(args)
+    with SignalStop() as stopping, open_session(conf) as session:
+        if stopping.signalled:  # while the session opened
+            return stopping.exit_code(0)
+        code = asyncio.run(_serve(session, opts, stopping))
+        stopping.install()  # the closed loop put the default handlers back; the session closes next
+    return stopping.exit_code(code)
+
+
+async def _serve(session: Any, opts: Any, stopping: SignalStop) -> int:
+    """``server.serve`` until SIGTERM or SIGINT, remembering which came (0 or 130 to exit with)."""
+    from pfp_clients.map.server import serve
+    from pfp_service.signals import SIGNALS
+
+    stop = asyncio.Event()
+    task = asyncio.create_task(serve(session, opts, stop=stop))
+    # serve's first step installs its own handlers (stop.set, which cannot tell SIGTERM from SIGINT);
+    # once it has run, ours replace them and note the signal as well
+    await asyncio.sleep(0)
+
+    def signalled(signum: int) -> None:
+        stopping.note(signum)
+        stop.set()
+
+    loop = asyncio.get_running_loop()
+    for sig in SIGNALS:
+        loop.add_signal_handler(sig, signalled, sig)
+    return await task
