@@ -102,3 +102,7 @@ def paper_scenario():
     from pfp_service.scenario import load_scenario
 
     return load_scenario(EXAMPLES / "paper-simple.yaml")
+
+
+# Hypothesis profiles (``--hypothesis-profile=long``) must be registered before the plugin reads the flag.
+import tests.hypothesis_profiles  # noqa: E402, F401

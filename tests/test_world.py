@@ -177,6 +177,7 @@ def test_stale_units_are_forgotten_with_an_event_and_their_memory():
         "units_owned": 0,
         "pushes": 0,
         "pushes_resent": 0,
+        "faults": 0,
     }
     assert not w._units and not w._timers  # nothing left behind
 

@@ -30,6 +30,15 @@ choices are read from the registry ``escape_strategies.STRATEGIES``.
 
 Every quantity is a length ratio or a dimensionless level, so a scenario scaled
 by any factor resolves to the same path, scaled.
+
+``resolve`` is total: whatever finite numbers it is given, it returns
+parameters and never raises.  A start-goal distance too small for its
+hundred-and-fiftieth to be a normal float (a goal 5e-324 m away) resolves as
+if it were ``SCALE_FLOOR``, so the unit is within tolerance: arrived.  A step
+too fine for ``8 D0 / step`` to be a number gets ``MAX_ITER_DERIVED``, and a
+derived delta is kept within ``constraints.DELTA_MIN``..``DELTA_MAX``.  What
+the planner cannot plan is refused before it gets here, by the validators
+(``constraints``); these floors only keep the arithmetic finite.
 """
 
 from __future__ import annotations
@@ -39,12 +48,14 @@ import statistics
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
+from pfp_service.constraints import DELTA_MAX, DELTA_MIN
 from pfp_service.core.escape_strategies import STRATEGIES
 from pfp_service.core.threat import Intensity, Threat
 
 __all__ = [
     "ESCAPES",
     "MAX_ITER_DERIVED",
+    "SCALE_FLOOR",
     "Escape",
     "FieldStats",
     "PlannerParams",
@@ -54,6 +65,7 @@ __all__ = [
 ]
 
 MAX_ITER_DERIVED = 1_000_000
+SCALE_FLOOR = 1e-150  # the smallest start-goal distance derived from: its square is still a normal float
 
 ESCAPES: tuple[str, ...] = ("none", "auto", *STRATEGIES)
 
@@ -136,7 +148,7 @@ def resolve(
     ``stats`` is ``field_stats(threats)``, when the caller keeps it for many goals.
     """
     d0 = math.hypot(goal[0] - start[0], goal[1] - start[1])
-    scale = d0 if d0 > 0 else 1.0
+    scale = max(d0, SCALE_FLOOR) if d0 > 0 else 1.0
     if stats is None:
         stats = field_stats(threats)
     s_min = stats.min_sigma  # resolve the narrowest axis
@@ -147,11 +159,13 @@ def resolve(
     tolerance = params.tolerance if params.tolerance is not None else 0.75 * step
     max_iter = params.max_iter
     if max_iter is None:
-        max_iter = min(max(300, math.ceil(8.0 * scale / step)), MAX_ITER_DERIVED)
+        need = 8.0 * scale / step if step > 0 else math.inf
+        max_iter = max(300, math.ceil(need)) if need < MAX_ITER_DERIVED else MAX_ITER_DERIVED
     delta = params.delta
     if delta is None:
         median = stats.median_ratio[params.intensity]
         delta = 0.15 * scale * median if median is not None else 1.0
+        delta = min(max(delta, DELTA_MIN), DELTA_MAX)  # a threat of weight 1e-300 leaves the goal a pull
     return Resolved(
         delta=float(delta),
         step=float(step),

@@ -31,6 +31,7 @@ from pfp_service.wire import (
 
 __all__ = [
     "Deliberated",
+    "Fault",
     "GoalCancelled",
     "GoalSet",
     "Input",
@@ -204,17 +205,44 @@ class MissionRecord:
     params: Resolved
 
 
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """Applying an input (or a timer, or one unit's step) failed inside the world: what to log, once.
+
+    The world already dropped what failed and sent a ``rejected`` event; this
+    is for the operator's log, at most once a minute per key (``suppressed``
+    counts the faults on that key not logged since), and never a traceback.
+    """
+
+    key: str  # the key of the input, or of the unit or threat a timer or step was for
+    error: str  # the exception's class, e.g. ``ZeroDivisionError``
+    detail: str  # its message, cut short
+    where: str  # the innermost frame, ``core/params.py:150``
+    suppressed: int = 0
+
+    def fields(self) -> dict[str, object]:
+        """The log line's fields."""
+        return {
+            "key": self.key,
+            "error": self.error,
+            "detail": self.detail,
+            "where": self.where,
+            "suppressed": self.suppressed,
+        }
+
+
 @dataclass(slots=True)
 class Outputs:
-    """What one ``apply`` must send: directions, events, deliberation jobs, and missions to record."""
+    """What one ``apply`` must send: directions, events, deliberation jobs, missions to record, faults to log."""
 
     directions: list[Direction] = field(default_factory=list)
     events: list[Event] = field(default_factory=list)
     jobs: list[Job] = field(default_factory=list)
     missions: list[MissionRecord] = field(default_factory=list)
+    faults: list[Fault] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.directions or self.events or self.jobs or self.missions)
+        return bool(self.directions or self.events or self.jobs or self.missions or self.faults)
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,6 +22,21 @@ adopted only if it was computed for the unit's goal and world version still
 in force (latest wins); until then the unit gets plain descent with
 ``deliberating`` set.  ``"inline"`` runs the same work inside ``apply``.
 
+Bulkheads: ``apply`` is total.  A failure belongs to the input, timer or unit
+that caused it: each input is applied on its own, each timer run on its own,
+and one unit's numbers that break the vectorised step drop that unit alone
+(the batch is re-run one unit at a time).  What failed is rejected (a
+``rejected`` event on its key, rate-limited like every rejection), its goal is
+dropped, and a ``Fault`` for the log comes out at most once a minute per key;
+every other input and every other unit's direction in the tick goes out.  What
+the planner cannot plan is refused before that, as a value: a goal whose step
+would need more than ``max_iter`` steps (``constraints.reach_problem``), and a
+goal closer to its unit than ``LENGTH_MIN_M`` or the tolerance has arrived.
+
+Units are fresh only while they report: a unit the world learns of from a
+goal, a restored mission or a peer's, and that has not reported, is stale
+from the start and forgotten ``unit_forget_s`` later unless it reports.
+
 Timers (threat expiry, unit silence, token debounce, forgetting, push
 re-sends) sit in one heap, so a tick costs O(what is due), never a scan of
 every unit.  Under ``cluster`` each unit is guided by the one live planner
@@ -30,24 +45,28 @@ rendezvous hashing gives it (``owns``); the others keep its mission.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import heapq
+import itertools
 import math
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import msgspec
 import numpy as np
 
+from pfp_service.constraints import LENGTH_MIN_M, reach_problem
 from pfp_service.core import Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
 from pfp_service.core.cull import MIN_THREATS, CullIndex, corridors_meet, influence_boxes
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.plan import predict_many
 from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.errors import FINITE_LIMIT, InputError
-from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.service.events import (
     Deliberated,
+    Fault,
     GoalCancelled,
     GoalSet,
     Input,
@@ -91,10 +110,12 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
+from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.wire.messages import MAX_EVENT_ITEMS, MAX_SNAPSHOT_ITEMS
 
 __all__ = [
     "Deliberated",
+    "Fault",
     "GoalCancelled",
     "GoalSet",
     "Input",
@@ -127,6 +148,9 @@ _STATUS = {
     StepStatus.INVALID: DirectionStatus.TRAPPED,
 }
 REJECTS_PER_S = 5  # rejected events per second per kind of key; the rest are counted in the next
+FAULT_LOG_S = 60.0  # a fault is logged once per key in this long; the rest are counted in the next
+FAULT_KEYS_MAX = 1024  # keys whose fault-log window is remembered; past it, one line for all the rest
+_ANY_KEY = "*"  # the fault-log key of faults on keys past FAULT_KEYS_MAX
 
 
 @dataclass(slots=True)
@@ -188,6 +212,8 @@ class World:
         self._reject_window: dict[str, tuple[float, int, int]] = {}  # kind -> (window start, sent, held)
         self._peers: set[str] = set()
         self._peers_gone: dict[str, float] = {}  # peer -> when its token went, until the debounce ends
+        self.faults = 0  # inputs, timers and unit steps that failed inside the world (bulkheads)
+        self._fault_log: dict[str, tuple[float, int]] = {}  # key -> (when last logged, held since)
 
     # -- queries (read-only) ------------------------------------------------------
     @property
@@ -211,6 +237,7 @@ class World:
             "units_owned": sum(1 for r in self._units.values() if r.owned),
             "pushes": self.pushes,
             "pushes_resent": self.pushes_resent,
+            "faults": self.faults,
         }
 
     def view(self, unit_id: str) -> UnitView:
@@ -318,38 +345,13 @@ class World:
         changes: list[ThreatChange] = []
         self._touched = []  # threats put, moved or gone in this batch (old and new)
         for inp in inputs:
-            match inp:
-                case StateReported(unit, state):
-                    self._state(unit, state, now, dirty, out)
-                case GoalSet(unit, goal):
-                    self._goal(unit, goal, now, dirty, out)
-                case GoalCancelled(unit):
-                    self._cancel(unit, dirty)
-                case ThreatPut(tid, update):
-                    self._threat_put(tid, update, now, changes, out)
-                case ThreatRemoved(tid):
-                    gone = self._threats.pop(tid, None)
-                    if gone is not None:
-                        self._touched.append(gone.threat)
-                        changes.append(
-                            ThreatChange(threat=tid, change="removed", position=gone.update.position)
-                        )
-                case TokenChanged(unit, alive):
-                    self._token(unit, alive, now)
-                case InputRejected(key, error):
-                    self._reject(key, error, now, out)
-                case Deliberated():
-                    self._deliberated(inp, dirty)
-                case MissionRestored():
-                    self._restore(inp, now, out)
-                case MissionShared(unit, mission):
-                    self._shared(unit, mission, now, out)
-                case PeerPlanner(planner, alive):
-                    self._peer(planner, alive, now, dirty, out)
-                case Tick(t):
-                    self._run_timers(t, changes, out, dirty)
+            try:
+                self._apply_one(inp, now, dirty, changes, out)
+            except Exception as exc:  # the bulkhead: this input alone fails
+                key, unit = self._blame(inp)
+                self._fault(key, exc, now, out, unit, dirty)
         if changes:
-            dirty |= self._world_changed()
+            dirty |= self._world_changed(now, out)
         first = len(out.directions)  # before: pushes sent again by the timers
         self._directions(dirty, now, out)
         self._pushes(out.directions[first:], now)
@@ -371,9 +373,124 @@ class World:
             )
         return out
 
+    def _apply_one(
+        self, inp: Input, now: float, dirty: set[str], changes: list[ThreatChange], out: Outputs
+    ) -> None:
+        match inp:
+            case StateReported(unit, state):
+                self._state(unit, state, now, dirty, out)
+            case GoalSet(unit, goal):
+                self._goal(unit, goal, now, dirty, out)
+            case GoalCancelled(unit):
+                self._cancel(unit, dirty)
+            case ThreatPut(tid, update):
+                self._threat_put(tid, update, now, changes, out)
+            case ThreatRemoved(tid):
+                gone = self._threats.pop(tid, None)
+                if gone is not None:
+                    self._touched.append(gone.threat)
+                    changes.append(ThreatChange(threat=tid, change="removed", position=gone.update.position))
+            case TokenChanged(unit, alive):
+                self._token(unit, alive, now)
+            case InputRejected(key, error):
+                self._reject(key, error, now, out)
+            case Deliberated():
+                self._deliberated(inp, dirty)
+            case MissionRestored():
+                self._restore(inp, now, out)
+            case MissionShared(unit, mission):
+                self._shared(unit, mission, now, out)
+            case PeerPlanner(planner, alive):
+                self._peer(planner, alive, now, dirty, out)
+            case Tick(t):
+                self._run_timers(t, changes, out, dirty)
+
+    # -- bulkheads ------------------------------------------------------------------
+    def _key(self, kind: keys.KeyKind, ident: str) -> str:
+        """The key an input came on, spelled from the layout even for an id ``keys`` would refuse."""
+        return keys.TEMPLATES[kind].format(mission=self.settings.mission, id=ident)
+
+    def _blame(self, inp: Input) -> tuple[str, str | None]:
+        """The key a failed input is rejected on, and the unit whose goal goes with it (if any)."""
+        k = keys.KeyKind
+        match inp:
+            case StateReported(unit):
+                return self._key(k.UNIT_STATE, unit), unit
+            case GoalSet(unit) | GoalCancelled(unit) | MissionRestored(unit) | Deliberated(unit):
+                return self._key(k.UNIT_GOAL, unit), unit
+            case MissionShared(unit):
+                return self._key(k.UNIT_MISSION, unit), unit
+            case ThreatPut(tid) | ThreatRemoved(tid):
+                return self._key(k.THREAT, tid), None
+            case TokenChanged(unit):
+                return self._key(k.ALIVE_UNIT, unit), None
+            case PeerPlanner(planner):
+                return self._key(k.ALIVE_PLANNER, planner), None
+            case InputRejected(key):
+                return key, None
+        return self._key(k.EVENT, "tick"), None
+
+    def _fault(
+        self,
+        key: str,
+        exc: BaseException,
+        now: float,
+        out: Outputs,
+        unit: str | None = None,
+        dirty: set[str] | None = None,
+    ) -> None:
+        """Something failed inside the world on ``key``'s account: drop it, reject it, log it once a minute.
+
+        The unit named loses its goal (a goal it cannot be guided to is
+        refused, not retried at every report) and gets ``no_goal``.
+        """
+        self.faults += 1
+        rec = self._units.get(unit) if unit is not None else None
+        said = ""
+        if rec is not None:
+            try:
+                had = rec.goal is not None
+                self._drop_mission(rec)
+                said = "; the unit's goal was dropped" if had else ""
+                if dirty is not None and rec.position is not None and not rec.stale:
+                    dirty.add(rec.id)
+            except Exception:  # a record too broken to reset: forget it (a report makes it afresh)
+                self._units.pop(rec.id, None)
+                if rec.stale:
+                    self._stale -= 1
+        name = type(exc).__name__
+        detail = str(exc)[:200]
+        reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
+        self._reject(key, InputError("$", reason), now, out)
+        # the operator's log: once a minute per key, and never a traceback
+        if key not in self._fault_log and len(self._fault_log) >= FAULT_KEYS_MAX:
+            for old, (when, _held) in list(self._fault_log.items()):
+                if now - when >= FAULT_LOG_S:
+                    del self._fault_log[old]
+            if len(self._fault_log) >= FAULT_KEYS_MAX:
+                key = _ANY_KEY
+        when, held = self._fault_log.get(key, (-math.inf, 0))
+        if now - when < FAULT_LOG_S:
+            self._fault_log[key] = (when, held + 1)
+            return
+        self._fault_log[key] = (now, 0)
+        out.faults.append(Fault(key, name, detail, _where(exc), held))
+
     # -- inputs ---------------------------------------------------------------------
-    def _unit(self, unit_id: str, now: float, out: Outputs, key: Callable[[str, str], str]) -> _Unit | None:
-        """The unit's record, made at its first input; ``key`` names the input's key for a refusal."""
+    def _unit(
+        self,
+        unit_id: str,
+        now: float,
+        out: Outputs,
+        key: Callable[[str, str], str],
+        reported: bool = False,
+    ) -> _Unit | None:
+        """The unit's record, made at its first input; ``key`` names the input's key for a refusal.
+
+        A record made by anything but a report (a goal, a restored or a
+        peer's mission) is stale from the start: it has not been heard from,
+        and it is forgotten ``unit_forget_s`` later unless it reports.
+        """
         rec = self._units.get(unit_id)
         if rec is None:
             if len(self._units) >= self.settings.max_units:
@@ -383,10 +500,16 @@ class World:
                 return None
             rec = self._units[unit_id] = _Unit(unit_id, unit_key(unit_id))
             rec.owned = self.owns(unit_id)
+            if not reported:
+                rec.stale = True
+                rec.stale_since = now
+                self._stale += 1
+                if self.settings.unit_forget_s is not None:
+                    self._timer(now + self.settings.unit_forget_s, "forget", unit_id)
         return rec
 
     def _state(self, unit_id: str, msg: UnitState, now: float, dirty: set[str], out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_state)
+        rec = self._unit(unit_id, now, out, keys.unit_state, reported=True)
         if rec is None:
             return
         rec.position = (msg.position[0], msg.position[1])
@@ -405,7 +528,7 @@ class World:
         if not rec.owned:  # another planner guides it; its report keeps it fresh here too
             return
         if rec.goal is not None and rec.stepper is None:
-            self._start(rec, out)
+            self._start(rec, now, out)
         dirty.add(unit_id)
 
     def _goal(self, unit_id: str, goal: Goal, now: float, dirty: set[str], out: Outputs) -> None:
@@ -418,7 +541,7 @@ class World:
         rec.goal = goal
         rec.shared = keep
         if rec.position is not None and rec.owned:
-            self._start(rec, out)
+            self._start(rec, now, out)
             if not rec.stale:
                 dirty.add(unit_id)
 
@@ -430,7 +553,7 @@ class World:
         rec.goal = m.goal
         rec.shared = (m.goal, m.origin, m.params)
         if rec.owned:
-            self._start(rec, out, record=False)
+            self._start(rec, now, out, record=False)
 
     def _peer(self, planner: str, alive: bool, now: float, dirty: set[str], out: Outputs) -> None:
         if planner == self.settings.planner_id:
@@ -474,7 +597,7 @@ class World:
             rec.owned = owned
             if owned:  # taken over: guided from the mission its last owner fixed, told at once
                 if rec.goal is not None and rec.position is not None:
-                    self._start(rec, out)
+                    self._start(rec, now, out)
                 if rec.position is not None and not rec.stale:
                     dirty.add(rec.id)
             else:  # handed over: the new owner guides it now
@@ -581,44 +704,57 @@ class World:
         heapq.heappush(self._timers, (when, self._timer_seq, kind, ident))
 
     def _run_timers(self, now: float, changes: list[ThreatChange], out: Outputs, dirty: set[str]) -> None:
-        s = self.settings
         while self._timers and self._timers[0][0] <= now:
             _, _, kind, ident = heapq.heappop(self._timers)
-            if kind == "peer":  # a peer planner's token gone for the whole debounce: its units move
-                gone = self._peers_gone.get(ident)
-                if gone is not None and now - gone >= s.liveliness_debounce_s:
-                    del self._peers_gone[ident]
-                    self._peers.discard(ident)
-                    self._rebalance(now, dirty, out)
-                continue
-            if kind == "expire":
-                t = self._threats.get(ident)
-                if t is not None and t.expires_at is not None and t.expires_at <= now:
-                    del self._threats[ident]
-                    self._touched.append(t.threat)
-                    changes.append(ThreatChange(threat=ident, change="expired", position=t.update.position))
-                continue
-            rec = self._units.get(ident)
-            if rec is None:
-                continue
-            if kind == "silence":
-                if now - rec.last_seen <= s.unit_stale_s:  # heard since: look again when it could be due
-                    self._timer(max(rec.last_seen + s.unit_stale_s, now) + 1e-9, "silence", ident)
-                    continue
-                rec.silence_timer = False
-                self._go_stale(rec, now, f"silent for {now - rec.last_seen:.3g} s", out)
-            elif kind == "token":
-                gone = rec.token_gone_since
-                if gone is not None and now - gone >= s.liveliness_debounce_s:
-                    self._go_stale(rec, now, "liveliness token gone", out)
-            elif kind == "push" and rec.push is not None and rec.push_tries > 0 and not rec.stale:
-                rec.push_tries -= 1
-                self.pushes_resent += 1
-                out.directions.append(rec.push)
-                if rec.push_tries:
-                    self._timer(now + s.push_retry_s, "push", ident)
-            elif kind == "forget" and self._forgettable(rec, now):
-                self._forget(rec, now, out)
+            try:
+                self._timer_due(kind, ident, now, changes, out, dirty)
+            except Exception as exc:  # the bulkhead: this timer alone fails
+                if kind == "expire":
+                    self._fault(self._key(keys.KeyKind.THREAT, ident), exc, now, out)
+                elif kind == "peer":
+                    self._fault(self._key(keys.KeyKind.ALIVE_PLANNER, ident), exc, now, out)
+                else:
+                    self._fault(self._key(keys.KeyKind.UNIT_GOAL, ident), exc, now, out, ident, dirty)
+
+    def _timer_due(
+        self, kind: str, ident: str, now: float, changes: list[ThreatChange], out: Outputs, dirty: set[str]
+    ) -> None:
+        s = self.settings
+        if kind == "peer":  # a peer planner's token gone for the whole debounce: its units move
+            gone = self._peers_gone.get(ident)
+            if gone is not None and now - gone >= s.liveliness_debounce_s:
+                del self._peers_gone[ident]
+                self._peers.discard(ident)
+                self._rebalance(now, dirty, out)
+            return
+        if kind == "expire":
+            t = self._threats.get(ident)
+            if t is not None and t.expires_at is not None and t.expires_at <= now:
+                del self._threats[ident]
+                self._touched.append(t.threat)
+                changes.append(ThreatChange(threat=ident, change="expired", position=t.update.position))
+            return
+        rec = self._units.get(ident)
+        if rec is None:
+            return
+        if kind == "silence":
+            if now - rec.last_seen <= s.unit_stale_s:  # heard since: look again when it could be due
+                self._timer(max(rec.last_seen + s.unit_stale_s, now) + 1e-9, "silence", ident)
+                return
+            rec.silence_timer = False
+            self._go_stale(rec, now, f"silent for {now - rec.last_seen:.3g} s", out)
+        elif kind == "token":
+            gone = rec.token_gone_since
+            if gone is not None and now - gone >= s.liveliness_debounce_s:
+                self._go_stale(rec, now, "liveliness token gone", out)
+        elif kind == "push" and rec.push is not None and rec.push_tries > 0 and not rec.stale:
+            rec.push_tries -= 1
+            self.pushes_resent += 1
+            out.directions.append(rec.push)
+            if rec.push_tries:
+                self._timer(now + s.push_retry_s, "push", ident)
+        elif kind == "forget" and self._forgettable(rec, now):
+            self._forget(rec, now, out)
 
     def _pushes(self, fresh: list[Direction], now: float) -> None:
         """Directions no report asked for (a world change, a route landing) are sent again until answered.
@@ -664,12 +800,15 @@ class World:
         out.events.append(ForgottenEvent(planner=self.settings.planner_id, unit=rec.id, stale_s=stale_s))
 
     # -- planning -------------------------------------------------------------------
-    def _start(self, rec: _Unit, out: Outputs, record: bool = True) -> None:
+    def _start(self, rec: _Unit, now: float, out: Outputs, record: bool = True) -> bool:
         """Fix the unit's mission (x0 and parameters) and give it a stepper.
 
         A mission restored or shared for this very goal is kept, so a restart or
         a takeover guides the unit exactly as before; otherwise x0 is where the
-        unit is now.
+        unit is now.  A goal closer than ``LENGTH_MIN_M`` is planned with a
+        step of that length, so it has arrived; a mission the planner cannot
+        plan (``constraints.reach_problem``) is refused: the goal is rejected
+        on its key, dropped, and ``False`` returned.
         """
         assert rec.goal is not None
         goal = (rec.goal.position[0], rec.goal.position[1])
@@ -679,13 +818,23 @@ class World:
             assert rec.position is not None
             origin = rec.position
             fld = self.field  # builds the stats with it
-            resolved = resolve(self.settings.params_for(rec.goal), origin, goal, fld.threats, self._stats)
-            rec.shared = (rec.goal, origin, resolved)
+            params = self.settings.params_for(rec.goal)
+            if math.dist(origin, goal) < LENGTH_MIN_M and (params.step or 0.0) < LENGTH_MIN_M:
+                params = params.merged(step=LENGTH_MIN_M)  # closer than the planner resolves: arrived
+            resolved = resolve(params, origin, goal, fld.threats, self._stats)
+        problem = reach_problem(math.dist(origin, goal), resolved.step, resolved.max_iter, resolved.tolerance)
+        if problem is not None:
+            path = "$.step" if rec.goal.step is not None else "$.position"
+            self._reject(self._key(keys.KeyKind.UNIT_GOAL, rec.id), InputError(path, problem), now, out)
+            self._drop_mission(rec)
+            return False
+        rec.shared = (rec.goal, origin, resolved)
         rec.origin = origin
         rec.stepper = Stepper(origin, goal, resolved, self.settings.bounds, rec.key)
         rec.stepper.defer = self.settings.deliberation == "deferred"
         if record:
             out.missions.append(MissionRecord(rec.id, rec.epoch, origin, rec.goal, resolved))
+        return True
 
     def _supersede(self, rec: _Unit) -> None:
         if rec.job is not None:
@@ -693,7 +842,7 @@ class World:
             rec.job = None
             self._deliberating -= 1
 
-    def _world_changed(self) -> set[str]:
+    def _world_changed(self, now: float, out: Outputs) -> set[str]:
         """The threats changed: re-judge and re-direct the units the change can reach.
 
         A unit is reached when a touched threat's influence box (where it is
@@ -701,24 +850,34 @@ class World:
         goal (``cull.corridors_meet``), or when it is escaping or deliberating
         (its route or its job was judged under the old field).  Every other
         unit's direction is unchanged within the cull bound, and it is left
-        alone: a contingency costs what it touches, not the whole fleet.
+        alone: a contingency costs what it touches, not the whole fleet.  If
+        the vectorised test fails, every guided unit counts as reached.
         """
         self._field = None
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
         if not guided:
             return set()
-        touched = ThreatField(self._touched, self.settings.planner.intensity)
-        boxes = influence_boxes(touched.packed)
-        starts = np.array([r.position for r in guided], dtype=float)
-        ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
-        reached = corridors_meet(starts, ends, boxes)
-        dirty = set()
-        for rec, hit in zip(guided, reached.tolist()):
-            assert rec.stepper is not None
-            if not (hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None):
+        try:
+            touched = ThreatField(self._touched, self.settings.planner.intensity)
+            boxes = influence_boxes(touched.packed)
+            starts = np.array([r.position for r in guided], dtype=float)
+            ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
+            reached = corridors_meet(starts, ends, boxes).tolist()
+        except Exception:  # judged afresh, all of them: dearer, never wrong
+            reached = [True] * len(guided)
+        dirty: set[str] = set()
+        for rec, hit in zip(guided, reached):
+            try:
+                assert rec.stepper is not None
+                if not (
+                    hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None
+                ):
+                    continue
+                rec.stepper.world_changed()
+                self._supersede(rec)
+            except Exception as exc:
+                self._fault(self._key(keys.KeyKind.UNIT_GOAL, rec.id), exc, now, out, rec.id, dirty)
                 continue
-            rec.stepper.world_changed()
-            self._supersede(rec)
             if not rec.stale:
                 dirty.add(rec.id)
         return dirty
@@ -727,7 +886,10 @@ class World:
         """A fresh direction for each unit named (stale and unknown units get none).
 
         Units with a goal are advised in one vectorised call, their look-ahead
-        points in ``lookahead`` more; the rest get ``no_goal``.
+        points in ``lookahead`` more; the rest get ``no_goal``.  If a unit's
+        numbers break the batch, it is run again one unit at a time and the
+        units that fail alone are dropped (``_fault``); a direction that is
+        not finite drops its unit the same way.
         """
         guided: list[_Unit] = []
         for uid in sorted(unit_ids):
@@ -735,33 +897,91 @@ class World:
             if rec is None or rec.stale or rec.position is None or not rec.owned:
                 continue
             if rec.stepper is None:
-                rec.last_status = DirectionStatus.NO_GOAL
-                out.directions.append(
-                    Direction(
-                        unit=uid,
-                        seq=rec.seq,
-                        status=DirectionStatus.NO_GOAL,
-                        vector=(0.0, 0.0),
-                        planner=self.settings.planner_id,
-                    )
-                )
+                out.directions.append(self._no_goal(rec))
             else:
                 guided.append(rec)
         if not guided:
             return
         fld = self.field
-        steppers: list[Stepper] = [r.stepper for r in guided]  # type: ignore[misc]
-        advices = advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), self._cull)
-        ahead = self._lookahead(guided, advices, fld)
+        dropped: list[_Unit] = []  # units whose step failed: told no_goal once the rest are out
+        try:
+            advices = self._advise(guided, fld)
+        except Exception:  # one unit's numbers broke the batch: each alone, the poisoned dropped
+            advices, alone = [], guided
+            guided = []
+            for rec in alone:
+                try:
+                    advices += self._advise([rec], fld)
+                    guided.append(rec)
+                except Exception as exc:
+                    self._unit_fault(rec, exc, now, out, dropped)
+        if not all(map(_finite_advice, advices)):
+            for rec, adv in zip(guided, advices):
+                if not _finite_advice(adv):
+                    err = FloatingPointError(f"a direction that is not finite at {rec.position}")
+                    self._unit_fault(rec, err, now, out, dropped)
+            kept = [(r, a) for r, a in zip(guided, advices) if _finite_advice(a)]
+            guided, advices = [r for r, _ in kept], [a for _, a in kept]
+        try:
+            ahead = self._lookahead(guided, advices, fld)
+        except Exception:
+            ahead, pairs = [], list(zip(guided, advices))
+            guided, advices = [], []
+            for rec, adv in pairs:
+                try:
+                    ahead += self._lookahead([rec], [adv], fld)
+                    guided.append(rec)
+                    advices.append(adv)
+                except Exception as exc:
+                    self._unit_fault(rec, exc, now, out, dropped)
         first = len(out.directions)
+        sent: list[_Unit] = []
         for rec, adv, points in zip(guided, advices, ahead):
-            out.directions.append(self._direction(rec, adv, points, out))
-            if rec.stepper is not None and rec.stepper.pending is not None and rec.job is None:
-                self._ask(rec, fld, now, out)
-        if self.settings.origin is not None:  # lat/lon for the whole tick in one conversion
-            out.directions[first:] = with_geodetic_many(
-                out.directions[first:], self.settings.origin, [r.position for r in guided]
-            )
+            try:
+                d = self._direction(rec, adv, _within_map(points), out)
+                if rec.stepper is not None and rec.stepper.pending is not None and rec.job is None:
+                    self._ask(rec, fld, now, out)
+            except Exception as exc:
+                self._unit_fault(rec, exc, now, out, dropped)
+                continue
+            out.directions.append(d)
+            sent.append(rec)
+        if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
+            self._geodetic(out, first, [r.position for r in sent])
+        for rec in dropped:
+            if rec.id in self._units and rec.position is not None and not rec.stale and rec.owned:
+                out.directions.append(self._no_goal(rec))
+
+    def _advise(self, guided: list[_Unit], fld: ThreatField) -> list[Advice]:
+        steppers: list[Stepper] = [r.stepper for r in guided]  # type: ignore[misc]
+        return advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), self._cull)
+
+    def _unit_fault(
+        self, rec: _Unit, exc: BaseException, now: float, out: Outputs, dropped: list[_Unit]
+    ) -> None:
+        """One unit's step failed: its goal is dropped and rejected, and it is to be told ``no_goal``."""
+        self._fault(self._key(keys.KeyKind.UNIT_GOAL, rec.id), exc, now, out, rec.id)
+        dropped.append(rec)
+
+    def _no_goal(self, rec: _Unit) -> Direction:
+        rec.last_status = DirectionStatus.NO_GOAL
+        return Direction(
+            unit=rec.id,
+            seq=rec.seq,
+            status=DirectionStatus.NO_GOAL,
+            vector=(0.0, 0.0),
+            planner=self.settings.planner_id,
+        )
+
+    def _geodetic(self, out: Outputs, first: int, positions: list[tuple[float, float] | None]) -> None:
+        """Lat/lon and true bearing for the directions from ``first`` on; one that fails goes without."""
+        fresh = out.directions[first:]
+        try:
+            out.directions[first:] = with_geodetic_many(fresh, self.settings.origin, positions)
+        except Exception:
+            for i, (d, p) in enumerate(zip(fresh, positions), start=first):
+                with contextlib.suppress(Exception):  # this one goes in metres only
+                    (out.directions[i],) = with_geodetic_many([d], self.settings.origin, [p])
 
     def _ask(self, rec: _Unit, fld: ThreatField, now: float, out: Outputs) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
@@ -804,7 +1024,7 @@ class World:
             self._transition(rec, status, adv, out)
         rec.last_status = status
         rec.last_reason = adv.reason
-        rec.last_distance = adv.distance
+        rec.last_distance = min(adv.distance, FINITE_LIMIT)  # the wire's bound: a diagonal of the map is more
         rec.last_vector = None if adv.status.terminal else (adv.dx, adv.dy)
         heading = None
         if not adv.status.terminal and (adv.dx or adv.dy):
@@ -816,7 +1036,7 @@ class World:
             status=status,
             vector=(adv.dx, adv.dy),
             heading_deg=heading,
-            distance_to_goal=adv.distance,
+            distance_to_goal=rec.last_distance,
             threat_level=min(max(adv.level, 0.0), FINITE_LIMIT),  # the wire's bound, even for absurd weights
             lookahead=points,
             reason=adv.reason[:1024],
@@ -836,3 +1056,29 @@ class World:
             out.events.append(
                 TrappedEvent(planner=p, unit=rec.id, position=rec.position, reason=adv.reason[:1024])
             )
+
+
+def _finite_advice(a: Advice) -> bool:
+    return math.isfinite(a.dx + a.dy + a.level + a.distance)
+
+
+def _within_map(track: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The look-ahead up to its first point off the wire's map (±``FINITE_LIMIT``, or not a number)."""
+    lim = FINITE_LIMIT
+    if all(-lim <= c <= lim for c in itertools.chain.from_iterable(track)):
+        return track
+    for i, (x, y) in enumerate(track):
+        if not (-lim <= x <= lim and -lim <= y <= lim):
+            return track[:i]
+    return track
+
+
+def _where(exc: BaseException) -> str:
+    """The innermost frame of ``exc`` as ``package/module.py:line`` (no traceback: one line in the log)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    if not frames:
+        return "?"
+    f = frames[-1]
+    path = f.filename.replace("\\", "/")
+    cut = path.rfind("pfp_service/")
+    return f"{path[cut + len('pfp_service/') :] if cut >= 0 else path.rsplit('/', 1)[-1]}:{f.lineno}"

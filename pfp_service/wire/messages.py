@@ -22,6 +22,7 @@ import msgspec
 from msgspec import Meta
 
 from pfp_service.constraints import (
+    Delta,
     Id,
     Iterations,
     NonNegative,
@@ -29,6 +30,8 @@ from pfp_service.constraints import (
     Positive,
     Sigma,
     Skew,
+    Step,
+    Tolerance,
     Weight,
     check_spreads,
 )
@@ -183,15 +186,18 @@ class Goal(_Message, frozen=True, kw_only=True):
 
     Attributes:
         position: ``[x, y]`` in metres.
-        delta: goal weight; derived by the scale-free rule when absent.
-        tolerance: arrival radius in metres; derived when absent.
-        step: step length in metres; derived when absent.
+        delta: goal weight (1e-9 to 1e9); derived by the scale-free rule when absent.
+        tolerance: arrival radius in metres (>= 0.001); derived when absent.
+        step: step length in metres (>= 0.001); derived when absent.  A step
+            that would need more than ``max_iter`` steps to reach the goal from
+            where the unit is is refused when the mission is fixed (a
+            ``rejected`` event on the goal's key, field ``$.step``).
     """
 
     position: Point
-    delta: Positive | None = None
-    tolerance: Positive | None = None
-    step: Positive | None = None
+    delta: Delta | None = None
+    tolerance: Tolerance | None = None
+    step: Step | None = None
 
 
 class ThreatUpdate(_Message, frozen=True, kw_only=True):
@@ -261,9 +267,9 @@ class PreviewRequest(_Message, frozen=True, kw_only=True):
     start: Point | None = None
     goal: Point | None = None
     threats: Annotated[list[WhatIfThreat], Meta(max_length=MAX_WHATIF_THREATS)] = []
-    delta: Positive | None = None
-    step: Positive | None = None
-    tolerance: Positive | None = None
+    delta: Delta | None = None
+    step: Step | None = None
+    tolerance: Tolerance | None = None
     max_iter: Iterations | None = None
     geojson: bool = False
 
@@ -345,6 +351,9 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     units_owned: Count = 0  # units this planner guides (all of them unless several share the mission)
     pushes: Count = 0  # directions sent without a report asking (world changes, routes landing)
     pushes_resent: Count = 0  # ... sent again, because no report has been answered since
+    session: Text = ""  # the planner's Zenoh session id: planners that share an id are told apart by it
+    origin: Origin | None = None  # where its [0, 0] lies; clients check or convert their own against it
+    faults: Count = 0  # inputs dropped because applying them failed inside the planner (each also rejected)
 
 
 # -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
@@ -434,6 +443,8 @@ class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
     goals: Count = 0
     missions: Count = 0
     expired: Count = 0  # threats whose TTL ran out while the planner was down
+    corrupt: Count = 0  # rows skipped as unreadable, plus the damaged pages of a state file set aside
+    set_aside: Text = ""  # where a damaged state file was moved (kept), if one was
 
 
 class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):
