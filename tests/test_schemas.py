@@ -150,6 +150,8 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "ErrorReply": ({"error"}, {"field"}),
     # positions to the planner may be {"lat", "lon"} (added with geo)
     "LatLon": ({"lat", "lon"}, set()),
+    # the planner's origin in its status (added with acknowledged writes and origin checks)
+    "Origin": ({"lat", "lon"}, {"alt"}),
     "PlannerStatus": (
         {"planner", "mission", "uptime_s"},
         {"version", "units", "units_stale", "threats", "msgs_in", "msgs_out", "rejected"}

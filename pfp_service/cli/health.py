@@ -54,7 +54,10 @@ def run(args: argparse.Namespace) -> int:
         return 1
     found = []
     with session:
-        for reply in session.get(keys.planner_statuses(args.mission), timeout=args.timeout):
+        every = zenoh.ConsolidationMode.NONE  # two planners sharing an id answer on one key: both count
+        for reply in session.get(
+            keys.planner_statuses(args.mission), consolidation=every, timeout=args.timeout
+        ):
             if reply.ok is None:
                 continue
             try:

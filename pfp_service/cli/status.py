@@ -45,10 +45,12 @@ def planner_lines(statuses: Sequence[Any]) -> list[str]:
     rows: list[tuple[str, ...]] = [
         ("planner", "owns", "units", "stale", "threats", "p50", "p99", "deliberating", "overload")
     ]
+    ids = [st.planner for st in statuses]
     for st in statuses:
         rows.append(
             (
-                st.planner,
+                # planners sharing an id (a conflict) are told apart by their Zenoh session
+                f"{st.planner} ({st.session})" if ids.count(st.planner) > 1 else st.planner,
                 str(st.units_owned),
                 str(st.units),
                 str(st.units_stale),
@@ -139,11 +141,15 @@ def run(args: argparse.Namespace) -> int:
     found = []
     statuses = []
     with session:
-        for reply in session.get(keys.planner_statuses(args.mission), timeout=args.timeout):
+        # every reply: two planners sharing an id answer on one key, and Zenoh would keep only one
+        every = zenoh.ConsolidationMode.NONE
+        for reply in session.get(
+            keys.planner_statuses(args.mission), consolidation=every, timeout=args.timeout
+        ):
             if reply.ok is not None:
                 with contextlib.suppress(InputError):
                     statuses.append(decode_planner_status(reply.ok.payload.to_bytes()))
-        for reply in session.get(keys.worlds(args.mission), timeout=args.timeout):
+        for reply in session.get(keys.worlds(args.mission), consolidation=every, timeout=args.timeout):
             if reply.ok is None:
                 continue
             try:

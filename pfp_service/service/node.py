@@ -57,6 +57,7 @@ from pfp_service.service.store import Store
 from pfp_service.service.world import World
 from pfp_service.service.worldpages import answer_world, fetch_world
 from pfp_service.wire import (
+    ConflictEvent,
     ErrorReply,
     Event,
     ForgottenEvent,
@@ -65,6 +66,7 @@ from pfp_service.wire import (
     RestoredEvent,
     decode_goal,
     decode_mission,
+    decode_planner_status,
     decode_threat,
     decode_unit_state,
     encode,
@@ -186,6 +188,7 @@ class PlannerNode:
         self._order = WriteOrder()
         self.zid = str(session.info.zid())
         self._same_id: dict[str, int] = {}  # planners with this id on other sessions -> asks missed
+        self._inbox_events: list[Event] = []  # events raised off the loop (a twin under --cluster)
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -251,13 +254,18 @@ class PlannerNode:
             self._event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
-        log.info("planner ready", extra={"fields": {"mission": m, "planner": p}})
+        self._twins_thread = threading.Thread(target=self._watch_twins, name="pfp-twins", daemon=True)
+        self._twins_thread.start()
+        log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
 
     def stop(self) -> None:
         self._stop.set()
         self._wake.set()
         if self._loop_thread is not None:
             self._loop_thread.join(timeout=2.0)
+        twins = getattr(self, "_twins_thread", None)
+        if twins is not None:
+            twins.join(timeout=2.0)
         self._deliberators.shutdown()
         self._desk.shutdown()
         for d in self._declared:
@@ -381,6 +389,61 @@ class PlannerNode:
             return
         self._push(PeerPlanner(pid, sample.kind == zenoh.SampleKind.PUT))
 
+    def _watch_twins(self) -> None:
+        """Ask every planner of the mission for its status each ``PEERS_EVERY_S``, to find twins.
+
+        A twin is another session serving this mission under this planner's id:
+        both hold the same ``alive/planner/{id}`` token, so liveliness cannot tell
+        them apart, but each status names its session.  A twin becomes a
+        ``PeerPlanner`` named ``{id}-{its session}``: the world reports the
+        conflict.  Under ``--cluster`` the units are shared by planner id, which
+        two twins cannot do, so the twin is a conflict there too, said by the node.
+        Runs on its own thread: it blocks on queries, which no callback may.
+        """
+        selector = keys.planner_statuses(self.cfg.mission)
+        me = self.cfg.planner_id
+        while not self._stop.wait(PEERS_EVERY_S):
+            seen: set[str] = set()
+            try:
+                replies = self.session.get(
+                    selector, consolidation=zenoh.ConsolidationMode.NONE, timeout=PEERS_EVERY_S
+                )
+                for reply in replies:
+                    if reply.ok is None:
+                        continue
+                    with contextlib.suppress(InputError):
+                        st = decode_planner_status(reply.ok.payload.to_bytes())
+                        if st.planner == me and st.session and st.session != self.zid:
+                            seen.add(st.session)
+            except Exception:  # the session is closing under us
+                if self._stop.is_set():
+                    return
+                continue
+            for zid in seen - self._same_id.keys():
+                self._same_id[zid] = 0
+                self._twin(zid, True)
+            for zid in list(self._same_id):
+                self._same_id[zid] = 0 if zid in seen else self._same_id[zid] + 1
+                if self._same_id[zid] >= PEER_MISSES:
+                    del self._same_id[zid]
+                    self._twin(zid, False)
+
+    def _twin(self, zid: str, alive: bool) -> None:
+        name = f"{self.cfg.planner_id[:50]}-{zid[:12]}"
+        if not self.cfg.cluster:
+            self._push(PeerPlanner(name, alive))
+            return
+        if alive:  # the world shares units by planner id: twins under --cluster cannot share, only collide
+            reason = (
+                f"another planner (session {zid}) also serves mission {self.cfg.mission!r} as "
+                f"{self.cfg.planner_id!r}; --cluster shares units by planner id: give each its own --planner-id"
+            )
+            with self._lock:  # events are published from the loop's thread only
+                self._inbox_events.append(
+                    ConflictEvent(planner=self.cfg.planner_id, other=name, reason=reason)
+                )
+            self._wake.set()
+
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
             if len(self._queries) >= QUERIES_MAX:  # a query flood: shed, counted, never queued unbounded
@@ -458,7 +521,9 @@ class PlannerNode:
         for d in out.directions:
             self._put(self._direction_keys.key(d.unit), encode(d), direction=True)
         logged: collections.Counter[str] = collections.Counter()
-        for ev in out.events:
+        with self._lock:
+            raised, self._inbox_events = self._inbox_events, []
+        for ev in [*raised, *out.events]:
             self._event(ev, logged)
         for fault in out.faults:  # the world's bulkheads: once a minute per key, never a traceback
             log.error("input failed inside the planner", extra={"fields": fault.fields()})
@@ -612,5 +677,7 @@ class PlannerNode:
             overload=c["overload"] + self.counters["overload"],
             pushes=c["pushes"],
             pushes_resent=c["pushes_resent"],
+            session=self.zid,
+            origin=self.cfg.origin,
             faults=c["faults"],
         )
