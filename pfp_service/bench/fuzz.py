@@ -10,12 +10,18 @@ wrong types, NaN and Infinity, huge numbers, out-of-range values, bad UTF-8,
 non-objects, impossible lat/lon positions (the planner has an origin), megabyte
 payloads and valid payloads on keys with odd ids.
 
+Then a bad unit sends poison goals (``POISON_GOALS``: valid JSON whose
+numbers a planner once could not plan, a ZeroDivisionError or an
+OverflowError inside it), each with every report for ``POISON_S`` seconds,
+while ``INNOCENTS`` innocent units report at 10 Hz in the same ticks.
+
 It passes when afterwards the planner
   - gives a fresh probe unit the same direction, bit for bit, as before the fuzz,
     and answered every probe sent during it within 5 s (no stall);
   - counted every put and delete as rejected (or as shed at its bounded inbox:
     ``overload``), and answered every query (an error reply that decodes, or a status);
   - grew its resident memory by at most ``--max-rss-growth-mb``;
+  - answered at least ``INNOCENT_SHARE`` of the innocent units' reports beside the poison goals;
   - wrote zero tracebacks to its log, and is still running.
 """
 
@@ -37,7 +43,7 @@ from typing import Any, NamedTuple
 
 from pfp_service.cli._common import positive_float, positive_int
 
-__all__ = ["CATEGORIES", "Input", "add_arguments", "fuzz", "malformed", "run"]
+__all__ = ["CATEGORIES", "POISON_GOALS", "Input", "add_arguments", "fuzz", "malformed", "poison_goals", "run"]
 
 MISSION = "fuzz"
 ORIGIN = "48.0,11.0"  # 58 N is 1,100 km north of it: too far for any mission
@@ -195,6 +201,97 @@ def malformed(rng: random.Random, kind: str) -> Input:
     return Input(category, payload, rng.choice(_ODD_IDS) if category == "odd_id" else None)
 
 
+# -- poison goals: valid JSON whose numbers once broke the planner (issue 21) ------------------
+# The bad unit reports from [0, 0]; each goal is sent with every one of its reports.  The
+# decoders refuse the subnormal step, tolerance and delta (>= 1 mm, >= 1e-9: constraints);
+# the offsets and the goal on the unit have arrived.  Neither may cost another unit a direction.
+POISON_GOALS: dict[str, dict[str, Any]] = {
+    "subnormal_offset": {"position": [5e-324, 5e-324]},
+    "subnormal_step": {"position": [10.0, 10.0], "step": 5e-324},
+    "subnormal_tolerance": {"position": [10.0, 10.0], "tolerance": 5e-324},
+    "subnormal_delta": {"position": [10.0, 10.0], "delta": 5e-324},
+    "goal_on_unit": {"position": [0.0, 0.0]},
+    "offset_1e-300": {"position": [1e-300, 1e-300]},
+}
+INNOCENTS = 20
+POISON_S = 2.0  # seconds of each poison, at POISON_HZ
+POISON_HZ = 10.0
+INNOCENT_SHARE = 0.95  # of the innocent units' reports answered, to pass
+
+
+def poison_goals(session: Any, say: Callable[[str], None] = print) -> dict[str, Any]:
+    """Each of ``POISON_GOALS`` from a bad unit while ``INNOCENTS`` units report in the same ticks.
+
+    Returns:
+        ``innocent_share`` (reports of the innocent units answered with their
+        own ``seq``), per poison the same share and what the bad unit was told.
+    """
+    import threading
+
+    import zenoh
+
+    from pfp_service.wire import decode_direction, keys
+
+    enc = zenoh.Encoding.APPLICATION_JSON
+    block = zenoh.CongestionControl.BLOCK
+    lock = threading.Lock()
+    got: set[tuple[str, int]] = set()
+    bad_told: Counter[str] = Counter()
+
+    def on_direction(sample: Any) -> None:
+        try:
+            d = decode_direction(sample.payload.to_bytes())
+        except Exception:
+            return
+        with lock:
+            if d.unit == "poisoner":
+                bad_told[d.status.value] += 1
+            elif d.seq is not None:
+                got.add((d.unit, d.seq))
+
+    sub = session.declare_subscriber(keys.unit_directions(MISSION), on_direction)
+    names = [f"innocent{i}" for i in range(INNOCENTS)]
+    per: dict[str, Any] = {}
+    seq = 0
+    try:
+        for name in names:
+            goal = json.dumps({"position": [10.0 + names.index(name) % 5, 12.0]}).encode()
+            session.put(keys.unit_goal(MISSION, name), goal, encoding=enc, congestion_control=block)
+        for poison, body in POISON_GOALS.items():
+            with lock:
+                bad_told.clear()
+            first = seq + 1
+            t0 = time.monotonic()
+            for tick in range(int(POISON_S * POISON_HZ)):
+                seq += 1
+                bad_state = json.dumps({"position": [0.0, 0.0], "seq": seq}).encode()
+                session.put(
+                    keys.unit_state(MISSION, "poisoner"), bad_state, encoding=enc, congestion_control=block
+                )
+                goal = json.dumps(body).encode()
+                session.put(keys.unit_goal(MISSION, "poisoner"), goal, encoding=enc, congestion_control=block)
+                for i, name in enumerate(names):
+                    state = json.dumps({"position": [float(i % 5), -3.0 - i // 5], "seq": seq}).encode()
+                    session.put(keys.unit_state(MISSION, name), state, encoding=enc, congestion_control=block)
+                time.sleep(max(t0 + (tick + 1) / POISON_HZ - time.monotonic(), 0.0))
+            time.sleep(0.5)  # the last tick's directions
+            with lock:
+                answered = sum((n, k) in got for n in names for k in range(first, seq + 1))
+                told = dict(bad_told)
+            sent = len(names) * (seq + 1 - first)
+            per[poison] = {"innocent_share": round(answered / sent, 4), "sent": sent, "bad_unit_told": told}
+            say(
+                f"  poison goal {poison}: innocent units answered {answered}/{sent}; the bad unit told {told}"
+            )
+    finally:
+        sub.undeclare()
+        for name in [*names, "poisoner"]:
+            session.delete(keys.unit_goal(MISSION, name))
+    sent_all = sum(p["sent"] for p in per.values())
+    answered_all = sum(round(p["innocent_share"] * p["sent"]) for p in per.values())
+    return {"innocent_share": round(answered_all / sent_all, 4) if sent_all else 0.0, "by_poison": per}
+
+
 # -- the live run -------------------------------------------------------------------
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--count", type=positive_int, default=10_000, help="inputs per key and queryable")
@@ -291,6 +388,8 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
     log = tempfile.NamedTemporaryFile(prefix="pfp-fuzz-", suffix=".log", delete=False)  # noqa: SIM115
     # an origin, so {lat, lon} positions go the whole way through the geodetic path
     argv = ["serve", "--listen", endpoint, "--mission", MISSION, "--log-format", "json", "--origin", ORIGIN]
+    state = tempfile.TemporaryDirectory(prefix="pfp-fuzz-state-")  # never the user's state
+    argv += ["--state-dir", state.name]
     proc = subprocess.Popen(
         [sys.executable, "-m", "pfp_service", *argv],
         stdout=log,
@@ -413,6 +512,9 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
                 time.sleep(0.2)
             after = probe.ask()
             rss1 = _rss_mb(proc.pid)
+            r["poison_goals"] = poison_goals(session, say)  # after the count of rejections: it adds its own
+            st1 = _status(session)
+            r["faults"] = st1.faults if st1 is not None else None
             r.update(
                 inputs=sum(sent.values()) + queries["sent"],
                 puts=dict(sent),
@@ -443,6 +545,7 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
                 proc.kill()
                 proc.wait()
         log.close()
+        state.cleanup()
     text = Path(log.name).read_text(errors="replace")
     r["log_lines"] = text.count("\n")
     r["log_bytes"] = len(text)
@@ -456,6 +559,10 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
         "every put and delete rejected (or shed as overload)": r["rejected"] + r["shed_overload"]
         == r["rejected_expected"],
         "every query answered": queries["unanswered"] == 0 and queries["undecodable"] == 0,
+        f"innocent units answered >= {INNOCENT_SHARE:.0%} beside poison goals": r["poison_goals"][
+            "innocent_share"
+        ]
+        >= INNOCENT_SHARE,
         f"memory growth <= {max_rss_growth_mb:g} MB": growth <= max_rss_growth_mb,
         "zero tracebacks in the log": r["tracebacks"] == 0,
         "planner still running": r["planner_alive"],
@@ -538,6 +645,11 @@ def run(args: argparse.Namespace) -> int:
         f"  planner RSS: {r['rss_mb_before']:.1f} MB before, {r['rss_mb_peak']:.1f} peak, "
         f"{r['rss_mb_after']:.1f} after; log {r['log_lines']} lines, {r['log_bytes']} bytes, "
         f"{r['tracebacks']} tracebacks"
+    )
+    pg = r["poison_goals"]
+    print(
+        f"  poison goals: innocent units answered {pg['innocent_share']:.1%} of their reports; "
+        f"faults inside the planner {r['faults']}"
     )
     for name, ok in r["checks"].items():
         print(f"  [{'ok' if ok else 'FAILED'}] {name}")

@@ -16,6 +16,7 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Any
 
@@ -60,6 +61,7 @@ def measure(count: int) -> dict[str, Any]:
 
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     mission = "bench"
+    state = tempfile.TemporaryDirectory(prefix="pfp-roundtrip-state-")  # never the user's state
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -72,6 +74,8 @@ def measure(count: int) -> dict[str, Any]:
             mission,
             "--log-level",
             "warning",
+            "--state-dir",
+            state.name,
         ],
         env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )
@@ -122,6 +126,7 @@ def measure(count: int) -> dict[str, Any]:
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+        state.cleanup()
     samples.sort()
     n = len(samples)
     return {

@@ -250,6 +250,8 @@ class PlannerNode:
                 goals=restored.goals,
                 missions=restored.missions,
                 expired=restored.expired,
+                corrupt=restored.corrupt,
+                set_aside=restored.set_aside,
             )
             self._event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)

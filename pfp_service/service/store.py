@@ -1,4 +1,4 @@
-"""Durable state: what users gave the planner survives ``kill -9``.
+"""Durable state: what users gave the planner survives ``kill -9``, and survives its own damage.
 
 One SQLite database in WAL mode per mission (``--state-dir``).  It holds the
 threats in force (with their absolute expiry, in Unix time, so a restart
@@ -12,16 +12,37 @@ lost; missions are derived, and recorded after ``apply`` from the world's
 ``Outputs.missions``.  ``synchronous=NORMAL`` in WAL mode survives a killed
 process (only a power cut can take the last transactions).
 
-No zenoh here, no clock: times are passed in.
+Damage.  At open the database is checked (``PRAGMA quick_check``).  A
+damaged file is moved aside with its WAL, kept as
+``state.sqlite3.corrupt-<UTC time>`` (``-wal``, ``-shm``), and the rows still
+readable from it (``statefile.salvage``: the WAL's pages included, since SQLite reads
+them first) are copied into a fresh database; the planner starts with those.
+A row that reads but does not decode (``restore``) is moved to the
+``set_aside`` table and named as ``table/key``; the rest loads.  Both are
+said in one warning line and counted in ``Restored.corrupt``.  A full disk
+or a read-only file is named as such (``statefile.describe``): at open it is an
+``InputError`` (the CLI's one line and exit 2), later a refused input.
+
+Who holds it.  A planner holds a shared ``flock`` on ``state.lock`` while it
+runs; ``pfp state clear`` takes it exclusively, so it refuses a state that a
+planner is using (``statefile.in_use``).
+
+No zenoh here; times are passed in (the clock is read only to name a file
+set aside when the caller gave no time).
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import os
+import re
 import sqlite3
+import time
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
@@ -37,9 +58,23 @@ from pfp_service.service.events import (
     ThreatPut,
     ThreatRemoved,
 )
+from pfp_service.service.log import get_logger
+from pfp_service.service.statefile import (
+    CORRUPT_CODES,
+    DB_NAME,
+    LOCK_NAME,
+    TABLES,
+    describe,
+    hold_shared,
+    salvage,
+)
 from pfp_service.wire import Goal, ThreatUpdate, decode, encode, keys
 
 __all__ = ["Restored", "Store"]
+
+NAMED_MAX = 20  # rows named in the warning line at most; the count has them all
+
+log = get_logger("store")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS threats (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
@@ -47,42 +82,151 @@ CREATE TABLE IF NOT EXISTS goals (unit TEXT PRIMARY KEY, body BLOB NOT NULL);
 CREATE TABLE IF NOT EXISTS missions (
     unit TEXT PRIMARY KEY, epoch INTEGER NOT NULL, origin_x REAL NOT NULL, origin_y REAL NOT NULL, params TEXT NOT NULL
 );
+CREATE TABLE IF NOT EXISTS set_aside (tbl TEXT NOT NULL, key TEXT, body BLOB, reason TEXT NOT NULL, at REAL);
 """
+_BAD_ROW = (InputError, ValueError, TypeError, KeyError, msgspec.MsgspecError)
+_PAGE = re.compile(r"\bPage (\d+)")
 
 
 @dataclasses.dataclass(frozen=True)
 class Restored:
-    """What a restart found: inputs to apply, and the counts for the ``restored`` event."""
+    """What a restart found: inputs to apply, and the counts for the ``restored`` event.
+
+    ``corrupt`` counts the rows skipped as unreadable (named in ``skipped`` as
+    ``table/key``), plus the damaged pages of a file set aside (at least one);
+    ``set_aside`` is where that file was moved, or ``""``.
+    """
 
     inputs: list[Input]
     threats: int
     goals: int
     missions: int
     expired: int
+    corrupt: int = 0
+    set_aside: str = ""
+    skipped: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass
+class _Damage:
+    """A damaged file found at open: where it went, why, and what could not be read from it."""
+
+    moved_to: str
+    reason: str
+    pages: int
+    lost: list[str]
+    salvaged: dict[str, int]
+
+
+def _corrupt(exc: BaseException) -> bool:
+    code = getattr(exc, "sqlite_errorcode", None)
+    return isinstance(code, int) and code & 0xFF in CORRUPT_CODES
 
 
 class Store:
     """The planner's durable state in ``directory/state.sqlite3``.
 
+    Args:
+        directory: the mission's state directory (made if missing).
+        wall_now: Unix time, to name a damaged file set aside (read from the clock if not given).
+
     Raises:
-        InputError: the directory cannot be made or the database opened (path ``--state-dir``).
+        InputError: the directory cannot be made, or the database opened or created
+            (path ``--state-dir``; the reason names the file and says why: disk full, read-only ...).
     """
 
-    def __init__(self, directory: str | Path) -> None:
+    def __init__(self, directory: str | Path, wall_now: float | None = None) -> None:
         path = Path(directory)
+        self.path = path / DB_NAME
+        self.damage: _Damage | None = None
+        self._lock: int | None = None
+        self._complained: set[str] = set()
         try:
             path.mkdir(parents=True, exist_ok=True)
-            self.path = path / "state.sqlite3"
-            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=NORMAL")
-            self._db.executescript(_SCHEMA)
+            self._lock = hold_shared(path / LOCK_NAME)
+        except OSError as exc:
+            raise InputError(
+                "--state-dir", f"{path}: cannot use the state directory: {describe(exc)}"
+            ) from exc
+        try:
+            try:
+                self._db = self._open_checked()
+            except sqlite3.DatabaseError as exc:
+                if not (_corrupt(exc) or isinstance(exc, _Damaged)):
+                    raise
+                self._db = self._recover(str(exc), wall_now, getattr(exc, "pages", 0))
         except (OSError, sqlite3.Error) as exc:
-            raise InputError("--state-dir", f"{path}: cannot open the state database: {exc}") from exc
+            self._unlock()
+            raise InputError(
+                "--state-dir", f"{self.path}: cannot open the state database: {describe(exc)}"
+            ) from exc
+
+    # -- opening, checking, recovering ---------------------------------------------------
+    def _connect(self) -> sqlite3.Connection:
+        return sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+
+    def _open_checked(self) -> sqlite3.Connection:
+        db = self._connect()
+        try:
+            found = [row[0] for row in db.execute("PRAGMA quick_check")]
+            if found != ["ok"]:
+                raise _Damaged("; ".join(map(str, found[:3])), _pages(found))
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=NORMAL")
+            db.executescript(_SCHEMA)
+        except BaseException:
+            db.close()
+            raise
+        return db
+
+    def _recover(self, reason: str, wall_now: float | None, pages: int = 0) -> sqlite3.Connection:
+        """Move the damaged file (and its WAL) aside, keep it, and start afresh with what it still holds."""
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(time.time() if wall_now is None else wall_now))
+        aside = self.path.with_name(f"{DB_NAME}.corrupt-{stamp}")
+        n = 1
+        while aside.exists():
+            aside = self.path.with_name(f"{DB_NAME}.corrupt-{stamp}-{n}")
+            n += 1
+        for suffix in ("", "-wal", "-shm"):  # SQLite finds a WAL by its name: the copy keeps its own
+            src = Path(f"{self.path}{suffix}")
+            if src.exists():
+                os.replace(src, f"{aside}{suffix}")
+        rows, lost = salvage(aside)
+        db = self._connect()
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=NORMAL")
+            db.executescript(_SCHEMA)
+            db.execute("BEGIN")
+            salvaged = {}
+            for table, got in rows.items():
+                width = TABLES[table][1]
+                marks = ", ".join("?" * width)
+                kept = 0
+                for row in got:
+                    try:
+                        db.execute(f"INSERT OR REPLACE INTO {table} VALUES ({marks})", row[:width])
+                        kept += 1
+                    except sqlite3.IntegrityError:  # a NULL where none may be: unreadable
+                        lost.append(f"{table}/{row[0]}")
+                salvaged[table] = kept
+            db.execute("COMMIT")
+        except BaseException:
+            db.close()
+            raise
+        self.damage = _Damage(str(aside), reason, pages, lost, salvaged)
+        return db
 
     def close(self) -> None:
         self._db.close()
+        self._unlock()
 
+    def _unlock(self) -> None:
+        if self._lock is not None:
+            os.close(self._lock)  # the flock goes with the descriptor
+            self._lock = None
+
+    # -- writing -------------------------------------------------------------------------
     def commit_inputs(self, inputs: Iterable[Input], wall_now: float, default_ttl_s: float | None) -> None:
         """Record the goal and threat inputs of one batch, in one transaction, before they are applied."""
         rows_t: list[tuple[str, bytes, float | None]] = []
@@ -101,18 +245,31 @@ class Store:
                 gone_g.append((inp.unit,))
         if not (rows_t or gone_t or rows_g or gone_g):
             return
-        db = self._db
-        db.execute("BEGIN")
-        try:
+        with self._transaction() as db:
             # a new goal or a cancel ends the old mission: its x0 and parameters no longer hold
             db.executemany("DELETE FROM missions WHERE unit = ?", [(u,) for u, _ in rows_g] + gone_g)
             db.executemany("INSERT OR REPLACE INTO threats VALUES (?, ?, ?)", rows_t)
             db.executemany("DELETE FROM threats WHERE id = ?", gone_t)
             db.executemany("INSERT OR REPLACE INTO goals VALUES (?, ?)", rows_g)
             db.executemany("DELETE FROM goals WHERE unit = ?", gone_g)
+
+    @contextlib.contextmanager
+    def _transaction(self) -> Any:
+        """BEGIN ... COMMIT; on failure the original error, not the ROLLBACK's.
+
+        SQLite rolls a transaction back by itself on a full disk or an I/O
+        error; a ROLLBACK then fails with "no transaction is active" and, if
+        raised, would hide the cause.
+        """
+        db = self._db
+        db.execute("BEGIN")
+        try:
+            yield db
             db.execute("COMMIT")
         except BaseException:
-            db.execute("ROLLBACK")
+            if db.in_transaction:
+                with contextlib.suppress(sqlite3.Error):
+                    db.execute("ROLLBACK")
             raise
 
     def commit_batch(
@@ -121,13 +278,15 @@ class Store:
         """``commit_inputs``, or, if the store fails, the batch with its goal and threat changes refused.
 
         Nothing is applied that was not committed: a refused change becomes an
-        ``InputRejected`` naming the storage error, and the rest goes on.
+        ``InputRejected`` naming the storage error (disk full, read-only ...)
+        and the state file, and the rest goes on.
         """
         try:
             self.commit_inputs(batch, wall_now, default_ttl_s)
             return batch
         except (OSError, sqlite3.Error) as exc:
-            err = InputError("$", f"not stored: {exc}")
+            err = InputError("$", f"not stored: {describe(exc)}: {self.path}")
+            self._complain("commit", err.reason)
             kept: list[Input] = []
             for inp in batch:
                 if isinstance(inp, GoalSet | GoalCancelled):
@@ -138,10 +297,25 @@ class Store:
                     kept.append(inp)
             return kept
 
+    def _complain(self, what: str, reason: str) -> None:
+        # one warning line per distinct failure, not one per batch while the disk stays full
+        if reason not in self._complained and len(self._complained) < 64:
+            self._complained.add(reason)
+            log.warning(
+                f"state not stored ({what})", extra={"fields": {"state": str(self.path), "reason": reason}}
+            )
+
     def record(self, missions: Iterable[MissionRecord], forgotten: Iterable[str]) -> None:
-        """After an ``apply``: the missions it fixed, and the units it forgot."""
-        self.record_missions(missions)
-        self.forget(forgotten)
+        """After an ``apply``: the missions it fixed, and the units it forgot.
+
+        A storage failure here is logged, not raised: the goals are stored, and
+        a unit whose mission was not recorded is restored from its goal.
+        """
+        try:
+            self.record_missions(missions)
+            self.forget(forgotten)
+        except (OSError, sqlite3.Error) as exc:
+            self._complain("missions", f"{describe(exc)}: {self.path}")
 
     def record_missions(self, missions: Iterable[MissionRecord]) -> None:
         """Record units' missions (``x0`` and resolved parameters) once they are fixed."""
@@ -150,51 +324,130 @@ class Store:
             for m in missions
         ]
         if rows:
-            with self._db:
-                self._db.execute("BEGIN")
-                self._db.executemany("INSERT OR REPLACE INTO missions VALUES (?, ?, ?, ?, ?)", rows)
+            with self._transaction() as db:
+                db.executemany("INSERT OR REPLACE INTO missions VALUES (?, ?, ?, ?, ?)", rows)
 
     def forget(self, units: Iterable[str]) -> None:
         """Units the world forgot: their goals and missions go too."""
         rows = [(u,) for u in units]
         if rows:
-            with self._db:
-                self._db.execute("BEGIN")
-                self._db.executemany("DELETE FROM goals WHERE unit = ?", rows)
-                self._db.executemany("DELETE FROM missions WHERE unit = ?", rows)
+            with self._transaction() as db:
+                db.executemany("DELETE FROM goals WHERE unit = ?", rows)
+                db.executemany("DELETE FROM missions WHERE unit = ?", rows)
 
+    # -- reading -------------------------------------------------------------------------
     def restore(self, wall_now: float) -> Restored:
-        """The inputs that rebuild the world as it was: threats with the time left, goals, missions."""
+        """The inputs that rebuild the world as it was: threats with the time left, goals, missions.
+
+        A row that does not decode is moved to ``set_aside`` and named; the
+        rest loads.  A read that finds the file damaged (past the check at
+        open) sets the file aside as ``__init__`` would, and reads again.
+        """
+        try:
+            found = self._read(wall_now)
+        except sqlite3.DatabaseError as exc:
+            if not _corrupt(exc):
+                raise
+            self._db.close()
+            self._db = self._recover(str(exc), wall_now)
+            found = self._read(wall_now)
+        damage = self.damage
+        lost = damage.lost if damage is not None else []
+        skipped = tuple(lost) + found.skipped
+        corrupt = len(skipped) + (max(1, damage.pages) if damage is not None else 0)
+        restored = dataclasses.replace(
+            found,
+            corrupt=corrupt,
+            set_aside=damage.moved_to if damage is not None else "",
+            skipped=skipped,
+        )
+        if corrupt:
+            self._say(restored)
+        return restored
+
+    def _read(self, wall_now: float) -> Restored:
+        db = self._db
         inputs: list[Input] = []
+        bad: list[tuple[str, str, Any, str]] = []
         expired = 0
-        for tid, body, expires_at in self._db.execute("SELECT id, body, expires_at FROM threats ORDER BY id"):
-            update = decode(ThreatUpdate, body)
-            if expires_at is not None:
-                left = expires_at - wall_now
-                if left <= 0:
-                    expired += 1
-                    continue
-                update = msgspec.structs.replace(update, ttl_s=left)
-            inputs.append(ThreatPut(tid, update))
+        for tid, body, expires_at in db.execute("SELECT id, body, expires_at FROM threats ORDER BY id"):
+            try:
+                update = decode(ThreatUpdate, body)
+                if expires_at is not None:
+                    left = float(expires_at) - wall_now
+                    if left <= 0:
+                        expired += 1
+                        continue
+                    update = msgspec.structs.replace(update, ttl_s=left)
+            except _BAD_ROW as exc:
+                bad.append(("threats", str(tid), body, _why(exc)))
+                continue
+            inputs.append(ThreatPut(str(tid), update))
         n_threats = len(inputs)
-        missions = {
-            unit: (epoch, (ox, oy), Resolved(**json.loads(params)))
-            for unit, epoch, ox, oy, params in self._db.execute("SELECT * FROM missions")
-        }
+        missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
+        for unit, _epoch, ox, oy, params in db.execute("SELECT * FROM missions"):
+            try:
+                missions[str(unit)] = ((float(ox), float(oy)), Resolved(**json.loads(params)))
+            except _BAD_ROW as exc:
+                bad.append(("missions", str(unit), params, _why(exc)))
         n_goals = n_missions = 0
-        for unit, body in self._db.execute("SELECT unit, body FROM goals ORDER BY unit"):
-            goal = decode(Goal, body)
+        for unit, body in db.execute("SELECT unit, body FROM goals ORDER BY unit"):
+            try:
+                goal = decode(Goal, body)
+            except _BAD_ROW as exc:
+                bad.append(("goals", str(unit), body, _why(exc)))
+                continue
             n_goals += 1
             if unit in missions:
-                _epoch, origin, params = missions[unit]
+                origin, params = missions[unit]
                 inputs.append(MissionRestored(unit, goal, origin, params))
                 n_missions += 1
             else:
                 inputs.append(GoalSet(unit, goal))
-        if expired:
-            with self._db:
-                self._db.execute("BEGIN")
-                self._db.execute(
+        if expired or bad:
+            with self._transaction() as tx:
+                tx.execute(
                     "DELETE FROM threats WHERE expires_at IS NOT NULL AND expires_at <= ?", (wall_now,)
                 )
-        return Restored(inputs, n_threats, n_goals, n_missions, expired)
+                for table, key, body, why in bad:  # kept, out of the way: a later start does not trip on it
+                    tx.execute(
+                        "INSERT INTO set_aside VALUES (?, ?, ?, ?, ?)", (table, key, body, why, wall_now)
+                    )
+                    tx.execute(f"DELETE FROM {table} WHERE {TABLES[table][0]} = ?", (key,))
+        skipped = tuple(f"{table}/{key}" for table, key, _b, _w in bad)
+        return Restored(inputs, n_threats, n_goals, n_missions, expired, skipped=skipped)
+
+    def _say(self, r: Restored) -> None:
+        """The one warning line: what was set aside, where it went, and what was kept."""
+        names = ", ".join(r.skipped[:NAMED_MAX]) + (
+            f" and {len(r.skipped) - NAMED_MAX} more" if len(r.skipped) > NAMED_MAX else ""
+        )
+        fields: dict[str, Any] = {"state": str(self.path), "corrupt": r.corrupt}
+        if self.damage is not None:
+            fields |= {
+                "moved_to": self.damage.moved_to,
+                "reason": self.damage.reason,
+                "salvaged": " ".join(f"{t}:{n}" for t, n in self.damage.salvaged.items()),
+            }
+        if names:
+            fields["skipped"] = names
+        what = (
+            "damaged state file set aside" if self.damage is not None else "unreadable state rows set aside"
+        )
+        log.warning(f"{what}; started with the rest", extra={"fields": fields})
+
+
+class _Damaged(sqlite3.DatabaseError):
+    """``quick_check`` found damage (it names the pages)."""
+
+    def __init__(self, reason: str, pages: int) -> None:
+        super().__init__(reason)
+        self.pages = pages
+
+
+def _pages(found: list[Any]) -> int:
+    return len({m.group(1) for line in found for m in _PAGE.finditer(str(line))})
+
+
+def _why(exc: BaseException) -> str:
+    return str(exc) or type(exc).__name__

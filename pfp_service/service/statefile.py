@@ -1,0 +1,186 @@
+"""The state database as files: salvage from a damaged one, who holds it, what a mission's directory holds.
+
+``Store`` opens, checks and writes the database; this module is what it and
+``pfp state`` need of the files around it: ``salvage`` reads what it can
+from a file set aside, ``hold_shared`` and ``in_use`` are the planner's lock
+(a shared ``flock`` on ``state.lock``, which ``pfp state clear`` takes
+exclusively), ``state_files`` reads a directory without changing it, and
+``describe`` puts a storage error in an operator's words.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+try:  # POSIX; elsewhere nothing is locked and ``in_use`` is always false
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None  # type: ignore[assignment]
+
+__all__ = [
+    "CORRUPT_CODES",
+    "DB_NAME",
+    "LOCK_NAME",
+    "TABLES",
+    "StateFiles",
+    "describe",
+    "hold_shared",
+    "in_use",
+    "salvage",
+    "state_files",
+]
+
+DB_NAME = "state.sqlite3"
+LOCK_NAME = "state.lock"
+CORRUPT_CODES = (11, 26)  # SQLITE_CORRUPT, SQLITE_NOTADB
+# table -> (key column, column count): what salvage copies and how a lost row is named
+TABLES: dict[str, tuple[str, int]] = {"threats": ("id", 3), "goals": ("unit", 2), "missions": ("unit", 5)}
+
+
+def describe(exc: BaseException) -> str:
+    """A storage error in words a field operator acts on: the disk is full, the file is read-only ..."""
+    code = getattr(exc, "sqlite_errorcode", None)
+    errno = getattr(exc, "errno", None)
+    primary = code & 0xFF if isinstance(code, int) else None
+    if primary == 13 or errno == 28:  # SQLITE_FULL, ENOSPC
+        return f"the disk is full ({exc})"
+    if primary == 8 or errno == 30:  # SQLITE_READONLY, EROFS
+        return f"the state database is read-only ({exc})"
+    if primary == 3 or errno in (1, 13):  # SQLITE_PERM, EPERM, EACCES
+        return f"permission denied ({exc})"
+    if primary in CORRUPT_CODES:
+        return f"the state database is damaged ({exc})"
+    if primary in (5, 6):  # SQLITE_BUSY, SQLITE_LOCKED
+        return f"the state database is locked by another process ({exc})"
+    if primary == 10:  # SQLITE_IOERR
+        return f"I/O error ({exc})"
+    return str(exc)
+
+
+# -- salvage -------------------------------------------------------------------------------
+def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[str]]:
+    """The rows still readable from a damaged database, per table, and ``table/key`` of rows known lost.
+
+    Each table is scanned in rowid order; where a page cannot be read the scan
+    starts again past it (at rowid steps doubling until one reads).  A key
+    found in the table's primary-key index whose row was not read is known
+    lost.  Opened read-only (``mode=ro``): the file set aside stays as found.
+    """
+    rows: dict[str, list[tuple[Any, ...]]] = {t: [] for t in TABLES}
+    lost: list[str] = []
+    try:
+        db = sqlite3.connect(f"file:{Path(path).as_posix()}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return rows, lost
+    try:
+        for table, (key, _width) in TABLES.items():
+            got = _scan(db, table)
+            rows[table] = list(got.values())
+            have = {str(r[0]) for r in got.values()}
+            lost += [f"{table}/{k}" for k in _index_keys(db, table, key) if k not in have]
+    finally:
+        db.close()
+    return rows, lost
+
+
+def _scan(db: sqlite3.Connection, table: str) -> dict[int, tuple[Any, ...]]:
+    got: dict[int, tuple[Any, ...]] = {}
+    after, jump = 0, 0
+    while after < 2**62:
+        try:
+            for row in db.execute(f"SELECT rowid, * FROM {table} WHERE rowid > ? ORDER BY rowid", (after,)):
+                got[row[0]] = tuple(row[1:])
+                after, jump = row[0], 0
+            return got
+        except sqlite3.Error:  # this page is gone: try past it
+            jump += 1
+            after += 1 << jump
+    return got
+
+
+def _index_keys(db: sqlite3.Connection, table: str, key: str) -> list[str]:
+    out: list[str] = []
+    with contextlib.suppress(sqlite3.Error):
+        for (k,) in db.execute(
+            f"SELECT {key} FROM {table} INDEXED BY sqlite_autoindex_{table}_1 ORDER BY {key}"
+        ):
+            out.append(str(k))
+    return out
+
+
+# -- who holds it, what is there (``pfp state``) ----------------------------------------
+def hold_shared(lock_path: Path) -> int | None:
+    """A shared flock on ``state.lock``, held until closed; retried if ``clear`` removed the file meanwhile."""
+    if fcntl is None:  # pragma: no cover
+        return None
+    for _ in range(100):
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH)
+            if os.fstat(fd).st_ino == os.stat(lock_path).st_ino:
+                return fd
+        except FileNotFoundError:
+            pass
+        except BaseException:
+            os.close(fd)
+            raise
+        os.close(fd)
+    raise OSError(f"{lock_path}: could not be locked")
+
+
+def in_use(directory: str | Path) -> bool:
+    """A planner holds this state directory (its shared lock on ``state.lock``)."""
+    lock_path = Path(directory) / LOCK_NAME
+    if fcntl is None or not lock_path.exists():
+        return False
+    fd = os.open(lock_path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+@dataclasses.dataclass(frozen=True)
+class StateFiles:
+    """A mission's state directory as ``pfp state list`` shows it.
+
+    ``counts`` holds the rows per table (``threats``, ``goals``, ``missions``,
+    ``set_aside``), empty when the database cannot be read; ``error`` says why.
+    """
+
+    directory: Path
+    files: tuple[Path, ...]
+    bytes: int
+    counts: dict[str, int]
+    set_aside_files: tuple[Path, ...]
+    error: str
+
+
+def state_files(directory: str | Path) -> StateFiles:
+    """What a mission's state directory holds, read without changing it (``mode=ro``)."""
+    d = Path(directory)
+    files = tuple(sorted(p for p in d.glob(f"{DB_NAME}*") if p.is_file())) if d.is_dir() else ()
+    aside = tuple(p for p in files if ".corrupt-" in p.name and not p.name.endswith(("-wal", "-shm")))
+    counts: dict[str, int] = {}
+    error = ""
+    db_path = d / DB_NAME
+    if db_path.exists():
+        try:
+            db = sqlite3.connect(f"file:{db_path.as_posix()}?mode=ro", uri=True)
+            try:
+                for table in (*TABLES, "set_aside"):
+                    with contextlib.suppress(sqlite3.OperationalError):  # no such table: an older file
+                        counts[table] = int(db.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
+            finally:
+                db.close()
+        except sqlite3.Error as exc:
+            error = describe(exc)
+    return StateFiles(d, files, sum(p.stat().st_size for p in files), counts, aside, error)
