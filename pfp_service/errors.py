@@ -1,6 +1,8 @@
 """The project's exceptions, and the translation of third-party errors at the boundary.
 
     PfpError                    anything this package raises on purpose
+    ├── DeadlinePassed          a computation's deadline passed inside it (a preview's
+    │                           metrics, say): its answer is "expired", never a partial one
     └── InputError              bad input from outside: a file, a flag, a wire message
         │                       (path, reason), e.g. ``threats[2].sigma_range: must be > 0``
         └── ZenohError          Zenoh refused a flag or setting: a malformed endpoint,
@@ -23,6 +25,7 @@ from contextlib import contextmanager
 import msgspec
 
 __all__ = [
+    "DeadlinePassed",
     "InputError",
     "PfpError",
     "Unreachable",
@@ -35,6 +38,10 @@ __all__ = [
 
 class PfpError(Exception):
     """Base of every exception this package raises on purpose."""
+
+
+class DeadlinePassed(PfpError):
+    """A computation checked its deadline where it spends its time, and the deadline had passed."""
 
 
 class InputError(PfpError):

@@ -13,17 +13,20 @@ route's search, the optimal planner's default and the benchmark's ``J / J*``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
 from pfp_service.core.threat import ThreatField
+from pfp_service.errors import DeadlinePassed
 
 __all__ = ["LAMBDA", "Epoch", "PathMetrics", "exposure", "measure", "path_cost", "segment_clearance"]
 
 LAMBDA = 10.0
 """Exposure weight of ``J = length + LAMBDA * exposure`` (metres per unit exposure)."""
+MEASURE_CHUNK = 2048  # segments measured between two looks at the deadline
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,11 +74,18 @@ def segment_clearance(path: np.ndarray, positions: np.ndarray) -> float:
     return float(_clearance(pts, np.ascontiguousarray(positions, dtype=np.float64)))
 
 
-def measure(path: np.ndarray, epochs: list[Epoch]) -> PathMetrics:
+def measure(
+    path: np.ndarray, epochs: list[Epoch], deadline: Callable[[], bool] | None = None
+) -> PathMetrics:
     """Metrics of ``path`` (``(K+1, 2)``) walked under ``epochs``.
 
     A path of a single point has length and exposure 0, and its peak threat is
-    the level where it stands.
+    the level where it stands.  ``deadline()`` is asked every ``MEASURE_CHUNK``
+    segments: the metrics of a long path under thousands of threats take as
+    long as walking it.
+
+    Raises:
+        DeadlinePassed: ``deadline()`` said so before every segment was measured.
     """
     seg = np.diff(path, axis=0)
     seglen = np.hypot(seg[:, 0], seg[:, 1])
@@ -91,15 +101,19 @@ def measure(path: np.ndarray, epochs: list[Epoch]) -> PathMetrics:
             peak = max(peak, float(ep.field.level(pt)[0]))
             clearance = min(clearance, segment_clearance(pt, ep.field.positions))
             continue
-        a = path[ep.first : ep.last]
-        b = path[ep.first + 1 : ep.last + 1]
-        pts = np.concatenate([a, 0.5 * (a + b), b])
-        lv = ep.field.level(pts)
-        n = len(a)
-        fa, fm, fb = lv[:n], lv[n : 2 * n], lv[2 * n :]
-        exposure += float(np.sum(seglen[ep.first : ep.last] * (fa + 4.0 * fm + fb)) / 6.0)
-        peak = max(peak, float(lv.max()))
-        clearance = min(clearance, segment_clearance(path[ep.first : ep.last + 1], ep.field.positions))
+        for first in range(ep.first, ep.last, MEASURE_CHUNK if deadline is not None else ep.last):
+            if deadline is not None and deadline():
+                raise DeadlinePassed(f"the deadline passed measuring the path, at segment {first}")
+            last = min(first + MEASURE_CHUNK, ep.last) if deadline is not None else ep.last
+            a = path[first:last]
+            b = path[first + 1 : last + 1]
+            pts = np.concatenate([a, 0.5 * (a + b), b])
+            lv = ep.field.level(pts)
+            n = len(a)
+            fa, fm, fb = lv[:n], lv[n : 2 * n], lv[2 * n :]
+            exposure += float(np.sum(seglen[first:last] * (fa + 4.0 * fm + fb)) / 6.0)
+            peak = max(peak, float(lv.max()))
+            clearance = min(clearance, segment_clearance(path[first : last + 1], ep.field.positions))
     return PathMetrics(float(seglen.sum()), exposure, peak, clearance)
 
 

@@ -242,6 +242,7 @@ def plan(
     budget_s: float | None = None,
     stepper: Stepper | None = None,
     first_move: tuple[float, float] | None = None,
+    field: ThreatField | None = None,
 ) -> PlanResult:
     """Plan a path from ``start`` to ``goal`` among scheduled threats.
 
@@ -254,16 +255,23 @@ def plan(
         origin: where the goal was assigned (``x0`` of the goal term); default ``start``.
             The live daemon's previews pass the unit's origin so they match its stream.
         budget_s: stop with ``max_iter`` once this much ``clock`` time is spent
-            (checked every 64 steps; needs ``clock``).
+            (checked every 64 steps; needs ``clock``); measuring the path may
+            take as long again (checked every ``MEASURE_CHUNK`` segments).
         stepper: drive this stepper (a live unit's detached copy) instead of a
             fresh one; its goal, origin, parameters and state are used, and
             ``params``, ``bounds`` and ``origin`` are ignored.
         first_move: the unit vector the stepper already gave at ``start``
             (a live unit's last direction): the first step takes it without
             advising again, as the live unit does.
+        field: the field of every threat in ``schedule`` (all from step 0),
+            already built and shared (a preview desk's, per world); ignored
+            when it does not match them or the intensity.
 
     Returns:
         A ``PlanResult``; failure is a status, never an exception.
+
+    Raises:
+        DeadlinePassed: twice ``budget_s`` was spent before the path was measured.
     """
     t0 = clock() if clock else 0.0
     schedule = sorted(schedule, key=lambda s: s.appear_step)
@@ -275,6 +283,8 @@ def plan(
     if isinstance(params, PlannerParams):
         params = resolve(params, start, goal, [s.threat for s in schedule])
     cache: dict[int, ThreatField] = {}
+    if field is not None and field.intensity == params.intensity and len(field) == len(schedule):
+        cache[len(schedule)] = field  # _field_at's key: the threats active
     appear_steps = sorted({s.appear_step for s in schedule if s.appear_step > 0})
     field = _field_at(schedule, 0, params.intensity, cache)
     epochs: list[Epoch] = []
@@ -330,7 +340,14 @@ def plan(
                 f"start inside the core of threat {name[len('leave core ') :]}: left it by the shortest way out",
             )
     path = np.array(track)
-    m = measure(path, epochs)
+    measured_by = None
+    if budget_s is not None and clock is not None:
+        t_measured = t0 + 2.0 * budget_s
+
+        def measured_by() -> bool:
+            return clock() > t_measured
+
+    m = measure(path, epochs, measured_by)
     final = math.hypot(goal[0] - x, goal[1] - y)
     if status is PlanStatus.REACHED and not final <= params.tolerance:  # belt and braces
         status, reason = PlanStatus.INVALID, "internal: reached outside tolerance"

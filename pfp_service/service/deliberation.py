@@ -24,34 +24,34 @@ under a storm, and a thread running it shares the GIL with the loop, the
 Zenoh callbacks and the publishing (measured: with the deliberation thread
 busy, the loop held the GIL 46 % of the time and the deliberation 30 %, and
 the planner answered 30 % of 10,000 states/s).  In its own process it
-shares only the machine's cores.
+shares only the machine's cores.  The processes are a ``WorkerPool``
+(``workers.py``, shared with the preview desk): a chunk still running
+``CHUNK_RUN_S`` after it started is killed with its worker (its jobs are
+asked again later), and each worker's memory is bounded.
 """
 
 from __future__ import annotations
 
-import contextlib
-import functools
 import heapq
-import pickle
 import time
 import traceback
 from collections.abc import Callable
-from concurrent.futures import Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from typing import Any
 
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Stepper
 from pfp_service.service.events import Deliberated, Job
 from pfp_service.service.log import get_logger
-from pfp_service.service.workers import spawn_pool, stop_pool
+from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool, world_field
 
-__all__ = ["AHEAD", "CHUNK", "Deliberators"]
+__all__ = ["AHEAD", "CHUNK", "CHUNK_RUN_S", "Deliberators"]
 
 log = get_logger("deliberation")
 CHUNK = 8  # jobs per round trip to a worker
 AHEAD = 2  # chunks in the pool per worker; the rest wait here, where cancelling is free
 _PRIORITY = {"escape": 0, "foresee": 1}  # a unit trapped now before a look-ahead
+CHUNK_RUN_S = 60.0  # a chunk still running this long after it started is killed: a runaway, not a search
+WORKER_MEMORY_MB = 1024.0  # address space a deliberation worker may add to its warm size
+WORKER_NICE = 5  # below the live loop, above the preview workers
 
 
 class Deliberators:
@@ -72,17 +72,21 @@ class Deliberators:
         self._waiting: list[tuple[int, int, Job]] = []  # (priority, seq, job)
         self._seq = 0
         self._in_flight = 0  # chunks in the pool (only the loop thread changes it, in feed and _done)
-        self._fields: dict[int, tuple[ThreatField, int, bytes]] = {}  # id(field) -> (field, version, blob)
-        self._version = 0
+        self._blobs = Blobs()
         self._closed = False
         self._logged_at = -float("inf")
         self._unlogged = 0
         self._finished: list[int] = []  # chunks done since the last feed (appended by pool threads)
-        self._pool = self._new_pool()
-
-    def _new_pool(self) -> ProcessPoolExecutor:
-        pool, _warming = spawn_pool(self._workers)  # jobs sent meanwhile wait for the workers
-        return pool
+        self._pool = WorkerPool(
+            "deliberation",
+            workers,
+            memory_mb=WORKER_MEMORY_MB,
+            nice=WORKER_NICE,
+            warm=_warm_worker,
+            on_replaced=lambda why: log.warning(
+                "deliberation worker replaced", extra={"fields": {"why": why}}
+            ),
+        )  # jobs sent meanwhile wait for the workers
 
     def submit(self, jobs: list[Job]) -> None:
         """Queue the tick's jobs (the loop thread); ``feed`` sends them on."""
@@ -117,38 +121,25 @@ class Deliberators:
             self._send(chunk, now)
 
     def _send(self, chunk: list[Job], now: float) -> None:
-        version, blob = self._blob(chunk[0].field)
+        field = chunk[0].field
         items = [(j.unit, j.token, j.kind, j.stepper, j.deadline - now) for j in chunk]
-        try:
-            future = self._pool.submit(_run_chunk, version, blob, items)
-        except BrokenProcessPool:  # a worker died: a fresh pool, and these are asked again later
-            log.error("deliberation workers died; starting new ones")
-            self._pool = self._new_pool()
-            for j in chunk:
-                self._deliver(Deliberated(j.unit, j.token, None))
-            return
+        task = Task(
+            _run_chunk,
+            (field.intensity, items),
+            lambda out: self._done(out, chunk=chunk),
+            budget_s=CHUNK_RUN_S,
+            field=self._blobs.of(field.threats),
+        )
         self._in_flight += 1
-        future.add_done_callback(functools.partial(self._done, chunk=chunk))
+        self._pool.submit(task)
 
-    def _blob(self, field: ThreatField) -> tuple[int, bytes]:
-        got = self._fields.get(id(field))
-        if got is None or got[0] is not field:
-            self._version += 1
-            blob = pickle.dumps((field.threats, field.intensity), protocol=pickle.HIGHEST_PROTOCOL)
-            got = (field, self._version, blob)
-            self._fields = {id(field): got}  # one field at a time: older jobs are superseded anyway
-        return got[1], got[2]
-
-    def _done(self, future: Future[list[tuple[Deliberated | None, str]]], *, chunk: list[Job]) -> None:
+    def _done(self, out: Outcome, *, chunk: list[Job]) -> None:
         if self._closed:
             return
-        try:
-            results = future.result()
-        except Exception as exc:  # a worker died mid-chunk, or the pool shut down
-            results = [(None, f"{type(exc).__name__}: {exc}")] * len(chunk)
-            if isinstance(exc, BrokenProcessPool):
-                with contextlib.suppress(Exception):
-                    self._pool = self._new_pool()
+        if out.kind == "done":
+            results: list[tuple[Deliberated | None, str]] = out.value
+        else:  # killed, out of memory, died, or the pool shut down: each job is asked again later
+            results = [(None, f"{out.kind}: {out.detail}")] * len(chunk)
         for job, (done, error) in zip(chunk, results):
             if error:
                 self._log_failure(job, error)
@@ -166,25 +157,18 @@ class Deliberators:
         self._logged_at, self._unlogged = now, 0
 
     def shutdown(self) -> None:
-        """Stop at once: a worker inside a search is terminated, not waited for."""
+        """Stop at once: a worker inside a search is killed, not waited for."""
         self._closed = True
-        stop_pool(self._pool)
+        self._pool.shutdown()
 
 
 # -- in the worker processes -------------------------------------------------------
-_FIELD: dict[str, Any] = {}  # version -> field, one cached
-
-
 def _run_chunk(
-    version: int, blob: bytes, items: list[tuple[str, tuple[int, int], str, Stepper, float]]
+    intensity: str, items: list[tuple[str, tuple[int, int], str, Stepper, float]]
 ) -> list[tuple[Deliberated | None, str]]:
-    """``Job.run`` for each item under the field, each by its own deadline; an error comes back as text."""
+    """``Job.run`` for each item under the field in force, each by its own deadline; an error comes back as text."""
     started = time.monotonic()
-    if _FIELD.get("version") != version:
-        threats, intensity = pickle.loads(blob)
-        _FIELD.clear()
-        _FIELD.update(version=version, field=ThreatField(threats, intensity))
-    field = _FIELD["field"]
+    field = world_field(intensity)
     out: list[tuple[Deliberated | None, str]] = []
     for unit, token, kind, stepper, left_s in items:
         try:
@@ -192,3 +176,9 @@ def _run_chunk(
         except Exception:
             out.append((None, traceback.format_exc(limit=3)))
     return out
+
+
+def _warm_worker() -> None:
+    from pfp_service.service.desk import warm_up
+
+    warm_up(None)

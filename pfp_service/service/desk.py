@@ -1,60 +1,82 @@
-"""The preview desk: previews answered by worker processes, each exactly once and within its deadline.
+"""The preview desk: previews admitted, ordered and answered by worker processes, each exactly once and in time.
 
 The loop hands each preview query here with the unit's detached view
-(``World.view``).  A worker process computes it with ``preview()`` within
-what is left of the query's budget; the loop calls ``expire(now)`` every
-tick and answers ``expired`` any query still unanswered past its deadline,
-even while its worker is stuck in it.  Whichever comes first answers; the
-other is a no-op.  Replies over the payload limit are decimated
-(``fit_reply``).
+(``World.view``).  In the loop thread, before any work:
+
+* the body is decoded and admitted (``preview.admit``): a request whose cost
+  bound is out of proportion is refused, naming the field;
+* a request that cannot start within ``wait_s`` of its arrival (the lane's
+  queue times its measured run time, over the slots it may use) is answered
+  ``busy`` at once with a retry hint, instead of waiting until it expires.
+
+An admitted preview waits in its lane: light ones before heavy ones, and
+heavy ones hold at most ``workers - 1`` slots, so a light preview never waits
+behind a heavy one.  A worker computes it within ``budget_s`` from when it
+starts: the walk checks its deadline every 64 steps, an alarm in the worker
+stops any other phase (a route search, the metrics of a long path) just past
+it, and ``WorkerPool`` kills a worker still busy ``KILL_GRACE_S`` later and
+starts a fresh one in its slot.  Each worker's address space is bounded
+(``WORKER_MEMORY_MB`` past its warm size): past it the preview is answered an
+error and the worker replaced, never the planner.  Replies over the payload
+limit are decimated (``fit_reply``).
 
 Why processes: a preview is a Python stepping loop, and a thread running it
 shares the GIL with the planning loop (measured: the live stream's p99 rose
 from 18 ms to 185 ms under a 60-query storm with two preview threads, on a
-loaded machine).  In its own process it shares nothing.  The threats in
-force are pickled once per field and cached on both sides, so a preview
-ships only the unit's stepper copy and its request.
+loaded machine).  In its own process it shares nothing, and it can be killed.
+
+Why two preview workers on a 2-core machine (``preview_workers``, default 2):
+the planning loop needs one core, so more CPU-bound workers only time-slice
+the other one (and cost ~150 MB each); two keep one slot for light previews
+while a heavy one runs, and they run at a lower CPU priority than the loop
+(``WORKER_NICE``), so the live stream keeps its latency under a storm.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import functools
 import heapq
-import pickle
+import math
+import signal
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import zenoh
 
 from pfp_service import geojson
-from pfp_service.errors import InputError
+from pfp_service.core.params import FieldStats, field_stats
+from pfp_service.errors import DeadlinePassed, InputError
 from pfp_service.geo import Origin
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings
 from pfp_service.service.log import get_logger
-from pfp_service.service.preview import fit_reply, preview
-from pfp_service.service.workers import spawn_pool, stop_pool
+from pfp_service.service.preview import Cost, admit, fit_reply, preview
+from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool, world_field, world_threats
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds
 
-__all__ = ["EXPIRY_GRACE_S", "PreviewDesk", "warm_up"]
+__all__ = ["EXPIRY_GRACE_S", "WORKER_MEMORY_MB", "WORKER_NICE", "PreviewDesk", "warm_up"]
 
 log = get_logger("previews")
 _JSON = zenoh.Encoding.APPLICATION_JSON
-EXPIRY_GRACE_S = 0.05  # a preview still computing this long past its deadline is answered "expired"
+EXPIRY_GRACE_S = 1.0  # a backstop: a preview unanswered this long past its last moment is answered "expired"
+WORKER_MEMORY_MB = 1024.0  # address space a preview worker may add to its warm size (measured: ~0.3 GB used)
+WORKER_NICE = 10  # preview workers yield the cores to the live loop
+ALARM_GRACE_S = 0.05  # the worker's alarm stops any phase this long past the budget
+WALK_SHARE = 0.45  # of the budget, for the walk; measuring its path may take as long again (``plan``)
+LIGHT, HEAVY = 0, 1
+_FIRST_GUESS_S = {LIGHT: 0.02, HEAVY: 0.5}  # run time assumed before any is measured
+_EWMA = 0.2
 
 
 class _Answer:
     """One preview query, answered exactly once."""
 
-    def __init__(self, query: zenoh.Query, deadline: float) -> None:
+    def __init__(self, query: zenoh.Query, last: float) -> None:
         self.query = query
-        self.deadline = deadline
+        self.last = last  # on the desk's clock: answered by then, whatever happens
         self.done = False
         self._lock = threading.Lock()
 
@@ -79,11 +101,15 @@ class _Answer:
 
 
 class PreviewDesk:
-    """Previews on ``workers`` threads, at most ``queue`` in flight, each within ``budget_s``.
+    """Previews on ``workers`` processes, at most ``queue`` in flight, each started within ``wait_s``
+    and computed within ``budget_s``.
 
     Args:
-        clock: the node's monotonic clock (deadlines are on it).
+        clock: the node's monotonic clock (arrival times are on it).
         bounds, origin: the mission's, for decoding requests.
+        wait_s: longest a preview may wait for a worker; one that could not start by then is
+            answered ``busy`` at once.
+        memory_mb: address space each worker may add to its warm size.
     """
 
     def __init__(
@@ -95,120 +121,225 @@ class PreviewDesk:
         clock: Callable[[], float],
         bounds: Bounds | None,
         origin: Origin | None,
+        wait_s: float = 2.0,
+        memory_mb: float | None = WORKER_MEMORY_MB,
     ) -> None:
-        self._workers = workers
-        self._pool = self._new_pool()
-        self._threats_key: tuple[Any, ...] | None = (
-            None  # the field last shipped: (its tuple, version, bytes)
-        )
-        self._version = 0
         self._queue = queue
         self._budget_s = budget_s
+        self._wait_s = wait_s
         self._max_iter = max_iter
         self._clock = clock
         self._bounds = bounds
         self._origin = origin
+        self._blobs = Blobs()
+        self._stats: tuple[tuple[Any, ...], FieldStats] | None = None
+        self._lock = threading.Lock()
         self._pending: dict[int, _Answer] = {}
         self._deadlines: list[tuple[float, int, _Answer]] = []
+        self._run_s = dict(_FIRST_GUESS_S)
+        self.counts = {"busy": 0, "refused": 0, "killed": 0, "memory": 0}
+        self._pool = WorkerPool(
+            "preview",
+            workers,
+            memory_mb=memory_mb,
+            nice=WORKER_NICE,
+            lane_caps={HEAVY: max(1, workers - 1)},
+            warm=_warm_worker,
+            on_replaced=self._replaced,
+            spare=True,
+        )
 
-    def _new_pool(self) -> ProcessPoolExecutor:
-        pool, self._started = spawn_pool(self._workers)  # started (and warmed) now, not at the first preview
-        return pool
+    @property
+    def pool(self) -> WorkerPool:
+        return self._pool
 
-    def wait_ready(self, timeout_s: float = 120.0) -> None:
+    def wait_ready(self, timeout_s: float = 180.0) -> None:
         """Block until every worker has loaded the kernels (the node calls it before serving)."""
-        for f in self._started:
-            f.result(timeout=timeout_s)
+        if not self._pool.wait_ready(timeout_s):
+            log.error("preview workers not ready", extra={"fields": {"waited_s": timeout_s}})
 
     def shutdown(self) -> None:
-        """Stop at once: a worker still inside a preview is terminated, not waited for."""
-        stop_pool(self._pool)
-
-    def _threats_blob(self, threats: tuple[Any, ...]) -> tuple[int, bytes]:
-        if self._threats_key is None or self._threats_key[0] is not threats:
-            self._version += 1
-            self._threats_key = (
-                threats,
-                self._version,
-                pickle.dumps(threats, protocol=pickle.HIGHEST_PROTOCOL),
-            )
-        return self._threats_key[1], self._threats_key[2]
+        """Stop at once: a worker still inside a preview is killed, not waited for."""
+        self._pool.shutdown()
 
     def refuse(self, query: zenoh.Query, err: ErrorReply) -> None:
         """Answer a query the loop will not compute (a bad key, say)."""
         _Answer(query, 0.0).error(err)
 
     def submit(self, query: zenoh.Query, key: str, view: UnitView, received: float) -> None:
-        """Queue one preview; busy (more than ``queue`` in flight) is answered at once."""
-        if len(self._pending) >= self._queue:
-            self.refuse(query, ErrorReply(error="planner busy: too many previews queued"))
-            return
-        answer = _Answer(query, received + self._budget_s)
-        self._pending[id(answer)] = answer
-        heapq.heappush(self._deadlines, (answer.deadline, id(answer), answer))
+        """Admit one preview and queue it in its lane, or answer it at once (refused, or busy)."""
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        version, blob = self._threats_blob(view.threats)
-        job = (dataclasses.replace(view, threats=()), version, blob, payload, self._bounds, self._origin)
         try:
-            future = self._pool.submit(_compute, job, answer.deadline - self._clock(), self._max_iter)
-        except BrokenProcessPool:  # a worker died: a fresh pool, and this query is answered as an error
-            log.error("preview workers died; starting new ones")
-            self._pool = self._new_pool()
-            answer.error(ErrorReply(error="internal error while previewing", field="$"))
+            request = decode_preview_request(payload, self._bounds, self._origin)
+            cost = admit(view, request, self._max_iter, self._stats_of(view.threats))
+        except InputError as err:
+            self.counts["refused"] += 1
+            self.refuse(query, ErrorReply.of(err))
             return
-        future.add_done_callback(functools.partial(self._done, answer=answer, key=key))
+        lane = HEAVY if cost.heavy else LIGHT
+        now = self._clock()
+        start_by = received + self._wait_s
+        wait = self._expected_wait(lane)
+        if len(self._pending) >= self._queue or now + wait > start_by:
+            self._busy(query, wait)
+            return
+        answer = _Answer(query, start_by + self._budget_s + ALARM_GRACE_S)
+        with self._lock:
+            self._pending[id(answer)] = answer
+            heapq.heappush(self._deadlines, (answer.last, id(answer), answer))
+        blob = self._blobs.of(view.threats)
+        job = (dataclasses.replace(view, threats=()), request, self._origin, self._budget_s, self._max_iter)
+        offset = time.monotonic() - now  # the pool's deadlines are on time.monotonic
+        task = Task(
+            _compute,
+            (job,),
+            lambda out: self._done(out, answer=answer, key=key, lane=lane, wait=self._expected_wait(lane)),
+            budget_s=self._budget_s + ALARM_GRACE_S,
+            start_by=start_by + offset,
+            field=blob,
+            lane=lane,
+            priority=_priority(cost),
+        )
+        self._pool.submit(task)
 
-    def _done(self, future: Future[tuple[str, bytes]], *, answer: _Answer, key: str) -> None:
-        try:
-            kind, body = future.result()
-        except Exception:
-            log.exception("preview failed", extra={"fields": {"key": key}})
-            answer.error(ErrorReply(error="internal error while previewing", field="$"))
-            return
-        if kind == "reply":
-            answer.reply(key, body)
+    def _stats_of(self, threats: tuple[Any, ...]) -> FieldStats:
+        """``field_stats`` of the threats in force, once per field (admission derives steps from it)."""
+        if self._stats is None or self._stats[0] is not threats:
+            self._stats = (threats, field_stats(threats))
+        return self._stats[1]
+
+    def _expected_wait(self, lane: int) -> float:
+        """How long a preview queued in ``lane`` now would wait for a worker (an estimate)."""
+        pool = self._pool
+        ahead = pool.waiting(LIGHT) + (pool.waiting(HEAVY) if lane == HEAVY else 0)
+        slots = pool.slots_for(lane) if lane == HEAVY else max(1, pool.workers - pool.running(HEAVY))
+        busy = pool.running(lane) >= slots
+        return (ahead + busy) * self._run_s[lane] / slots
+
+    def _busy(self, query: zenoh.Query, wait: float) -> None:
+        self.counts["busy"] += 1
+        self.refuse(
+            query,
+            ErrorReply(
+                error=f"busy: the planner cannot start this preview in time; retry in {_retry_ms(wait)} ms"
+            ),
+        )
+
+    def _done(self, out: Outcome, *, answer: _Answer, key: str, lane: int, wait: float) -> None:
+        with self._lock:
+            self._pending.pop(id(answer), None)
+        if out.kind in ("done", "error", "memory", "killed"):
+            self._run_s[lane] += _EWMA * (max(out.run_s, 1e-3) - self._run_s[lane])
+        if out.kind == "done":
+            kind, body = out.value
+            if kind == "reply":
+                answer.reply(key, body)
+            else:
+                answer.error(_decode_error(body))
+        elif out.kind == "late":
+            self.counts["busy"] += 1
+            answer.error(
+                ErrorReply(error=f"busy: the preview could not start in time; retry in {_retry_ms(wait)} ms")
+            )
+        elif out.kind == "killed":
+            self.counts["killed"] += 1
+            answer.error(ErrorReply(error="expired: the preview ran past its deadline and was stopped"))
+        elif out.kind == "memory":
+            self.counts["memory"] += 1
+            answer.error(ErrorReply(error="too large: the preview ran out of its worker's memory"))
+        elif out.kind == "closed":
+            answer.error(ErrorReply(error="unavailable: the planner is shutting down"))
         else:
-            answer.error(msgspec_decode_error(body))
+            log.error("preview failed", extra={"fields": {"key": key, "why": out.kind, "error": out.detail}})
+            answer.error(ErrorReply(error="internal error while previewing", field="$"))
+
+    def _replaced(self, why: str) -> None:
+        log.warning("preview worker replaced", extra={"fields": {"why": why}})
 
     def expire(self, now: float) -> None:
-        """Answer every preview past its deadline with ``expired``, computed or not (a stuck one included)."""
-        while self._deadlines and self._deadlines[0][0] + EXPIRY_GRACE_S <= now:
-            _, ident, answer = heapq.heappop(self._deadlines)
-            self._pending.pop(ident, None)
-            answer.error(ErrorReply(error="expired: the preview's deadline passed before it was computed"))
+        """A backstop: answer ``expired`` any preview still unanswered well past its last moment."""
+        with self._lock:
+            while self._deadlines and self._deadlines[0][0] + EXPIRY_GRACE_S <= now:
+                _, ident, answer = heapq.heappop(self._deadlines)
+                self._pending.pop(ident, None)
+                answer.error(
+                    ErrorReply(error="expired: the preview's deadline passed before it was computed")
+                )
+            while self._deadlines and self._deadlines[0][2].done:  # answered: off the heap
+                _, ident, _answer = heapq.heappop(self._deadlines)
+                self._pending.pop(ident, None)
 
 
-# -- in the worker processes -------------------------------------------------------
-_FIELD: dict[str, Any] = {}  # version -> threats, one field cached
+def _priority(cost: Cost) -> float:
+    return max(cost.steps, cost.route_points) * (1 + cost.whatifs)
 
 
-def _compute(job: tuple[Any, ...], left_s: float, max_iter: int) -> tuple[str, bytes]:
-    """One preview in a worker: ``("reply", body)`` or ``("error", ErrorReply JSON)``."""
-    view, version, blob, payload, bounds, origin = job
-    started = time.monotonic()
-    try:
-        if left_s <= 0:
-            return "error", encode(ErrorReply(error="expired: the preview's deadline passed in the queue"))
-        if _FIELD.get("version") != version:
-            _FIELD.clear()
-            _FIELD.update(version=version, threats=pickle.loads(blob))
-        view = dataclasses.replace(view, threats=_FIELD["threats"])
-        request = decode_preview_request(payload, bounds, origin)
-        budget = 0.9 * left_s - (time.monotonic() - started)
-        result = preview(view, request, time.monotonic, max(budget, 1e-3), max_iter)
-        if request.geojson:
-            return "reply", geojson.preview_reply(
-                origin, result, view.threats, result.path[0], result.path[-1]
-            )
-        return "reply", fit_reply(result)
-    except InputError as err:
-        return "error", encode(ErrorReply.of(err))
+def _retry_ms(wait: float) -> int:
+    return max(100, math.ceil(1e3 * min(wait, 60.0) / 100) * 100)
 
 
-def msgspec_decode_error(body: bytes) -> ErrorReply:
+def _decode_error(body: bytes) -> ErrorReply:
     from pfp_service.wire import decode_error_reply
 
     return decode_error_reply(body)
+
+
+# -- in the worker processes -------------------------------------------------------
+class _Overrun(BaseException):
+    """The worker's alarm: the preview's budget is spent (not an ``Exception``: nothing may swallow it)."""
+
+
+_ARMED = [False]
+
+
+def _alarm(signum: int, frame: Any) -> None:
+    if _ARMED[0]:
+        _ARMED[0] = False
+        raise _Overrun
+
+
+def _compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
+    """One preview in a worker: ``("reply", body)`` or ``("error", ErrorReply JSON)``.
+
+    The walk stops itself at the budget; an alarm just past it stops any other
+    phase, and the caches it may have left half-built are dropped.
+    """
+    view, request, origin, budget_s, max_iter = job
+    threats = world_threats()
+    view = dataclasses.replace(view, threats=threats)
+    signal.signal(signal.SIGALRM, _alarm)
+    _ARMED[0] = True
+    signal.setitimer(signal.ITIMER_REAL, budget_s + ALARM_GRACE_S)
+    try:
+        field = world_field(view.settings.planner.intensity)
+        result = preview(view, request, time.monotonic, WALK_SHARE * budget_s, max_iter, field)
+        _ARMED[0] = False
+        if request.geojson:
+            return "reply", geojson.preview_reply(origin, result, threats, result.path[0], result.path[-1])
+        return "reply", fit_reply(result)
+    except InputError as err:
+        return "error", encode(ErrorReply.of(err))
+    except DeadlinePassed:
+        return "error", encode(ErrorReply(error="expired: the preview's budget was spent measuring its path"))
+    except _Overrun:
+        _forget_caches()
+        return "error", encode(ErrorReply(error="expired: the preview's budget was spent and it was stopped"))
+    finally:
+        _ARMED[0] = False
+        signal.setitimer(signal.ITIMER_REAL, 0)
+
+
+def _forget_caches() -> None:
+    """An interrupted phase may have left a cache half-built: the shared field and the route cache go."""
+    from pfp_service.core.routes import ROUTES
+    from pfp_service.service.workers import forget_fields
+
+    forget_fields()
+    ROUTES.clear()
+
+
+def _warm_worker() -> None:
+    warm_up(None)
 
 
 def warm_up(settings: WorldSettings | None) -> None:

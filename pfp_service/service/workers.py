@@ -1,54 +1,518 @@
-"""Worker processes for the planner's off-loop work (previews, deliberation): started, warmed, never orphaned.
+"""Worker processes for the planner's off-loop work (previews, deliberation): one small pool both use.
 
-Both pools are ``spawn`` process pools (a fork of a process holding a Zenoh
-session is unsafe).  Each worker loads the numba kernels once at start
-(``warm_up``) and watches its parent: a planner that dies, even by
-``SIGKILL``, takes its workers with it within ``ORPHAN_POLL_S`` -- before,
-every killed planner left its workers running, a few hundred MB each.
+A ``WorkerPool`` runs each worker as its own ``spawn`` process (a fork of a
+process holding a Zenoh session is unsafe) with its own pipe, driven by one
+parent thread per slot.  The slot thread takes the next task, sends it,
+waits for the result until the task's hard stop (its budget plus
+``KILL_GRACE_S``), and past it kills that one process, answers the task
+``killed`` and starts a fresh worker in the slot.  Why not a
+``ProcessPoolExecutor``: it cannot stop one task -- a preview answered
+``expired`` kept computing and the planner's process tree grew to 8 GB --
+and terminating its processes breaks every other task in the pool.
+
+Each worker:
+
+* loads the numba kernels once (``warm_up``) before it takes a task;
+* ignores SIGINT (Ctrl-C to the process group reaches it: the parent shuts
+  it down, no traceback) and watches its parent, so a planner that dies,
+  even by ``SIGKILL``, takes it along within ``ORPHAN_POLL_S``;
+* runs at a lower CPU priority (``nice``), so the live loop wins the cores;
+* has its address space bounded (``RLIMIT_AS``: its size once warm, plus
+  ``memory_mb``).  An allocation past it raises ``MemoryError`` in the task,
+  which is answered ``memory``, and the worker is replaced (its heap may be
+  left fragmented at the limit), never the planner;
+* caches the threats in force (``FieldBlob``: pickled once per field by
+  ``Blobs`` in the parent, shipped to a worker only when it lacks that
+  version) and the ``ThreatField`` built on them (``world_field``), so
+  every task under one world shares its culled field and route cache.
+
+Tasks wait in lanes (``Task.lane``), each a heap by ``(priority, seq)``; a
+free slot takes from the lowest lane first, and a lane may be capped to a
+number of slots (``lane_caps``), so heavy work never holds every slot.  A
+task not started by its ``start_by`` is answered ``late`` unrun.
 """
 
 from __future__ import annotations
 
 import contextlib
+import heapq
+import itertools
+import math
 import multiprocessing
 import os
+import pickle
+import signal
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+import traceback
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any, Literal
 
-__all__ = ["ORPHAN_POLL_S", "spawn_pool", "stop_pool"]
+__all__ = [
+    "KILL_GRACE_S",
+    "ORPHAN_POLL_S",
+    "Blobs",
+    "FieldBlob",
+    "Outcome",
+    "Task",
+    "WorkerPool",
+    "forget_fields",
+    "world_field",
+    "world_threats",
+]
 
 ORPHAN_POLL_S = 0.5
+KILL_GRACE_S = 0.25  # a task this long past its budget is killed with its worker
+READY_TIMEOUT_S = 180.0  # a worker not warm by then is started again
+OutcomeKind = Literal["done", "error", "memory", "killed", "died", "late", "closed"]
 
 
-def spawn_pool(workers: int) -> tuple[ProcessPoolExecutor, list[Future[None]]]:
-    """A pool of ``workers`` processes, started now; wait on the futures to know they are warm."""
-    ctx = multiprocessing.get_context("spawn")  # never fork a process holding a zenoh session
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init, initargs=(os.getpid(),))
-    return pool, [pool.submit(_noop) for _ in range(workers)]
+@dataclass(frozen=True, slots=True)
+class FieldBlob:
+    """The threats in force, pickled once: ``version`` names them in the workers' cache."""
+
+    version: int
+    data: bytes
 
 
-def stop_pool(pool: ProcessPoolExecutor) -> None:
-    """Stop at once: a worker still inside a job is terminated, not waited for."""
-    procs = list((getattr(pool, "_processes", None) or {}).values())  # no public handle on them
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        with contextlib.suppress(Exception):
-            proc.terminate()
+class Blobs:
+    """The parent's side of the field cache: one blob per threats tuple (by identity), the latest kept."""
+
+    def __init__(self) -> None:
+        self._threats: Any = None
+        self._blob: FieldBlob | None = None
+        self._version = 0
+
+    def of(self, threats: tuple[Any, ...]) -> FieldBlob:
+        if self._blob is None or self._threats is not threats:
+            self._version += 1
+            self._threats = threats
+            self._blob = FieldBlob(self._version, pickle.dumps(threats, protocol=pickle.HIGHEST_PROTOCOL))
+        return self._blob
 
 
-def _init(parent: int) -> None:
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    """How a task ended: ``done`` with its ``value``, or why not (``detail``); ``run_s`` in the worker."""
+
+    kind: OutcomeKind
+    value: Any = None
+    detail: str = ""
+    run_s: float = 0.0
+
+
+@dataclass(eq=False)
+class Task:
+    """One call of ``fn(*args)`` in a worker.
+
+    Args:
+        fn: a module-level function (it is pickled by name).
+        done: called once with the ``Outcome``, from a pool thread.
+        budget_s: run time allowed once started; the worker is killed ``KILL_GRACE_S`` past it.
+        start_by: on ``time.monotonic``; not started by then, it is answered ``late`` unrun.
+        field: the threats the task runs under (``world_threats`` in the worker).
+        lane, priority: lower first.
+        skip: asked before it starts; true drops it unanswered (it was superseded).
+    """
+
+    fn: Callable[..., Any]
+    args: tuple[Any, ...]
+    done: Callable[[Outcome], None]
+    budget_s: float
+    start_by: float = math.inf
+    field: FieldBlob | None = None
+    lane: int = 0
+    priority: float = 0.0
+    skip: Callable[[], bool] | None = None
+
+
+@dataclass
+class _Slot:
+    index: int
+    proc: Any = None
+    conn: Connection | None = None
+    version: int = -1  # the field version its worker holds
+    task: Task | None = None
+    thread: threading.Thread | None = None
+    started: int = field(default=0)  # workers started in this slot
+
+
+class WorkerPool:
+    """``workers`` processes, each task on one of them, each killable alone.
+
+    Args:
+        name: for thread names and log lines.
+        workers: processes.
+        memory_mb: address space each worker may add to its warm size; ``None``: unbounded.
+        nice: CPU priority added to each worker (0: as the planner).
+        lane_caps: slots a lane may hold at once (lanes not named: every slot).
+        warm: a module-level function each worker runs once before its first task.
+        on_replaced: called with the reason each time a worker is killed or replaced.
+        spare: keep one more warm worker aside, so a killed worker's slot is free again at once.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        workers: int,
+        *,
+        memory_mb: float | None = None,
+        nice: int = 0,
+        lane_caps: Mapping[int, int] | None = None,
+        warm: Callable[[], None] | None = None,
+        on_replaced: Callable[[str], None] | None = None,
+        spare: bool = False,
+    ) -> None:
+        self.name = name
+        self._memory_mb = memory_mb
+        self._nice = nice
+        self._caps = dict(lane_caps or {})
+        self._warm = warm
+        self._on_replaced = on_replaced
+        self._ctx = multiprocessing.get_context("spawn")  # never fork a process holding a zenoh session
+        self._cond = threading.Condition()
+        self._lanes: dict[int, list[tuple[float, int, Task]]] = {}
+        self._running: dict[int, int] = {}  # lane -> tasks running
+        self._seq = itertools.count()
+        self._closed = False
+        self._ready = threading.Event()
+        self._warm_left = workers
+        self.replaced = 0
+        self._spare: tuple[Any, Connection, int] | None = None
+        self._slots = [_Slot(i) for i in range(workers)]
+        if spare:
+            threading.Thread(target=self._keep_spare, name=f"pfp-{name}-spare", daemon=True).start()
+        for slot in self._slots:
+            slot.thread = threading.Thread(target=self._serve, args=(slot,), name=f"pfp-{name}-{slot.index}")
+            slot.thread.daemon = True
+            slot.thread.start()
+
+    # -- the parent's API ---------------------------------------------------------------
+    @property
+    def workers(self) -> int:
+        return len(self._slots)
+
+    def wait_ready(self, timeout_s: float = READY_TIMEOUT_S) -> bool:
+        """Block until every worker is warm (or ``timeout_s``); true if they are."""
+        return self._ready.wait(timeout_s)
+
+    def submit(self, task: Task) -> None:
+        """Queue ``task``; a closed pool answers it ``closed`` at once."""
+        with self._cond:
+            if not self._closed:
+                heapq.heappush(self._lanes.setdefault(task.lane, []), (task.priority, next(self._seq), task))
+                self._cond.notify()
+                return
+        task.done(Outcome("closed", detail="the planner is shutting down"))
+
+    def waiting(self, lane: int) -> int:
+        """Tasks queued in ``lane``, not yet started."""
+        with self._cond:
+            return len(self._lanes.get(lane, ()))
+
+    def running(self, lane: int | None = None) -> int:
+        """Tasks running (in ``lane``, or in all)."""
+        with self._cond:
+            return sum(self._running.values()) if lane is None else self._running.get(lane, 0)
+
+    def slots_for(self, lane: int) -> int:
+        """Slots ``lane`` may hold at once."""
+        return min(self._caps.get(lane, len(self._slots)), len(self._slots))
+
+    def pids(self) -> list[int]:
+        """The workers' process ids (those running now)."""
+        spare = self._spare
+        procs = [s.proc for s in self._slots] + [spare[0] if spare is not None else None]
+        return [p.pid for p in procs if p is not None and p.is_alive()]
+
+    def shutdown(self) -> None:
+        """Stop at once: queued tasks are answered ``closed``, a worker inside a task is killed."""
+        with self._cond:
+            self._closed = True
+            queued = [t for lane in self._lanes.values() for _, _, t in lane]
+            self._lanes.clear()
+            self._cond.notify_all()
+        for task in queued:
+            task.done(Outcome("closed", detail="the planner is shutting down"))
+        for slot in self._slots:
+            self._stop_worker(slot)
+        with self._cond:
+            spare, self._spare = self._spare, None
+            self._cond.notify_all()
+        if spare is not None:
+            with contextlib.suppress(Exception):
+                spare[0].kill()
+                spare[0].join(timeout=2.0)
+
+    # -- the slot threads ----------------------------------------------------------------
+    def _next(self) -> Task | None:
+        """The next task a free slot may take (under the lock), or ``None``."""
+        for lane in sorted(self._lanes):
+            heap = self._lanes[lane]
+            if heap and self._running.get(lane, 0) < self.slots_for(lane):
+                task = heapq.heappop(heap)[2]
+                self._running[lane] = self._running.get(lane, 0) + 1
+                return task
+        return None
+
+    def _serve(self, slot: _Slot) -> None:
+        while True:
+            if not self._ensure_worker(slot):
+                return
+            with self._cond:
+                task = self._next()
+                while task is None and not self._closed:
+                    self._cond.wait()
+                    task = self._next()
+                if self._closed:
+                    return
+            assert task is not None
+            try:
+                self._run(slot, task)
+            finally:
+                with self._cond:
+                    self._running[task.lane] -= 1
+                    self._cond.notify_all()
+
+    def _run(self, slot: _Slot, task: Task) -> None:
+        if task.skip is not None and task.skip():
+            return
+        now = time.monotonic()
+        if now > task.start_by:
+            task.done(
+                Outcome("late", detail=f"not started within its deadline ({now - task.start_by:.3f} s late)")
+            )
+            return
+        blob = task.field
+        ship = None
+        if blob is not None and blob.version != slot.version:
+            ship = blob.data
+        version = blob.version if blob is not None else -1
+        conn = slot.conn
+        assert conn is not None
+        try:
+            conn.send((task.fn, task.args, version, ship))
+        except (OSError, ValueError) as exc:  # the worker is gone (or the args would not pickle)
+            self._replace(slot, f"send failed: {type(exc).__name__}")
+            task.done(Outcome("died", detail=f"the worker could not take the task: {type(exc).__name__}"))
+            return
+        if blob is not None:
+            slot.version = version
+        hard_stop = time.monotonic() + task.budget_s + KILL_GRACE_S
+        got: tuple[Any, Any, float] | None = None
+        try:
+            while got is None:
+                left = hard_stop - time.monotonic()
+                if left <= 0 or self._closed:
+                    break
+                if conn.poll(min(left, 0.5)):
+                    got = conn.recv()
+        except (EOFError, OSError):  # the worker died mid-task (a signal, the OOM killer)
+            self._replace(slot, "died")
+            task.done(Outcome("died", detail="the worker died during the task"))
+            return
+        if got is None:
+            self._replace(slot, "killed past its budget")
+            task.done(
+                Outcome(
+                    "killed", detail=f"still running {task.budget_s + KILL_GRACE_S:.2f} s after it started"
+                )
+            )
+            return
+        kind: OutcomeKind
+        kind, value, run_s = got
+        if kind == "memory":
+            self._replace(slot, "memory limit")
+        task.done(
+            Outcome(kind, value if kind == "done" else None, "" if kind == "done" else str(value), run_s)
+        )
+
+    def _replace(self, slot: _Slot, why: str) -> None:
+        self._stop_worker(slot)
+        self.replaced += 1
+        if self._on_replaced is not None:
+            with contextlib.suppress(Exception):
+                self._on_replaced(why)
+
+    def _stop_worker(self, slot: _Slot) -> None:
+        proc, conn = slot.proc, slot.conn
+        slot.proc, slot.conn, slot.version = None, None, -1
+        if proc is not None:
+            with contextlib.suppress(Exception):
+                proc.kill()
+            with contextlib.suppress(Exception):
+                proc.join(timeout=2.0)
+        if conn is not None:
+            with contextlib.suppress(Exception):
+                conn.close()
+
+    def _ensure_worker(self, slot: _Slot) -> bool:
+        """A warm worker in ``slot`` (the spare, or one started now); false once the pool is closed."""
+        while slot.proc is None or not slot.proc.is_alive():
+            if self._closed:
+                return False
+            if slot.proc is not None:
+                self._stop_worker(slot)
+            with self._cond:
+                got, self._spare = self._spare, None
+                self._cond.notify_all()  # the spare keeper starts the next one
+            if got is None:
+                got = self._start_worker(slot)
+            if got is None:
+                time.sleep(0.5)  # a worker that cannot start: not in a tight loop
+                continue
+            slot.proc, slot.conn, slot.version = got
+            slot.started += 1
+            if self._closed:
+                self._stop_worker(slot)
+                return False
+            with self._cond:
+                if slot.started == 1:
+                    self._warm_left -= 1
+                    if self._warm_left == 0:
+                        self._ready.set()
+        return True
+
+    def _start_worker(self, slot: _Slot | None) -> tuple[Any, Connection, int] | None:
+        """A new worker, warm (``slot`` shows it meanwhile, so a shutdown can kill it); ``None`` if it failed."""
+        ours, theirs = self._ctx.Pipe(duplex=True)
+        proc = self._ctx.Process(
+            target=_worker_main,
+            args=(theirs, os.getpid(), self._memory_mb, self._nice, self._warm),
+            name=f"pfp-{self.name}-worker",
+            daemon=True,
+        )
+        try:
+            proc.start()
+        except Exception:  # no process to be had now (out of memory, too many processes)
+            theirs.close()
+            ours.close()
+            return None
+        theirs.close()
+        if slot is not None:
+            slot.proc, slot.conn = proc, ours
+        try:
+            ok = ours.poll(READY_TIMEOUT_S) and ours.recv() == "ready"
+        except (EOFError, OSError):
+            ok = False
+        if not ok or self._closed:
+            with contextlib.suppress(Exception):
+                proc.kill()
+                proc.join(timeout=2.0)
+            ours.close()
+            if slot is not None:
+                slot.proc, slot.conn = None, None
+            return None
+        return proc, ours, -1
+
+    def _keep_spare(self) -> None:
+        """Keep one warm worker aside, so a killed one is replaced at once, not after a warm-up."""
+        self._ready.wait()
+        while True:
+            with self._cond:
+                while self._spare is not None and not self._closed:
+                    self._cond.wait()
+                if self._closed:
+                    return
+            got = self._start_worker(None)
+            if got is None:
+                time.sleep(1.0)
+                continue
+            with self._cond:
+                if not self._closed:
+                    self._spare = got
+                    continue
+            with contextlib.suppress(Exception):
+                got[0].kill()
+            return
+
+
+# -- in the worker processes -------------------------------------------------------------
+_WORLD: dict[str, Any] = {"version": None, "threats": (), "fields": {}}
+
+
+def world_threats() -> tuple[Any, ...]:
+    """The threats the current task runs under (its ``Task.field``)."""
+    return _WORLD["threats"]  # type: ignore[no-any-return]
+
+
+def world_field(intensity: str) -> Any:
+    """The ``ThreatField`` of ``world_threats()``, built once per field and intensity, shared by every task."""
+    fields = _WORLD["fields"]
+    got = fields.get(intensity)
+    if got is None:
+        from pfp_service.core import ThreatField
+
+        got = fields[intensity] = ThreatField(_WORLD["threats"], intensity)  # type: ignore[arg-type]
+    return got
+
+
+def forget_fields() -> None:
+    """Drop the fields built on the threats (they are built again when next asked)."""
+    _WORLD["fields"] = {}
+
+
+def _worker_main(
+    conn: Connection, parent: int, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
+) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
     threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
-    from pfp_service.service.desk import warm_up
+    if nice:
+        with contextlib.suppress(OSError):
+            os.nice(nice)
+    if warm is not None:
+        warm()
+    if memory_mb is not None:
+        _limit_address_space(memory_mb)
+    conn.send("ready")
+    while True:
+        try:
+            fn, args, version, blob = conn.recv()
+        except (EOFError, OSError):
+            os._exit(0)  # the parent closed the pipe: nobody will ask again
+        started = time.monotonic()
+        try:
+            if blob is not None:
+                _WORLD.update(
+                    version=None, threats=(), fields={}
+                )  # the old field goes before the new one loads
+                _WORLD.update(version=version, threats=pickle.loads(blob))
+            value = fn(*args)
+            reply: tuple[str, Any, float] = ("done", value, time.monotonic() - started)
+        except MemoryError:
+            reply = ("memory", "the worker's memory limit was reached", time.monotonic() - started)
+        except Exception:
+            reply = ("error", traceback.format_exc(limit=4), time.monotonic() - started)
+        try:
+            conn.send(reply)
+        except MemoryError:
+            conn.send(
+                ("memory", "the reply did not fit the worker's memory limit", time.monotonic() - started)
+            )
+        except (OSError, ValueError):
+            os._exit(0)
+        if reply[0] == "memory":
+            os._exit(0)  # the parent replaces this worker: its heap may be left fragmented at the limit
 
-    warm_up(None)
+
+def _limit_address_space(memory_mb: float) -> None:
+    """``RLIMIT_AS``: the worker's size now (warm, numba's and llvm's reservations included) plus ``memory_mb``."""
+    import resource
+
+    size = 0
+    with contextlib.suppress(OSError), open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmSize:"):
+                size = int(line.split()[1]) * 1024
+    if size:
+        limit = size + int(memory_mb * 1024 * 1024)
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 
 
 def _watch_parent(parent: int) -> None:
     while os.getppid() == parent:
         time.sleep(ORPHAN_POLL_S)
     os._exit(0)  # the planner is gone: nobody will ask this worker anything again
-
-
-def _noop() -> None:
-    return None
