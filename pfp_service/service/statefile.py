@@ -28,6 +28,7 @@ __all__ = [
     "LOCK_NAME",
     "TABLES",
     "StateFiles",
+    "clear",
     "describe",
     "hold_shared",
     "in_use",
@@ -184,3 +185,35 @@ def state_files(directory: str | Path) -> StateFiles:
         except sqlite3.Error as exc:
             error = describe(exc)
     return StateFiles(d, files, sum(p.stat().st_size for p in files), counts, aside, error)
+
+
+def clear(directory: str | Path) -> list[tuple[Path, int]]:
+    """Remove a mission's state files (the database, its WAL, files set aside, the lock); the directory if empty.
+
+    Returns:
+        Each file removed, with its size; empty when there was nothing.
+
+    Raises:
+        BlockingIOError: a planner holds the state (``in_use``); nothing was removed.
+        OSError: a file could not be removed.
+    """
+    d = Path(directory)
+    files = [p for p in d.glob(f"{DB_NAME}*") if p.is_file()] if d.is_dir() else []
+    if not files:
+        return []
+    lock_path = d / LOCK_NAME
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        if fcntl is not None:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # BlockingIOError while a planner holds it
+        removed = []
+        for p in sorted(files):
+            size = p.stat().st_size
+            p.unlink()
+            removed.append((p, size))
+        lock_path.unlink()  # while held: a planner waiting on it sees it gone and takes a new one
+    finally:
+        os.close(fd)
+    with contextlib.suppress(OSError):
+        d.rmdir()
+    return removed
