@@ -156,11 +156,11 @@ class _Link:
             if not chunk:
                 raise ConnectionError("the server closed the connection")
             framed = framer.feed(chunk)
-            if framed.skipped:
-                self.skipped += framed.skipped
+            for size in framed.skipped_bytes:
+                self.skipped += 1
                 log.warning(
-                    "tak: skipped %d CoT event(s) over %d bytes from %s; the link stays up",
-                    framed.skipped,
+                    "tak: skipped a CoT event of %d bytes (over %d) from %s; the link stays up",
+                    size,
                     cot.MAX_EVENT_BYTES,
                     self.url,
                 )

@@ -12,7 +12,8 @@ Rules (as h11 keeps its rules in one place):
 - bytes outside an event (XML declarations, whitespace, garbage) are discarded;
 - an event starts at ``<event`` followed by whitespace, ``>`` or ``/``, and
   ends at the first ``</event>`` after it, or at its own ``/>``;
-- memory held is at most ``max_event_bytes`` plus one chunk, whatever arrives.
+- memory held is at most ``max_event_bytes`` plus one chunk, whatever arrives;
+- a skipped event is reported once its end has come, with its size.
 """
 
 from __future__ import annotations
@@ -28,10 +29,18 @@ _KEEP = len(_END) - 1  # a tail this long may be the start of a split marker
 
 @dataclass(frozen=True, slots=True)
 class Framed:
-    """What one ``feed`` produced: whole events (each at most the limit) and how many were skipped."""
+    """What one ``feed`` produced: whole events (each at most the limit), and the skipped ones' sizes.
+
+    An event too large is counted in ``skipped_bytes`` once its end has come
+    (its size, ``<event`` to ``</event>``); until then the framer is skipping it.
+    """
 
     events: list[bytes]
-    skipped: int = 0
+    skipped_bytes: list[int]
+
+    @property
+    def skipped(self) -> int:
+        return len(self.skipped_bytes)
 
 
 def _find_start(buf: bytearray, start: int = 0) -> int:
@@ -56,6 +65,7 @@ class EventFramer:
         self.max_event_bytes = max_event_bytes
         self._buf = bytearray()
         self._skipping = False  # inside an event that is too large: discard until its end
+        self._skip_size = 0  # bytes of it discarded so far
         self.skipped = 0  # events skipped since this framer was made
 
     @property
@@ -68,13 +78,16 @@ class EventFramer:
         buf = self._buf
         buf += data
         events: list[bytes] = []
-        skipped = 0
+        skipped: list[int] = []
         while True:
             if self._skipping:
                 end = buf.find(_END)
                 if end < 0:
-                    del buf[: max(0, len(buf) - _KEEP)]
+                    drop = max(0, len(buf) - _KEEP)
+                    self._skip_size += drop
+                    del buf[:drop]
                     break
+                skipped.append(self._skip_size + end + len(_END))
                 del buf[: end + len(_END)]
                 self._skipping = False
                 continue
@@ -94,14 +107,14 @@ class EventFramer:
             if end < 0:
                 if len(buf) > self.max_event_bytes:
                     self._skipping = True
-                    skipped += 1
-                    del buf[: len(buf) - _KEEP]
+                    self._skip_size = len(buf) - _KEEP
+                    del buf[: self._skip_size]
                     continue
                 break
             if size <= self.max_event_bytes:
                 events.append(bytes(buf[:size]))
             else:
-                skipped += 1  # it all came in one chunk: over the limit all the same
+                skipped.append(size)  # it all came in one chunk: over the limit all the same
             del buf[:size]
-        self.skipped += skipped
+        self.skipped += len(skipped)
         return Framed(events, skipped)
