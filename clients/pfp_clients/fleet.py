@@ -11,7 +11,15 @@ direction it had, as a vehicle would.  Each unit holds a liveliness token
 
 Goals from the team file are put with ``step = speed_mps * dt``: the planner's
 stepper then expects exactly the motion it gets, so its preview matches the
-track and its trap detection judges real progress.
+track and its trap detection judges real progress.  They are acknowledged
+writes (``wire.delivery``): put before a planner runs, they are in force once
+one starts, and the fleet says it is waiting meanwhile.
+
+A team file with an ``origin`` is checked against the planner's (from its
+status) before anything is sent: the same, it runs as written; another, every
+start and goal is converted exactly into the planner's frame (through lat/lon)
+and the fleet says so; a planner without an origin is refused in one line
+naming both, since metres from two different points cannot be mixed.
 """
 
 from __future__ import annotations
@@ -24,12 +32,25 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import msgspec
+
 from pfp_clients.sim import SimUnit
 from pfp_clients.team import Team
 from pfp_service.errors import InputError
-from pfp_service.wire import Direction, DirectionStatus, Goal, decode_direction, encode, keys, zenoh_encoding
+from pfp_service.geo import Origin
+from pfp_service.wire import (
+    Direction,
+    DirectionStatus,
+    Goal,
+    decode_direction,
+    decode_planner_status,
+    encode,
+    keys,
+    zenoh_encoding,
+)
+from pfp_service.wire.delivery import Deliverer
 
-__all__ = ["FleetOptions", "FleetResult", "run_fleet", "summary_lines"]
+__all__ = ["FleetOptions", "FleetResult", "in_planner_frame", "planner_origin", "run_fleet", "summary_lines"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +97,68 @@ def _goal_of(u: SimUnit, dt_s: float) -> Goal | None:
     return Goal(position=u.spec.goal, step=u.spec.speed_mps * dt_s)
 
 
+def _shown(o: Origin) -> str:
+    return f"{o.lat:g},{o.lon:g}" + (f",{o.alt:g}" if o.alt else "")
+
+
+def in_planner_frame(team: Team, planner: Origin | None, mission: str) -> tuple[Team, str | None]:
+    """``team`` in the planner's frame, and a line to say when it was converted.
+
+    Raises:
+        InputError: at ``origin``, when the team has one and the planner none (naming both).
+    """
+    mine = team.origin
+    if mine is None or planner == mine:
+        return team, None
+    if planner is None:
+        raise InputError(
+            "origin",
+            f"the team's origin is {_shown(mine)} but the planner of mission {mission!r} has none: "
+            f"start it with --origin {_shown(mine)}, or leave origin out of the team file",
+        )
+
+    def conv(p: tuple[float, float] | None) -> tuple[float, float] | None:
+        return None if p is None else planner.to_local(*mine.to_geodetic(*p))
+
+    units = [msgspec.structs.replace(u, start=conv(u.start), goal=conv(u.goal)) for u in team.units]
+    line = (
+        f"the team's origin {_shown(mine)} differs from the planner's {_shown(planner)}: "
+        "starts and goals converted to the planner's frame"
+    )
+    return msgspec.structs.replace(team, origin=planner, units=units), line
+
+
+def planner_origin(session: Any, mission: str, timeout_s: float = 1.0) -> tuple[bool, Origin | None]:
+    """Whether a planner of ``mission`` answered its status, and its origin (``None``: plain metres)."""
+    for reply in session.get(keys.planner_statuses(mission), timeout=timeout_s):
+        if reply.ok is None:
+            continue
+        try:
+            return True, decode_planner_status(reply.ok.payload.to_bytes()).origin
+        except InputError:
+            continue
+    return False, None
+
+
+def _learn_origin(
+    session: Any, team: Team, m: str, stop: threading.Event, say: Callable[[str], None]
+) -> Team | None:
+    """The team in the planner's frame once a planner answers (``None`` if stopped first)."""
+    told = False
+    while not stop.is_set():
+        answered, origin = planner_origin(session, m)
+        if answered:
+            team, line = in_planner_frame(team, origin, m)
+            if line is not None:
+                say(line)
+            return team
+        if not told:
+            say(f"waiting for a planner of mission {m!r}: the team's origin is checked against its own")
+            told = True
+        stop.wait(1.0)
+    return None
+
+
 def run_fleet(
     session: Any,
     team: Team,
@@ -100,6 +183,11 @@ def run_fleet(
 
     m = keys.check_chunk(opts.mission, "--mission")
     stop = stop or threading.Event()
+    if team.origin is not None:  # before anything is sent: metres from two origins never mix
+        known = _learn_origin(session, team, m, stop, say)
+        if known is None:
+            return FleetResult([SimUnit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
+        team = known
     units = [SimUnit(spec) for spec in team.units]
     by_id = {u.id: u for u in units}
     dt_s = 1.0 / opts.rate_hz
@@ -141,9 +229,11 @@ def run_fleet(
         if goal is None or clock() - reput_at.get(u.id, -1e9) < 2.0:
             return
         reput_at[u.id] = clock()
-        session.put(keys.unit_goal(m, u.id), encode(goal), encoding=enc)
+        goals.put(keys.unit_goal(m, u.id), encode(goal))
         say(f"t={t_s:7.2f}s  {u.id} goal put again ({why})")
 
+    # goals are acknowledged writes: put before a planner runs, in force once one starts
+    goals = Deliverer(session, m, lambda line: say(f"t={t_s:7.2f}s  {line}"))
     tokens = [session.liveliness().declare_token(keys.alive_unit(m, u.id)) for u in units]
     pubs = {u.id: session.declare_publisher(keys.unit_state(m, u.id), encoding=enc) for u in units}
     t_s, tick, late = 0.0, 0, 0
@@ -177,7 +267,7 @@ def run_fleet(
                 for u in units:
                     goal = _goal_of(u, dt_s)
                     if goal is not None:
-                        session.put(keys.unit_goal(m, u.id), encode(goal), encoding=enc)
+                        goals.put(keys.unit_goal(m, u.id), encode(goal))
                         gx, gy = goal.position
                         say(f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal ({gx:.1f}, {gy:.1f})")
             if new_planner.is_set() and tick > 0:
@@ -212,6 +302,7 @@ def run_fleet(
         wall = clock() - started
         say(f"t={t_s:7.2f}s  fleet stops: {reason} ({tick} ticks in {wall:.1f} s wall)")
     finally:
+        goals.close()
         for d in [*declared, *pubs.values(), *tokens]:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
                 d.undeclare()
@@ -271,11 +362,14 @@ def main(
     Raises:
         ZenohError: the session cannot be opened (``Unreachable`` when no router answers).
     """
-    from pfp_clients.common import open_session
+    from pfp_clients.common import open_session_waiting
     from pfp_clients.progress import Progress
 
     silent_after = max(round(2 * opts.rate_hz), 2)  # about two simulated seconds without an answer
-    with open_session(conf) as session, Progress(progress_s, total=len(team.units)) as progress:
+    session = open_session_waiting(conf, print, stop)  # started before `pfp serve`: wait for its router
+    if session is None:  # stopped while waiting
+        return 0
+    with session, Progress(progress_s, total=len(team.units)) as progress:
 
         def on_tick(t_s: float, units: Sequence[SimUnit]) -> None:
             progress.update(progress_line(t_s, units, silent_after), sum(u.arrived for u in units))
