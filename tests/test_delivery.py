@@ -18,6 +18,7 @@ import tempfile
 import time
 import uuid
 from contextlib import contextmanager
+from pathlib import Path
 
 import msgspec
 import pytest
@@ -192,7 +193,7 @@ def test_inject_and_fleet_started_before_pfp_serve_are_in_force_within_2s_of_its
                 w = _world(s, mission)
                 assert w is not None and _goals(w).get("u2") is None, w  # deleted before it started
             print(
-                f"in force {t_force - t_status:.2f} s after the first status; {open('/proc/loadavg').read()}"
+                f"in force {t_force - t_status:.2f} s after the first status; {Path('/proc/loadavg').read_text()}"
             )
             assert t_force - t_status <= 2.0
             _wait_for("inject ends once its writes are taken", lambda: inject.poll() is not None, 30, logs)
