@@ -214,7 +214,8 @@ async def _main(
 
     def stop_with(code: int) -> None:
         nonlocal exit_code
-        exit_code = code
+        if not stop.is_set():  # the first signal says how the bridge ended
+            exit_code = code
         stop.set()
 
     for sig, code in ((signal.SIGTERM, EXIT_TERMINATED), (signal.SIGINT, EXIT_INTERRUPTED)):
@@ -316,10 +317,7 @@ async def _main(
             sub.undeclare()
         keep_tombstones()
         log.info("tak: stopped: links closed, subscribers undeclared")
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
-                loop.remove_signal_handler(sig)
-    return exit_code
+    return exit_code  # the signal handlers stay until the loop closes: a second signal changes nothing
 
 
 def _encoding() -> Any:
@@ -361,4 +359,16 @@ def run(
     with map_zenoh_errors("--connect"):
         session = zenoh.open(zenoh_conf)
     with session:
-        return asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready, tombstones))
+        code = asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready, tombstones))
+        _hold_signals()
+    return code
+
+
+def _hold_signals() -> None:
+    """Ignore SIGTERM and SIGINT while the session closes: the closed loop put the defaults back, and
+    a second signal would kill the process half-way through closing, which can hang Zenoh at exit."""
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, signal.SIG_IGN)
