@@ -43,6 +43,7 @@ from pfp_service.wire import (
     keys,
     zenoh_encoding,
 )
+from pfp_service.wire.delivery import Deliverer
 
 __all__ = [
     "DirectionIn",
@@ -167,6 +168,9 @@ class Link:
             keys.alive_planners(mission), self._on_planner
         )
         self._token = session.liveliness().declare_token(keys.alive_unit(mission, unit))
+        # the goal is an acknowledged write: put while no planner runs, it is in force once one starts
+        # (the screen shows no direction meanwhile; the model also re-sends it until a planner answers)
+        self._goals = Deliverer(session, mission)
 
     @property
     def connected(self) -> bool:
@@ -206,11 +210,12 @@ class Link:
         self._state_pub.put(encode(state))
 
     def put_goal(self, goal: Goal) -> None:
-        """Put ``unit/{u}/goal``."""
-        self.session.put(keys.unit_goal(self.mission, self.unit), encode(goal), encoding=zenoh_encoding())
+        """Put ``unit/{u}/goal``, until a planner acknowledges it (``wire.delivery``)."""
+        self._goals.put(keys.unit_goal(self.mission, self.unit), encode(goal))
 
     def close(self) -> None:
         """Withdraw the token, undeclare, then close the session."""
+        self._goals.close()
         for entity in (self._token, self._planners, self._goal_sub, self._sub, self._state_pub):
             with suppress(Exception):  # already gone with the session; closing matters more
                 entity.undeclare()

@@ -77,6 +77,7 @@ class Feed:
         self._latest: dict[tuple[type, str], Input] = {}
         self._latest_lock = threading.Lock()
         self._declared: list[Any] = []
+        self._writes: Any = None  # a wire.delivery.Deliverer once declared
         self.samples_in = 0
 
     # -- in: decode and enqueue, nothing more -------------------------------------------
@@ -139,9 +140,17 @@ class Feed:
             s.declare_subscriber(keys.events(m), self._enqueue(on_event)),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._enqueue(on_alive), history=True),
         ]
+        from pfp_service.wire.delivery import Deliverer
+
+        # edits are acknowledged writes: made while no planner runs, they are in force once one starts
+        if self._writes is None:
+            self._writes = Deliverer(s, m, lambda line: log.warning("map: %s", line))
 
     def undeclare(self) -> None:
-        """Withdraw every subscriber (before the session closes)."""
+        """Withdraw every subscriber and stop asking planners to take edits (before the session closes)."""
+        if self._writes is not None:
+            self._writes.close()
+            self._writes = None
         for d in self._declared:
             with contextlib.suppress(Exception):  # the session may already be closing
                 d.undeclare()
@@ -193,8 +202,16 @@ class Feed:
         return PreviewError("no planner of this mission answered")
 
     def send(self, key: str, msg: Any | None) -> None:
-        """Put ``msg`` on ``key`` as every client does, or delete ``key`` when ``msg`` is None."""
-        if msg is None:
+        """Put ``msg`` on ``key`` as every client does, or delete ``key`` when ``msg`` is None.
+
+        A goal or threat edit is an acknowledged write (``wire.delivery``) once declared.
+        """
+        if self._writes is not None:
+            if msg is None:
+                self._writes.delete(key)
+            else:
+                self._writes.put(key, encode(msg))
+        elif msg is None:
             self.session.delete(key)
         else:
             self.session.put(key, encode(msg), encoding=zenoh_encoding())
