@@ -71,7 +71,9 @@ def test_a_10_mb_event_costs_that_event_and_bounded_memory():
         events += got.events
         skipped += got.skipped_bytes
         most = max(most, framer.buffered)
-    assert skipped == [len(hostile_10mb) - hostile_10mb.index(b"<event")] and [cot.read_event(e).uid for e in events] == ["fresh"]
+    assert skipped == [len(hostile_10mb) - hostile_10mb.index(b"<event")] and [
+        cot.read_event(e).uid for e in events
+    ] == ["fresh"]
     assert most <= cot.MAX_EVENT_BYTES + chunk
 
 
@@ -215,3 +217,27 @@ def test_tombstones_survive_in_a_file_and_a_damaged_file_is_set_aside(tmp_path):
     (tmp_path / "file").write_text("x")
     note = tombfile.save(tmp_path / "file" / tombfile.FILE_NAME, kept)  # a file where the folder goes
     assert note is not None and "cannot save tombstones" in note
+
+
+def test_the_keeper_writes_on_change_and_says_a_failure_once(tmp_path):
+    from pfp_service.tak import tombfile
+
+    path = tmp_path / tombfile.FILE_NAME
+    notes: list[str] = []
+    s = _state()
+    keeper = tombfile.Keeper(path, notes.append)
+    assert keeper.restore(s, T0) == 0
+    keeper.keep(s)
+    assert not path.exists()  # nothing changed, nothing written
+    s.on_cot(hostile(t=T0, ttl=600), T0)
+    s.on_cot(delete("ANDROID-7f.h1", t=T0 + 1), T0 + 1)
+    keeper.keep(s)
+    again = _state()
+    assert tombfile.Keeper(path, notes.append).restore(again, T0 + 2) == 1
+    assert again.on_cot(hostile(t=T0, ttl=600), T0 + 3).zenoh == []  # the restart's replay
+    blocked = tombfile.Keeper(tmp_path / "f" / "x.json", notes.append)
+    (tmp_path / "f").write_text("a file where the folder goes")
+    for i in range(3):
+        s.on_cot(delete(f"more{i}", t=T0 + 5), T0 + 5)
+        blocked.keep(s)
+    assert len(notes) == 1 and "cannot save tombstones" in notes[0]

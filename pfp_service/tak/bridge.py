@@ -186,25 +186,9 @@ async def _main(
 ) -> int:
     loop = asyncio.get_running_loop()
     state = BridgeState(settings, log=lambda text: log.warning("tak: %s", text))
-    saved_version, save_failed = -1, False
-    if tomb_path is not None:
-        loaded = tombfile.load(tomb_path, time.time())
-        if loaded.note:
-            log.warning("tak: %s", loaded.note)
-        state.restore_tombstones(loaded.tombstones, time.time())
-        if loaded.tombstones:
-            log.info("tak: %d tombstone(s) of deleted markers from %s", len(state.tombstones), tomb_path)
-        saved_version = state.tombstones_version
-
-    def keep_tombstones() -> None:
-        nonlocal saved_version, save_failed
-        if tomb_path is None or state.tombstones_version == saved_version:
-            return
-        saved_version = state.tombstones_version
-        note = tombfile.save(tomb_path, state.tombstones)
-        if note is not None and not save_failed:
-            log.warning("tak: %s", note)  # said once; they stay in memory, and the next change tries again
-        save_failed = note is not None
+    keeper = None if tomb_path is None else tombfile.Keeper(tomb_path, lambda t: log.warning("tak: %s", t))
+    if keeper is not None and (kept := keeper.restore(state, time.time())):
+        log.info("tak: %d tombstone(s) of deleted markers from %s", kept, tomb_path)
 
     inbox: asyncio.Queue[tuple[str, str, bytes | None]] = asyncio.Queue()
     rx: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize=RX_BACKLOG)
@@ -297,7 +281,8 @@ async def _main(
     async def ticker() -> None:
         while True:
             emit(state.tick(time.time()))
-            keep_tombstones()
+            if keeper is not None:
+                keeper.keep(state)
             await asyncio.sleep(TICK_S)
 
     tasks = [
@@ -315,7 +300,8 @@ async def _main(
         await asyncio.gather(*pending, return_exceptions=True)
         for sub in subs:
             sub.undeclare()
-        keep_tombstones()
+        if keeper is not None:
+            keeper.keep(state)
         log.info("tak: stopped: links closed, subscribers undeclared")
     return exit_code  # the signal handlers stay until the loop closes: a second signal changes nothing
 

@@ -17,14 +17,15 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgspec
 
-from pfp_service.tak.state import Tombstone
+from pfp_service.tak.state import BridgeState, Tombstone
 
-__all__ = ["FILE_NAME", "Loaded", "load", "save"]
+__all__ = ["FILE_NAME", "Keeper", "Loaded", "load", "save"]
 
 FILE_NAME = "tak-tombstones.json"
 _MAX_BYTES = 16 * 1024 * 1024  # far above MAX_TOMBSTONES entries; more is not our file
@@ -91,3 +92,34 @@ def save(path: Path, tombstones: dict[str, Tombstone]) -> str | None:
             tmp.unlink()
         return f"{path}: cannot save tombstones ({exc.strerror or exc})"
     return None
+
+
+class Keeper:
+    """Keeps a bridge's tombstones in ``path``: ``restore`` once at the start, ``keep`` after each step.
+
+    ``keep`` writes only when the tombstones changed (``BridgeState.tombstones_version``);
+    a failure to write is logged once, the tombstones stay in memory, and the next change tries again.
+    """
+
+    def __init__(self, path: Path, log: Callable[[str], None]) -> None:
+        self.path, self.log = path, log
+        self._saved = -1
+        self._failing = False
+
+    def restore(self, state: BridgeState, now: float) -> int:
+        """Put the file's tombstones into ``state``; returns how many it holds now."""
+        loaded = load(self.path, now)
+        if loaded.note:
+            self.log(loaded.note)
+        state.restore_tombstones(loaded.tombstones, now)
+        self._saved = state.tombstones_version
+        return len(state.tombstones)
+
+    def keep(self, state: BridgeState) -> None:
+        if state.tombstones_version == self._saved:
+            return
+        self._saved = state.tombstones_version
+        note = save(self.path, state.tombstones)
+        if note is not None and not self._failing:
+            self.log(note)
+        self._failing = note is not None
