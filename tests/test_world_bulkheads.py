@@ -220,3 +220,25 @@ def test_restored_units_are_stale_until_they_report_and_forgotten_on_the_usual_c
     assert gone == {f"r{k}" for k in range(57)} | {"g"}  # forgotten unit_forget_s after the restore
     assert w.counts()["units"] == 1 and w.counts()["units_stale"] == 0
     assert not [e for e in out.events if isinstance(e, ArrivedEvent)]
+
+
+def test_a_deliberation_that_fails_where_it_runs_costs_its_unit_the_goal_and_no_one_else_anything():
+    # a peer's or a restored mission may carry a step of 2.2e-308 m when its tolerance covered the distance
+    # then; from 100 m away its look-ahead overflows (6 * 100 / 2.2e-308 steps) in the worker
+    params = Resolved(1.0, 2.2250738585072014e-308, 300, 10.0, "peak", "auto", 20, 200, 0)
+    w = World(WorldSettings(deliberation="deferred", planner=PlannerParams(intensity="density", delta=0.08)))
+    w.apply([MissionRestored("odd", Goal(position=(5.0, 0.0)), (0.0, 0.0), params)], 0.0)
+    w.apply([GoalSet(u, Goal(position=(10.0, 12.0))) for u in INNOCENTS], 0.0)
+    out = w.apply([StateReported("odd", UnitState(position=(100.0, 0.0))), *_states(0.0)], 0.0)
+    results = [job.run(0.0) for job in out.jobs]  # as a worker runs them: an answer saying so, never a raise
+    (failed,) = [r for r in results if r.error is not None]
+    assert failed.unit == "odd" and failed.error[0] == "OverflowError"
+    out = w.apply([*results, StateReported("odd", UnitState(position=(100.0, 0.0))), *_states(0.1)], 0.1)
+    _valid(out)
+    status = {d.unit: d.status for d in out.directions}
+    assert status["odd"] is DirectionStatus.NO_GOAL
+    assert all(status[u] is not DirectionStatus.NO_GOAL for u in INNOCENTS)
+    (ev,) = [e for e in out.events if isinstance(e, RejectedEvent)]
+    assert ev.key == keys.unit_goal("default", "odd") and "OverflowError" in ev.reason
+    (f,) = out.faults
+    assert f.error == "OverflowError" and f.where.startswith("core/")

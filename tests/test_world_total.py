@@ -261,6 +261,39 @@ def _run(settings: WorldSettings, script: list[tuple[list, float]], run_jobs: bo
     ],
     run_jobs=True,
 )
+@example(  # steps of 4,000 km: the look-ahead's lat/lon left the globe's bounds (found by the long profile)
+    settings=WorldSettings(origin=Origin(lat=48.0, lon=11.0)),
+    script=[
+        (
+            [
+                StateReported("u0", UnitState(position=(0.0, 0.0))),
+                GoalSet("u0", Goal(position=(598593630.8650813, -4.507907952438738e-184), delta=215.65)),
+            ],
+            4023.5,
+        )
+    ],
+    run_jobs=True,
+)
+@example(  # a restored mission whose tolerance covered its distance, with a step of 2.2e-308 m, then a report
+    # from 1e9 m away: its look-ahead overflowed in Job.run (found by the long profile)
+    settings=WorldSettings(deliberation="deferred"),
+    script=[
+        (
+            [
+                MissionRestored(
+                    "bad",
+                    Goal(position=(0.0, 5e-324), tolerance=1.1, step=4.68),
+                    (-1e-300, 0.001),
+                    Resolved(1e9, TINY, 7992, 162.3, "peak", "auto", 15, 107, 23072818288700728),
+                )
+            ],
+            3379.5,
+        ),
+        ([StateReported("bad", UnitState(position=(999999999.0, 1.0)))], 3380.0),
+        ([StateReported("bad", UnitState(position=(999999999.0, 1.0)))], 3380.1),
+    ],
+    run_jobs=True,
+)
 @profiled()
 @given(settings=settings_st, script=batches, run_jobs=st.booleans())
 def test_apply_never_raises_and_everything_it_sends_is_valid(settings, script, run_jobs):

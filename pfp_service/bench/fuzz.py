@@ -258,6 +258,8 @@ def poison_goals(session: Any, say: Callable[[str], None] = print) -> dict[str, 
             goal = json.dumps({"position": [10.0 + names.index(name) % 5, 12.0]}).encode()
             session.put(keys.unit_goal(MISSION, name), goal, encoding=enc, congestion_control=block)
         for poison, body in POISON_GOALS.items():
+            session.delete(keys.unit_goal(MISSION, "poisoner"))  # what it is told is this poison's alone
+            time.sleep(0.2)
             with lock:
                 bad_told.clear()
             first = seq + 1

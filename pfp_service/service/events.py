@@ -8,6 +8,7 @@ missions one ``apply`` returns.  Pure values: no zenoh, no clock.
 from __future__ import annotations
 
 import hashlib
+import traceback
 import zlib
 from dataclasses import dataclass, field
 from typing import Literal, Union
@@ -54,7 +55,19 @@ __all__ = [
     "mission_of",
     "rendezvous_weight",
     "unit_key",
+    "where",
 ]
+
+
+def where(exc: BaseException) -> str:
+    """The innermost frame of ``exc`` as ``package/module.py:line``: one line in a log, never a traceback."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    if not frames:
+        return "?"
+    f = frames[-1]
+    path = f.filename.replace("\\", "/")
+    cut = path.rfind("pfp_service/")
+    return f"{path[cut + len('pfp_service/') :] if cut >= 0 else path.rsplit('/', 1)[-1]}:{f.lineno}"
 
 
 def unit_key(unit_id: str) -> int:
@@ -111,11 +124,16 @@ class InputRejected:
 
 @dataclass(frozen=True, slots=True)
 class Deliberated:
-    """A finished ``Job``: ``stepper`` is its copy after ``deliberate()`` (``None``: past its deadline)."""
+    """A finished ``Job``: ``stepper`` is its copy after ``deliberate()`` (``None``: past its deadline).
+
+    ``error`` says why it failed instead, as ``(class, message, where)``
+    (``Job.run`` never raises): the world drops that unit's goal and rejects it.
+    """
 
     unit: str
     token: tuple[int, int]
     stepper: Stepper | None
+    error: tuple[str, str, str] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,7 +208,10 @@ class Job:
         """Deliberate; ``now`` past the deadline gives up without computing."""
         if now is not None and now > self.deadline:
             return Deliberated(self.unit, self.token, None)
-        self.stepper.deliberate(self.field)
+        try:
+            self.stepper.deliberate(self.field)
+        except Exception as exc:  # a failure as a value: the world drops this unit's goal, no one else's
+            return Deliberated(self.unit, self.token, None, (type(exc).__name__, str(exc)[:200], where(exc)))
         return Deliberated(self.unit, self.token, self.stepper)
 
 

@@ -50,7 +50,6 @@ import copy
 import heapq
 import itertools
 import math
-import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -88,6 +87,7 @@ from pfp_service.service.events import (
     mission_of,
     rendezvous_weight,
     unit_key,
+    where,
 )
 from pfp_service.wire import (
     ArrivedEvent,
@@ -395,7 +395,7 @@ class World:
             case InputRejected(key, error):
                 self._reject(key, error, now, out)
             case Deliberated():
-                self._deliberated(inp, dirty)
+                self._deliberated(inp, now, dirty, out)
             case MissionRestored():
                 self._restore(inp, now, out)
             case MissionShared(unit, mission):
@@ -438,6 +438,7 @@ class World:
         out: Outputs,
         unit: str | None = None,
         dirty: set[str] | None = None,
+        error: tuple[str, str, str] | None = None,
     ) -> None:
         """Something failed inside the world on ``key``'s account: drop it, reject it, log it once a minute.
 
@@ -458,8 +459,7 @@ class World:
                 self._units.pop(rec.id, None)
                 if rec.stale:
                     self._stale -= 1
-        name = type(exc).__name__
-        detail = str(exc)[:200]
+        name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], where(exc))
         reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
         self._reject(key, InputError("$", reason), now, out)
         # the operator's log: once a minute per key, and never a traceback
@@ -474,7 +474,7 @@ class World:
             self._fault_log[key] = (when, held + 1)
             return
         self._fault_log[key] = (now, 0)
-        out.faults.append(Fault(key, name, detail, _where(exc), held))
+        out.faults.append(Fault(key, name, detail, at, held))
 
     # -- inputs ---------------------------------------------------------------------
     def _unit(
@@ -681,7 +681,7 @@ class World:
         out.events.append(ev)
         self._reject_window[kind] = (start, sent + 1, 0)
 
-    def _deliberated(self, done: Deliberated, dirty: set[str]) -> None:
+    def _deliberated(self, done: Deliberated, now: float, dirty: set[str], out: Outputs) -> None:
         rec = self._units.get(done.unit)
         if rec is None or rec.job is None or rec.job.token != done.token:
             return  # superseded: a newer goal or world is in force
@@ -689,6 +689,10 @@ class World:
         rec.job = None
         self._deliberating -= 1
         if rec.stepper is None or rec.token() != done.token:
+            return
+        if done.error is not None:  # it failed where it ran: this unit's goal goes, as a fault here would
+            err = RuntimeError(done.error[1])
+            self._fault(self._key(keys.KeyKind.UNIT_GOAL, rec.id), err, now, out, rec.id, dirty, done.error)
             return
         if done.stepper is None:  # ran past its deadline: descend meanwhile, and ask again
             if kind == "foresee":
@@ -977,11 +981,14 @@ class World:
         """Lat/lon and true bearing for the directions from ``first`` on; one that fails goes without."""
         fresh = out.directions[first:]
         try:
-            out.directions[first:] = with_geodetic_many(fresh, self.settings.origin, positions)
+            converted = with_geodetic_many(fresh, self.settings.origin, positions)
         except Exception:
-            for i, (d, p) in enumerate(zip(fresh, positions), start=first):
+            converted = list(fresh)
+            for i, (d, p) in enumerate(zip(fresh, positions)):
                 with contextlib.suppress(Exception):  # this one goes in metres only
-                    (out.directions[i],) = with_geodetic_many([d], self.settings.origin, [p])
+                    (converted[i],) = with_geodetic_many([d], self.settings.origin, [p])
+        # a point thousands of km off the origin has no meaningful lat/lon: that one goes in metres only
+        out.directions[first:] = [g if _geo_ok(g) else d for d, g in zip(fresh, converted)]
 
     def _ask(self, rec: _Unit, fld: ThreatField, now: float, out: Outputs) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
@@ -1073,12 +1080,9 @@ def _within_map(track: list[tuple[float, float]]) -> list[tuple[float, float]]:
     return track
 
 
-def _where(exc: BaseException) -> str:
-    """The innermost frame of ``exc`` as ``package/module.py:line`` (no traceback: one line in the log)."""
-    frames = traceback.extract_tb(exc.__traceback__)
-    if not frames:
-        return "?"
-    f = frames[-1]
-    path = f.filename.replace("\\", "/")
-    cut = path.rfind("pfp_service/")
-    return f"{path[cut + len('pfp_service/') :] if cut >= 0 else path.rsplit('/', 1)[-1]}:{f.lineno}"
+def _geo_ok(d: Direction) -> bool:
+    """Whether the lat/lon a direction was given are within the wire's bounds."""
+    b = d.true_bearing_deg
+    return (b is None or -360.0 <= b <= 360.0) and all(
+        -90.0 <= g.lat <= 90.0 and -180.0 <= g.lon <= 180.0 for g in d.lookahead_geo
+    )
