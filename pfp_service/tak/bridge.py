@@ -96,13 +96,14 @@ class _Link:
         self.url, self.tls, self.rx, self.on_up = url, tls, rx, on_up
         self.tx: asyncio.Queue[bytes] = asyncio.Queue(maxsize=1000)
         self.connected = asyncio.Event()
-        self.write_only = "+wo" in url.split("://", 1)[0].lower()
+        scheme = url.split("://", 1)[0].lower()
+        self.write_only, self.read_only = "+wo" in scheme, "+ro" in scheme
         self.connects = 0  # how many times it has connected
         self.skipped = 0  # events skipped as too large
 
     def send(self, data: bytes) -> None:
-        if not self.connected.is_set():
-            return  # nobody to tell; it gets the whole picture once it is back
+        if self.read_only or not self.connected.is_set():
+            return  # nobody to tell; a link gets the whole picture once it is back
         if self.tx.full():
             self.tx.get_nowait()  # drop the oldest, as pytak does
         self.tx.put_nowait(data)
@@ -234,8 +235,9 @@ async def _main(
         for data in out.cot:
             for link in links:
                 link.send(data)
-        for url, data in out.to_link:
-            by_url[url].send(data)
+        for url, data in out.to_link:  # a device heard on a read-only link is reached by the others
+            for link in links if by_url[url].read_only else (by_url[url],):
+                link.send(data)
         for action in out.zenoh:
             publish(action)
         for unit in out.routes:
