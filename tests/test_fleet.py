@@ -164,3 +164,88 @@ def test_generate_is_capped_with_a_clear_error():
         "pfp fleet: error: argument --generate: at most 10000 units per fleet process, "
         "got '100000000' (run several fleets instead)"
     )
+
+
+# -- the team's origin against the planner's ----------------------------------------------
+ORIGIN_TEAM = """\
+name: elsewhere
+origin: {lat: 50.01, lon: 8.0}
+units:
+  - {id: o1, start: [0, 0], goal: [6, 0], speed_mps: 1.0}
+"""
+
+
+def test_a_team_origin_other_than_the_planners_is_converted_exactly():
+    from pfp_clients.fleet import in_planner_frame
+    from pfp_clients.team import Team
+
+    from pfp_service.geo import Origin
+
+    mine, theirs = Origin(lat=50.01, lon=8.0), Origin(lat=50.0, lon=8.0)
+    team = Team(origin=mine, units=[UnitSpec(id="a", start=(0.0, 0.0), goal=(6.0, 0.0))])
+    moved, line = in_planner_frame(team, theirs, "m")
+    assert line is not None and "50.01,8" in line and "50,8" in line
+    x, y = moved.units[0].start
+    assert abs(x) < 1e-6 and 1111.0 < y < 1113.0  # 0.01 degree north
+    for p, q in ((moved.units[0].start, (0.0, 0.0)), (moved.units[0].goal, (6.0, 0.0))):
+        lat, lon = theirs.to_geodetic(*p)  # the same point on the earth as the team file meant
+        back = mine.to_local(lat, lon)
+        assert abs(back[0] - q[0]) < 1e-6 and abs(back[1] - q[1]) < 1e-6
+    assert in_planner_frame(team, mine, "m") == (team, None)
+
+
+def test_a_team_origin_against_a_planner_without_one_is_refused_naming_both():
+    from pfp_clients.fleet import in_planner_frame
+    from pfp_clients.team import Team
+
+    from pfp_service.geo import Origin
+
+    team = Team(origin=Origin(lat=50.01, lon=8.0), units=[UnitSpec(id="a", start=(0.0, 0.0))])
+    with pytest.raises(InputError) as err:
+        in_planner_frame(team, None, "m")
+    assert "50.01,8" in str(err.value) and "has none" in str(err.value)
+
+
+def _unit(endpoint: str, mission: str, unit: str) -> dict | None:
+    import json
+
+    with client(endpoint) as s:
+        for r in s.get(keys.worlds(mission), timeout=2.0):
+            if r.ok is not None:
+                for u in json.loads(r.ok.payload.to_bytes()).get("units", []):
+                    if u["id"] == unit:
+                        return u
+    return None
+
+
+@pytest.mark.proc
+def test_a_fleet_whose_origin_differs_from_the_planners_is_converted_never_shifted(tmp_path, mission):
+    from pfp_service.geo import Origin
+
+    team = tmp_path / "team.yaml"
+    team.write_text(ORIGIN_TEAM)
+    with planner_process("--origin", "50.0,8.0", "--state-dir", "none", mission=mission) as (endpoint, _):
+        r = run_pfp(
+            "fleet", "--team", str(team), "--connect", endpoint, "--mission", mission, "--duration-s", "1",
+            timeout=90,
+        )  # fmt: skip
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "differs from the planner's 50,8" in r.stdout, r.stdout
+        u = _unit(endpoint, mission, "o1")
+    assert u is not None
+    planner, mine = Origin(lat=50.0, lon=8.0), Origin(lat=50.01, lon=8.0)
+    gx, gy = planner.to_local(*mine.to_geodetic(6.0, 0.0))
+    assert abs(u["goal"][0] - gx) < 1e-6 and abs(u["goal"][1] - gy) < 1e-6, u
+    sx, sy = planner.to_local(*mine.to_geodetic(0.0, 0.0))
+    assert abs(u["position"][0] - sx) <= 1.5 and abs(u["position"][1] - sy) <= 1.5, u  # it moved <= 1 m
+
+
+@pytest.mark.proc
+def test_a_fleet_with_an_origin_against_a_planner_without_one_is_one_line_exit_2(tmp_path, mission):
+    team = tmp_path / "team.yaml"
+    team.write_text(ORIGIN_TEAM)
+    with planner_process("--state-dir", "none", mission=mission) as (endpoint, _):
+        r = run_pfp("fleet", "--team", str(team), "--connect", endpoint, "--mission", mission, timeout=90)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    line = r.stderr.strip()
+    assert len(line.splitlines()) == 1 and "50.01,8" in line and "has none" in line, line
