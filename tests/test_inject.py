@@ -174,3 +174,40 @@ def test_inject_says_which_entry_it_waits_on_and_for_what(tmp_path, mission):
     assert r.returncode == 1  # the trigger never came
     assert "waiting on timeline[1] (remove threat e1): u9 within 1 m of (5, 5), not seen yet" in r.stdout
     assert "FAIL  timeline[1] (remove threat e1) never fired" in r.stdout
+
+
+ORIGIN_SCRIPT = """\
+name: elsewhere
+origin: {lat: -33.9, lon: 151.2}
+timeline:
+  - {do: add_threat, threat: t1, position: [4, 6], sigma_range: 1.0, sigma_lateral: 0.7}
+  - {do: set_goal, unit: u1, position: {lat: -33.8999, lon: 151.2001},
+     when: {unit: u1, within_m: 1, of: [1, 2]}}
+  - {do: move_threat, threat: t1, position: [5, 6]}
+"""
+
+
+def test_a_script_origin_other_than_the_planners_is_converted_exactly_and_none_is_refused(tmp_path):
+    from pfp_clients.inject import script_in_planner_frame
+
+    from pfp_service.geo import Origin
+
+    path = tmp_path / "s.yaml"
+    path.write_text(ORIGIN_SCRIPT)
+    script = load_script(path)
+    mine, theirs = Origin(lat=-33.9, lon=151.2), Origin(lat=-33.91, lon=151.19)
+    moved, line = script_in_planner_frame(script, theirs, "m")
+    assert line is not None and "-33.9,151.2" in line and "-33.91,151.19" in line
+    pairs = [
+        (moved.timeline[0].position, script.timeline[0].position),
+        (moved.timeline[1].position, script.timeline[1].position),
+        (moved.timeline[1].when.of, script.timeline[1].when.of),
+        (moved.timeline[2].position, script.timeline[2].position),
+    ]
+    for p, q in pairs:
+        assert abs(p[0] - q[0]) > 500 or abs(p[1] - q[1]) > 500  # really moved: 0.01 degree away
+        back = mine.to_local(*theirs.to_geodetic(*p))
+        assert abs(back[0] - q[0]) < 1e-6 and abs(back[1] - q[1]) < 1e-6
+    assert script_in_planner_frame(script, mine, "m") == (script, None)
+    with pytest.raises(InputError, match="has none"):
+        script_in_planner_frame(script, None, "m")

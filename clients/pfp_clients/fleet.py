@@ -34,6 +34,7 @@ from typing import Any
 
 import msgspec
 
+from pfp_clients.frames import learn_planner_origin, reframe
 from pfp_clients.sim import SimUnit
 from pfp_clients.team import Team
 from pfp_service.errors import InputError
@@ -43,14 +44,13 @@ from pfp_service.wire import (
     DirectionStatus,
     Goal,
     decode_direction,
-    decode_planner_status,
     encode,
     keys,
     zenoh_encoding,
 )
 from pfp_service.wire.delivery import Deliverer
 
-__all__ = ["FleetOptions", "FleetResult", "in_planner_frame", "planner_origin", "run_fleet", "summary_lines"]
+__all__ = ["FleetOptions", "FleetResult", "in_planner_frame", "run_fleet", "summary_lines"]
 
 
 @dataclass(frozen=True)
@@ -97,66 +97,21 @@ def _goal_of(u: SimUnit, dt_s: float) -> Goal | None:
     return Goal(position=u.spec.goal, step=u.spec.speed_mps * dt_s)
 
 
-def _shown(o: Origin) -> str:
-    return f"{o.lat:g},{o.lon:g}" + (f",{o.alt:g}" if o.alt else "")
-
-
 def in_planner_frame(team: Team, planner: Origin | None, mission: str) -> tuple[Team, str | None]:
-    """``team`` in the planner's frame, and a line to say when it was converted.
+    """``team`` in the planner's frame, and a line to say when it was converted (``frames.reframe``).
 
     Raises:
         InputError: at ``origin``, when the team has one and the planner none (naming both).
     """
-    mine = team.origin
-    if mine is None or planner == mine:
+    conv = reframe(team.origin, planner, mission, "team")
+    if conv is None:
         return team, None
-    if planner is None:
-        raise InputError(
-            "origin",
-            f"the team's origin is {_shown(mine)} but the planner of mission {mission!r} has none: "
-            f"start it with --origin {_shown(mine)}, or leave origin out of the team file",
-        )
 
-    def conv(p: tuple[float, float] | None) -> tuple[float, float] | None:
-        return None if p is None else planner.to_local(*mine.to_geodetic(*p))
+    def at(p: tuple[float, float] | None) -> tuple[float, float] | None:
+        return None if p is None else conv(p)
 
-    units = [msgspec.structs.replace(u, start=conv(u.start), goal=conv(u.goal)) for u in team.units]
-    line = (
-        f"the team's origin {_shown(mine)} differs from the planner's {_shown(planner)}: "
-        "starts and goals converted to the planner's frame"
-    )
-    return msgspec.structs.replace(team, origin=planner, units=units), line
-
-
-def planner_origin(session: Any, mission: str, timeout_s: float = 1.0) -> tuple[bool, Origin | None]:
-    """Whether a planner of ``mission`` answered its status, and its origin (``None``: plain metres)."""
-    for reply in session.get(keys.planner_statuses(mission), timeout=timeout_s):
-        if reply.ok is None:
-            continue
-        try:
-            return True, decode_planner_status(reply.ok.payload.to_bytes()).origin
-        except InputError:
-            continue
-    return False, None
-
-
-def _learn_origin(
-    session: Any, team: Team, m: str, stop: threading.Event, say: Callable[[str], None]
-) -> Team | None:
-    """The team in the planner's frame once a planner answers (``None`` if stopped first)."""
-    told = False
-    while not stop.is_set():
-        answered, origin = planner_origin(session, m)
-        if answered:
-            team, line = in_planner_frame(team, origin, m)
-            if line is not None:
-                say(line)
-            return team
-        if not told:
-            say(f"waiting for a planner of mission {m!r}: the team's origin is checked against its own")
-            told = True
-        stop.wait(1.0)
-    return None
+    units = [msgspec.structs.replace(u, start=at(u.start), goal=at(u.goal)) for u in team.units]
+    return msgspec.structs.replace(team, origin=planner, units=units), conv.line("team")
 
 
 def run_fleet(
@@ -184,10 +139,12 @@ def run_fleet(
     m = keys.check_chunk(opts.mission, "--mission")
     stop = stop or threading.Event()
     if team.origin is not None:  # before anything is sent: metres from two origins never mix
-        known = _learn_origin(session, team, m, stop, say)
-        if known is None:
+        answered, origin = learn_planner_origin(session, m, stop, say, "team")
+        if not answered:
             return FleetResult([SimUnit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
-        team = known
+        team, line = in_planner_frame(team, origin, m)
+        if line is not None:
+            say(line)
     units = [SimUnit(spec) for spec in team.units]
     by_id = {u.id: u for u in units}
     dt_s = 1.0 / opts.rate_hz

@@ -21,6 +21,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import msgspec
+
+from pfp_clients.frames import learn_planner_origin, reframe
 from pfp_clients.script import (
     AddThreat,
     CancelGoal,
@@ -34,6 +37,7 @@ from pfp_clients.script import (
 )
 from pfp_clients.watch import Watch
 from pfp_service.errors import InputError
+from pfp_service.geo import Origin
 from pfp_service.wire import (
     ArrivedEvent,
     ThreatUpdate,
@@ -44,7 +48,16 @@ from pfp_service.wire import (
     keys,
 )
 
-__all__ = ["Fired", "InjectReport", "Verdict", "judge", "main", "report_lines", "run_inject"]
+__all__ = [
+    "Fired",
+    "InjectReport",
+    "Verdict",
+    "judge",
+    "main",
+    "report_lines",
+    "run_inject",
+    "script_in_planner_frame",
+]
 
 
 @dataclass(frozen=True)
@@ -218,6 +231,29 @@ class _Runner:
             s.delete(keys.unit_goal(m, step.unit))
 
 
+def script_in_planner_frame(
+    script: Script, planner: Origin | None, mission: str
+) -> tuple[Script, str | None]:
+    """``script`` with every position (and trigger point) in the planner's frame, and a line to say so.
+
+    Raises:
+        InputError: at ``origin``, when the script has one and the planner none (naming both).
+    """
+    conv = reframe(script.origin, planner, mission, "script")
+    if conv is None:
+        return script, None
+    steps: list[Step] = []
+    for step in script.timeline:
+        if isinstance(step, AddThreat | MoveThreat | SetGoal):
+            step = msgspec.structs.replace(step, position=conv(step.position))
+        if step.when is not None:
+            step = msgspec.structs.replace(
+                step, when=msgspec.structs.replace(step.when, of=conv(step.when.of))
+            )
+        steps.append(step)
+    return msgspec.structs.replace(script, origin=planner, timeline=steps), conv.line("script")
+
+
 def run_inject(
     session: Any,
     script: Script,
@@ -250,6 +286,12 @@ def run_inject(
 
     m = keys.check_chunk(mission, "--mission")
     stop = stop or threading.Event()
+    if script.origin is not None:  # before anything is sent: metres from two origins never mix
+        answered, origin = learn_planner_origin(session, m, stop, say, "script")
+        if answered:
+            script, line = script_in_planner_frame(script, origin, m)
+            if line is not None:
+                say(line)
     inbox: queue.Queue[tuple[str, str, Any]] = queue.Queue()
 
     def on_state(sample: zenoh.Sample) -> None:  # decode and enqueue, nothing more

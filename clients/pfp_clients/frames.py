@@ -1,0 +1,100 @@
+"""A client's origin against the planner's: learnt from its status, then the same, converted, or refused.
+
+Team and script files may carry an ``origin`` (their ``[0, 0]``) and write
+positions in metres from it.  The planner measures from its own ``--origin``.
+Metres from two different points never mix: a client with an origin learns
+the planner's from its status before it sends anything, and then
+
+* the same origin: nothing changes;
+* another origin: every position is converted exactly into the planner's
+  frame, through lat/lon (``Reframe``), and the client says so in one line;
+* a planner without an origin: refused, one line naming both (``InputError``).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pfp_service.errors import InputError
+from pfp_service.geo import Origin
+from pfp_service.wire import decode_planner_status, keys
+
+__all__ = ["Reframe", "learn_planner_origin", "planner_origin", "reframe", "shown"]
+
+Point = tuple[float, float]
+
+
+def shown(o: Origin) -> str:
+    """``50.01,8`` (and ``,ALT`` when the altitude is not 0): as ``--origin`` takes it."""
+    return f"{o.lat:g},{o.lon:g}" + (f",{o.alt:g}" if o.alt else "")
+
+
+@dataclass(frozen=True)
+class Reframe:
+    """Metres from ``mine`` to metres from ``theirs``: the same points on the earth."""
+
+    mine: Origin
+    theirs: Origin
+
+    def __call__(self, p: Point) -> Point:
+        return self.theirs.to_local(*self.mine.to_geodetic(p[0], p[1]))
+
+    def line(self, what: str) -> str:
+        return (
+            f"the {what}'s origin {shown(self.mine)} differs from the planner's {shown(self.theirs)}: "
+            "its positions are converted to the planner's frame"
+        )
+
+
+def reframe(mine: Origin | None, planner: Origin | None, mission: str, what: str) -> Reframe | None:
+    """How to bring positions from ``mine`` into the planner's frame; ``None`` when nothing changes.
+
+    Raises:
+        InputError: at ``origin``, when ``mine`` is set and the planner has none (naming both).
+    """
+    if mine is None or planner == mine:
+        return None
+    if planner is None:
+        raise InputError(
+            "origin",
+            f"the {what}'s origin is {shown(mine)} but the planner of mission {mission!r} has none: "
+            f"start it with --origin {shown(mine)}, or leave origin out of the {what} file",
+        )
+    return Reframe(mine, planner)
+
+
+def planner_origin(session: Any, mission: str, timeout_s: float = 1.0) -> tuple[bool, Origin | None]:
+    """Whether a planner of ``mission`` answered its status, and its origin (``None``: plain metres)."""
+    for reply in session.get(keys.planner_statuses(mission), timeout=timeout_s):
+        if reply.ok is None:
+            continue
+        try:
+            return True, decode_planner_status(reply.ok.payload.to_bytes()).origin
+        except InputError:
+            continue
+    return False, None
+
+
+def learn_planner_origin(
+    session: Any, mission: str, stop: threading.Event, say: Callable[[str], None], what: str
+) -> tuple[bool, Origin | None]:
+    """``planner_origin``, asked every second until a planner answers or ``stop``; says it waits, once.
+
+    Returns:
+        ``(False, None)`` if stopped before any planner answered.
+    """
+    told = False
+    while not stop.is_set():
+        answered, origin = planner_origin(session, mission)
+        if answered:
+            return True, origin
+        if not told:
+            say(
+                f"waiting for a planner of mission {mission!r}: the {what}'s origin is checked against its own"
+            )
+            told = True
+        stop.wait(1.0)
+    return False, None
