@@ -22,19 +22,24 @@ It passes when afterwards the planner
     ``overload``), and answered every query (an error reply that decodes, or a status);
   - grew its resident memory by at most ``--max-rss-growth-mb``;
   - answered at least ``INNOCENT_SHARE`` of the innocent units' reports beside the poison goals;
+  - answered each preview bomb (``PREVIEW_BOMBS``, 3 at once) within 5 s, its process tree
+    (workers included) back within 400 MB 8 s later, and a plain preview then planned within 3 s;
   - wrote zero tracebacks to its log, and is still running.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import os
 import random
 import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -294,6 +299,123 @@ def poison_goals(session: Any, say: Callable[[str], None] = print) -> dict[str, 
     return {"innocent_share": round(answered_all / sent_all, 4) if sent_all else 0.0, "by_poison": per}
 
 
+# -- preview bombs ----------------------------------------------------------------------
+def _wide(n: int, sigma_m: float, spread_m: float = 50.0, seed: int = 5) -> list[dict[str, Any]]:
+    rng = random.Random(seed)
+    return [
+        {
+            "id": f"b{i}",
+            "position": [rng.uniform(-spread_m, spread_m), rng.uniform(-spread_m, spread_m)],
+            "sigma_range": sigma_m if i % 2 else 5.0,
+            "sigma_lateral": sigma_m if i % 2 else 3.0,
+        }
+        for i in range(n)
+    ]
+
+
+def _ring(n: int, radius_m: float) -> list[dict[str, Any]]:
+    step = 2 * math.pi / n
+    return [
+        {
+            "id": f"r{i}",
+            "position": [radius_m * math.cos(i * step), radius_m * math.sin(i * step)],
+            "sigma_range": 1.0,
+            "sigma_lateral": 1.0,
+        }
+        for i in range(n)
+    ]
+
+
+# Previews built to exhaust the host: each must be answered (a plan or an error that decodes) within
+# BOMB_ANSWER_S, and afterwards the planner's process tree must be back within BOMB_GROWTH_MB.
+PREVIEW_BOMBS: dict[str, Callable[[], dict[str, Any]]] = {
+    "goal 1e9 m away at 1 mm, 256 what-ifs half a megametre wide": lambda: {
+        "start": [-900, -900],
+        "goal": [1e9, 1e9],
+        "step": 1e-3,
+        "max_iter": 10_000_000,
+        "threats": _wide(256, 1e6),
+    },
+    "64 what-ifs 1e6 m wide": lambda: {"start": [0, 0], "goal": [500, 500], "threats": _wide(64, 1e6)},
+    "65 what-ifs": lambda: {"start": [0, 0], "goal": [50, 50], "threats": _wide(65, 1.0)},
+    "190 m at 1 mm (just under the step cap)": lambda: {
+        "start": [0, 0],
+        "goal": [134, 134],
+        "step": 1e-3,
+        "max_iter": 10_000_000,
+    },
+    "the start ringed by 64 what-ifs at 1 cm steps": lambda: {
+        "start": [0, 0],
+        "goal": [100, 100],
+        "step": 0.01,
+        "threats": _ring(64, 4.0),
+    },
+}
+BOMB_COPIES = 3  # of each bomb, at once
+BOMB_ANSWER_S = 5.0
+BOMB_SETTLE_S = 8.0  # the process tree is measured this long after the last answer
+BOMB_GROWTH_MB = 400.0
+BOMB_PLAIN_S = 3.0  # then a plain preview gets a plan within this
+
+
+def _tree_pss_mb(pid: int) -> float:
+    """PSS of ``pid`` and every descendant (its workers), from ``/proc/*/smaps_rollup``."""
+    total_kb, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        for children in Path(f"/proc/{p}/task").glob("*/children"):
+            with contextlib.suppress(OSError, ValueError):
+                todo += [int(c) for c in children.read_text().split()]
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            rollup = Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()
+            total_kb += next(int(ln.split()[1]) for ln in rollup if ln.startswith("Pss:"))
+    return total_kb / 1024
+
+
+def preview_bombs(session: Any, pid: int, say: Callable[[str], None] = print) -> dict[str, Any]:
+    """Each of ``PREVIEW_BOMBS``, ``BOMB_COPIES`` at once: answers, the tree's memory after, a plain preview."""
+    from pfp_service.wire import keys
+
+    def ask(body: bytes) -> tuple[float, str]:
+        t0 = time.monotonic()
+        replies = list(session.get(keys.preview(MISSION, "bomber"), payload=body, timeout=BOMB_ANSWER_S + 5))
+        took = time.monotonic() - t0
+        if not replies or _is_timeout(replies[0]):
+            return took, "unanswered"
+        return took, "plan" if replies[0].ok is not None else "error"
+
+    before = _tree_pss_mb(pid)
+    per: dict[str, Any] = {}
+    for name, make in PREVIEW_BOMBS.items():
+        body = json.dumps(make()).encode()
+        out: list[tuple[float, str]] = []
+        threads = [threading.Thread(target=lambda: out.append(ask(body))) for _ in range(BOMB_COPIES)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        per[name] = {"answers": sorted(k for _, k in out), "slowest_s": round(max(s for s, _ in out), 3)}
+        say(f"  preview bomb {name}: {per[name]['answers']} in at most {per[name]['slowest_s']} s")
+    time.sleep(BOMB_SETTLE_S)
+    after = _tree_pss_mb(pid)
+    plain = ask(json.dumps({"start": [0, 0], "goal": [10, 10]}).encode())
+    say(
+        f"  preview bombs: tree PSS {before:.0f} -> {after:.0f} MB; a plain preview then: {plain[1]} in {plain[0]:.2f} s"
+    )
+    return {
+        "by_bomb": per,
+        "answered_in_time": all(
+            len(b["answers"]) == BOMB_COPIES
+            and "unanswered" not in b["answers"]
+            and b["slowest_s"] <= BOMB_ANSWER_S
+            for b in per.values()
+        ),
+        "pss_mb_before": round(before, 1),
+        "pss_mb_after": round(after, 1),
+        "plain_after": {"kind": plain[1], "s": round(plain[0], 3)},
+    }
+
+
 # -- the live run -------------------------------------------------------------------
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--count", type=positive_int, default=10_000, help="inputs per key and queryable")
@@ -515,6 +637,7 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
             after = probe.ask()
             rss1 = _rss_mb(proc.pid)
             r["poison_goals"] = poison_goals(session, say)  # after the count of rejections: it adds its own
+            r["preview_bombs"] = preview_bombs(session, proc.pid, say)
             st1 = _status(session)
             r["faults"] = st1.faults if st1 is not None else None
             r.update(
@@ -566,6 +689,17 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
         ]
         >= INNOCENT_SHARE,
         f"memory growth <= {max_rss_growth_mb:g} MB": growth <= max_rss_growth_mb,
+        "every preview bomb answered within 5 s": r["preview_bombs"]["answered_in_time"],
+        f"the planner's tree within {BOMB_GROWTH_MB:g} MB {BOMB_SETTLE_S:g} s after the bombs": r[
+            "preview_bombs"
+        ]["pss_mb_after"]
+        - r["preview_bombs"]["pss_mb_before"]
+        <= BOMB_GROWTH_MB,
+        f"a plain preview planned within {BOMB_PLAIN_S:g} s after the bombs": r["preview_bombs"][
+            "plain_after"
+        ]["kind"]
+        == "plan"
+        and r["preview_bombs"]["plain_after"]["s"] <= BOMB_PLAIN_S,
         "zero tracebacks in the log": r["tracebacks"] == 0,
         "planner still running": r["planner_alive"],
     }

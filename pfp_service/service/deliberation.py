@@ -82,7 +82,7 @@ class Deliberators:
             workers,
             memory_mb=WORKER_MEMORY_MB,
             nice=WORKER_NICE,
-            warm=_warm_worker,
+            warm="pfp_service.service.deliberation:_warm_worker",
             on_replaced=lambda why: log.warning(
                 "deliberation worker replaced", extra={"fields": {"why": why}}
             ),

@@ -144,7 +144,7 @@ class PreviewDesk:
             memory_mb=memory_mb,
             nice=WORKER_NICE,
             lane_caps={HEAVY: max(1, workers - 1)},
-            warm=_warm_worker,
+            warm="pfp_service.service.desk:_warm_worker",
             on_replaced=self._replaced,
             spare=True,
         )

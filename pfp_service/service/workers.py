@@ -1,8 +1,8 @@
 """Worker processes for the planner's off-loop work (previews, deliberation): one small pool both use.
 
-A ``WorkerPool`` runs each worker as its own ``spawn`` process (a fork of a
-process holding a Zenoh session is unsafe) with its own pipe, driven by one
-parent thread per slot.  The slot thread takes the next task, sends it,
+A ``WorkerPool`` runs each worker as its own fresh interpreter (a fork of a
+process holding a Zenoh session is unsafe) with its own socket pipe, driven
+by one parent thread per slot.  The slot thread takes the next task, sends it,
 waits for the result until the task's hard stop (its budget plus
 ``KILL_GRACE_S``), and past it kills that one process, answers the task
 ``killed`` and starts a fresh worker in the slot.  Why not a
@@ -36,12 +36,16 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import importlib
 import itertools
+import json
 import math
-import multiprocessing
 import os
 import pickle
 import signal
+import socket
+import subprocess
+import sys
 import threading
 import time
 import traceback
@@ -148,7 +152,7 @@ class WorkerPool:
         memory_mb: address space each worker may add to its warm size; ``None``: unbounded.
         nice: CPU priority added to each worker (0: as the planner).
         lane_caps: slots a lane may hold at once (lanes not named: every slot).
-        warm: a module-level function each worker runs once before its first task.
+        warm: ``"module:function"``, run once in each worker before its first task.
         on_replaced: called with the reason each time a worker is killed or replaced.
         spare: keep one more warm worker aside, so a killed worker's slot is free again at once.
     """
@@ -161,7 +165,7 @@ class WorkerPool:
         memory_mb: float | None = None,
         nice: int = 0,
         lane_caps: Mapping[int, int] | None = None,
-        warm: Callable[[], None] | None = None,
+        warm: str | None = None,
         on_replaced: Callable[[str], None] | None = None,
         spare: bool = False,
     ) -> None:
@@ -171,7 +175,6 @@ class WorkerPool:
         self._caps = dict(lane_caps or {})
         self._warm = warm
         self._on_replaced = on_replaced
-        self._ctx = multiprocessing.get_context("spawn")  # never fork a process holding a zenoh session
         self._cond = threading.Condition()
         self._lanes: dict[int, list[tuple[float, int, Task]]] = {}
         self._running: dict[int, int] = {}  # lane -> tasks running
@@ -225,7 +228,7 @@ class WorkerPool:
         """The workers' process ids (those running now)."""
         spare = self._spare
         procs = [s.proc for s in self._slots] + [spare[0] if spare is not None else None]
-        return [p.pid for p in procs if p is not None and p.is_alive()]
+        return [p.pid for p in procs if p is not None and p.poll() is None]
 
     def shutdown(self) -> None:
         """Stop at once: queued tasks are answered ``closed``, a worker inside a task is killed."""
@@ -244,7 +247,7 @@ class WorkerPool:
         if spare is not None:
             with contextlib.suppress(Exception):
                 spare[0].kill()
-                spare[0].join(timeout=2.0)
+                spare[0].wait(timeout=2.0)
 
     # -- the slot threads ----------------------------------------------------------------
     def _next(self) -> Task | None:
@@ -258,6 +261,7 @@ class WorkerPool:
         return None
 
     def _serve(self, slot: _Slot) -> None:
+        _block_sigint()
         while True:
             if not self._ensure_worker(slot):
                 return
@@ -343,14 +347,14 @@ class WorkerPool:
             with contextlib.suppress(Exception):
                 proc.kill()
             with contextlib.suppress(Exception):
-                proc.join(timeout=2.0)
+                proc.wait(timeout=2.0)
         if conn is not None:
             with contextlib.suppress(Exception):
                 conn.close()
 
     def _ensure_worker(self, slot: _Slot) -> bool:
         """A warm worker in ``slot`` (the spare, or one started now); false once the pool is closed."""
-        while slot.proc is None or not slot.proc.is_alive():
+        while slot.proc is None or slot.proc.poll() is not None:
             if self._closed:
                 return False
             if slot.proc is not None:
@@ -375,22 +379,24 @@ class WorkerPool:
                         self._ready.set()
         return True
 
-    def _start_worker(self, slot: _Slot | None) -> tuple[Any, Connection, int] | None:
+    def _start_worker(self, slot: _Slot | None) -> tuple[subprocess.Popen[bytes], Connection, int] | None:
         """A new worker, warm (``slot`` shows it meanwhile, so a shutdown can kill it); ``None`` if it failed."""
-        ours, theirs = self._ctx.Pipe(duplex=True)
-        proc = self._ctx.Process(
-            target=_worker_main,
-            args=(theirs, os.getpid(), self._memory_mb, self._nice, self._warm),
-            name=f"pfp-{self.name}-worker",
-            daemon=True,
-        )
+        ours_sock, theirs_sock = socket.socketpair()
+        ours = Connection(ours_sock.detach())
+        theirs = theirs_sock.detach()
+        boot = [os.getpid(), theirs, self._memory_mb, self._nice, self._warm]
+        code = "import sys; from pfp_service.service.workers import _boot; _boot(sys.argv[1])"
         try:
-            proc.start()
+            # a fresh interpreter, not multiprocessing's spawn: it keeps the SIGINT blocked in this
+            # thread (``_block_sigint``) until it ignores it, and it imports no __main__ of ours
+            proc = subprocess.Popen(
+                [sys.executable, "-c", code, json.dumps(boot)], pass_fds=(theirs,), stdin=subprocess.DEVNULL
+            )
         except Exception:  # no process to be had now (out of memory, too many processes)
-            theirs.close()
+            os.close(theirs)
             ours.close()
             return None
-        theirs.close()
+        os.close(theirs)
         if slot is not None:
             slot.proc, slot.conn = proc, ours
         try:
@@ -400,7 +406,7 @@ class WorkerPool:
         if not ok or self._closed:
             with contextlib.suppress(Exception):
                 proc.kill()
-                proc.join(timeout=2.0)
+                proc.wait(timeout=2.0)
             ours.close()
             if slot is not None:
                 slot.proc, slot.conn = None, None
@@ -409,6 +415,7 @@ class WorkerPool:
 
     def _keep_spare(self) -> None:
         """Keep one warm worker aside, so a killed one is replaced at once, not after a warm-up."""
+        _block_sigint()
         self._ready.wait()
         while True:
             with self._cond:
@@ -454,10 +461,29 @@ def forget_fields() -> None:
     _WORLD["fields"] = {}
 
 
+def _block_sigint() -> None:
+    """Block SIGINT in a thread that starts workers: a worker inherits the mask, so a Ctrl-C to the
+    process group while it is still importing (before it can ignore SIGINT) leaves it be, and the
+    parent stops it; Python handles signals on the main thread only, so the thread loses nothing."""
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def _boot(arg: str) -> None:
+    """A worker's entry point (``python -c``): ``arg`` is ``[parent, fd, memory_mb, nice, warm]`` as JSON."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked while it started (_block_sigint)
+    parent, fd, memory_mb, nice, warm = json.loads(arg)
+    fn = None
+    if warm is not None:
+        module, _, name = warm.partition(":")
+        fn = getattr(importlib.import_module(module), name)
+    _worker_main(Connection(fd), parent, memory_mb, nice, fn)
+
+
 def _worker_main(
     conn: Connection, parent: int, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
 ) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
     threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
     if nice:
         with contextlib.suppress(OSError):
