@@ -94,7 +94,11 @@ def _command(name: str, endpoint: str, tmp: Path) -> tuple[list[str], str, str]:
     if name == "inject":
         script = tmp / "long.yaml"
         script.write_text(INJECT_SCRIPT)
-        return ["inject", str(script), "--connect", endpoint, "--mission", "sig"], "add threat", "inject stops"
+        return (
+            ["inject", str(script), "--connect", endpoint, "--mission", "sig"],
+            "add threat",
+            "inject stops",
+        )
     if name == "map":
         return (
             ["map", "--connect", endpoint, "--mission", "sig", "--http", "127.0.0.1:0"],

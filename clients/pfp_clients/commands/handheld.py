@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_flags(args)
     require_extra("tui", "textual")
+    session_config(args)  # a bad --zenoh-config or endpoint is a bad flag now, not a retry loop later
     check_terminal(args.nmea)
 
     import time
@@ -143,7 +144,6 @@ def run(args: argparse.Namespace) -> int:
         gps=gps,
     )
     frame = LocalFrame(*args.origin) if gps else None
-    session_config(args)  # a malformed endpoint is a bad flag now, not a retry loop later
     stream = open_nmea(args.nmea, args.nmea_baud) if gps else None
     where = ", ".join(args.connect or [DEFAULT_CONNECT])
     link = RetryingLink(lambda: session_config(args), where, args.mission, args.unit)
