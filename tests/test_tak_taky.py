@@ -414,6 +414,12 @@ def test_a_late_device_gets_every_route_at_once_at_the_origin_altitude(planner, 
                 early.wait(lambda e: e.get("uid") == route_uid, timeout=1.0)
                 break
             assert time.monotonic() < deadline, bridge.seen[-10:]
+        put_json(
+            s,
+            keys.threat(MISSION, "ambush"),
+            {"position": [200.0, 100.0], "sigma_range": 30, "sigma_lateral": 20},
+        )
+        early.wait(lambda e: e.get("uid") == f"pfp.threat.{MISSION}.ambush", timeout=10)
         time.sleep(1.0)  # past the bridge's announce interval: what follows is for the late device alone
         joined = time.monotonic()
         with device(port, "ANDROID-late-joiner") as late:
@@ -421,11 +427,19 @@ def test_a_late_device_gets_every_route_at_once_at_the_origin_altitude(planner, 
             delay = arrived - joined
             assert delay < 5.0, delay
             _, unit = late.wait(lambda e: e.get("uid") == f"pfp.unit.{MISSION}.u7", timeout=10)
-        assert float(unit.find("point").get("hae")) == ORIGIN.alt
+            _, threat = late.wait(lambda e: e.get("uid") == f"pfp.threat.{MISSION}.ambush", timeout=10)
+        assert unit.get("type") == "a-f-G-U-C" and threat.get("type") == "a-h-G"
+        p = threat.find("point")  # taky re-writes a point it relays with 6 decimals (about 0.1 m)
+        assert ORIGIN.to_local(float(p.get("lat")), float(p.get("lon"))) == pytest.approx(
+            (200.0, 100.0), abs=0.2
+        )
+        for ev in (unit, threat):
+            assert float(ev.find("point").get("hae")) == ORIGIN.alt
         points = [lk.get("point").split(",") for lk in route.findall("detail/link")]
         assert len(points) >= 2 and all(float(p[2]) == ORIGIN.alt for p in points)
         print(f"\nroute on a late device {delay:.2f} s after it connected")
         s.delete(keys.unit_goal(MISSION, "u7"))
+        s.delete(keys.threat(MISSION, "ambush"))
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 0), (signal.SIGINT, 130)])
