@@ -58,6 +58,25 @@ def test_framer_gives_the_same_events_whatever_the_chunking(cuts):
     assert skipped == [len(big) - big.index(b"<event")] and framer.skipped == 1
 
 
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.one_of(
+            st.binary(max_size=300),
+            st.sampled_from([b"<event", b"</event>", b"<event/>", b"/>", b">", b"<event ", b"</even"]),
+        ),
+        max_size=60,
+    )
+)
+def test_framer_never_raises_and_stays_bounded_on_any_bytes(chunks):
+    framer = EventFramer(256)
+    for c in chunks:
+        got = framer.feed(c)
+        assert framer.buffered <= 256 + len(c)
+        assert all(e.startswith(b"<event") and len(e) <= 256 for e in got.events)
+        assert all(n > 256 for n in got.skipped_bytes)
+
+
 def test_a_10_mb_event_costs_that_event_and_bounded_memory():
     hostile_10mb = hostile(uid="huge").replace(
         b"<detail>", b"<detail><remarks>" + b"A" * 10_000_000 + b"</remarks>"
