@@ -273,8 +273,9 @@ class Deliverer:
 
     # -- asking -------------------------------------------------------------------
     def _run(self) -> None:
+        probing = False  # no planner answered the last ask: retries ask one write, not thousands
         while not self._stop.is_set():
-            self._kick.wait(self._retry_s)
+            kicked = self._kick.wait(self._retry_s)
             self._kick.clear()
             if self._stop.is_set():
                 return
@@ -282,15 +283,22 @@ class Deliverer:
                 batch = [(k, p) for k, p in self._pending.items()]
             if not batch:
                 continue
+            if probing and not kicked:
+                batch = batch[:1]
             try:
-                self._ask(batch)
+                acked = self._ask(batch)
             except Exception as exc:  # the session closed under us, or Zenoh refused: try again later
                 if self._stop.is_set():
                     return
                 self._say(f"acknowledged writes: {exc}")
+                acked = 0
+            if probing and acked:
+                self._kick.set()  # a planner answers now: the rest at once
+            probing = acked == 0
             self._note_waiting()
 
-    def _ask(self, batch: list[tuple[str, _Pending]]) -> None:
+    def _ask(self, batch: list[tuple[str, _Pending]]) -> int:
+        """Ask a planner to take each write of ``batch``; returns how many some planner answered."""
         z = self._zenoh
         asked = []
         for key, p in batch:
@@ -330,6 +338,7 @@ class Deliverer:
             elif p.told:
                 waited = self._clock() - p.since
                 self._say(f"{describe_key(key)} taken by planner {ack.planner} after {waited:.1f} s")
+        return len(delivered)
 
     def _note_waiting(self) -> None:
         now = self._clock()
