@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import typing
 from collections.abc import Callable
 from typing import Annotated, Any
 
@@ -119,9 +120,12 @@ def flag_type(constraint: Any, what: str = "a number") -> Callable[[str], Any]:
     """An argparse ``type`` that checks a flag against the same bound as the messages and files.
 
     ``flag_type(Step)`` takes ``"0.5"`` and refuses ``"1e-9"`` with the bound
-    the wire names (``must be >= 0.001``).
+    itself: ``must be a finite number >= 0.001 (at most 1e+09), got '1e-9'``.
     """
-    base = float if "float" in str(constraint) else int
+    base, *metas = typing.get_args(constraint)
+    meta = next(m for m in metas if isinstance(m, Meta))
+    low = f">= {meta.ge:g}" if meta.ge is not None else f"> {meta.gt:g}"
+    bound = f"must be a finite number {low} (at most {meta.le:g})"
 
     def parse(text: str) -> Any:
         try:
@@ -130,10 +134,8 @@ def flag_type(constraint: Any, what: str = "a number") -> Callable[[str], Any]:
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
         try:
             return msgspec.convert(value, constraint)
-        except msgspec.ValidationError as exc:
-            from pfp_service.errors import from_validation
-
-            raise argparse.ArgumentTypeError(f"{from_validation(exc).reason}, got {text!r}") from None
+        except msgspec.ValidationError:
+            raise argparse.ArgumentTypeError(f"{bound}, got {text!r}") from None
 
     parse.__name__ = what  # argparse names the type in its own messages
     return parse

@@ -20,19 +20,21 @@ import yaml
 
 from pfp_service import yamlio
 from pfp_service.constraints import (
+    Delta,
     Finite,
     Id,
     Iterations,
     Point,
-    Positive,
     Sigma,
     Skew,
+    Step,
     StepIndex,
+    Tolerance,
     Weight,
     check_spreads,
 )
 from pfp_service.core import PlannerParams, Scheduled, Threat
-from pfp_service.core.params import ESCAPES, Escape
+from pfp_service.core.params import ESCAPES, Escape, reach
 from pfp_service.errors import InputError, from_validation
 from pfp_service.geo import Origin, localise_document
 
@@ -117,10 +119,10 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
 class PlannerSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
     """Planner settings; anything left out is derived by the scale-free rule."""
 
-    delta: Positive | None = None
-    step: Positive | None = None
+    delta: Delta | None = None
+    step: Step | None = None
     max_iter: Iterations | None = None
-    tolerance: Positive | None = None
+    tolerance: Tolerance | None = None
     intensity: Literal["peak", "density"] = "peak"
     escape: Escape = "auto"
     seed: int = 0
@@ -156,6 +158,9 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
             for name, (x, y) in (("start", self.start), ("goal", self.goal)):
                 if not (x0 <= x <= x1 and y0 <= y <= y1):
                     raise ValueError(f"{name}: lies outside bounds")
+        problem = reach(self.planner.to_params(), self.start, self.goal)  # the bound that needs both ends
+        if problem is not None:
+            raise ValueError(f"planner.step: {problem}")
         seen: set[str] = set()
         for i, t in enumerate(self.threats):
             tid = t.id or f"t{i + 1}"

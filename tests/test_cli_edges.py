@@ -79,7 +79,7 @@ BAD_FLAGS = [
     ),
     (["plan", "S", "--max-iter", "999999999999"], "--max-iter: must be 1 to 10,000,000"),
     (["serve", "--lookahead", "1000"], "--lookahead: must be 0 to 100"),
-    (["plan", "S", "--step", "1e300"], "--step: must be a finite number > 0 (at most 1e+09)"),
+    (["plan", "S", "--step", "1e300"], "--step: must be a finite number >= 0.001 (at most 1e+09)"),
     (["serve", "--listen", "notanendpoint"], "pfp serve: --listen: 'notanendpoint' is not an endpoint"),
     (["serve", "--mission", "a/b"], "--mission: 'a/b' is not 1-64 characters"),
     (["fleet", "--generate", "100000000"], "--generate: at most 10000 units per fleet process"),

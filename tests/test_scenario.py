@@ -75,7 +75,7 @@ def test_good_scenario_decodes():
             "planner.intensity: unknown value 'loud' (expected one of: peak, density)",
         ),
         ("planner.escape", "teleport", "planner.escape: unknown value 'teleport'"),
-        ("planner.delta", 0, "planner.delta: must be > 0"),
+        ("planner.delta", 0, "planner.delta: must be >= 1e-09"),
         ("planner.max_iter", 0, "planner.max_iter: must be >= 1"),
         ("planner.bogus", 1, "planner.bogus: unknown field"),
         ("goal", _DELETE, "goal: is required"),

@@ -22,9 +22,9 @@ from pfp_service.cli._common import (
     bounded_int,
     grid_cells,
     non_negative_float,
-    positive_float,
     positive_int,
 )
+from pfp_service.constraints import Delta, Step, Tolerance, flag_type
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.optimal import DEFAULT_CELLS
 from pfp_service.core.params import ESCAPES
@@ -54,9 +54,12 @@ def register(sub: Any) -> None:
     pf = p.add_argument_group(
         "potential-field planner only (--planner pfp); unset: the file's, else the scale-free rule"
     )
-    pf.add_argument("--delta", type=positive_float, help="override the goal weight delta")
-    pf.add_argument("--step", type=positive_float, help="override the step length (m)")
-    pf.add_argument("--tolerance", type=positive_float, help="override the arrival tolerance (m)")
+    # the bounds a scenario file's planner and a goal message have (constraints), for the same words
+    pf.add_argument("--delta", type=flag_type(Delta, "a goal weight"), help="override the goal weight delta")
+    pf.add_argument("--step", type=flag_type(Step, "a length in m"), help="override the step length (m)")
+    pf.add_argument(
+        "--tolerance", type=flag_type(Tolerance, "a length in m"), help="override the arrival tolerance (m)"
+    )
     pf.add_argument(
         "--max-iter", type=bounded_int(1, MAX_ITER), help=f"override the iteration limit (1 to {MAX_ITER:,})"
     )
@@ -133,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
+    from pfp_service.core.params import reach
     from pfp_service.errors import InputError
     from pfp_service.files import read_text
     from pfp_service.render import summary
@@ -161,6 +165,8 @@ def run(args: argparse.Namespace) -> int:
         intensity=args.intensity,
         escape=args.escape,
     )
+    if args.planner == "pfp" and (problem := reach(params, scenario.start, scenario.goal)) is not None:
+        raise InputError("--step" if args.step is not None else f"{args.scenario}: planner.step", problem)
     schedule = scenario.schedule()
     times = []
     for _ in range(args.repeat):

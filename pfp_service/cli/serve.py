@@ -14,6 +14,7 @@ from pfp_service.cli._common import (
     positive_float,
     positive_int,
 )
+from pfp_service.constraints import Delta, Step, Tolerance, flag_type
 from pfp_service.core.params import ESCAPES
 
 
@@ -53,10 +54,19 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="(default: info)")
     g = p.add_argument_group("planner defaults (a goal message may override delta, step, tolerance)")
-    g.add_argument("--delta", type=positive_float, help="goal weight (default: the scale-free rule)")
-    g.add_argument("--step", type=positive_float, help="step length in m (default: the scale-free rule)")
+    # the bounds of a goal message's own delta, step and tolerance (constraints), for the same words
     g.add_argument(
-        "--tolerance", type=positive_float, help="arrival tolerance in m (default: the scale-free rule)"
+        "--delta", type=flag_type(Delta, "a goal weight"), help="goal weight (default: the scale-free rule)"
+    )
+    g.add_argument(
+        "--step",
+        type=flag_type(Step, "a length in m"),
+        help="step length in m (default: the scale-free rule)",
+    )
+    g.add_argument(
+        "--tolerance",
+        type=flag_type(Tolerance, "a length in m"),
+        help="arrival tolerance in m (default: the scale-free rule)",
     )
     g.add_argument("--intensity", choices=("peak", "density"), help="threat intensity scale (default: peak)")
     g.add_argument("--escape", choices=ESCAPES, help="trap-escape strategy (default: auto)")

@@ -48,7 +48,7 @@ import statistics
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
-from pfp_service.constraints import DELTA_MAX, DELTA_MIN
+from pfp_service.constraints import DELTA_MAX, DELTA_MIN, reach_problem
 from pfp_service.core.escape_strategies import STRATEGIES
 from pfp_service.core.threat import Intensity, Threat
 
@@ -61,6 +61,7 @@ __all__ = [
     "PlannerParams",
     "Resolved",
     "field_stats",
+    "reach",
     "resolve",
 ]
 
@@ -177,3 +178,17 @@ def resolve(
         progress_window=params.progress_window,
         seed=params.seed,
     )
+
+
+def reach(params: PlannerParams, start: tuple[float, float], goal: tuple[float, float]) -> str | None:
+    """Why a step the caller gave cannot carry a plan from ``start`` to ``goal`` (``None``: it can).
+
+    Only a given step under the derived ``max_iter`` is judged
+    (``constraints.reach_problem``): a derived step always reaches, and an
+    explicit ``max_iter`` is a cap the caller asked for, so a plan that stops
+    there is an honest ``max_iter``.
+    """
+    if params.step is None or params.max_iter is not None:
+        return None
+    r = resolve(params, start, goal)
+    return reach_problem(math.hypot(goal[0] - start[0], goal[1] - start[1]), r.step, r.max_iter, r.tolerance)

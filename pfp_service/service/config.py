@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 import msgspec
 from msgspec import Meta
 
-from pfp_service.constraints import Finite, Id, NonNegative, Positive
+from pfp_service.constraints import Delta, Finite, Id, NonNegative, Positive, Step, Tolerance
 from pfp_service.core import PlannerParams
 from pfp_service.core.params import Escape
 from pfp_service.errors import InputError, from_validation, map_zenoh_errors
@@ -71,9 +71,9 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     log_format: LogFormat = "human"
     log_level: LogLevel = "info"
     # planner defaults; None means the scale-free rule
-    delta: Positive | None = None
-    step: Positive | None = None
-    tolerance: Positive | None = None
+    delta: Delta | None = None
+    step: Step | None = None
+    tolerance: Tolerance | None = None
     intensity: Literal["peak", "density"] = "peak"
     escape: Escape = "auto"
     # the live world
