@@ -71,6 +71,15 @@ def wait_line(lines: queue.Queue[str], fragment: str, timeout: float = 20.0) -> 
     raise TimeoutError(f"no line with {fragment!r}; saw {seen[-10:]}")
 
 
+def wait_lines(lines: queue.Queue[str], *fragments: str, timeout: float = 20.0) -> None:
+    """Wait until every fragment has been in a line, in any order."""
+    left_to_see = set(fragments)
+    deadline = time.monotonic() + timeout
+    while left_to_see:
+        line = wait_line(lines, "", timeout=max(0.0, deadline - time.monotonic()))
+        left_to_see = {f for f in left_to_see if f not in line}
+
+
 def wait_cot(q: queue.Queue[bytes], where: Callable[[ET.Element], bool], timeout: float = 20.0) -> ET.Element:
     deadline = time.monotonic() + timeout
     while (left := deadline - time.monotonic()) > 0:
@@ -234,8 +243,7 @@ def test_udp_both_ways(planner):
     try:
         urls = (f"udp+wo://127.0.0.1:{out_port}", f"udp+ro://127.0.0.1:{in_port}")
         with bridge(planner, *urls) as lines, client(planner) as s:
-            wait_line(lines, "connected udp+wo")
-            wait_line(lines, "connected udp+ro")
+            wait_lines(lines, "connected udp+wo", "connected udp+ro")  # the links connect in any order
             deadline = time.monotonic() + 15
             ev = None
             while ev is None and time.monotonic() < deadline:  # until the bridge's subscriber has propagated
