@@ -43,6 +43,7 @@ from pfp_service.tak.framing import EventFramer
 from pfp_service.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
+from pfp_service.wire.delivery import Deliverer
 
 __all__ = ["RECONNECT_S", "TICK_S", "TlsFiles", "link_config", "run"]
 
@@ -225,11 +226,14 @@ async def _main(
         session.declare_subscriber(keys.events(mission), enqueue("event")),
     ]
 
+    # markers are acknowledged writes (wire.delivery): put while no planner runs, in force once one starts
+    writes = Deliverer(session, mission, lambda line: log.warning("tak: %s", line))
+
     def publish(action: ZenohPut | ZenohDelete) -> None:
         if isinstance(action, ZenohPut):
-            session.put(action.key, action.payload, encoding=_encoding())
+            writes.put(action.key, action.payload)
         else:
-            session.delete(action.key)
+            writes.delete(action.key)
 
     def emit(out: Outputs) -> None:
         for data in out.cot:
@@ -300,6 +304,7 @@ async def _main(
         for t in pending:
             t.cancel()
         await asyncio.gather(*pending, return_exceptions=True)
+        writes.close()
         for sub in subs:
             sub.undeclare()
         if keeper is not None:
