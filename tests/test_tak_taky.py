@@ -455,3 +455,4 @@ def test_pfp_tak_stops_cleanly_on_sigterm_and_sigint(planner, tmp_path, sig, cod
         assert got == code and took < 10.0, (got, took, bridge.seen)
         assert not any("Traceback" in line for line in bridge.seen), bridge.seen
         assert bridge.count("subscribers undeclared") == 1 and bridge.seen[-1] == "pfp tak: stopped"
+        print(f"\npfp tak on {signal.Signals(sig).name}: exit {got} in {took:.2f} s")
