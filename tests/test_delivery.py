@@ -242,3 +242,39 @@ def test_a_delete_is_never_undone_by_an_older_put_asked_again_by_another_writer(
         finally:
             a.close()
             b.close()
+
+
+@pytest.mark.proc
+def test_a_write_while_the_planner_restarts_is_in_force_after_and_an_acknowledged_delete_stays_deleted(
+    tmp_path,
+):
+    """Durable state holds what was acknowledged; nothing a writer acknowledged is asked again to undo it."""
+    mission = "r" + uuid.uuid4().hex[:8]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    serve = ("serve", "--mode", "client", "--connect", endpoint, "--mission", mission)
+    state = ("--state-dir", str(tmp_path / "state"))
+    goal = encode(Goal(position=(3.0, 4.0)))
+    with _router(endpoint), client(endpoint) as s:
+        writer = Deliverer(s, mission, retry_s=0.3)
+        try:
+            with _pfp(*serve, *state) as (first, log):
+                writer.put(keys.unit_goal(mission, "kept"), goal)
+                writer.put(keys.unit_goal(mission, "gone"), goal)
+                _wait_for("the first planner takes both goals", lambda: not writer.pending(), 90, [log])
+                writer.delete(keys.unit_goal(mission, "gone"))
+                _wait_for("it takes the delete", lambda: not writer.pending(), 30, [log])
+                first.kill()  # no clean stop: only what it committed survives
+                first.wait(timeout=10)
+            writer.put(keys.unit_goal(mission, "late"), goal)  # while no planner runs
+            assert not writer.wait_delivered(1.0)
+            with _pfp(*serve, *state) as (_second, log2):
+                _wait_for(
+                    "the restarted planner takes the late goal", lambda: not writer.pending(), 90, [log2]
+                )
+                w = _world(s, mission)
+                assert w is not None, _text(log2)
+                goals = _goals(w)
+                assert goals.get("kept") == [3.0, 4.0] and goals.get("late") == [3.0, 4.0], w
+                assert goals.get("gone") is None, w
+        finally:
+            writer.close()
