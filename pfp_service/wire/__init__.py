@@ -3,6 +3,9 @@
 Nothing here opens a session.  ``messages`` and ``keys`` never import zenoh;
 the one Zenoh-specific choice, the encoding every payload is put with, is
 ``zenoh_encoding()`` below, which imports zenoh only when called.
+``delivery`` is how every client writes goals and threats: acknowledged
+writes that reach a planner started later (its ``Deliverer`` is given an
+open session).
 """
 
 from __future__ import annotations
