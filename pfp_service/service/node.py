@@ -90,7 +90,7 @@ TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
 TRIM_AFTER = 256  # units forgotten before freed memory is handed back to the OS
 TRIM_QUIET_S = 1.0  # ... once no unit was forgotten for this long
 TRIM_EVERY_S = 10.0  # ... or this often while they go on being forgotten
-WRITES_MAX = 20_000  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
+WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
 PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
 PEER_MISSES = 3  # a same-id peer that did not answer this many asks in a row is gone
 
