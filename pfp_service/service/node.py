@@ -154,6 +154,19 @@ class _Trim:
         threading.Thread(target=self._fn, args=(0,), name="pfp-trim", daemon=True).start()
 
 
+def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewDesk:
+    """The preview desk of a planner of ``cfg``: its worker processes start warming up now."""
+    return PreviewDesk(
+        cfg.preview_workers,
+        cfg.preview_queue,
+        cfg.preview_budget_ms / 1e3,
+        cfg.preview_max_iter,
+        clock,
+        cfg.bounds_tuple(),
+        cfg.origin,
+    )
+
+
 class PlannerNode:
     """One planner of one mission on an open Zenoh session.
 
@@ -163,6 +176,9 @@ class PlannerNode:
         clock: monotonic seconds; the world sees only this.
         store: durable state (``Store``); goals and threats are committed to it
             before they are applied, and restored from it at ``start``.
+        desk: the preview desk made by ``preview_desk`` before the session opened, so its
+            worker processes warm up while a client-mode planner waits for its router; the
+            node shuts it down.  A new one when not given.
     """
 
     def __init__(
@@ -171,6 +187,7 @@ class PlannerNode:
         cfg: ServeConfig,
         clock: Callable[[], float] = time.monotonic,
         store: Store | None = None,
+        desk: PreviewDesk | None = None,
     ) -> None:
         self.session = session
         self.store = store
@@ -198,15 +215,7 @@ class PlannerNode:
         self._state_keys = keys.KeyOf(keys.KeyKind.UNIT_STATE, cfg.mission)
         self._direction_keys = keys.KeyOf(keys.KeyKind.UNIT_DIRECTION, cfg.mission)
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
-        self._desk = PreviewDesk(
-            cfg.preview_workers,
-            cfg.preview_queue,
-            cfg.preview_budget_ms / 1e3,
-            cfg.preview_max_iter,
-            clock,
-            cfg.bounds_tuple(),
-            cfg.origin,
-        )
+        self._desk = desk if desk is not None else preview_desk(cfg, clock)
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
@@ -367,7 +376,10 @@ class PlannerNode:
         """Apply what the planners already serving the mission hold, every page of it (none: ~1 ms)."""
 
         def ask(selector: str, timeout_s: float) -> list[bytes]:
-            return [r.ok.payload.to_bytes() for r in s.get(selector, timeout=timeout_s) if r.ok is not None]
+            # other sessions only: our own world queryable, declared above, is not answered before the
+            # loop starts, so asking it too cost the whole page timeout (2 s) at every start
+            replies = s.get(selector, timeout=timeout_s, allowed_destination=zenoh.Locality.REMOTE)
+            return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
 
         joined = fetch_world(ask, self.cfg.mission, self.cfg.planner_id)
         if joined.inputs:

@@ -47,6 +47,7 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
 def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Event, log: Any) -> int:
     import zenoh
 
+    from pfp_service.service.node import preview_desk
     from pfp_service.service.store import Store
 
     if threading.current_thread() is threading.main_thread():
@@ -57,12 +58,20 @@ def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Even
         conf.insert_json5("connect/timeout_ms", "-1")
         conf.insert_json5("connect/exit_on_failure", "false")
     with contextlib.closing(store) if store is not None else contextlib.nullcontext():
-        session = _open(zenoh, conf, cfg, stop, log)
+        # the preview workers boot while the session opens: a client-mode planner waiting for its
+        # router is ready to answer the moment the router comes, not seconds later
+        desk = preview_desk(cfg)
+        try:
+            session = _open(zenoh, conf, cfg, stop, log)
+        except BaseException:
+            desk.shutdown()
+            raise
         if session is None:  # stopped while waiting for the router
+            desk.shutdown()
             log.info("stopped")
             return 0
         with session:
-            _run(session, cfg, store, ready, stop, log)
+            _run(session, cfg, store, desk, ready, stop, log)
     log.info("stopped")
     return 0
 
@@ -82,10 +91,16 @@ def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: A
     t.start()
     t.join(2.0)
     next_log = 0.0
+    warmed = False
     while t.is_alive():  # joined in short slices: the session is used the moment it opens
         if time.monotonic() >= next_log:
             log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
             next_log = time.monotonic() + WAITING_LOG_S
+        if not warmed:  # the kernels load while the router is away, not once it has come
+            from pfp_service.service.desk import warm_up
+
+            warm_up(cfg.world_settings())
+            warmed = True
         if stop.is_set():
             return None
         t.join(0.05)
@@ -98,13 +113,14 @@ def _run(
     session: Any,
     cfg: ServeConfig,
     store: Any,
+    desk: Any,
     ready: threading.Event | None,
     stop: threading.Event,
     log: Any,
 ) -> None:
     from pfp_service.service.node import PlannerNode
 
-    node = PlannerNode(session, cfg, store=store)
+    node = PlannerNode(session, cfg, store=store, desk=desk)
     node.start()
     try:
         endpoints = cfg.listen
