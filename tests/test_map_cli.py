@@ -69,8 +69,7 @@ def test_no_router_is_one_line():
     assert line.startswith("pfp map: --connect:"), line
 
 
-@pytest.mark.net
-@pytest.mark.net
+@pytest.mark.proc
 def test_a_port_in_use_is_one_line(router):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -110,8 +109,7 @@ def _http(method: str, url: str, body: Any = None, headers: dict[str, str] | Non
 EDIT = {"X-PFP-Edit": "1", "Content-Type": "application/json"}
 
 
-@pytest.mark.net
-@pytest.mark.net
+@pytest.mark.proc
 def test_the_api_puts_through_the_same_keys_and_validates_first(router):
     mission = "api" + uuid.uuid4().hex[:8]
     with client(router) as s, map_process(router, mission, "--allow-edit") as url:
@@ -186,7 +184,6 @@ def test_the_map_runs_from_a_plain_install_as_a_separate_process():
     assert r.returncode == 0 and "--allow-edit" in r.stdout
 
 
-@pytest.mark.net
 @pytest.mark.net
 def test_the_map_embeds_in_another_program_on_its_own_thread(router):
     """What ``pfp demo --map`` needs: start, get the URL, keep running, close cleanly."""
