@@ -30,7 +30,7 @@ from pfp_service.core import ThreatField
 from pfp_service.core.metrics import MEASURE_CHUNK, Epoch, measure
 from pfp_service.errors import DeadlinePassed, InputError
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, WorldSettings
-from pfp_service.service.preview import MAX_PREVIEW_WHATIFS, admit
+from pfp_service.service.preview import MAX_PREVIEW_WHATIFS, admit, preview
 from pfp_service.service.workers import Outcome, Task, WorkerPool
 from pfp_service.service.world import World
 from pfp_service.wire import Goal, ThreatUpdate, UnitState, decode_preview_request, keys
@@ -113,11 +113,13 @@ def test_measuring_a_long_path_checks_its_deadline():
 
     def deadline() -> bool:
         asked.append(1)
-        return len(asked) > 2  # passes at the third look
+        return len(asked) > 1  # passes at the second look (the first chunk is measured unasked)
 
     with pytest.raises(DeadlinePassed):
         measure(path, epochs, deadline)
-    assert len(asked) == 3
+    assert len(asked) == 2
+    short = path[: MEASURE_CHUNK // 2]
+    assert measure(short, [Epoch(0, len(short) - 1, field)], lambda: True).length > 0  # measured whole
     whole = measure(path, epochs)
     assert measure(path, epochs, lambda: False).exposure == pytest.approx(whole.exposure, rel=1e-12)
 
@@ -260,3 +262,22 @@ def test_ctrl_c_to_the_process_group_prints_no_traceback_from_any_worker():
         log.seek(0)
         text = log.read()
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text[-3000:]
+
+
+@pytest.mark.unit
+def test_a_what_if_reuses_the_worlds_packed_field_and_plans_the_same():
+    w = _world()
+    view = w.view("u")
+    base = ThreatField(view.threats, "peak")
+    extra = ThreatUpdate(position=(60.0, 50.0), sigma_range=8.0, sigma_lateral=5.0).to_threat("w1")
+    replaced = ThreatUpdate(position=(30.0, 30.0), sigma_range=4.0, sigma_lateral=4.0).to_threat("t1")
+    got = base.plus([extra, replaced], {"t1"})
+    fresh = ThreatField((extra, replaced), "peak")
+    assert got.threats == fresh.threats and np.array_equal(got.packed, fresh.packed)
+    body = json.dumps(
+        {"threats": [{"id": "w1", "position": [60.0, 50.0], "sigma_range": 8.0, "sigma_lateral": 5.0}]}
+    )
+    request = decode_preview_request(body.encode())
+    shared = preview(w.view("u"), request, time.monotonic, 5.0, CAP, base)
+    alone = preview(w.view("u"), request, time.monotonic, 5.0, CAP)
+    assert shared.path == alone.path and shared.exposure == alone.exposure

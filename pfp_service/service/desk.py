@@ -53,7 +53,16 @@ from pfp_service.geo import Origin
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings
 from pfp_service.service.log import get_logger
 from pfp_service.service.preview import Cost, admit, fit_reply, preview
-from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool, world_field, world_threats
+from pfp_service.service.workers import (
+    Blobs,
+    Outcome,
+    Task,
+    WorkerPool,
+    forget_fields,
+    retire,
+    world_field,
+    world_threats,
+)
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds
 
@@ -65,10 +74,11 @@ EXPIRY_GRACE_S = 1.0  # a backstop: a preview unanswered this long past its last
 WORKER_MEMORY_MB = 1024.0  # address space a preview worker may add to its warm size (measured: ~0.3 GB used)
 WORKER_NICE = 10  # preview workers yield the cores to the live loop
 ALARM_GRACE_S = 0.05  # the worker's alarm stops any phase this long past the budget
-WALK_SHARE = 0.45  # of the budget, for the walk; measuring its path may take as long again (``plan``)
+WALK_SHARE = 0.5  # of the budget, for the walk; measuring its path may take as long again (``plan``)
 LIGHT, HEAVY = 0, 1
 _FIRST_GUESS_S = {LIGHT: 0.02, HEAVY: 0.5}  # run time assumed before any is measured
 _EWMA = 0.2
+WARM_S = 3.0  # how long a worker takes to start, for the retry hint while every one is being replaced
 
 
 class _Answer:
@@ -211,8 +221,11 @@ class PreviewDesk:
     def _expected_wait(self, lane: int) -> float:
         """How long a preview queued in ``lane`` now would wait for a worker (an estimate)."""
         pool = self._pool
+        ready = pool.ready_slots()
+        if ready == 0:
+            return WARM_S  # every worker is being replaced
         ahead = pool.waiting(LIGHT) + (pool.waiting(HEAVY) if lane == HEAVY else 0)
-        slots = pool.slots_for(lane) if lane == HEAVY else max(1, pool.workers - pool.running(HEAVY))
+        slots = pool.slots_for(lane) if lane == HEAVY else max(1, ready - pool.running(HEAVY))
         busy = pool.running(lane) >= slots
         return (ahead + busy) * self._run_s[lane] / slots
 
@@ -257,7 +270,9 @@ class PreviewDesk:
         log.warning("preview worker replaced", extra={"fields": {"why": why}})
 
     def expire(self, now: float) -> None:
-        """A backstop: answer ``expired`` any preview still unanswered well past its last moment."""
+        """Answer ``busy`` the previews still queued past their start, and (a backstop) ``expired`` any
+        still unanswered well past its last moment."""
+        self._pool.drop_late()
         with self._lock:
             while self._deadlines and self._deadlines[0][0] + EXPIRY_GRACE_S <= now:
                 _, ident, answer = heapq.heappop(self._deadlines)
@@ -290,24 +305,29 @@ class _Overrun(BaseException):
 
 
 _ARMED = [False]
+_FIRED = [False]
 
 
 def _alarm(signum: int, frame: Any) -> None:
     if _ARMED[0]:
         _ARMED[0] = False
+        _FIRED[0] = True
         raise _Overrun
 
 
 def _compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
     """One preview in a worker: ``("reply", body)`` or ``("error", ErrorReply JSON)``.
 
-    The walk stops itself at the budget; an alarm just past it stops any other
-    phase, and the caches it may have left half-built are dropped.
+    The walk stops itself at half the budget and measuring the path by the
+    whole; an alarm just past it stops any other phase (a route search, a
+    foresight): the caches it may have left half-built are dropped, or, when
+    the alarm surfaced through compiled code, the worker is retired.
     """
     view, request, origin, budget_s, max_iter = job
     threats = world_threats()
     view = dataclasses.replace(view, threats=threats)
     signal.signal(signal.SIGALRM, _alarm)
+    _FIRED[0] = False
     _ARMED[0] = True
     signal.setitimer(signal.ITIMER_REAL, budget_s + ALARM_GRACE_S)
     try:
@@ -321,8 +341,13 @@ def _compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
         return "error", encode(ErrorReply.of(err))
     except DeadlinePassed:
         return "error", encode(ErrorReply(error="expired: the preview's budget was spent measuring its path"))
-    except _Overrun:
-        _forget_caches()
+    except BaseException as exc:
+        if not _FIRED[0]:
+            raise
+        if isinstance(exc, _Overrun):  # stopped between two bytecodes of ours: the caches it fed go
+            _forget_caches()
+        else:  # surfaced through C (numba's dispatcher wraps it in a SystemError): a fresh worker
+            retire()
         return "error", encode(ErrorReply(error="expired: the preview's budget was spent and it was stopped"))
     finally:
         _ARMED[0] = False
@@ -330,9 +355,8 @@ def _compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
 
 
 def _forget_caches() -> None:
-    """An interrupted phase may have left a cache half-built: the shared field and the route cache go."""
+    """What an interrupted phase may have left half-built: the shared fields and the route cache."""
     from pfp_service.core.routes import ROUTES
-    from pfp_service.service.workers import forget_fields
 
     forget_fields()
     ROUTES.clear()

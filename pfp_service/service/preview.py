@@ -152,8 +152,8 @@ def preview(
     goal, add what-if threats and override delta, step, tolerance, max_iter.
 
     ``field``, when given, is the field of ``view.threats`` (built once per
-    world and shared): a preview without what-ifs plans on it instead of
-    building its own.
+    world and shared): a preview plans on it, or on it plus its what-ifs
+    (``ThreatField.plus``), instead of packing every threat again.
 
     Raises:
         InputError: the unit is unknown or has no goal and the request gives none.
@@ -173,7 +173,9 @@ def preview(
     replaced = {e.id for e in extra}  # a what-if threat with a live id stands in for it
     threats = [t for t in view.threats if t.id not in replaced] + extra
     schedule = [Scheduled(t) for t in threats]
-    shared = field if not extra else None
+    shared = field
+    if field is not None and extra:  # the world's field, its rows reused: only the what-ifs are packed
+        shared = field.plus(extra, replaced)
     overrides = (req.start, req.goal, req.delta, req.step, req.tolerance, req.max_iter)
     live = view.stepper
     if live is not None and all(v is None for v in overrides):

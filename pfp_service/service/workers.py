@@ -63,6 +63,7 @@ __all__ = [
     "Task",
     "WorkerPool",
     "forget_fields",
+    "retire",
     "world_field",
     "world_threats",
 ]
@@ -141,6 +142,7 @@ class _Slot:
     task: Task | None = None
     thread: threading.Thread | None = None
     started: int = field(default=0)  # workers started in this slot
+    ready: bool = False  # a warm worker is in it
 
 
 class WorkerPool:
@@ -219,6 +221,25 @@ class WorkerPool:
         """Tasks running (in ``lane``, or in all)."""
         with self._cond:
             return sum(self._running.values()) if lane is None else self._running.get(lane, 0)
+
+    def ready_slots(self) -> int:
+        """Slots with a warm worker (a killed one's successor may still be warming)."""
+        return sum(1 for s in self._slots if s.ready)
+
+    def drop_late(self) -> int:
+        """Answer ``late`` every queued task past its ``start_by`` (while every slot is busy or warming)."""
+        now = time.monotonic()
+        late: list[Task] = []
+        with self._cond:
+            for lane, heap in self._lanes.items():
+                keep = [item for item in heap if item[2].start_by >= now]
+                if len(keep) < len(heap):
+                    late += [item[2] for item in heap if item[2].start_by < now]
+                    heapq.heapify(keep)
+                    self._lanes[lane] = keep
+        for task in late:
+            task.done(Outcome("late", detail="not started within its deadline"))
+        return len(late)
 
     def slots_for(self, lane: int) -> int:
         """Slots ``lane`` may hold at once."""
@@ -305,7 +326,7 @@ class WorkerPool:
         if blob is not None:
             slot.version = version
         hard_stop = time.monotonic() + task.budget_s + KILL_GRACE_S
-        got: tuple[Any, Any, float] | None = None
+        got: tuple[Any, Any, float, bool] | None = None
         try:
             while got is None:
                 left = hard_stop - time.monotonic()
@@ -326,9 +347,11 @@ class WorkerPool:
             )
             return
         kind: OutcomeKind
-        kind, value, run_s = got
+        kind, value, run_s, retired = got
         if kind == "memory":
             self._replace(slot, "memory limit")
+        elif retired:
+            self._replace(slot, "retired after its task (it was interrupted)")
         task.done(
             Outcome(kind, value if kind == "done" else None, "" if kind == "done" else str(value), run_s)
         )
@@ -342,7 +365,7 @@ class WorkerPool:
 
     def _stop_worker(self, slot: _Slot) -> None:
         proc, conn = slot.proc, slot.conn
-        slot.proc, slot.conn, slot.version = None, None, -1
+        slot.proc, slot.conn, slot.version, slot.ready = None, None, -1, False
         if proc is not None:
             with contextlib.suppress(Exception):
                 proc.kill()
@@ -372,6 +395,7 @@ class WorkerPool:
             if self._closed:
                 self._stop_worker(slot)
                 return False
+            slot.ready = True
             with self._cond:
                 if slot.started == 1:
                     self._warm_left -= 1
@@ -418,9 +442,9 @@ class WorkerPool:
         _block_sigint()
         self._ready.wait()
         while True:
-            with self._cond:
-                while self._spare is not None and not self._closed:
-                    self._cond.wait()
+            with self._cond:  # a slot's own successor first: two warming at once take twice as long
+                while (self._spare is not None or not all(x.ready for x in self._slots)) and not self._closed:
+                    self._cond.wait(1.0)
                 if self._closed:
                     return
             got = self._start_worker(None)
@@ -456,9 +480,17 @@ def world_field(intensity: str) -> Any:
     return got
 
 
+_RETIRE = [False]
+
+
 def forget_fields() -> None:
-    """Drop the fields built on the threats (they are built again when next asked)."""
+    """Drop the fields built on the threats in force (built again when next asked)."""
     _WORLD["fields"] = {}
+
+
+def retire() -> None:
+    """Have this worker replaced once its task has replied (a task that was interrupted mid-phase calls it)."""
+    _RETIRE[0] = True
 
 
 def _block_sigint() -> None:
@@ -485,11 +517,11 @@ def _worker_main(
     conn: Connection, parent: int, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
 ) -> None:
     threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
+    if warm is not None:
+        warm()  # at the planner's priority: a killed worker's successor is wanted soon
     if nice:
         with contextlib.suppress(OSError):
             os.nice(nice)
-    if warm is not None:
-        warm()
     if memory_mb is not None:
         _limit_address_space(memory_mb)
     conn.send("ready")
@@ -499,28 +531,31 @@ def _worker_main(
         except (EOFError, OSError):
             os._exit(0)  # the parent closed the pipe: nobody will ask again
         started = time.monotonic()
+        _RETIRE[0] = False
         try:
             if blob is not None:
-                _WORLD.update(
-                    version=None, threats=(), fields={}
-                )  # the old field goes before the new one loads
+                _WORLD.update(version=None, threats=(), fields={})  # the old field goes before the new loads
                 _WORLD.update(version=version, threats=pickle.loads(blob))
             value = fn(*args)
-            reply: tuple[str, Any, float] = ("done", value, time.monotonic() - started)
+            reply: tuple[str, Any, float, bool] = ("done", value, time.monotonic() - started, _RETIRE[0])
         except MemoryError:
-            reply = ("memory", "the worker's memory limit was reached", time.monotonic() - started)
+            reply = ("memory", "the worker's memory limit was reached", time.monotonic() - started, True)
         except Exception:
-            reply = ("error", traceback.format_exc(limit=4), time.monotonic() - started)
+            reply = ("error", traceback.format_exc(limit=4), time.monotonic() - started, _RETIRE[0])
         try:
             conn.send(reply)
         except MemoryError:
-            conn.send(
-                ("memory", "the reply did not fit the worker's memory limit", time.monotonic() - started)
+            reply = (
+                "memory",
+                "the reply did not fit the worker's memory limit",
+                time.monotonic() - started,
+                True,
             )
+            conn.send(reply)
         except (OSError, ValueError):
             os._exit(0)
-        if reply[0] == "memory":
-            os._exit(0)  # the parent replaces this worker: its heap may be left fragmented at the limit
+        if reply[3]:
+            os._exit(0)  # the parent replaces this worker: its heap (or numba's state) may be left damaged
 
 
 def _limit_address_space(memory_mb: float) -> None:
