@@ -49,3 +49,25 @@ def test_a_second_planner_with_the_default_id_is_a_conflict_for_both_within_5s_a
             assert len(rows) == 2, r.stdout  # told apart by session
             r = run_pfp("health", "--connect", endpoint, "--mission", mission, timeout=60)
             assert r.stdout.count("planner ok") == 2, r.stdout
+
+
+def test_twins_under_cluster_cannot_share_by_id_and_say_so_within_5s():
+    """``--cluster`` shares units by planner id: two planners under one id would both own every unit."""
+    mission = "w" + uuid.uuid4().hex[:8]
+    flags = ("--state-dir", "none", "--cluster")
+    with planner_process(*flags, mission=mission) as (endpoint, _first), client(endpoint) as s:
+        conflicts = Inbox(s, keys.event(mission, "conflict"))
+        with _pfp("serve", "--mode", "client", "--connect", endpoint, "--mission", mission, *flags) as (
+            _p,
+            log,
+        ):
+            ready = time.monotonic() + 120
+            while "planner ready" not in _text(log):
+                assert time.monotonic() < ready, _text(log)
+                time.sleep(0.05)
+            t_ready = time.monotonic()
+            others = set()
+            while len(others) < 2:
+                ev = conflicts.get(timeout=max(t_ready + 5.0 - time.monotonic(), 0.01))
+                assert "--planner-id" in ev["reason"], ev
+                others.add(ev["other"])
