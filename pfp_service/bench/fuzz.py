@@ -210,7 +210,8 @@ def malformed(rng: random.Random, kind: str) -> Input:
 # The bad unit reports from [0, 0]; each goal is sent with every one of its reports.  The
 # decoders refuse the subnormal step, tolerance and delta (>= 1 mm, >= 1e-9: constraints);
 # the offsets and the goal on the unit have arrived.  Neither may cost another unit a direction.
-POISON_GOALS: dict[str, dict[str, Any]] = {
+POISON_GOALS: dict[str, dict[str, Any] | None] = {
+    "none": None,  # the same run's baseline: the bad unit reports and sends no goal
     "subnormal_offset": {"position": [5e-324, 5e-324]},
     "subnormal_step": {"position": [10.0, 10.0], "step": 5e-324},
     "subnormal_tolerance": {"position": [10.0, 10.0], "tolerance": 5e-324},
@@ -227,9 +228,13 @@ INNOCENT_SHARE = 0.95  # of the innocent units' reports answered, to pass
 def poison_goals(session: Any, say: Callable[[str], None] = print) -> dict[str, Any]:
     """Each of ``POISON_GOALS`` from a bad unit while ``INNOCENTS`` units report in the same ticks.
 
+    A report counts as answered when a direction answers it or the unit's
+    next report (directions are latest-wins: a planner a tick behind answers
+    the newer one); ``none`` is the same run's baseline, with no poison.
+
     Returns:
-        ``innocent_share`` (reports of the innocent units answered with their
-        own ``seq``), per poison the same share and what the bad unit was told.
+        ``innocent_share`` over the poisons, ``baseline_share`` without one,
+        and per poison its share and what the bad unit was told.
     """
     import threading
 
@@ -275,15 +280,20 @@ def poison_goals(session: Any, say: Callable[[str], None] = print) -> dict[str, 
                 session.put(
                     keys.unit_state(MISSION, "poisoner"), bad_state, encoding=enc, congestion_control=block
                 )
-                goal = json.dumps(body).encode()
-                session.put(keys.unit_goal(MISSION, "poisoner"), goal, encoding=enc, congestion_control=block)
+                if body is not None:
+                    goal = json.dumps(body).encode()
+                    session.put(
+                        keys.unit_goal(MISSION, "poisoner"), goal, encoding=enc, congestion_control=block
+                    )
                 for i, name in enumerate(names):
                     state = json.dumps({"position": [float(i % 5), -3.0 - i // 5], "seq": seq}).encode()
                     session.put(keys.unit_state(MISSION, name), state, encoding=enc, congestion_control=block)
                 time.sleep(max(t0 + (tick + 1) / POISON_HZ - time.monotonic(), 0.0))
             time.sleep(0.5)  # the last tick's directions
             with lock:
-                answered = sum((n, k) in got for n in names for k in range(first, seq + 1))
+                answered = sum(
+                    (n, k) in got or (n, k + 1) in got for n in names for k in range(first, seq + 1)
+                )
                 told = dict(bad_told)
             sent = len(names) * (seq + 1 - first)
             per[poison] = {"innocent_share": round(answered / sent, 4), "sent": sent, "bad_unit_told": told}
@@ -294,9 +304,14 @@ def poison_goals(session: Any, say: Callable[[str], None] = print) -> dict[str, 
         sub.undeclare()
         for name in [*names, "poisoner"]:
             session.delete(keys.unit_goal(MISSION, name))
-    sent_all = sum(p["sent"] for p in per.values())
-    answered_all = sum(round(p["innocent_share"] * p["sent"]) for p in per.values())
-    return {"innocent_share": round(answered_all / sent_all, 4) if sent_all else 0.0, "by_poison": per}
+    poisoned = [p for name, p in per.items() if POISON_GOALS[name] is not None]
+    sent_all = sum(p["sent"] for p in poisoned)
+    answered_all = sum(round(p["innocent_share"] * p["sent"]) for p in poisoned)
+    return {
+        "innocent_share": round(answered_all / sent_all, 4) if sent_all else 0.0,
+        "baseline_share": per["none"]["innocent_share"],
+        "by_poison": per,
+    }
 
 
 # -- preview bombs ----------------------------------------------------------------------
@@ -784,8 +799,8 @@ def run(args: argparse.Namespace) -> int:
     )
     pg = r["poison_goals"]
     print(
-        f"  poison goals: innocent units answered {pg['innocent_share']:.1%} of their reports; "
-        f"faults inside the planner {r['faults']}"
+        f"  poison goals: innocent units answered {pg['innocent_share']:.1%} of their reports "
+        f"({pg['baseline_share']:.1%} with no poison); faults inside the planner {r['faults']}"
     )
     for name, ok in r["checks"].items():
         print(f"  [{'ok' if ok else 'FAILED'}] {name}")
