@@ -89,6 +89,33 @@ def test_rows_past_a_damaged_page_are_salvaged(tmp_path):
     assert 1800 < r.goals < 2000  # the rest of the table, either side of the lost leaf
 
 
+@pytest.mark.parametrize("kind", ["garbage", "zeros", "one byte"])
+def test_damage_to_any_page_never_raises_and_the_store_works_after(tmp_path, kind):
+    import random
+
+    seed = 22
+    rng = random.Random(seed)
+    base = tmp_path / "base"
+    _fill(base)
+    pages = (base / "state.sqlite3").stat().st_size // 4096
+    for page in range(pages):
+        d = tmp_path / f"p{page}"
+        shutil.copytree(base, d)
+        if kind == "garbage":
+            _scribble(d / "state.sqlite3", page * 4096, rng.randbytes(4096))
+        elif kind == "zeros":
+            _scribble(d / "state.sqlite3", page * 4096, bytes(4096))
+        else:
+            _scribble(d / "state.sqlite3", page * 4096 + rng.randrange(4096), rng.randbytes(1))
+        store = Store(d)
+        r = store.restore(1000.0)  # never raises
+        assert r.goals <= 200 and r.threats <= 50, (seed, page)
+        assert bool(r.set_aside) <= (r.corrupt >= 1), (seed, page)
+        store.commit_inputs([GoalSet("after", Goal(position=(1, 1)))], 1000.0, None)
+        store.close()
+        assert any(i == GoalSet("after", Goal(position=(1, 1))) for i in Store(d).restore(1000.0).inputs)
+
+
 def test_the_wal_of_a_killed_planner_shadows_a_damaged_page(tmp_path):
     live = tmp_path / "live"
     store = Store(live)

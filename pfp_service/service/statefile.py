@@ -32,6 +32,7 @@ __all__ = [
     "describe",
     "hold_shared",
     "in_use",
+    "lenient_text",
     "salvage",
     "state_files",
 ]
@@ -39,6 +40,7 @@ __all__ = [
 DB_NAME = "state.sqlite3"
 LOCK_NAME = "state.lock"
 CORRUPT_CODES = (11, 26)  # SQLITE_CORRUPT, SQLITE_NOTADB
+SCAN_QUERIES = 10_000  # a salvage scan of one table gives up after this many queries
 # table -> (key column, column count): what salvage copies and how a lost row is named
 TABLES: dict[str, tuple[str, int]] = {"threats": ("id", 3), "goals": ("unit", 2), "missions": ("unit", 5)}
 
@@ -50,8 +52,10 @@ def describe(exc: BaseException) -> str:
     primary = code & 0xFF if isinstance(code, int) else None
     if primary == 13 or errno == 28:  # SQLITE_FULL, ENOSPC
         return f"the disk is full ({exc})"
-    if primary == 8 or errno == 30:  # SQLITE_READONLY, EROFS
+    if primary == 8:  # SQLITE_READONLY
         return f"the state database is read-only ({exc})"
+    if errno == 30:  # EROFS
+        return f"the file system is read-only ({exc})"
     if primary == 3 or errno in (1, 13):  # SQLITE_PERM, EPERM, EACCES
         return f"permission denied ({exc})"
     if primary in CORRUPT_CODES:
@@ -61,6 +65,11 @@ def describe(exc: BaseException) -> str:
     if primary == 10:  # SQLITE_IOERR
         return f"I/O error ({exc})"
     return str(exc)
+
+
+def lenient_text(raw: bytes) -> str:
+    """SQLite text as ``str`` even when a damaged file holds bytes that are not UTF-8 (they read as U+FFFD)."""
+    return raw.decode("utf-8", "replace")
 
 
 # -- salvage -------------------------------------------------------------------------------
@@ -76,6 +85,7 @@ def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[st
     lost: list[str] = []
     try:
         db = sqlite3.connect(f"file:{Path(path).as_posix()}?mode=ro", uri=True)
+        db.text_factory = lenient_text
     except sqlite3.Error:
         return rows, lost
     try:
@@ -90,15 +100,21 @@ def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[st
 
 
 def _scan(db: sqlite3.Connection, table: str) -> dict[int, tuple[Any, ...]]:
+    # Every query either reads a new row (rowids only grow) or jumps further: it ends.  A damaged
+    # tree may hand rows back out of order; that is treated as a page that cannot be read.
     got: dict[int, tuple[Any, ...]] = {}
     after, jump = 0, 0
-    while after < 2**62:
+    for _query in range(SCAN_QUERIES):
+        if after >= 2**62:
+            break
         try:
             for row in db.execute(f"SELECT rowid, * FROM {table} WHERE rowid > ? ORDER BY rowid", (after,)):
+                if not isinstance(row[0], int) or row[0] <= after:
+                    raise sqlite3.DatabaseError("rows out of order")
                 got[row[0]] = tuple(row[1:])
                 after, jump = row[0], 0
             return got
-        except sqlite3.Error:  # this page is gone: try past it
+        except (sqlite3.Error, UnicodeDecodeError):  # this page is gone: try past it
             jump += 1
             after += 1 << jump
     return got
@@ -106,7 +122,7 @@ def _scan(db: sqlite3.Connection, table: str) -> dict[int, tuple[Any, ...]]:
 
 def _index_keys(db: sqlite3.Connection, table: str, key: str) -> list[str]:
     out: list[str] = []
-    with contextlib.suppress(sqlite3.Error):
+    with contextlib.suppress(sqlite3.Error, UnicodeDecodeError):
         for (k,) in db.execute(
             f"SELECT {key} FROM {table} INDEXED BY sqlite_autoindex_{table}_1 ORDER BY {key}"
         ):
@@ -176,13 +192,14 @@ def state_files(directory: str | Path) -> StateFiles:
     if db_path.exists():
         try:
             db = sqlite3.connect(f"file:{db_path.as_posix()}?mode=ro", uri=True)
+            db.text_factory = lenient_text
             try:
                 for table in (*TABLES, "set_aside"):
                     with contextlib.suppress(sqlite3.OperationalError):  # no such table: an older file
                         counts[table] = int(db.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
             finally:
                 db.close()
-        except sqlite3.Error as exc:
+        except (sqlite3.Error, UnicodeDecodeError) as exc:
             error = describe(exc)
     return StateFiles(d, files, sum(p.stat().st_size for p in files), counts, aside, error)
 

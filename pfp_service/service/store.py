@@ -66,6 +66,7 @@ from pfp_service.service.statefile import (
     TABLES,
     describe,
     hold_shared,
+    lenient_text,
     salvage,
 )
 from pfp_service.wire import Goal, ThreatUpdate, decode, encode, keys
@@ -119,6 +120,9 @@ class _Damage:
 
 
 def _corrupt(exc: BaseException) -> bool:
+    # a damaged file may also make SQLite's own message undecodable: Python raises that instead
+    if isinstance(exc, UnicodeDecodeError):
+        return True
     code = getattr(exc, "sqlite_errorcode", None)
     return isinstance(code, int) and code & 0xFF in CORRUPT_CODES
 
@@ -151,11 +155,11 @@ class Store:
         try:
             try:
                 self._db = self._open_checked()
-            except sqlite3.DatabaseError as exc:
+            except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
                 if not (_corrupt(exc) or isinstance(exc, _Damaged)):
                     raise
                 self._db = self._recover(str(exc), wall_now, getattr(exc, "pages", 0))
-        except (OSError, sqlite3.Error) as exc:
+        except (OSError, sqlite3.Error, UnicodeDecodeError) as exc:
             self._unlock()
             raise InputError(
                 "--state-dir", f"{self.path}: cannot open the state database: {describe(exc)}"
@@ -163,7 +167,9 @@ class Store:
 
     # -- opening, checking, recovering ---------------------------------------------------
     def _connect(self) -> sqlite3.Connection:
-        return sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+        db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+        db.text_factory = lenient_text  # a damaged key reads as text, and is then refused as a key
+        return db
 
     def _open_checked(self) -> sqlite3.Connection:
         db = self._connect()
@@ -342,15 +348,23 @@ class Store:
         A row that does not decode is moved to ``set_aside`` and named; the
         rest loads.  A read that finds the file damaged (past the check at
         open) sets the file aside as ``__init__`` would, and reads again.
+
+        Raises:
+            InputError: the database cannot be read at all (an I/O error), naming the file.
         """
         try:
-            found = self._read(wall_now)
-        except sqlite3.DatabaseError as exc:
-            if not _corrupt(exc):
-                raise
-            self._db.close()
-            self._db = self._recover(str(exc), wall_now)
-            found = self._read(wall_now)
+            try:
+                found = self._read(wall_now)
+            except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
+                if not _corrupt(exc):
+                    raise
+                self._db.close()
+                self._db = self._recover(str(exc), wall_now)
+                found = self._read(wall_now)
+        except (OSError, sqlite3.Error, UnicodeDecodeError) as exc:
+            raise InputError(
+                "--state-dir", f"{self.path}: cannot read the state database: {describe(exc)}"
+            ) from exc
         damage = self.damage
         lost = damage.lost if damage is not None else []
         skipped = tuple(lost) + found.skipped
@@ -368,10 +382,11 @@ class Store:
     def _read(self, wall_now: float) -> Restored:
         db = self._db
         inputs: list[Input] = []
-        bad: list[tuple[str, str, Any, str]] = []
+        bad: list[tuple[str, int, str, Any, str]] = []  # table, rowid, key, what was stored, why
         expired = 0
-        for tid, body, expires_at in db.execute("SELECT id, body, expires_at FROM threats ORDER BY id"):
+        for rowid, tid, body, expires_at in db.execute("SELECT rowid, * FROM threats ORDER BY id"):
             try:
+                threat = keys.check_chunk(tid)
                 update = decode(ThreatUpdate, body)
                 if expires_at is not None:
                     left = float(expires_at) - wall_now
@@ -380,41 +395,48 @@ class Store:
                         continue
                     update = msgspec.structs.replace(update, ttl_s=left)
             except _BAD_ROW as exc:
-                bad.append(("threats", str(tid), body, _why(exc)))
+                bad.append(("threats", rowid, str(tid), body, _why(exc)))
                 continue
-            inputs.append(ThreatPut(str(tid), update))
+            inputs.append(ThreatPut(threat, update))
         n_threats = len(inputs)
         missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
-        for unit, _epoch, ox, oy, params in db.execute("SELECT * FROM missions"):
+        for rowid, unit, _epoch, ox, oy, params in db.execute("SELECT rowid, * FROM missions"):
             try:
-                missions[str(unit)] = ((float(ox), float(oy)), Resolved(**json.loads(params)))
+                missions[keys.check_chunk(unit)] = ((float(ox), float(oy)), Resolved(**json.loads(params)))
             except _BAD_ROW as exc:
-                bad.append(("missions", str(unit), params, _why(exc)))
+                bad.append(("missions", rowid, str(unit), params, _why(exc)))
         n_goals = n_missions = 0
-        for unit, body in db.execute("SELECT unit, body FROM goals ORDER BY unit"):
+        for rowid, unit, body in db.execute("SELECT rowid, * FROM goals ORDER BY unit"):
             try:
+                uid = keys.check_chunk(unit)
                 goal = decode(Goal, body)
             except _BAD_ROW as exc:
-                bad.append(("goals", str(unit), body, _why(exc)))
+                bad.append(("goals", rowid, str(unit), body, _why(exc)))
                 continue
             n_goals += 1
-            if unit in missions:
-                origin, params = missions[unit]
-                inputs.append(MissionRestored(unit, goal, origin, params))
+            if uid in missions:
+                origin, params = missions[uid]
+                inputs.append(MissionRestored(uid, goal, origin, params))
                 n_missions += 1
             else:
-                inputs.append(GoalSet(unit, goal))
+                inputs.append(GoalSet(uid, goal))
         if expired or bad:
             with self._transaction() as tx:
                 tx.execute(
                     "DELETE FROM threats WHERE expires_at IS NOT NULL AND expires_at <= ?", (wall_now,)
                 )
-                for table, key, body, why in bad:  # kept, out of the way: a later start does not trip on it
+                for (
+                    table,
+                    rowid,
+                    key,
+                    body,
+                    why,
+                ) in bad:  # kept, out of the way: a later start does not trip on it
                     tx.execute(
                         "INSERT INTO set_aside VALUES (?, ?, ?, ?, ?)", (table, key, body, why, wall_now)
                     )
-                    tx.execute(f"DELETE FROM {table} WHERE {TABLES[table][0]} = ?", (key,))
-        skipped = tuple(f"{table}/{key}" for table, key, _b, _w in bad)
+                    tx.execute(f"DELETE FROM {table} WHERE rowid = ?", (rowid,))
+        skipped = tuple(f"{table}/{key}" for table, _r, key, _b, _w in bad)
         return Restored(inputs, n_threats, n_goals, n_missions, expired, skipped=skipped)
 
     def _say(self, r: Restored) -> None:
