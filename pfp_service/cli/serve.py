@@ -133,6 +133,12 @@ def register(sub: Any) -> None:
         type=bounded_int(1, 100_000),
         help="previews in flight at most; more are refused as busy (default: 256)",
     )
+    d.add_argument(
+        "--preview-wait-ms",
+        type=positive_float,
+        help="a preview that cannot start within this is answered busy at once, with a retry hint "
+        "(default: 2000)",
+    )
     p.add_argument(
         "--cluster",
         action="store_const",
@@ -187,6 +193,7 @@ _FLAG_KEYS = [
     "deliberation_budget_s",
     "preview_workers",
     "preview_queue",
+    "preview_wait_ms",
     "state_dir",
     "cluster",
 ]

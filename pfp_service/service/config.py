@@ -88,6 +88,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     preview_max_iter: int = 200_000
     preview_workers: Annotated[int, Meta(ge=1, le=64)] = 2
     preview_queue: Annotated[int, Meta(ge=1, le=100_000)] = 256
+    preview_wait_ms: Positive = 2000.0  # a preview that cannot start within this is answered busy at once
     # deliberation (look-ahead, escape searches) off the planning loop
     deliberation_workers: Annotated[int, Meta(ge=1, le=64)] = 1
     deliberation_budget_s: Positive = 5.0

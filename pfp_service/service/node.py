@@ -164,6 +164,7 @@ def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) 
         clock,
         cfg.bounds_tuple(),
         cfg.origin,
+        wait_s=cfg.preview_wait_ms / 1e3,
     )
 
 
