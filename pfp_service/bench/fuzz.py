@@ -391,12 +391,16 @@ def preview_bombs(session: Any, pid: int, say: Callable[[str], None] = print) ->
     """Each of ``PREVIEW_BOMBS``, ``BOMB_COPIES`` at once: answers, the tree's memory after, a plain preview."""
     from pfp_service.wire import keys
 
+    errors: Counter[str] = Counter()
+
     def ask(body: bytes) -> tuple[float, str]:
         t0 = time.monotonic()
         replies = list(session.get(keys.preview(MISSION, "bomber"), payload=body, timeout=BOMB_ANSWER_S + 5))
         took = time.monotonic() - t0
         if not replies or _is_timeout(replies[0]):
             return took, "unanswered"
+        if replies[0].ok is None:
+            errors[replies[0].err.payload.to_bytes().decode(errors="replace")[:100]] += 1
         return took, "plan" if replies[0].ok is not None else "error"
 
     before = _tree_pss_mb(pid)
@@ -428,6 +432,7 @@ def preview_bombs(session: Any, pid: int, say: Callable[[str], None] = print) ->
         "pss_mb_before": round(before, 1),
         "pss_mb_after": round(after, 1),
         "plain_after": {"kind": plain[1], "s": round(plain[0], 3)},
+        "errors": dict(errors),
     }
 
 

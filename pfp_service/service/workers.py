@@ -208,7 +208,7 @@ class WorkerPool:
         with self._cond:
             if not self._closed:
                 heapq.heappush(self._lanes.setdefault(task.lane, []), (task.priority, next(self._seq), task))
-                self._cond.notify()
+                self._cond.notify_all()  # the spare keeper waits on it too
                 return
         task.done(Outcome("closed", detail="the planner is shutting down"))
 
