@@ -59,13 +59,13 @@ def admit(
 ) -> Cost:
     """The cost bound of a preview, or why it is out of proportion, before any work is done on it.
 
-    Refused: a step that needs more than ``max_iter_cap`` steps to cover the
-    start-goal distance (``$.step``); more than ``MAX_PREVIEW_WHATIFS``
-    what-ifs (``$.threats``); a what-if so wide that an escape route round it
+    Refused, in this order: a step that needs more than ``max_iter_cap``
+    steps to cover the start-goal distance (``$.step``, or ``$.goal`` when the
+    step is the goal's); more than ``MAX_PREVIEW_WHATIFS`` what-ifs
+    (``$.threats``); a what-if so wide that an escape route round it
     (the route search's grid spans the distance plus three spreads on each
     side, and its route is resampled at the step) would have more than
-    ``max_iter_cap`` points
-    (``$.threats[i].sigma_range``).  A plain preview (the unit's own mission,
+    ``max_iter_cap`` points (``$.threats[i].sigma_range``).  A plain preview (the unit's own mission,
     accepted by the world) is never refused: its walk is capped instead.
     ``stats`` is ``field_stats(view.threats)``, kept by a caller per field.
 
@@ -73,23 +73,21 @@ def admit(
         InputError: naming the field, with the bound and what would pass.
     """
     req = request or PreviewRequest()
-    if len(req.threats) > MAX_PREVIEW_WHATIFS:
-        raise InputError(
-            "$.threats", f"{len(req.threats)} what-if threats; a preview takes at most {MAX_PREVIEW_WHATIFS}"
-        )
     start = req.start if req.start is not None else view.position
     goal_msg = Goal(position=req.goal) if req.goal is not None else view.goal
-    if start is None or goal_msg is None:
-        return Cost(0.0, 0.0, len(req.threats))  # ``preview`` refuses it, at no cost
+    if start is None or goal_msg is None:  # ``preview`` refuses it, at no cost
+        if len(req.threats) > MAX_PREVIEW_WHATIFS:
+            raise InputError(
+                "$.threats", f"{len(req.threats)} what-if threats; at most {MAX_PREVIEW_WHATIFS}"
+            )
+        return Cost(0.0, 0.0, len(req.threats))
     dist = math.hypot(goal_msg.position[0] - start[0], goal_msg.position[1] - start[1])
     live = view.stepper
     fresh = live is None or any(v is not None for v in (req.start, req.goal, req.step, req.max_iter))
     if fresh:
         given = req.step if req.step is not None else view.params_for(goal_msg).step
         path = "$.step" if req.step is not None else "$.goal"
-        if (
-            given is None
-        ):  # derived (``resolve``): never more than a few thousand steps, whatever the distance
+        if given is None:  # derived (``resolve``): a few thousand steps at most, whatever the distance
             base = stats if stats is not None else field_stats(view.threats)
             narrowest = min((t.to_threat(t.id).min_sigma() for t in req.threats), default=math.inf)
             merged = FieldStats(min(base.min_sigma, narrowest), base.median_ratio)
@@ -107,6 +105,10 @@ def admit(
             f"preview's {max_iter_cap}; use a step of at least {dist / max_iter_cap:.3g} m",
         )
     step_m = step
+    if len(req.threats) > MAX_PREVIEW_WHATIFS:
+        raise InputError(
+            "$.threats", f"{len(req.threats)} what-if threats; a preview takes at most {MAX_PREVIEW_WHATIFS}"
+        )
     route_points = 0.0
     if req.threats:
         widest = max(range(len(req.threats)), key=lambda i: _sigma(req.threats[i]))
