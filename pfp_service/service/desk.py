@@ -78,6 +78,7 @@ WALK_SHARE = 0.5  # of the budget, for the walk; measuring its path may take as 
 LIGHT, HEAVY = 0, 1
 _FIRST_GUESS_S = {LIGHT: 0.02, HEAVY: 0.5}  # run time assumed before any is measured
 _EWMA = 0.2
+FAILURE_LOG_S = 60.0  # a preview failing the same way is logged once a minute
 WARM_S = 3.0  # how long a worker takes to start, for the retry hint while every one is being replaced
 
 
@@ -143,11 +144,11 @@ class PreviewDesk:
         self._origin = origin
         self._blobs = Blobs()
         self._stats: tuple[tuple[Any, ...], FieldStats] | None = None
+        self._logged: dict[str, float] = {}  # failure -> when last logged
         self._lock = threading.Lock()
         self._pending: dict[int, _Answer] = {}
         self._deadlines: list[tuple[float, int, _Answer]] = []
         self._run_s = dict(_FIRST_GUESS_S)
-        self.counts = {"busy": 0, "refused": 0, "killed": 0, "memory": 0}
         self._pool = WorkerPool(
             "preview",
             workers,
@@ -158,10 +159,6 @@ class PreviewDesk:
             on_replaced=self._replaced,
             spare=True,
         )
-
-    @property
-    def pool(self) -> WorkerPool:
-        return self._pool
 
     def wait_ready(self, timeout_s: float = 180.0) -> None:
         """Block until every worker has loaded the kernels (the node calls it before serving)."""
@@ -183,7 +180,6 @@ class PreviewDesk:
             request = decode_preview_request(payload, self._bounds, self._origin)
             cost = admit(view, request, self._max_iter, self._stats_of(view.threats))
         except InputError as err:
-            self.counts["refused"] += 1
             self.refuse(query, ErrorReply.of(err))
             return
         lane = HEAVY if cost.heavy else LIGHT
@@ -230,7 +226,6 @@ class PreviewDesk:
         return (ahead + busy) * self._run_s[lane] / slots
 
     def _busy(self, query: zenoh.Query, wait: float) -> None:
-        self.counts["busy"] += 1
         self.refuse(
             query,
             ErrorReply(
@@ -250,21 +245,29 @@ class PreviewDesk:
             else:
                 answer.error(_decode_error(body))
         elif out.kind == "late":
-            self.counts["busy"] += 1
             answer.error(
                 ErrorReply(error=f"busy: the preview could not start in time; retry in {_retry_ms(wait)} ms")
             )
         elif out.kind == "killed":
-            self.counts["killed"] += 1
             answer.error(ErrorReply(error="expired: the preview ran past its deadline and was stopped"))
         elif out.kind == "memory":
-            self.counts["memory"] += 1
             answer.error(ErrorReply(error="too large: the preview ran out of its worker's memory"))
         elif out.kind == "closed":
             answer.error(ErrorReply(error="unavailable: the planner is shutting down"))
         else:
-            log.error("preview failed", extra={"fields": {"key": key, "why": out.kind, "error": out.detail}})
+            self._log_failure(key, out)
             answer.error(ErrorReply(error="internal error while previewing", field="$"))
+
+    def _log_failure(self, key: str, out: Outcome) -> None:
+        """One line per kind of failure a minute: the exception's own line, not its traceback."""
+        error = (out.detail.strip().splitlines() or [out.kind])[-1]
+        now = time.monotonic()
+        if now - self._logged.get(error, -math.inf) < FAILURE_LOG_S:
+            return
+        if len(self._logged) > 256:  # bounded: a storm of distinct failures is logged, not remembered
+            self._logged.clear()
+        self._logged[error] = now
+        log.error("preview failed", extra={"fields": {"key": key, "why": out.kind, "error": error}})
 
     def _replaced(self, why: str) -> None:
         log.warning("preview worker replaced", extra={"fields": {"why": why}})
