@@ -21,6 +21,8 @@ from tests.zenoh_util import ROOT
 CASES = {
     "handheld": (["handheld", "--unit", "u1"], "textual", "tui"),
     "map": (["map"], "aiohttp", "map"),
+    "demo": (["demo", "--quick"], "matplotlib", "demo"),
+    "plan": (["plan", "examples/paper-simple.yaml", "--plot", "PNG"], "matplotlib", "plot"),
 }
 LINE = re.compile(
     r"^pfp (?P<cmd>\w+): needs the (?P<extra>\w+) extra: (?P<pip>\S+) install -e '\.\[(?P<e2>\w+)\]'$"
@@ -41,9 +43,9 @@ def _without(package: str, argv: list[str]) -> subprocess.CompletedProcess[str]:
 
 @pytest.mark.proc
 @pytest.mark.parametrize("command", sorted(CASES))
-def test_a_missing_extra_is_one_line_naming_the_venvs_pip(command):
+def test_a_missing_extra_is_one_line_naming_the_venvs_pip(command, tmp_path):
     argv, package, extra = CASES[command]
-    done = _without(package, argv)
+    done = _without(package, [str(tmp_path / "out.png") if a == "PNG" else a for a in argv])
     assert done.returncode == 2, done.stdout + done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1, done.stderr  # no traceback, no doubled "pfp map: pfp map:"
@@ -52,6 +54,7 @@ def test_a_missing_extra_is_one_line_naming_the_venvs_pip(command):
     assert (m["cmd"], m["extra"], m["e2"]) == (command, extra, extra)
     pip = ROOT / m["pip"]  # relative to the working directory, as a user types it there
     assert pip.exists() and pip.parent == Path(sys.executable).parent, m["pip"]
+    assert not list(tmp_path.iterdir())  # refused before any work: no plot, no demo
 
 
 @pytest.mark.unit

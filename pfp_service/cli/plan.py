@@ -146,8 +146,10 @@ def run(args: argparse.Namespace) -> int:
     lam = LAMBDA if args.lam is None else args.lam
     cells = DEFAULT_CELLS if args.cells is None else args.cells
     if args.plot:
+        from pfp_service.cli._common import require_extra
         from pfp_service.render import check_png_path
 
+        require_extra("plot", "matplotlib")  # before planning, not after
         check_png_path(args.plot, "--plot")
     if args.geojson:
         from pfp_service.geojson import check_geojson_path

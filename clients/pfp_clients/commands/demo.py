@@ -32,7 +32,9 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pfp_clients.demo import DemoOptions, run_demo
+    from pfp_service.cli._common import require_extra
 
+    require_extra("demo", "matplotlib")  # its plot: said before the demo runs, not after
     speed_up = args.speed_up or (15.0 if args.quick else 5.0)
     from pfp_service.render import check_png_path
 
