@@ -79,7 +79,22 @@ SHRINK: dict[str, tuple[set[str], list[str]]] = {
         {"--find-max", "--echo"},
         ["--units", "20", "--rate", "5", "--threats", "5", "--duration", "2", "--no-storm", "--no-fanout"],
     ),
-    "previews": (set(), ["--scenario", "storm", "--queries", "10", "--threads", "2", "--live-threats", "50"]),
+    # a pass mark for a quiet machine: here the test checks the command runs, not the machine's figures
+    "previews": (
+        set(),
+        [
+            "--scenario",
+            "storm",
+            "--queries",
+            "10",
+            "--threads",
+            "2",
+            "--live-threats",
+            "50",
+            "--max-p99-ms",
+            "10000",
+        ],
+    ),
     "failover": (set(), ["--planners", "2", "--units", "6", "--kills", "1"]),
     "quality": (set(), ["--scenarios", "2", "--modes", "none,contour", "--cells", "60"]),
 }
@@ -252,7 +267,7 @@ class Session:
         self.block = block
         self.work = work
         self.lines = [ln for ln in session_lines(block) if runnable(ln) or ln.program == "wait"]
-        own = any(ln.subcommand == "serve" for ln in self.lines)
+        own = any(_starts_a_router(ln) for ln in self.lines)
         self.port = str(free_port()) if own else shared_endpoint.rsplit(":", 1)[1]
         self.tak = tak
         self.state = Path(tempfile.mkdtemp(prefix="state-", dir=work))
@@ -377,6 +392,7 @@ class Session:
         background: list[Proc] = []
         try:
             for line in self.lines:
+                t0 = time.monotonic()
                 if line.program == "wait":
                     for proc in [p for p in background if not long_running(p.line)]:
                         self.finish(proc)
@@ -392,6 +408,7 @@ class Session:
                     self.stop(proc)
                 else:
                     self.finish(proc)
+                print(f"{time.monotonic() - t0:6.1f} s  {line.text}")
             for proc in reversed(background):  # the planner last: clients first, as a shell's kill would
                 if long_running(proc.line) or proc.popen.poll() is None:
                     self.stop(proc)
@@ -402,6 +419,16 @@ class Session:
                 if proc.popen.poll() is None:
                     proc.popen.kill()
                     proc.popen.wait()
+
+
+def _starts_a_router(line: Line) -> bool:
+    """A planner on its own embedded router, or a router from a config: the block gets its own port."""
+    if line.program in PYTHON:
+        return line.background
+    if line.subcommand != "serve":
+        return False
+    flags = [flag(line.words, f) for f in ("--config", "--zenoh-config")]
+    return (flag(line.words, "--mode") or "router") == "router" and flags == [None, None]
 
 
 def _read_pty(fd: int, into: list[bytes]) -> None:
