@@ -10,7 +10,7 @@ Each ```sh block is one shell session, run in a scratch directory holding ``exam
   handheld, a fleet without an end, a router) must still be up when the block ends, and then
   stops on SIGTERM with exit 0; a finite one (inject) must end with exit 0 by the block's
   ``wait`` line;
-* any other line must exit 0, or, when it is a long-running command, come up (its own
+* any other line must exit 0 (or N, when its comment says "(exit N)"), or, when it is a long-running command, come up (its own
   readiness condition: a log line, an answering port, a rendered screen) and stop on SIGTERM
   with exit 0;
 * nothing may print a traceback.
@@ -137,6 +137,7 @@ class Line:
     env: dict[str, str]
     background: bool
     text: str
+    exit_code: int = 0  # what the doc says it exits with: "(exit N)" in its comment
 
     @property
     def program(self) -> str:
@@ -164,7 +165,8 @@ def session_lines(block: Block) -> list[Line]:
         while words and re.match(r"^[A-Z_][A-Z0-9_]*=", words[0]):
             k, v = words.pop(0).split("=", 1)
             env[k] = v
-        out.append(Line(words, env, background, raw.strip()))
+        said = re.search(r"\(exit (\d+)\)", raw.partition(" #")[2])
+        out.append(Line(words, env, background, raw.strip(), int(said[1]) if said else 0))
     return out
 
 
@@ -378,14 +380,15 @@ class Session:
         assert "Traceback" not in proc.output(), f"{proc.line.text!r}:\n{proc.output()[-3000:]}"
 
     def finish(self, proc: Proc) -> None:
-        """A finite command: exit 0, no traceback."""
+        """A finite command: exit 0 (or the code its doc line says), no traceback."""
         try:
             code = proc.popen.wait(timeout=RUN_TIMEOUT_S)
         except subprocess.TimeoutExpired:
             proc.popen.kill()
             proc.popen.wait()
             raise AssertionError(f"{proc.line.text!r} did not finish in {RUN_TIMEOUT_S:g} s") from None
-        assert code == 0, f"{proc.line.text!r}: exit {code}:\n{proc.output()[-3000:]}"
+        want = proc.line.exit_code
+        assert code == want, f"{proc.line.text!r}: exit {code}, not {want}:\n{proc.output()[-3000:]}"
         assert "Traceback" not in proc.output(), f"{proc.line.text!r}:\n{proc.output()[-3000:]}"
 
     def run(self) -> None:
