@@ -602,3 +602,24 @@ def test_the_reach_table_is_what_the_threat_model_computes():
         expected = [a10, b10, a50, b50, c10, c50]
         for got, exp in zip(map(float, shown), expected):
             assert got == pytest.approx(exp, abs=0.006), f"skew {skew}: {shown} vs {expected}"
+
+
+@pytest.mark.unit
+def test_the_vehicle_example_speaks_the_wire_contract():
+    """Its keys are templates of wire.keys, and the fields it writes and reads are the messages' own."""
+    from pfp_service.wire import keys
+    from pfp_service.wire.messages import Direction, Goal, UnitState
+
+    code = named_files()["vehicle.py"]
+    used = {
+        k.replace("{M}", "{mission}").replace("{U}", "{unit}") for k in re.findall(r'f"(mumt/[^"]+)"', code)
+    }
+    templates = {keys.template(kind) for kind in keys.KeyKind}
+    assert used and used <= templates, used - templates
+    wrote = {
+        UnitState: set(re.findall(r'"(\w+)":', code.split("state = ", 1)[1].splitlines()[0])),
+        Goal: set(re.findall(r'"(\w+)":', code.split("/goal", 1)[1].splitlines()[0])),
+        Direction: set(re.findall(r'd\["(\w+)"\]', code)),
+    }
+    for message, names in wrote.items():
+        assert names and names <= set(message.__struct_fields__), (message.__name__, names)
