@@ -32,21 +32,30 @@ pytestmark = pytest.mark.unit
 
 
 # -- the order of writes: sans-I/O ------------------------------------------------------
-def test_a_newer_write_applies_an_older_one_asked_again_is_superseded_and_a_repeat_is_a_duplicate():
+def test_an_older_write_asked_again_is_superseded_and_a_repeat_is_a_duplicate():
     order = WriteOrder()
     put = WriteMark(t=100.0, writer="a")
     delete = WriteMark(t=101.0, writer="b", delete=True)
-    assert order.admit("k", delete, 0.0) == "applied"
-    assert order.admit("k", put, 0.0) == "superseded"  # the older put, asked again after the delete
-    assert order.admit("k", delete, 0.0) == "duplicate"  # the delete's query after its put
-    assert order.admit("other", put, 0.0) == "applied"  # per key
+    assert order.admit("k", delete, 0.0, asked=True) == "applied"  # no planner saw either live
+    assert order.admit("k", put, 0.0, asked=True) == "superseded"  # the older put, asked after the delete
+    assert order.admit("k", delete, 0.0) == "duplicate"  # the delete's put after its query
+    assert order.admit("other", put, 0.0, asked=True) == "applied"  # per key
+
+
+def test_live_puts_apply_in_the_order_they_arrive_whatever_the_clocks():
+    order = WriteOrder()
+    ahead, behind = WriteMark(t=200.0, writer="a"), WriteMark(t=100.0, writer="b")
+    assert order.admit("k", ahead, 0.0) == "applied"
+    assert order.admit("k", behind, 0.0) == "applied"  # a writer whose clock is behind, live: still applied
+    assert order.admit("k", behind, 0.0, asked=True) == "duplicate"  # its query: the write in force
+    assert order.admit("k", ahead, 0.0, asked=True) == "superseded"  # a's query came late: b's is newer here
 
 
 def test_a_write_without_a_mark_counts_as_written_when_received():
     order = WriteOrder()
     assert order.admit("k", None, 50.0) == "applied"  # a raw zenoh put at 50
-    assert order.admit("k", WriteMark(t=49.0, writer="a"), 51.0) == "superseded"
-    assert order.admit("k", WriteMark(t=52.0, writer="a"), 53.0) == "applied"
+    assert order.admit("k", WriteMark(t=49.0, writer="a"), 51.0, asked=True) == "superseded"
+    assert order.admit("k", WriteMark(t=52.0, writer="a"), 53.0, asked=True) == "applied"
 
 
 def test_the_order_is_bounded():

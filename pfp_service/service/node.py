@@ -563,11 +563,12 @@ class PlannerNode:
     def _admit(
         self, writes: collections.deque[_Write], inbox: collections.deque[Input]
     ) -> list[tuple[_Write, str]]:
-        """The writes newer than the last applied on their key join ``inbox``; the outcome of each write.
+        """The writes to apply join ``inbox`` (``WriteOrder``); the outcome of each write.
 
-        A write's put and its query carry one mark: the second is a duplicate.
-        An older write asked again (a put while no planner ran, then a delete
-        from another writer) is superseded, never applied over the newer one.
+        Live puts apply in the order they arrive.  A write's put and its query
+        carry one mark: the second is a duplicate.  An older write asked again
+        (a put while no planner ran, then a delete from another writer) is
+        superseded, never applied over the newer one.
         """
         acks: list[tuple[_Write, str]] = []
         for w in writes:
@@ -576,7 +577,7 @@ class PlannerNode:
                 if w.query is None:
                     inbox.append(w.input)  # the rejected event comes from the put; the writer's ask hears why
             else:
-                outcome = self._order.admit(w.key, w.mark, w.received)
+                outcome = self._order.admit(w.key, w.mark, w.received, asked=w.query is not None)
                 if outcome == "applied":
                     inbox.append(w.input)
             if w.query is not None:

@@ -14,11 +14,11 @@ token appears; meanwhile it says it is waiting.  Nothing is replayed after an
 acknowledgement: from then on the planner's durable state holds the write.
 
 Every write carries a ``WriteMark`` (the writer's Unix time and session id) as
-its Zenoh attachment, on the put and on the query.  A planner applies a write
-only if it is newer than the last it applied on that key (``WriteOrder``):
-a delete put while no planner ran is never undone by an older put asked again
-by another writer, and the put and the query of one write are applied once.
-A put without a mark (a raw ``zenoh`` put) counts as written when received.
+its Zenoh attachment, on the put and on the query.  Live puts apply in the
+order they arrive; a write asked again applies only if newer than every write
+its key has seen (``WriteOrder``): a delete is never undone by an older put
+asked again by another writer, and the put and the query of one write apply
+once.  A put without a mark (a raw ``zenoh`` put) counts as written when received.
 
 Chosen over ``zenoh.ext`` advanced publishers with a cache: those need one
 publisher (and its queryable) per key, so a fleet of 10,000 goals would declare
@@ -120,22 +120,50 @@ def decode_ack(data: bytes) -> WriteAck:
 
 
 class WriteOrder:
-    """The last write applied per key, so that an older write asked again is not applied over it.
+    """What was written last per key, so that a write asked again never undoes a newer one.
+
+    A write that arrives live (its put, while the planner listens) is applied
+    in the order it arrives, as any put always was: that order is the truth,
+    whatever the writers' clocks say.  A write that is *asked again* (its
+    query, after the planner missed its put) is applied only if its mark is
+    newer than every write the key has seen; if it is the write last applied
+    (its put came first) it is a duplicate.  So a put made while no planner ran
+    is in force once one starts, unless a newer write (a delete from another
+    writer) came meanwhile.  Marks compare writers' wall clocks only on that
+    path: clocks that disagree by more than the time between two conflicting
+    writes made while no planner ran can order those two wrongly (use NTP).
 
     Sans-I/O: the caller passes the wall time at which a mark-less write was received.
     """
 
     def __init__(self, max_keys: int = ORDER_KEYS_MAX) -> None:
-        self._last: collections.OrderedDict[str, tuple[float, str]] = collections.OrderedDict()
+        # key -> (the newest order seen, the order of the write last applied)
+        self._last: collections.OrderedDict[str, tuple[tuple[float, str], tuple[float, str]]] = (
+            collections.OrderedDict()
+        )
         self._max = max_keys
 
-    def admit(self, key: str, mark: WriteMark | None, received_wall_s: float) -> Outcome:
-        """``applied`` if the write is newer than the key's last, else ``duplicate`` or ``superseded``."""
+    def admit(self, key: str, mark: WriteMark | None, received_wall_s: float, asked: bool = False) -> Outcome:
+        """Whether to apply a write: ``applied``, ``duplicate`` (already applied) or ``superseded``.
+
+        Args:
+            key: the goal or threat key.
+            mark: the write's mark, if it has one (a raw zenoh put has none).
+            received_wall_s: when it was received (Unix seconds): the order of a mark-less write.
+            asked: it came as a query (asked again), not as a live put.
+        """
         order = mark.order() if mark is not None else (received_wall_s, "")
         last = self._last.get(key)
-        if last is not None and order <= last:
-            return "duplicate" if order == last else "superseded"
-        self._last[key] = order
+        if last is not None:
+            newest, applied = last
+            if order == applied:
+                return "duplicate"
+            if asked and order <= newest:
+                return "superseded"
+            newest = max(newest, order)
+        else:
+            newest = order
+        self._last[key] = (newest, order)
         self._last.move_to_end(key)
         if len(self._last) > self._max:
             self._last.popitem(last=False)
