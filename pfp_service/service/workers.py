@@ -54,6 +54,8 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any, Literal
 
+from pfp_service.service.log import get_logger
+
 __all__ = [
     "KILL_GRACE_S",
     "ORPHAN_POLL_S",
@@ -68,6 +70,7 @@ __all__ = [
     "world_threats",
 ]
 
+log = get_logger("workers")
 ORPHAN_POLL_S = 0.5
 KILL_GRACE_S = 0.25  # a task this long past its budget is killed with its worker
 READY_TIMEOUT_S = 180.0  # a worker not warm by then is started again
@@ -131,6 +134,7 @@ class Task:
     lane: int = 0
     priority: float = 0.0
     skip: Callable[[], bool] | None = None
+    answered: bool = False  # set once ``done`` was called (``_finish``)
 
 
 @dataclass
@@ -210,7 +214,7 @@ class WorkerPool:
                 heapq.heappush(self._lanes.setdefault(task.lane, []), (task.priority, next(self._seq), task))
                 self._cond.notify_all()  # the spare keeper waits on it too
                 return
-        task.done(Outcome("closed", detail="the planner is shutting down"))
+        _finish(task, Outcome("closed", detail="the planner is shutting down"))
 
     def waiting(self, lane: int) -> int:
         """Tasks queued in ``lane``, not yet started."""
@@ -238,7 +242,7 @@ class WorkerPool:
                     heapq.heapify(keep)
                     self._lanes[lane] = keep
         for task in late:
-            task.done(Outcome("late", detail="not started within its deadline"))
+            _finish(task, Outcome("late", detail="not started within its deadline"))
         return len(late)
 
     def slots_for(self, lane: int) -> int:
@@ -259,7 +263,7 @@ class WorkerPool:
             self._lanes.clear()
             self._cond.notify_all()
         for task in queued:
-            task.done(Outcome("closed", detail="the planner is shutting down"))
+            _finish(task, Outcome("closed", detail="the planner is shutting down"))
         for slot in self._slots:
             self._stop_worker(slot)
         with self._cond:
@@ -296,6 +300,12 @@ class WorkerPool:
             assert task is not None
             try:
                 self._run(slot, task)
+            except Exception as exc:  # a bug of ours: the task is answered, the slot carries on
+                log.error(
+                    "worker pool failed a task", extra={"fields": {"pool": self.name, "error": repr(exc)}}
+                )
+                self._replace(slot, f"internal error: {type(exc).__name__}")
+                _finish(task, Outcome("died", detail=f"internal error: {type(exc).__name__}"))
             finally:
                 with self._cond:
                     self._running[task.lane] -= 1
@@ -306,8 +316,9 @@ class WorkerPool:
             return
         now = time.monotonic()
         if now > task.start_by:
-            task.done(
-                Outcome("late", detail=f"not started within its deadline ({now - task.start_by:.3f} s late)")
+            _finish(
+                task,
+                Outcome("late", detail=f"not started within its deadline ({now - task.start_by:.3f} s late)"),
             )
             return
         blob = task.field
@@ -319,9 +330,14 @@ class WorkerPool:
         assert conn is not None
         try:
             conn.send((task.fn, task.args, version, ship))
-        except (OSError, ValueError) as exc:  # the worker is gone (or the args would not pickle)
+        except (
+            OSError,
+            ValueError,
+            pickle.PicklingError,
+            TypeError,
+        ) as exc:  # gone, or args that won't pickle
             self._replace(slot, f"send failed: {type(exc).__name__}")
-            task.done(Outcome("died", detail=f"the worker could not take the task: {type(exc).__name__}"))
+            _finish(task, Outcome("died", detail=f"the worker could not take the task: {type(exc).__name__}"))
             return
         if blob is not None:
             slot.version = version
@@ -336,14 +352,15 @@ class WorkerPool:
                     got = conn.recv()
         except (EOFError, OSError):  # the worker died mid-task (a signal, the OOM killer)
             self._replace(slot, "died")
-            task.done(Outcome("died", detail="the worker died during the task"))
+            _finish(task, Outcome("died", detail="the worker died during the task"))
             return
         if got is None:
             self._replace(slot, "killed past its budget")
-            task.done(
+            _finish(
+                task,
                 Outcome(
                     "killed", detail=f"still running {task.budget_s + KILL_GRACE_S:.2f} s after it started"
-                )
+                ),
             )
             return
         kind: OutcomeKind
@@ -352,8 +369,9 @@ class WorkerPool:
             self._replace(slot, "memory limit")
         elif retired:
             self._replace(slot, "retired after its task (it was interrupted)")
-        task.done(
-            Outcome(kind, value if kind == "done" else None, "" if kind == "done" else str(value), run_s)
+        _finish(
+            task,
+            Outcome(kind, value if kind == "done" else None, "" if kind == "done" else str(value), run_s),
         )
 
     def _replace(self, slot: _Slot, why: str) -> None:
@@ -458,6 +476,17 @@ class WorkerPool:
             with contextlib.suppress(Exception):
                 got[0].kill()
             return
+
+
+def _finish(task: Task, out: Outcome) -> None:
+    """Answer ``task`` once: a second answer (a bug) is dropped, and its callback's failure logged, not raised."""
+    if task.answered:
+        return
+    task.answered = True
+    try:
+        task.done(out)
+    except Exception as exc:
+        log.error("a task's answer failed", extra={"fields": {"outcome": out.kind, "error": repr(exc)}})
 
 
 # -- in the worker processes -------------------------------------------------------------
