@@ -161,6 +161,9 @@ class _Runner:
                 and e.unit not in self.watch.arrived_at_s
                 and t_s <= e.arrives_within_s
             ]
+            pending = self.s.pending()
+            if pending:  # goals and threats no planner has taken yet (wire.delivery)
+                due.append(f"a planner to take {len(pending)} write{'s' if len(pending) > 1 else ''}")
             return "timeline done; waiting for " + ", ".join(due) if due else "timeline done"
         step = tl[self.index]
         head = f"waiting on timeline[{self.index}] ({step.describe()})"
