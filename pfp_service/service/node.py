@@ -92,7 +92,7 @@ TRIM_QUIET_S = 1.0  # ... once no unit was forgotten for this long
 TRIM_EVERY_S = 10.0  # ... or this often while they go on being forgotten
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
 PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
-PEER_MISSES = 5  # a same-id peer that did not answer this many asks in a row is gone (a busy loop answers late)
+PEER_MISSES = 5  # a same-id peer that missed this many asks in a row is gone (a busy loop answers late)
 
 
 class _Write:
