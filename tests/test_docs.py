@@ -1,7 +1,7 @@
 """The docs cannot rot: every command README.md and docs/*.md show is run, as a user would run it.
 
-Each ```sh block is one shell session, run in a scratch directory holding ``examples/`` and
-``docker/`` (linked) and a copy of ``schemas/``:
+Each ```sh block (and ```console block, its ``$ `` lines) is one shell session, run in a scratch
+directory holding ``examples/`` and ``docker/`` (linked) and a copy of ``schemas/``:
 
 * a ``pfp ...`` (or ``.venv/bin/pfp``) or ``python FILE.py`` line is run; ``make``, ``pip``,
   ``export``, ``kill``, ``docker`` ... lines are what a person types around them and are not;
@@ -152,6 +152,10 @@ def session_lines(block: Block) -> list[Line]:
     """The block's lines as commands: continuations joined, comments and blank lines dropped."""
     out: list[Line] = []
     for raw in block.text.replace("\\\n", " ").splitlines():
+        if block.lang == "console":  # "$ command" lines; the rest is its output
+            if not raw.startswith("$ "):
+                continue
+            raw = raw[2:]
         words = shlex.split(raw, comments=True)
         if not words:
             continue
