@@ -126,7 +126,7 @@ class _Probe:
 
     def __init__(self, session: Any, rate_hz: float, goal: tuple[float, float]) -> None:
         self.session, self.rate_hz = session, rate_hz
-        self.phase = "before"
+        self.phase = "warmup"  # its first second (the goal's first directions) counts nowhere
         self.lat: dict[str, list[float]] = {}
         self.unanswered: dict[str, int] = {}
         self._got: dict[int, tuple[float, tuple[float, float]]] = {}
@@ -290,6 +290,8 @@ def bombs(args: argparse.Namespace) -> dict[str, Any]:
         _wait("the threats", lambda: (_status(session) or {}).get("threats") == args.live_threats, 120.0)
         probe = _Probe(session, args.rate_hz, (100.0, 100.0))
         try:
+            time.sleep(1.0)
+            probe.phase = "before"
             time.sleep(3.0)  # the probe's baseline, and the field shipped to the workers
             _ask(session, PROBE, None, 10.0)  # the plain preview warm: what follows is the bombs' cost
             pss_before = tree_pss_mb(server.proc.pid)
@@ -346,6 +348,8 @@ def whatifs(args: argparse.Namespace) -> dict[str, Any]:
         _wait("the threats", lambda: (_status(session) or {}).get("threats") == 50, 60.0)
         probe = _Probe(session, args.rate_hz, (800.0, 800.0))
         try:
+            time.sleep(1.0)
+            probe.phase = "before"
             time.sleep(5.0)  # the probe's baseline
             probe.phase = "during"
             t0 = time.monotonic()
@@ -416,6 +420,8 @@ def storm(args: argparse.Namespace) -> dict[str, Any]:
                     answers.append(got)
 
         try:
+            time.sleep(1.0)
+            probe.phase = "before"
             time.sleep(3.0)  # the probe's baseline
             probe.phase = "during"
             t0 = time.monotonic()
