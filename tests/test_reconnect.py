@@ -5,7 +5,8 @@ once answered 8.1 s after its router came up); client sessions now retry at most
 every second (``config.CONNECT_RETRY``).  The planner runs as a user runs it,
 ``pfp serve --mode client --connect ...``, and the router is a Python router
 session started in another process a few seconds later, once the planner has
-said it is waiting, so its backoff has had time to grow.
+said it is waiting, so its backoff has had time to grow (and its cold start to end:
+the bar is about the reconnect, not about how long worker processes take to warm up).
 """
 
 from __future__ import annotations
@@ -25,7 +26,11 @@ pytestmark = pytest.mark.multi
 
 M = "reconnect"
 ANSWER_WITHIN_S = 1.5
-ROUTER_AFTER_S = 8.0  # the planner has waited this long (and backed off) before the router comes up
+# The planner has waited this long (and backed off) before the router comes up.  Its own cold start
+# (imports, kernels, preview workers warming up) ends meanwhile: measured 16.5 s from launch to
+# "planner ready" for a router-mode planner at load 9 on this 2-core machine; this test's wait
+# starts at the first "waiting for the router", about 7 s after launch.
+ROUTER_AFTER_S = 15.0
 ROUTER = """
 import sys, time, zenoh
 conf = zenoh.Config()

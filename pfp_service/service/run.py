@@ -106,6 +106,8 @@ def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: A
         t.join(0.05)
     if "error" in box:
         raise box["error"]
+    if warmed:
+        log.info("router reached", extra={"fields": {"connect": cfg.connect}})
     return box["session"]
 
 
