@@ -187,7 +187,9 @@ def test_a_team_origin_other_than_the_planners_is_converted_exactly():
     assert line is not None and "50.01,8" in line and "50,8" in line
     x, y = moved.units[0].start
     assert abs(x) < 1e-6 and 1111.0 < y < 1113.0  # 0.01 degree north
-    for p, q in ((moved.units[0].start, (0.0, 0.0)), (moved.units[0].goal, (6.0, 0.0))):
+    goal = moved.units[0].goal
+    assert goal is not None
+    for p, q in ((moved.units[0].start, (0.0, 0.0)), (goal, (6.0, 0.0))):
         lat, lon = theirs.to_geodetic(*p)  # the same point on the earth as the team file meant
         back = mine.to_local(lat, lon)
         assert abs(back[0] - q[0]) < 1e-6 and abs(back[1] - q[1]) < 1e-6

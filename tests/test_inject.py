@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 import uuid
+from typing import Any
 
 import pytest
 from pfp_clients.script import load_script
@@ -198,11 +199,13 @@ def test_a_script_origin_other_than_the_planners_is_converted_exactly_and_none_i
     mine, theirs = Origin(lat=-33.9, lon=151.2), Origin(lat=-33.91, lon=151.19)
     moved, line = script_in_planner_frame(script, theirs, "m")
     assert line is not None and "-33.9,151.2" in line and "-33.91,151.19" in line
+    new: list[Any] = list(moved.timeline)
+    old: list[Any] = list(script.timeline)
     pairs = [
-        (moved.timeline[0].position, script.timeline[0].position),
-        (moved.timeline[1].position, script.timeline[1].position),
-        (moved.timeline[1].when.of, script.timeline[1].when.of),
-        (moved.timeline[2].position, script.timeline[2].position),
+        (new[0].position, old[0].position),
+        (new[1].position, old[1].position),
+        (new[1].when.of, old[1].when.of),
+        (new[2].position, old[2].position),
     ]
     for p, q in pairs:
         assert abs(p[0] - q[0]) > 500 or abs(p[1] - q[1]) > 500  # really moved: 0.01 degree away

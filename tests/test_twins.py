@@ -33,7 +33,7 @@ def test_a_second_planner_with_the_default_id_is_a_conflict_for_both_within_5s_a
                 assert time.monotonic() < ready, _text(log)
                 time.sleep(0.05)
             t_ready = time.monotonic()
-            others = set()
+            others: set[str] = set()
             while len(others) < 2:
                 ev = conflicts.get(timeout=max(t_ready + 5.0 - time.monotonic(), 0.01))
                 assert ev["planner"] == "planner"
@@ -66,7 +66,7 @@ def test_twins_under_cluster_cannot_share_by_id_and_say_so_within_5s():
                 assert time.monotonic() < ready, _text(log)
                 time.sleep(0.05)
             t_ready = time.monotonic()
-            others = set()
+            others: set[str] = set()
             while len(others) < 2:
                 ev = conflicts.get(timeout=max(t_ready + 5.0 - time.monotonic(), 0.01))
                 assert "--planner-id" in ev["reason"], ev
