@@ -97,7 +97,13 @@ def test_an_empty_or_inactive_field_culls_to_the_goal_term():
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 10_000), n=st.sampled_from([0, 5, 40, 300]), culled=st.booleans())
 def test_predict_is_descent_stepped_one_call_at_a_time(seed, n, culled):
-    """The compiled look-ahead gives, bit for bit, the positions of stepping ``descent`` by hand."""
+    """The compiled look-ahead gives, bit for bit, the positions of stepping ``descent`` by hand.
+
+    The reference below is the rule written out again on purpose (arrival,
+    bounds, the gradient, the final approach onto the goal), so a change to
+    ``steprule.judge`` that the look-ahead does not share shows here.
+    """
+    from pfp_service.core import steprule
     from pfp_service.core.cull import predict
 
     extent = 5000.0
@@ -114,7 +120,18 @@ def test_predict_is_descent_stepped_one_call_at_a_time(seed, n, culled):
     tol = rng.uniform(0.5, 50.0, m)
     lo = np.full((m, 2), 500.0)
     hi = np.full((m, 2), extent - 500.0)
-    trail, lengths = predict(field.packed, index, pts, goals, gains, step, tol, lo, hi, steps)
+    pts[2] = (2500.0, 2500.0)
+    goals[2] = pts[2] + (0.6 * step[2], 0.0)  # a final approach: the first step ends on the goal
+    tol[2] = 0.1 * step[2]
+    units = np.stack(
+        [
+            steprule.unit(
+                tuple(goals[i]), gains[i], tol[i], step[i], (tuple(lo[i]), tuple(hi[i])), watch=False
+            )
+            for i in range(m)
+        ]
+    )
+    trail, lengths = predict(field.packed, index, pts, units, steps)
     for i in range(m):
         track = [tuple(pts[i])]
         x, y = pts[i]
@@ -129,10 +146,15 @@ def test_predict_is_descent_stepped_one_call_at_a_time(seed, n, culled):
             norm = out[0, 3]
             if not (math.isfinite(norm) and norm > 0.0):
                 break
-            x, y = x - step[i] * out[0, 0] / norm, y - step[i] * out[0, 1] / norm
-            track.append((x, y))
+            dist = math.hypot(goals[i, 0] - x, goals[i, 1] - y)
+            if dist <= step[i]:  # the final approach ends on the goal
+                x, y = goals[i]
+            else:
+                x, y = x + step[i] * (-out[0, 0] / norm), y + step[i] * (-out[0, 1] / norm)
+            track.append((float(x), float(y)))
         got = [tuple(p) for p in trail[i, : lengths[i]].tolist()]
         assert len(got) == len(track), i
         np.testing.assert_array_equal(np.array(got), np.array(track))
     assert lengths[0] == 1 and lengths[1] == 1
+    assert lengths[2] == 2 and tuple(trail[2, 1]) == tuple(goals[2])  # landed, then arrived
     assert lengths.max() == steps + 1  # most units walked every step

@@ -5,8 +5,9 @@ The regression (issue 22, item 10): on the paper-scale scenario (8 threats in
 committed to a ``global`` route and then bounced across the goal, 0.3 apart
 and about 0.18 from it, until ``max_iter``; with a tolerance under half a step
 a full step can never land within it.  The last step along a route is now
-shortened to end on the goal (``Advice.reach``), in both drivers: the Python
-walk and the compiled ``EscapeRun.ahead``.
+shortened to end on the goal, by the one step rule (``steprule.judge``) that
+the stepper's drivers and the compiled ``EscapeRun.ahead`` share; plain
+descent's final approach is the same rule (``test_final_approach.py``).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from pfp_service.core import PlannerParams, PlanStatus, Scheduled, Threat, plan
+from pfp_service.core import PlannerParams, PlanStatus, Scheduled, Threat, plan, steprule
 from pfp_service.core.escape import EscapeRun
 from pfp_service.core.metrics import LAMBDA
 
@@ -102,22 +103,26 @@ def test_route_walk_and_compiled_ahead_take_the_same_shortened_last_step():
     walked = _route(step)
     x, y = 0.0, 0.0
     track = [(x, y)]
-    for _ in range(100):
-        if math.hypot(goal[0] - x, goal[1] - y) <= tol:
+    for _ in range(100):  # the rule written out: full steps along the heading, the last one onto the goal
+        dist = math.hypot(goal[0] - x, goal[1] - y)
+        if dist <= tol:
             break
         heading = walked.direction(x, y)
         assert heading is not None
-        dx, dy, reach = heading
-        move = min(step, reach)
-        x, y = x + move * dx, y + move * dy
+        x, y = goal if dist <= step else (x + step * heading[0], y + step * heading[1])
         track.append((x, y))
-    assert math.hypot(goal[0] - x, goal[1] - y) <= 1e-9  # on the goal, not bouncing across it
-    ahead = _route(step).ahead(0.0, 0.0, 100, step, goal, tol, None)
+    assert track[-1] == goal and math.hypot(goal[0] - track[-2][0], goal[1] - track[-2][1]) < step
+    unit = steprule.unit(goal, 0.0, tol, step, watch=False)
+    ahead = _route(step).ahead(unit, 0.0, 0.0, 100)
     assert ahead is not None
     np.testing.assert_allclose(np.array(ahead), np.array(track), atol=1e-12)
+    assert ahead[-1] == goal  # on the goal, not bouncing across it
 
 
 def test_a_route_that_does_not_end_at_the_goal_moves_full_steps():
     run = EscapeRun("waypoint", np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]), 0.3, to_goal=False)
-    heading = run.direction(0.0, 0.0)
-    assert heading is not None and heading[2] == math.inf
+    unit = steprule.unit((10.0, 0.0), 0.0, 0.1, 0.3, watch=False)
+    stepped = run.steer(unit, 0.0, 0.0)
+    assert stepped is not None
+    dx, dy, dist, move, tx, ty = stepped
+    assert (dx, dy, dist, move) == (1.0, 0.0, 10.0, 0.3) and math.isclose(tx, 0.3) and ty == 0.0

@@ -34,7 +34,7 @@ import math
 import numba
 import numpy as np
 
-from pfp_service.core import kernels
+from pfp_service.core import kernels, steprule
 from pfp_service.core.kernels import A_X, A_Y, ACTIVE, P00, P01, P11, SCALE, XI_X, XI_Y
 
 __all__ = [
@@ -230,20 +230,18 @@ def predict(
     packed: np.ndarray,
     index: CullIndex | None,
     points: np.ndarray,
-    goals: np.ndarray,
-    gains: np.ndarray,
-    step: np.ndarray,
-    tolerance: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
+    units: np.ndarray,
     steps: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Plain steepest descent of many units for ``steps`` steps, in one compiled call.
 
     Each step is ``descent`` (culled through ``index`` where the bound holds,
-    every threat elsewhere; every threat when ``index`` is ``None``), and the
-    unit stops at its goal (within ``tolerance``), outside ``[lo, hi]``, or
-    where the gradient vanishes or is not finite.
+    every threat elsewhere; every threat when ``index`` is ``None``), judged
+    by ``steprule.judge`` for row ``i`` of ``units`` (``steprule.unit``
+    without a watch: its goal, gain, tolerance, step and bounds): the unit
+    stops at its goal, outside its bounds, or where the gradient vanishes or
+    is not finite, and its last step ends on the goal when that is within a
+    step.
 
     Returns:
         ``(trail, lengths)``: ``trail[i, :lengths[i]]`` are unit ``i``'s
@@ -253,6 +251,8 @@ def predict(
     n = pts.shape[0]
     trail = np.empty((n, steps + 1, 2))
     lengths = np.empty(n, dtype=np.int64)
+    goals = np.ascontiguousarray(units[:, steprule.GOAL_X : steprule.GOAL_Y + 1])
+    gains = np.ascontiguousarray(units[:, steprule.GAIN])
     if index is not None:
         grid = (index.origin[0], index.origin[1], index.cell, index.nx, index.ny)
         args = (
@@ -267,27 +267,24 @@ def predict(
         args = ((0.0, 0.0, 1.0, 1, 1), np.zeros(2, np.int64), np.zeros(0, np.int64), np.zeros(1), 0.0)
         pairs = n * steps * max(packed.shape[0], 1)
     kernel = _predict_parallel if pairs >= kernels.PARALLEL_MIN_PAIRS else _predict_serial
-    kernel(
-        packed, pts, goals, gains, step, tolerance, lo, hi, steps, index is not None, *args, trail, lengths
-    )
+    kernel(packed, pts, goals, gains, units, steps, index is not None, *args, trail, lengths)
     return trail, lengths
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _predict_row(
-    packed, pts, goals, gains, step, tol, lo, hi, steps, culled, grid, indptr, indices, cell_need,
-    need_outside, trail, lengths, out, flags, i,
+    packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
+    trail, lengths, out, flags, i,
 ):  # type: ignore[no-untyped-def]  # fmt: skip
     trail[i, 0, 0] = pts[i, 0]
     trail[i, 0, 1] = pts[i, 1]
     length = 1
+    unit = units[i]
     for _k in range(steps):
         x = pts[i, 0]
         y = pts[i, 1]
-        if math.hypot(goals[i, 0] - x, goals[i, 1] - y) <= tol[i]:
-            break
-        if x < lo[i, 0] or y < lo[i, 1] or x > hi[i, 0] or y > hi[i, 1]:
-            break
+        if steprule.judge(unit, x, y, 0.0, 0.0, 0.0, steprule.CHECK)[0] != steprule.GO:
+            break  # arrived, out of bounds or not finite: no gradient needed
         if culled:
             _culled_row(
                 packed, pts, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags, i
@@ -296,42 +293,44 @@ def _predict_row(
                 kernels._descent_row(packed, pts, goals, gains, out, i)
         else:
             kernels._descent_row(packed, pts, goals, gains, out, i)
-        norm = out[i, 3]
-        if not (math.isfinite(norm) and norm > 0.0):
+        code, _dx, _dy, _dist, _move, tx, ty = steprule.judge(
+            unit, x, y, out[i, 0], out[i, 1], out[i, 3], steprule.DESCENT
+        )
+        if code != steprule.GO:
             break
-        pts[i, 0] = x - step[i] * out[i, 0] / norm
-        pts[i, 1] = y - step[i] * out[i, 1] / norm
-        trail[i, length, 0] = pts[i, 0]
-        trail[i, length, 1] = pts[i, 1]
+        pts[i, 0] = tx
+        pts[i, 1] = ty
+        trail[i, length, 0] = tx
+        trail[i, length, 1] = ty
         length += 1
     lengths[i] = length
 
 
 @numba.njit(cache=True, nogil=True)
 def _predict_serial(
-    packed, pts, goals, gains, step, tol, lo, hi, steps, culled, grid, indptr, indices, cell_need,
-    need_outside, trail, lengths,
+    packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
+    trail, lengths,
 ):  # type: ignore[no-untyped-def]  # fmt: skip
     out = np.empty((pts.shape[0], 4))
     flags = np.zeros(pts.shape[0], dtype=np.bool_)
     for i in range(pts.shape[0]):
         _predict_row(
-            packed, pts, goals, gains, step, tol, lo, hi, steps, culled, grid, indptr, indices, cell_need,
-            need_outside, trail, lengths, out, flags, i,
+            packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
+            trail, lengths, out, flags, i,
         )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _predict_parallel(
-    packed, pts, goals, gains, step, tol, lo, hi, steps, culled, grid, indptr, indices, cell_need,
-    need_outside, trail, lengths,
+    packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
+    trail, lengths,
 ):  # type: ignore[no-untyped-def]  # fmt: skip
     out = np.empty((pts.shape[0], 4))
     flags = np.zeros(pts.shape[0], dtype=np.bool_)
     for i in numba.prange(pts.shape[0]):
         _predict_row(
-            packed, pts, goals, gains, step, tol, lo, hi, steps, culled, grid, indptr, indices, cell_need,
-            need_outside, trail, lengths, out, flags, i,
+            packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
+            trail, lengths, out, flags, i,
         )  # fmt: skip
 
 

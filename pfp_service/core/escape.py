@@ -60,6 +60,7 @@ import math
 import numba
 import numpy as np
 
+from pfp_service.core import steprule
 from pfp_service.core.cores import Cores
 from pfp_service.core.escape_strategies import (
     AUTO_ORDER,
@@ -112,63 +113,68 @@ class EscapeRun:
         pts = np.concatenate([self.path, other.path[1:]])
         return EscapeRun(f"{self.name}, then {other.name}", pts, self.step, other.to_goal)
 
-    def ahead(
-        self,
-        x: float,
-        y: float,
-        steps: int,
-        move: float,
-        goal: tuple[float, float],
-        tolerance: float,
-        bounds: tuple[tuple[float, float], tuple[float, float]] | None,
-    ) -> list[tuple[float, float]] | None:
-        """The next ``steps`` positions of a unit at ``(x, y)`` steering along this run, each ``move`` on.
+    def ahead(self, unit: np.ndarray, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
+        """The next ``steps`` positions of ``unit`` (``steprule.unit``) at ``(x, y)`` steering along this run.
 
-        Exactly what a ghost stepper walks (``Stepper.advise`` then ``direction``
-        each step: arrival within ``tolerance`` of ``goal`` or leaving ``bounds``
-        ends the track), in one compiled loop, without moving this run's
-        cursor.  ``None`` when the run would end within those steps (its exit,
-        or its advisory limit): plain descent takes over there, so walk a ghost.
+        Exactly what a ghost stepper walks (``Stepper.advise`` then ``steer``
+        each step, ``steprule.judge`` ending the track at the goal or the
+        bounds), in one compiled loop, without moving this run's cursor.
+        ``None`` when the run would end within those steps (its exit, or its
+        advisory limit): plain descent takes over there, so walk a ghost.
         """
-        (x0, y0), (x1, y1) = bounds if bounds is not None else ((-math.inf, -math.inf), (math.inf, math.inf))
         out = np.empty((steps + 1, 2))
         n = _ahead(
-            self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal,
-            x, y, steps, move, goal[0], goal[1], tolerance, x0, y0, x1, y1, out,
-        )  # fmt: skip
+            self.path,
+            self.cursor,
+            self.advisories,
+            self.limit,
+            self.step,
+            self.to_goal,
+            unit,
+            x,
+            y,
+            steps,
+            out,
+        )
         if n < 0:
             return None
         return list(map(tuple, out[:n].tolist()))
 
-    def direction(self, x: float, y: float) -> tuple[float, float, float] | None:
-        """``(dx, dy, reach)``: the heading towards the path ahead, and how far at most to move along it.
-
-        ``reach`` is the distance left to the goal on the final approach of a
-        ``to_goal`` run (a full step would overshoot the goal, then bounce
-        across it and never come within a tolerance under half a step), else
-        infinite.  ``None`` once at the exit (or abandoned).
-        """
-        ok, self.cursor, self.advisories, dx, dy, reach = _steer(
+    def direction(self, x: float, y: float) -> tuple[float, float] | None:
+        """``(dx, dy)``: the heading towards the path ahead; ``None`` once at the exit (or abandoned)."""
+        ok, self.cursor, self.advisories, dx, dy = _steer(
             self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal, x, y
         )
-        return (dx, dy, reach) if ok else None
+        return (dx, dy) if ok else None
+
+    def steer(
+        self, unit: np.ndarray, x: float, y: float
+    ) -> tuple[float, float, float, float, float, float] | None:
+        """``direction``, judged as a step of ``unit`` (``steprule.judge``): ``(dx, dy, dist, move, to_x, to_y)``.
+
+        The step ends on the goal when it is within one step (the final
+        approach).  ``None`` at the exit (or abandoned), and where the unit
+        is not to move on (the stepper judged arrival and bounds before).
+        """
+        ok, self.cursor, self.advisories, code, dx, dy, dist, move, tx, ty = _steer_step(
+            self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal, unit, x, y
+        )
+        return (dx, dy, dist, move, tx, ty) if ok and code == steprule.GO else None
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _steer(
     path: np.ndarray, cursor: int, advisories: int, limit: int, step: float, to_goal: bool, x: float, y: float
-) -> tuple[bool, int, int, float, float, float]:
-    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy, reach)``; not ``ok`` at the exit or past the limit.
+) -> tuple[bool, int, int, float, float]:
+    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy)``; not ``ok`` at the exit or past the limit.
 
     The cursor moves to the nearest of the next 16 points (the first on a
-    tie), and the unit heads for the point two beyond it.  Heading for the
-    last point of a ``to_goal`` run (the goal), ``reach`` is the distance to
-    it, so the last step ends on the goal instead of overshooting it; else
-    infinite.
+    tie), and the unit heads for the point two beyond it.  The last step of
+    a ``to_goal`` run ends on the goal: ``steprule.judge``'s final approach.
     """
     advisories += 1
     if advisories > limit:
-        return False, cursor, advisories, 0.0, 0.0, math.inf
+        return False, cursor, advisories, 0.0, 0.0
     n = path.shape[0]
     best = math.inf
     i = cursor
@@ -178,15 +184,34 @@ def _steer(
             best = d
             i = j
     if i >= n - 2 and math.hypot(path[n - 1, 0] - x, path[n - 1, 1] - y) <= step and not to_goal:
-        return False, i, advisories, 0.0, 0.0, math.inf
+        return False, i, advisories, 0.0, 0.0
     t = min(i + 2, n - 1)
     dx = path[t, 0] - x
     dy = path[t, 1] - y
     norm = math.hypot(dx, dy)
     if norm <= 1e-9 * step:
-        return False, i, advisories, 0.0, 0.0, math.inf
-    reach = norm if to_goal and t == n - 1 else math.inf
-    return True, i, advisories, dx / norm, dy / norm, reach
+        return False, i, advisories, 0.0, 0.0
+    return True, i, advisories, dx / norm, dy / norm
+
+
+@numba.njit(cache=True, nogil=True)
+def _steer_step(
+    path: np.ndarray,
+    cursor: int,
+    advisories: int,
+    limit: int,
+    step: float,
+    to_goal: bool,
+    unit: np.ndarray,
+    x: float,
+    y: float,
+) -> tuple[bool, int, int, int, float, float, float, float, float, float]:
+    """``EscapeRun.steer``: ``_steer``, then the heading judged as a step (``steprule.judge``)."""
+    ok, cursor, advisories, hx, hy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
+    if not ok:
+        return False, cursor, advisories, steprule.GO, 0.0, 0.0, 0.0, 0.0, x, y
+    code, dx, dy, dist, move, tx, ty = steprule.judge(unit, x, y, hx, hy, 1.0, steprule.HEADING)
+    return True, cursor, advisories, code, dx, dy, dist, move, tx, ty
 
 
 @numba.njit(cache=True, nogil=True)
@@ -197,35 +222,22 @@ def _ahead(
     limit: int,
     step: float,
     to_goal: bool,
+    unit: np.ndarray,
     x: float,
     y: float,
     steps: int,
-    move: float,
-    gx: float,
-    gy: float,
-    tolerance: float,
-    x0: float,
-    y0: float,
-    x1: float,
-    y1: float,
     out: np.ndarray,
 ) -> int:
     """``EscapeRun.ahead``'s loop: positions written to ``out``, or -1 where the run would end."""
     out[0, 0] = x
     out[0, 1] = y
     for k in range(steps):
-        if not (math.isfinite(x) and math.isfinite(y)):
-            return k + 1
-        if math.hypot(gx - x, gy - y) <= tolerance:
-            return k + 1
-        if not (x0 <= x <= x1 and y0 <= y <= y1):
-            return k + 1
-        ok, cursor, advisories, dx, dy, reach = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
+        if steprule.judge(unit, x, y, 0.0, 0.0, 0.0, steprule.CHECK)[0] != steprule.GO:
+            return k + 1  # arrived, out of bounds or not finite: the ghost stops here
+        ok, cursor, advisories, hx, hy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
         if not ok:
             return -1
-        m = min(move, reach)  # the last step onto the goal is shortened, as Stepper's drivers do
-        x = x + m * dx
-        y = y + m * dy
+        _code, _dx, _dy, _dist, _move, x, y = steprule.judge(unit, x, y, hx, hy, 1.0, steprule.HEADING)
         out[k + 1, 0] = x
         out[k + 1, 1] = y
     return steps + 1

@@ -42,7 +42,7 @@ from types import MappingProxyType
 import numba
 import numpy as np
 
-from pfp_service.core import kernels
+from pfp_service.core import kernels, steprule
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.grid import GridGraph, resample
 from pfp_service.core.metrics import LAMBDA
@@ -80,28 +80,17 @@ Candidate = np.ndarray | NoCandidate
 
 
 @numba.njit(cache=True, nogil=True)
-def _rollout(
-    packed: np.ndarray,
-    x: float,
-    y: float,
-    tx: float,
-    ty: float,
-    gain: float,
-    step: float,
-    tol: float,
-    out: np.ndarray,
-) -> int:
+def _rollout(packed: np.ndarray, unit: np.ndarray, x: float, y: float, out: np.ndarray) -> int:
     out[0, 0] = x
     out[0, 1] = y
     n = 1
     for _ in range(out.shape[0] - 1):
-        if math.hypot(tx - x, ty - y) <= tol:
+        fx, fy, _lv, norm = kernels.point_descent(
+            packed, x, y, unit[steprule.GOAL_X], unit[steprule.GOAL_Y], unit[steprule.GAIN]
+        )
+        code, _dx, _dy, _dist, _move, x, y = steprule.judge(unit, x, y, fx, fy, norm, steprule.DESCENT)
+        if code != steprule.GO:
             break
-        fx, fy, _lv, norm = kernels.point_descent(packed, x, y, tx, ty, gain)
-        if not (norm > 0.0 and math.isfinite(norm)):
-            break
-        x += step * (-fx / norm)
-        y += step * (-fy / norm)
         out[n, 0] = x
         out[n, 1] = y
         n += 1
@@ -117,9 +106,14 @@ def rollout(
     tol: float,
     n: int,
 ) -> np.ndarray:
-    """Simulated plain descent: at most ``n`` steps from ``start`` towards ``target`` (stops within ``tol``)."""
+    """Simulated plain descent: at most ``n`` steps from ``start`` towards ``target`` (stops within ``tol``).
+
+    Each step is ``steprule.judge``'s, unwatched and unbounded: the last one
+    ends on ``target`` when it is within a step.
+    """
     out = np.empty((n + 1, 2))
-    k = _rollout(field.packed, start[0], start[1], target[0], target[1], gain, step, tol, out)
+    unit = steprule.unit(target, gain, tol, step, watch=False)
+    k = _rollout(field.packed, unit, float(start[0]), float(start[1]), out)
     return out[:k]
 
 

@@ -4,8 +4,9 @@ Plain descent cannot see a trap until it is inside it: by then the walk in is
 spent, and so is the walk back out.  Under ``escape: auto`` the stepper
 therefore runs this simulation once when its goal is set and once after each
 world change (never per advisory): plain descent from the unit's position,
-exactly as ``Stepper.follow`` would advise it for a unit that moves ``step``
-each time, with the same arrival, bounds, stall and no-progress rules.  If
+exactly as ``Stepper.advise`` would advise it for a unit that moves to each
+``Advice.to``: the same rule, ``steprule.judge`` (arrival, bounds, the final
+approach, stall and no-progress), called advisory by advisory.  If
 the simulation ends ``trapped`` or out of bounds, the stepper commits to a way
 round before walking in (``escape.Escaper.foresee``).
 
@@ -21,14 +22,13 @@ and a trap is still caught when it happens.
 
 from __future__ import annotations
 
-import math
 from enum import StrEnum
 from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from pfp_service.core import kernels
+from pfp_service.core import kernels, steprule
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
@@ -75,62 +75,35 @@ class Foresight(NamedTuple):
 
 @numba.njit(cache=True, nogil=True)
 def _simulate(
-    packed: np.ndarray,
-    x: float,
-    y: float,
-    gx: float,
-    gy: float,
-    gain: float,
-    step: float,
-    tol: float,
-    window: int,
-    patience: int,
-    budget: int,
-    box: np.ndarray,
+    packed: np.ndarray, unit: np.ndarray, x: float, y: float, budget: int
 ) -> tuple[int, int, float, float, float]:
-    # mirrors Stepper.check / follow / _watch, advisory by advisory
-    best = math.inf
+    # the stepper's own advisories: steprule.judge, advisory by advisory, and the exposure on the way
     exposure = 0.0
     last = -1.0
-    since = 0
-    ring = np.empty((window, 2))
-    count = 0
-    head = 0
+    seg = 0.0  # the last step's length
     for k in range(budget + 1):
-        if not (math.isfinite(x) and math.isfinite(y)):
+        fx, fy, lv, norm = kernels.point_descent(
+            packed, x, y, unit[steprule.GOAL_X], unit[steprule.GOAL_Y], unit[steprule.GAIN]
+        )
+        code, _dx, _dy, _dist, move, tx, ty = steprule.judge(unit, x, y, fx, fy, norm, steprule.DESCENT)
+        if code == steprule.BAD_POSITION:
             return _STOPS, k, x, y, exposure
-        dist = math.hypot(gx - x, gy - y)
-        if dist <= tol:
-            if last >= 0.0:  # the level at the goal itself, for the last step
-                exposure += 0.5 * step * (last + kernels.point_level(packed, x, y))
-            return _ARRIVES, k, x, y, exposure
-        if not (box[0] <= x <= box[2] and box[1] <= y <= box[3]):
+        if code == steprule.OUT_OF_BOUNDS:
             return _LEAVES, k, x, y, exposure
-        fx, fy, lv, norm = kernels.point_descent(packed, x, y, gx, gy, gain)
-        if last >= 0.0:
-            exposure += 0.5 * step * (last + lv)
+        if last >= 0.0:  # the trapezoid of the step that came here
+            exposure += 0.5 * seg * (last + lv)
+        if code == steprule.ARRIVED:
+            return _ARRIVES, k, x, y, exposure
         last = lv
-        if not math.isfinite(norm):
+        if code == steprule.BAD_GRADIENT:
             return _STOPS, k, x, y, exposure
-        if norm == 0.0:
+        if code != steprule.GO:
             return _TRAPPED, k, x, y, exposure
-        if dist < best - tol:
-            best = dist
-            since = 0
-        else:
-            since += 1
-            if since >= patience:
-                return _TRAPPED, k, x, y, exposure
-        if count == window and math.hypot(x - ring[head, 0], y - ring[head, 1]) < 0.2 * window * step:
-            return _TRAPPED, k, x, y, exposure
-        ring[head, 0] = x
-        ring[head, 1] = y
-        head = (head + 1) % window
-        count = min(count + 1, window)
         if k == budget:
             break
-        x += step * (-fx / norm)
-        y += step * (-fy / norm)
+        seg = move
+        x = tx
+        y = ty
     return _RUNS_ON, budget, x, y, exposure
 
 
@@ -156,23 +129,11 @@ def simulate(
     """
     limit = params.max_iter if budget is None else budget
     limit = min(limit, FORESIGHT_MAX_STEPS)
-    if bounds is None:
-        box = np.array([-math.inf, -math.inf, math.inf, math.inf])
-    else:
-        (x0, y0), (x1, y1) = bounds
-        box = np.array([x0, y0, x1, y1], dtype=np.float64)
-    code, steps, x, y, exposure = _simulate(
-        field.packed,
-        float(start[0]),
-        float(start[1]),
-        float(goal[0]),
-        float(goal[1]),
-        gain,
-        params.step,
-        params.tolerance,
-        params.trap_window,
-        params.progress_window,
-        limit,
-        box,
+    unit = steprule.unit(
+        goal, gain, params.tolerance, params.step, bounds, params.trap_window, params.progress_window
     )
+    if params.trap_window > 0:  # room for the whole watch at once: at most the steps simulated
+        ring = min(params.trap_window, limit + 1)
+        unit = np.concatenate([unit[: steprule.RING], np.zeros(2 * ring)])
+    code, steps, x, y, exposure = _simulate(field.packed, unit, float(start[0]), float(start[1]), limit)
     return Foresight(_OUTCOMES[code], steps, x, y, exposure)

@@ -6,9 +6,9 @@ whole-path answer (``pfp plan``, the preview queryable) built on ``walk``.
 It uses the very ``Stepper`` the live daemon uses -- given one, the live
 unit's own detached copy, mid-escape included -- so a preview is what the
 live stream will do for a unit that moves exactly ``step`` along each
-direction (or ``Advice.reach``, when less: a route's last step ends on the
-goal).  The live direction's look-ahead points are ``walk_many`` on
-ghosts of the live steppers.
+direction (less on the final approach, which ends on the goal): to
+``Advice.to``, where ``steprule.judge`` says the step ends.  The live
+direction's look-ahead points are ``predict_many``.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from enum import StrEnum
 import msgspec
 import numpy as np
 
+from pfp_service.core import steprule
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.cull import predict as cull_predict
 from pfp_service.core.metrics import Epoch, measure
@@ -123,7 +124,6 @@ def walk(
         ``deadline()`` is asked every 64 moves; true stops the walk.
     """
     x, y = track[-1]
-    step = stepper.params.step
     if stepper.pending is not None:  # a deferring copy: what the unit does once it lands
         stepper.deliberate(field)
     stepper.defer = False
@@ -131,9 +131,7 @@ def walk(
         adv = stepper.advise(field, x, y)
         if adv.status.terminal:
             return adv, k
-        move = min(step, adv.reach)  # a route's last step ends on the goal
-        x += move * adv.dx
-        y += move * adv.dy
+        x, y = adv.to
         track.append((x, y))
         if deadline is not None and (k + 1) % 64 == 0 and deadline():
             return None, k + 1
@@ -163,11 +161,8 @@ def walk_many(
         for i, adv in zip(live, advs):
             if adv.status.terminal:
                 continue
-            move = min(ghosts[i].params.step, adv.reach)
-            x, y = tracks[i][-1]
-            x, y = x + move * adv.dx, y + move * adv.dy
-            tracks[i].append((x, y))
-            pts[i] = (x, y)
+            tracks[i].append(adv.to)
+            pts[i] = adv.to
             keep.append(i)
         live = keep
     return tracks
@@ -186,9 +181,9 @@ def predict_many(
     loop (``Stepper.route_ahead``), or walks a ghost of its stepper
     (``walk_many``) where the route may end within the steps.  Every unit in
     plain descent is stepped in one compiled call (``cull.predict``): the
-    same direction, arrival and bounds rules as ``Stepper.advise``, without
-    its trap watch (a prediction this short never fills the trap window; a
-    trap is judged when the unit gets there).
+    same rule as ``Stepper.advise`` (``steprule.judge``), without its trap
+    watch (a prediction this short never fills the trap window; a trap is
+    judged when the unit gets there).
 
     Returns:
         One track per unit, its start first, ending early at the goal or the bounds.
@@ -211,20 +206,11 @@ def predict_many(
     )
     if plain.size == 0:
         return tracks
-    m = plain.size
     idx = plain.tolist()
-    goals = np.array([steppers[i].goal for i in idx], dtype=np.float64)
-    gains = np.array([steppers[i].goal_gain for i in idx], dtype=np.float64)
-    step = np.array([steppers[i].params.step for i in idx], dtype=np.float64)
-    tol = np.array([steppers[i].params.tolerance for i in idx], dtype=np.float64)
-    lo = np.full((m, 2), -np.inf)
-    hi = np.full((m, 2), np.inf)
-    for row, i in enumerate(idx):
-        b = steppers[i].bounds
-        if b is not None:
-            lo[row], hi[row] = b[0], b[1]
+    units = np.stack([steppers[i].rules() for i in idx])
+    units[:, steprule.WINDOW] = 0.0  # unwatched
     index = cull if cull is not None and len(field) >= MIN_THREATS else None
-    trail, lengths = cull_predict(field.packed, index, pts0[plain], goals, gains, step, tol, lo, hi, steps)
+    trail, lengths = cull_predict(field.packed, index, pts0[plain], units, steps)
     rows = trail.tolist()
     for r, (i, n) in enumerate(zip(idx, lengths.tolist())):
         tracks[i] = list(map(tuple, rows[r][:n]))
@@ -262,7 +248,7 @@ def plan(
             ``params``, ``bounds`` and ``origin`` are ignored.
         first_move: the unit vector the stepper already gave at ``start``
             (a live unit's last direction): the first step takes it without
-            advising again, as the live unit does.
+            advising again, as the live unit does (``Stepper.step_along``).
         field: the field of every threat in ``schedule`` (all from step 0),
             already built and shared (a preview desk's, per world); ignored
             when it does not match them or the intensity.
@@ -295,8 +281,10 @@ def plan(
     track = [(float(start[0]), float(start[1]))]
     k = 0
     if first_move is not None and params.max_iter > 0:
-        track.append((track[0][0] + params.step * first_move[0], track[0][1] + params.step * first_move[1]))
-        k = 1
+        to = stepper.step_along(*track[0], *first_move)
+        if to is not None:  # else the first advice says why it stands
+            track.append(to)
+            k = 1
     status = PlanStatus.MAX_ITER
     reason = f"max_iter ({params.max_iter}) reached"
     spent = None

@@ -6,7 +6,11 @@ unit reports.  Its state is the unit's goal, its mode and a short recent track,
 which is what trap detection needs.  It never reads a clock and never moves the
 unit itself.
 
-Trap detection (plain descent has no memory, so this is the only guard):
+The rules -- arrival, bounds, the direction, the final approach onto the
+goal and trap detection -- are ``steprule.judge``, the one compiled rule every
+driver shares; the stepper keeps its unit's ``steprule.unit`` (goal, rules and
+trap watch) and says what each verdict means.  Trap detection (plain descent
+has no memory, so this is the only guard):
 
 * *stall*: over the last ``trap_window`` advisories the unit moved less than
   ``0.2 * trap_window * step`` net, i.e. it is oscillating about a point;
@@ -50,13 +54,12 @@ from __future__ import annotations
 
 import copy
 import math
-from collections import deque
 from enum import StrEnum
 from typing import NamedTuple
 
 import numpy as np
 
-from pfp_service.core import foresight, kernels
+from pfp_service.core import foresight, kernels, steprule
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.escape import Escaper, EscapeRun
 from pfp_service.core.metrics import LAMBDA
@@ -90,9 +93,10 @@ class Advice(NamedTuple):
 
     ``dx, dy`` is a unit vector (``0, 0`` when the status is terminal);
     ``level`` is the weighted threat level at the position; ``distance`` is the
-    distance to the goal in metres.  ``reach`` is how far at most to move
-    along it: a route's final approach stops on the goal (``EscapeRun.direction``);
-    infinite otherwise, where a driver moves a full step.
+    distance to the goal in metres.  ``reach`` is how far a simulated unit
+    moves along it: ``step``, or less on the final approach, which ends on the
+    goal; ``to`` is where that step ends (``steprule.judge``): a driver moves
+    there.  A terminal advice has ``reach`` infinite and ``to`` not a number.
     """
 
     status: StepStatus
@@ -103,6 +107,7 @@ class Advice(NamedTuple):
     reason: str = ""
     deliberating: bool = False
     reach: float = math.inf
+    to: tuple[float, float] = (math.nan, math.nan)
 
 
 class Need(NamedTuple):
@@ -127,16 +132,14 @@ class Stepper:
     """
 
     __slots__ = (
-        "_best",
         "_escaper",
         "_foresee",
         "_ghost",
-        "_recent",
         "_run",
-        "_since_best",
         "_terminal",
         "_trap_at",
         "_traps",
+        "_unit",
         "advisories",
         "bounds",
         "defer",
@@ -164,9 +167,16 @@ class Stepper:
         d0sq = (self.goal[0] - self.origin[0]) ** 2 + (self.goal[1] - self.origin[1]) ** 2
         self.goal_gain = params.delta / d0sq if d0sq > 0 else 0.0
         self.advisories = 0
-        self._recent: deque[tuple[float, float]] = deque(maxlen=params.trap_window)
-        self._best = math.inf
-        self._since_best = 0
+        # the goal, the rules and the trap watch, as ``steprule.judge`` reads them
+        self._unit = steprule.unit(
+            self.goal,
+            self.goal_gain,
+            params.tolerance,
+            params.step,
+            bounds,
+            params.trap_window,
+            params.progress_window,
+        )
         self._terminal: Advice | None = None
         self._trap_at: tuple[float, float] | None = None  # where the standing trapped verdict was given
         self.unit_key = unit_key
@@ -184,7 +194,7 @@ class Stepper:
         new = Stepper.__new__(Stepper)
         for name in Stepper.__slots__:  # numbers, tuples, flags and the parameters: immutable, shared
             setattr(new, name, getattr(self, name))
-        new._recent = deque(self._recent, maxlen=self._recent.maxlen)
+        new._unit = self._unit.copy()
         if self._escaper is not None:
             new._escaper = copy.deepcopy(self._escaper, memo)
         if self._run is not None:  # its path is never changed, only its cursor: shared
@@ -196,8 +206,7 @@ class Stepper:
         new = Stepper.__new__(Stepper)
         for name in ("params", "bounds", "goal", "origin", "goal_gain", "unit_key", "advisories"):
             setattr(new, name, getattr(self, name))
-        new._recent = deque(self._recent, maxlen=self._recent.maxlen)
-        new._best, new._since_best = self._best, self._since_best
+        new._unit = self._unit.copy()
         new._terminal, new._trap_at = self._terminal, self._trap_at
         new._escaper, new._traps = None, self._traps
         new._run = copy.copy(self._run)  # the route is shared; only its cursor moves
@@ -244,9 +253,7 @@ class Stepper:
             self._terminal, self._trap_at = done._terminal, done._trap_at
         changed = self._run is not None or self._terminal is not None
         if self._run is not None:  # a route to follow: descent is judged afresh after it
-            self._recent.clear()
-            self._best = math.inf
-            self._since_best = 0
+            steprule.reset_watch(self._unit)
         return changed
 
     @property
@@ -266,9 +273,7 @@ class Stepper:
 
     def world_changed(self) -> None:
         """Threats appeared, moved or vanished: judge progress afresh from here."""
-        self._recent.clear()
-        self._best = math.inf
-        self._since_best = 0
+        steprule.reset_watch(self._unit)
         self._run = None  # judged under the old field
         self._foresee = self.params.escape == "auto" and not self._ghost
         self.pending = None  # asked under the old field
@@ -281,6 +286,8 @@ class Stepper:
 
     def advise(self, field: ThreatField, x: float, y: float) -> Advice:
         """The next direction for a unit at ``(x, y)`` under ``field``."""
+        if self._terminal is None and self._run is None and not self._foresee:  # plain descent: one call
+            return self._descend(field, x, y)
         early = self.check(x, y)
         if early is not None:
             if early.status is StepStatus.TRAPPED:
@@ -294,10 +301,13 @@ class Stepper:
                 self._look_ahead(field, x, y)
         if self._run is not None:
             return self._escaping(field, x, y)
-        fx, fy, level, norm = kernels.point_descent(
-            field.packed, x, y, self.goal[0], self.goal[1], self.goal_gain
-        )
-        return self.follow(x, y, fx, fy, level, norm, field)
+        return self._descend(field, x, y)
+
+    def _descend(self, field: ThreatField, x: float, y: float) -> Advice:
+        """Plain descent at ``(x, y)``: the gradient and the verdict in one compiled call."""
+        self._unit = steprule.roomy(self._unit)
+        code, dx, dy, level, dist, move, tx, ty = steprule.descend(field.packed, self._unit, x, y)
+        return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
     def check(self, x: float, y: float) -> Advice | None:
         """The part of ``advise`` that needs no field: arrival, bounds, a standing verdict.
@@ -307,16 +317,12 @@ class Stepper:
         it is dropped, and ``None`` returned, once the unit is more than
         ``trap_window * step`` from where it was trapped.
         """
-        gx, gy = self.goal
-        dist = math.hypot(gx - x, gy - y)
-        if not (math.isfinite(x) and math.isfinite(y)):
-            return self._end(StepStatus.INVALID, 0.0, dist, "position is not finite")
-        if dist <= self.params.tolerance:
-            return self._end(StepStatus.ARRIVED, 0.0, dist, "within tolerance")
-        if self.bounds is not None:
-            (x0, y0), (x1, y1) = self.bounds
-            if not (x0 <= x <= x1 and y0 <= y <= y1):
-                return self._end(StepStatus.OUT_OF_BOUNDS, 0.0, dist, "left the mission bounds")
+        code, _dx, _dy, dist, _move, _tx, _ty = steprule.judge(
+            self._unit, x, y, 0.0, 0.0, 0.0, steprule.CHECK
+        )
+        if code != steprule.GO:
+            status, reason = _VERDICTS[code]
+            return self._end(status, 0.0, dist, reason)
         if self._terminal is None:
             return None
         if self._trap_at is not None:
@@ -324,9 +330,7 @@ class Stepper:
             if math.hypot(x - tx, y - ty) > self.params.trap_window * self.params.step:
                 self._terminal = None
                 self._trap_at = None
-                self._recent.clear()
-                self._best = math.inf
-                self._since_best = 0
+                steprule.reset_watch(self._unit)
                 return None
         return self._terminal._replace(distance=dist)
 
@@ -346,16 +350,44 @@ class Stepper:
         and then calls this per unit.  ``field`` is needed only to escape a
         trap; without it a trap is final.
         """
-        dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
-        if not math.isfinite(norm):
+        self._unit = steprule.roomy(self._unit)
+        code, dx, dy, dist, move, tx, ty = steprule.judge(self._unit, x, y, fx, fy, norm, steprule.DESCENT)
+        return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
+
+    def _judged(
+        self,
+        field: ThreatField | None,
+        x: float,
+        y: float,
+        level: float,
+        code: int,
+        dx: float,
+        dy: float,
+        dist: float,
+        move: float,
+        tx: float,
+        ty: float,
+    ) -> Advice:
+        """What ``steprule.judge``'s verdict on a descent advisory means for this unit."""
+        if code == steprule.GO:
+            self.advisories += 1
+            return Advice(
+                StepStatus.EN_ROUTE, dx, dy, level, dist, "", self.pending is not None, move, (tx, ty)
+            )
+        if code <= steprule.BAD_POSITION:  # arrival, bounds, position: judged before the gradient
+            status, reason = _VERDICTS[code]
+            return self._end(status, 0.0, dist, reason)
+        if code == steprule.BAD_GRADIENT:
             return self._end(StepStatus.INVALID, level, dist, "gradient is not finite")
-        if norm == 0.0:
+        if code == steprule.STATIONARY:
             return self._trapped(field, x, y, level, dist, "gradient vanishes (stationary point)")
         self.advisories += 1
-        trapped = self._watch(x, y, dist)
-        if trapped:
-            return self._trapped(field, x, y, level, dist, trapped, -fx / norm, -fy / norm)
-        return Advice(StepStatus.EN_ROUTE, -fx / norm, -fy / norm, level, dist, "", self.pending is not None)
+        p = self.params
+        if code == steprule.NO_PROGRESS:
+            reason = f"no progress toward the goal in {p.progress_window} steps"
+        else:
+            reason = f"oscillating: moved under {0.2 * p.trap_window:g} steps net in {p.trap_window}"
+        return self._trapped(field, x, y, level, dist, reason, dx, dy, move, (tx, ty))
 
     # -- internals ----------------------------------------------------------
     def _look_ahead(self, field: ThreatField, x: float, y: float) -> None:
@@ -393,6 +425,8 @@ class Stepper:
         reason: str,
         dx: float = 0.0,
         dy: float = 0.0,
+        move: float = math.inf,
+        to: tuple[float, float] = (math.nan, math.nan),
     ) -> Advice:
         if self.params.escape == "none" or field is None or self._ghost:
             self._traps += 1
@@ -400,7 +434,7 @@ class Stepper:
         if self.defer:  # plain descent until the escape search lands
             if self.pending is None:
                 self.pending = Need("escape", x, y, reason)
-            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True)
+            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, to)
         self._traps += 1
         if self._escaper is None:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
@@ -423,7 +457,19 @@ class Stepper:
         """
         if self._run is None or self._terminal is not None:
             return None
-        return self._run.ahead(x, y, steps, self.params.step, self.goal, self.params.tolerance, self.bounds)
+        return self._run.ahead(self._unit, x, y, steps)
+
+    def rules(self) -> np.ndarray:
+        """This unit's goal and rules as ``steprule.judge`` reads them (a view, without the watch's ring)."""
+        return self._unit[: steprule.RING]
+
+    def step_along(self, x: float, y: float, dx: float, dy: float) -> tuple[float, float] | None:
+        """Where one step along the heading ``(dx, dy)`` takes the unit at ``(x, y)`` (``steprule.judge``).
+
+        ``None`` where it is not to move on (arrived, out of bounds, not finite).
+        """
+        code, _dx, _dy, _dist, _move, tx, ty = steprule.judge(self._unit, x, y, dx, dy, 1.0, steprule.HEADING)
+        return (tx, ty) if code == steprule.GO else None
 
     def look_ahead_again(self) -> None:
         """A look-ahead asked for was dropped (its deadline passed): ask again at the next advisory."""
@@ -438,42 +484,18 @@ class Stepper:
         """Steer along the committed route; ``level`` is the threat level here when the caller has it."""
         run = self._run
         assert run is not None
-        heading = run.direction(x, y)
-        if heading is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
+        stepped = run.steer(self._unit, x, y)
+        if stepped is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
             self._run = None
-            self._recent.clear()
-            self._best = math.inf
-            self._since_best = 0
-            fx, fy, level, norm = kernels.point_descent(
-                field.packed, x, y, self.goal[0], self.goal[1], self.goal_gain
-            )
-            return self.follow(x, y, fx, fy, level, norm, field)
+            steprule.reset_watch(self._unit)
+            return self._descend(field, x, y)
+        dx, dy, dist, move, tx, ty = stepped
         self.advisories += 1
         if self._escaper is not None:  # a ghost has none: it only predicts
             self._escaper.escape_steps += 1
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
-        dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
-        return Advice(
-            StepStatus.ESCAPING, heading[0], heading[1], level, dist, f"escape: {run.name}", reach=heading[2]
-        )
-
-    def _watch(self, x: float, y: float, dist: float) -> str:
-        p = self.params
-        if dist < self._best - p.tolerance:
-            self._best = dist
-            self._since_best = 0
-        else:
-            self._since_best += 1
-            if self._since_best >= p.progress_window:
-                return f"no progress toward the goal in {p.progress_window} steps"
-        recent = self._recent
-        if len(recent) == p.trap_window:
-            ox, oy = recent[0]
-            if math.hypot(x - ox, y - oy) < 0.2 * p.trap_window * p.step:
-                return f"oscillating: moved under {0.2 * p.trap_window:g} steps net in {p.trap_window}"
-        recent.append((x, y))
-        return ""
+        return Advice(StepStatus.ESCAPING, dx, dy, level, dist, f"escape: {run.name}", False, move, (tx, ty))
 
     def _end(
         self,
@@ -488,6 +510,14 @@ class Stepper:
             self._terminal = advice
             self._trap_at = at
         return advice
+
+
+# what a verdict of ``steprule.judge`` found before any gradient means
+_VERDICTS = {
+    steprule.ARRIVED: (StepStatus.ARRIVED, "within tolerance"),
+    steprule.OUT_OF_BOUNDS: (StepStatus.OUT_OF_BOUNDS, "left the mission bounds"),
+    steprule.BAD_POSITION: (StepStatus.INVALID, "position is not finite"),
+}
 
 
 def advise_many(

@@ -1014,9 +1014,8 @@ class World:
         for i in idx:
             rec, adv = guided[i], advices[i]
             assert rec.stepper is not None and rec.position is not None
-            step = rec.stepper.params.step
             steppers.append(rec.stepper)
-            starts.append((rec.position[0] + step * adv.dx, rec.position[1] + step * adv.dy))
+            starts.append(adv.to)  # where the step advised ends (steprule.judge)
         tracks = predict_many(steppers, fld, np.array(starts), n - 1, self._cull)
         for i, track in zip(idx, tracks):
             result[i] = track
