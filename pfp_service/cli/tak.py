@@ -100,14 +100,11 @@ def run(args: argparse.Namespace) -> int:
     import signal
     import sys
 
-    from pfp_service.cli._common import session_config
+    from pfp_service.cli._common import require_extra, session_config
     from pfp_service.constraints import SIGMA_MIN_M, check_spreads
     from pfp_service.errors import InputError
 
-    try:
-        import pytak  # noqa: F401
-    except ImportError:
-        raise InputError("pfp tak", "needs the [tak] extra: pip install 'pfp-service[tak]'") from None
+    require_extra("tak", "pytak")
     from pfp_service.tak import cot
     from pfp_service.tak.bridge import TlsFiles
     from pfp_service.tak.bridge import run as bridge
