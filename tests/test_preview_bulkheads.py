@@ -281,3 +281,35 @@ def test_a_what_if_reuses_the_worlds_packed_field_and_plans_the_same():
     shared = preview(w.view("u"), request, time.monotonic, 5.0, CAP, base)
     alone = preview(w.view("u"), request, time.monotonic, 5.0, CAP)
     assert shared.path == alone.path and shared.exposure == alone.exposure
+
+
+@pytest.mark.proc
+def test_a_burst_past_what_the_workers_can_start_is_answered_busy_at_once_not_queued_to_expiry():
+    goal = [565.0, 565.0]
+    bodies = [
+        json.dumps({"start": [0, 0], "goal": goal, "threats": [_threat(0, 15.0 + i % 7)]}).encode()
+        for i in range(60)
+    ]
+    with planner_process("--preview-wait-ms", "300") as (endpoint, _proc), client(endpoint) as s:
+        answers: list[tuple[float, Any]] = []
+        lock = threading.Lock()
+
+        def one(body: bytes) -> None:
+            got = _ask(s, body)
+            with lock:
+                answers.append(got)
+
+        threads = [threading.Thread(target=one, args=(b,)) for b in bodies]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    assert len(answers) == len(bodies)
+    plans = [r for _, r in answers if "status" in r]
+    busy = [(took, r) for took, r in answers if r.get("error", "").startswith("busy:")]
+    # a preview that started but ran its whole budget (a loaded machine) is "expired ... stopped";
+    # none waits in a queue until it expires ("deadline passed before it was computed")
+    stopped = [r for _, r in answers if r.get("error", "").startswith("expired: the preview's budget")]
+    assert plans and len(plans) + len(busy) + len(stopped) == len(answers), answers
+    assert all("retry in" in r["error"] and took < 0.3 + 1.5 for took, r in busy)
+    assert max(took for took, _ in answers) < 5.0
