@@ -374,7 +374,9 @@ def test_a_real_planner_answers_a_unit_through_the_acl(router):
 def test_health_and_fleet_commands_connect_with_a_certificate_endpoint(router):
     """Every pfp client takes only ``--connect``; with mTLS that endpoint carries the certificate."""
     if not router.tls:
-        pytest.skip("usrpwd identities are tested in test_client_zenoh_config.py; here mutual TLS goes in the endpoint")
+        pytest.skip(
+            "usrpwd identities are tested in test_client_zenoh_config.py; here mutual TLS goes in the endpoint"
+        )
     from pfp_service.service.config import ServeConfig
     from pfp_service.service.node import PlannerNode
 

@@ -17,8 +17,9 @@ import pytest
 
 pytest.importorskip("pytak")
 
+from pfp_clients.tak import cot
+
 from pfp_service.geo import Origin
-from pfp_service.tak import cot
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from tests.zenoh_util import ROOT, Inbox, client, free_port, planner_process, put_json

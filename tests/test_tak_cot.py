@@ -6,10 +6,10 @@ import json
 import xml.etree.ElementTree as ET
 
 import pytest
+from pfp_clients.tak import cot
+from pfp_clients.tak.state import BridgeSettings, BridgeState, ZenohDelete, ZenohPut
 
 from pfp_service.geo import Origin
-from pfp_service.tak import cot
-from pfp_service.tak.state import BridgeSettings, BridgeState, ZenohDelete, ZenohPut
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 

@@ -7,11 +7,11 @@ import xml.etree.ElementTree as ET
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from pfp_clients.tak import cot
+from pfp_clients.tak.framing import EventFramer
+from pfp_clients.tak.state import BridgeSettings, BridgeState, Tombstone, ZenohDelete, ZenohPut
 
 from pfp_service.geo import Origin
-from pfp_service.tak import cot
-from pfp_service.tak.framing import EventFramer
-from pfp_service.tak.state import BridgeSettings, BridgeState, Tombstone, ZenohDelete, ZenohPut
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from tests.test_tak_cot import T0, delete, hostile
@@ -153,7 +153,7 @@ def test_a_delete_before_the_marker_and_a_marker_gone_stale_leave_tombstones():
 
 
 def test_tombstones_are_bounded_and_restored(monkeypatch):
-    from pfp_service.tak import state as state_mod
+    from pfp_clients.tak import state as state_mod
 
     monkeypatch.setattr(state_mod, "MAX_TOMBSTONES", 100)
     s = _state()
@@ -221,7 +221,7 @@ def test_points_carry_the_origin_altitude():
 
 # -- tombstones on disk ---------------------------------------------------------------------
 def test_tombstones_survive_in_a_file_and_a_damaged_file_is_set_aside(tmp_path):
-    from pfp_service.tak import tombfile
+    from pfp_clients.tak import tombfile
 
     path = tmp_path / "m" / tombfile.FILE_NAME
     assert tombfile.load(path, T0) == tombfile.Loaded()  # none yet
@@ -239,7 +239,7 @@ def test_tombstones_survive_in_a_file_and_a_damaged_file_is_set_aside(tmp_path):
 
 
 def test_the_keeper_writes_on_change_and_says_a_failure_once(tmp_path):
-    from pfp_service.tak import tombfile
+    from pfp_clients.tak import tombfile
 
     path = tmp_path / tombfile.FILE_NAME
     notes: list[str] = []

@@ -28,8 +28,9 @@ import pytest
 pytest.importorskip("pytak")
 pytest.importorskip("taky")
 
+from pfp_clients.tak import cot
+
 from pfp_service.geo import Origin
-from pfp_service.tak import cot
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from tests.test_tak_cot import delete

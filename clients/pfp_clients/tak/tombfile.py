@@ -23,7 +23,7 @@ from pathlib import Path
 
 import msgspec
 
-from pfp_service.tak.state import BridgeState, Tombstone
+from pfp_clients.tak.state import BridgeState, Tombstone
 
 __all__ = ["FILE_NAME", "Keeper", "Loaded", "load", "save"]
 

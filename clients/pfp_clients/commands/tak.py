@@ -105,10 +105,10 @@ def run(args: argparse.Namespace) -> int:
     from pfp_service.errors import InputError
 
     require_extra("tak", "pytak")
-    from pfp_service.tak import cot
-    from pfp_service.tak.bridge import TlsFiles
-    from pfp_service.tak.bridge import run as bridge
-    from pfp_service.tak.state import BridgeSettings
+    from pfp_clients.tak import cot
+    from pfp_clients.tak.bridge import TlsFiles
+    from pfp_clients.tak.bridge import run as bridge
+    from pfp_clients.tak.state import BridgeSettings
 
     for flag, v in (("--sigma-range", args.sigma_range), ("--sigma-lateral", args.sigma_lateral)):
         if v < SIGMA_MIN_M:
@@ -151,9 +151,9 @@ def _tombstone_file(args: argparse.Namespace) -> Any:
     import os
     from pathlib import Path
 
+    from pfp_clients.tak.tombfile import FILE_NAME
     from pfp_service.errors import InputError
     from pfp_service.service.config import default_state_dir
-    from pfp_service.tak.tombfile import FILE_NAME
 
     if args.state_dir == "none":
         return None

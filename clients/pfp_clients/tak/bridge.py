@@ -37,10 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pfp_clients.tak import cot, tombfile
+from pfp_clients.tak.framing import EventFramer
+from pfp_clients.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
 from pfp_service.errors import InputError
-from pfp_service.tak import cot, tombfile
-from pfp_service.tak.framing import EventFramer
-from pfp_service.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from pfp_service.wire.delivery import Deliverer

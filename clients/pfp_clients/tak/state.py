@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 import msgspec
 import numpy as np
 
+from pfp_clients.tak import cot
 from pfp_service import geo
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.tak import cot
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 
