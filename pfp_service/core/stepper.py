@@ -95,8 +95,9 @@ class Advice(NamedTuple):
     ``level`` is the weighted threat level at the position; ``distance`` is the
     distance to the goal in metres.  ``reach`` is how far a simulated unit
     moves along it: ``step``, or less on the final approach, which ends on the
-    goal; ``to`` is where that step ends (``steprule.judge``): a driver moves
-    there.  A terminal advice has ``reach`` infinite and ``to`` not a number.
+    goal; ``to`` (``to_x, to_y``) is where that step ends (``steprule.judge``):
+    a driver moves there.  A terminal advice has ``reach`` infinite and ``to``
+    not a number.
     """
 
     status: StepStatus
@@ -107,7 +108,13 @@ class Advice(NamedTuple):
     reason: str = ""
     deliberating: bool = False
     reach: float = math.inf
-    to: tuple[float, float] = (math.nan, math.nan)
+    to_x: float = math.nan  # two floats, not a tuple: no container for the collector per advice
+    to_y: float = math.nan
+
+    @property
+    def to(self) -> tuple[float, float]:
+        """Where the step along this advice ends."""
+        return (self.to_x, self.to_y)
 
 
 class Need(NamedTuple):
@@ -305,7 +312,8 @@ class Stepper:
 
     def _descend(self, field: ThreatField, x: float, y: float) -> Advice:
         """Plain descent at ``(x, y)``: the gradient and the verdict in one compiled call."""
-        self._unit = steprule.roomy(self._unit)
+        if self.params.trap_window > steprule.RING_START:  # the ring may need to grow
+            self._unit = steprule.roomy(self._unit)
         code, dx, dy, level, dist, move, tx, ty = steprule.descend(field.packed, self._unit, x, y)
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
@@ -350,7 +358,8 @@ class Stepper:
         and then calls this per unit.  ``field`` is needed only to escape a
         trap; without it a trap is final.
         """
-        self._unit = steprule.roomy(self._unit)
+        if self.params.trap_window > steprule.RING_START:  # the ring may need to grow
+            self._unit = steprule.roomy(self._unit)
         code, dx, dy, dist, move, tx, ty = steprule.judge(self._unit, x, y, fx, fy, norm, steprule.DESCENT)
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
@@ -372,7 +381,7 @@ class Stepper:
         if code == steprule.GO:
             self.advisories += 1
             return Advice(
-                StepStatus.EN_ROUTE, dx, dy, level, dist, "", self.pending is not None, move, (tx, ty)
+                StepStatus.EN_ROUTE, dx, dy, level, dist, "", self.pending is not None, move, tx, ty
             )
         if code <= steprule.BAD_POSITION:  # arrival, bounds, position: judged before the gradient
             status, reason = _VERDICTS[code]
@@ -387,7 +396,7 @@ class Stepper:
             reason = f"no progress toward the goal in {p.progress_window} steps"
         else:
             reason = f"oscillating: moved under {0.2 * p.trap_window:g} steps net in {p.trap_window}"
-        return self._trapped(field, x, y, level, dist, reason, dx, dy, move, (tx, ty))
+        return self._trapped(field, x, y, level, dist, reason, dx, dy, move, tx, ty)
 
     # -- internals ----------------------------------------------------------
     def _look_ahead(self, field: ThreatField, x: float, y: float) -> None:
@@ -426,7 +435,8 @@ class Stepper:
         dx: float = 0.0,
         dy: float = 0.0,
         move: float = math.inf,
-        to: tuple[float, float] = (math.nan, math.nan),
+        tx: float = math.nan,
+        ty: float = math.nan,
     ) -> Advice:
         if self.params.escape == "none" or field is None or self._ghost:
             self._traps += 1
@@ -434,7 +444,7 @@ class Stepper:
         if self.defer:  # plain descent until the escape search lands
             if self.pending is None:
                 self.pending = Need("escape", x, y, reason)
-            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, to)
+            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, tx, ty)
         self._traps += 1
         if self._escaper is None:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
@@ -495,7 +505,7 @@ class Stepper:
             self._escaper.escape_steps += 1
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
-        return Advice(StepStatus.ESCAPING, dx, dy, level, dist, f"escape: {run.name}", False, move, (tx, ty))
+        return Advice(StepStatus.ESCAPING, dx, dy, level, dist, f"escape: {run.name}", False, move, tx, ty)
 
     def _end(
         self,
@@ -551,6 +561,9 @@ def advise_many(
     coords = pts.tolist()
     result = []
     for s, (x, y), (fx, fy, level, norm) in zip(steppers, coords, rows):
+        if s._terminal is None and s._run is None and not s._foresee:  # plain descent: one judge call
+            result.append(s.follow(x, y, fx, fy, level, norm, field))
+            continue
         early = s.check(x, y)
         if early is not None:
             result.append(early._replace(level=level) if early.status is StepStatus.TRAPPED else early)

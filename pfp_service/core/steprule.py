@@ -53,6 +53,8 @@ __all__ = [
     "NO_PROGRESS",
     "OSCILLATING",
     "OUT_OF_BOUNDS",
+    "RING",
+    "RING_START",
     "STATIONARY",
     "UNIT_COLUMNS",
     "descend",
@@ -70,7 +72,7 @@ GOAL_X, GOAL_Y, GAIN, TOL, STEP, LO_X, LO_Y, HI_X, HI_Y, WINDOW, PATIENCE, BEST,
     len(UNIT_COLUMNS)
 )
 RING = len(UNIT_COLUMNS)  # the watch's ring of recent positions starts here, x and y interleaved
-_RING_START = 64  # positions a ring holds at first: it grows (``roomy``) up to ``trap_window``
+RING_START = 64  # positions a ring holds at first: it grows (``roomy``) up to ``trap_window``
 
 # What ``judge`` is asked: arrival and bounds only; a descent step (given grad f); a step along a heading.
 CHECK, DESCENT, HEADING = range(3)
@@ -93,7 +95,7 @@ def unit(
     """A unit for ``judge``: its goal and rules, and a fresh trap watch (none when not ``watch``)."""
     (x0, y0), (x1, y1) = bounds if bounds is not None else ((-math.inf, -math.inf), (math.inf, math.inf))
     window = trap_window if watch else 0
-    u = np.empty(RING + 2 * min(window, _RING_START))
+    u = np.empty(RING + 2 * min(window, RING_START))
     u[:RING] = (goal[0], goal[1], gain, tolerance, step, x0, y0, x1, y1, window, progress_window, 0, 0, 0, 0)
     reset_watch(u)
     return u
