@@ -10,9 +10,9 @@ import uuid
 import pytest
 import zenoh
 from pfp_clients.sim import SimUnit
-from pfp_clients.team import UnitSpec, generate_team, load_team
 
 from pfp_service.errors import InputError
+from pfp_service.team import UnitSpec, generate_team, load_team
 from pfp_service.wire import Direction, DirectionStatus, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, planner_process, put_json
@@ -177,9 +177,9 @@ units:
 
 def test_a_team_origin_other_than_the_planners_is_converted_exactly():
     from pfp_clients.fleet import in_planner_frame
-    from pfp_clients.team import Team
 
     from pfp_service.geo import Origin
+    from pfp_service.team import Team
 
     mine, theirs = Origin(lat=50.01, lon=8.0), Origin(lat=50.0, lon=8.0)
     team = Team(origin=mine, units=[UnitSpec(id="a", start=(0.0, 0.0), goal=(6.0, 0.0))])
@@ -198,9 +198,9 @@ def test_a_team_origin_other_than_the_planners_is_converted_exactly():
 
 def test_a_team_origin_against_a_planner_without_one_is_refused_naming_both():
     from pfp_clients.fleet import in_planner_frame
-    from pfp_clients.team import Team
 
     from pfp_service.geo import Origin
+    from pfp_service.team import Team
 
     team = Team(origin=Origin(lat=50.01, lon=8.0), units=[UnitSpec(id="a", start=(0.0, 0.0))])
     with pytest.raises(InputError) as err:

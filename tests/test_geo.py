@@ -298,7 +298,8 @@ def test_a_json_scenario_takes_lat_lon_too():
 
 def test_team_and_inject_files_take_lat_lon(tmp_path):
     from pfp_clients.script import load_script
-    from pfp_clients.team import load_team
+
+    from pfp_service.team import load_team
 
     o = Origin(lat=48.0, lon=11.0)
     lat, lon = o.to_geodetic(30.0, 40.0)

@@ -142,7 +142,7 @@ def test_yaml_exponent_floats_are_numbers(tmp_path):
 
 
 def test_team_files_read_exponent_floats_too(tmp_path):
-    from pfp_clients.team import load_team
+    from pfp_service.team import load_team
 
     p = tmp_path / "team.yaml"
     p.write_text(

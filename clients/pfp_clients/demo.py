@@ -34,9 +34,9 @@ from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
 from pfp_clients.inject import InjectReport, report_lines, run_inject
 from pfp_clients.script import AddThreat, SetGoal, load_script
 from pfp_clients.sim import SimUnit
-from pfp_clients.team import load_team
 from pfp_service.core.metrics import measure
 from pfp_service.errors import map_zenoh_errors
+from pfp_service.team import load_team
 
 __all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DemoOptions", "run_demo"]
 

@@ -36,9 +36,9 @@ import msgspec
 
 from pfp_clients.frames import learn_planner_origin, reframe
 from pfp_clients.sim import SimUnit
-from pfp_clients.team import Team
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
+from pfp_service.team import Team
 from pfp_service.wire import (
     Direction,
     DirectionStatus,

@@ -30,11 +30,11 @@ from typing import Annotated, Union
 import msgspec
 from msgspec import Meta
 
-from pfp_clients.common import load_yaml, located
 from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import Goal, ThreatUpdate
+from pfp_service.yamlio import load_yaml, located
 
 __all__ = [
     "ACTIONS",

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pfp_clients.team import UnitSpec
+from pfp_service.team import UnitSpec
 from pfp_service.wire import Direction, DirectionStatus, UnitState
 
 __all__ = ["SimUnit", "TrackPoint"]

@@ -447,7 +447,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfp_clients.team import load_team
+    from pfp_service.team import load_team
 
     keys.check_chunk(args.mission, "--mission")
     planners = tuple(dict.fromkeys(args.planner_id or ["planner"]))

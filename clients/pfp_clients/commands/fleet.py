@@ -65,8 +65,8 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pfp_clients.fleet import FleetOptions, main
-    from pfp_clients.team import generate_team, load_team
     from pfp_service.errors import InputError
+    from pfp_service.team import generate_team, load_team
 
     for flag, value in (("--seed", args.seed), ("--area", args.area)):
         if args.team and value is not None:

@@ -20,11 +20,11 @@ from typing import Annotated
 import msgspec
 from msgspec import Meta
 
-from pfp_clients.common import load_yaml
 from pfp_service.constraints import Id, Point
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import UnitKind
+from pfp_service.yamlio import load_yaml
 
 __all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team"]
 
