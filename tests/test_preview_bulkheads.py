@@ -230,10 +230,10 @@ def test_a_long_walk_ends_at_its_budget_and_the_next_preview_is_served():
     with planner_process("--preview-budget-ms", "300") as (endpoint, _proc), client(endpoint) as s:
         body = {"start": [0, 0], "goal": [134, 134], "step": 1e-3, "max_iter": 10_000_000}  # 190,000 steps
         took, reply = _ask(s, json.dumps(body).encode())
-        assert took < 2.0
+        assert took < 5.0, reply  # its budget, the alarm past it, the kill past that: well within 5 s
         assert reply.get("status") == "max_iter" or reply.get("error", "").startswith("expired"), reply
         took, plan = _ask(s, json.dumps({"start": [0, 0], "goal": [100, 100]}).encode())
-        assert took < 3.0 and plan["status"] == "reached"
+        assert took < 3.0 and plan.get("status") == "reached", plan
 
 
 @pytest.mark.proc
