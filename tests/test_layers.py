@@ -17,7 +17,19 @@ pytestmark = pytest.mark.unit
 
 PACKAGES = {"pfp_service": ROOT / "pfp_service", "pfp_clients": ROOT / "clients" / "pfp_clients"}
 # The sans-I/O parts: they take numbers and time as values and return values (STYLE.md, rule 1).
-SANS_IO = ("pfp_service/core/", "pfp_service/service/world.py", "pfp_service/service/events.py")
+WORLD = [
+    "world",
+    "events",
+    "world_records",
+    "timers",
+    "liveness",
+    "ownership",
+    "limits",
+    "missions",
+    "steering",
+    "lookahead",
+]
+SANS_IO = ("pfp_service/core/", *(f"pfp_service/service/{m}.py" for m in WORLD))
 IO_MODULES = {"time", "os", "socket", "threading", "logging", "zenoh", "subprocess", "asyncio", "sqlite3"}
 # What is still to mend, named so that nothing new slips in; each entry is a debt, not a rule.
 KNOWN: set[str] = {

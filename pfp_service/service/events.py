@@ -7,7 +7,6 @@ missions one ``apply`` returns.  Pure values: no zenoh, no clock.
 
 from __future__ import annotations
 
-import hashlib
 import traceback
 import zlib
 from dataclasses import dataclass, field
@@ -50,10 +49,10 @@ __all__ = [
     "TokenChanged",
     "UnitView",
     "WorldSettings",
+    "blame",
     "inputs_from_snapshot",
     "mission_message",
     "mission_of",
-    "rendezvous_weight",
     "unit_key",
     "where",
 ]
@@ -312,10 +311,31 @@ class WorldSettings:
         return self.planner.merged(delta=goal.delta, tolerance=goal.tolerance, step=goal.step)
 
 
-def rendezvous_weight(unit_id: str, planner: str) -> int:
-    """The rendezvous weight of a unit on a planner: stable across processes and restarts."""
-    digest = hashlib.blake2b(f"{unit_id}\0{planner}".encode(), digest_size=8).digest()
-    return int.from_bytes(digest, "big")
+def blame(inp: Input, mission: str) -> tuple[str, str | None]:
+    """The key an input came on (where a failure to apply it is rejected), and the unit whose goal goes with it.
+
+    The key is spelled from the layout even for an id ``keys`` would refuse; a
+    ``Tick`` is blamed on the mission's event key.
+    """
+    k = keys.KeyKind
+    match inp:
+        case StateReported(unit):
+            kind, ident, goal = k.UNIT_STATE, unit, True
+        case GoalSet(unit) | GoalCancelled(unit) | MissionRestored(unit) | Deliberated(unit):
+            kind, ident, goal = k.UNIT_GOAL, unit, True
+        case MissionShared(unit):
+            kind, ident, goal = k.UNIT_MISSION, unit, True
+        case ThreatPut(ident) | ThreatRemoved(ident):
+            kind, goal = k.THREAT, False
+        case TokenChanged(ident):
+            kind, goal = k.ALIVE_UNIT, False
+        case PeerPlanner(ident):
+            kind, goal = k.ALIVE_PLANNER, False
+        case InputRejected(key):
+            return key, None
+        case _:
+            kind, ident, goal = k.EVENT, "tick", False
+    return keys.TEMPLATES[kind].format(mission=mission, id=ident), ident if goal else None
 
 
 def mission_of(

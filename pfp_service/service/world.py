@@ -1,255 +1,95 @@
 """The live world: a sans-I/O state machine of one mission's units, goals and threats.
 
 In the manner of h11's connection: ``World.apply(inputs, now)`` takes a batch
-of frozen input events (``Input``) and returns ``Outputs``: the directions to
-publish, the events to send and the deliberation jobs to run.  It never reads
-a clock, opens a socket or touches a file; ``now`` is seconds on any
-monotonic clock.
+of frozen input events (``Input``) and returns ``Outputs``: the directions,
+events, deliberation jobs, missions and faults that must go out.  It reads no
+clock, socket or file; ``now`` is seconds on any monotonic clock.  Every
+decision lives here -- who gets a direction, which event fires and why,
+status transitions, expiry, limits; the node never reads the world's records.
 
-Rule 1: every decision lives here -- who gets a fresh direction, which event
-fires and why, status transitions, staleness, expiry, limits.  The node only
-decodes, enqueues, applies and publishes; it never reads the world's records.
+``World`` decides; its parts keep the books, each plain data in and out with
+its own tests: the records and the field of the threats (``world_records``),
+the timer heap (``timers``), staleness, forgetting and push re-sends
+(``liveness``), cluster ownership (``ownership``), the limits on rejections
+and fault lines (``limits``), a unit's mission (``missions``), the reactive
+step and its look-ahead (``steering``, ``lookahead``) and the snapshot's
+pages (``worldpages.page``).
 
-The reactive part of ``apply`` is bounded: plain steepest descent for the
-units touched, in one vectorised call (culled, ``core.cull``), plus their
-look-ahead points (``plan.predict_many``: batched kernel steps, ghosts for
-units on a route).  Everything unbounded -- ``auto``'s trap
-look-ahead and the escape-route searches -- is *deliberation*: with
-``deliberation="deferred"`` a unit's stepper records what it needs, the world
-emits a ``Job`` holding a detached copy, and the driver runs ``job.run()``
-anywhere and feeds back the ``Deliberated`` input it returns.  A result is
-adopted only if it was computed for the unit's goal and world version still
-in force (latest wins); until then the unit gets plain descent with
-``deliberating`` set.  ``"inline"`` runs the same work inside ``apply``.
-
-Bulkheads: ``apply`` is total.  A failure belongs to the input, timer or unit
-that caused it: each input is applied on its own, each timer run on its own,
-and one unit's numbers that break the vectorised step drop that unit alone
-(the batch is re-run one unit at a time).  What failed is rejected (a
-``rejected`` event on its key, rate-limited like every rejection), its goal is
-dropped, and a ``Fault`` for the log comes out at most once a minute per key;
-every other input and every other unit's direction in the tick goes out.  What
-the planner cannot plan is refused before that, as a value: a goal whose step
-would need more than ``max_iter`` steps (``constraints.reach_problem``), and a
-goal closer to its unit than ``LENGTH_MIN_M`` or the tolerance has arrived.
-
-Units are fresh only while they report: a unit the world learns of from a
-goal, a restored mission or a peer's, and that has not reported, is stale
-from the start and forgotten ``unit_forget_s`` later unless it reports.
-
-Timers (threat expiry, unit silence, token debounce, forgetting, push
-re-sends) sit in one heap, so a tick costs O(what is due), never a scan of
-every unit.  Under ``cluster`` each unit is guided by the one live planner
-rendezvous hashing gives it (``owns``); the others keep its mission.
+Unbounded work (``auto``'s trap look-ahead, escape-route searches) is
+*deliberation*: a ``Job`` on a detached copy of the unit's stepper, whose
+``Deliberated`` result is adopted only for the goal and world version still
+in force (``deliberation="inline"`` runs it inside ``apply``).  Bulkheads:
+``apply`` is total; a failure belongs to the input, timer or unit that caused
+it (rejected on its key, its goal dropped, a ``Fault`` logged at most once a
+minute per key) and the rest of the batch goes out.
 """
 
 from __future__ import annotations
 
-import contextlib
 import copy
-import heapq
-import itertools
-import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-import msgspec
-import numpy as np
+from pfp_service.core import Threat, ThreatField
+from pfp_service.errors import InputError
+from pfp_service.service import events as ev
+from pfp_service.service import missions, steering, worldpages
+from pfp_service.service.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
+from pfp_service.service.events import Input, Outputs, UnitView, WorldSettings
+from pfp_service.service.limits import Limits
+from pfp_service.service.liveness import UNIT_TIMERS, Liveness
+from pfp_service.service.ownership import Ownership
+from pfp_service.service.timers import Timers
+from pfp_service.service.world_records import Records, ThreatRecord, UnitRecord
+from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS
 
-from pfp_service.constraints import LENGTH_MIN_M, reach_problem
-from pfp_service.core import Resolved, Stepper, StepStatus, Threat, ThreatField, resolve
-from pfp_service.core.cull import MIN_THREATS, CullIndex, corridors_meet, influence_boxes
-from pfp_service.core.params import FieldStats, field_stats
-from pfp_service.core.plan import predict_many
-from pfp_service.core.stepper import Advice, advise_many
-from pfp_service.errors import FINITE_LIMIT, InputError
-from pfp_service.service.events import (
-    Deliberated,
-    Fault,
-    GoalCancelled,
-    GoalSet,
-    Input,
-    InputRejected,
-    Job,
-    MissionRecord,
-    MissionRestored,
-    MissionShared,
-    Outputs,
-    PeerPlanner,
-    StateReported,
-    ThreatPut,
-    ThreatRemoved,
-    Tick,
-    TokenChanged,
-    UnitView,
-    WorldSettings,
-    mission_message,
-    mission_of,
-    rendezvous_weight,
-    unit_key,
-    where,
-)
-from pfp_service.wire import (
-    ArrivedEvent,
-    ConflictEvent,
-    Direction,
-    DirectionStatus,
-    ForgottenEvent,
-    Goal,
-    Mission,
-    RejectedEvent,
-    ReplanEvent,
-    StaleEvent,
-    ThreatChange,
-    ThreatSummary,
-    ThreatUpdate,
-    TrappedEvent,
-    UnitKind,
-    UnitState,
-    UnitSummary,
-    WorldSnapshot,
-    keys,
-)
-from pfp_service.wire.geodetic import with_geodetic_many
-from pfp_service.wire.messages import MAX_EVENT_ITEMS, MAX_SNAPSHOT_ITEMS
+__all__ = ["World", *ev.__all__]
 
-__all__ = [
-    "Deliberated",
-    "Fault",
-    "GoalCancelled",
-    "GoalSet",
-    "Input",
-    "InputRejected",
-    "Job",
-    "MissionRecord",
-    "MissionRestored",
-    "MissionShared",
-    "Outputs",
-    "PeerPlanner",
-    "StateReported",
-    "ThreatPut",
-    "ThreatRemoved",
-    "Tick",
-    "TokenChanged",
-    "UnitView",
-    "World",
-    "WorldSettings",
-    "mission_message",
-    "unit_key",
-]
-
-_STATUS = {
-    StepStatus.EN_ROUTE: DirectionStatus.EN_ROUTE,
-    StepStatus.ESCAPING: DirectionStatus.ESCAPING,
-    StepStatus.ARRIVED: DirectionStatus.ARRIVED,
-    StepStatus.TRAPPED: DirectionStatus.TRAPPED,
-    # mission bounds are enforced on decode; a stepper verdict of these is a dead end all the same
-    StepStatus.OUT_OF_BOUNDS: DirectionStatus.TRAPPED,
-    StepStatus.INVALID: DirectionStatus.TRAPPED,
-}
-REJECTS_PER_S = 5  # rejected events per second per kind of key; the rest are counted in the next
-FAULT_LOG_S = 60.0  # a fault is logged once per key in this long; the rest are counted in the next
-FAULT_KEYS_MAX = 1024  # keys whose fault-log window is remembered; past it, one line for all the rest
-_ANY_KEY = "*"  # the fault-log key of faults on keys past FAULT_KEYS_MAX
+K = keys.KeyKind
 
 
 @dataclass(slots=True)
-class _Unit:
-    id: str
-    key: int
-    position: tuple[float, float] | None = None
-    seq: int | None = None
-    kind: str | None = None
-    last_seen: float = -math.inf
-    goal: Goal | None = None
-    origin: tuple[float, float] | None = None  # x0: where the unit was when its goal was set
-    stepper: Stepper | None = None
-    epoch: int = 0  # bumped by every goal set or cancelled
-    stale: bool = False
-    stale_since: float | None = None
-    token_gone_since: float | None = None
-    silence_timer: bool = False
-    last_status: DirectionStatus | None = None
-    last_reason: str = ""
-    last_distance: float | None = None
-    last_vector: tuple[float, float] | None = None
-    job: Job | None = None
-    push: Direction | None = None  # the last push, until a report is answered
-    push_tries: int = 0
-    owned: bool = True  # this planner guides it (scale-out: rendezvous over the live planners)
-    shared: tuple[Goal, tuple[float, float], Resolved] | None = None  # a mission another planner fixed
+class _Batch:
+    """One ``apply``: its clock, what goes out, the units to direct, and the threats changed."""
 
-    def token(self) -> tuple[int, int]:
-        return (self.epoch, self.stepper.version if self.stepper is not None else -1)
-
-
-@dataclass(slots=True)
-class _Threat:
-    update: ThreatUpdate
-    threat: Threat
-    expires_at: float | None
+    now: float
+    out: Outputs = field(default_factory=Outputs)
+    dirty: set[str] = field(default_factory=set)  # units to get a fresh direction
+    changes: list[ThreatChange] = field(default_factory=list)
+    touched: list[Threat] = field(default_factory=list)  # threats put, moved or gone (old and new)
 
 
 class World:
     """Units, goals and threats of one mission, and the steppers that guide the units."""
 
     def __init__(self, settings: WorldSettings | None = None) -> None:
-        self.settings = settings or WorldSettings()
-        self._units: dict[str, _Unit] = {}
-        self._threats: dict[str, _Threat] = {}
-        self._field: ThreatField | None = None
-        self._cull: CullIndex | None = None
-        self._stats: FieldStats | None = None
-        self._touched: list[Threat] = []
-        self._timers: list[tuple[float, int, str, str]] = []  # (when, seq, kind, id)
-        self._timer_seq = 0
-        self._stale = 0
-        self._deliberating = 0
-        self.overload = 0  # inputs refused at a limit
-        self.rejected = 0
-        self.pushes = 0  # directions sent without a report asking
-        self.pushes_resent = 0
-        self._reject_window: dict[str, tuple[float, int, int]] = {}  # kind -> (window start, sent, held)
-        self._peers: set[str] = set()
-        self._peers_gone: dict[str, float] = {}  # peer -> when its token went, until the debounce ends
-        self.faults = 0  # inputs, timers and unit steps that failed inside the world (bulkheads)
-        self._fault_log: dict[str, tuple[float, int]] = {}  # key -> (when last logged, held since)
+        self.settings = s = settings or WorldSettings()
+        self._rec = Records(s.planner.intensity)
+        self._units = self._rec.units
+        self._threats = self._rec.threats
+        self._timers = Timers()
+        self._live = Liveness(s, self._rec, self._timers)
+        self._own = Ownership(s.planner_id, s.cluster)
+        self.limits = Limits()
 
     # -- queries (read-only) ------------------------------------------------------
     @property
     def field(self) -> ThreatField:
-        if self._field is None:
-            ordered = [self._threats[k].threat for k in sorted(self._threats)]
-            self._field = ThreatField(ordered, self.settings.planner.intensity)
-            self._cull = CullIndex(self._field.packed) if len(ordered) >= MIN_THREATS else None
-            self._stats = field_stats(ordered)
-        return self._field
+        return self._rec.field
 
     def counts(self) -> dict[str, int]:
-        """O(1) figures for the status reply."""
-        return {
-            "units": len(self._units),
-            "units_stale": self._stale,
-            "threats": len(self._threats),
-            "deliberating": self._deliberating,
-            "overload": self.overload,
-            "rejected": self.rejected,
-            "units_owned": sum(1 for r in self._units.values() if r.owned),
-            "pushes": self.pushes,
-            "pushes_resent": self.pushes_resent,
-            "faults": self.faults,
-        }
+        """Figures for the status reply (O(1) but ``units_owned``)."""
+        return {**self._rec.counts(), **self.limits.counts(), **self._live.counts()}
 
     def view(self, unit_id: str) -> UnitView:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
-        rec = self._units.get(unit_id)
+        rec, s = self._units.get(unit_id), self.settings
         threats = self.field.threats  # the same tuple while the field stands: a desk can cache it
         if rec is None:
-            return UnitView(unit_id, None, None, None, None, threats, self.settings)
+            return UnitView(unit_id, None, None, None, None, threats, s)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
-        return UnitView(
-            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, self.settings, rec.last_vector
-        )
+        return UnitView(unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector)
 
     def snapshot(
         self,
@@ -260,184 +100,81 @@ class World:
         max_bytes: int | None = None,
         threats_limit: int | None = None,
     ) -> WorldSnapshot:
-        """One page of what the planner holds, for the world queryable: threats, then units, sorted by id.
-
-        Args:
-            now: the clock, for TTLs left and time since last seen.
-            limit: at most this many units, and this many threats unless
-                ``threats_limit`` says otherwise.
-            units_from, threats_from: the first ids listed (a former page's
-                ``next_unit`` and ``next_threat``); ``None``: from the first.
-            max_bytes: the page's items stop short of this much JSON
-                (default ``SNAPSHOT_PAGE_BYTES``, so a reply always decodes).
-
-        Returns:
-            The page; its ``next_unit`` and ``next_threat`` say where the next
-            one starts (``None``: that list is complete, or was not asked for
-            with a limit of 0).  A page with room for nothing still lists one
-            item, so paging always ends.
-        """
-        import bisect
-
-        from pfp_service.wire.messages import SNAPSHOT_PAGE_BYTES
-
-        room = SNAPSHOT_PAGE_BYTES if max_bytes is None else max_bytes
-
-        def fits(item: msgspec.Struct) -> bool:
-            nonlocal room
-            size = len(msgspec.json.encode(item)) + 1  # and its comma
-            if size > room and (units or threats):
-                return False
-            room -= size
-            return True
-
-        units: list[UnitSummary] = []
-        threats: list[ThreatSummary] = []
-        tids = sorted(self._threats)
-        i = bisect.bisect_left(tids, threats_from) if threats_from is not None else 0
-        tlimit = limit if threats_limit is None else threats_limit
-        while i < len(tids) and len(threats) < tlimit:
-            t = self._threats[tids[i]]
-            ttl = None if t.expires_at is None else max(t.expires_at - now, 0.0)
-            summary = ThreatSummary(id=tids[i], threat=t.update, ttl_s=ttl)
-            if not fits(summary):
-                break
-            threats.append(summary)
-            i += 1
-        next_threat = tids[i] if i < len(tids) and tlimit else None
-        uids = sorted(self._units)
-        j = bisect.bisect_left(uids, units_from) if units_from is not None else 0
-        while j < len(uids) and len(units) < limit:
-            r = self._units[uids[j]]
-            unit = UnitSummary(
-                id=uids[j],
-                kind=UnitKind(r.kind) if r.kind is not None else None,
-                status=r.last_status,
-                position=r.position,
-                goal=r.goal.position if r.goal is not None else None,
-                last_seen_s=max(now - r.last_seen, 0.0) if math.isfinite(r.last_seen) else None,
-                distance_to_goal=r.last_distance,
-                stale=r.stale,
-                deliberating=r.job is not None,
-                reason=r.last_reason[:1024],
-                mission=mission_of(r.shared, self.settings.planner_id if r.owned else None),
-            )
-            if not fits(unit):
-                break
-            units.append(unit)
-            j += 1
-        return WorldSnapshot(
-            planner=self.settings.planner_id,
-            mission=self.settings.mission,
-            units=units,
-            threats=threats,
-            units_total=len(self._units),
-            threats_total=len(self._threats),
-            next_unit=uids[j] if j < len(uids) and limit else None,
-            next_threat=next_threat,
+        """One page of what the planner holds, for the world queryable (``worldpages.page``)."""
+        m, p = self.settings.mission, self.settings.planner_id
+        return worldpages.page(
+            self._rec, now, m, p, limit, units_from, threats_from, max_bytes, threats_limit
         )
+
+    def owns(self, unit_id: str) -> bool:
+        """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
+        return self._own.owns(unit_id)
 
     # -- the one way in -----------------------------------------------------------
     def apply(self, inputs: list[Input] | tuple[Input, ...], now: float) -> Outputs:
         """Apply a batch of inputs at ``now``; return what must go out."""
-        out = Outputs()
-        dirty: set[str] = set()
-        changes: list[ThreatChange] = []
-        self._touched = []  # threats put, moved or gone in this batch (old and new)
+        b = _Batch(now)
         for inp in inputs:
             try:
-                self._apply_one(inp, now, dirty, changes, out)
+                self._apply_one(inp, b)
             except Exception as exc:  # the bulkhead: this input alone fails
-                key, unit = self._blame(inp)
-                self._fault(key, exc, now, out, unit, dirty)
-        if changes:
-            dirty |= self._world_changed(now, out)
-        first = len(out.directions)  # before: pushes sent again by the timers
-        self._directions(dirty, now, out)
-        self._pushes(out.directions[first:], now)
-        if changes:
-            guided = sorted(d.unit for d in out.directions if d.status is not DirectionStatus.NO_GOAL)
-            shown = changes[:MAX_EVENT_ITEMS]
-            reason = "; ".join(f"threat {c.threat} {c.change}" for c in shown[:4])
-            if len(changes) > 4:
-                reason += f"; and {len(changes) - 4} more"
-            out.events.append(
-                ReplanEvent(
-                    planner=self.settings.planner_id,
-                    units=guided[:MAX_EVENT_ITEMS],
-                    reason=reason,
-                    changes=shown,
-                    more=len(changes) - len(shown),
-                    more_units=max(len(guided) - MAX_EVENT_ITEMS, 0),
-                )
-            )
-        return out
+                self._fault(b, *ev.blame(inp, self.settings.mission), exc)
+        if b.changes:
+            self._world_changed(b)
+        first = len(b.out.directions)  # before: pushes sent again by the timers
+        self._directions(b)
+        self._live.pushed(b.out.directions[first:], now)
+        if b.changes:
+            b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions))
+        return b.out
 
-    def _apply_one(
-        self, inp: Input, now: float, dirty: set[str], changes: list[ThreatChange], out: Outputs
-    ) -> None:
+    def _apply_one(self, inp: Input, b: _Batch) -> None:
         match inp:
-            case StateReported(unit, state):
-                self._state(unit, state, now, dirty, out)
-            case GoalSet(unit, goal):
-                self._goal(unit, goal, now, dirty, out)
-            case GoalCancelled(unit):
-                self._cancel(unit, dirty)
-            case ThreatPut(tid, update):
-                self._threat_put(tid, update, now, changes, out)
-            case ThreatRemoved(tid):
-                gone = self._threats.pop(tid, None)
-                if gone is not None:
-                    self._touched.append(gone.threat)
-                    changes.append(ThreatChange(threat=tid, change="removed", position=gone.update.position))
-            case TokenChanged(unit, alive):
-                self._token(unit, alive, now)
-            case InputRejected(key, error):
-                self._reject(key, error, now, out)
-            case Deliberated():
-                self._deliberated(inp, now, dirty, out)
-            case MissionRestored():
-                self._restore(inp, now, out)
-            case MissionShared(unit, mission):
-                self._shared(unit, mission, now, out)
-            case PeerPlanner(planner, alive):
-                self._peer(planner, alive, now, dirty, out)
-            case Tick(t):
-                self._run_timers(t, changes, out, dirty)
+            case ev.StateReported(unit, state):
+                self._state(unit, state, b)
+            case ev.GoalSet(unit, goal):
+                rec = self._units.get(unit)  # a peer's mission for this very goal may have come first: kept
+                keep = rec.shared if rec and not rec.owned and rec.shared and rec.shared[0] == goal else None
+                self._adopt(unit, goal, keep, b)
+            case ev.GoalCancelled(unit):
+                rec = self._units.get(unit)
+                if rec is not None and rec.goal is not None:
+                    self._rec.drop_mission(rec)
+                    self._tell(rec, b)
+            case ev.ThreatPut(tid, update):
+                self._threat_put(tid, update, b)
+            case ev.ThreatRemoved(tid):
+                self._threat_gone(self._rec.remove_threat(tid), tid, "removed", b)
+            case ev.TokenChanged(unit, alive):
+                rec = self._units.get(unit)
+                if rec is not None:  # a token alone makes no unit: only a report does
+                    self._live.token(rec, alive, b.now)
+            case ev.InputRejected(key, error):
+                self._reject(key, error, b)
+            case ev.Deliberated():
+                self._deliberated(inp, b)
+            case ev.MissionRestored(unit, goal, origin, params):
+                self._adopt(unit, goal, (goal, origin, params), b, restored=True)
+            case ev.MissionShared(unit, mission):
+                rec = self._unit(unit, b, keys.unit_mission)
+                if rec is not None and not rec.owned:  # our own missions come back to us too: ours stands
+                    self._rec.share(rec, mission)
+            case ev.PeerPlanner(planner, alive):
+                self._peer(planner, alive, b)
+            case ev.Tick(t):
+                self._run_timers(t, b)
 
     # -- bulkheads ------------------------------------------------------------------
     def _key(self, kind: keys.KeyKind, ident: str) -> str:
-        """The key an input came on, spelled from the layout even for an id ``keys`` would refuse."""
+        """The key of ``kind`` for ``ident``, spelled even for an id ``keys`` would refuse."""
         return keys.TEMPLATES[kind].format(mission=self.settings.mission, id=ident)
-
-    def _blame(self, inp: Input) -> tuple[str, str | None]:
-        """The key a failed input is rejected on, and the unit whose goal goes with it (if any)."""
-        k = keys.KeyKind
-        match inp:
-            case StateReported(unit):
-                return self._key(k.UNIT_STATE, unit), unit
-            case GoalSet(unit) | GoalCancelled(unit) | MissionRestored(unit) | Deliberated(unit):
-                return self._key(k.UNIT_GOAL, unit), unit
-            case MissionShared(unit):
-                return self._key(k.UNIT_MISSION, unit), unit
-            case ThreatPut(tid) | ThreatRemoved(tid):
-                return self._key(k.THREAT, tid), None
-            case TokenChanged(unit):
-                return self._key(k.ALIVE_UNIT, unit), None
-            case PeerPlanner(planner):
-                return self._key(k.ALIVE_PLANNER, planner), None
-            case InputRejected(key):
-                return key, None
-        return self._key(k.EVENT, "tick"), None
 
     def _fault(
         self,
+        b: _Batch,
         key: str,
+        unit: str | None,
         exc: BaseException,
-        now: float,
-        out: Outputs,
-        unit: str | None = None,
-        dirty: set[str] | None = None,
         error: tuple[str, str, str] | None = None,
     ) -> None:
         """Something failed inside the world on ``key``'s account: drop it, reject it, log it once a minute.
@@ -445,643 +182,219 @@ class World:
         The unit named loses its goal (a goal it cannot be guided to is
         refused, not retried at every report) and gets ``no_goal``.
         """
-        self.faults += 1
         rec = self._units.get(unit) if unit is not None else None
         said = ""
         if rec is not None:
             try:
-                had = rec.goal is not None
-                self._drop_mission(rec)
-                said = "; the unit's goal was dropped" if had else ""
-                if dirty is not None and rec.position is not None and not rec.stale:
-                    dirty.add(rec.id)
+                said = "; the unit's goal was dropped" if rec.goal is not None else ""
+                self._rec.drop_mission(rec)
+                self._tell(rec, b)
             except Exception:  # a record too broken to reset: forget it (a report makes it afresh)
                 self._units.pop(rec.id, None)
-                if rec.stale:
-                    self._stale -= 1
-        name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], where(exc))
+                self._rec.stale -= rec.stale
+        name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], ev.where(exc))
         reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
-        self._reject(key, InputError("$", reason), now, out)
-        # the operator's log: once a minute per key, and never a traceback
-        if key not in self._fault_log and len(self._fault_log) >= FAULT_KEYS_MAX:
-            for old, (when, _held) in list(self._fault_log.items()):
-                if now - when >= FAULT_LOG_S:
-                    del self._fault_log[old]
-            if len(self._fault_log) >= FAULT_KEYS_MAX:
-                key = _ANY_KEY
-        when, held = self._fault_log.get(key, (-math.inf, 0))
-        if now - when < FAULT_LOG_S:
-            self._fault_log[key] = (when, held + 1)
-            return
-        self._fault_log[key] = (now, 0)
-        out.faults.append(Fault(key, name, detail, at, held))
+        self._reject(key, InputError("$", reason), b)
+        logged = self.limits.fault(key, b.now)  # the operator's log: once a minute per key, never a traceback
+        if logged is not None:
+            b.out.faults.append(ev.Fault(logged[0], name, detail, at, logged[1]))
+
+    def _unit_fault(self, b: _Batch, rec: UnitRecord, exc: BaseException) -> None:
+        self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, exc)
+
+    def _reject(self, key: str, err: InputError, b: _Batch) -> None:
+        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per kind of key."""
+        held = self.limits.reject(key, b.now)
+        if held is not None:
+            b.out.events.append(steering.rejected(key, err, self.settings.planner_id, held))
 
     # -- inputs ---------------------------------------------------------------------
     def _unit(
-        self,
-        unit_id: str,
-        now: float,
-        out: Outputs,
-        key: Callable[[str, str], str],
-        reported: bool = False,
-    ) -> _Unit | None:
-        """The unit's record, made at its first input; ``key`` names the input's key for a refusal.
-
-        A record made by anything but a report (a goal, a restored or a
-        peer's mission) is stale from the start: it has not been heard from,
-        and it is forgotten ``unit_forget_s`` later unless it reports.
-        """
+        self, unit_id: str, b: _Batch, key: Callable[[str, str], str], reported: bool = False
+    ) -> UnitRecord | None:
+        """The unit's record, made at its first input (stale then, unless ``reported``)."""
         rec = self._units.get(unit_id)
         if rec is None:
-            if len(self._units) >= self.settings.max_units:
-                self.overload += 1
-                err = InputError("$", f"planner at max_units ({self.settings.max_units})")
-                self._reject(key(self.settings.mission, unit_id), err, now, out)
+            s = self.settings
+            if len(self._units) >= s.max_units:
+                self.limits.overload += 1
+                err = InputError("$", f"planner at max_units ({s.max_units})")
+                self._reject(key(s.mission, unit_id), err, b)
                 return None
-            rec = self._units[unit_id] = _Unit(unit_id, unit_key(unit_id))
-            rec.owned = self.owns(unit_id)
-            if not reported:
-                rec.stale = True
-                rec.stale_since = now
-                self._stale += 1
-                if self.settings.unit_forget_s is not None:
-                    self._timer(now + self.settings.unit_forget_s, "forget", unit_id)
+            rec = self._rec.add(unit_id, self.owns(unit_id), b.now, reported)
+            self._live.made(rec, b.now)
         return rec
 
-    def _state(self, unit_id: str, msg: UnitState, now: float, dirty: set[str], out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_state, reported=True)
+    def _tell(self, rec: UnitRecord, b: _Batch) -> None:
+        """The unit is to get a fresh direction in this batch, if it has reported and is not stale."""
+        if rec.position is not None and not rec.stale:
+            b.dirty.add(rec.id)
+
+    def _state(self, unit_id: str, state: UnitState, b: _Batch) -> None:
+        rec = self._unit(unit_id, b, keys.unit_state, reported=True)
         if rec is None:
             return
-        rec.position = (msg.position[0], msg.position[1])
-        rec.seq = msg.seq
-        rec.kind = msg.kind.value if msg.kind is not None else rec.kind
-        rec.last_seen = now
-        if rec.stale:
-            rec.stale = False
-            rec.stale_since = None
-            self._stale -= 1
-        rec.token_gone_since = None  # a report is proof of life, whatever the token says
-        rec.push = None  # it is answered now
-        if not rec.silence_timer:
-            rec.silence_timer = True
-            self._timer(now + self.settings.unit_stale_s, "silence", unit_id)
-        if not rec.owned:  # another planner guides it; its report keeps it fresh here too
-            return
-        if rec.goal is not None and rec.stepper is None:
-            self._start(rec, now, out)
-        dirty.add(unit_id)
+        self._live.heard(rec, state, b.now)
+        if rec.owned:  # else another planner guides it; its report keeps it fresh here too
+            if rec.goal is not None and rec.stepper is None:
+                self._start(rec, b)
+            b.dirty.add(unit_id)
 
-    def _goal(self, unit_id: str, goal: Goal, now: float, dirty: set[str], out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_goal)
+    def _adopt(
+        self, unit_id: str, goal: Goal, shared: missions.Shared | None, b: _Batch, restored: bool = False
+    ) -> None:
+        """A goal set (keeping ``shared`` if given), or a mission restored: a new epoch, started if owned."""
+        rec = self._unit(unit_id, b, keys.unit_goal)
         if rec is None:
             return
-        # a peer's mission for this very goal may have come first: keep it for a takeover
-        keep = rec.shared if not rec.owned and rec.shared is not None and rec.shared[0] == goal else None
-        self._drop_mission(rec)
-        rec.goal = goal
-        rec.shared = keep
-        if rec.position is not None and rec.owned:
-            self._start(rec, now, out)
-            if not rec.stale:
-                dirty.add(unit_id)
+        self._rec.drop_mission(rec)
+        rec.goal, rec.shared = goal, shared
+        if restored and rec.owned:
+            self._start(rec, b, record=False)
+        elif rec.position is not None and rec.owned:
+            self._start(rec, b)
+            self._tell(rec, b)
 
-    def _restore(self, m: MissionRestored, now: float, out: Outputs) -> None:
-        rec = self._unit(m.unit, now, out, keys.unit_goal)
-        if rec is None:
-            return
-        self._drop_mission(rec)
-        rec.goal = m.goal
-        rec.shared = (m.goal, m.origin, m.params)
-        if rec.owned:
-            self._start(rec, now, out, record=False)
-
-    def _peer(self, planner: str, alive: bool, now: float, dirty: set[str], out: Outputs) -> None:
-        if planner == self.settings.planner_id:
-            return
+    def _peer(self, planner: str, alive: bool, b: _Batch) -> None:
+        s = self.settings
         if not alive:  # acted on only if still gone after the debounce (a router restart flaps every token)
-            if planner in self._peers and planner not in self._peers_gone:
-                self._peers_gone[planner] = now
-                self._timer(now + self.settings.liveliness_debounce_s, "peer", planner)
-            return
-        if self._peers_gone.pop(planner, None) is not None or planner in self._peers:
-            return  # back within the debounce, or known: nothing moves
-        self._peers.add(planner)
-        if self.settings.cluster:
-            self._rebalance(now, dirty, out)
+            if self._own.left(planner, b.now):
+                self._timers.set(b.now + s.liveliness_debounce_s, "peer", planner)
+        elif not self._own.joined(planner):
+            return  # this planner, a known peer, or one back within the debounce: nothing moves
+        elif s.cluster:
+            self._rebalance(b)
         else:
-            reason = (
-                f"planner {planner!r} also serves mission {self.settings.mission!r}; both answer every unit"
-            )
-            out.events.append(ConflictEvent(planner=self.settings.planner_id, other=planner, reason=reason))
+            why = f"planner {planner!r} also serves mission {s.mission!r}; both answer every unit"
+            b.out.events.append(ConflictEvent(planner=s.planner_id, other=planner, reason=why))
 
-    # -- scale-out -------------------------------------------------------------------
-    def owns(self, unit_id: str) -> bool:
-        """Whether this planner guides ``unit_id``: rendezvous hashing of unit x planner, highest wins.
-
-        Without ``cluster`` it owns every unit.  A planner joining takes about
-        1/K of each planner's units; one leaving hands over only its own.
-        """
-        if not self.settings.cluster or not self._peers:
-            return True
-        me = self.settings.planner_id
-        best = max((*self._peers, me), key=lambda p: (rendezvous_weight(unit_id, p), p))
-        return best == me
-
-    def _rebalance(self, now: float, dirty: set[str], out: Outputs) -> None:
-        if not self.settings.cluster:
-            return
+    def _rebalance(self, b: _Batch) -> None:
+        """The live planners changed: a unit taken over is guided from its last mission at once."""
         for rec in self._units.values():
             owned = self.owns(rec.id)
             if owned == rec.owned:
                 continue
-            rec.owned = owned
-            if owned:  # taken over: guided from the mission its last owner fixed, told at once
-                if rec.goal is not None and rec.position is not None:
-                    self._start(rec, now, out)
-                if rec.position is not None and not rec.stale:
-                    dirty.add(rec.id)
-            else:  # handed over: the new owner guides it now
-                self._supersede(rec)
-                rec.stepper = None
-                rec.push = None
-                rec.last_status = None
+            if not owned:
+                self._rec.hand_over(rec)
+                continue
+            rec.owned = True
+            if rec.goal is not None and rec.position is not None:
+                self._start(rec, b)
+            self._tell(rec, b)
 
-    def _shared(self, unit_id: str, mission: Mission, now: float, out: Outputs) -> None:
-        rec = self._unit(unit_id, now, out, keys.unit_mission)
-        if rec is None or rec.owned:
-            return  # our own missions come back to us too: ours stands
-        params = Resolved(**msgspec.structs.asdict(mission.params))  # type: ignore[arg-type]
-        rec.shared = (mission.goal, (mission.origin[0], mission.origin[1]), params)
-
-    def _cancel(self, unit_id: str, dirty: set[str]) -> None:
-        rec = self._units.get(unit_id)
-        if rec is None or rec.goal is None:
+    def _threat_put(self, tid: str, msg: ThreatUpdate, b: _Batch) -> None:
+        s = self.settings
+        if tid not in self._threats and len(self._threats) >= s.max_threats:
+            self.limits.overload += 1
+            err = InputError("$", f"planner at max_threats ({s.max_threats})")
+            self._reject(keys.threat(s.mission, tid), err, b)
             return
-        self._drop_mission(rec)
-        if rec.position is not None and not rec.stale:
-            dirty.add(unit_id)
+        ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
+        new = ThreatRecord(msg, msg.to_threat(tid), None if ttl is None else b.now + ttl)
+        old = self._rec.put_threat(tid, new)
+        b.touched += [new.threat] if old is None else [old.threat, new.threat]
+        if new.expires_at is not None:
+            self._timers.set(new.expires_at, "expire", tid)
+        b.changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
 
-    def _drop_mission(self, rec: _Unit) -> None:
-        rec.goal = None
-        rec.stepper = None
-        rec.origin = None
-        rec.last_status = None
-        rec.last_reason = ""
-        rec.last_distance = None
-        rec.last_vector = None
-        rec.shared = None
-        rec.epoch += 1
-        self._supersede(rec)
+    def _threat_gone(self, t: ThreatRecord | None, tid: str, change: str, b: _Batch) -> None:
+        if t is not None:
+            b.touched.append(t.threat)
+            b.changes.append(ThreatChange(threat=tid, change=change, position=t.update.position))
 
-    def _threat_put(
-        self, tid: str, msg: ThreatUpdate, now: float, changes: list[ThreatChange], out: Outputs
-    ) -> None:
-        if tid not in self._threats and len(self._threats) >= self.settings.max_threats:
-            self.overload += 1
-            err = InputError("$", f"planner at max_threats ({self.settings.max_threats})")
-            self._reject(keys.threat(self.settings.mission, tid), err, now, out)
-            return
-        ttl = msg.ttl_s if msg.ttl_s is not None else self.settings.threat_ttl_s
-        expires = None if ttl is None else now + ttl
-        old = self._threats.get(tid)
-        if old is not None:
-            self._touched.append(old.threat)
-        self._threats[tid] = new = _Threat(msg, msg.to_threat(tid), expires)
-        self._touched.append(new.threat)
-        if expires is not None:
-            self._timer(expires, "expire", tid)
-        changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
-
-    def _token(self, unit_id: str, alive: bool, now: float) -> None:
-        rec = self._units.get(unit_id)
-        if rec is None:
-            return  # a token alone makes no unit: only a report does
-        if alive:
-            rec.token_gone_since = None
-        elif rec.token_gone_since is None:
-            rec.token_gone_since = now
-            self._timer(now + self.settings.liveliness_debounce_s, "token", unit_id)
-
-    def _reject(self, key: str, err: InputError, now: float, out: Outputs) -> None:
-        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per kind of key."""
-        self.rejected += 1
-        try:
-            kind = keys.parse(key).kind.value
-        except InputError:
-            kind = "unknown"
-        start, sent, held = self._reject_window.get(kind, (now, 0, 0))
-        if now - start >= 1.0:
-            start, sent = now, 0
-        if sent >= REJECTS_PER_S:
-            self._reject_window[kind] = (start, sent, held + 1)
-            return
-        ev = RejectedEvent.of(key, err, planner=self.settings.planner_id)
-        if held:
-            ev = msgspec.structs.replace(ev, suppressed=held)
-        out.events.append(ev)
-        self._reject_window[kind] = (start, sent + 1, 0)
-
-    def _deliberated(self, done: Deliberated, now: float, dirty: set[str], out: Outputs) -> None:
+    def _deliberated(self, done: ev.Deliberated, b: _Batch) -> None:
         rec = self._units.get(done.unit)
         if rec is None or rec.job is None or rec.job.token != done.token:
             return  # superseded: a newer goal or world is in force
-        kind = rec.job.kind
-        rec.job = None
-        self._deliberating -= 1
+        kind = self._rec.answered(rec)
         if rec.stepper is None or rec.token() != done.token:
             return
         if done.error is not None:  # it failed where it ran: this unit's goal goes, as a fault here would
-            err = RuntimeError(done.error[1])
-            self._fault(self._key(keys.KeyKind.UNIT_GOAL, rec.id), err, now, out, rec.id, dirty, done.error)
-            return
-        if done.stepper is None:  # ran past its deadline: descend meanwhile, and ask again
-            if kind == "foresee":
-                rec.stepper.look_ahead_again()  # at its next report, behind the queue
-            else:
-                rec.stepper.pending = None  # a trap is asked again by the trap watch itself
-        elif rec.stepper.adopt(done.stepper) and rec.position is not None and not rec.stale:
-            dirty.add(rec.id)  # a route or a verdict: told at once, not at its next report
+            self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, RuntimeError(done.error[1]), done.error)
+        elif done.stepper is None and kind == "foresee":  # past its deadline: descend, and ask again
+            rec.stepper.look_ahead_again()  # at its next report, behind the queue
+        elif done.stepper is None:
+            rec.stepper.pending = None  # a trap is asked again by the trap watch itself
+        elif rec.stepper.adopt(done.stepper):
+            self._tell(rec, b)  # a route or a verdict: told at once, not at its next report
 
     # -- timers ---------------------------------------------------------------------
-    def _timer(self, when: float, kind: str, ident: str) -> None:
-        self._timer_seq += 1
-        heapq.heappush(self._timers, (when, self._timer_seq, kind, ident))
-
-    def _run_timers(self, now: float, changes: list[ThreatChange], out: Outputs, dirty: set[str]) -> None:
-        while self._timers and self._timers[0][0] <= now:
-            _, _, kind, ident = heapq.heappop(self._timers)
-            try:
-                self._timer_due(kind, ident, now, changes, out, dirty)
-            except Exception as exc:  # the bulkhead: this timer alone fails
-                if kind == "expire":
-                    self._fault(self._key(keys.KeyKind.THREAT, ident), exc, now, out)
-                elif kind == "peer":
-                    self._fault(self._key(keys.KeyKind.ALIVE_PLANNER, ident), exc, now, out)
-                else:
-                    self._fault(self._key(keys.KeyKind.UNIT_GOAL, ident), exc, now, out, ident, dirty)
-
-    def _timer_due(
-        self, kind: str, ident: str, now: float, changes: list[ThreatChange], out: Outputs, dirty: set[str]
-    ) -> None:
+    def _run_timers(self, now: float, b: _Batch) -> None:
         s = self.settings
-        if kind == "peer":  # a peer planner's token gone for the whole debounce: its units move
-            gone = self._peers_gone.get(ident)
-            if gone is not None and now - gone >= s.liveliness_debounce_s:
-                del self._peers_gone[ident]
-                self._peers.discard(ident)
-                self._rebalance(now, dirty, out)
-            return
-        if kind == "expire":
-            t = self._threats.get(ident)
-            if t is not None and t.expires_at is not None and t.expires_at <= now:
-                del self._threats[ident]
-                self._touched.append(t.threat)
-                changes.append(ThreatChange(threat=ident, change="expired", position=t.update.position))
-            return
-        rec = self._units.get(ident)
-        if rec is None:
-            return
-        if kind == "silence":
-            if now - rec.last_seen <= s.unit_stale_s:  # heard since: look again when it could be due
-                self._timer(max(rec.last_seen + s.unit_stale_s, now) + 1e-9, "silence", ident)
-                return
-            rec.silence_timer = False
-            self._go_stale(rec, now, f"silent for {now - rec.last_seen:.3g} s", out)
-        elif kind == "token":
-            gone = rec.token_gone_since
-            if gone is not None and now - gone >= s.liveliness_debounce_s:
-                self._go_stale(rec, now, "liveliness token gone", out)
-        elif kind == "push" and rec.push is not None and rec.push_tries > 0 and not rec.stale:
-            rec.push_tries -= 1
-            self.pushes_resent += 1
-            out.directions.append(rec.push)
-            if rec.push_tries:
-                self._timer(now + s.push_retry_s, "push", ident)
-        elif kind == "forget" and self._forgettable(rec, now):
-            self._forget(rec, now, out)
-
-    def _pushes(self, fresh: list[Direction], now: float) -> None:
-        """Directions no report asked for (a world change, a route landing) are sent again until answered.
-
-        Directions go out with congestion control DROP, so a burst may lose
-        some; a pushed unit gets the same direction again every
-        ``push_retry_s``, up to ``push_retries`` times, until its next report
-        is answered.
-        """
-        for d in fresh:
-            rec = self._units.get(d.unit)
-            if rec is None or rec.last_seen >= now:  # answering a report of this batch
-                continue
-            if (rec.push is None or rec.push_tries == 0) and self.settings.push_retries > 0:
-                self._timer(now + self.settings.push_retry_s, "push", rec.id)
-            rec.push = d
-            rec.push_tries = self.settings.push_retries
-            self.pushes += 1
-
-    def _forgettable(self, rec: _Unit, now: float) -> bool:
-        limit = self.settings.unit_forget_s
-        return (
-            rec.stale and rec.stale_since is not None and limit is not None and now - rec.stale_since >= limit
-        )
-
-    def _go_stale(self, rec: _Unit, now: float, reason: str, out: Outputs) -> None:
-        if rec.stale or rec.position is None:
-            return
-        rec.stale = True
-        rec.stale_since = now
-        self._stale += 1
-        out.events.append(
-            StaleEvent(planner=self.settings.planner_id, unit=rec.id, position=rec.position, reason=reason)
-        )
-        if self.settings.unit_forget_s is not None:
-            self._timer(now + self.settings.unit_forget_s, "forget", rec.id)
-
-    def _forget(self, rec: _Unit, now: float, out: Outputs) -> None:
-        self._supersede(rec)
-        del self._units[rec.id]
-        self._stale -= 1
-        stale_s = now - rec.stale_since if rec.stale_since is not None else 0.0
-        out.events.append(ForgottenEvent(planner=self.settings.planner_id, unit=rec.id, stale_s=stale_s))
+        for kind, ident in self._timers.due(now):
+            try:
+                if kind == "peer":  # a peer's token gone for the whole debounce: its units move
+                    if self._own.settle(ident, now, s.liveliness_debounce_s) and s.cluster:
+                        self._rebalance(b)
+                elif kind == "expire":
+                    self._threat_gone(self._rec.expire(ident, now), ident, "expired", b)
+                elif kind in UNIT_TIMERS and (rec := self._units.get(ident)) is not None:
+                    self._live.due(kind, rec, now, b.out)
+            except Exception as exc:  # the bulkhead: this timer alone fails
+                on = {"expire": K.THREAT, "peer": K.ALIVE_PLANNER}.get(kind, K.UNIT_GOAL)
+                self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, exc)
 
     # -- planning -------------------------------------------------------------------
-    def _start(self, rec: _Unit, now: float, out: Outputs, record: bool = True) -> bool:
-        """Fix the unit's mission (x0 and parameters) and give it a stepper.
+    def _start(self, rec: UnitRecord, b: _Batch, record: bool = True) -> None:
+        """Fix the unit's mission and give it a stepper (``missions.start``); a mission refused drops the goal."""
+        fld = self.field  # builds the stats with it
+        mission = missions.start(rec, self.settings, fld, self._rec.stats)
+        if isinstance(mission, InputError):
+            self._reject(self._key(K.UNIT_GOAL, rec.id), mission, b)
+            self._rec.drop_mission(rec)
+        elif record:
+            b.out.missions.append(mission)
 
-        A mission restored or shared for this very goal is kept, so a restart or
-        a takeover guides the unit exactly as before; otherwise x0 is where the
-        unit is now.  A goal closer than ``LENGTH_MIN_M`` is planned with a
-        step of that length, so it has arrived; a mission the planner cannot
-        plan (``constraints.reach_problem``) is refused: the goal is rejected
-        on its key, dropped, and ``False`` returned.
+    def _world_changed(self, b: _Batch) -> None:
+        """The threats changed: re-judge and re-direct the units the change can reach (``steering.reached``).
+
+        A unit out of reach, neither escaping nor deliberating, keeps its
+        direction: a contingency costs what it touches, not the whole fleet.
         """
-        assert rec.goal is not None
-        goal = (rec.goal.position[0], rec.goal.position[1])
-        if rec.shared is not None and rec.shared[0] == rec.goal:
-            origin, resolved = rec.shared[1], rec.shared[2]
-        else:
-            assert rec.position is not None
-            origin = rec.position
-            fld = self.field  # builds the stats with it
-            params = self.settings.params_for(rec.goal)
-            if math.dist(origin, goal) < LENGTH_MIN_M and (params.step or 0.0) < LENGTH_MIN_M:
-                params = params.merged(step=LENGTH_MIN_M)  # closer than the planner resolves: arrived
-            resolved = resolve(params, origin, goal, fld.threats, self._stats)
-        problem = reach_problem(math.dist(origin, goal), resolved.step, resolved.max_iter, resolved.tolerance)
-        if problem is not None:
-            path = "$.step" if rec.goal.step is not None else "$.position"
-            self._reject(self._key(keys.KeyKind.UNIT_GOAL, rec.id), InputError(path, problem), now, out)
-            self._drop_mission(rec)
-            return False
-        rec.shared = (rec.goal, origin, resolved)
-        rec.origin = origin
-        rec.stepper = Stepper(origin, goal, resolved, self.settings.bounds, rec.key)
-        rec.stepper.defer = self.settings.deliberation == "deferred"
-        if record:
-            out.missions.append(MissionRecord(rec.id, rec.epoch, origin, rec.goal, resolved))
-        return True
-
-    def _supersede(self, rec: _Unit) -> None:
-        if rec.job is not None:
-            rec.job.cancelled = True
-            rec.job = None
-            self._deliberating -= 1
-
-    def _world_changed(self, now: float, out: Outputs) -> set[str]:
-        """The threats changed: re-judge and re-direct the units the change can reach.
-
-        A unit is reached when a touched threat's influence box (where it is
-        not culled, ``cull.influence_boxes``) meets the unit's corridor to its
-        goal (``cull.corridors_meet``), or when it is escaping or deliberating
-        (its route or its job was judged under the old field).  Every other
-        unit's direction is unchanged within the cull bound, and it is left
-        alone: a contingency costs what it touches, not the whole fleet.  If
-        the vectorised test fails, every guided unit counts as reached.
-        """
-        self._field = None
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
-        if not guided:
-            return set()
-        try:
-            touched = ThreatField(self._touched, self.settings.planner.intensity)
-            boxes = influence_boxes(touched.packed)
-            starts = np.array([r.position for r in guided], dtype=float)
-            ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
-            reached = corridors_meet(starts, ends, boxes).tolist()
-        except Exception:  # judged afresh, all of them: dearer, never wrong
-            reached = [True] * len(guided)
-        dirty: set[str] = set()
-        for rec, hit in zip(guided, reached):
+        for rec, hit in zip(guided, steering.reached(guided, b.touched, self.settings.planner.intensity)):
             try:
                 assert rec.stepper is not None
-                if not (
-                    hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None
-                ):
-                    continue
-                rec.stepper.world_changed()
-                self._supersede(rec)
+                if hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None:
+                    rec.stepper.world_changed()
+                    self._rec.supersede(rec)
+                    self._tell(rec, b)
             except Exception as exc:
-                self._fault(self._key(keys.KeyKind.UNIT_GOAL, rec.id), exc, now, out, rec.id, dirty)
-                continue
-            if not rec.stale:
-                dirty.add(rec.id)
-        return dirty
+                self._unit_fault(b, rec, exc)
 
-    def _directions(self, unit_ids: set[str], now: float, out: Outputs) -> None:
-        """A fresh direction for each unit named (stale and unknown units get none).
-
-        Units with a goal are advised in one vectorised call, their look-ahead
-        points in ``lookahead`` more; the rest get ``no_goal``.  If a unit's
-        numbers break the batch, it is run again one unit at a time and the
-        units that fail alone are dropped (``_fault``); a direction that is
-        not finite drops its unit the same way.
-        """
-        guided: list[_Unit] = []
-        for uid in sorted(unit_ids):
-            rec = self._units.get(uid)
-            if rec is None or rec.stale or rec.position is None or not rec.owned:
-                continue
-            if rec.stepper is None:
-                out.directions.append(self._no_goal(rec))
-            else:
-                guided.append(rec)
+    def _directions(self, b: _Batch) -> None:
+        """A fresh direction for each live unit of the batch (``steering.steer``); one whose step fails loses its goal."""
+        p, out = self.settings.planner_id, b.out
+        live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
+        out.directions += [steering.no_goal(r, p) for r in live if r.stepper is None]
+        guided = [r for r in live if r.stepper is not None]
         if not guided:
             return
         fld = self.field
-        dropped: list[_Unit] = []  # units whose step failed: told no_goal once the rest are out
-        try:
-            advices = self._advise(guided, fld)
-        except Exception:  # one unit's numbers broke the batch: each alone, the poisoned dropped
-            advices, alone = [], guided
-            guided = []
-            for rec in alone:
-                try:
-                    advices += self._advise([rec], fld)
-                    guided.append(rec)
-                except Exception as exc:
-                    self._unit_fault(rec, exc, now, out, dropped)
-        if not all(map(_finite_advice, advices)):
-            for rec, adv in zip(guided, advices):
-                if not _finite_advice(adv):
-                    err = FloatingPointError(f"a direction that is not finite at {rec.position}")
-                    self._unit_fault(rec, err, now, out, dropped)
-            kept = [(r, a) for r, a in zip(guided, advices) if _finite_advice(a)]
-            guided, advices = [r for r, _ in kept], [a for _, a in kept]
-        try:
-            ahead = self._lookahead(guided, advices, fld)
-        except Exception:
-            ahead, pairs = [], list(zip(guided, advices))
-            guided, advices = [], []
-            for rec, adv in pairs:
-                try:
-                    ahead += self._lookahead([rec], [adv], fld)
-                    guided.append(rec)
-                    advices.append(adv)
-                except Exception as exc:
-                    self._unit_fault(rec, exc, now, out, dropped)
-        first = len(out.directions)
-        sent: list[_Unit] = []
-        for rec, adv, points in zip(guided, advices, ahead):
+        steered, failed = steering.steer(guided, fld, self._rec.cull, self.settings.lookahead)
+        for rec, exc in failed:
+            self._unit_fault(b, rec, exc)
+        first, sent = len(out.directions), []
+        for rec, adv, points in steered:
             try:
-                d = self._direction(rec, adv, _within_map(points), out)
+                d, event = steering.direction(rec, adv, points, p, rec.job is not None)
                 if rec.stepper is not None and rec.stepper.pending is not None and rec.job is None:
-                    self._ask(rec, fld, now, out)
+                    self._ask(rec, fld, b)
             except Exception as exc:
-                self._unit_fault(rec, exc, now, out, dropped)
+                self._unit_fault(b, rec, exc)
+                failed.append((rec, exc))
                 continue
+            out.events += [event] if event is not None else []
             out.directions.append(d)
-            sent.append(rec)
+            sent.append(rec.position)
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
-            self._geodetic(out, first, [r.position for r in sent])
-        for rec in dropped:
-            if rec.id in self._units and rec.position is not None and not rec.stale and rec.owned:
-                out.directions.append(self._no_goal(rec))
+            out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
+        # a unit whose step failed lost its goal: told so, once the rest are out
+        out.directions += [steering.no_goal(r, p) for r, _ in failed if r.id in self._units and r.live()]
 
-    def _advise(self, guided: list[_Unit], fld: ThreatField) -> list[Advice]:
-        steppers: list[Stepper] = [r.stepper for r in guided]  # type: ignore[misc]
-        return advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), self._cull)
-
-    def _unit_fault(
-        self, rec: _Unit, exc: BaseException, now: float, out: Outputs, dropped: list[_Unit]
-    ) -> None:
-        """One unit's step failed: its goal is dropped and rejected, and it is to be told ``no_goal``."""
-        self._fault(self._key(keys.KeyKind.UNIT_GOAL, rec.id), exc, now, out, rec.id)
-        dropped.append(rec)
-
-    def _no_goal(self, rec: _Unit) -> Direction:
-        rec.last_status = DirectionStatus.NO_GOAL
-        return Direction(
-            unit=rec.id,
-            seq=rec.seq,
-            status=DirectionStatus.NO_GOAL,
-            vector=(0.0, 0.0),
-            planner=self.settings.planner_id,
-        )
-
-    def _geodetic(self, out: Outputs, first: int, positions: list[tuple[float, float] | None]) -> None:
-        """Lat/lon and true bearing for the directions from ``first`` on; one that fails goes without."""
-        fresh = out.directions[first:]
-        try:
-            converted = with_geodetic_many(fresh, self.settings.origin, positions)
-        except Exception:
-            converted = list(fresh)
-            for i, (d, p) in enumerate(zip(fresh, positions)):
-                with contextlib.suppress(Exception):  # this one goes in metres only
-                    (converted[i],) = with_geodetic_many([d], self.settings.origin, [p])
-        # a point thousands of km off the origin has no meaningful lat/lon: that one goes in metres only
-        out.directions[first:] = [g if _geo_ok(g) else d for d, g in zip(fresh, converted)]
-
-    def _ask(self, rec: _Unit, fld: ThreatField, now: float, out: Outputs) -> None:
+    def _ask(self, rec: UnitRecord, fld: ThreatField, b: _Batch) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
-        work = copy.deepcopy(rec.stepper)
-        kind = rec.stepper.pending.kind
-        deadline = now + self.settings.deliberation_budget_s
-        rec.job = Job(rec.id, rec.token(), kind, work, fld, deadline)
-        self._deliberating += 1
-        out.jobs.append(rec.job)
-
-    def _lookahead(
-        self, guided: list[_Unit], advices: list[Advice], fld: ThreatField
-    ) -> list[list[tuple[float, float]]]:
-        n = self.settings.lookahead
-        result: list[list[tuple[float, float]]] = [[] for _ in guided]
-        if n <= 0:
-            return result
-        idx = [i for i, a in enumerate(advices) if not a.status.terminal]
-        if not idx:
-            return result
-        steppers = []
-        starts = []
-        for i in idx:
-            rec, adv = guided[i], advices[i]
-            assert rec.stepper is not None and rec.position is not None
-            steppers.append(rec.stepper)
-            starts.append(adv.to)  # where the step advised ends (steprule.judge)
-        tracks = predict_many(steppers, fld, np.array(starts), n - 1, self._cull)
-        for i, track in zip(idx, tracks):
-            result[i] = track
-        return result
-
-    def _direction(
-        self, rec: _Unit, adv: Advice, points: list[tuple[float, float]], out: Outputs
-    ) -> Direction:
-        assert rec.position is not None
-        status = _STATUS[adv.status]
-        if status is not rec.last_status:
-            self._transition(rec, status, adv, out)
-        rec.last_status = status
-        rec.last_reason = adv.reason
-        rec.last_distance = min(adv.distance, FINITE_LIMIT)  # the wire's bound: a diagonal of the map is more
-        rec.last_vector = None if adv.status.terminal else (adv.dx, adv.dy)
-        heading = None
-        if not adv.status.terminal and (adv.dx or adv.dy):
-            heading = math.degrees(math.atan2(adv.dx, adv.dy)) % 360.0
-            heading = 0.0 if heading >= 360.0 else heading  # -1e-300 % 360 is 360.0
-        d = Direction(
-            unit=rec.id,
-            seq=rec.seq,
-            status=status,
-            vector=(adv.dx, adv.dy),
-            heading_deg=heading,
-            distance_to_goal=rec.last_distance,
-            threat_level=min(max(adv.level, 0.0), FINITE_LIMIT),  # the wire's bound, even for absurd weights
-            lookahead=points,
-            reason=adv.reason[:1024],
-            deliberating=adv.deliberating or rec.job is not None,
-            planner=self.settings.planner_id,
-        )
-        return d
-
-    def _transition(self, rec: _Unit, status: DirectionStatus, adv: Advice, out: Outputs) -> None:
-        assert rec.position is not None
-        p = self.settings.planner_id
-        if status is DirectionStatus.ARRIVED:
-            out.events.append(
-                ArrivedEvent(planner=p, unit=rec.id, position=rec.position, distance_to_goal=adv.distance)
-            )
-        elif status is DirectionStatus.TRAPPED:
-            out.events.append(
-                TrappedEvent(planner=p, unit=rec.id, position=rec.position, reason=adv.reason[:1024])
-            )
-
-
-def _finite_advice(a: Advice) -> bool:
-    return math.isfinite(a.dx + a.dy + a.level + a.distance)
-
-
-def _within_map(track: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """The look-ahead up to its first point off the wire's map (±``FINITE_LIMIT``, or not a number)."""
-    lim = FINITE_LIMIT
-    if all(-lim <= c <= lim for c in itertools.chain.from_iterable(track)):
-        return track
-    for i, (x, y) in enumerate(track):
-        if not (-lim <= x <= lim and -lim <= y <= lim):
-            return track[:i]
-    return track
-
-
-def _geo_ok(d: Direction) -> bool:
-    """Whether the lat/lon a direction was given are within the wire's bounds."""
-    b = d.true_bearing_deg
-    return (b is None or -360.0 <= b <= 360.0) and all(
-        -90.0 <= g.lat <= 90.0 and -180.0 <= g.lon <= 180.0 for g in d.lookahead_geo
-    )
+        kind, deadline = rec.stepper.pending.kind, b.now + self.settings.deliberation_budget_s
+        job = ev.Job(rec.id, rec.token(), kind, copy.deepcopy(rec.stepper), fld, deadline)
+        self._rec.asked(rec, job)
+        b.out.jobs.append(job)

@@ -16,6 +16,8 @@ and a deadline, and says whether it got everything.
 
 from __future__ import annotations
 
+import bisect
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,9 +26,13 @@ from typing import TYPE_CHECKING, Any
 import msgspec
 
 from pfp_service.errors import InputError
-from pfp_service.service.events import Input, inputs_from_snapshot
+from pfp_service.service.events import Input, inputs_from_snapshot, mission_of
+from pfp_service.service.world_records import Records
 from pfp_service.wire import (
     ErrorReply,
+    ThreatSummary,
+    UnitKind,
+    UnitSummary,
     WorldQuery,
     WorldSnapshot,
     decode_world_query,
@@ -34,11 +40,20 @@ from pfp_service.wire import (
     encode,
     keys,
 )
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES
 
 if TYPE_CHECKING:
     from pfp_service.service.world import World
 
-__all__ = ["JOIN_DEADLINE_S", "JOIN_MAX_PAGES", "Joined", "answer_world", "fetch_world", "whole_world"]
+__all__ = [
+    "JOIN_DEADLINE_S",
+    "JOIN_MAX_PAGES",
+    "Joined",
+    "answer_world",
+    "fetch_world",
+    "page",
+    "whole_world",
+]
 
 JOIN_MAX_PAGES = 1024  # 100,000 units (max_units) with missions are about 350 pages
 JOIN_DEADLINE_S = 30.0
@@ -46,6 +61,92 @@ JOIN_PAGE_TIMEOUT_S = 2.0
 
 # ask(selector, timeout_s) -> the payloads of the replies that came (``ok`` ones only)
 Ask = Callable[[str, float], list[bytes]]
+
+
+def page(
+    records: Records,
+    now: float,
+    mission: str,
+    planner: str,
+    limit: int = MAX_SNAPSHOT_ITEMS,
+    units_from: str | None = None,
+    threats_from: str | None = None,
+    max_bytes: int | None = None,
+    threats_limit: int | None = None,
+) -> WorldSnapshot:
+    """One page of what a planner holds, for the world queryable: threats, then units, sorted by id.
+
+    Args:
+        records: the world's records (read only).
+        now: the clock, for TTLs left and time since last seen.
+        mission, planner: name the page.
+        limit: at most this many units, and this many threats unless
+            ``threats_limit`` says otherwise.
+        units_from, threats_from: the first ids listed (a former page's
+            ``next_unit`` and ``next_threat``); ``None``: from the first.
+        max_bytes: the page's items stop short of this much JSON
+            (default ``SNAPSHOT_PAGE_BYTES``, so a reply always decodes).
+
+    Returns:
+        The page; its ``next_unit`` and ``next_threat`` say where the next
+        one starts (``None``: that list is complete, or was not asked for
+        with a limit of 0).  A page with room for nothing still lists one
+        item, so paging always ends.
+    """
+    room = SNAPSHOT_PAGE_BYTES if max_bytes is None else max_bytes
+
+    def fits(item: msgspec.Struct) -> bool:
+        nonlocal room
+        size = len(msgspec.json.encode(item)) + 1  # and its comma
+        if size > room and (units or threats):
+            return False
+        room -= size
+        return True
+
+    units: list[UnitSummary] = []
+    threats: list[ThreatSummary] = []
+    tids = sorted(records.threats)
+    i = bisect.bisect_left(tids, threats_from) if threats_from is not None else 0
+    tlimit = limit if threats_limit is None else threats_limit
+    while i < len(tids) and len(threats) < tlimit:
+        t = records.threats[tids[i]]
+        ttl = None if t.expires_at is None else max(t.expires_at - now, 0.0)
+        summary = ThreatSummary(id=tids[i], threat=t.update, ttl_s=ttl)
+        if not fits(summary):
+            break
+        threats.append(summary)
+        i += 1
+    uids = sorted(records.units)
+    j = bisect.bisect_left(uids, units_from) if units_from is not None else 0
+    while j < len(uids) and len(units) < limit:
+        r = records.units[uids[j]]
+        unit = UnitSummary(
+            id=uids[j],
+            kind=UnitKind(r.kind) if r.kind is not None else None,
+            status=r.last_status,
+            position=r.position,
+            goal=r.goal.position if r.goal is not None else None,
+            last_seen_s=max(now - r.last_seen, 0.0) if math.isfinite(r.last_seen) else None,
+            distance_to_goal=r.last_distance,
+            stale=r.stale,
+            deliberating=r.job is not None,
+            reason=r.last_reason[:1024],
+            mission=mission_of(r.shared, planner if r.owned else None),
+        )
+        if not fits(unit):
+            break
+        units.append(unit)
+        j += 1
+    return WorldSnapshot(
+        planner=planner,
+        mission=mission,
+        units=units,
+        threats=threats,
+        units_total=len(records.units),
+        threats_total=len(records.threats),
+        next_unit=uids[j] if j < len(uids) and limit else None,
+        next_threat=tids[i] if i < len(tids) and tlimit else None,
+    )
 
 
 def answer_world(query: Any, world: World, now: float, mission: str, planner: str) -> None:

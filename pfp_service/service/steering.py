@@ -1,0 +1,224 @@
+"""The reactive step of the world: a batch of guided units advised at once, and their directions on the wire.
+
+``steer`` advises every unit in one vectorised call (culled, ``core.cull``)
+and predicts their look-ahead in one more.  Bulkheads: if a unit's numbers
+break a batch, it is run again one unit at a time, and a unit that fails
+alone, or whose direction is not finite, is handed back as a failure; every
+other unit is steered.  ``direction`` turns one unit's advice into its
+``Direction`` and, on a change of status, its ``arrived`` or ``trapped``
+event.  Pure values in and out (a unit's last verdict is kept on its record).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+
+import msgspec
+import numpy as np
+
+from pfp_service.core import StepStatus, Threat, ThreatField
+from pfp_service.core.cull import CullIndex, corridors_meet, influence_boxes
+from pfp_service.core.stepper import Advice, advise_many
+from pfp_service.errors import FINITE_LIMIT, InputError
+from pfp_service.geo import Origin
+from pfp_service.service.lookahead import Track, lookahead, within_map
+from pfp_service.service.world_records import UnitRecord
+from pfp_service.wire import (
+    ArrivedEvent,
+    Direction,
+    DirectionStatus,
+    Event,
+    RejectedEvent,
+    ReplanEvent,
+    ThreatChange,
+    TrappedEvent,
+)
+from pfp_service.wire.geodetic import with_geodetic_many
+from pfp_service.wire.messages import MAX_EVENT_ITEMS
+
+__all__ = ["STATUS", "direction", "geodetic", "no_goal", "reached", "rejected", "replan", "steer"]
+
+STATUS = {
+    StepStatus.EN_ROUTE: DirectionStatus.EN_ROUTE,
+    StepStatus.ESCAPING: DirectionStatus.ESCAPING,
+    StepStatus.ARRIVED: DirectionStatus.ARRIVED,
+    StepStatus.TRAPPED: DirectionStatus.TRAPPED,
+    # mission bounds are enforced on decode; a stepper verdict of these is a dead end all the same
+    StepStatus.OUT_OF_BOUNDS: DirectionStatus.TRAPPED,
+    StepStatus.INVALID: DirectionStatus.TRAPPED,
+}
+
+Steered = list[tuple[UnitRecord, Advice, Track]]
+Failed = list[tuple[UnitRecord, BaseException]]
+
+
+def steer(
+    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None, n: int
+) -> tuple[Steered, Failed]:
+    """Advise the units (each with a stepper and a position) and predict ``n`` positions ahead.
+
+    Returns:
+        (unit, advice, look-ahead) for each unit steered, in the order given,
+        and (unit, error) for each unit that failed alone.
+    """
+    failed: Failed = []
+    try:
+        advices = _advise(guided, fld, cull)
+    except Exception:  # one unit's numbers broke the batch: each alone, the poisoned dropped
+        advices, alone, guided = [], guided, []
+        for rec in alone:
+            try:
+                advices += _advise([rec], fld, cull)
+                guided.append(rec)
+            except Exception as exc:
+                failed.append((rec, exc))
+    if not all(map(_finite, advices)):
+        kept = []
+        for rec, adv in zip(guided, advices):
+            if _finite(adv):
+                kept.append((rec, adv))
+            else:
+                failed.append((rec, FloatingPointError(f"a direction that is not finite at {rec.position}")))
+        guided, advices = [r for r, _ in kept], [a for _, a in kept]
+    try:
+        ahead = _ahead(guided, advices, fld, cull, n)
+    except Exception:
+        ahead, pairs, guided, advices = [], list(zip(guided, advices)), [], []
+        for rec, adv in pairs:
+            try:
+                ahead += _ahead([rec], [adv], fld, cull, n)
+                guided.append(rec)
+                advices.append(adv)
+            except Exception as exc:
+                failed.append((rec, exc))
+    return [(r, a, within_map(t)) for r, a, t in zip(guided, advices, ahead)], failed
+
+
+def _advise(guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None) -> list[Advice]:
+    steppers = [r.stepper for r in guided]
+    return advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), cull)  # type: ignore[arg-type]
+
+
+def _ahead(
+    guided: list[UnitRecord], advices: list[Advice], fld: ThreatField, cull: CullIndex | None, n: int
+) -> list[Track]:
+    return lookahead([r.stepper for r in guided], advices, fld, n, cull)  # type: ignore[misc]
+
+
+def _finite(a: Advice) -> bool:
+    return math.isfinite(a.dx + a.dy + a.level + a.distance)
+
+
+def direction(
+    rec: UnitRecord, adv: Advice, points: Track, planner: str, deliberating: bool
+) -> tuple[Direction, Event | None]:
+    """The unit's direction for its advice, and the event its change of status fires (if any)."""
+    assert rec.position is not None
+    status = STATUS[adv.status]
+    event: Event | None = None
+    if status is not rec.last_status:
+        if status is DirectionStatus.ARRIVED:
+            event = ArrivedEvent(
+                planner=planner, unit=rec.id, position=rec.position, distance_to_goal=adv.distance
+            )
+        elif status is DirectionStatus.TRAPPED:
+            event = TrappedEvent(
+                planner=planner, unit=rec.id, position=rec.position, reason=adv.reason[:1024]
+            )
+    rec.last_status = status
+    rec.last_reason = adv.reason
+    rec.last_distance = min(adv.distance, FINITE_LIMIT)  # the wire's bound: a diagonal of the map is more
+    rec.last_vector = None if adv.status.terminal else (adv.dx, adv.dy)
+    heading = None
+    if not adv.status.terminal and (adv.dx or adv.dy):
+        heading = math.degrees(math.atan2(adv.dx, adv.dy)) % 360.0
+        heading = 0.0 if heading >= 360.0 else heading  # -1e-300 % 360 is 360.0
+    d = Direction(
+        unit=rec.id,
+        seq=rec.seq,
+        status=status,
+        vector=(adv.dx, adv.dy),
+        heading_deg=heading,
+        distance_to_goal=rec.last_distance,
+        threat_level=min(max(adv.level, 0.0), FINITE_LIMIT),  # the wire's bound, even for absurd weights
+        lookahead=points,
+        reason=adv.reason[:1024],
+        deliberating=adv.deliberating or deliberating,
+        planner=planner,
+    )
+    return d, event
+
+
+def no_goal(rec: UnitRecord, planner: str) -> Direction:
+    """The direction of a unit with no goal: stand still."""
+    rec.last_status = DirectionStatus.NO_GOAL
+    return Direction(
+        unit=rec.id, seq=rec.seq, status=DirectionStatus.NO_GOAL, vector=(0.0, 0.0), planner=planner
+    )
+
+
+def geodetic(
+    fresh: list[Direction], origin: Origin, positions: list[tuple[float, float] | None]
+) -> list[Direction]:
+    """The directions with lat/lon and true bearing; one that fails, or lands off the globe, goes in metres only."""
+    try:
+        converted = with_geodetic_many(fresh, origin, positions)
+    except Exception:
+        converted = list(fresh)
+        for i, (d, p) in enumerate(zip(fresh, positions)):
+            with contextlib.suppress(Exception):  # this one goes in metres only
+                (converted[i],) = with_geodetic_many([d], origin, [p])
+    # a point thousands of km off the origin has no meaningful lat/lon: that one goes in metres only
+    return [g if _geo_ok(g) else d for d, g in zip(fresh, converted)]
+
+
+def _geo_ok(d: Direction) -> bool:
+    """Whether the lat/lon a direction was given are within the wire's bounds."""
+    b = d.true_bearing_deg
+    return (b is None or -360.0 <= b <= 360.0) and all(
+        -90.0 <= g.lat <= 90.0 and -180.0 <= g.lon <= 180.0 for g in d.lookahead_geo
+    )
+
+
+def reached(guided: list[UnitRecord], touched: list[Threat], intensity: str) -> list[bool]:
+    """Which units (each with a stepper and a position) a change of the ``touched`` threats can reach.
+
+    A unit is reached when a touched threat's influence box (where it is not
+    culled, ``cull.influence_boxes``) meets the unit's corridor to its goal
+    (``cull.corridors_meet``).  Every other unit's direction is unchanged
+    within the cull bound.  If the vectorised test fails, every unit counts
+    as reached: dearer, never wrong.
+    """
+    if not guided:
+        return []
+    try:
+        boxes = influence_boxes(ThreatField(touched, intensity).packed)  # type: ignore[arg-type]
+        starts = np.array([r.position for r in guided], dtype=float)
+        ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
+        return [bool(b) for b in corridors_meet(starts, ends, boxes).tolist()]
+    except Exception:
+        return [True] * len(guided)
+
+
+def replan(planner: str, changes: list[ThreatChange], directions: list[Direction]) -> ReplanEvent:
+    """The event of a batch that changed the threats: what changed, and the units guided afresh."""
+    guided = sorted(d.unit for d in directions if d.status is not DirectionStatus.NO_GOAL)
+    shown = changes[:MAX_EVENT_ITEMS]
+    reason = "; ".join(f"threat {c.threat} {c.change}" for c in shown[:4])
+    if len(changes) > 4:
+        reason += f"; and {len(changes) - 4} more"
+    return ReplanEvent(
+        planner=planner,
+        units=guided[:MAX_EVENT_ITEMS],
+        reason=reason,
+        changes=shown,
+        more=len(changes) - len(shown),
+        more_units=max(len(guided) - MAX_EVENT_ITEMS, 0),
+    )
+
+
+def rejected(key: str, err: InputError, planner: str, held: int) -> RejectedEvent:
+    """The ``rejected`` event of an input on ``key``, with the count of those held back before it."""
+    event = RejectedEvent.of(key, err, planner=planner)
+    return msgspec.structs.replace(event, suppressed=held) if held else event
