@@ -228,4 +228,21 @@ def load_scenario(path: str | Path) -> Scenario:
         data = p.read_bytes()
     except OSError as exc:
         raise InputError(str(p), f"cannot read: {exc.strerror or exc}") from exc
-    return decode_scenario(data, "json" if suffix == ".json" else "yaml")
+    fmt: Literal["json", "yaml"] = "json" if suffix == ".json" else "yaml"
+    try:
+        return decode_scenario(data, fmt)
+    except InputError as err:
+        raise _in_file(p, data, fmt, err) from None
+
+
+def _in_file(p: Path, data: bytes, fmt: Literal["json", "yaml"], err: InputError) -> InputError:
+    """``err`` naming the file, and for YAML the line of its field, as team and script files do."""
+    if err.path.startswith("line "):  # a YAML syntax error already knows its line and column
+        return InputError(f"{p.name} {err.path}", err.reason)
+    if fmt == "yaml":
+        try:
+            root = yamlio.compose(data)
+        except yaml.YAMLError:
+            root = None
+        return yamlio.located(p, root, err)
+    return InputError(f"{p.name}, {err.path}" if err.path else p.name, err.reason)

@@ -113,10 +113,24 @@ def test_raw_form():
     assert "give either omega or sigma_range" in _error({**GOOD, "threats": [both]})
 
 
+def test_a_bad_field_names_the_file_and_its_line(tmp_path):
+    p = tmp_path / "bad.yaml"
+    p.write_text(
+        "start: [0, 0]\ngoal: [10, 0]\nthreats:\n  - {position: [5, 0], sigma_range: -1, sigma_lateral: 1}\n"
+    )
+    with pytest.raises(InputError) as e:
+        load_scenario(p)
+    assert str(e.value) == "bad.yaml line 4, threats[0].sigma_range: must be >= 0.001"
+    q = tmp_path / "bad.json"
+    q.write_text('{"start": [0, 0], "goal": [10, 0], "step": -1}')
+    with pytest.raises(InputError, match=r"^bad\.json, step: "):
+        load_scenario(q)
+
+
 def test_malformed_files(tmp_path):
     p = tmp_path / "s.yaml"
     p.write_text("start: [0, 0\ngoal: [1, 1]\n")
-    with pytest.raises(InputError, match=r"^line \d+, column \d+: invalid YAML"):
+    with pytest.raises(InputError, match=r"^s\.yaml line \d+, column \d+: invalid YAML"):
         load_scenario(p)
     p.write_text("- just\n- a list\n")
     with pytest.raises(InputError, match="must be a mapping"):

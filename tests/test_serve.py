@@ -174,7 +174,7 @@ def test_what_if_preview_changes_nothing(planner, mission):
         r = next(iter(s.get(f"mumt/{mission}/preview/u1", payload=b'{"delta": -1}', timeout=5)))
         assert r.err is not None
         err = json.loads(r.err.payload.to_bytes())
-        assert err["field"] == "$.delta" and "> 0" in err["error"]
+        assert err["field"] == "$.delta" and "must be >= 1e-09" in err["error"]
         assert u.report()["status"] == "en_route"
 
 
