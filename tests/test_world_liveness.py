@@ -1,0 +1,93 @@
+"""Liveness (service/liveness.py): silence and a token gone make a unit stale, stale long enough it is forgotten,
+and a push is sent again until the unit's next report."""
+
+from __future__ import annotations
+
+import pytest
+
+from pfp_service.service.events import Outputs, WorldSettings
+from pfp_service.service.liveness import Liveness
+from pfp_service.service.timers import Timers
+from pfp_service.service.world_records import Records
+from pfp_service.wire import Direction, DirectionStatus, ForgottenEvent, StaleEvent, UnitState
+
+pytestmark = pytest.mark.unit
+
+
+def _live(**kw) -> tuple[Liveness, Records, Timers]:
+    recs, timers = Records(), Timers()
+    return Liveness(WorldSettings(**kw), recs, timers), recs, timers
+
+
+def _run(live: Liveness, timers: Timers, recs: Records, now: float) -> Outputs:
+    """What the unit timers due by ``now`` put out (what the world's tick does for them)."""
+    out = Outputs()
+    for kind, ident in timers.due(now):
+        if ident in recs.units:
+            live.due(kind, recs.units[ident], now, out)
+    return out
+
+
+def _report(live: Liveness, recs: Records, uid: str, now: float) -> None:
+    rec = recs.units.get(uid) or recs.add(uid, True, now, reported=True)
+    live.heard(rec, UnitState(position=(1.0, 2.0), seq=1), now)
+
+
+def test_a_silent_unit_goes_stale_once_and_a_unit_that_reports_never_does():
+    live, recs, timers = _live(unit_stale_s=10.0, unit_forget_s=None)
+    _report(live, recs, "quiet", 0.0)
+    _report(live, recs, "chatty", 0.0)
+    for t in range(1, 25):
+        _report(live, recs, "chatty", float(t))
+        out = _run(live, timers, recs, float(t))
+        stale = [e for e in out.events if isinstance(e, StaleEvent)]
+        if t == 11:  # the first tick past 10 s of silence
+            assert [e.unit for e in stale] == ["quiet"] and "silent for 11 s" in stale[0].reason
+        else:
+            assert stale == []
+    assert recs.stale == 1 and len(timers) == 1  # chatty's one silence timer, looked at again: never a pile
+
+
+def test_a_token_gone_makes_a_unit_stale_only_after_the_debounce_unless_it_comes_back():
+    live, recs, timers = _live(liveliness_debounce_s=2.0, unit_forget_s=None)
+    _report(live, recs, "a", 0.0)
+    _report(live, recs, "b", 0.0)
+    live.token(recs.units["a"], False, 1.0)
+    live.token(recs.units["b"], False, 1.0)
+    live.token(recs.units["b"], True, 2.0)  # back within the debounce
+    stale = [e for e in _run(live, timers, recs, 3.0).events if isinstance(e, StaleEvent)]
+    assert [e.unit for e in stale] == ["a"] and "token" in stale[0].reason
+
+
+def test_stale_long_enough_is_forgotten_unless_it_reports():
+    live, recs, timers = _live(unit_stale_s=1.0, unit_forget_s=5.0)
+    _report(live, recs, "gone", 0.0)
+    _report(live, recs, "back", 0.0)
+    _run(live, timers, recs, 1.5)  # both stale now, forgotten at 6.5 unless ...
+    _report(live, recs, "back", 3.0)
+    out = _run(live, timers, recs, 6.5)
+    forgotten = [e for e in out.events if isinstance(e, ForgottenEvent)]
+    assert [e.unit for e in forgotten] == ["gone"] and forgotten[0].stale_s == pytest.approx(5.0)
+    assert set(recs.units) == {"back"}
+
+
+def test_a_unit_never_heard_from_is_forgotten_in_time():
+    live, recs, timers = _live(unit_forget_s=5.0)
+    live.made(recs.add("told", True, 0.0, reported=False), 0.0)
+    gone = [e for e in _run(live, timers, recs, 5.0).events if isinstance(e, ForgottenEvent)]
+    assert [e.unit for e in gone] == ["told"] and recs.units == {}
+
+
+def test_a_push_is_sent_again_until_the_next_report_and_no_more_than_its_retries():
+    live, recs, timers = _live(push_retry_s=0.25, push_retries=2, unit_stale_s=1e9)
+    _report(live, recs, "a", 0.0)
+    _report(live, recs, "b", 0.0)
+    d = {u: Direction(unit=u, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0)) for u in "ab"}
+    live.pushed([d["a"], d["b"]], 0.0)  # answering the reports of this batch: not pushes
+    assert live.pushes == 0
+    live.pushed([d["a"], d["b"]], 1.0)  # no report asked: pushes
+    assert live.pushes == 2
+    _report(live, recs, "b", 1.1)  # b answers: its push is done
+    again = [x.unit for t in (1.25, 1.5, 1.75, 2.0) for x in _run(live, timers, recs, t).directions]
+    assert again == ["a", "a"] and live.pushes_resent == 2
+    assert live.counts() == {"pushes": 2, "pushes_resent": 2}

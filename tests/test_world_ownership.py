@@ -1,0 +1,71 @@
+"""Cluster ownership (service/ownership.py): rendezvous hashing over the live planners, and the peers' debounce."""
+
+from __future__ import annotations
+
+import pytest
+
+from pfp_service.service.ownership import Ownership, rendezvous_weight
+
+pytestmark = pytest.mark.unit
+
+UNITS = [f"u{i}" for i in range(600)]
+
+
+def _owned(planners: list[str]) -> dict[str, str]:
+    """unit -> the planner that owns it, each planner asked for itself."""
+    owners: dict[str, str] = {}
+    for me in planners:
+        own = Ownership(me, cluster=True)
+        for p in planners:
+            own.joined(p)
+        owners |= {u: me for u in UNITS if own.owns(u)}
+    return owners
+
+
+def test_without_cluster_or_peers_a_planner_owns_every_unit():
+    assert all(Ownership("p0", cluster=False).owns(u) for u in UNITS)
+    alone = Ownership("p0", cluster=True)
+    assert all(alone.owns(u) for u in UNITS)
+    solo = Ownership("p0", cluster=False)
+    solo.joined("p1")
+    assert all(solo.owns(u) for u in UNITS)  # not a cluster: a peer is a conflict, not an owner
+
+
+def test_every_unit_has_exactly_one_owner_and_the_share_is_fair():
+    planners = ["p0", "p1", "p2"]
+    owners = _owned(planners)
+    assert set(owners) == set(UNITS)  # each planner decides alone, and they agree
+    for p in planners:
+        assert 150 < sum(o == p for o in owners.values()) < 250
+
+
+def test_a_planner_joining_takes_units_only_for_itself_and_one_leaving_hands_over_only_its_own():
+    before, after = _owned(["p0", "p1"]), _owned(["p0", "p1", "p2"])
+    moved = {u for u in UNITS if before[u] != after[u]}
+    assert moved and all(after[u] == "p2" for u in moved)
+    assert 120 < len(moved) < 280  # about a third
+    gone = _owned(["p0", "p2"])
+    assert all(gone[u] == after[u] for u in UNITS if after[u] != "p1")
+
+
+def test_weights_are_a_pure_function_of_unit_and_planner():
+    assert rendezvous_weight("u1", "p0") == rendezvous_weight("u1", "p0")
+    assert rendezvous_weight("u1", "p0") != rendezvous_weight("u1", "p1")
+    assert all(0 <= rendezvous_weight(u, "p0") < 2**64 for u in UNITS)
+    assert len({rendezvous_weight(u, "p0") for u in UNITS}) == len(UNITS)
+
+
+def test_a_peer_gone_counts_only_after_the_debounce_and_one_back_within_it_never_moved():
+    own = Ownership("me", cluster=True)
+    assert own.joined("p1") and not own.joined("p1") and not own.joined("me")
+    assert own.left("p1", 10.0) and not own.left("p1", 10.5)  # one debounce per going
+    assert not own.settle("p1", 11.0, debounce_s=2.0)  # not yet
+    assert not own.joined("p1")  # back within the debounce: not new, and its debounce is over
+    assert not own.settle("p1", 12.0, debounce_s=2.0) and own.peers == {"p1"}
+    assert own.left("p1", 20.0) and own.settle("p1", 22.0, debounce_s=2.0)
+    assert own.peers == set() and own.joined("p1")  # a new peer again
+
+
+def test_an_unknown_planner_going_starts_no_debounce():
+    own = Ownership("me", cluster=True)
+    assert not own.left("stranger", 0.0) and own.gone == {}
