@@ -352,15 +352,21 @@ class Stepper:
         norm: float,
         field: ThreatField | None = None,
     ) -> Advice:
-        """The rest of ``advise`` in plain descent, given the potential's gradient at ``(x, y)``.
+        """``advise`` in plain descent, given the potential's gradient at ``(x, y)``: one ``steprule.judge`` call.
 
-        ``advise_many`` computes the gradients of many units in one kernel call
-        and then calls this per unit.  ``field`` is needed only to escape a
-        trap; without it a trap is final.
+        Arrival and bounds are judged too (as ``check`` would).  ``advise_many``
+        computes the gradients of many units in one kernel call and then calls
+        this per unit.  ``field`` is needed only to escape a trap; without it a
+        trap is final.
         """
         if self.params.trap_window > steprule.RING_START:  # the ring may need to grow
             self._unit = steprule.roomy(self._unit)
         code, dx, dy, dist, move, tx, ty = steprule.judge(self._unit, x, y, fx, fy, norm, steprule.DESCENT)
+        if code == steprule.GO:  # the common case, without a call (thousands of units a tick)
+            self.advisories += 1
+            return Advice(
+                StepStatus.EN_ROUTE, dx, dy, level, dist, "", self.pending is not None, move, tx, ty
+            )
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
     def _judged(
