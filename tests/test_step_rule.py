@@ -123,3 +123,11 @@ def test_the_rule_judges_in_its_documented_order():
     assert codes == [steprule.GO, steprule.GO, steprule.GO, steprule.OSCILLATING]
     steprule.reset_watch(u)
     assert j(u, 5.0, 0.0, -1.0, 0.0, 1.0, steprule.DESCENT)[0] == steprule.GO
+
+
+def test_a_previews_first_move_takes_the_same_final_approach():
+    # a live unit's last direction, taken without advising again (plan's first_move), lands on a goal within a step
+    params = resolve(PlannerParams(step=1.0, tolerance=0.1, escape="none"), (0.0, 0.0), (10.0, 0.0))
+    r = plan((9.4, 0.3), (10.0, 0.0), (), params, origin=(0.0, 0.0), first_move=(1.0, 0.0))
+    assert r.path[:2] == [(9.4, 0.3), (10.0, 0.0)]
+    assert r.status is PlanStatus.REACHED and r.steps == 1
