@@ -52,3 +52,16 @@ def test_counts_name_the_figures_of_the_status_reply():
     lim.reject("x", 0.0)
     lim.fault("x", 0.0)
     assert lim.counts() == {"overload": 2, "rejected": 1, "faults": 1}
+
+
+def test_the_node_shed_and_the_world_refused_are_one_overload_count():
+    from pfp_service.service.world import GoalSet, Tick, World, WorldSettings
+    from pfp_service.wire import Goal
+
+    w = World(WorldSettings(max_units=1))
+    w.apply([GoalSet("a", Goal(position=(1.0, 1.0))), GoalSet("b", Goal(position=(1.0, 1.0)))], 0.0)
+    assert w.counts()["overload"] == 1  # b: past max_units
+    w.apply([Tick(1.0, shed=7)], 1.0)  # the node refused 7 at its queues since its last tick
+    assert w.counts()["overload"] == 8
+    w.apply([Tick(2.0)], 2.0)
+    assert w.counts()["overload"] == 8

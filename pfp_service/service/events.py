@@ -163,9 +163,15 @@ class PeerPlanner:
 
 @dataclass(frozen=True, slots=True)
 class Tick:
-    """Time passed: run the timers due by ``now``."""
+    """Time passed: run the timers due by ``now``.
+
+    ``shed`` counts the inputs the node refused at its bounded queues since
+    its last tick (a flood past ``INBOX_MAX``, a query flood): the world keeps
+    the one ``overload`` count, of these and of its own limits.
+    """
 
     now: float
+    shed: int = 0
 
 
 Input = Union[  # noqa: UP007

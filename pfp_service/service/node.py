@@ -92,6 +92,7 @@ TRIM_QUIET_S = 1.0  # ... once no unit was forgotten for this long
 TRIM_EVERY_S = 10.0  # ... or this often while they go on being forgotten
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
 PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
+PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
 PEER_MISSES = 5  # a same-id peer that missed this many asks in a row is gone (a busy loop answers late)
 
 
@@ -197,7 +198,8 @@ class PlannerNode:
         self.clock = clock
         self.world = World(cfg.world_settings())
         self.started = clock()
-        self.counters = {"msgs_in": 0, "msgs_out": 0, "overload": 0}
+        self.counters = {"msgs_in": 0, "msgs_out": 0}
+        self._shed = 0  # inputs refused at the queues since the last tick: told to the world with it
         self.latency = _Latency()
         self._lock = threading.Lock()
         self._states: dict[str, tuple[Any, float]] = {}
@@ -250,8 +252,8 @@ class PlannerNode:
         if self.cfg.cluster:
             self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
         self._join(s)
-        if self.cfg.cluster:  # let the liveliness history name the peers before the first direction
-            time.sleep(0.3)
+        if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
+            self._peers_known(s)
         self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
             ev = RestoredEvent(
@@ -291,7 +293,7 @@ class PlannerNode:
             # a deliberation's answer is never dropped: the unit's job would stand forever (they are
             # bounded by the jobs asked, one per unit)
             if len(self._inbox) >= INBOX_MAX and not isinstance(item, Deliberated):
-                self.counters["overload"] += 1
+                self._shed += 1
                 return
             self._inbox.append(item)
         self._wake.set()
@@ -329,7 +331,7 @@ class PlannerNode:
     def _push_write(self, write: _Write) -> None:
         with self._lock:
             if len(self._writes) >= WRITES_MAX:  # shed: a writer asks again, a put is counted lost
-                self.counters["overload"] += 1
+                self._shed += 1
                 if write.query is not None:
                     write.query.drop()
                 return
@@ -404,6 +406,21 @@ class PlannerNode:
             return
         self._push(PeerPlanner(pid, sample.kind == zenoh.SampleKind.PUT))
 
+    def _peers_known(self, s: zenoh.Session) -> None:
+        """Enqueue a ``PeerPlanner`` for each live planner of the mission, once its token has answered.
+
+        A liveliness query ends when every live token has answered (or at
+        ``PEERS_KNOWN_S``): start-up waits on that, not on a guess of how long
+        the subscriber's history takes.  The subscriber says the same again;
+        the world counts a peer once.
+        """
+        try:
+            for reply in s.liveliness().get(keys.alive_planners(self.cfg.mission), timeout=PEERS_KNOWN_S):
+                if reply.ok is not None:
+                    self._on_planner(reply.ok)
+        except Exception as exc:  # the session is closing under us: the subscriber names them in time
+            log.warning("peers not asked", extra={"fields": {"reason": str(exc)[:200]}})
+
     def _watch_twins(self) -> None:
         """Ask every planner of the mission for its status each ``PEERS_EVERY_S``, to find twins.
 
@@ -462,7 +479,7 @@ class PlannerNode:
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
             if len(self._queries) >= QUERIES_MAX:  # a query flood: shed, counted, never queued unbounded
-                self.counters["overload"] += 1
+                self._shed += 1
                 query.drop()
                 return
             self._queries.append((kind, query, self.clock()))
@@ -516,11 +533,12 @@ class PlannerNode:
                 writes = collections.deque(self._writes.popleft() for _ in range(TICK_INPUTS))
             if self._inbox or self._states or self._writes:
                 self._wake.set()  # the rest at once, in the next tick
+            shed, self._shed = self._shed, 0
         now = self.clock()
         acks = self._admit(writes, inbox)
         batch: list[Input] = list(inbox)
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
-        batch.append(Tick(now))
+        batch.append(Tick(now, shed))
         self.counters["msgs_in"] += len(batch) - 1
         if self.store is not None:  # applied only once committed
             batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
@@ -690,7 +708,7 @@ class PlannerNode:
             latency_p99_ms=p99,
             deliberating=c["deliberating"],
             units_owned=c["units_owned"],
-            overload=c["overload"] + self.counters["overload"],
+            overload=c["overload"],
             pushes=c["pushes"],
             pushes_resent=c["pushes_resent"],
             session=self.zid,

@@ -101,10 +101,8 @@ class World:
         threats_limit: int | None = None,
     ) -> WorldSnapshot:
         """One page of what the planner holds, for the world queryable (``worldpages.page``)."""
-        m, p = self.settings.mission, self.settings.planner_id
-        return worldpages.page(
-            self._rec, now, m, p, limit, units_from, threats_from, max_bytes, threats_limit
-        )
+        s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
+        return worldpages.page(self._rec, now, s.mission, s.planner_id, *page)
 
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
@@ -161,7 +159,8 @@ class World:
                     self._rec.share(rec, mission)
             case ev.PeerPlanner(planner, alive):
                 self._peer(planner, alive, b)
-            case ev.Tick(t):
+            case ev.Tick(t, shed):
+                self.limits.overload += shed
                 self._run_timers(t, b)
 
     # -- bulkheads ------------------------------------------------------------------
