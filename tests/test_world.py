@@ -418,7 +418,9 @@ def test_a_superseded_job_never_overwrites_a_newer_result():
     (old,) = out.jobs
     # the world changes before the job lands: a new job is asked, the old one is cancelled
     out = w.apply([ThreatPut("far", ThreatUpdate(position=(-500, -500), **T))], 0.1)
-    assert old.cancelled
+    assert (
+        out.cancelled == [old] and not old.cancelled
+    )  # said as an output; the job the world returned is left alone
     (new,) = out.jobs  # the re-direction the change caused asked again, for the new world
     stale_result = old.run(0.3)
     d = _one(w.apply([stale_result, _state("u", 0, 0)], 0.3), "u")

@@ -61,7 +61,7 @@ def test_dropping_a_mission_starts_an_epoch_and_supersedes_the_job():
     job = _job(r, "a")
     assert r.deliberating == 1 and rec.token() == (0, rec.stepper.version)
     r.drop_mission(rec)
-    assert job.cancelled and rec.job is None and r.deliberating == 0
+    assert r.superseded == [job] and not job.cancelled and rec.job is None and r.deliberating == 0
     assert rec.goal is None and rec.stepper is None and rec.last_status is None and rec.last_reason == ""
     assert rec.epoch == 1 and rec.token() == (1, -1)
 

@@ -8,9 +8,10 @@ The loop hands the tick's jobs to ``Deliberators.submit`` and calls
 * jobs wait here, not in the pool: escape searches (a unit is trapped now)
   before look-aheads, oldest first.  At most ``workers * AHEAD`` chunks are
   in the pool at once, so a job superseded while it waits (a newer goal or
-  world: ``Job.cancelled``) is dropped before it costs anything, and one
-  still waiting at its deadline is answered ``Deliberated(..., None)``
-  unrun, which the world takes as "ask again later";
+  world: the world's ``Outputs.cancelled``, passed to ``cancel``) is dropped
+  before it costs anything, and one still waiting at its deadline is
+  answered ``Deliberated(..., None)`` unrun, which the world takes as "ask
+  again later";
 * a chunk is up to ``CHUNK`` jobs under one field, so a storm of 1,000 costs
   125 round trips, not 1,000;
 * each field's threats are pickled once and cached in the workers, so a job
@@ -93,6 +94,11 @@ class Deliberators:
         for job in jobs:
             self._seq += 1
             heapq.heappush(self._waiting, (_PRIORITY.get(job.kind, 1), self._seq, job))
+
+    def cancel(self, jobs: list[Job]) -> None:
+        """The world no longer wants these jobs (``Outputs.cancelled``): one still waiting is dropped unrun."""
+        for job in jobs:
+            job.cancelled = True
 
     def feed(self) -> None:
         """Send waiting jobs to the pool while it has room; drop superseded ones, answer late ones."""

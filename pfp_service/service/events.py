@@ -196,9 +196,11 @@ class Job:
     """Deliberation for one unit, to run off the planning loop.
 
     ``run()`` needs nothing from the world: it works on a detached copy of the
-    unit's stepper under the field in force when it was asked.  ``cancelled``
-    is set by the world when a newer goal or world supersedes it, so a pool
-    can skip it; a late result is discarded by its ``token`` in any case.
+    unit's stepper under the field in force when it was asked.  Once it is
+    returned the world never touches it again: when a newer goal or world
+    supersedes it, the job is listed in ``Outputs.cancelled``, and its driver
+    sets ``cancelled`` so a pool can skip it; a late result is discarded by
+    its ``token`` in any case.
     """
 
     unit: str
@@ -266,9 +268,12 @@ class Outputs:
     jobs: list[Job] = field(default_factory=list)
     missions: list[MissionRecord] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
+    cancelled: list[Job] = field(default_factory=list)  # jobs returned before and no longer wanted
 
     def __bool__(self) -> bool:
-        return bool(self.directions or self.events or self.jobs or self.missions or self.faults)
+        return bool(
+            self.directions or self.events or self.jobs or self.missions or self.faults or self.cancelled
+        )
 
 
 @dataclass(frozen=True, slots=True)

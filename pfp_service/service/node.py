@@ -569,6 +569,7 @@ class PlannerNode:
                     keys.unit_mission(self.cfg.mission, rec.unit),
                     encode(mission_message(rec, self.cfg.planner_id)),
                 )
+        self._deliberators.cancel(out.cancelled)
         self._deliberators.submit(out.jobs)
         self._deliberators.feed()
         done = self.clock()

@@ -124,6 +124,7 @@ class World:
         self._live.pushed(b.out.directions[first:], now)
         if b.changes:
             b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions))
+        b.out.cancelled, self._rec.superseded = self._rec.superseded, []
         return b.out
 
     def _apply_one(self, inp: Input, b: _Batch) -> None:

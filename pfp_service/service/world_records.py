@@ -75,6 +75,7 @@ class Records:
         self.threats: dict[str, ThreatRecord] = {}
         self.stale = 0  # units stale
         self.deliberating = 0  # units with a job asked and not answered
+        self.superseded: list[Job] = []  # jobs asked and no longer wanted, until the world says so
         self.intensity = intensity
         self._field: ThreatField | None = None  # built when asked, until the threats change
         self.cull: CullIndex | None = None
@@ -140,10 +141,13 @@ class Records:
             self.stale -= 1
 
     def supersede(self, rec: UnitRecord) -> Job | None:
-        """The unit's job (if any) no longer counts: a newer goal or world is in force.  Returns that job."""
+        """The unit's job (if any) no longer counts: a newer goal or world is in force.  Returns that job.
+
+        The job is noted in ``superseded``: whoever runs it may drop it (``Outputs.cancelled``).
+        """
         job = rec.job
         if job is not None:
-            job.cancelled = True
+            self.superseded.append(job)
             rec.job = None
             self.deliberating -= 1
         return job
