@@ -69,3 +69,15 @@ def test_a_peer_gone_counts_only_after_the_debounce_and_one_back_within_it_never
 def test_an_unknown_planner_going_starts_no_debounce():
     own = Ownership("me", cluster=True)
     assert not own.left("stranger", 0.0) and own.gone == {}
+
+
+def test_a_preview_is_answered_by_the_units_owner_alone():
+    from pfp_service.service.world import PeerPlanner, World, WorldSettings
+
+    worlds = {p: World(WorldSettings(planner_id=p, cluster=True)) for p in ("p0", "p1")}
+    for me, w in worlds.items():
+        w.apply([PeerPlanner("p1" if me == "p0" else "p0", True)], 0.0)
+    for u in UNITS[:50]:
+        answering = [p for p, w in worlds.items() if w.preview(u) is not None]
+        assert len(answering) == 1 and worlds[answering[0]].owns(u)
+    assert World().preview("anyone") is not None  # alone, a planner answers every preview

@@ -686,10 +686,11 @@ class PlannerNode:
             except InputError as err:
                 self._desk.refuse(query, ErrorReply.of(err))
                 return
-            if not self.world.owns(uid):  # scale-out: the unit's owner answers, once; what-ifs too
+            view = self.world.preview(uid)  # None: another planner answers (scale-out: the owner, once)
+            if view is None:
                 query.drop()
                 return
-            self._desk.submit(query, key, self.world.view(uid), t_recv)
+            self._desk.submit(query, key, view, t_recv)
 
     def _status(self) -> PlannerStatus:
         p50, p99 = self.latency.quantiles_ms()

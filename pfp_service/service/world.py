@@ -2,26 +2,22 @@
 
 In the manner of h11's connection: ``World.apply(inputs, now)`` takes a batch
 of frozen input events (``Input``) and returns ``Outputs``: the directions,
-events, deliberation jobs, missions and faults that must go out.  It reads no
-clock, socket or file; ``now`` is seconds on any monotonic clock.  Every
-decision lives here -- who gets a direction, which event fires and why,
-status transitions, expiry, limits; the node never reads the world's records.
+events, deliberation jobs (and those cancelled), missions and faults that
+must go out.  It reads no clock, socket or file; ``now`` is a parameter.
+Every decision lives here -- who gets a direction, which event fires and why,
+status transitions, expiry, limits, who answers a preview.
 
 ``World`` decides; its parts keep the books, each plain data in and out with
-its own tests: the records and the field of the threats (``world_records``),
-the timer heap (``timers``), staleness, forgetting and push re-sends
+its own tests: the records and the threats' field (``world_records``), the
+timer heap (``timers``), staleness, forgetting and push re-sends
 (``liveness``), cluster ownership (``ownership``), the limits on rejections
 and fault lines (``limits``), a unit's mission (``missions``), the reactive
 step and its look-ahead (``steering``, ``lookahead``) and the snapshot's
-pages (``worldpages.page``).
-
-Unbounded work (``auto``'s trap look-ahead, escape-route searches) is
-*deliberation*: a ``Job`` on a detached copy of the unit's stepper, whose
-``Deliberated`` result is adopted only for the goal and world version still
-in force (``deliberation="inline"`` runs it inside ``apply``).  Bulkheads:
-``apply`` is total; a failure belongs to the input, timer or unit that caused
-it (rejected on its key, its goal dropped, a ``Fault`` logged at most once a
-minute per key) and the rest of the batch goes out.
+pages (``worldpages.page``).  Unbounded work (look-ahead, escape searches) is
+deliberation: a ``Job`` whose result is adopted only for the goal and world
+still in force.  Bulkheads: ``apply`` is total; a failure belongs to the
+input, timer or unit that caused it (rejected on its key, its goal dropped,
+a ``Fault`` logged at most once a minute per key); the rest goes out.
 """
 
 from __future__ import annotations
@@ -107,6 +103,10 @@ class World:
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
         return self._own.owns(unit_id)
+
+    def preview(self, unit_id: str) -> UnitView | None:
+        """What a preview of ``unit_id`` runs on; ``None``: another planner answers it (its owner, once)."""
+        return self.view(unit_id) if self.owns(unit_id) else None
 
     # -- the one way in -----------------------------------------------------------
     def apply(self, inputs: list[Input] | tuple[Input, ...], now: float) -> Outputs:
