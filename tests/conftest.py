@@ -1,8 +1,9 @@
 """Shared fixtures, the test tiers, and helpers to run the CLI as a user would.
 
-Every test carries exactly one tier marker, named by what it starts (TIERS below).  A module
-sets its tier with ``pytestmark = pytest.mark.<tier>``; a test that starts more than its module
-does carries its own marker, which then wins.  The tiers are enforced, not only declared:
+Every test carries exactly one tier marker, named by what it starts (TIERS below): a module whose
+tests all share a tier says so once, ``pytestmark = pytest.mark.<tier>``; a module of mixed tiers
+marks each test instead, so that ``-m unit`` selects exactly the unit tests (pytest's ``-m``
+sees a module's marker and a test's own together).  The tiers are enforced, not only declared:
 a ``unit`` test that starts a subprocess or opens a Zenoh session fails, and so does a ``net``
 test that starts a subprocess.  ``make test-fast`` runs ``unit`` and ``net``; ``make test``
 runs every tier.
@@ -32,19 +33,27 @@ def pytest_configure(config: pytest.Config) -> None:
         config.addinivalue_line("markers", f"{name}: test tier: {what}")
 
 
+def _tiers_of(item: pytest.Item) -> set[str]:
+    return {mark.name for mark in item.iter_markers() if mark.name in TIERS}
+
+
 def _tier_of(item: pytest.Item) -> str | None:
-    # the closest marker wins: a test's own marker before its module's
-    for mark in item.iter_markers():
-        if mark.name in TIERS:
-            return mark.name
-    return None
+    tiers = _tiers_of(item)
+    return tiers.pop() if len(tiers) == 1 else None
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    missing = [item.nodeid for item in items if _tier_of(item) is None]
+    missing = [item.nodeid for item in items if not _tiers_of(item)]
     if missing:
         raise pytest.UsageError(
             "tests without a tier marker (one of " + ", ".join(TIERS) + "): " + ", ".join(missing[:10])
+        )
+    mixed = [f"{item.nodeid} {sorted(_tiers_of(item))}" for item in items if len(_tiers_of(item)) > 1]
+    if mixed:
+        raise pytest.UsageError(
+            "tests with more than one tier (mark each test of a mixed module, not the module): "
+            + ", ".join(mixed[:10])
         )
 
 

@@ -16,8 +16,6 @@ import pytest
 from tests.conftest import EXAMPLES, ROOT, run_pfp
 from tests.zenoh_util import free_port
 
-pytestmark = pytest.mark.unit
-
 # Every command that reads a file, with the argument list around the file (FILE is replaced).
 FILE_TAKERS = {
     "plan": ["plan", "FILE"],
@@ -165,6 +163,7 @@ HELP_CHECKED = (
 )
 
 
+@pytest.mark.unit
 def test_every_flag_has_help_and_shows_its_default():
     from pfp_service.cli import build_parser
 

@@ -13,8 +13,6 @@ from tests.conftest import run_pfp
 from tests.test_serve import Unit
 from tests.zenoh_util import client, planner_process, put_json
 
-pytestmark = pytest.mark.unit
-
 
 @pytest.fixture(scope="module")
 def world():

@@ -28,10 +28,9 @@ from pfp_service.wire import Goal, ThreatUpdate, encode, keys
 from pfp_service.wire.delivery import Deliverer, WriteMark, WriteOrder, decode_mark
 from tests.zenoh_util import ROOT, client, free_port
 
-pytestmark = pytest.mark.unit
-
 
 # -- the order of writes: sans-I/O ------------------------------------------------------
+@pytest.mark.unit
 def test_an_older_write_asked_again_is_superseded_and_a_repeat_is_a_duplicate():
     order = WriteOrder()
     put = WriteMark(t=100.0, writer="a")
@@ -42,6 +41,7 @@ def test_an_older_write_asked_again_is_superseded_and_a_repeat_is_a_duplicate():
     assert order.admit("other", put, 0.0, asked=True) == "applied"  # per key
 
 
+@pytest.mark.unit
 def test_live_puts_apply_in_the_order_they_arrive_whatever_the_clocks():
     order = WriteOrder()
     ahead, behind = WriteMark(t=200.0, writer="a"), WriteMark(t=100.0, writer="b")
@@ -51,6 +51,7 @@ def test_live_puts_apply_in_the_order_they_arrive_whatever_the_clocks():
     assert order.admit("k", ahead, 0.0, asked=True) == "superseded"  # a's query came late: b's is newer here
 
 
+@pytest.mark.unit
 def test_a_write_without_a_mark_counts_as_written_when_received():
     order = WriteOrder()
     assert order.admit("k", None, 50.0) == "applied"  # a raw zenoh put at 50
@@ -58,6 +59,7 @@ def test_a_write_without_a_mark_counts_as_written_when_received():
     assert order.admit("k", WriteMark(t=52.0, writer="a"), 53.0, asked=True) == "applied"
 
 
+@pytest.mark.unit
 def test_the_order_is_bounded():
     order = WriteOrder(max_keys=3)
     for i in range(10):
@@ -65,11 +67,13 @@ def test_the_order_is_bounded():
     assert len(order._last) == 3
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("data", [None, b"", b"x" * 300, b"{", b'{"t": "soon"}', b"[1]"])
 def test_an_attachment_that_is_no_mark_of_ours_is_none(data):
     assert decode_mark(data) is None
 
 
+@pytest.mark.unit
 def test_a_mark_round_trips():
     mark = WriteMark(t=1.5, writer="ab", delete=True)
     assert decode_mark(msgspec.json.encode(mark)) == mark

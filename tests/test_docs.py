@@ -56,8 +56,6 @@ import pytest
 
 from tests.zenoh_util import free_port, planner_process
 
-pytestmark = pytest.mark.multi
-
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
 DOCS = [README, *sorted((ROOT / "docs").glob("*.md"))]
@@ -492,6 +490,7 @@ def tak_server() -> Iterator[TakServer]:
 SH_BLOCKS = [b for b in sh_blocks() if any(runnable(ln) for ln in session_lines(b))]
 
 
+@pytest.mark.multi
 @pytest.mark.timeout(1200)
 @pytest.mark.parametrize("block", SH_BLOCKS, ids=[b.name for b in SH_BLOCKS])
 def test_every_command_the_docs_show_runs(

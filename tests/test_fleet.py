@@ -17,8 +17,6 @@ from pfp_service.wire import Direction, DirectionStatus, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
-pytestmark = pytest.mark.unit
-
 TEAM = """\
 name: mixed
 units:
@@ -91,6 +89,7 @@ def test_bad_team_file_is_one_line_exit_2(tmp_path):
     assert r.stderr.strip() == "pfp fleet: team.yaml line 3, units[1].speed_mps: must be > 0"
 
 
+@pytest.mark.unit
 def test_generated_team_is_seeded_and_mixed():
     a, b = generate_team(6, 7, 100.0), generate_team(6, 7, 100.0)
     assert a == b and a != generate_team(6, 8, 100.0)
@@ -100,6 +99,7 @@ def test_generated_team_is_seeded_and_mixed():
         generate_team(3, 0, -1.0)
 
 
+@pytest.mark.unit
 def test_example_team_files_load():
     from tests.conftest import EXAMPLES
 
@@ -111,6 +111,7 @@ def _d(status: DirectionStatus, seq: int, vector=(1.0, 0.0), dist=10.0) -> Direc
     return Direction(unit="u", seq=seq, status=status, vector=vector, distance_to_goal=dist)
 
 
+@pytest.mark.unit
 def test_sim_unit_moves_only_when_told_and_arrives_only_when_the_planner_says():
     u = SimUnit(UnitSpec(id="u", start=(0.0, 0.0), goal=(10.0, 0.0), speed_mps=2.0))
     assert u.state(0.0).seq == 1
@@ -132,6 +133,7 @@ def test_sim_unit_moves_only_when_told_and_arrives_only_when_the_planner_says():
     assert u.arrived and u.arrived_at_s == 2.5
 
 
+@pytest.mark.unit
 def test_progress_is_a_bar_on_a_terminal_and_a_line_every_few_seconds_otherwise():
     from pfp_clients.progress import Progress
 
@@ -175,6 +177,7 @@ units:
 """
 
 
+@pytest.mark.unit
 def test_a_team_origin_other_than_the_planners_is_converted_exactly():
     from pfp_clients.fleet import in_planner_frame
 
@@ -196,6 +199,7 @@ def test_a_team_origin_other_than_the_planners_is_converted_exactly():
     assert in_planner_frame(team, mine, "m") == (team, None)
 
 
+@pytest.mark.unit
 def test_a_team_origin_against_a_planner_without_one_is_refused_naming_both():
     from pfp_clients.fleet import in_planner_frame
 

@@ -17,8 +17,6 @@ from pfp_service.geo import LatLon, Origin
 from pfp_service.wire import geodetic
 from pfp_service.wire import messages as m
 
-pytestmark = pytest.mark.unit
-
 WGS84 = Geodesic.WGS84
 ORIGINS = [
     Origin(lat=59.3293, lon=18.0686),
@@ -33,6 +31,7 @@ def _walk(o: Origin, x: float, y: float) -> tuple[float, float]:
     return g["lat2"], g["lon2"]
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("o", ORIGINS)
 def test_round_trip_is_exact_to_a_tenth_of_a_millimetre(o):
     rng = np.random.default_rng(7)
@@ -42,6 +41,7 @@ def test_round_trip_is_exact_to_a_tenth_of_a_millimetre(o):
     assert np.max(np.abs(back - xy)) < 1e-4
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("o", ORIGINS)
 def test_distances_in_a_30_km_area_match_karney_to_centimetres(o):
     """The documented accuracy: any two points of a 30 km x 30 km area keep their geodesic distance to < 10 cm."""
@@ -60,6 +60,7 @@ def test_distances_in_a_30_km_area_match_karney_to_centimetres(o):
     assert 0.005 < 15_000.0 * (1.0 + o.alt / 6_371_000.0) - math.hypot(x, y) < 0.03
 
 
+@pytest.mark.unit
 @settings(max_examples=50, deadline=None)
 @given(
     st.floats(-15_000, 15_000),
@@ -77,6 +78,7 @@ def test_true_bearing_matches_the_geodesic_azimuth(x, y, heading):
     assert abs((got - azi + 180.0) % 360.0 - 180.0) < 0.01
 
 
+@pytest.mark.unit
 def test_true_bearing_turns_by_the_meridian_convergence():
     o = ORIGINS[0]
     x = 15_000.0  # east of the origin, north of the equator: grid north lies east of true north
@@ -86,6 +88,7 @@ def test_true_bearing_turns_by_the_meridian_convergence():
     assert abs(geo.true_bearing_deg(o, (x, 0.0), (0.0, 1.0)) - convergence) < 0.001
 
 
+@pytest.mark.unit
 def test_localise_converts_positions_and_names_their_paths():
     o = ORIGINS[0]
     lat, lon = o.to_geodetic(100.0, -50.0)
@@ -116,6 +119,7 @@ def test_localise_converts_positions_and_names_their_paths():
     assert e.value.path == "goal" and "111 km from the mission origin" in e.value.reason
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("text", "want"),
     [
@@ -127,6 +131,7 @@ def test_parse_origin(text, want):
     assert geo.parse_origin(text) == want
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("text", ["59.5", "a,b", "95,0", '{"lat": 1}', "1,2,3,4"])
 def test_parse_origin_refuses(text):
     with pytest.raises(InputError) as e:
@@ -135,6 +140,7 @@ def test_parse_origin_refuses(text):
 
 
 # -- on the wire ----------------------------------------------------------------
+@pytest.mark.unit
 def test_a_lat_lon_message_decodes_to_the_same_metres():
     o = ORIGINS[0]
     lat, lon = o.to_geodetic(120.5, 80.25)
@@ -163,6 +169,7 @@ def test_a_lat_lon_message_decodes_to_the_same_metres():
     assert np.allclose(req.threats[0].position, (120.5, 80.25), atol=1e-6)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("body", "origin", "path", "fragment"),
     [
@@ -179,6 +186,7 @@ def test_bad_lat_lon_is_rejected_with_its_path(body, origin, path, fragment):
     assert e.value.path == path and fragment in e.value.reason, str(e.value)
 
 
+@pytest.mark.unit
 def test_mission_bounds_apply_after_conversion():
     o = ORIGINS[0]
     lat, lon = o.to_geodetic(150.0, 0.0)
@@ -189,6 +197,7 @@ def test_mission_bounds_apply_after_conversion():
     assert e.value.path == "$.position" and "outside the mission bounds" in e.value.reason
 
 
+@pytest.mark.unit
 def test_with_geodetic_fills_bearing_and_lat_lon_lookahead():
     o = ORIGINS[0]
     d = m.Direction(
@@ -233,6 +242,7 @@ def _scenario(pos) -> bytes:
     return f"{head}start: {pos('start')}\ngoal: {pos('goal')}\nthreats:\n{threats}".encode()
 
 
+@pytest.mark.unit
 def test_a_lat_lon_scenario_plans_the_metres_path_to_within_centimetres():
     """The lat/lon are Karney's (geographiclib), not ours: the check is independent of pymap3d."""
     from pfp_service.core import plan
@@ -254,6 +264,7 @@ def test_a_lat_lon_scenario_plans_the_metres_path_to_within_centimetres():
     assert gap < 0.01, gap
 
 
+@pytest.mark.unit
 def test_the_shipped_lat_lon_example_matches_its_metres():
     from pfp_service.scenario import load_scenario
     from tests.conftest import EXAMPLES
@@ -265,6 +276,7 @@ def test_the_shipped_lat_lon_example_matches_its_metres():
         assert np.allclose(got[k], xy, atol=0.05), (k, got[k])
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("doc", "path", "fragment"),
     [
@@ -288,6 +300,7 @@ def test_bad_geodetic_scenarios_name_their_field(doc, path, fragment):
     assert e.value.path == path and fragment in e.value.reason, str(e.value)
 
 
+@pytest.mark.unit
 def test_a_json_scenario_takes_lat_lon_too():
     from pfp_service.scenario import decode_scenario
 
@@ -296,6 +309,7 @@ def test_a_json_scenario_takes_lat_lon_too():
     assert np.allclose(s.start, (0.0, 0.0), atol=1e-9) and s.goal == (10.0, 0.0)
 
 
+@pytest.mark.unit
 def test_team_and_inject_files_take_lat_lon(tmp_path):
     from pfp_clients.script import load_script
 
@@ -328,6 +342,7 @@ def test_team_and_inject_files_take_lat_lon(tmp_path):
     assert e.value.path == "bad.yaml line 2, units[0].start" and "origin" in e.value.reason
 
 
+@pytest.mark.unit
 def test_serve_config_takes_an_origin_from_file_env_and_flag(tmp_path):
     from pfp_service.service.config import load_config
 
@@ -351,6 +366,7 @@ def test_serve_origin_flag_is_one_line_exit_2():
     assert out.returncode == 2 and "Traceback" not in out.stderr and "--origin" in out.stderr
 
 
+@pytest.mark.unit
 def test_with_geodetic_without_a_position_uses_the_first_lookahead_point():
     o = ORIGINS[0]
     d = m.Direction(
@@ -362,6 +378,7 @@ def test_with_geodetic_without_a_position_uses_the_first_lookahead_point():
     assert geodetic.with_geodetic(bare, o).true_bearing_deg is None  # no position: not guessed
 
 
+@pytest.mark.unit
 def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres():
     """Through the wire decoders and the world (the node passes ``cfg.origin`` to the decoders)."""
     from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
@@ -398,6 +415,7 @@ def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metr
         assert np.allclose(a.lookahead, b.lookahead, atol=1e-6)
 
 
+@pytest.mark.unit
 def test_serve_config_bounds_may_be_lat_lon_corners(tmp_path):
     from pfp_service.service.config import load_config
 
@@ -416,6 +434,7 @@ def test_serve_config_bounds_may_be_lat_lon_corners(tmp_path):
     assert e.value.path.endswith("bounds[0]") and "origin" in e.value.reason
 
 
+@pytest.mark.unit
 def test_a_tick_of_directions_gets_the_lat_lon_each_would_get_alone():
     """``with_geodetic_many`` (one conversion for a tick) against the one-point conversions."""
     from pfp_service.wire import Direction, DirectionStatus

@@ -17,8 +17,6 @@ from pfp_service.geo import Origin
 from pfp_service.scenario import load_scenario
 from tests.conftest import EXAMPLES, run_pfp
 
-pytestmark = pytest.mark.unit
-
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 
 
@@ -48,6 +46,7 @@ def _check(fc: dict) -> None:
             assert _signed_area(ring) > 0, "exterior rings run counter-clockwise (RFC 7946 3.1.6)"
 
 
+@pytest.mark.unit
 def test_a_scenario_exports_a_valid_feature_collection():
     s = load_scenario(EXAMPLES / "geo-simple.yaml")
     r = plan(s.start, s.goal, s.schedule(), s.planner.to_params())
@@ -73,6 +72,7 @@ def test_a_scenario_exports_a_valid_feature_collection():
     json.dumps(fc, allow_nan=False)  # no NaN or infinity anywhere
 
 
+@pytest.mark.unit
 def test_the_validator_is_not_a_rubber_stamp():
     open_ring = {
         "type": "FeatureCollection",
@@ -88,6 +88,7 @@ def test_the_validator_is_not_a_rubber_stamp():
         FeatureCollection.model_validate(open_ring)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(("facing", "sr", "sl"), [(0.0, 100.0, 50.0), (135.0, 30.0, 80.0)])
 def test_unskewed_zones_are_the_analytic_ellipses(facing, sr, sl):
     """Without skew the level-L set is the ellipse of Mahalanobis radius sqrt(2 ln(1/L))."""
@@ -100,6 +101,7 @@ def test_unskewed_zones_are_the_analytic_ellipses(facing, sr, sl):
         assert np.allclose(np.sqrt(m2), math.sqrt(2 * math.log(1 / level)), rtol=1e-9)
 
 
+@pytest.mark.unit
 def test_skewed_zone_boundaries_sit_at_their_level_and_hold_the_core():
     t = Threat.from_facing((0.0, 0.0), 60.0, 40.0, 25.0, 3.0, 2.0, "s")
     cores = Cores(ThreatField([t]))
@@ -114,6 +116,7 @@ def test_skewed_zone_boundaries_sit_at_their_level_and_hold_the_core():
     assert mx > 0 and my > 0 and math.isclose(math.degrees(math.atan2(mx, my)), 60.0, abs_tol=1e-6)
 
 
+@pytest.mark.unit
 def test_threats_only_and_weightless_threats():
     ts = [Threat.from_facing((0.0, 0.0), 0.0, 10.0, 10.0, 0.0, 0.0, "ghost")]
     fc = geojson.feature_collection(ORIGIN, ts, level=0.2)
@@ -153,6 +156,7 @@ def test_plan_cli_geojson_edges_are_one_line_exit_2(tmp_path, args, fragment):
     assert len(r.stderr.strip().splitlines()) <= 3  # argparse adds its usage line for a bad flag value
 
 
+@pytest.mark.unit
 def test_preview_request_geojson_option_is_not_a_what_if():
     from pfp_service.wire import messages as m
 
@@ -161,6 +165,7 @@ def test_preview_request_geojson_option_is_not_a_what_if():
     assert m.decode_preview_request(b'{"geojson": true, "goal": [1, 2]}').what_if
 
 
+@pytest.mark.unit
 def test_preview_reply_body_and_its_refusal_without_an_origin():
     from pfp_service.errors import InputError
 

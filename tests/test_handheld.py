@@ -29,8 +29,6 @@ from pfp_service.wire import Direction, DirectionStatus, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, free_port, planner_process, put_json
 
-pytestmark = pytest.mark.unit
-
 SIZE = (50, 20)
 
 
@@ -47,6 +45,7 @@ def _direction(status="en_route", vector=(1.0, 0.0), distance=10.0, level=0.0, u
     )
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("bearing", "name"),
     [
@@ -72,6 +71,7 @@ def test_cardinal(bearing, name):
     assert cardinal(bearing) == name
 
 
+@pytest.mark.unit
 def test_sixteen_points_in_order():
     assert [cardinal(i * 22.5) for i in range(16)] == list(CARDINALS)
     assert bearing_text(359.6) == "000° N"
@@ -79,6 +79,7 @@ def test_sixteen_points_in_order():
     assert bearing_text(None) == "---° --"
 
 
+@pytest.mark.unit
 def test_eta_and_durations():
     assert eta_s(14.0, 1.4) == pytest.approx(10.0)
     assert eta_s(None, 1.4) is None
@@ -118,6 +119,7 @@ def _points_along(lines: list[str], bearing_deg: float, margin: float = 0.3) -> 
     return all(ahead > _reach(lines, bearing_deg + off) + margin for off in (90, 180, 270))
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("size", [(19, 9), (23, 11), (31, 15)])
 def test_arrow_points_along_the_bearing(size):
     for bearing in range(360):
@@ -126,12 +128,14 @@ def test_arrow_points_along_the_bearing(size):
         assert _points_along(lines, bearing, margin=0.2), bearing  # (coarser pictures may tie)
 
 
+@pytest.mark.unit
 def test_arrow_without_bearing_shows_the_status():
     ring, cross, dot = (arrow_art(None, status=s) for s in ("arrived", "trapped", "no_goal"))
     assert len({"\n".join(ring), "\n".join(cross), "\n".join(dot)}) == 3
     assert sum(line.count("█") for line in dot) < sum(line.count("█") for line in ring)
 
 
+@pytest.mark.unit
 def test_staleness_uses_the_given_clock():
     m = HandheldModel(Settings(unit="u1", stale_after_s=2.0), (0.0, 0.0), now=100.0)
     v = m.view(101.0)
@@ -143,6 +147,7 @@ def test_staleness_uses_the_given_clock():
     assert m.view(105.1).stale
 
 
+@pytest.mark.unit
 def test_walk_follows_the_direction_and_stops_at_the_goal():
     m = HandheldModel(Settings(unit="u1", speed_mps=2.0, stale_after_s=100.0), (0.0, 0.0), now=0.0)
     m.on_direction(_direction(vector=(0.0, 1.0), distance=3.0), now=0.0)
@@ -159,6 +164,7 @@ def test_walk_follows_the_direction_and_stops_at_the_goal():
     assert m.view(9.0).status_label == "ARRIVED" and m.view(9.0).bearing == "---° --"
 
 
+@pytest.mark.unit
 def test_walk_halts_when_guidance_is_stale_or_paused():
     m = HandheldModel(Settings(unit="u1", speed_mps=1.0, stale_after_s=1.0), (0.0, 0.0), now=0.0)
     m.on_direction(_direction(vector=(1.0, 0.0), distance=100.0), now=0.0)
@@ -172,6 +178,7 @@ def test_walk_halts_when_guidance_is_stale_or_paused():
     assert m.position == pytest.approx((0.5, 0.0))
 
 
+@pytest.mark.unit
 def test_states_carry_seq_kind_speed_heading():
     m = HandheldModel(Settings(unit="u1"), (1.0, 2.0), now=0.0)
     m.nudge(0.0, -1.0)
@@ -182,6 +189,7 @@ def test_states_carry_seq_kind_speed_heading():
     assert HandheldModel(Settings(unit="u1"), None, now=0.0).next_state() is None
 
 
+@pytest.mark.unit
 def test_gps_fix_gives_speed_and_heading():
     m = HandheldModel(Settings(unit="u1", walk=False), None, now=0.0)
     m.on_fix(0.0, 0.0, now=0.0)
@@ -192,6 +200,7 @@ def test_gps_fix_gives_speed_and_heading():
     assert m.heading_deg == pytest.approx(45.0)
 
 
+@pytest.mark.unit
 def test_goal_is_resent_until_acted_on_then_left_alone():
     m = HandheldModel(Settings(unit="u1", goal=(5.0, 5.0), goal_retry_s=2.0), (0.0, 0.0), now=0.0)
     assert m.goal_to_send(0.0).position == (5.0, 5.0)
@@ -213,6 +222,7 @@ def test_goal_is_resent_until_acted_on_then_left_alone():
     assert m.goal_to_send(20.1).position == (7.0, 1.0)
 
 
+@pytest.mark.unit
 def test_threat_severity_and_bad_direction_note():
     m = HandheldModel(Settings(unit="u1", threat_full_scale=2.0), (0.0, 0.0), now=0.0)
     for level, sev in (
@@ -455,6 +465,7 @@ def test_refuses_to_start_without_a_terminal():
 
 
 # -- issue 16: a handheld that recovers ----------------------------------------------------
+@pytest.mark.unit
 def test_eta_uses_the_speed_it_shows():
     m = HandheldModel(Settings(unit="u1", speed_mps=1.4, speed_up=10.0), (0.0, 0.0), now=0.0)
     m.on_direction(_direction(distance=140.0), now=0.0)
@@ -580,6 +591,7 @@ def _arrivals(reader: NmeaReader, inbox, want: int, timeout: float = 10.0) -> li
     return times
 
 
+@pytest.mark.unit
 def test_an_nmea_file_is_paced_by_its_own_timestamps_or_by_nmea_rate(tmp_path: Path):
     import queue
 
@@ -600,6 +612,7 @@ def test_an_nmea_file_is_paced_by_its_own_timestamps_or_by_nmea_rate(tmp_path: P
     assert len(times) == 4 and times[-1] - times[0] < 0.6
 
 
+@pytest.mark.unit
 def test_a_binary_nmea_file_is_bad_sentences_that_end(tmp_path: Path):
     import queue
     import random

@@ -16,8 +16,6 @@ from pfp_service.errors import InputError
 from tests.conftest import EXAMPLES, ROOT, run_pfp
 from tests.zenoh_util import client, planner_process
 
-pytestmark = pytest.mark.unit
-
 SPEED_UP = "10"
 
 
@@ -115,6 +113,7 @@ def test_bad_script_is_one_line_exit_2_and_nothing_is_sent(tmp_path, mission):
     assert heard == []
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("body", "message"),
     [
@@ -188,6 +187,7 @@ timeline:
 """
 
 
+@pytest.mark.unit
 def test_a_script_origin_other_than_the_planners_is_converted_exactly_and_none_is_refused(tmp_path):
     from pfp_clients.inject import script_in_planner_frame
 

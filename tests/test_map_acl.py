@@ -19,8 +19,6 @@ from tests.test_map_browser import map_process
 from tests.test_map_cli import EDIT, _http
 from tests.zenoh_util import Inbox, free_port, put_json
 
-pytestmark = pytest.mark.net
-
 M = "mapacl"
 TEAM = "name: map-acl\nunits:\n  - {id: u1, start: [0, 0], goal: [10, 0]}\n"
 

@@ -20,8 +20,6 @@ from tests.conftest import ROOT, run_pfp
 from tests.test_map_browser import map_process
 from tests.zenoh_util import Inbox, client, free_port, put_json
 
-pytestmark = pytest.mark.unit
-
 
 @pytest.fixture
 def router():
@@ -81,6 +79,7 @@ def test_a_port_in_use_is_one_line(router):
     assert line.startswith(f"pfp map: --http: cannot listen on 127.0.0.1:{port}"), line
 
 
+@pytest.mark.unit
 def test_every_flag_has_help_and_shows_its_default():
     from pfp_service.cli import build_parser
 

@@ -18,8 +18,6 @@ from tests.conftest import ROOT
 from tests.test_map_browser import map_process
 from tests.zenoh_util import free_port
 
-pytestmark = pytest.mark.proc
-
 
 @pytest.fixture(scope="module")
 def router():
@@ -74,6 +72,7 @@ def _ws_status(url: str, host: str) -> int:
         conn.close()
 
 
+@pytest.mark.proc
 def test_forged_hosts_get_421_and_nothing_else(router):
     mission = "hosts" + uuid.uuid4().hex[:8]
     with map_process(router, mission, "--allow-edit", "--allowed-host", "Map.Example.") as url:
@@ -111,6 +110,7 @@ def test_forged_hosts_get_421_and_nothing_else(router):
         assert stats["refused_hosts"] == 27  # 5 hosts x 5 paths, the WebSocket and the edit
 
 
+@pytest.mark.proc
 @pytest.mark.parametrize("bad", ["evil example", "a/b", "http://x", "-x", ""])
 def test_a_bad_allowed_host_is_one_line_exit_2(bad):
     r = subprocess.run(

@@ -13,8 +13,6 @@ import pytest
 from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, plan
 from pfp_service.core.optimal import OptimalSolver, plan_optimal
 
-pytestmark = pytest.mark.unit
-
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
@@ -22,6 +20,7 @@ def _simple():
     return [Threat.from_facing(p, 225, 1.0, 0.7, 2.0, 1.0, f"e{i}") for i, p in enumerate([(4, 6), (7, 3)])]
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("lam", [1.0, 10.0, 100.0])
 def test_optimal_beats_or_matches_pfp_on_j(lam):
     threats = _simple()
@@ -33,6 +32,7 @@ def test_optimal_beats_or_matches_pfp_on_j(lam):
     assert opt.length + lam * opt.exposure <= (pfp.length + lam * pfp.exposure) * 1.001
 
 
+@pytest.mark.unit
 def test_lambda_trades_length_for_exposure():
     field = ThreatField(_simple())
     s = OptimalSolver(field, (0, 0), (10, 10), None, 120)
@@ -41,6 +41,7 @@ def test_lambda_trades_length_for_exposure():
     assert short.length == pytest.approx(math.hypot(10, 10), rel=1e-3)  # shortcuts undo the grid's headings
 
 
+@pytest.mark.unit
 def test_core_free_grid_says_when_no_way_avoids_the_cores():
     ring = [
         Threat.from_facing((14 * math.sin(a), 14 * math.cos(a)), 0, 4, 4, 0.0)

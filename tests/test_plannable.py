@@ -23,8 +23,6 @@ from pfp_service.service.config import load_config
 from pfp_service.wire import decode_goal, decode_preview_request
 from tests.conftest import run_pfp
 
-pytestmark = pytest.mark.unit
-
 SUB = 5e-324
 
 
@@ -32,6 +30,7 @@ def _scenario(**planner) -> bytes:
     return json.dumps({"start": [0, 0], "goal": [1e5, 0], "planner": planner}).encode()
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("field", "value", "reason"),
     [
@@ -61,6 +60,7 @@ def test_the_same_bound_refuses_the_same_value_on_the_wire_in_a_file_and_in_a_fl
         flag_type(kind)(repr(value))
 
 
+@pytest.mark.unit
 def test_a_step_too_fine_for_its_distance_is_refused_where_the_distance_is_known():
     want = "a step of 0.001 m needs 1e+08 steps to come within 0.00075 m of a goal 100000 m away"
     with pytest.raises(InputError) as file:
@@ -72,6 +72,7 @@ def test_a_step_too_fine_for_its_distance_is_refused_where_the_distance_is_known
     assert reach(PlannerParams(step=1e-3), (0.0, 0.0), (5e-4, 0.0)) is None  # within tolerance: arrived
 
 
+@pytest.mark.unit
 def test_reach_problem_is_a_value_for_any_numbers():
     assert reach_problem(1e5, 1e-3, MAX_ITER_DERIVED, 7.5e-4) is not None
     assert reach_problem(5e-324, 1e-3, 300, 7.5e-4) is None  # closer than the tolerance: arrived
@@ -81,6 +82,7 @@ def test_reach_problem_is_a_value_for_any_numbers():
     assert "cannot plan" in (reach_problem(float("nan"), 0.1, 300, 0.1) or "")
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("offset", [0.0, SUB, 1e-300, 1e-160, 1e-10])
 def test_resolve_is_total_and_a_goal_closer_than_it_resolves_has_arrived(offset):
     r = resolve(PlannerParams(), (0.0, 0.0), (offset, offset))

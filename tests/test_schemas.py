@@ -16,8 +16,6 @@ from pfp_service.cli import main
 from pfp_service.wire import messages as m
 from pfp_service.wire import schema
 
-pytestmark = pytest.mark.unit
-
 ROOT = Path(__file__).resolve().parent.parent
 SCHEMAS = ROOT / "schemas"
 
@@ -63,6 +61,7 @@ def test_check_names_what_is_stale_and_regenerating_fixes_it(copy: Path, damage:
     assert main(["schemas", "--check", "--dir", str(copy)]) == 0
 
 
+@pytest.mark.unit
 def test_regenerating_into_an_empty_directory_writes_everything(tmp_path: Path) -> None:
     target = tmp_path / "fresh"
     assert main(["schemas", "--check", "--dir", str(target)]) == 1
@@ -107,6 +106,7 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
 }
 
 
+@pytest.mark.unit
 def test_index_lists_every_message_once_with_schema_and_examples() -> None:
     index = _index()
     assert set(index["messages"]) == set(DECODE)
@@ -121,6 +121,7 @@ def test_index_lists_every_message_once_with_schema_and_examples() -> None:
         assert entry["examples"], name
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", list(DECODE))
 def test_every_example_decodes_and_re_encodes_identically(name: str) -> None:
     for rel in _index()["messages"][name]["examples"]:
@@ -194,6 +195,7 @@ def _defs() -> dict[str, Any]:
     return defs
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("struct", list(V1))
 def test_schemas_only_grow_and_new_fields_have_defaults(struct: str) -> None:
     d = _defs()[struct]
@@ -202,6 +204,7 @@ def test_schemas_only_grow_and_new_fields_have_defaults(struct: str) -> None:
     assert required | optional <= set(d["properties"]), "a published field was removed"
 
 
+@pytest.mark.unit
 def test_every_published_struct_is_pinned() -> None:
     """PlanResult's inner types belong to the planning core; every other object is pinned."""
     core = set(json.loads((SCHEMAS / "preview_reply.schema.json").read_text())["$defs"]) - {"PlanResult"}

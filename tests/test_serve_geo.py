@@ -13,8 +13,6 @@ from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
-pytestmark = pytest.mark.unit
-
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 MISSION = "geo"
 

@@ -26,8 +26,6 @@ from pfp_service.service.world import GoalSet, InputRejected, MissionRestored, T
 from pfp_service.wire import Goal, ThreatUpdate
 from tests.zenoh_util import ROOT, Inbox, client, free_port, wait_for_planner
 
-pytestmark = pytest.mark.unit
-
 T = dict(facing_deg=225.0, sigma_range=1.0, sigma_lateral=0.7, skew=2.0)
 GARBAGE = bytes(range(256)) * 32  # 8 KiB
 
@@ -46,6 +44,7 @@ def _scribble(db: Path, offset: int = 4096, data: bytes = GARBAGE) -> None:
         f.write(data)
 
 
+@pytest.mark.unit
 def test_a_corrupt_page_is_moved_aside_kept_and_the_readable_rows_salvaged(tmp_path):
     _fill(tmp_path)
     db = tmp_path / "state.sqlite3"
@@ -63,6 +62,7 @@ def test_a_corrupt_page_is_moved_aside_kept_and_the_readable_rows_salvaged(tmp_p
     assert (again.corrupt, again.set_aside, again.goals) == (0, "", 200)
 
 
+@pytest.mark.unit
 def test_a_file_that_is_not_a_database_starts_empty_and_is_kept(tmp_path):
     (tmp_path / "state.sqlite3").write_bytes(b"this is not SQLite" * 1000)
     store = Store(tmp_path)
@@ -73,6 +73,7 @@ def test_a_file_that_is_not_a_database_starts_empty_and_is_kept(tmp_path):
     assert Store(tmp_path).restore(0.0).goals == 1
 
 
+@pytest.mark.unit
 def test_rows_past_a_damaged_page_are_salvaged(tmp_path):
     _fill(tmp_path, threats=0, goals=2000)  # goals over many pages
     db = tmp_path / "state.sqlite3"
@@ -89,6 +90,7 @@ def test_rows_past_a_damaged_page_are_salvaged(tmp_path):
     assert 1800 < r.goals < 2000  # the rest of the table, either side of the lost leaf
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("kind", ["garbage", "zeros", "one byte"])
 def test_damage_to_any_page_never_raises_and_the_store_works_after(tmp_path, kind):
     import random
@@ -116,6 +118,7 @@ def test_damage_to_any_page_never_raises_and_the_store_works_after(tmp_path, kin
         assert any(i == GoalSet("after", Goal(position=(1, 1))) for i in Store(d).restore(1000.0).inputs)
 
 
+@pytest.mark.unit
 def test_the_wal_of_a_killed_planner_shadows_a_damaged_page(tmp_path):
     live = tmp_path / "live"
     store = Store(live)
@@ -131,6 +134,7 @@ def test_the_wal_of_a_killed_planner_shadows_a_damaged_page(tmp_path):
     assert (r.goals, r.corrupt, r.set_aside) == (50, 0, "")
 
 
+@pytest.mark.unit
 def test_a_corrupt_row_is_skipped_named_kept_and_the_rest_loads(tmp_path):
     _fill(tmp_path, threats=3, goals=5)
     con = sqlite3.connect(tmp_path / "state.sqlite3")
@@ -149,6 +153,7 @@ def test_a_corrupt_row_is_skipped_named_kept_and_the_rest_loads(tmp_path):
     assert Store(tmp_path).restore(1000.0).corrupt == 0
 
 
+@pytest.mark.unit
 def test_a_full_disk_is_named_as_such(tmp_path):
     store = Store(tmp_path)
     store._db.execute("PRAGMA max_page_count = 1")  # SQLite's own SQLITE_FULL, as a full disk gives it
@@ -161,6 +166,7 @@ def test_a_full_disk_is_named_as_such(tmp_path):
     assert "no transaction is active" not in rej.error.reason
 
 
+@pytest.mark.unit
 def test_a_read_only_database_is_named_as_such(tmp_path):
     store = Store(tmp_path)
     store._db.execute("PRAGMA query_only = 1")  # SQLITE_READONLY, as a read-only file or mount gives it

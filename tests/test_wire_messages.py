@@ -17,8 +17,6 @@ from pfp_service.errors import InputError
 from pfp_service.wire import messages as m
 from pfp_service.wire.schema import examples
 
-pytestmark = pytest.mark.unit
-
 BIG = 7.77e77  # written as 1e999 on the wire: parses to infinity
 MISSING = object()
 REQ, OPT, DEF = "required", "optional (null allowed)", "defaulted (null not allowed)"
@@ -358,6 +356,7 @@ def _bad_cases() -> Iterator[Any]:
                 yield pytest.param(name, field, None, "", "got null", id=f"{name}.{field}=null")
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(("name", "field", "value", "sub", "reason"), list(_bad_cases()))
 def test_every_bad_value_of_every_field_is_rejected_with_its_path(
     name: str, field: str, value: Any, sub: str, reason: str
@@ -380,12 +379,14 @@ def _good_cases() -> Iterator[Any]:
                 yield pytest.param(name, field, MISSING, id=f"{name}.{field}=missing")
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(("name", "field", "value"), list(_good_cases()))
 def test_optional_fields_may_be_left_out(name: str, field: str, value: Any) -> None:
     data, _ = _payload(name, field, value)
     DECODERS[name](data)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", list(FIELDS))
 def test_the_table_covers_every_field_of_every_message(name: str) -> None:
     """A new field must join FIELDS (and so get its bad values tested) and must have a default."""
@@ -398,6 +399,7 @@ def test_the_table_covers_every_field_of_every_message(name: str) -> None:
     assert actual == {f: how for f, (_, how) in FIELDS[name].items()}
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", list(DECODERS))
 def test_examples_decode_and_round_trip(name: str) -> None:
     payload = BASES["preview_request"] if name == "what_if_threat" else BASES[name]
@@ -405,6 +407,7 @@ def test_examples_decode_and_round_trip(name: str) -> None:
     assert msgspec.json.decode(m.encode(msg)) == payload
 
 
+@pytest.mark.unit
 def test_boundary_values_are_accepted() -> None:
     m.decode_unit_state(
         b'{"position":[-1e9,1e9],"heading_deg":-360,"speed_mps":0,"seq":9007199254740991,"t":0}'
@@ -417,6 +420,7 @@ def test_boundary_values_are_accepted() -> None:
     )
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("data", "reason"),
     [
@@ -437,6 +441,7 @@ def test_whole_payload_errors_have_the_root_path(data: bytes, reason: str) -> No
     assert reason in e.value.reason
 
 
+@pytest.mark.unit
 def test_payload_size_is_limited_before_parsing() -> None:
     pad = b" " * m.MAX_PAYLOAD_BYTES
     ok = b'{"position":[1,2]}'
@@ -449,6 +454,7 @@ def test_payload_size_is_limited_before_parsing() -> None:
     )
 
 
+@pytest.mark.unit
 def test_the_largest_legitimate_preview_request_fits() -> None:
     threat = {**BASES["what_if_threat"], "facing_deg": -123.456789, "sigma_range": 123.456789}
     many = [{**threat, "id": "t" * 60 + f"{i:04d}", "position": [-1e8 / 3, 1e8 / 7]} for i in range(256)]
@@ -457,6 +463,7 @@ def test_the_largest_legitimate_preview_request_fits() -> None:
     assert len(m.decode_preview_request(data).threats) == 256
 
 
+@pytest.mark.unit
 def test_decoders_accept_zenoh_style_buffers() -> None:
     data = json.dumps(BASES["unit_state"]).encode()
     assert m.decode_unit_state(bytearray(data)) == m.decode_unit_state(memoryview(data))
@@ -466,6 +473,7 @@ def test_decoders_accept_zenoh_style_buffers() -> None:
 BOUNDS = ((0.0, 0.0), (10.0, 20.0))
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("pos", [[0, 0], [10, 20], [5, 7.5], [0, 20]])
 def test_positions_within_bounds_pass(pos: list[float]) -> None:
     body = json.dumps({"position": pos}).encode()
@@ -473,6 +481,7 @@ def test_positions_within_bounds_pass(pos: list[float]) -> None:
     m.decode_goal(body, BOUNDS)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("pos", [[-0.001, 5], [10.001, 5], [5, -1], [5, 20.5], [-100, 100]])
 @pytest.mark.parametrize("name", ["unit_state", "goal", "threat"])
 def test_positions_outside_bounds_are_rejected(pos: list[float], name: str) -> None:
@@ -484,6 +493,7 @@ def test_positions_outside_bounds_are_rejected(pos: list[float], name: str) -> N
     assert "outside the mission bounds [[0, 0], [10, 20]]" in e.value.reason
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("change", "path"),
     [
@@ -500,11 +510,13 @@ def test_preview_request_positions_are_bounded(change: dict[str, Any], path: str
     assert e.value.path == path
 
 
+@pytest.mark.unit
 def test_messages_without_positions_pass_any_bounds() -> None:
     m.check_bounds(m.ErrorReply(error="x"), BOUNDS)
     m.check_bounds(m.PreviewRequest(), BOUNDS)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("bad", [((0, 0), (0, 10)), ((5, 0), (1, 10)), ((0, 10), (10, 0))])
 def test_inverted_bounds_are_a_configuration_error(bad: Any) -> None:
     with pytest.raises(ValueError, match="bounds"):
@@ -528,6 +540,7 @@ class PreviewRequestV2(m.PreviewRequest, frozen=True, kw_only=True):
     horizon_s: float | None = None
 
 
+@pytest.mark.unit
 def test_an_older_decoder_reads_a_newer_message() -> None:
     newer = UnitStateV2(position=(1.0, 2.0), seq=7, battery_pct=55.0, fix={"hdop": 0.9, "sats": [1, 2]})
     assert m.decode_unit_state(msgspec.json.encode(newer)) == m.UnitState(position=(1.0, 2.0), seq=7)
@@ -543,11 +556,13 @@ def test_an_older_decoder_reads_a_newer_message() -> None:
     assert old.threats == [m.WhatIfThreat(id="a", position=(1.0, 1.0), sigma_range=1.0, sigma_lateral=1.0)]
 
 
+@pytest.mark.unit
 def test_a_newer_decoder_reads_an_older_message() -> None:
     old = m.encode(m.UnitState(position=(1.0, 2.0)))
     assert msgspec.json.decode(old, type=UnitStateV2).battery_pct == 100.0
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize("name", list(DECODERS))
 def test_unknown_fields_are_ignored_everywhere(name: str) -> None:
     payload = copy.deepcopy(BASES["preview_request"] if name == "what_if_threat" else BASES[name])
@@ -557,6 +572,7 @@ def test_unknown_fields_are_ignored_everywhere(name: str) -> None:
     DECODERS[name](json.dumps(payload).encode())
 
 
+@pytest.mark.unit
 def test_an_unknown_event_kind_names_the_known_ones() -> None:
     with pytest.raises(InputError) as e:
         m.decode_event(b'{"kind":"teleported","unit":"u1"}')
@@ -564,6 +580,7 @@ def test_an_unknown_event_kind_names_the_known_ones() -> None:
     assert "rejected, replan, trapped, arrived" in e.value.reason
 
 
+@pytest.mark.unit
 def test_event_kinds_match_the_union() -> None:
     tags = set()
     for t in typing.get_args(m.AnyEvent):
@@ -574,6 +591,7 @@ def test_event_kinds_match_the_union() -> None:
 
 
 # -- helpers the daemon uses ----------------------------------------------------------
+@pytest.mark.unit
 def test_threat_update_converts_to_the_core_threat() -> None:
     from pfp_service.core.threat import Threat
 
@@ -581,12 +599,14 @@ def test_threat_update_converts_to_the_core_threat() -> None:
     assert upd.to_threat("t9") == Threat.from_facing((4.0, 5.0), 180.0, 2.0, 1.0, 3.0, 1.0, "t9")
 
 
+@pytest.mark.unit
 def test_empty_preview_body_means_the_live_preview() -> None:
     assert m.decode_preview_request(None) == m.decode_preview_request(b"") == m.decode_preview_request(b"{}")
     assert not m.decode_preview_request(None).what_if
     assert m.decode_preview_request(b'{"max_iter": 10}').what_if
 
 
+@pytest.mark.unit
 def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
     with pytest.raises(InputError) as e:
         m.decode_threat(b'{"position":[0,0],"sigma_range":0,"sigma_lateral":1}')
@@ -606,10 +626,12 @@ def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
     assert m.decode_event(m.encode(ev)) == ev
 
 
+@pytest.mark.unit
 def test_direction_status_values_are_the_contract() -> None:
     assert [s.value for s in m.DirectionStatus] == ["en_route", "escaping", "arrived", "trapped", "no_goal"]
 
 
+@pytest.mark.unit
 def test_the_preview_reply_is_what_pfp_plan_json_prints(capsys: pytest.CaptureFixture[str]) -> None:
     from pathlib import Path
 
@@ -633,6 +655,7 @@ def test_wire_modules_import_without_zenoh_or_numpy() -> None:
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+@pytest.mark.unit
 @pytest.mark.parametrize(
     ("body", "path"),
     [
@@ -646,6 +669,7 @@ def test_wire_threat_rejects_degenerate_sigma(body, path):
     assert exc.value.path == path
 
 
+@pytest.mark.unit
 def test_wire_what_if_rejects_degenerate_sigma():
     body = b'{"threats": [{"id": "x", "position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}]}'
     with pytest.raises(InputError) as exc:
