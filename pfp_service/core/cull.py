@@ -217,9 +217,9 @@ def _culled_descent(packed, points, goals, gains, grid, indptr, indices, cell_ne
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
-def _culled_descent_parallel(
+def _culled_descent_parallel(  # type: ignore[no-untyped-def]
     packed, points, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags
-):  # type: ignore[no-untyped-def]
+):
     for i in numba.prange(points.shape[0]):
         _culled_row(
             packed, points, goals, gains, grid, indptr, indices, cell_need, need_outside, out, flags, i
@@ -272,10 +272,10 @@ def predict(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _predict_row(
+def _predict_row(  # type: ignore[no-untyped-def]
     packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
     trail, lengths, out, flags, i,
-):  # type: ignore[no-untyped-def]  # fmt: skip
+):  # fmt: skip
     trail[i, 0, 0] = pts[i, 0]
     trail[i, 0, 1] = pts[i, 1]
     length = 1
@@ -307,10 +307,10 @@ def _predict_row(
 
 
 @numba.njit(cache=True, nogil=True)
-def _predict_serial(
+def _predict_serial(  # type: ignore[no-untyped-def]
     packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
     trail, lengths,
-):  # type: ignore[no-untyped-def]  # fmt: skip
+):  # fmt: skip
     out = np.empty((pts.shape[0], 4))
     flags = np.zeros(pts.shape[0], dtype=np.bool_)
     for i in range(pts.shape[0]):
@@ -321,10 +321,10 @@ def _predict_serial(
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _predict_parallel(
+def _predict_parallel(  # type: ignore[no-untyped-def]
     packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
     trail, lengths,
-):  # type: ignore[no-untyped-def]  # fmt: skip
+):  # fmt: skip
     out = np.empty((pts.shape[0], 4))
     flags = np.zeros(pts.shape[0], dtype=np.bool_)
     for i in numba.prange(pts.shape[0]):

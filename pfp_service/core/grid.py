@@ -311,12 +311,12 @@ def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) 
     w = np.ones(_SAMPLES)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     length = np.hypot(*(b - a).T)
-    return length + lam * length * (lv @ w) / (3.0 * (_SAMPLES - 1))
+    return np.asarray(length + lam * length * (lv @ w) / (3.0 * (_SAMPLES - 1)))
 
 
 def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
     """Greedily replace runs of segments by straight ones that cost no more."""
-    return pts[shortcut_kept(field, pts, lam, cores)]
+    return np.asarray(pts[shortcut_kept(field, pts, lam, cores)])
 
 
 def shortcut_kept(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:

@@ -132,7 +132,7 @@ def field_stats(threats: tuple[Threat, ...] | list[Threat]) -> FieldStats:
     s_min = min((t.min_sigma() for t in threats), default=math.inf)
     medians: dict[str, float | None] = {}
     for intensity in ("peak", "density"):
-        ratios = [_peak_level(t, intensity) / s for t, s in zip(threats, spreads) if t.weight > 0]  # type: ignore[arg-type]
+        ratios = [_peak_level(t, intensity) / s for t, s in zip(threats, spreads) if t.weight > 0]
         medians[intensity] = statistics.median(ratios) if ratios else None
     return FieldStats(s_min, medians)
 

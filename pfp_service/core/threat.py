@@ -236,7 +236,7 @@ class ThreatField:
     # -- evaluation ---------------------------------------------------------
     def level_grad_at(self, x: float, y: float) -> tuple[float, float, float]:
         """``(level, d/dx, d/dy)`` at one point."""
-        return kernels.point_level_grad(self.packed, x, y)  # type: ignore[no-any-return]
+        return kernels.point_level_grad(self.packed, x, y)
 
     def level_grad(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Level ``(N,)`` and gradient ``(N, 2)`` at ``points`` of shape ``(N, 2)``."""
