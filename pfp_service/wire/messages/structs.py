@@ -1,22 +1,13 @@
-"""Every message on the wire: frozen msgspec Structs, their decoders, and validation.
+"""The message Structs: every payload's shape and bounds, frozen and keyword-only.
 
-Payloads are JSON (``CONTENT_TYPE``), encoded with ``encode()`` and read with
-the ``decode_*`` functions, which are the only way in.  They check the size,
-the types and every bound, and raise ``InputError`` whose ``path`` is rooted
-at ``$`` (``$.position[1]: expected a finite number within ±1e+09``).
-
-Evolution: schemas only grow.  A new field always has a default, and decoders
-ignore fields they do not know, so an older reader accepts a newer message.
-The preview reply is ``core.plan.PlanResult`` itself (what ``pfp plan --json``
-prints); it is imported lazily so this module stays light and zenoh-free.
+Decoding and encoding are in ``codec``; ``pfp_service.wire.messages`` exports both.
 """
 
 from __future__ import annotations
 
-import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from enum import StrEnum
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar, Union
+from typing import TYPE_CHECKING, Annotated, Union
 
 import msgspec
 from msgspec import Meta
@@ -35,11 +26,10 @@ from pfp_service.constraints import (
     Weight,
     check_spreads,
 )
-from pfp_service.errors import InputError, from_validation
-from pfp_service.geo import LatLon, Origin, localise
+from pfp_service.errors import InputError
+from pfp_service.geo import LatLon, Origin
 
 if TYPE_CHECKING:
-    from pfp_service.core.plan import PlanResult
     from pfp_service.core.threat import Threat
 
 __all__ = [
@@ -84,21 +74,6 @@ __all__ = [
     "WhatIfThreat",
     "WorldQuery",
     "WorldSnapshot",
-    "check_bounds",
-    "decode",
-    "decode_direction",
-    "decode_error_reply",
-    "decode_event",
-    "decode_goal",
-    "decode_mission",
-    "decode_plan_result",
-    "decode_planner_status",
-    "decode_preview_request",
-    "decode_threat",
-    "decode_unit_state",
-    "decode_world_query",
-    "decode_world_snapshot",
-    "encode",
     "fit_text",
 ]
 
@@ -576,273 +551,3 @@ class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
             for name in self.__struct_fields__
             if getattr(self, name) != getattr(default, name)
         )
-
-
-# -- encoding and decoding -------------------------------------------------------
-_ENCODER = msgspec.json.Encoder()
-_DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
-    t: msgspec.json.Decoder(t)
-    for t in (
-        UnitState,
-        Goal,
-        ThreatUpdate,
-        PreviewRequest,
-        Direction,
-        ErrorReply,
-        PlannerStatus,
-        AnyEvent,
-        WorldSnapshot,
-        Mission,
-    )
-}
-M = TypeVar("M")
-
-
-def encode(msg: msgspec.Struct) -> bytes:
-    """JSON bytes of any wire message (or of a ``PlanResult``)."""
-    return _ENCODER.encode(msg)
-
-
-def _rooted(path: str) -> str:
-    if not path:
-        return "$"
-    return "$" + path if path.startswith("[") else "$." + path
-
-
-_ROOT_OWN = re.compile(r"^(?P<path>[A-Za-z_][\w\[\].]*): (?P<reason>.+)$", re.S)
-
-
-def _wire_error(exc: msgspec.ValidationError | msgspec.DecodeError) -> InputError:
-    text = str(exc)
-    # A __post_init__ check of the top-level struct comes without " - at `$`";
-    # from_validation would call it malformed JSON.
-    own = _ROOT_OWN.match(text) if isinstance(exc, msgspec.ValidationError) else None
-    if own is not None and " - at `$" not in text:
-        return InputError(_rooted(own["path"]), own["reason"])
-    e = from_validation(exc, CHOICES)
-    reason = e.reason
-    if reason == "number out of range":  # 1e999 and friends: JSON has no infinities
-        reason = "expected a finite number"
-    elif reason.startswith("expected float, got "):
-        reason = "expected a finite number, got " + reason[len("expected float, got ") :]
-    elif reason.startswith("expected float | null, got "):
-        reason = "expected a finite number or null, got " + reason[len("expected float | null, got ") :]
-    return InputError(_rooted(e.path), reason)
-
-
-# The most lat/lon positions an inbound message holds.  The lat/lon path walks the
-# document in Python (about 50 ms for 256 KiB of small objects, on a Zenoh callback
-# thread), so for these types a payload with more positions, or more JSON objects and
-# arrays than that many positions need, is refused before it is walked.
-_GEO_MAX_POSITIONS: dict[Any, int] = {
-    UnitState: 1,
-    Goal: 1,
-    ThreatUpdate: 1,
-    PreviewRequest: 2 + MAX_WHATIF_THREATS,
-}
-
-
-def _geo_document(cls: Any, data: bytes | bytearray) -> Any:
-    """The untyped document for the lat/lon path, costing no more than a real message of ``cls``.
-
-    Raises:
-        InputError: more positions, objects or arrays than ``cls`` can hold.
-    """
-    limit = _GEO_MAX_POSITIONS.get(cls)
-    if limit is not None:
-        if max(data.count(b'"lat"'), data.count(b'"lon"')) > limit:
-            raise InputError("$", f"more lat/lon positions than the {limit} a message of this kind holds")
-        if data.count(b"{") + data.count(b"[") > 4 * limit + 16:
-            raise InputError("$", f"more JSON objects and arrays than {limit} positions need")
-    doc = msgspec.json.decode(data)
-    fields = getattr(cls, "__struct_fields__", None)
-    if fields is not None and isinstance(doc, dict):  # unknown fields are ignored: never walk them
-        doc = {k: v for k, v in doc.items() if k in fields}
-    return doc
-
-
-def decode(
-    cls: type[M],
-    data: bytes | bytearray | memoryview | None,
-    bounds: Bounds | None = None,
-    origin: Origin | None = None,
-) -> M:
-    """Decode and validate one message of type ``cls``.
-
-    A position may be ``[x, y]`` metres or ``{"lat": …, "lon": …}``; the
-    second becomes metres from ``origin`` here (``geo.localise``), so what
-    comes out is always in metres.
-
-    Args:
-        cls: a message Struct of this module, ``AnyEvent``, or ``PlanResult``.
-        data: the payload as received.
-        bounds: the mission bounds, if any; every position must lie within them.
-        origin: the mission origin, if any; without one a lat/lon is refused.
-
-    Raises:
-        InputError: ``path`` rooted at ``$`` and the reason.
-    """
-    decoder = _DECODERS.get(cls)
-    if decoder is None:
-        decoder = _DECODERS[cls] = msgspec.json.Decoder(cls)
-    size = 0 if data is None else len(data)
-    if size == 0:
-        raise InputError("$", "empty payload (expected a JSON object)")
-    if size > MAX_PAYLOAD_BYTES:
-        raise InputError("$", f"payload of {size} bytes exceeds the limit of {MAX_PAYLOAD_BYTES}")
-    try:
-        if isinstance(data, memoryview):
-            data = data.tobytes()
-        if b'"lat"' in data or b'"lon"' in data:  # type: ignore[operator]
-            # the slow path only for lat/lon: untyped, localised, then typed with the same paths
-            msg: M = msgspec.convert(localise(_geo_document(cls, data), origin, "$"), cls)  # type: ignore[arg-type]
-        else:
-            msg = decoder.decode(data)  # type: ignore[arg-type]
-    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-        raise _wire_error(exc) from exc
-    except RecursionError:  # [[[[... or {"a":{"a":... deeper than the decoder's stack
-        raise InputError("$", "malformed JSON: nested too deeply") from None
-    except InputError:
-        raise
-    except Exception as exc:  # hostile bytes leave this function as an InputError and nothing else
-        raise InputError("$", f"cannot decode: {type(exc).__name__}: {exc}"[:200]) from exc
-    if bounds is not None:
-        check_bounds(msg, bounds)
-    return msg
-
-
-def _positions(msg: object) -> Iterator[tuple[str, tuple[float, float]]]:
-    if isinstance(msg, (UnitState, Goal, ThreatUpdate, TrappedEvent, ArrivedEvent)):
-        yield "$.position", msg.position
-    elif isinstance(msg, PreviewRequest):
-        if msg.start is not None:
-            yield "$.start", msg.start
-        if msg.goal is not None:
-            yield "$.goal", msg.goal
-        for i, t in enumerate(msg.threats):
-            yield f"$.threats[{i}].position", t.position
-
-
-def check_bounds(msg: object, bounds: Bounds) -> None:
-    """Check that every position in ``msg`` lies within ``bounds`` (edges included).
-
-    Args:
-        msg: a decoded message; those without positions pass.
-        bounds: ``((xmin, ymin), (xmax, ymax))`` from the daemon's mission config.
-
-    Raises:
-        InputError: the first position outside, with its path.
-        ValueError: ``bounds`` is empty or inverted (a configuration bug).
-    """
-    (x0, y0), (x1, y1) = bounds
-    if not (x0 < x1 and y0 < y1):
-        raise ValueError(f"bounds: must be ((xmin, ymin), (xmax, ymax)) with min < max, got {bounds}")
-    for path, (x, y) in _positions(msg):
-        if not (x0 <= x <= x1 and y0 <= y <= y1):
-            raise InputError(
-                path, f"[{x:g}, {y:g}] lies outside the mission bounds [[{x0:g}, {y0:g}], [{x1:g}, {y1:g}]]"
-            )
-
-
-def decode_unit_state(
-    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
-) -> UnitState:
-    """A ``UnitState`` from a ``unit/{u}/state`` payload (see ``decode``)."""
-    return decode(UnitState, data, bounds, origin)
-
-
-def decode_goal(
-    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
-) -> Goal:
-    """A ``Goal`` from a ``unit/{u}/goal`` PUT payload (see ``decode``)."""
-    return decode(Goal, data, bounds, origin)
-
-
-def decode_threat(
-    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
-) -> ThreatUpdate:
-    """A ``ThreatUpdate`` from a ``threat/{t}`` PUT payload (see ``decode``)."""
-    return decode(ThreatUpdate, data, bounds, origin)
-
-
-def decode_preview_request(
-    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
-) -> PreviewRequest:
-    """A ``PreviewRequest`` from a preview query body; no body means the live preview."""
-    if data is None or len(data) == 0:
-        return PreviewRequest()
-    return decode(PreviewRequest, data, bounds, origin)
-
-
-def decode_direction(data: bytes | bytearray | memoryview | None) -> Direction:
-    """A ``Direction`` (for units and clients)."""
-    return decode(Direction, data)
-
-
-def decode_planner_status(data: bytes | bytearray | memoryview | None) -> PlannerStatus:
-    """A ``PlannerStatus`` status-query reply."""
-    return decode(PlannerStatus, data)
-
-
-def decode_mission(data: bytes | bytearray | memoryview | None) -> Mission:
-    """A ``Mission`` another planner published."""
-    return decode(Mission, data)
-
-
-def decode_world_snapshot(data: bytes | bytearray | memoryview | None) -> WorldSnapshot:
-    """A ``WorldSnapshot`` world-query reply."""
-    return decode(WorldSnapshot, data)
-
-
-def decode_world_query(parameters: str) -> WorldQuery:
-    """A world query's selector parameters (``query.parameters``: ``a=1;b=2``), validated.
-
-    Raises:
-        InputError: too long, not ``name=value``, a name repeated or unknown, or a
-            bad value; the path names the parameter (``$.limit``).
-    """
-    if len(parameters) > MAX_WORLD_QUERY_CHARS:
-        raise InputError("$", f"query parameters longer than {MAX_WORLD_QUERY_CHARS} characters")
-    doc: dict[str, str] = {}
-    for part in parameters.split(";"):
-        if not part:
-            continue
-        name, eq, value = part.partition("=")
-        if not eq:
-            raise InputError("$", f"expected name=value, got {fit_text(part, 64)!r}")
-        if name in doc:
-            raise InputError(_rooted(name), "parameter given twice")
-        if name not in WorldQuery.__struct_fields__:
-            raise InputError(
-                _rooted(name) if re.fullmatch(r"[A-Za-z_]\w{0,63}", name) else "$",
-                f"unknown parameter (expected one of {', '.join(WorldQuery.__struct_fields__)})",
-            )
-        doc[name] = value
-    try:
-        return msgspec.convert(doc, WorldQuery, strict=False)
-    except msgspec.ValidationError as exc:
-        raise _wire_error(exc) from exc
-
-
-def decode_error_reply(data: bytes | bytearray | memoryview | None) -> ErrorReply:
-    """An ``ErrorReply`` from a ``reply_err`` body."""
-    return decode(ErrorReply, data)
-
-
-def decode_event(
-    data: bytes | bytearray | memoryview | None,
-) -> Event:
-    """One planner event, by its ``kind`` tag (an unknown kind is an ``InputError`` at ``$.kind``)."""
-    try:
-        return decode(AnyEvent, data)  # type: ignore[arg-type]
-    except InputError as exc:
-        if exc.path == "$.kind" and exc.reason.startswith("invalid value"):
-            raise InputError(exc.path, f"{exc.reason} (expected one of: {', '.join(EVENT_KINDS)})") from exc
-        raise
-
-
-def decode_plan_result(data: bytes | bytearray | memoryview | None) -> PlanResult:
-    """A preview reply: ``core.plan.PlanResult``, exactly what ``pfp plan --json`` prints."""
-    from pfp_service.core.plan import PlanResult
-
-    return decode(PlanResult, data)
