@@ -28,6 +28,7 @@ WORLD = [
     "missions",
     "steering",
     "lookahead",
+    "intake",  # the node's queue policy, kept pure
 ]
 SANS_IO = ("pfp_service/core/", *(f"pfp_service/service/{m}.py" for m in WORLD))
 IO_MODULES = {"time", "os", "socket", "threading", "logging", "zenoh", "subprocess", "asyncio", "sqlite3"}

@@ -21,7 +21,6 @@ from __future__ import annotations
 import collections
 import contextlib
 import ctypes
-import itertools
 import math
 import sys
 import threading
@@ -38,7 +37,6 @@ from pfp_service.service.config import ServeConfig
 from pfp_service.service.deliberation import Deliberators
 from pfp_service.service.desk import PreviewDesk, warm_up
 from pfp_service.service.events import (
-    Deliberated,
     GoalCancelled,
     GoalSet,
     Input,
@@ -52,6 +50,7 @@ from pfp_service.service.events import (
     TokenChanged,
     mission_message,
 )
+from pfp_service.service.intake import Intake
 from pfp_service.service.log import get_logger
 from pfp_service.service.store import Store
 from pfp_service.service.world import World
@@ -199,11 +198,9 @@ class PlannerNode:
         self.world = World(cfg.world_settings())
         self.started = clock()
         self.counters = {"msgs_in": 0, "msgs_out": 0}
-        self._shed = 0  # inputs refused at the queues since the last tick: told to the world with it
         self.latency = _Latency()
         self._lock = threading.Lock()
-        self._states: dict[str, tuple[Any, float]] = {}
-        self._inbox: collections.deque[Input] = collections.deque()
+        self._intake = Intake(INBOX_MAX, TICK_INPUTS, TICK_UNITS)  # inputs and states, for the loop
         self._writes: collections.deque[_Write] = collections.deque()
         self._order = WriteOrder()
         self.zid = str(session.info.zid())
@@ -290,13 +287,9 @@ class PlannerNode:
     # -- callbacks: decode and enqueue, nothing more -----------------------------
     def _push(self, item: Input) -> None:
         with self._lock:
-            # a deliberation's answer is never dropped: the unit's job would stand forever (they are
-            # bounded by the jobs asked, one per unit)
-            if len(self._inbox) >= INBOX_MAX and not isinstance(item, Deliberated):
-                self._shed += 1
-                return
-            self._inbox.append(item)
-        self._wake.set()
+            taken = self._intake.put(item)
+        if taken:
+            self._wake.set()
 
     def _state(self, sample: zenoh.Sample, received: float) -> None:
         """One state from the ring (the loop thread): decoded, latest-wins per unit."""
@@ -308,7 +301,7 @@ class PlannerNode:
             self._push(InputRejected(key, err))
             return
         with self._lock:
-            self._states[uid] = (msg, received)
+            self._intake.state(uid, msg, received)
 
     def _goal_input(self, key: str, delete: bool, payload: bytes) -> Input:
         try:
@@ -331,7 +324,7 @@ class PlannerNode:
     def _push_write(self, write: _Write) -> None:
         with self._lock:
             if len(self._writes) >= WRITES_MAX:  # shed: a writer asks again, a put is counted lost
-                self._shed += 1
+                self._intake.refused()
                 if write.query is not None:
                     write.query.drop()
                 return
@@ -479,7 +472,7 @@ class PlannerNode:
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
             if len(self._queries) >= QUERIES_MAX:  # a query flood: shed, counted, never queued unbounded
-                self._shed += 1
+                self._intake.refused()
                 query.drop()
                 return
             self._queries.append((kind, query, self.clock()))
@@ -518,27 +511,20 @@ class PlannerNode:
 
     def _tick(self) -> None:
         with self._lock:  # a bounded slice: a storm is spread over ticks, so no tick holds up the rest
-            if len(self._inbox) <= TICK_INPUTS:
-                inbox, self._inbox = self._inbox, collections.deque()
-            else:
-                inbox = collections.deque(self._inbox.popleft() for _ in range(TICK_INPUTS))
-            if len(self._states) <= TICK_UNITS:
-                states, self._states = self._states, {}
-            else:  # the longest waiting first (a unit reporting again keeps its place: latest wins)
-                states = {u: self._states.pop(u) for u in list(itertools.islice(self._states, TICK_UNITS))}
+            got = self._intake.take()
+            inbox, states = got.inputs, got.states
             queries, self._queries = self._queries, collections.deque()
             if len(self._writes) <= TICK_INPUTS:
                 writes, self._writes = self._writes, collections.deque()
             else:
                 writes = collections.deque(self._writes.popleft() for _ in range(TICK_INPUTS))
-            if self._inbox or self._states or self._writes:
+            if got.more or self._writes:
                 self._wake.set()  # the rest at once, in the next tick
-            shed, self._shed = self._shed, 0
         now = self.clock()
         acks = self._admit(writes, inbox)
         batch: list[Input] = list(inbox)
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
-        batch.append(Tick(now, shed))
+        batch.append(Tick(now, got.shed))
         self.counters["msgs_in"] += len(batch) - 1
         if self.store is not None:  # applied only once committed
             batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
