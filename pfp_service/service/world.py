@@ -384,7 +384,7 @@ class World:
                 self._unit_fault(b, rec, exc)
                 failed.append((rec, exc))
                 continue
-            out.events += [event] if event is not None else []
+            out.events.extend(() if event is None else (event,))
             out.directions.append(d)
             sent.append(rec.position)
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
