@@ -302,7 +302,7 @@ def test_a_planner_killed_takes_its_worker_processes_with_it():
         deadline = time.monotonic() + 60
         workers: set[int] = set()
         while time.monotonic() < deadline and len(workers) < 3:  # 2 preview workers, 1 deliberation
-            workers = {k for k in _children(proc.pid) if b"pfp_service.service.workers" in _cmdline(k)}
+            workers = {k for k in _children(proc.pid) if b"pfp_service.service.workerproc" in _cmdline(k)}
             time.sleep(0.2)
         assert len(workers) >= 3, workers
         proc.send_signal(signal.SIGKILL)

@@ -42,7 +42,8 @@ from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Stepper
 from pfp_service.service.events import Deliberated, Job
 from pfp_service.service.log import get_logger
-from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool, world_field
+from pfp_service.service.workerproc import world_field
+from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool
 
 __all__ = ["AHEAD", "CHUNK", "CHUNK_RUN_S", "Deliberators"]
 

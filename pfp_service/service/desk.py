@@ -53,16 +53,8 @@ from pfp_service.geo import Origin
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings
 from pfp_service.service.log import get_logger
 from pfp_service.service.preview import Cost, admit, fit_reply, preview
-from pfp_service.service.workers import (
-    Blobs,
-    Outcome,
-    Task,
-    WorkerPool,
-    forget_fields,
-    retire,
-    world_field,
-    world_threats,
-)
+from pfp_service.service.workerproc import forget_fields, retire, world_field, world_threats
+from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds
 

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import heapq
-import importlib
 import itertools
 import json
 import math
@@ -48,7 +47,6 @@ import subprocess
 import sys
 import threading
 import time
-import traceback
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
@@ -64,10 +62,6 @@ __all__ = [
     "Outcome",
     "Task",
     "WorkerPool",
-    "forget_fields",
-    "retire",
-    "world_field",
-    "world_threats",
 ]
 
 log = get_logger("workers")
@@ -427,7 +421,7 @@ class WorkerPool:
         ours = Connection(ours_sock.detach())
         theirs = theirs_sock.detach()
         boot = [os.getpid(), theirs, self._memory_mb, self._nice, self._warm]
-        code = "import sys; from pfp_service.service.workers import _boot; _boot(sys.argv[1])"
+        code = "import sys; from pfp_service.service.workerproc import boot; boot(sys.argv[1])"
         try:
             # a fresh interpreter, not multiprocessing's spawn: it keeps the SIGINT blocked in this
             # thread (``_block_sigint``) until it ignores it, and it imports no __main__ of ours
@@ -489,120 +483,9 @@ def _finish(task: Task, out: Outcome) -> None:
         log.error("a task's answer failed", extra={"fields": {"outcome": out.kind, "error": repr(exc)}})
 
 
-# -- in the worker processes -------------------------------------------------------------
-_WORLD: dict[str, Any] = {"version": None, "threats": (), "fields": {}}
-
-
-def world_threats() -> tuple[Any, ...]:
-    """The threats the current task runs under (its ``Task.field``)."""
-    return _WORLD["threats"]  # type: ignore[no-any-return]
-
-
-def world_field(intensity: str) -> Any:
-    """The ``ThreatField`` of ``world_threats()``, built once per field and intensity, shared by every task."""
-    fields = _WORLD["fields"]
-    got = fields.get(intensity)
-    if got is None:
-        from pfp_service.core import ThreatField
-
-        got = fields[intensity] = ThreatField(_WORLD["threats"], intensity)  # type: ignore[arg-type]
-    return got
-
-
-_RETIRE = [False]
-
-
-def forget_fields() -> None:
-    """Drop the fields built on the threats in force (built again when next asked)."""
-    _WORLD["fields"] = {}
-
-
-def retire() -> None:
-    """Have this worker replaced once its task has replied (a task that was interrupted mid-phase calls it)."""
-    _RETIRE[0] = True
-
-
 def _block_sigint() -> None:
     """Block SIGINT in a thread that starts workers: a worker inherits the mask, so a Ctrl-C to the
     process group while it is still importing (before it can ignore SIGINT) leaves it be, and the
     parent stops it; Python handles signals on the main thread only, so the thread loses nothing."""
     with contextlib.suppress(AttributeError, OSError, ValueError):
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-
-
-def _boot(arg: str) -> None:
-    """A worker's entry point (``python -c``): ``arg`` is ``[parent, fd, memory_mb, nice, warm]`` as JSON."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked while it started (_block_sigint)
-    parent, fd, memory_mb, nice, warm = json.loads(arg)
-    fn = None
-    if warm is not None:
-        module, _, name = warm.partition(":")
-        fn = getattr(importlib.import_module(module), name)
-    _worker_main(Connection(fd), parent, memory_mb, nice, fn)
-
-
-def _worker_main(
-    conn: Connection, parent: int, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
-) -> None:
-    threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
-    if warm is not None:
-        warm()  # at the planner's priority: a killed worker's successor is wanted soon
-    if nice:
-        with contextlib.suppress(OSError):
-            os.nice(nice)
-    if memory_mb is not None:
-        _limit_address_space(memory_mb)
-    conn.send("ready")
-    while True:
-        try:
-            fn, args, version, blob = conn.recv()
-        except (EOFError, OSError):
-            os._exit(0)  # the parent closed the pipe: nobody will ask again
-        started = time.monotonic()
-        _RETIRE[0] = False
-        try:
-            if blob is not None:
-                _WORLD.update(version=None, threats=(), fields={})  # the old field goes before the new loads
-                _WORLD.update(version=version, threats=pickle.loads(blob))
-            value = fn(*args)
-            reply: tuple[str, Any, float, bool] = ("done", value, time.monotonic() - started, _RETIRE[0])
-        except MemoryError:
-            reply = ("memory", "the worker's memory limit was reached", time.monotonic() - started, True)
-        except Exception:
-            reply = ("error", traceback.format_exc(limit=4), time.monotonic() - started, _RETIRE[0])
-        try:
-            conn.send(reply)
-        except MemoryError:
-            reply = (
-                "memory",
-                "the reply did not fit the worker's memory limit",
-                time.monotonic() - started,
-                True,
-            )
-            conn.send(reply)
-        except (OSError, ValueError):
-            os._exit(0)
-        if reply[3]:
-            os._exit(0)  # the parent replaces this worker: its heap (or numba's state) may be left damaged
-
-
-def _limit_address_space(memory_mb: float) -> None:
-    """``RLIMIT_AS``: the worker's size now (warm, numba's and llvm's reservations included) plus ``memory_mb``."""
-    import resource
-
-    size = 0
-    with contextlib.suppress(OSError), open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmSize:"):
-                size = int(line.split()[1]) * 1024
-    if size:
-        limit = size + int(memory_mb * 1024 * 1024)
-        with contextlib.suppress(ValueError, OSError):
-            resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-
-
-def _watch_parent(parent: int) -> None:
-    while os.getppid() == parent:
-        time.sleep(ORPHAN_POLL_S)
-    os._exit(0)  # the planner is gone: nobody will ask this worker anything again

@@ -1,0 +1,138 @@
+"""A worker process's side of the pool: its entry point, its limits, and the field its tasks share.
+
+``workers.WorkerPool`` starts ``python -c "...; boot(ARG)"``, so this module is
+what a worker imports first; nothing in the planner's process imports it but
+the tasks that run in workers (``world_field``, ``retire``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import os
+import pickle
+import signal
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from typing import Any
+
+from pfp_service.service.log import get_logger
+from pfp_service.service.workers import ORPHAN_POLL_S
+
+__all__ = ["boot", "forget_fields", "retire", "world_field", "world_threats"]
+
+log = get_logger("workers")
+
+# -- in the worker processes -------------------------------------------------------------
+_WORLD: dict[str, Any] = {"version": None, "threats": (), "fields": {}}
+
+
+def world_threats() -> tuple[Any, ...]:
+    """The threats the current task runs under (its ``Task.field``)."""
+    return _WORLD["threats"]  # type: ignore[no-any-return]
+
+
+def world_field(intensity: str) -> Any:
+    """The ``ThreatField`` of ``world_threats()``, built once per field and intensity, shared by every task."""
+    fields = _WORLD["fields"]
+    got = fields.get(intensity)
+    if got is None:
+        from pfp_service.core import ThreatField
+
+        got = fields[intensity] = ThreatField(_WORLD["threats"], intensity)  # type: ignore[arg-type]
+    return got
+
+
+_RETIRE = [False]
+
+
+def forget_fields() -> None:
+    """Drop the fields built on the threats in force (built again when next asked)."""
+    _WORLD["fields"] = {}
+
+
+def retire() -> None:
+    """Have this worker replaced once its task has replied (a task that was interrupted mid-phase calls it)."""
+    _RETIRE[0] = True
+
+
+def boot(arg: str) -> None:
+    """A worker's entry point (``python -c``): ``arg`` is ``[parent, fd, memory_mb, nice, warm]`` as JSON."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked while it started (_block_sigint)
+    parent, fd, memory_mb, nice, warm = json.loads(arg)
+    fn = None
+    if warm is not None:
+        module, _, name = warm.partition(":")
+        fn = getattr(importlib.import_module(module), name)
+    _worker_main(Connection(fd), parent, memory_mb, nice, fn)
+
+
+def _worker_main(
+    conn: Connection, parent: int, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
+) -> None:
+    threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
+    if warm is not None:
+        warm()  # at the planner's priority: a killed worker's successor is wanted soon
+    if nice:
+        with contextlib.suppress(OSError):
+            os.nice(nice)
+    if memory_mb is not None:
+        _limit_address_space(memory_mb)
+    conn.send("ready")
+    while True:
+        try:
+            fn, args, version, blob = conn.recv()
+        except (EOFError, OSError):
+            os._exit(0)  # the parent closed the pipe: nobody will ask again
+        started = time.monotonic()
+        _RETIRE[0] = False
+        try:
+            if blob is not None:
+                _WORLD.update(version=None, threats=(), fields={})  # the old field goes before the new loads
+                _WORLD.update(version=version, threats=pickle.loads(blob))
+            value = fn(*args)
+            reply: tuple[str, Any, float, bool] = ("done", value, time.monotonic() - started, _RETIRE[0])
+        except MemoryError:
+            reply = ("memory", "the worker's memory limit was reached", time.monotonic() - started, True)
+        except Exception:
+            reply = ("error", traceback.format_exc(limit=4), time.monotonic() - started, _RETIRE[0])
+        try:
+            conn.send(reply)
+        except MemoryError:
+            reply = (
+                "memory",
+                "the reply did not fit the worker's memory limit",
+                time.monotonic() - started,
+                True,
+            )
+            conn.send(reply)
+        except (OSError, ValueError):
+            os._exit(0)
+        if reply[3]:
+            os._exit(0)  # the parent replaces this worker: its heap (or numba's state) may be left damaged
+
+
+def _limit_address_space(memory_mb: float) -> None:
+    """``RLIMIT_AS``: the worker's size now (warm, numba's and llvm's reservations included) plus ``memory_mb``."""
+    import resource
+
+    size = 0
+    with contextlib.suppress(OSError), open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmSize:"):
+                size = int(line.split()[1]) * 1024
+    if size:
+        limit = size + int(memory_mb * 1024 * 1024)
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+
+
+def _watch_parent(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(ORPHAN_POLL_S)
+    os._exit(0)  # the planner is gone: nobody will ask this worker anything again
