@@ -92,6 +92,20 @@ def _state_home(tmp_path_factory):
     os.environ["XDG_STATE_HOME"] = str(tmp_path_factory.mktemp("state-home"))
 
 
+@pytest.fixture(autouse=True)
+def _fresh_route_cache():
+    """Each test starts with the process's shared route cache empty.
+
+    Which grid serves a route depends on what the cache already holds (a goal another
+    unit asked for gets a shared, roomier grid), so without this a test's routes would
+    depend on the tests that ran before it in the same process.
+    """
+    routes = sys.modules.get("pfp_service.core.routes")
+    if routes is not None:
+        routes.ROUTES.clear()
+    yield
+
+
 def run_pfp(*args: str, timeout: float = 120, **kw) -> subprocess.CompletedProcess[str]:
     """Run ``pfp ARGS`` in a subprocess, exactly as a user would."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
