@@ -473,7 +473,9 @@ def _opt(v: float | None) -> str:
 def run(args: argparse.Namespace) -> int:
     import numba
 
-    machine = f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {numba.get_num_threads()}"
+    machine = (
+        f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {numba.get_num_threads()}"
+    )
     if args.scale_only:
         only = scale_table(args.repeat, args.quick)
         if args.json:

@@ -50,6 +50,7 @@ from pfp_service import geojson
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import DeadlinePassed, InputError
 from pfp_service.geo import Origin
+from pfp_service.service.config import ServeConfig
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings
 from pfp_service.service.log import get_logger
 from pfp_service.service.preview import Cost, admit, fit_reply, preview
@@ -378,3 +379,17 @@ def warm_up(settings: WorldSettings | None) -> None:
     )
     preview(w.view("w"), None, time.monotonic, 5.0, 10_000)
     assert out.directions
+
+
+def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewDesk:
+    """The preview desk of a planner of ``cfg``: its worker processes start warming up now."""
+    return PreviewDesk(
+        cfg.preview_workers,
+        cfg.preview_queue,
+        cfg.preview_budget_ms / 1e3,
+        cfg.preview_max_iter,
+        clock,
+        cfg.bounds_tuple(),
+        cfg.origin,
+        wait_s=cfg.preview_wait_ms / 1e3,
+    )

@@ -10,6 +10,7 @@ import json
 import logging
 import sys
 import time
+from collections.abc import Iterable
 from typing import Any
 
 __all__ = ["get_logger", "setup_logging"]
@@ -56,3 +57,27 @@ def setup_logging(fmt: str = "human", level: str = "info") -> logging.Logger:
 
 def get_logger(name: str) -> logging.Logger:
     return logging.getLogger(f"{_ROOT}.{name}")
+
+
+def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 20) -> None:
+    """One line per goal or threat change among ``inputs``, at most ``limit`` and a count of the rest."""
+    # here, not at the top: every process logs, and only the planner holds the world's inputs
+    from pfp_service.service.events import GoalCancelled, GoalSet, ThreatPut, ThreatRemoved
+
+    shown = 0
+    for inp in inputs:
+        if isinstance(inp, GoalSet):
+            msg, fields = "goal set", {"unit": inp.unit, "goal": list(inp.goal.position)}
+        elif isinstance(inp, GoalCancelled):
+            msg, fields = "goal cancelled", {"unit": inp.unit}
+        elif isinstance(inp, ThreatPut):
+            msg, fields = "threat put", {"threat": inp.threat, "position": list(inp.update.position)}
+        elif isinstance(inp, ThreatRemoved):
+            msg, fields = "threat removed", {"threat": inp.threat}
+        else:
+            continue
+        shown += 1
+        if shown <= limit:
+            logger.info(msg, extra={"fields": fields})
+    if shown > limit:
+        logger.info("more goal and threat changes", extra={"fields": {"count": shown - limit}})

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import ctypes
 import math
 import sys
 import threading
@@ -35,7 +34,7 @@ from pfp_service import __version__
 from pfp_service.errors import InputError
 from pfp_service.service.config import ServeConfig
 from pfp_service.service.deliberation import Deliberators
-from pfp_service.service.desk import PreviewDesk, warm_up
+from pfp_service.service.desk import PreviewDesk, preview_desk, warm_up
 from pfp_service.service.events import (
     GoalCancelled,
     GoalSet,
@@ -51,8 +50,10 @@ from pfp_service.service.events import (
     mission_message,
 )
 from pfp_service.service.intake import Intake
-from pfp_service.service.log import get_logger
+from pfp_service.service.log import get_logger, log_changes
+from pfp_service.service.loopstats import Latency, Trim
 from pfp_service.service.store import Store
+from pfp_service.service.twins import watch_twins
 from pfp_service.service.world import World
 from pfp_service.service.worldpages import answer_world, fetch_world
 from pfp_service.wire import (
@@ -65,7 +66,6 @@ from pfp_service.wire import (
     RestoredEvent,
     decode_goal,
     decode_mission,
-    decode_planner_status,
     decode_threat,
     decode_unit_state,
     encode,
@@ -86,13 +86,8 @@ POLL_S = 0.0003  # the loop looks at the state ring this often (states wake no P
 POLL_IDLE_S = 0.001  # ... backing off to this when none came (idle: about 2 % of a core)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
-TRIM_AFTER = 256  # units forgotten before freed memory is handed back to the OS
-TRIM_QUIET_S = 1.0  # ... once no unit was forgotten for this long
-TRIM_EVERY_S = 10.0  # ... or this often while they go on being forgotten
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
-PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
 PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
-PEER_MISSES = 5  # a same-id peer that missed this many asks in a row is gone (a busy loop answers late)
 
 
 class _Write:
@@ -102,70 +97,6 @@ class _Write:
 
     def __init__(self, key: str, mark: WriteMark | None, inp: Input, received: float, query: Any) -> None:
         self.key, self.mark, self.input, self.received, self.query = key, mark, inp, received, query
-
-
-class _Latency:
-    """Recent latencies, receipt of a state to publication of its direction; quantiles when asked."""
-
-    def __init__(self, size: int = 4096) -> None:
-        self._samples: collections.deque[float] = collections.deque(maxlen=size)
-
-    def add(self, seconds: float) -> None:
-        self._samples.append(seconds)
-
-    def quantiles_ms(self) -> tuple[float | None, float | None]:
-        if not self._samples:
-            return None, None
-        s = sorted(self._samples)
-        return 1e3 * s[len(s) // 2], 1e3 * s[min(len(s) - 1, int(0.99 * len(s)))]
-
-
-class _Trim:
-    """Give freed memory back to the OS once many units are forgotten (glibc's ``malloc_trim``).
-
-    CPython's allocator and glibc keep freed memory for reuse, so a planner
-    that held 10,000 units and forgot them would stay at its peak (measured
-    in process: 10,000 units forgotten left 30 MB of 65 MB; trimmed, 14 MB).
-    Once ``TRIM_AFTER`` units are forgotten, one ``malloc_trim(0)`` runs when
-    the forgetting pauses for ``TRIM_QUIET_S`` (or every ``TRIM_EVERY_S``
-    through a long one), on a short-lived thread: ctypes releases the GIL, so
-    the loop never waits for it.  Elsewhere than glibc it does nothing.
-    """
-
-    def __init__(self) -> None:
-        self._pending = 0
-        self._last_forget = self._last_trim = -math.inf
-        try:
-            self._fn: Any = ctypes.CDLL(None).malloc_trim
-        except (OSError, AttributeError):
-            self._fn = None
-
-    def forgot(self, units: int, now: float) -> None:
-        self._pending += units
-        self._last_forget = now
-
-    def due(self, now: float) -> None:
-        """Called every tick: trim if enough was forgotten and the forgetting paused."""
-        if self._fn is None or self._pending < TRIM_AFTER:
-            return
-        if now - self._last_forget < TRIM_QUIET_S and now - self._last_trim < TRIM_EVERY_S:
-            return
-        self._pending, self._last_trim = 0, now
-        threading.Thread(target=self._fn, args=(0,), name="pfp-trim", daemon=True).start()
-
-
-def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewDesk:
-    """The preview desk of a planner of ``cfg``: its worker processes start warming up now."""
-    return PreviewDesk(
-        cfg.preview_workers,
-        cfg.preview_queue,
-        cfg.preview_budget_ms / 1e3,
-        cfg.preview_max_iter,
-        clock,
-        cfg.bounds_tuple(),
-        cfg.origin,
-        wait_s=cfg.preview_wait_ms / 1e3,
-    )
 
 
 class PlannerNode:
@@ -198,20 +129,19 @@ class PlannerNode:
         self.world = World(cfg.world_settings())
         self.started = clock()
         self.counters = {"msgs_in": 0, "msgs_out": 0}
-        self.latency = _Latency()
+        self.latency = Latency()
         self._lock = threading.Lock()
         self._intake = Intake(INBOX_MAX, TICK_INPUTS, TICK_UNITS)  # inputs and states, for the loop
         self._writes: collections.deque[_Write] = collections.deque()
         self._order = WriteOrder()
         self.zid = str(session.info.zid())
-        self._same_id: dict[str, int] = {}  # planners with this id on other sessions -> asks missed
         self._inbox_events: list[Event] = []  # events raised off the loop (a twin under --cluster)
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
-        self._trim = _Trim()
+        self._trim = Trim()
         self._state_keys = keys.KeyOf(keys.KeyKind.UNIT_STATE, cfg.mission)
         self._direction_keys = keys.KeyOf(keys.KeyKind.UNIT_DIRECTION, cfg.mission)
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
@@ -265,7 +195,12 @@ class PlannerNode:
             self._event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
-        self._twins_thread = threading.Thread(target=self._watch_twins, name="pfp-twins", daemon=True)
+        self._twins_thread = threading.Thread(
+            target=watch_twins,
+            args=(self.session, self.cfg.mission, self.cfg.planner_id, self.zid, self._stop, self._twin),
+            name="pfp-twins",
+            daemon=True,
+        )
         self._twins_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
 
@@ -414,45 +349,6 @@ class PlannerNode:
         except Exception as exc:  # the session is closing under us: the subscriber names them in time
             log.warning("peers not asked", extra={"fields": {"reason": str(exc)[:200]}})
 
-    def _watch_twins(self) -> None:
-        """Ask every planner of the mission for its status each ``PEERS_EVERY_S``, to find twins.
-
-        A twin is another session serving this mission under this planner's id:
-        both hold the same ``alive/planner/{id}`` token, so liveliness cannot tell
-        them apart, but each status names its session.  A twin becomes a
-        ``PeerPlanner`` named ``{id}-{its session}``: the world reports the
-        conflict.  Under ``--cluster`` the units are shared by planner id, which
-        two twins cannot do, so the twin is a conflict there too, said by the node.
-        Runs on its own thread: it blocks on queries, which no callback may.
-        """
-        selector = keys.planner_statuses(self.cfg.mission)
-        me = self.cfg.planner_id
-        while not self._stop.wait(PEERS_EVERY_S):
-            seen: set[str] = set()
-            try:
-                replies = self.session.get(
-                    selector, consolidation=zenoh.ConsolidationMode.NONE, timeout=PEERS_EVERY_S
-                )
-                for reply in replies:
-                    if reply.ok is None:
-                        continue
-                    with contextlib.suppress(InputError):
-                        st = decode_planner_status(reply.ok.payload.to_bytes())
-                        if st.planner == me and st.session and st.session != self.zid:
-                            seen.add(st.session)
-            except Exception:  # the session is closing under us
-                if self._stop.is_set():
-                    return
-                continue
-            for zid in seen - self._same_id.keys():
-                self._same_id[zid] = 0
-                self._twin(zid, True)
-            for zid in list(self._same_id):
-                self._same_id[zid] = 0 if zid in seen else self._same_id[zid] + 1
-                if self._same_id[zid] >= PEER_MISSES:
-                    del self._same_id[zid]
-                    self._twin(zid, False)
-
     def _twin(self, zid: str, alive: bool) -> None:
         name = f"{self.cfg.planner_id[:50]}-{zid[:12]}"
         if not self.cfg.cluster:
@@ -528,7 +424,7 @@ class PlannerNode:
         self.counters["msgs_in"] += len(batch) - 1
         if self.store is not None:  # applied only once committed
             batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
-        self._log_inputs(inbox)
+        log_changes(log, inbox)
         out = self.world.apply(batch, now)
         self._acknowledge(acks, batch)
         forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
@@ -604,26 +500,6 @@ class PlannerNode:
             with contextlib.suppress(Exception):  # the writer gave up waiting: nothing to answer
                 w.query.reply(w.key, msgspec.json.encode(ack), encoding=_JSON)
             w.query.drop()
-
-    def _log_inputs(self, inbox: collections.deque[Input], limit: int = 20) -> None:
-        """One line per goal or threat change, at most ``limit`` a tick and a count of the rest."""
-        shown = 0
-        for inp in inbox:
-            if isinstance(inp, GoalSet):
-                msg, fields = "goal set", {"unit": inp.unit, "goal": list(inp.goal.position)}
-            elif isinstance(inp, GoalCancelled):
-                msg, fields = "goal cancelled", {"unit": inp.unit}
-            elif isinstance(inp, ThreatPut):
-                msg, fields = "threat put", {"threat": inp.threat, "position": list(inp.update.position)}
-            elif isinstance(inp, ThreatRemoved):
-                msg, fields = "threat removed", {"threat": inp.threat}
-            else:
-                continue
-            shown += 1
-            if shown <= limit:
-                log.info(msg, extra={"fields": fields})
-        if shown > limit:
-            log.info("more goal and threat changes", extra={"fields": {"count": shown - limit}})
 
     # -- output -----------------------------------------------------------------------
     def _put(self, key: str, payload: bytes, direction: bool = False) -> None:

@@ -47,7 +47,7 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
 def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Event, log: Any) -> int:
     import zenoh
 
-    from pfp_service.service.node import preview_desk
+    from pfp_service.service.desk import preview_desk
     from pfp_service.service.store import Store
 
     if threading.current_thread() is threading.main_thread():
