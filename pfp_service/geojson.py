@@ -98,7 +98,7 @@ def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndar
         inside = cores.ratio(np.array([mx, my]) + mid[:, None] * d)[0] >= level
         lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
     r = 0.5 * (lo + hi)
-    return np.array([mx, my]) + r[:, None] * d
+    return np.asarray(np.array([mx, my]) + r[:, None] * d)
 
 
 def _lonlat(origin: Origin, xy: np.ndarray) -> list[list[float]]:

@@ -95,13 +95,13 @@ class _Answer:
         if self._claim():
             with contextlib.suppress(Exception):  # the querier may be gone
                 self.query.reply(key, body, encoding=_JSON)
-                self.query.drop()
+                self.query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
 
     def error(self, err: ErrorReply) -> None:
         if self._claim():
             with contextlib.suppress(Exception):
                 self.query.reply_err(encode(err), encoding=_JSON)
-                self.query.drop()
+                self.query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
 
 
 class PreviewDesk:

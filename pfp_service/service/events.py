@@ -381,7 +381,7 @@ def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
         inputs.append(ThreatPut(t.id, update))
     for u in snap.units:
         if u.mission is not None:
-            params = Resolved(**msgspec.structs.asdict(u.mission.params))  # type: ignore[arg-type]
+            params = Resolved(**msgspec.structs.asdict(u.mission.params))
             origin = (u.mission.origin[0], u.mission.origin[1])
             inputs.append(MissionRestored(u.id, u.mission.goal, origin, params))
         elif u.goal is not None:

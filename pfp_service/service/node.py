@@ -278,7 +278,7 @@ class PlannerNode:
         att = query.attachment
         mark = decode_mark(att.to_bytes() if att is not None else None)
         if mark is None:  # not a write: a plain get on a goal or threat key has nothing to learn here
-            query.drop()
+            query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
             return
         body = query.payload
         inp = make(key, mark.delete, body.to_bytes() if body is not None else b"")
@@ -369,7 +369,7 @@ class PlannerNode:
         with self._lock:
             if len(self._queries) >= QUERIES_MAX:  # a query flood: shed, counted, never queued unbounded
                 self._intake.refused()
-                query.drop()
+                query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
                 return
             self._queries.append((kind, query, self.clock()))
         self._wake.set()
@@ -537,10 +537,10 @@ class PlannerNode:
         m, p = self.cfg.mission, self.cfg.planner_id
         if kind == "status":
             query.reply(keys.planner_status(m, p), encode(self._status()), encoding=_JSON)
-            query.drop()
+            query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
         elif kind == "world":
             answer_world(query, self.world, self.clock(), m, p)
-            query.drop()
+            query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
         else:
             key = str(query.key_expr)
             try:
@@ -550,7 +550,7 @@ class PlannerNode:
                 return
             view = self.world.preview(uid)  # None: another planner answers (scale-out: the owner, once)
             if view is None:
-                query.drop()
+                query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
                 return
             self._desk.submit(query, key, view, t_recv)
 

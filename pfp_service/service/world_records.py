@@ -180,7 +180,7 @@ class Records:
 
     def share(self, rec: UnitRecord, mission: Mission) -> None:
         """Another planner fixed the unit's mission: kept for when this one takes the unit over."""
-        params = Resolved(**msgspec.structs.asdict(mission.params))  # type: ignore[arg-type]
+        params = Resolved(**msgspec.structs.asdict(mission.params))
         rec.shared = (mission.goal, (mission.origin[0], mission.origin[1]), params)
 
     def hand_over(self, rec: UnitRecord) -> None:
