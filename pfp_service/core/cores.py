@@ -1,6 +1,6 @@
 """Threat cores: the regions no escape may drive through, and the test for them.
 
-Definition (also in README.md, "Escape strategies"):  a point ``x`` lies in
+Definition (also in docs/algorithm.md, "Threat cores"):  a point ``x`` lies in
 the *core* of threat ``j`` when that threat's own level is at least half its
 peak, ``t_j(x) >= CORE_FRACTION * max t_j`` with ``CORE_FRACTION = 0.5``: the
 threat's half-maximum region.  For an unskewed threat that is the ellipse of

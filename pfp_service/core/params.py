@@ -1,6 +1,6 @@
 """Planner parameters and the scale-free rule that fills in the ones not given.
 
-The rule (also in README.md, "Scale-free defaults"):
+The rule (also in docs/algorithm.md, "Scale-free defaults"):
 
 * ``D0 = ||goal - start||``; ``s_min`` = the narrowest standard deviation of
   any threat, ``sqrt(lambda_min(Omega))``; ``s_j`` = threat j's spread

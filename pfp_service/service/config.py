@@ -59,7 +59,7 @@ Mode = Literal["router", "peer", "client"]
 
 
 class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
-    """Everything ``pfp serve`` can be told.  See README "Configuration"."""
+    """Everything ``pfp serve`` can be told.  See docs/operations.md, "Configuration"."""
 
     mission: Id = "default"
     planner_id: Id = "planner"

@@ -83,7 +83,10 @@ def _worker_main(
             os.nice(nice)
     if memory_mb is not None:
         _limit_address_space(memory_mb)
-    conn.send("ready")
+    try:
+        conn.send("ready")
+    except OSError:  # the planner went while this worker was starting (a BrokenPipeError): nobody waits
+        os._exit(0)
     while True:
         try:
             fn, args, version, blob = conn.recv()
