@@ -344,6 +344,14 @@ def fuzz(count: int, seed: int, max_rss_growth_mb: float = 100.0, say: Callable[
             for tid, pos in (("e1", [4, 6]), ("e2", [7, 3])):
                 threat = {"position": pos, "facing_deg": 225, "sigma_range": 1.0, "sigma_lateral": 0.7}
                 session.put(keys.threat(MISSION, tid), json.dumps(threat).encode(), encoding=enc)
+            # the probe's goal and the threats travel on different keys: ask only once both threats
+            # are in the world, or the first answer may be the threat-free one
+            ready = time.monotonic() + 10.0
+            while time.monotonic() < ready:
+                st = _status(session)
+                if st is not None and st.threats >= 2:
+                    break
+                time.sleep(0.05)
             probe = _Probe(session)
             before = probe.ask()
             rss0 = _rss_mb(proc.pid)
