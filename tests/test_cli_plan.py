@@ -68,10 +68,10 @@ def test_bad_file_is_one_line(tmp_path):
         "  - {position: [3, 3], sigma_range: -1, sigma_lateral: 1}\n"
     )
     line = _one_line_exit_2(run_pfp("plan", str(bad)))
-    assert line.endswith("threats[2].sigma_range: must be >= 0.001")
+    assert line == "pfp plan: bad.yaml line 6, threats[2].sigma_range: must be >= 0.001"
     assert (
         _one_line_exit_2(run_pfp("plan", str(_write(tmp_path, "start: [0, 0]\n"))))
-        == "pfp plan: goal: is required"
+        == "pfp plan: s.yaml line 1, goal: is required"
     )
     line = _one_line_exit_2(
         run_pfp("plan", str(_write(tmp_path, "start: [0, 0]\ngoal: [1, 1]\nplanner: {intensity: loud}\n")))

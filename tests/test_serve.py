@@ -30,7 +30,18 @@ def mission():
 @pytest.fixture
 def planner(mission):
     """A fresh planner per test (isolated world), planning the paper's way (density, delta 0.08)."""
-    args = ("--liveliness-debounce-s", "0.3", "--intensity", "density", "--delta", "0.08")
+    # a preview budget that a loaded CI machine cannot spend (the default 500 ms is for a vehicle
+    # asking live): these tests compare whole previews with live tracks, not the budget
+    args = (
+        "--liveliness-debounce-s",
+        "0.3",
+        "--intensity",
+        "density",
+        "--delta",
+        "0.08",
+        "--preview-budget-ms",
+        "5000",
+    )
     with planner_process(*args, mission=mission) as p:
         yield p
 
