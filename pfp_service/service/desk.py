@@ -378,6 +378,14 @@ def warm_up(settings: WorldSettings | None) -> None:
         0.0,
     )
     preview(w.view("w"), None, time.monotonic, 5.0, 10_000)
+    # and as a worker runs it: on the world's own field, with threats and with none (a fresh
+    # install compiles these on first use, which a 500 ms budget cannot pay)
+    preview(w.view("w"), None, time.monotonic, 5.0, 10_000, w.field)
+    empty = World(dataclasses.replace(base, deliberation="inline", bounds=None))
+    empty.apply(
+        [StateReported("e", UnitState(position=(0.0, 0.0))), GoalSet("e", Goal(position=(10.0, 0.0)))], 0.0
+    )
+    preview(empty.view("e"), None, time.monotonic, 5.0, 10_000, empty.field)
     assert out.directions
 
 
