@@ -11,7 +11,7 @@ from geojson_pydantic import FeatureCollection
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
-from tests.zenoh_util import Inbox, client, planner_process, put_json
+from tests.zenoh_util import Inbox, client, planner_process, put_in_force, put_json
 
 ORIGIN = Origin(lat=58.4105, lon=15.6213)
 MISSION = "geo"
@@ -31,20 +31,23 @@ def planner():
 @pytest.mark.net
 def test_a_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres(planner):
     with client(planner) as s:
-        put_json(
+        inboxes = {u: Inbox(s, keys.unit_direction(MISSION, u)) for u in ("metres", "degrees")}
+        ridge = {
+            "position": _ll(300.0, 260.0),
+            "facing_deg": 225,
+            "sigma_range": 60,
+            "sigma_lateral": 40,
+            "skew": 1,
+        }
+        put_in_force(
             s,
-            keys.threat(MISSION, "ridge"),
+            MISSION,
             {
-                "position": _ll(300.0, 260.0),
-                "facing_deg": 225,
-                "sigma_range": 60,
-                "sigma_lateral": 40,
-                "skew": 1,
+                keys.threat(MISSION, "ridge"): ridge,
+                keys.unit_goal(MISSION, "metres"): {"position": [600.0, 500.0]},
+                keys.unit_goal(MISSION, "degrees"): {"position": _ll(600.0, 500.0)},
             },
         )
-        inboxes = {u: Inbox(s, keys.unit_direction(MISSION, u)) for u in ("metres", "degrees")}
-        put_json(s, keys.unit_goal(MISSION, "metres"), {"position": [600.0, 500.0]})
-        put_json(s, keys.unit_goal(MISSION, "degrees"), {"position": _ll(600.0, 500.0)})
         for seq, (x, y) in enumerate([(0.0, 0.0), (50.0, 40.0), (120.0, 90.0)], start=1):
             put_json(s, keys.unit_state(MISSION, "metres"), {"position": [x, y], "seq": seq})
             put_json(s, keys.unit_state(MISSION, "degrees"), {"position": _ll(x, y), "seq": seq})

@@ -115,3 +115,19 @@ class Inbox:
 
 def put_json(session: zenoh.Session, key: str, obj: Any) -> None:
     session.put(key, json.dumps(obj).encode(), encoding=zenoh.Encoding.APPLICATION_JSON)
+
+
+def put_in_force(session: zenoh.Session, mission: str, writes: dict[str, Any], timeout: float = 15.0) -> None:
+    """Put goals and threats as the clients do (acknowledged writes), and return once a planner applied them.
+
+    A plain put races the unit states that follow it: each subscriber has its own
+    callback thread, so a state can reach the planner's tick before the goal put
+    just before it.  A test that needs the goal in force first waits for the ack.
+    """
+    from pfp_service.wire.delivery import Deliverer
+
+    with Deliverer(session, mission) as d:
+        for key, obj in writes.items():
+            d.put(key, json.dumps(obj).encode())
+        if not d.wait_delivered(timeout):
+            raise TimeoutError(f"no planner acknowledged {d.pending()}")
