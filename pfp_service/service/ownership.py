@@ -1,9 +1,13 @@
-"""Cluster ownership: which live planner guides a unit (rendezvous hashing), and who is live.
+"""Cluster ownership: which live planner guides a unit (rendezvous hashing of its shard), and who is live.
 
-Every planner of a mission takes every goal and threat; each unit is guided
-by the one live planner with the highest rendezvous weight for it.  A planner
-joining takes about 1/K of each planner's units; one leaving hands over only
-its own.  A peer's token going is acted on only once it stays gone for the
+Every planner of a mission takes every goal and threat; a unit is guided by
+the planner owning its shard (``keys.shard_of``), and a planner subscribes
+to the states of its own shards only, so K planners each receive about 1/K
+of the states.  Shards go by rendezvous hashing with bounded load: shard by
+shard, in order, to the live planner with the highest weight for it that
+holds fewer than ceil(S/K) yet.  Plain rendezvous over 16 shards left two
+planners 10 and 6 shards as often as not; bounded, each has 8, and a planner
+joining or leaving still moves few shards besides its own.  A peer's token going is acted on only once it stays gone for the
 debounce (a router restart flaps every token).  Pure values: ``now`` is a
 parameter, and the world sets the debounce's timer.
 """
@@ -11,14 +15,34 @@ parameter, and the world sets the debounce's timer.
 from __future__ import annotations
 
 import hashlib
+import math
 
-__all__ = ["Ownership", "rendezvous_weight"]
+from pfp_service.wire.keys import SHARDS, shard_of
+
+__all__ = ["Ownership", "rendezvous_weight", "shard_owners"]
 
 
 def rendezvous_weight(unit_id: str, planner: str) -> int:
     """The rendezvous weight of a unit on a planner: stable across processes and restarts."""
     digest = hashlib.blake2b(f"{unit_id}\0{planner}".encode(), digest_size=8).digest()
     return int.from_bytes(digest, "big")
+
+
+def shard_owners(planners: set[str] | frozenset[str], shards: int = SHARDS) -> tuple[str, ...]:
+    """The owner of each shard among ``planners``: rendezvous weights, at most ceil(shards/K) each.
+
+    Every planner computes the same from the same set (ties by id).
+    """
+    ranked = sorted(planners)
+    cap = math.ceil(shards / len(ranked))
+    load = dict.fromkeys(ranked, 0)
+    owners: list[str] = []
+    for s in range(shards):
+        order = sorted(ranked, key=lambda p: (rendezvous_weight(f"shard-{s}", p), p), reverse=True)
+        best = next(p for p in order if load[p] < cap)
+        load[best] += 1
+        owners.append(best)
+    return tuple(owners)
 
 
 class Ownership:
@@ -29,16 +53,26 @@ class Ownership:
         self.cluster = cluster
         self.peers: set[str] = set()
         self.gone: dict[str, float] = {}  # peer -> when its token went, until the debounce ends
+        self._mine: tuple[frozenset[str], frozenset[int]] | None = None  # (peers, my shards) cached
+
+    def shards(self) -> frozenset[int]:
+        """The shards this planner owns (every one without ``cluster`` or peers)."""
+        if not self.cluster or not self.peers:
+            return frozenset(range(SHARDS))
+        peers = frozenset(self.peers)
+        if self._mine is None or self._mine[0] != peers:
+            owners = shard_owners(peers | {self.me})
+            self._mine = (peers, frozenset(s for s, p in enumerate(owners) if p == self.me))
+        return self._mine[1]
 
     def owns(self, unit_id: str) -> bool:
-        """Whether this planner guides ``unit_id``: the highest weight of unit x planner wins.
+        """Whether this planner guides ``unit_id``: it owns the unit's shard.
 
         Without ``cluster`` it owns every unit.
         """
         if not self.cluster or not self.peers:
             return True
-        best = max((*self.peers, self.me), key=lambda p: (rendezvous_weight(unit_id, p), p))
-        return best == self.me
+        return shard_of(unit_id) in self.shards()
 
     def joined(self, planner: str) -> bool:
         """A peer's token is there: whether it is new (not this planner, not known, not back within the debounce)."""

@@ -104,6 +104,10 @@ class World:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
         return self._own.owns(unit_id)
 
+    def shards(self) -> frozenset[int]:
+        """The state shards this planner owns (``Ownership.shards``): the node subscribes to these."""
+        return self._own.shards()
+
     def preview(self, unit_id: str) -> UnitView | None:
         """What a preview of ``unit_id`` runs on; ``None``: another planner answers it (its owner, once)."""
         return self.view(unit_id) if self.owns(unit_id) else None

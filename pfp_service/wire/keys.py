@@ -3,6 +3,7 @@
 No other module spells a topic string.  The layout (one mission per prefix):
 
     mumt/{m}/unit/{u}/state        unit -> planner      UnitState
+    mumt/{m}/shard/{s}/unit/{u}/state  unit -> planner  UnitState, on its shard (s = shard_of(u))
     mumt/{m}/unit/{u}/goal         any -> planner       Goal (DELETE cancels)
     mumt/{m}/unit/{u}/direction    planner -> unit      Direction
     mumt/{m}/unit/{u}/mission      planner -> planners  Mission (x0 and parameters, for failover)
@@ -14,7 +15,9 @@ No other module spells a topic string.  The layout (one mission per prefix):
     mumt/{m}/alive/unit/{u}        liveliness token
     mumt/{m}/alive/planner/{p}     liveliness token
 
-Every variable part is one key chunk matching ``[A-Za-z0-9_-]{1,64}``, so a
+A unit state goes on either key; our clients use the shard key, so that each
+planner of a cluster subscribes to its own shards only (``shard_of``: CRC-32
+of the unit id's UTF-8 bytes, modulo ``SHARDS``).  Every variable part is one key chunk matching ``[A-Za-z0-9_-]{1,64}``, so a
 wildcard ``*`` stands for exactly one of them and an ACL rule can name one
 unit's keys (``mumt/m/unit/u7/**``).  Pure strings: no zenoh import.
 """
@@ -22,6 +25,7 @@ unit's keys (``mumt/m/unit/u7/**``).  Pure strings: no zenoh import.
 from __future__ import annotations
 
 import re
+import zlib
 from enum import StrEnum
 from typing import NamedTuple
 
@@ -33,6 +37,8 @@ __all__ = [
     "ID_NAMES",
     "MAX_KEY_CHARS",
     "PREFIX",
+    "SHARDS",
+    "SHARD_STATE_TEMPLATE",
     "TEMPLATES",
     "Key",
     "KeyKind",
@@ -51,6 +57,10 @@ __all__ = [
     "planner_statuses",
     "preview",
     "previews",
+    "shard_of",
+    "shard_state",
+    "shard_states",
+    "sharded_states",
     "template",
     "threat",
     "threats",
@@ -61,6 +71,7 @@ __all__ = [
     "unit_missions",
     "unit_state",
     "unit_states",
+    "unit_states_any",
     "world",
     "worlds",
 ]
@@ -168,6 +179,64 @@ def _build(kind: KeyKind, mission: str, id: str, what: str) -> str:
 
 def _wild(kind: KeyKind, mission: str) -> str:
     return TEMPLATES[kind].format(mission=check_chunk(mission, "mission"), id="*")
+
+
+# -- shards: a unit state's partition, so K planners each receive 1/K of the states ----------
+SHARDS = 16  # shards per mission, fixed (every client and planner must agree): a planner subscribes per shard
+SHARD_STATE_TEMPLATE = PREFIX + "/{mission}/shard/{shard}/unit/{unit}/state"
+_SHARD_HEAD = re.compile(r"^" + re.escape(PREFIX) + r"/([^/]+)/shard/(0|[1-9][0-9]{0,3})/unit/([^/]+)/state$")
+
+
+def shard_of(unit: str) -> int:
+    """The shard of a unit: CRC-32 (zlib, ISO-HDLC) of the id's UTF-8 bytes, modulo ``SHARDS``.
+
+    Stable across processes, machines and languages (``zlib.crc32``, Go's
+    ``crc32.ChecksumIEEE``): ``shard_of("ugv-1") == 15``.
+    """
+    return zlib.crc32(unit.encode()) % SHARDS
+
+
+def shard_state(mission: str, unit: str) -> str:
+    """``mumt/{mission}/shard/{shard_of(unit)}/unit/{unit}/state``: a unit's state on its shard."""
+    return SHARD_STATE_TEMPLATE.format(
+        mission=check_chunk(mission, "mission"), shard=shard_of(check_chunk(unit, "unit")), unit=unit
+    )
+
+
+def shard_states(mission: str, shard: int) -> str:
+    """``mumt/{mission}/shard/{shard}/unit/*/state``: what the planner owning one shard subscribes to."""
+    if not 0 <= shard < SHARDS:
+        raise InputError("shard", f"{shard!r} is not a shard (0 to {SHARDS - 1})")
+    return SHARD_STATE_TEMPLATE.format(mission=check_chunk(mission, "mission"), shard=shard, unit="*")
+
+
+def sharded_states(mission: str) -> str:
+    """``mumt/{mission}/shard/*/unit/*/state``: every shard (a planner owning them all)."""
+    return SHARD_STATE_TEMPLATE.format(mission=check_chunk(mission, "mission"), shard="*", unit="*")
+
+
+def unit_states_any(mission: str) -> str:
+    """``mumt/{mission}/**/unit/*/state``: unit states on the plain key and on the shard keys (watchers)."""
+    return f"{PREFIX}/{check_chunk(mission, 'mission')}/**/unit/*/state"
+
+
+def parse_shard_state(key: str) -> tuple[str, int, str] | None:
+    """``(mission, shard, unit)`` of a shard state key; ``None``: not one.
+
+    Raises:
+        InputError: path ``key``, when it is a shard key with a bad chunk or the wrong shard for its unit.
+    """
+    if len(key) > MAX_KEY_CHARS:
+        return None
+    m = _SHARD_HEAD.match(key)
+    if m is None:
+        return None
+    mission, shard, unit = m[1], int(m[2]), m[3]
+    if not _CHUNK.match(mission) or not _CHUNK.match(unit):
+        raise InputError("key", f"{_shown(key)}: a chunk is not 1-64 characters of [A-Za-z0-9_-]")
+    if shard != shard_of(unit):
+        raise InputError("key", f"{_shown(key)}: unit {unit!r} is in shard {shard_of(unit)}, not {shard}")
+    return mission, shard, unit
 
 
 # -- concrete keys ------------------------------------------------------------
@@ -299,6 +368,9 @@ def parse(key: str) -> Key:
     text = str(key)
     if len(text) > MAX_KEY_CHARS:  # before any matching: a hostile key may be megabytes long
         raise InputError("key", f"{_shown(text)} is longer than {MAX_KEY_CHARS} characters")
+    sharded = parse_shard_state(text)
+    if sharded is not None:  # a unit state on its shard: the same kind, the shard implied by the unit
+        return Key(KeyKind.UNIT_STATE, sharded[0], sharded[2])
     for kind, pattern in _PARSERS:
         m = pattern.match(text)
         if m is not None:
@@ -316,11 +388,12 @@ class KeyOf:
     builds one; both refuse what ``parse`` and the builders refuse.
     """
 
-    __slots__ = ("_head", "_tail", "_what")
+    __slots__ = ("_head", "_kind", "_mission", "_tail", "_what")
 
     def __init__(self, kind: KeyKind, mission: str) -> None:
         head, tail = TEMPLATES[kind].format(mission=check_chunk(mission, "mission"), id="\0").split("\0")
         self._head, self._tail, self._what = head, tail, ID_NAMES[kind]
+        self._kind, self._mission = kind, mission
 
     def id(self, key: str) -> str:
         """The id chunk of a received key of this kind.
@@ -334,6 +407,8 @@ class KeyOf:
             if _CHUNK.match(ident):
                 return ident
         got = parse(key)  # the precise reason, or a key of another kind or mission
+        if got.kind is self._kind and got.mission == self._mission:
+            return got.id  # the same kind on another key of it: a unit state on its shard
         raise InputError(
             "key", f"{_shown(key)} is a {got.kind.value} key of mission {got.mission!r}, not {self}"
         )
