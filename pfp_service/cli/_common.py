@@ -94,6 +94,19 @@ def mission_chunk(text: str) -> str:
         raise argparse.ArgumentTypeError(exc.reason) from None
 
 
+def add_coords_arg(parser: argparse.ArgumentParser) -> None:
+    """Declare ``--coords latlon|metres|mgrs``: how a command shows positions (``pfp_service.coords``)."""
+    from pfp_service.coords import STYLES
+
+    parser.add_argument(
+        "--coords",
+        choices=STYLES,
+        help="how positions are shown: latlon (degrees, and metres from the origin), metres east and "
+        "north of the origin, or mgrs grid references (default: latlon when the mission has an origin, "
+        "else metres)",
+    )
+
+
 def add_session_args(parser: argparse.ArgumentParser, *, serve: bool = False) -> None:
     """Declare ``--connect``, ``--listen``, ``--mode`` and ``--mission`` on ``parser``.
 

@@ -19,6 +19,7 @@ import time
 from typing import Any
 
 from pfp_service.cli._common import (
+    add_coords_arg,
     bounded_int,
     grid_cells,
     non_negative_float,
@@ -47,6 +48,7 @@ def register(sub: Any) -> None:
         metavar="F",
         help="--geojson: zone outline at this share of each threat's peak, 0 to 1 exclusive (default 0.1)",
     )
+    add_coords_arg(p)
     p.add_argument(
         "--repeat", type=positive_int, default=1, metavar="N", help="compute_ms is the median of N runs"
     )
@@ -134,6 +136,7 @@ def exit_code(status: str) -> int:
 def run(args: argparse.Namespace) -> int:
     import msgspec
 
+    from pfp_service.coords import Coords
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
     from pfp_service.core.params import reach
@@ -157,6 +160,11 @@ def run(args: argparse.Namespace) -> int:
         check_geojson_path(args.geojson)
     read_text(args.scenario)  # a directory, binary, non-UTF-8 or huge file: one line naming it
     scenario = load_scenario(args.scenario)
+    if args.coords in ("latlon", "mgrs") and scenario.origin is None:
+        raise InputError(
+            "--coords", f"{args.coords} needs an origin: add origin: {{lat: …, lon: …}} to {args.scenario}"
+        )
+    coords = Coords.choose(args.coords, scenario.origin)
     if args.geojson and scenario.origin is None:
         raise InputError("--geojson", f"{args.scenario} has no origin: add origin: {{lat: …, lon: …}}")
     params = scenario.planner.to_params().merged(
@@ -193,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from pfp_service.render import plot_plan
 
-        plot_plan(scenario, result, args.plot)
+        plot_plan(scenario, result, args.plot, coords)
     if args.geojson:
         from pfp_service import geojson
 
@@ -201,5 +209,5 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         sys.stdout.write(msgspec.json.encode(result).decode() + "\n")
     else:
-        print(summary(scenario.name, result, plot=args.plot))
+        print(summary(scenario.name, result, args.plot, coords, scenario.start, scenario.goal))
     return exit_code(result.status.value)

@@ -6,10 +6,15 @@ colour bar, each threat at its peak with an arrow along its facing, start
 axes so it never covers the data.  Earlier positions of moved threats and
 earlier goals are drawn faded; a plan that did not reach its goal marks
 where it stopped, with the reason.
+
+With a mission origin (``coords.Coords`` geodetic), the bottom and left axes
+carry longitude and latitude ticks at round values along those edges, with a
+faint graticule, and the top and right axes keep the metres from the origin.
 """
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -17,11 +22,21 @@ from typing import Any
 
 import numpy as np
 
+from pfp_service.coords import Coords
 from pfp_service.core import PlanResult, Threat, ThreatField
 from pfp_service.errors import InputError
 from pfp_service.scenario import Scenario
 
-__all__ = ["check_png_path", "extent", "facing", "peak", "plan_title", "plot_plan", "plot_tracks"]
+__all__ = [
+    "check_png_path",
+    "extent",
+    "facing",
+    "geo_ticks",
+    "peak",
+    "plan_title",
+    "plot_plan",
+    "plot_tracks",
+]
 
 
 def _pyplot() -> Any:
@@ -133,9 +148,12 @@ def _threat_marks(
         ax.annotate(text, (px, py), textcoords="offset points", xytext=(6, 6), fontsize=8, alpha=alpha)
 
 
-def _legend(ax: Any, handles: list[Any]) -> None:
-    """The legend beside the axes, so it never covers a track, a goal or a threat."""
-    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
+def _legend(ax: Any, handles: list[Any], geo: bool = False) -> None:
+    """The legend beside the axes, so it never covers a track, a goal or a threat (nor the metres axis)."""
+    ax.legend(
+        handles=handles, loc="upper left", bbox_to_anchor=(1.14 if geo else 1.02, 1.0), fontsize=8,
+        borderaxespad=0.0,
+    )  # fmt: skip
 
 
 def _proxies(plt: Any, *kinds: str) -> list[Any]:
@@ -157,26 +175,96 @@ def _proxies(plt: Any, *kinds: str) -> list[Any]:
     return [Line2D([], [], linestyle="none", **{"markersize": 8, **style[k]}) for k in kinds]
 
 
-def _colourbar(fig: Any, ax: Any, mappable: Any) -> None:
+def _colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
     if mappable is not None:
         fig.colorbar(
             mappable,
             ax=ax,
             orientation="horizontal",
             fraction=0.04,
-            pad=0.08,
+            pad=0.11 if geo else 0.08,
             label="threat level",
             format="%.2g",
         )
 
 
-def _frame(ax: Any, box: tuple[float, float, float, float], title: str) -> None:
+def _frame(ax: Any, box: tuple[float, float, float, float], title: str, coords: Coords | None = None) -> bool:
+    """Limits, aspect, title and axes; returns whether the axes are lat/lon (with a metres axis too)."""
     ax.set_xlim(box[0], box[1])
     ax.set_ylim(box[2], box[3])
     ax.set_aspect("equal")
+    ax.set_title(title, fontsize=10)
+    if coords is not None and coords.origin is not None and coords.geodetic:
+        _geo_ticks(ax, box, coords)
+        return True
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.set_title(title, fontsize=10)
+    return False
+
+
+def geo_ticks(
+    box: tuple[float, float, float, float], coords: Coords, n: int = 8
+) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
+    """Longitude ticks along the bottom edge and latitude ticks along the left one, at round values.
+
+    Returns:
+        ``([(x_m, "15.630°E"), ...], [(y_m, "58.415°N"), ...])``: where each round
+        degree value crosses that edge, in local metres, and its label.
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    origin = coords.origin
+    assert origin is not None
+    x0, x1, y0, y1 = box
+    lon_a, lon_b = origin.to_geodetic(x0, y0)[1], origin.to_geodetic(x1, y0)[1]
+    (lat_c, _), (lat_d, _) = origin.to_geodetic(x0, y0), origin.to_geodetic(x0, y1)
+
+    def rounded(lo: float, hi: float) -> list[float]:
+        return [
+            float(v) for v in MaxNLocator(n, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi) if lo <= v <= hi
+        ]
+
+    def decimals(values: list[float]) -> int:
+        step = min((b - a for a, b in itertools.pairwise(values)), default=1.0)
+        return max(0, min(6, -int(np.floor(np.log10(step))) if step > 0 else 6))
+
+    xs: list[tuple[float, str]] = []
+    lons = rounded(min(lon_a, lon_b), max(lon_a, lon_b))
+    d = decimals(lons)
+    for lon in lons:  # the x where the bottom edge (y = y0) meets this meridian: two fixed-point steps
+        x = x0 + (x1 - x0) * (lon - lon_a) / ((lon_b - lon_a) or 1.0)
+        for _ in range(3):
+            lat, _lon = origin.to_geodetic(x, y0)
+            x = origin.to_local(lat, lon)[0]
+        xs.append((x, f"{abs(lon):.{d}f}°{'E' if lon >= 0 else 'W'}"))
+    ys: list[tuple[float, str]] = []
+    lats = rounded(min(lat_c, lat_d), max(lat_c, lat_d))
+    d = decimals(lats)
+    for lat in lats:  # the y where the left edge (x = x0) meets this parallel
+        y = y0 + (y1 - y0) * (lat - lat_c) / ((lat_d - lat_c) or 1.0)
+        for _ in range(3):
+            _lat, lon = origin.to_geodetic(x0, y)
+            y = origin.to_local(lat, lon)[1]
+        ys.append((y, f"{abs(lat):.{d}f}°{'N' if lat >= 0 else 'S'}"))
+    return xs, ys
+
+
+def _geo_ticks(ax: Any, box: tuple[float, float, float, float], coords: Coords) -> None:
+    """Longitude and latitude on the bottom and left axes, metres from the origin on the top and right."""
+    xs, ys = geo_ticks(box, coords)
+    ax.set_xticks([x for x, _ in xs], [t for _, t in xs])
+    ax.set_yticks([y for y, _ in ys], [t for _, t in ys])
+    ax.tick_params(axis="x", labelsize=7)
+    ax.tick_params(axis="y", labelsize=7)
+    ax.set_xlabel("longitude (WGS-84)")
+    ax.set_ylabel("latitude (WGS-84)")
+    ax.grid(True, color="grey", alpha=0.25, linewidth=0.5)
+    top = ax.secondary_xaxis("top")
+    top.set_xlabel("metres east of the origin", fontsize=8)
+    top.tick_params(labelsize=7)
+    right = ax.secondary_yaxis("right")
+    right.set_ylabel("metres north of the origin", fontsize=8)
+    right.tick_params(labelsize=7)
 
 
 def _popup_marks(ax: Any, result: PlanResult) -> int:
@@ -200,8 +288,11 @@ def plan_title(name: str, result: PlanResult) -> str:
     return f"{name}: {planner}, {result.status.value}, {result.steps} steps, exposure {result.exposure:.3g}"
 
 
-def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path) -> None:
-    """Threat contours (all threats, pop-ups included), start, goal, the path, and where it stopped."""
+def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path, coords: Coords | None = None) -> None:
+    """Threat contours (all threats, pop-ups included), start, goal, the path, and where it stopped.
+
+    With a geodetic ``coords``, the axes carry lat/lon ticks (and the metres on the top and right).
+    """
     plt = _pyplot()
     intensity = result.params.intensity
     schedule = scenario.schedule()
@@ -237,9 +328,9 @@ def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path) -> None:
     handles = [line, *_proxies(plt, *kinds)]
     handles[1].set_color("green")
     handles[2].set_color("black")
-    _frame(ax, box, plan_title(scenario.name, result))
-    _legend(ax, handles)
-    _colourbar(fig, ax, mappable)
+    geo = _frame(ax, box, plan_title(scenario.name, result), coords)
+    _legend(ax, handles, geo)
+    _colourbar(fig, ax, mappable, geo)
     fig.tight_layout()
     try:
         _save(fig, out, "--plot")
@@ -257,6 +348,7 @@ def plot_tracks(
     marks: Sequence[tuple[float, float, str]] = (),
     old_threats: Sequence[tuple[Threat, Threat]] = (),
     old_goals: dict[str, Sequence[float]] | None = None,
+    coords: Coords | None = None,
 ) -> None:
     """Several units' tracks over one threat field, with labelled marks (e.g. contingencies).
 
@@ -271,6 +363,7 @@ def plot_tracks(
         old_threats: ``(before, after)`` for each threat that moved: ``before`` is drawn faded,
             with a dotted line to where it went.
         old_goals: goals a unit had before it was given a new one, drawn faded.
+        coords: with an origin (geodetic), lat/lon ticks on the axes.
     """
     plt = _pyplot()
     old_goals = old_goals or {}
@@ -309,9 +402,9 @@ def plot_tracks(
         kinds.append("old threat")
     if marks:
         kinds.append("struck")
-    _frame(ax, box, title)
-    _legend(ax, handles + _proxies(plt, *kinds))
-    _colourbar(fig, ax, mappable)
+    geo = _frame(ax, box, title, coords)
+    _legend(ax, handles + _proxies(plt, *kinds), geo)
+    _colourbar(fig, ax, mappable, geo)
     fig.tight_layout()
     try:
         _save(fig, out, "--out")

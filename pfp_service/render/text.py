@@ -1,19 +1,59 @@
-"""Text summaries of plan results for a terminal (no I/O)."""
+"""Text summaries of plan results for a terminal (no I/O).
+
+Positions go through ``pfp_service.coords``: lat/lon (and the metres from
+the origin) when the scenario has one, else metres.
+"""
 
 from __future__ import annotations
 
+import re
+
+from pfp_service.coords import Coords
 from pfp_service.core import PlanResult
+
+_UNIT_AT = re.compile(r"^step (\d+):(.*); unit at \([^)]*\)$")
 
 
 def _m(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.4g} m"
 
 
-def summary(name: str, r: PlanResult, plot: str | None = None) -> str:
-    """A short multi-line summary of one plan."""
+def _event(text: str, r: PlanResult, coords: Coords) -> str:
+    """A plan event with the unit's position in ``coords`` (the core writes it in metres)."""
+    m = _UNIT_AT.match(text)
+    if m is None or not coords.geodetic or int(m[1]) >= len(r.path):
+        return text
+    return f"step {m[1]}:{m[2]}; unit at {coords.point(r.path[int(m[1])])}"
+
+
+def summary(
+    name: str,
+    r: PlanResult,
+    plot: str | None = None,
+    coords: Coords | None = None,
+    start: tuple[float, float] | None = None,
+    goal: tuple[float, float] | None = None,
+) -> str:
+    """A short multi-line summary of one plan.
+
+    Args:
+        name: the scenario's name.
+        r: the plan.
+        plot: the PNG written, if any.
+        coords: how positions are shown (default: metres).
+        start: the scenario's start, shown with the goal and where the path ended.
+        goal: the scenario's goal.
+    """
+    coords = coords or Coords()
     p = r.params
     lines = [
         f"{name}: {r.status.value}" + (f" ({r.reason})" if r.reason else ""),
+    ]
+    if start is not None and goal is not None:
+        lines += [f"  start {coords.point(start, digits=2)}", f"  goal  {coords.point(goal, digits=2)}"]
+    if r.path:
+        lines.append(f"  end   {coords.point(r.path[-1], digits=2)}")
+    lines += [
         f"  steps {r.steps}, length {_m(r.length)}, final distance {_m(r.final_distance)}",
         f"  exposure {r.exposure:.4g}, peak threat {r.peak_threat:.4g}, min clearance {_m(r.min_clearance)}",
         (
@@ -28,7 +68,7 @@ def summary(name: str, r: PlanResult, plot: str | None = None) -> str:
         lines.append(
             f"  traps {r.traps}, escapes {', '.join(r.escapes) or 'none'}, {r.escape_steps} steps escaping"
         )
-    lines += [f"  event: {e}" for e in r.events]
+    lines += [f"  event: {_event(e, r, coords)}" for e in r.events]
     if plot:
         lines.append(f"  plot written to {plot}")
     return "\n".join(lines)

@@ -1,0 +1,131 @@
+"""Positions for people: local metres shown as lat/lon, MGRS or metres, one format everywhere.
+
+The planner works in metres east and north of the mission origin; people read
+lat/lon or grid references.  ``Coords`` is how every human-facing output (the
+plan summary and plot, fleet and inject lines, ``pfp status`` tables, the
+planner's log) turns a local point into text:
+
+* ``latlon``: ``58.41050N 15.62130E (300 m E, 260 m N)``: degrees to 5
+  decimals (about a metre), hemisphere letters, then the metres from the origin;
+* ``mgrs``: ``33VWE 36303 74581 (300 m E, 260 m N)``: a 1 m MGRS grid
+  reference from the ``mgrs`` library (a wrapper of the NGA's GEOTRANS C code:
+  small, well kept, no GDAL or PROJ to install), then the metres;
+* ``metres``: ``(300.0, 260.0)``, as before, for missions without an origin.
+
+The default is ``latlon`` when an origin is known, else ``metres``.  JSON
+outputs are not shown through here: they keep both the metres and lat/lon.
+No I/O: a pure function of the point, the origin and the style.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from pfp_service.errors import InputError
+
+if TYPE_CHECKING:
+    from pfp_service.geo import Origin
+
+__all__ = ["STYLES", "Coords", "degrees", "metres_offset", "mgrs_ref"]
+
+STYLES = ("latlon", "metres", "mgrs")
+Point = Sequence[float]
+
+
+def degrees(lat: float, lon: float) -> str:
+    """``58.41050N 15.62130E``: 5 decimals (about 1 m), hemisphere letters rather than signs."""
+    ns = "N" if lat >= 0 else "S"
+    ew = "E" if lon >= 0 else "W"
+    return f"{abs(lat):.5f}{ns} {abs(lon):.5f}{ew}"
+
+
+def _m(value: float) -> str:
+    # a metre is what a field user reads; below 10 m a decimetre still matters (tolerances, clearances)
+    return f"{abs(value):.0f}" if abs(value) >= 9.95 else f"{abs(value):.1f}"
+
+
+def metres_offset(x_east_m: float, y_north_m: float) -> str:
+    """``300 m E, 260 m N`` (``W`` and ``S`` for negative): the point from the mission origin."""
+    if abs(x_east_m) < 0.05 and abs(y_north_m) < 0.05:
+        return "the origin"
+    return f"{_m(x_east_m)} m {'E' if x_east_m >= 0 else 'W'}, {_m(y_north_m)} m {'N' if y_north_m >= 0 else 'S'}"
+
+
+def mgrs_ref(lat: float, lon: float) -> str:
+    """``33VWE 36303 74581``: the 1 m MGRS grid reference, grid square, easting and northing apart."""
+    import mgrs
+
+    raw = str(mgrs.MGRS().toMGRS(lat, lon, MGRSPrecision=5))
+    head, digits = raw[:-10], raw[-10:]
+    return f"{head} {digits[:5]} {digits[5:]}"
+
+
+@dataclass(frozen=True)
+class Coords:
+    """How positions are shown: a style from ``STYLES`` and the mission origin (``None``: metres only).
+
+    Build one with ``Coords.choose``; ``point`` and ``points`` format local metres.
+    """
+
+    style: str = "metres"
+    origin: Origin | None = None
+
+    @classmethod
+    def choose(cls, flag: str | None, origin: Origin | None, *, strict: bool = True) -> Coords:
+        """The ``--coords`` choice: ``flag`` if given, else ``latlon`` with an origin and ``metres`` without.
+
+        Args:
+            flag: ``--coords``, or ``None`` for the default.
+            origin: the mission origin, when known.
+            strict: refuse lat/lon or MGRS without an origin; when not strict (the origin
+                is learnt at run time and may be missing), fall back to metres.
+
+        Raises:
+            InputError: at ``--coords``, for an unknown style, or a geodetic style without an origin.
+        """
+        if flag is not None and flag not in STYLES:
+            raise InputError("--coords", f"expected one of {', '.join(STYLES)}, got {flag!r}")
+        style = flag or ("latlon" if origin is not None else "metres")
+        if style != "metres" and origin is None:
+            if strict:
+                raise InputError("--coords", f"{style} needs a mission origin ({{lat, lon}}); none is set")
+            style = "metres"
+        return cls(style, origin if style != "metres" else None)
+
+    @property
+    def geodetic(self) -> bool:
+        """Whether points are shown on the earth (lat/lon or MGRS) rather than as bare metres."""
+        return self.origin is not None and self.style != "metres"
+
+    def point(self, p: Point, *, offset: bool = True, digits: int = 1) -> str:
+        """One local point ``(x_east_m, y_north_m)`` as text.
+
+        Args:
+            p: the point in metres from the origin.
+            offset: with a geodetic style, add the metres from the origin in brackets.
+            digits: decimals of the bare metres style.
+        """
+        return self.points([p], offset=offset, digits=digits)[0]
+
+    def points(self, ps: Iterable[Point], *, offset: bool = True, digits: int = 1) -> list[str]:
+        """``point`` of each, with one vectorised conversion (a status table of 1,000 units)."""
+        pts = [(float(p[0]), float(p[1])) for p in ps]
+        if self.origin is None or self.style == "metres":
+            return [f"({x:.{digits}f}, {y:.{digits}f})" for x, y in pts]
+        if not pts:
+            return []
+        import numpy as np
+
+        ll = self.origin.to_geodetic_many(np.array(pts, dtype=float)).tolist()
+        show = degrees if self.style == "latlon" else mgrs_ref
+        out = []
+        for (x, y), (lat, lon) in zip(pts, ll):
+            text = show(lat, lon)
+            out.append(f"{text} ({metres_offset(x, y)})" if offset else text)
+        return out
+
+    def latlon(self, p: Point) -> tuple[float, float] | None:
+        """``(lat, lon)`` of a local point, or ``None`` without an origin."""
+        return None if self.origin is None else self.origin.to_geodetic(float(p[0]), float(p[1]))
