@@ -268,6 +268,7 @@ def run_inject(
     ready: threading.Event | None = None,
     mission_clock: Callable[[], float] | None = None,
     on_wait: Callable[[float, int, str], None] | None = None,
+    ready_after_acks: bool = False,
 ) -> InjectReport:
     """Play ``script`` on an open session and judge it.
 
@@ -283,6 +284,8 @@ def run_inject(
             timeline waits for a later trigger), so a caller can start units after them.
         mission_clock: the script's seconds, when another part owns the mission clock
             (``pfp demo`` passes its fleet's simulated time); else wall seconds x ``speed_up``.
+        ready_after_acks: set ``ready`` only once a planner has also taken what was sent
+            (``pfp inject SCENARIO``: its unit starts when the threats and the goal are in force).
         on_wait: called each round with the script time, the entries done and what the timeline waits for.
     """
     import zenoh
@@ -348,7 +351,7 @@ def run_inject(
                 else:
                     w.on_arrived_event(uid, t_s)
             run.advance(t_s, clock())
-            if ready is not None:
+            if ready is not None and not (ready_after_acks and run.s.pending()):
                 ready.set()
             if on_wait is not None:
                 on_wait(t_s, run.index, run.waiting_on(t_s))
