@@ -103,6 +103,7 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
     "world_snapshot": m.decode_world_snapshot,
     "mission": m.decode_mission,
     "event": m.decode_event,
+    "zone": m.decode_zone,
 }
 
 
@@ -180,6 +181,10 @@ V1: dict[str, tuple[set[str], set[str]]] = {
         {"delta", "step", "max_iter", "tolerance", "intensity", "escape", "trap_window", "progress_window"},
         {"seed"},
     ),
+    # added with keep-out zones
+    "ZoneUpdate": (set(), {"kind", "polygon", "circle", "ttl_s"}),
+    "ZoneCircle": ({"centre", "radius_m"}, set()),
+    "ZoneSummary": ({"id", "zone"}, {"ttl_s"}),
     "PlanResult": (
         {"status", "reason", "steps", "length", "exposure", "peak_threat", "min_clearance"}
         | {"final_distance", "path", "compute_ms", "params"},

@@ -32,6 +32,7 @@ BUILDERS = {
     KeyKind.ALIVE_UNIT: (keys.alive_unit, keys.alive_units, "mumt/m1/alive/unit/u1"),
     KeyKind.ALIVE_PLANNER: (keys.alive_planner, keys.alive_planners, "mumt/m1/alive/planner/u1"),
     KeyKind.WORLD: (keys.world, keys.worlds, "mumt/m1/planner/u1/world"),
+    KeyKind.ZONE: (keys.zone, keys.zones, "mumt/m1/zone/u1"),
 }
 
 

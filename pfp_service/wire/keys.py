@@ -8,6 +8,7 @@ No other module spells a topic string.  The layout (one mission per prefix):
     mumt/{m}/unit/{u}/direction    planner -> unit      Direction
     mumt/{m}/unit/{u}/mission      planner -> planners  Mission (x0 and parameters, for failover)
     mumt/{m}/threat/{t}            any -> planner       ThreatUpdate (DELETE removes)
+    mumt/{m}/zone/{z}              any -> planner       ZoneUpdate (DELETE removes)
     mumt/{m}/preview/{u}           queryable            PreviewRequest -> PlanResult
     mumt/{m}/planner/{p}/status    queryable            -> PlannerStatus
     mumt/{m}/planner/{p}/world     queryable            -> WorldSnapshot (units, threats held)
@@ -74,6 +75,8 @@ __all__ = [
     "unit_states_any",
     "world",
     "worlds",
+    "zone",
+    "zones",
 ]
 
 PREFIX = "mumt"
@@ -99,6 +102,7 @@ class KeyKind(StrEnum):
     ALIVE_UNIT = "alive_unit"
     ALIVE_PLANNER = "alive_planner"
     WORLD = "world"
+    ZONE = "zone"
 
 
 # ``{mission}`` and ``{id}`` are the only variables; the id is a unit, threat,
@@ -115,6 +119,7 @@ TEMPLATES: dict[KeyKind, str] = {
     KeyKind.ALIVE_UNIT: PREFIX + "/{mission}/alive/unit/{id}",
     KeyKind.ALIVE_PLANNER: PREFIX + "/{mission}/alive/planner/{id}",
     KeyKind.WORLD: PREFIX + "/{mission}/planner/{id}/world",
+    KeyKind.ZONE: PREFIX + "/{mission}/zone/{id}",
 }
 
 # What the ``{id}`` chunk names in each template, for people reading the layout.
@@ -130,6 +135,7 @@ ID_NAMES: dict[KeyKind, str] = {
     KeyKind.ALIVE_UNIT: "unit",
     KeyKind.ALIVE_PLANNER: "planner",
     KeyKind.WORLD: "planner",
+    KeyKind.ZONE: "zone",
 }
 
 
@@ -265,6 +271,11 @@ def threat(mission: str, threat_id: str) -> str:
     return _build(KeyKind.THREAT, mission, threat_id, "threat")
 
 
+def zone(mission: str, zone_id: str) -> str:
+    """``mumt/{mission}/zone/{zone_id}``: a keep-out zone; DELETE removes it."""
+    return _build(KeyKind.ZONE, mission, zone_id, "zone")
+
+
 def preview(mission: str, unit: str) -> str:
     """``mumt/{mission}/preview/{unit}``: the whole-path preview queryable."""
     return _build(KeyKind.PREVIEW, mission, unit, "unit")
@@ -319,6 +330,11 @@ def unit_missions(mission: str) -> str:
 def threats(mission: str) -> str:
     """``mumt/{mission}/threat/*``."""
     return _wild(KeyKind.THREAT, mission)
+
+
+def zones(mission: str) -> str:
+    """``mumt/{mission}/zone/*``."""
+    return _wild(KeyKind.ZONE, mission)
 
 
 def previews(mission: str) -> str:

@@ -63,6 +63,15 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "planner",
         "a DELETE on the key removes the threat",
     ),
+    MessageSpec(
+        "zone",
+        m.ZoneUpdate,
+        KeyKind.ZONE,
+        "put",
+        "any",
+        "planner",
+        "a keep-out zone no path enters; a DELETE on the key removes it",
+    ),
     MessageSpec("direction", m.Direction, KeyKind.UNIT_DIRECTION, "put", "planner", "unit"),
     MessageSpec(
         "mission",
@@ -167,6 +176,19 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                     ttl_s=30.0,
                 ),
             )
+        ],
+        "zone": [
+            (
+                "zone",
+                m.ZoneUpdate(
+                    polygon=[
+                        [(100.0, 40.0), (160.0, 40.0), (160.0, 90.0), (100.0, 90.0), (100.0, 40.0)],
+                        [(120.0, 55.0), (135.0, 55.0), (135.0, 70.0), (120.0, 55.0)],
+                    ],
+                    ttl_s=3600.0,
+                ),
+            ),
+            ("zone.circle", m.ZoneUpdate(circle=m.ZoneCircle(centre=(-40.0, 75.0), radius_m=25.0))),
         ],
         "direction": [
             (
@@ -375,7 +397,22 @@ def _geodetic_positions(spec: MessageSpec, body: dict[str, Any]) -> None:
             props[name] = _either_form(props[name])
         if POSITION_FIELDS & props.keys():
             d["description"] = f"{d.get('description', '').rstrip()}\n\n{GEODETIC_NOTE}".lstrip()
+    _geodetic_zone(defs)
     defs.update(msgspec.json.schema(LatLon)["$defs"])
+
+
+def _geodetic_zone(defs: dict[str, Any]) -> None:
+    """A zone's polygon vertices and circle centre take lat/lon too (``codec._localise_zone``)."""
+    polygon = defs.get("ZoneUpdate", {}).get("properties", {}).get("polygon")
+    if polygon is not None:
+        for alt in polygon.get("anyOf", [polygon]):
+            ring = alt.get("items") if alt.get("type") == "array" else None
+            if ring is not None and "items" in ring:
+                ring["items"] = _either_form(ring["items"])
+    centre = defs.get("ZoneCircle", {}).get("properties", {}).get("centre")
+    if centre is not None:
+        defs["ZoneCircle"]["properties"]["centre"] = _either_form(centre)
+        defs["ZoneCircle"]["description"] += "\n\n" + GEODETIC_NOTE
 
 
 def _schema(spec: MessageSpec) -> dict[str, Any]:

@@ -28,6 +28,7 @@ from pfp_service.wire.messages.codec import (
     decode_unit_state,
     decode_world_query,
     decode_world_snapshot,
+    decode_zone,
     encode,
 )
 from pfp_service.wire.messages.structs import (
@@ -40,6 +41,9 @@ from pfp_service.wire.messages.structs import (
     MAX_SNAPSHOT_ITEMS,
     MAX_WHATIF_THREATS,
     MAX_WORLD_QUERY_CHARS,
+    MAX_ZONE_EXTENT_M,
+    MAX_ZONE_RINGS,
+    MAX_ZONE_VERTICES,
     SNAPSHOT_PAGE_BYTES,
     TEXT_MAX_CHARS,
     AnyEvent,
@@ -72,6 +76,9 @@ from pfp_service.wire.messages.structs import (
     WhatIfThreat,
     WorldQuery,
     WorldSnapshot,
+    ZoneCircle,
+    ZoneSummary,
+    ZoneUpdate,
     fit_text,
 )
 
@@ -85,6 +92,9 @@ __all__ = [
     "MAX_SNAPSHOT_ITEMS",
     "MAX_WHATIF_THREATS",
     "MAX_WORLD_QUERY_CHARS",
+    "MAX_ZONE_EXTENT_M",
+    "MAX_ZONE_RINGS",
+    "MAX_ZONE_VERTICES",
     "SNAPSHOT_PAGE_BYTES",
     "TEXT_MAX_CHARS",
     "AnyEvent",
@@ -117,6 +127,9 @@ __all__ = [
     "WhatIfThreat",
     "WorldQuery",
     "WorldSnapshot",
+    "ZoneCircle",
+    "ZoneSummary",
+    "ZoneUpdate",
     "check_bounds",
     "decode",
     "decode_direction",
@@ -131,6 +144,7 @@ __all__ = [
     "decode_unit_state",
     "decode_world_query",
     "decode_world_snapshot",
+    "decode_zone",
     "encode",
     "fit_text",
 ]

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import msgspec
 
 from pfp_service.errors import InputError, from_validation
-from pfp_service.geo import localise
+from pfp_service.geo import LatLon, localise
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
@@ -24,6 +24,8 @@ from pfp_service.wire.messages.structs import (
     MAX_PAYLOAD_BYTES,
     MAX_WHATIF_THREATS,
     MAX_WORLD_QUERY_CHARS,
+    MAX_ZONE_RINGS,
+    MAX_ZONE_VERTICES,
     AnyEvent,
     ArrivedEvent,
     Bounds,
@@ -40,6 +42,7 @@ from pfp_service.wire.messages.structs import (
     UnitState,
     WorldQuery,
     WorldSnapshot,
+    ZoneUpdate,
     fit_text,
 )
 
@@ -58,6 +61,7 @@ __all__ = [
     "decode_unit_state",
     "decode_world_query",
     "decode_world_snapshot",
+    "decode_zone",
     "encode",
 ]
 
@@ -77,6 +81,7 @@ _DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
         AnyEvent,
         WorldSnapshot,
         Mission,
+        ZoneUpdate,
     )
 }
 M = TypeVar("M")
@@ -123,6 +128,7 @@ _GEO_MAX_POSITIONS: dict[Any, int] = {
     Goal: 1,
     ThreatUpdate: 1,
     PreviewRequest: 2 + MAX_WHATIF_THREATS,
+    ZoneUpdate: MAX_ZONE_VERTICES + MAX_ZONE_RINGS + 1,
 }
 
 
@@ -179,7 +185,9 @@ def decode(
             data = data.tobytes()
         if b'"lat"' in data or b'"lon"' in data:  # type: ignore[operator]
             # the slow path only for lat/lon: untyped, localised, then typed with the same paths
-            msg: M = msgspec.convert(localise(_geo_document(cls, data), origin, "$"), cls)  # type: ignore[arg-type]
+            doc = _geo_document(cls, data)  # type: ignore[arg-type]
+            doc = _localise_zone(doc, origin) if cls is ZoneUpdate else localise(doc, origin, "$")
+            msg: M = msgspec.convert(doc, cls)
         else:
             msg = decoder.decode(data)  # type: ignore[arg-type]
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
@@ -193,6 +201,39 @@ def decode(
     if bounds is not None:
         check_bounds(msg, bounds)
     return msg
+
+
+def _vertex(value: Any, origin: Origin | None, path: str) -> Any:
+    """A zone vertex or centre given as ``{lat, lon}`` in metres from ``origin``; anything else as it is."""
+    if not (isinstance(value, dict) and ("lat" in value or "lon" in value)):
+        return value
+    try:
+        p = msgspec.convert(value, LatLon)
+    except msgspec.ValidationError as exc:
+        e = from_validation(exc)
+        raise InputError(f"{path}.{e.path}" if e.path else path, e.reason) from exc
+    if origin is None:
+        raise InputError(path, "a lat/lon position needs a mission origin ({lat, lon}); none is set")
+    return list(origin.localise_point(p, path))
+
+
+def _localise_zone(doc: Any, origin: Origin | None) -> Any:
+    """A zone document with its polygon's vertices and circle's centre in metres (``decode``'s lat/lon path)."""
+    if not isinstance(doc, dict):
+        return doc
+    out = dict(doc)
+    rings = doc.get("polygon")
+    if isinstance(rings, list):
+        out["polygon"] = [
+            [_vertex(v, origin, f"$.polygon[{i}][{k}]") for k, v in enumerate(ring)]
+            if isinstance(ring, list)
+            else ring
+            for i, ring in enumerate(rings)
+        ]
+    circle = doc.get("circle")
+    if isinstance(circle, dict) and "centre" in circle:
+        out["circle"] = {**circle, "centre": _vertex(circle["centre"], origin, "$.circle.centre")}
+    return out
 
 
 def _positions(msg: object) -> Iterator[tuple[str, tuple[float, float]]]:
@@ -247,6 +288,18 @@ def decode_threat(
 ) -> ThreatUpdate:
     """A ``ThreatUpdate`` from a ``threat/{t}`` PUT payload (see ``decode``)."""
     return decode(ThreatUpdate, data, bounds, origin)
+
+
+def decode_zone(
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
+) -> ZoneUpdate:
+    """A ``ZoneUpdate`` from a ``zone/{z}`` PUT payload (see ``decode``).
+
+    A zone may reach past the mission bounds (a minefield's edge need not
+    stop where the mission's does): ``bounds`` is not checked against it.
+    """
+    del bounds
+    return decode(ZoneUpdate, data, None, origin)
 
 
 def decode_preview_request(

@@ -31,6 +31,7 @@ from pfp_service.geo import LatLon, Origin
 
 if TYPE_CHECKING:
     from pfp_service.core.threat import Threat
+    from pfp_service.core.zones import Zone
 
 __all__ = [
     "CHOICES",
@@ -42,6 +43,9 @@ __all__ = [
     "MAX_SNAPSHOT_ITEMS",
     "MAX_WHATIF_THREATS",
     "MAX_WORLD_QUERY_CHARS",
+    "MAX_ZONE_EXTENT_M",
+    "MAX_ZONE_RINGS",
+    "MAX_ZONE_VERTICES",
     "SNAPSHOT_PAGE_BYTES",
     "TEXT_MAX_CHARS",
     "AnyEvent",
@@ -74,6 +78,9 @@ __all__ = [
     "WhatIfThreat",
     "WorldQuery",
     "WorldSnapshot",
+    "ZoneCircle",
+    "ZoneSummary",
+    "ZoneUpdate",
     "fit_text",
 ]
 
@@ -212,6 +219,98 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
             self.weight,
             threat_id,
         )
+
+
+# -- keep-out zones ------------------------------------------------------------------
+MAX_ZONE_VERTICES = 4096  # over all of a zone's rings (``core.zones.MAX_VERTICES``)
+MAX_ZONE_RINGS = 64  # the shell and its holes (``core.zones.MAX_RINGS``)
+MAX_ZONE_EXTENT_M = 200_000.0  # a zone's bounding box, either side; a circle's diameter
+ZoneKind = Annotated[str, Meta(pattern="^keep_out$")]  # room for later kinds
+Ring = Annotated[list[Point], Meta(min_length=4, max_length=MAX_ZONE_VERTICES + 1)]
+
+
+class ZoneCircle(_Message, frozen=True, kw_only=True):
+    """A circular zone: its centre (``[x, y]`` metres or ``{lat, lon}``) and radius in metres."""
+
+    centre: Point
+    radius_m: Annotated[float, Meta(gt=0.0, le=MAX_ZONE_EXTENT_M / 2)]
+
+
+class ZoneUpdate(_Message, frozen=True, kw_only=True):
+    """A keep-out zone, put on ``mumt/{m}/zone/{z}`` (the id is the key's last chunk); a DELETE removes it.
+
+    Exactly one of ``polygon`` and ``circle``.  No unit's path enters a zone
+    (its boundary included).
+
+    Attributes:
+        kind: what the zone means; ``keep_out`` (the only kind so far).
+        polygon: rings of vertices, the outer ring first and then its holes, as
+            in GeoJSON: each ring closed (its last vertex repeats its first),
+            none crossing itself, the holes inside the outer ring; each vertex
+            ``[x, y]`` metres or ``{"lat": …, "lon": …}``.  At most
+            ``MAX_ZONE_RINGS`` rings and ``MAX_ZONE_VERTICES`` vertices in all,
+            within ``MAX_ZONE_EXTENT_M`` metres either way.
+        circle: a circle instead of a polygon.
+        ttl_s: seconds until it expires unless put again; absent = until deleted.
+    """
+
+    kind: ZoneKind = "keep_out"
+    polygon: Annotated[list[Ring], Meta(min_length=1, max_length=MAX_ZONE_RINGS)] | None = None
+    circle: ZoneCircle | None = None
+    ttl_s: Positive | None = None
+
+    def __post_init__(self) -> None:
+        if (self.polygon is None) == (self.circle is None):
+            raise ValueError("polygon: give exactly one of polygon and circle")
+        if self.polygon is not None:
+            _check_rings(self.polygon)
+
+    def to_zone(self, zone_id: str) -> Zone:
+        """The core's ``Zone`` for this update, named ``zone_id``."""
+        from pfp_service.core.zones import Zone
+
+        return Zone.from_update(zone_id, self)
+
+
+def _check_rings(rings: Sequence[Sequence[tuple[float, float]]]) -> None:
+    """Closed, simple rings, bounded in count and extent, that make a valid polygon (GEOS says why not).
+
+    Raises:
+        ValueError: ``polygon[i]: reason`` (or ``polygon: reason`` for the polygon as a whole).
+    """
+    import shapely
+    from shapely.validation import explain_validity
+
+    total = sum(len(r) - 1 for r in rings)
+    if total > MAX_ZONE_VERTICES:
+        raise ValueError(f"polygon: {total} vertices, more than the {MAX_ZONE_VERTICES} a zone may have")
+    for i, ring in enumerate(rings):
+        if tuple(ring[0]) != tuple(ring[-1]):
+            raise ValueError(f"polygon[{i}]: a ring must be closed (its last vertex repeats its first)")
+        if len(set(ring)) < 3:
+            raise ValueError(f"polygon[{i}]: a ring needs at least 3 distinct vertices")
+        xs = [p[0] for p in ring]
+        ys = [p[1] for p in ring]
+        if max(xs) - min(xs) > MAX_ZONE_EXTENT_M or max(ys) - min(ys) > MAX_ZONE_EXTENT_M:
+            raise ValueError(f"polygon[{i}]: wider than {MAX_ZONE_EXTENT_M:g} m")
+        lr = shapely.LinearRing(ring)
+        if not lr.is_simple:
+            raise ValueError(
+                f"polygon[{i}]: the ring crosses itself ({explain_validity(shapely.Polygon(ring))})"
+            )
+    poly = shapely.Polygon(rings[0], rings[1:])
+    if not poly.is_valid:
+        raise ValueError(f"polygon: not a valid polygon: {explain_validity(poly)}")
+    if poly.area <= 0.0:
+        raise ValueError("polygon: the polygon has no area")
+
+
+class ZoneSummary(_Message, frozen=True, kw_only=True):
+    """One zone in force (``WorldSnapshot.zones``); ``ttl_s`` is the time left, null: no expiry."""
+
+    id: Id
+    zone: ZoneUpdate
+    ttl_s: NonNegative | None = None
 
 
 class WhatIfThreat(ThreatUpdate, frozen=True, kw_only=True):
@@ -525,6 +624,8 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     threats_total: Count = 0
     next_unit: Id | None = None
     next_threat: Id | None = None
+    zones: Annotated[list[ZoneSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
+    zones_total: Count = 0
 
 
 class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
