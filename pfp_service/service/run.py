@@ -37,7 +37,9 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
     Raises:
         ZenohError: the session could not be opened (``--listen`` in use, ``--connect`` unreachable ...).
     """
-    log = setup_logging(cfg.log_format, cfg.log_level)
+    from pfp_service.coords import Coords
+
+    log = setup_logging(cfg.log_format, cfg.log_level, Coords.choose(None, cfg.origin))  # lat/lon with one
     signals = SignalStop(stop)  # on the main thread, SIGTERM and SIGINT set stop too
     stop = signals.event
     with signals:
