@@ -4,7 +4,9 @@ Asks the world queryable (``mumt/{m}/planner/*/world``) and the status of
 every planner.  Without ``--json``, a table of the live planners first (units
 owned, latency, deliberations, overload: several share a mission under
 ``--cluster``), then two tables per planner: units (id, kind, status, last
-seen, distance to goal) and threats (id, position, TTL left).  With
+seen, distance to goal, position) and threats (id, position, TTL left), ids in
+natural order (m2 before m10).  Positions are lat/lon with the metres from the
+origin when the planner has one (``--coords`` chooses: latlon, metres, mgrs).  With
 ``--json``, one JSON array of every planner's full ``WorldSnapshot``: every page
 of it, merged (``service.worldpages.whole_world``); the tables show a planner's
 first page (up to 1,000 units and threats) and count the rest.
@@ -18,7 +20,9 @@ import contextlib
 from collections.abc import Sequence
 from typing import Any
 
-from pfp_service.cli._common import add_session_args, positive_float, session_config
+from pfp_service.cli._common import add_coords_arg, add_session_args, positive_float, session_config
+from pfp_service.coords import Coords
+from pfp_service.natsort import natural_key
 
 
 def register(sub: Any) -> None:
@@ -28,6 +32,7 @@ def register(sub: Any) -> None:
         "--timeout", type=positive_float, default=2.0, metavar="S", help="seconds to wait for answers"
     )
     p.add_argument("--json", action="store_true", help="print a JSON array of every planner's full snapshot")
+    add_coords_arg(p)
     p.set_defaults(func=run)
 
 
@@ -64,18 +69,26 @@ def planner_lines(statuses: Sequence[Any]) -> list[str]:
     return _table(rows)
 
 
-def snapshot_lines(snap: Any) -> list[str]:
-    """One planner's snapshot as text: a heading, the units table and the threats table."""
+def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
+    """One planner's snapshot as text: a heading, the units table and the threats table.
+
+    Args:
+        snap: the planner's ``WorldSnapshot``.
+        coords: how positions are shown (default: metres).
+    """
+    coords = coords or Coords()
     lines = [
         f"planner {snap.planner}, mission {snap.mission}: {snap.units_total} units, {snap.threats_total} threats"
     ]
     if snap.units:
         rows: list[tuple[str, ...]] = [("unit", "kind", "status", "last seen", "to goal", "position")]
-        for u in snap.units:
+        units = sorted(snap.units, key=lambda u: natural_key(u.id))
+        placed = iter(coords.points([u.position for u in units if u.position is not None]))
+        for u in units:
             status = "stale" if u.stale else (u.status.value if u.status is not None else "-")
             if u.deliberating:
                 status += " (deliberating)"
-            pos = "-" if u.position is None else f"({u.position[0]:.1f}, {u.position[1]:.1f})"
+            pos = "-" if u.position is None else next(placed)
             rows.append(
                 (
                     u.id,
@@ -91,16 +104,26 @@ def snapshot_lines(snap: Any) -> list[str]:
             lines.append(f"... and {snap.units_total - len(snap.units)} more units (--json lists them all)")
     if snap.threats:
         rows = [("threat", "position", "facing", "TTL left")]
-        for t in snap.threats:
-            x, y = t.threat.position
+        threats = sorted(snap.threats, key=lambda t: natural_key(t.id))
+        for t, pos in zip(threats, coords.points([t.threat.position for t in threats])):
             ttl = "no expiry" if t.ttl_s is None else f"{t.ttl_s:.1f} s"
-            rows.append((t.id, f"({x:.1f}, {y:.1f})", f"{t.threat.facing_deg:g}°", ttl))
+            rows.append((t.id, pos, f"{t.threat.facing_deg:g}°", ttl))
         lines += ["", *_table(rows)]
         if snap.threats_total > len(snap.threats):
             lines.append(
                 f"... and {snap.threats_total - len(snap.threats)} more threats (--json lists them all)"
             )
     return lines
+
+
+def _coords(args: argparse.Namespace, origin: Any) -> Coords:
+    """``--coords`` for one planner: its origin, when it has one; a planner without shows metres."""
+    import sys
+
+    if args.coords not in (None, "metres") and origin is None:
+        print(f"pfp status: --coords {args.coords}: the planner has no origin; its positions are in metres",
+              file=sys.stderr)  # fmt: skip
+    return Coords.choose(args.coords, origin, strict=False)
 
 
 def _whole(session: Any, args: argparse.Namespace, first: Any) -> Any:
@@ -158,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"pfp status: {reply.ok.key_expr}: {exc}", file=sys.stderr)
         if args.json:
             found = [_whole(session, args, snap) for snap in found]
-    found.sort(key=lambda s: s.planner)
+    found.sort(key=lambda s: natural_key(s.planner))
     if args.json:
         print(msgspec.json.encode(found).decode())
     if not found:
@@ -169,10 +192,11 @@ def run(args: argparse.Namespace) -> int:
         return 1
     if not args.json:
         if statuses:
-            print("\n".join(planner_lines(sorted(statuses, key=lambda st: st.planner))))
+            print("\n".join(planner_lines(sorted(statuses, key=lambda st: natural_key(st.planner)))))
             print()
+        origins = {st.planner: st.origin for st in statuses}
         for i, snap in enumerate(found):
             if i:
                 print()
-            print("\n".join(snapshot_lines(snap)))
+            print("\n".join(snapshot_lines(snap, _coords(args, origins.get(snap.planner)))))
     return 0
