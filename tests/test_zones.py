@@ -199,3 +199,15 @@ def test_vertex_count_is_bounded() -> None:
     assert e.value.path.startswith("$.polygon")
     ok = ring[: m.MAX_ZONE_VERTICES - 1]
     assert m.decode_zone(json.dumps({"polygon": [[*ok, ok[0]]]}).encode()).polygon is not None
+
+
+def test_a_field_carries_its_zones() -> None:
+    from pfp_service.core.threat import Threat, ThreatField
+
+    t = Threat.from_facing((0.0, 0.0), 0.0, 2.0, 1.0, 0.0, id="a")
+    bare = ThreatField([t])
+    assert not bare.zones
+    f = bare.with_zones(ZONES)
+    assert f.zones is ZONES and f.packed is bare.packed and len(f) == 1
+    assert f.plus([Threat.from_facing((5.0, 0.0), 0.0, 2.0, 1.0, 0.0, id="b")]).zones is ZONES
+    assert f.with_threats([]).zones is ZONES

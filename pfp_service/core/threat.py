@@ -25,6 +25,7 @@ from scipy.optimize import brentq
 from scipy.special import ndtr
 
 from pfp_service.core import kernels
+from pfp_service.core.zones import ZoneSet
 
 __all__ = ["LEVEL_FLOOR", "PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
 
@@ -34,6 +35,9 @@ Intensity = Literal["peak", "density"]
 PACKED_COLUMNS = kernels.PACKED_COLUMNS
 # Of the strongest threat's peak: the terms ``level_culled`` and the route grids leave out.
 LEVEL_FLOOR = 1e-9
+
+
+_NO_ZONES = ZoneSet()
 
 
 @functools.lru_cache(maxsize=1 << 16)
@@ -190,11 +194,16 @@ class ThreatField:
     """A set of threats packed for fast evaluation of ``sum_j w_j t_j``.
 
     Immutable: adding or removing a threat builds a new field (cheap).
+    The field also carries the keep-out zones in force (``zones``, a
+    ``core.zones.ZoneSet``; empty by default), so everything that takes a
+    field sees them: ``with_zones`` gives the same threats with other zones.
     """
 
-    __slots__ = ("__weakref__", "_reach", "intensity", "packed", "positions", "threats")
+    __slots__ = ("__weakref__", "_reach", "intensity", "packed", "positions", "threats", "zones")
 
-    def __init__(self, threats: Iterable[Threat] = (), intensity: Intensity = "peak") -> None:
+    def __init__(
+        self, threats: Iterable[Threat] = (), intensity: Intensity = "peak", zones: ZoneSet | None = None
+    ) -> None:
         if intensity not in ("peak", "density"):
             raise ValueError(f"intensity: must be 'peak' or 'density', got {intensity!r}")
         self.threats: tuple[Threat, ...] = tuple(threats)
@@ -210,12 +219,24 @@ class ThreatField:
         self.packed = packed
         self.positions = packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
         self._reach: np.ndarray | None = None
+        self.zones: ZoneSet = zones if zones is not None else _NO_ZONES
 
     def __len__(self) -> int:
         return len(self.threats)
 
     def with_threats(self, threats: Iterable[Threat]) -> ThreatField:
-        return ThreatField(threats, self.intensity)
+        return ThreatField(threats, self.intensity, self.zones)
+
+    def with_zones(self, zones: ZoneSet) -> ThreatField:
+        """These threats (their packed rows reused) with ``zones`` in force instead."""
+        out = ThreatField.__new__(ThreatField)
+        out.threats = self.threats
+        out.intensity = self.intensity
+        out.packed = self.packed
+        out.positions = self.positions
+        out._reach = self._reach
+        out.zones = zones
+        return out
 
     def plus(self, extra: Iterable[Threat], replacing: Container[str] = ()) -> ThreatField:
         """This field without the threats whose id is in ``replacing``, with ``extra`` after them.
@@ -231,6 +252,7 @@ class ThreatField:
         out.packed = np.concatenate([self.packed[keep], added.packed])
         out.positions = out.packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
         out._reach = None
+        out.zones = self.zones
         return out
 
     # -- evaluation ---------------------------------------------------------
