@@ -129,7 +129,7 @@ class Deliberators:
 
     def _send(self, chunk: list[Job], now: float) -> None:
         field = chunk[0].field
-        items = [(j.unit, j.token, j.kind, j.stepper, j.deadline - now) for j in chunk]
+        items = [(j.unit, j.token, j.kind, j.detach(), j.deadline - now) for j in chunk]  # the copy, at last
         task = Task(
             _run_chunk,
             (field.intensity, items),

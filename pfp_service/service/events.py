@@ -7,6 +7,7 @@ missions one ``apply`` returns.  Pure values: no zenoh, no clock.
 
 from __future__ import annotations
 
+import copy
 import traceback
 import zlib
 from dataclasses import dataclass, field
@@ -210,11 +211,30 @@ class Job:
     field: ThreatField
     deadline: float
     cancelled: bool = False
+    live: bool = False  # ``stepper`` is the unit's own still: ``detach`` copies it
+
+    def detach(self) -> Stepper:
+        """The job's own copy of the stepper, made at the first call (lazily: off ``World.apply``'s wave).
+
+        The world hands the live stepper over and the copy is made when the
+        job is sent or run, on the loop thread; a job superseded before that
+        costs no copy.  The copy asks what was asked (``pending`` as at the
+        ask), and a result for a goal or world no longer in force is dropped
+        by its ``token`` as ever.
+        """
+        if self.live:
+            need = self.stepper.pending
+            self.stepper = copy.deepcopy(self.stepper)
+            if need is None or need.kind != self.kind or self.stepper.version != self.token[1]:
+                self.stepper.pending = None  # answered or superseded meanwhile: nothing to run
+            self.live = False
+        return self.stepper
 
     def run(self, now: float | None = None) -> Deliberated:
         """Deliberate; ``now`` past the deadline gives up without computing."""
         if now is not None and now > self.deadline:
             return Deliberated(self.unit, self.token, None)
+        self.detach()
         try:
             self.stepper.deliberate(self.field)
         except Exception as exc:  # a failure as a value: the world drops this unit's goal, no one else's

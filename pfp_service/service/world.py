@@ -399,6 +399,6 @@ class World:
     def _ask(self, rec: UnitRecord, fld: ThreatField, b: _Batch) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
         kind, deadline = rec.stepper.pending.kind, b.now + self.settings.deliberation_budget_s
-        job = ev.Job(rec.id, rec.token(), kind, copy.deepcopy(rec.stepper), fld, deadline)
+        job = ev.Job(rec.id, rec.token(), kind, rec.stepper, fld, deadline, live=True)  # Job.detach copies
         self._rec.asked(rec, job)
         b.out.jobs.append(job)
