@@ -20,6 +20,12 @@ status) before anything is sent: the same, it runs as written; another, every
 start and goal is converted exactly into the planner's frame (through lat/lon)
 and the fleet says so; a planner without an origin is refused in one line
 naming both, since metres from two different points cannot be mixed.
+
+Positions in its lines and its summary are shown as ``coords`` says
+(``FleetOptions.coords``, ``--coords``): lat/lon with the metres from the
+origin when the team or the planner has one, else metres.  Asked for lat/lon
+or MGRS with a team in plain metres, the fleet waits for the planner's origin
+first; by default it asks once, and shows metres if no planner answers yet.
 """
 
 from __future__ import annotations
@@ -29,15 +35,17 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import msgspec
 
-from pfp_clients.frames import learn_planner_origin, reframe
+from pfp_clients.frames import learn_planner_origin, planner_origin, reframe
 from pfp_clients.sim import SimUnit
+from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
+from pfp_service.natsort import natural_key
 from pfp_service.team import Team
 from pfp_service.wire import (
     Direction,
@@ -65,6 +73,8 @@ class FleetOptions:
         until_arrived: stop as soon as the planner reports every unit arrived.
         set_goals: put the team file's goals (else units wait for goals from elsewhere).
         reply_timeout_s: wall seconds to wait for late answers before moving on.
+        coords: how positions are shown (``--coords``: latlon, metres, mgrs; None: latlon
+            when an origin is known, else metres).
     """
 
     mission: str = keys.DEFAULT_MISSION
@@ -74,6 +84,7 @@ class FleetOptions:
     until_arrived: bool = False
     set_goals: bool = True
     reply_timeout_s: float = 1.0
+    coords: str | None = None
 
 
 @dataclass
@@ -85,6 +96,7 @@ class FleetResult:
     ticks: int
     late_replies: int
     reason: str
+    coords: Coords = field(default_factory=Coords)
 
     @property
     def all_arrived(self) -> bool:
@@ -138,6 +150,7 @@ def run_fleet(
 
     m = keys.check_chunk(opts.mission, "--mission")
     stop = stop or threading.Event()
+    shown_origin = team.origin
     if team.origin is not None:  # before anything is sent: metres from two origins never mix
         answered, origin = learn_planner_origin(session, m, stop, say, "team")
         if not answered:
@@ -145,6 +158,21 @@ def run_fleet(
         team, line = in_planner_frame(team, origin, m)
         if line is not None:
             say(line)
+        shown_origin = team.origin
+    elif opts.coords in (
+        "latlon",
+        "mgrs",
+    ):  # shown on the earth: the planner's origin, since the team has none
+        answered, shown_origin = learn_planner_origin(session, m, stop, say, "team")
+        if not answered:
+            return FleetResult([SimUnit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
+        if shown_origin is None:
+            say(
+                f"--coords {opts.coords}: neither the team nor the planner has an origin; positions are in metres"
+            )
+    elif opts.coords is None:  # the default: lat/lon if a planner already running has an origin
+        shown_origin = planner_origin(session, m)[1]
+    coords = Coords.choose(opts.coords, shown_origin, strict=False)
     units = [SimUnit(spec) for spec in team.units]
     by_id = {u.id: u for u in units}
     dt_s = 1.0 / opts.rate_hz
@@ -209,7 +237,7 @@ def run_fleet(
                 return
             nonlocal last_answer
             last_answer = clock()
-            line = by_id[uid].on_direction(d, t_s)
+            line = by_id[uid].on_direction(d, t_s, coords.point)
             if line is not None:
                 say(f"t={t_s:7.2f}s  {line}")
             if d.status is DirectionStatus.NO_GOAL and tick > 0:
@@ -225,8 +253,7 @@ def run_fleet(
                     goal = _goal_of(u, dt_s)
                     if goal is not None:
                         goals.put(keys.unit_goal(m, u.id), encode(goal))
-                        gx, gy = goal.position
-                        say(f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal ({gx:.1f}, {gy:.1f})")
+                        say(f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal {coords.point(goal.position)}")
             if new_planner.is_set() and tick > 0:
                 new_planner.clear()
                 for u in units:
@@ -263,17 +290,26 @@ def run_fleet(
         for d in [*declared, *pubs.values(), *tokens]:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
                 d.undeclare()
-    return FleetResult(units, t_s, tick, late, reason)
+    return FleetResult(units, t_s, tick, late, reason, coords)
 
 
 def summary_lines(result: FleetResult) -> list[str]:
-    """A plain-text table: unit, kind, status, arrival time, path length."""
-    rows = [("unit", "kind", "speed", "status", "arrived at", "path m")]
-    for u in result.units:
+    """A plain-text table, units in natural order: unit, kind, status, arrival time, path length, position."""
+    rows = [("unit", "kind", "speed", "status", "arrived at", "path m", "position")]
+    units = sorted(result.units, key=lambda u: natural_key(u.id))
+    for u, pos in zip(units, result.coords.points([u.position for u in units])):
         arrived = f"{u.arrived_at_s:.1f} s" if u.arrived_at_s is not None else "-"
         status = u.status + (f" ({u.trapped_reason})" if u.trapped_reason else "")
         rows.append(
-            (u.id, u.spec.kind.value, f"{u.spec.speed_mps:g}", status, arrived, f"{u.path_length_m():.1f}")
+            (
+                u.id,
+                u.spec.kind.value,
+                f"{u.spec.speed_mps:g}",
+                status,
+                arrived,
+                f"{u.path_length_m():.1f}",
+                pos,
+            )
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]

@@ -11,6 +11,7 @@ what the planner reported (status ``arrived`` within its tolerance).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from pfp_service.team import UnitSpec
@@ -81,10 +82,13 @@ class SimUnit:
             heading_deg=heading,
         )
 
-    def on_direction(self, d: Direction, t_s: float) -> str | None:
+    def on_direction(
+        self, d: Direction, t_s: float, show: Callable[[tuple[float, float]], str] | None = None
+    ) -> str | None:
         """Take a direction; returns a line worth logging when the status changed, else ``None``.
 
         A direction answering an older ``seq`` than one already held is stale and ignored.
+        ``show`` writes the unit's position in the line (``coords.Coords.point``: lat/lon with an origin).
         """
         if d.seq is not None and d.seq < self.answered:
             return None
@@ -100,7 +104,7 @@ class SimUnit:
         if d.status.value == before:
             return None
         x, y = self.position
-        where = f"at ({x:.2f}, {y:.2f})"
+        where = f"at {show(self.position)}" if show is not None else f"at ({x:.2f}, {y:.2f})"
         if d.status is DirectionStatus.ARRIVED:
             return f"{self.id} arrived {where}, {d.distance_to_goal or 0.0:.2f} m from its goal"
         if d.status is DirectionStatus.TRAPPED:

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from pfp_service.cli._common import add_session_args, positive_float, positive_int, session_config
+from pfp_service.cli._common import (
+    add_coords_arg,
+    add_session_args,
+    positive_float,
+    positive_int,
+    session_config,
+)
 from pfp_service.signals import SignalStop
 
 # Each unit costs a publisher, a token and a Python object per tick: past this one fleet process
@@ -60,6 +66,7 @@ def register(sub: Any) -> None:
         metavar="S",
         help="wall seconds between progress lines when stdout is not a terminal",
     )
+    add_coords_arg(p)
     p.set_defaults(func=run)
 
 
@@ -83,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         until_arrived=args.until_arrived,
         set_goals=not args.no_goals,
         reply_timeout_s=args.reply_timeout_s,
+        coords=args.coords,
     )
     conf = session_config(args)
     with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the fleet has closed
