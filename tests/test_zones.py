@@ -26,7 +26,7 @@ RING = Zone.circle("crater", (20.0, 0.0), 3.0)
 THIN = Zone.polygon("wire", [(30, -50), (30.01, -50), (30.01, 50), (30, 50)])  # 1 cm wide
 ZONES = ZoneSet([SQUARE_WITH_HOLE, RING, THIN])
 
-coord = st.floats(-60.0, 60.0, allow_nan=False)
+coord = st.floats(-60.0, 60.0, allow_nan=False).map(lambda v: round(v, 6))  # GEOS misjudges subnormals
 
 
 def _shapely(zone: Zone) -> shapely.Geometry:

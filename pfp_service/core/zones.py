@@ -9,8 +9,9 @@ form of a ``ZoneSet`` and the numba kernels below, which are exact for
 polygons and circles (no sampling: a segment's first contact with a zone is
 solved, so a thin zone is never stepped over).
 
-A zone is *closed*: a point on its boundary is in it.  ``track_enters`` and
-every check use that one rule.
+A zone is *closed*: a point on its boundary is in it, and so is one within
+``TOUCH_M`` (a nanometre) of it, so that rounding never turns a touch into a
+miss.  ``track_enters`` and every check use that one rule.
 
 How the live side hands zones to the engine: build ``ZoneSet(zones)`` from
 the zones in force (``Zone.from_update`` turns a wire ``ZoneUpdate`` into a
@@ -43,6 +44,7 @@ __all__ = [
     "KINDS",
     "MAX_RINGS",
     "MAX_VERTICES",
+    "TOUCH_M",
     "Zone",
     "ZoneSet",
     "point_zone",
@@ -53,6 +55,7 @@ __all__ = [
 KINDS = ("keep_out",)
 MAX_VERTICES = 4096  # per zone, over all its rings
 MAX_RINGS = 64  # holes plus the shell
+TOUCH_M = 1e-9  # closer to a zone than this is in it
 
 Ring = tuple[tuple[float, float], ...]
 
@@ -175,7 +178,7 @@ class Zone:
 
     def contains(self, x: float, y: float) -> bool:
         """Whether ``(x, y)`` lies in the zone, its boundary included."""
-        return self.signed_distance(x, y) <= 0.0
+        return self.signed_distance(x, y) <= TOUCH_M
 
     def signed_distance(self, x: float, y: float) -> float:
         """Metres from ``(x, y)`` to the zone's boundary: > 0 outside, <= 0 inside (the depth)."""
@@ -377,7 +380,7 @@ def segment_hit(
             fx = x0 - circles[z, 0]
             fy = y0 - circles[z, 1]
             c = fx * fx + fy * fy - r * r
-            if c <= 0.0:
+            if math.hypot(fx, fy) - r <= TOUCH_M:
                 return 0.0, z
             a = dx * dx + dy * dy
             b = fx * dx + fy * dy
@@ -389,14 +392,21 @@ def segment_hit(
                 best = t
                 arg = z
             continue
-        if _zone_signed(edges, offsets, circles, z, x0, y0) <= 0.0:
+        if _zone_signed(edges, offsets, circles, z, x0, y0) <= TOUCH_M:
             return 0.0, z  # starts in the zone or on its boundary
         for e in range(offsets[z], offsets[z + 1]):
             t = _cross_t(x0, y0, dx, dy, edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3])
             if t >= 0.0 and t < best:
                 best = t
                 arg = z
-    if arg < 0:
+    if arg < 0:  # no crossing: the end may still touch (a crossing lost to rounding)
+        for z in range(boxes.shape[0]):
+            if boxes[z, 0] - x1 > TOUCH_M or x1 - boxes[z, 2] > TOUCH_M:
+                continue
+            if boxes[z, 1] - y1 > TOUCH_M or y1 - boxes[z, 3] > TOUCH_M:
+                continue
+            if _zone_signed(edges, offsets, circles, z, x1, y1) <= TOUCH_M:
+                return 1.0, z
         return -1.0, -1
     return best, arg
 
@@ -422,7 +432,7 @@ def _first_hit(
     n = pts.shape[0]
     if n == 1:
         sd, z, _, _ = point_zone(edges, offsets, circles, boxes, pts[0, 0], pts[0, 1], 0.0)
-        return (0, z) if sd <= 0.0 else (-1, -1)
+        return (0, z) if sd <= TOUCH_M else (-1, -1)
     for i in range(n - 1):
         _t, z = segment_hit(
             edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1]
@@ -532,14 +542,14 @@ class ZoneSet:
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """Boolean mask: which points lie in some zone (boundary included)."""
-        return self.signed_distance(points) <= 0.0
+        return self.signed_distance(points) <= TOUCH_M
 
     def zone_at(self, x: float, y: float) -> str:
         """The id of the zone holding ``(x, y)`` (the deepest), or ``""``."""
         if not self.zones:
             return ""
         sd, z, _, _ = point_zone(self.edges, self.offsets, self.circles, self.boxes, x, y, math.inf)
-        return self.ids[z] if sd <= 0.0 else ""
+        return self.ids[z] if sd <= TOUCH_M else ""
 
     def nearest(self, x: float, y: float) -> tuple[float, str, tuple[float, float]]:
         """``(signed distance, zone id, unit gradient)`` of the nearest zone (``inf, "", (0, 0)`` with none)."""
