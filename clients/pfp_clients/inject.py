@@ -23,7 +23,7 @@ from typing import Any
 
 import msgspec
 
-from pfp_clients.frames import learn_planner_origin, reframe
+from pfp_clients.frames import learn_planner_origin, planner_origin, reframe
 from pfp_clients.script import (
     AddThreat,
     CancelGoal,
@@ -36,6 +36,7 @@ from pfp_clients.script import (
     Wait,
 )
 from pfp_clients.watch import Watch
+from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import (
@@ -92,6 +93,7 @@ class InjectReport:
     speed_up: float
     reason: str = ""
     lines: list[str] = field(default_factory=list)
+    coords: Coords = field(default_factory=Coords)  # how its lines show positions
 
     @property
     def ok(self) -> bool:
@@ -129,9 +131,17 @@ def _settled(script: Script, watch: Watch, t_s: float) -> bool:
 class _Runner:
     """The script's state machine; the Zenoh parts are the two callables it is given."""
 
-    def __init__(self, script: Script, session: Any, mission: str, say: Callable[[str], None]) -> None:
+    def __init__(
+        self,
+        script: Script,
+        session: Any,
+        mission: str,
+        say: Callable[[str], None],
+        coords: Coords | None = None,
+    ) -> None:
         from pfp_service.wire.delivery import Deliverer
 
+        self.coords = coords or Coords()
         self.script = script
         self.s = Deliverer(session, mission, say)  # goals and threats reach a planner that starts later
         self.m = mission
@@ -166,7 +176,7 @@ class _Runner:
                 due.append(f"a planner to take {len(pending)} write{'s' if len(pending) > 1 else ''}")
             return "timeline done; waiting for " + ", ".join(due) if due else "timeline done"
         step = tl[self.index]
-        head = f"waiting on timeline[{self.index}] ({step.describe()})"
+        head = f"waiting on timeline[{self.index}] ({step.describe(self.coords.point)})"
         if self.wait_until is not None:
             return f"{head}: {max(self.wait_until - t_s, 0.0):.1f} s left"
         if step.at_s is not None and t_s < step.at_s:
@@ -175,7 +185,7 @@ class _Runner:
             w = step.when
             pos = self.watch.position(w.unit)
             where = "not seen yet" if pos is None else f"now {math.dist(pos, w.of):.1f} m away"
-            return f"{head}: {w.unit} within {w.within_m:g} m of ({w.of[0]:g}, {w.of[1]:g}), {where}"
+            return f"{head}: {w.unit} within {w.within_m:g} m of {self.coords.point(w.of)}, {where}"
         return head
 
     def advance(self, t_s: float, wall_s: float) -> None:
@@ -195,8 +205,8 @@ class _Runner:
             self.fired.append(Fired(self.index, t_s, wall_s, step, where))
             trig = ""
             if where is not None and step.when is not None:
-                trig = f"  (when {step.when.unit} at ({where[0]:.2f}, {where[1]:.2f}))"
-            self.say(f"t={t_s:7.2f}s  {step.describe()}{trig}")
+                trig = f"  (when {step.when.unit} at {self.coords.point(where, digits=2)})"
+            self.say(f"t={t_s:7.2f}s  {step.describe(self.coords.point)}{trig}")
             if isinstance(step, Wait):
                 self.wait_until = t_s + step.seconds
             else:
@@ -269,6 +279,7 @@ def run_inject(
     mission_clock: Callable[[], float] | None = None,
     on_wait: Callable[[float, int, str], None] | None = None,
     ready_after_acks: bool = False,
+    coords: str | None = None,
 ) -> InjectReport:
     """Play ``script`` on an open session and judge it.
 
@@ -287,6 +298,8 @@ def run_inject(
         ready_after_acks: set ``ready`` only once a planner has also taken what was sent
             (``pfp inject SCENARIO``: its unit starts when the threats and the goal are in force).
         on_wait: called each round with the script time, the entries done and what the timeline waits for.
+        coords: how the lines show positions (``--coords``: latlon, metres, mgrs; None: latlon
+            with the script's or the planner's origin, else metres).
     """
     import zenoh
 
@@ -325,7 +338,7 @@ def run_inject(
         session.declare_subscriber(keys.unit_directions(m), on_direction),
         session.declare_subscriber(keys.events(m), on_event),
     ]
-    run = _Runner(script, session, m, say)
+    run = _Runner(script, session, m, say, _shown_coords(session, script, m, coords, stop, say))
     w = run.watch
     t0 = clock()
     t_s = 0.0
@@ -372,14 +385,39 @@ def run_inject(
     say(f"t={t_s:7.2f}s  inject stops: {reason}")
     verdicts = [judge(e, w) for e in script.expect]
     unfired = list(range(run.index, len(script.timeline)))
-    return InjectReport(script, run.fired, unfired, verdicts, w, t_s, t0, speed_up, reason)
+    return InjectReport(script, run.fired, unfired, verdicts, w, t_s, t0, speed_up, reason, coords=run.coords)
+
+
+def _shown_coords(
+    session: Any,
+    script: Script,
+    mission: str,
+    flag: str | None,
+    stop: threading.Event,
+    say: Callable[[str], None],
+) -> Coords:
+    """How the lines show positions (``--coords``): from the script's origin, else the planner's.
+
+    Asked for lat/lon or MGRS with a script in plain metres, it waits for a planner's
+    origin; by default it asks once and shows metres if none answers yet.
+    """
+    origin = script.origin
+    if origin is None and flag != "metres":
+        origin = (
+            learn_planner_origin(session, mission, stop, say, "script")[1]
+            if flag is not None
+            else planner_origin(session, mission)[1]
+        )
+        if origin is None and flag is not None:
+            say(f"--coords {flag}: neither the script nor the planner has an origin; positions are in metres")
+    return Coords.choose(flag, origin, strict=False)
 
 
 def report_lines(rep: InjectReport) -> list[str]:
     """The verdicts as text, one line each, then the overall result."""
     out = []
     for i in rep.unfired:
-        out.append(f"  FAIL  timeline[{i}] ({rep.script.timeline[i].describe()}) never fired")
+        out.append(f"  FAIL  timeline[{i}] ({rep.script.timeline[i].describe(rep.coords.point)}) never fired")
     for v in rep.verdicts:
         out.append(f"  {'PASS' if v.held else 'FAIL'}  {v.expect.describe()}: {v.detail}")
     held = sum(v.held for v in rep.verdicts)
@@ -394,6 +432,7 @@ def main(
     conf: Any,
     progress_s: float = 5.0,
     stop: threading.Event | None = None,
+    coords: str | None = None,
 ) -> int:
     """``pfp inject``: open a session from ``conf``, play with progress, print the report; 0 iff all held.
 
@@ -416,7 +455,9 @@ def main(
 
         if stop is not None and stop.is_set():  # a signal while the session opened
             return 1
-        rep = run_inject(session, script, mission, speed_up, say=progress.say, stop=stop, on_wait=on_wait)
+        rep = run_inject(
+            session, script, mission, speed_up, say=progress.say, stop=stop, on_wait=on_wait, coords=coords
+        )
     for line in report_lines(rep):
         print(line)
     return 0 if rep.ok else 1

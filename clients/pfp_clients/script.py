@@ -24,6 +24,7 @@ point).  Actions: ``add_threat``, ``move_threat``, ``remove_threat``,
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Union
 
@@ -63,6 +64,13 @@ class When(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
     of: Point
 
 
+Show = Callable[[tuple[float, float]], str] | None  # how a position is written (coords.Coords.point)
+
+
+def _shown(p: tuple[float, float], show: Show) -> str:
+    return show(p) if show is not None else f"({p[0]:g}, {p[1]:g})"
+
+
 class _Step(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True, tag_field="do"):
     at_s: NonNegative | None = None
     when: When | None = None
@@ -71,7 +79,8 @@ class _Step(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=Tru
         if self.at_s is not None and self.when is not None:
             raise ValueError("when: give at_s or when, not both")
 
-    def describe(self) -> str:
+    def describe(self, show: Show = None) -> str:
+        """The entry in words; ``show`` writes a position (``coords.Coords.point``), else ``(x, y)`` metres."""
         raise NotImplementedError
 
 
@@ -101,8 +110,8 @@ class AddThreat(_Step, kw_only=True, frozen=True, tag="add_threat"):
             ttl_s=self.ttl_s,
         )
 
-    def describe(self) -> str:
-        return f"add threat {self.threat} at ({self.position[0]:g}, {self.position[1]:g})"
+    def describe(self, show: Show = None) -> str:
+        return f"add threat {self.threat} at {_shown(self.position, show)}"
 
 
 class MoveThreat(_Step, kw_only=True, frozen=True, tag="move_threat"):
@@ -112,8 +121,8 @@ class MoveThreat(_Step, kw_only=True, frozen=True, tag="move_threat"):
     position: Point
     facing_deg: Angle | None = None
 
-    def describe(self) -> str:
-        return f"move threat {self.threat} to ({self.position[0]:g}, {self.position[1]:g})"
+    def describe(self, show: Show = None) -> str:
+        return f"move threat {self.threat} to {_shown(self.position, show)}"
 
 
 class RemoveThreat(_Step, kw_only=True, frozen=True, tag="remove_threat"):
@@ -121,7 +130,7 @@ class RemoveThreat(_Step, kw_only=True, frozen=True, tag="remove_threat"):
 
     threat: Id
 
-    def describe(self) -> str:
+    def describe(self, show: Show = None) -> str:
         return f"remove threat {self.threat}"
 
 
@@ -137,8 +146,8 @@ class SetGoal(_Step, kw_only=True, frozen=True, tag="set_goal"):
     def goal(self) -> Goal:
         return Goal(position=self.position, step=self.step, tolerance=self.tolerance, delta=self.delta)
 
-    def describe(self) -> str:
-        return f"set goal of {self.unit} to ({self.position[0]:g}, {self.position[1]:g})"
+    def describe(self, show: Show = None) -> str:
+        return f"set goal of {self.unit} to {_shown(self.position, show)}"
 
 
 class CancelGoal(_Step, kw_only=True, frozen=True, tag="cancel_goal"):
@@ -146,7 +155,7 @@ class CancelGoal(_Step, kw_only=True, frozen=True, tag="cancel_goal"):
 
     unit: Id
 
-    def describe(self) -> str:
+    def describe(self, show: Show = None) -> str:
         return f"cancel goal of {self.unit}"
 
 
@@ -155,7 +164,7 @@ class Wait(_Step, kw_only=True, frozen=True, tag="wait"):
 
     seconds: Positive
 
-    def describe(self) -> str:
+    def describe(self, show: Show = None) -> str:
         return f"wait {self.seconds:g} s"
 
 

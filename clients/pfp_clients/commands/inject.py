@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from pfp_service.cli._common import add_session_args, positive_float, session_config
+from pfp_service.cli._common import add_coords_arg, add_session_args, positive_float, session_config
 
 
 def register(sub: Any) -> None:
@@ -30,6 +30,7 @@ def register(sub: Any) -> None:
         metavar="S",
         help="wall seconds between 'waiting on' lines when stdout is not a terminal",
     )
+    add_coords_arg(p)
     s = p.add_argument_group("a scenario file")
     s.add_argument("--unit", default="u1", metavar="ID", help="the unit that drives the scenario")
     s.add_argument(
@@ -61,7 +62,15 @@ def run(args: argparse.Namespace) -> int:
 
     conf = session_config(args)
     with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the script has stopped
-        code = main(script, args.mission, args.speed_up, conf, args.progress_s, stop=stopping.event)
+        code = main(
+            script,
+            args.mission,
+            args.speed_up,
+            conf,
+            args.progress_s,
+            stop=stopping.event,
+            coords=args.coords,
+        )
     return stopping.exit_code(code)
 
 
