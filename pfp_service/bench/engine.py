@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from pfp_service.bench._check import add_check_arg, exit_code
 from pfp_service.cli._common import positive_int
 
 # Table 3 of the paper: (MAXITER, size, threats) -> seconds, with its delta and step per size.
@@ -54,6 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-scale", action="store_true", help="skip the fleet-scale tick and log-log grid")
     p.add_argument("--scale-only", action="store_true", help="only the fleet-scale tick and log-log grid")
+    add_check_arg(p)
 
 
 def table_threats(size: int, count: int) -> list[Any]:
@@ -517,7 +519,7 @@ def run(args: argparse.Namespace) -> int:
             "checks": checks,
         }
         print(json.dumps(doc, indent=2))
-        return 0
+        return exit_code(checks.values(), args.check)
     print(f"pfp bench engine on {machine}")
     print("each row: exactly MAXITER steps, density intensity, the paper's delta and step per size\n")
     head = f"{'MAXITER':>7} {'size':>6} {'thr':>3} {'ours ms':>9} {'paper ms':>9} {'baseline ms':>12} {'x paper':>9} {'x baseline':>10}"
@@ -547,4 +549,4 @@ def run(args: argparse.Namespace) -> int:
     print()
     for name, ok in checks.items():
         print(f"  [{'ok' if ok else 'MISSED'}] {name}")
-    return 0
+    return exit_code(checks.values(), args.check)

@@ -36,6 +36,7 @@ from typing import Any
 
 import zenoh
 
+from pfp_service.bench._check import add_check_arg
 from pfp_service.bench._load import MISSION, start_server
 from pfp_service.bench.roundtrip import _client
 from pfp_service.cli._common import positive_float, positive_int
@@ -78,6 +79,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-p99-ms", type=positive_float, default=50.0, help="probe p99 to pass (default: 50)")
     p.add_argument("--seed", type=int, default=1, help="threat positions (default: 1)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    add_check_arg(p)  # accepted for a uniform pipeline: previews exits 1 on FAIL with or without it
 
 
 # -- measuring ------------------------------------------------------------------------

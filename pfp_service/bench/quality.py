@@ -37,6 +37,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from pfp_service.bench._check import add_check_arg, exit_code
 from pfp_service.bench.cases import KINDS, Case, generate, reachability
 from pfp_service.cli._common import grid_cells
 from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
@@ -61,6 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--cells", type=grid_cells, default=200, help="optimal-planner grid cells on the longer side"
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_check_arg(p)
     p.add_argument(
         "--write", metavar="MD", nargs="?", const="BENCHMARKS.md", help="update this markdown file"
     )
@@ -364,4 +366,5 @@ def run(args: argparse.Namespace) -> int:
             f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
             f"; 1-minute load average {load0:.1f} at the start and {load1:.1f} at the end (the machine is shared)",
         )
-    return 0
+    met = rep.targets.get("met", {})
+    return exit_code(met.values() if isinstance(met, dict) else [], args.check)

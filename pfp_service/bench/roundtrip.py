@@ -20,6 +20,7 @@ import tempfile
 import time
 from typing import Any
 
+from pfp_service.bench._check import add_check_arg, exit_code
 from pfp_service.cli._common import positive_int
 
 TARGET_MEDIAN_MS = 1.0
@@ -28,6 +29,7 @@ TARGET_MEDIAN_MS = 1.0
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--count", type=positive_int, default=2000, help="round trips to time (default 2000)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_check_arg(p)
 
 
 def _free_port() -> int:
@@ -143,11 +145,11 @@ def measure(count: int) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     r = measure(args.count)
+    ok = r["median_ms"] <= TARGET_MEDIAN_MS
     if args.json:
         print(json.dumps(r, indent=2))
-        return 0
-    ok = r["median_ms"] <= TARGET_MEDIAN_MS
+        return exit_code([ok], args.check)
     print(f"pfp bench roundtrip: {r['count']} state -> direction round trips, 1 unit, 8 threats, {r['via']}")
     print(f"  median {r['median_ms']:.3f} ms, p90 {r['p90_ms']:.3f} ms, p99 {r['p99_ms']:.3f} ms")
     print(f"  [{'ok' if ok else 'MISSED'}] median <= {TARGET_MEDIAN_MS:g} ms")
-    return 0
+    return exit_code([ok], args.check)

@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from pfp_service.bench._check import add_check_arg, exit_code
 from pfp_service.bench._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
 from pfp_service.bench._phases import (
     MAX_P99_MS,
@@ -113,6 +114,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seed", type=int, default=2023, help="layout seed (default 2023)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_check_arg(p)
 
 
 # -- the field and the fleet --------------------------------------------------------------------
@@ -506,4 +508,4 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         _print(doc)
-    return 0
+    return exit_code((t["met"] for t in doc["targets"]), args.check)
