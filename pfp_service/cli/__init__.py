@@ -7,6 +7,12 @@ packages add theirs through the ``pfp_service.commands`` entry-point group
 (``pfp_clients`` adds fleet, inject, demo and handheld), so this package
 never imports them: the dependency runs one way, clients -> service.
 
+Help is plain text for a terminal, as httpie's is: doc markup (double
+backticks) is dropped, paragraphs keep their breaks, indented lines are kept
+as written, and every command ends with an example line.  A command module
+gives its examples as ``EXAMPLES = {"plan": "pfp plan examples/geo-simple.yaml"}``
+(one per command it registers); ``build_parser`` puts each under its parser.
+
 Errors at this edge: an ``InputError`` (bad file, flag or value) prints one
 line, ``pfp <command>: <field>: <reason>``, and exits 2, with no traceback;
 so does a reader closing the pipe early (``pfp plan X | head -1``).
@@ -20,6 +26,7 @@ import os
 import pkgutil
 import re
 import sys
+import textwrap
 from collections.abc import Iterator, Sequence
 from importlib.metadata import entry_points
 from types import ModuleType
@@ -28,16 +35,62 @@ from typing import Any, NoReturn
 from pfp_service import __version__
 from pfp_service.errors import InputError
 
-__all__ = ["COMMAND_GROUP", "ArgumentParser", "build_parser", "main"]
+__all__ = ["COMMAND_GROUP", "ArgumentParser", "build_parser", "example_epilog", "main", "plain"]
 
 COMMAND_GROUP = "pfp_service.commands"
 
 
+_MARKUP = re.compile(r"``([^`]*)``|`([^`]*)`")
+_NEW_PARAGRAPH = ("Exit codes", "Exit code")  # a paragraph of its own even when the docstring runs it on
+
+
+def plain(text: str) -> str:
+    """``text`` without doc markup: double (and single) backticks dropped (``--plot`` becomes --plot)."""
+    return _MARKUP.sub(lambda m: m[1] if m[1] is not None else m[2], text)
+
+
 class HelpFormatter(argparse.HelpFormatter):
-    """Shows every flag's default in its help, unless the help already says it."""
+    """Plain-text help: no doc markup, paragraphs and indented lines kept, and every flag's default shown
+    in its help unless the help already says it."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        out: list[str] = []
+        for para in re.split(r"\n\s*\n", plain(text).strip("\n")):
+            lines = para.splitlines()
+            block: list[str] = []  # running text, refilled; indented lines and bullets are kept as lines
+            for line in [*lines, ""]:
+                keep = line.startswith((" ", "\t")) or line.lstrip().startswith(("* ", "- "))
+                if line.startswith(_NEW_PARAGRAPH) and block:
+                    out.append(
+                        textwrap.fill(" ".join(block), width, initial_indent=indent, subsequent_indent=indent)
+                    )
+                    out.append("")
+                    block = []
+                if (keep or not line) and block:
+                    out.append(
+                        textwrap.fill(" ".join(block), width, initial_indent=indent, subsequent_indent=indent)
+                    )
+                    block = []
+                if keep:
+                    bullet = line.lstrip().startswith(("* ", "- "))
+                    hang = indent + "  " if bullet else indent + line[: len(line) - len(line.lstrip())]
+                    out.append(
+                        textwrap.fill(
+                            line.strip(),
+                            width,
+                            initial_indent=hang[:-2] if bullet else hang,
+                            subsequent_indent=hang,
+                        )
+                        if bullet
+                        else indent + line.rstrip()
+                    )
+                elif line:
+                    block.append(" ".join(line.split()))
+            out.append("")
+        return "\n".join(out).rstrip("\n")
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        text = action.help or ""
+        text = plain(action.help or "")
         default = action.default
         if (
             "default" in text
@@ -83,14 +136,29 @@ def command_modules() -> Iterator[ModuleType]:
         yield importlib.import_module(found[name])
 
 
+def example_epilog(*lines: str) -> str:
+    """The help's last paragraph: ``example:`` and each command line, indented (kept as written)."""
+    return "example:\n" + "\n".join(f"  {line}" for line in lines)
+
+
 def build_parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="pfp", description="Potential-field path planning for MUM-T teams.")
+    parser = ArgumentParser(
+        prog="pfp",
+        description="Potential-field path planning for MUM-T teams.",
+        epilog=example_epilog("pfp plan examples/geo-simple.yaml --plot geo.png", "pfp COMMAND --help"),
+    )
     parser.add_argument("--version", action="version", version=f"pfp-service {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=ArgumentParser)
     for module in command_modules():
         register = getattr(module, "register", None)
-        if register is not None:
-            register(sub)
+        if register is None:
+            continue
+        before = set(sub.choices)
+        register(sub)
+        examples: dict[str, str] = getattr(module, "EXAMPLES", {})
+        for name in set(sub.choices) - before:
+            if name in examples and sub.choices[name].epilog is None:
+                sub.choices[name].epilog = example_epilog(examples[name])
     return parser
 
 

@@ -407,9 +407,12 @@ def _parse_roles(specs: Sequence[str] | None, planners: Sequence[str]) -> dict[s
     return out
 
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"acl": "pfp acl examples/demo-team.yaml --out acl"}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("acl", help="write a deny-by-default router ACL and credentials", description=__doc__)
-    p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("team", metavar="TEAM.yaml", help="team file: one unit identity per unit")
     p.add_argument("--out", default="acl", metavar="DIR", help="where to write (default ./acl)")
     p.add_argument("--mission", default=keys.DEFAULT_MISSION)

@@ -13,6 +13,9 @@ import pkgutil
 from typing import Any
 
 import pfp_service.bench as _bench_pkg
+from pfp_service.cli import example_epilog
+
+EXAMPLES = {"bench": "pfp bench engine --quick --check"}
 
 
 def register(sub: Any) -> None:
@@ -27,6 +30,8 @@ def register(sub: Any) -> None:
         doc = (module.__doc__ or name).strip().splitlines()[0]
         bp = inner.add_parser(name, help=doc, description=module.__doc__)
         module.add_arguments(bp)
+        gates = any("--check" in a.option_strings for a in bp._actions)  # a benchmark with targets
+        bp.epilog = example_epilog(f"pfp bench {name}" + (" --check" if gates else ""))
         bp.set_defaults(func=_runner(name))
 
 

@@ -12,6 +12,9 @@ from typing import Any
 
 from pfp_service.cli._common import add_session_args, positive_float, session_config
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"health": "pfp health --mission exercise1 --timeout 5"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("health", help="check that a planner answers", description=__doc__)

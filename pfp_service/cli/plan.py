@@ -30,6 +30,9 @@ from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.optimal import DEFAULT_CELLS
 from pfp_service.core.params import ESCAPES
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"plan": "pfp plan examples/geo-simple.yaml --plot geo.png --coords mgrs"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("plan", help="plan a scenario file (YAML or JSON)", description=__doc__)

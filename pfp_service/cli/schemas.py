@@ -7,6 +7,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"schemas": "pfp schemas --check"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("schemas", help="write or check the wire contract's JSON Schemas", description=__doc__)

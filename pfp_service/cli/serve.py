@@ -37,6 +37,10 @@ def _origin(text: str) -> object:
         raise argparse.ArgumentTypeError(exc.reason) from None
 
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"serve": "pfp serve --origin 58.4105,15.6213 --mission exercise1"}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "serve",

@@ -25,6 +25,9 @@ from typing import Any
 
 from pfp_service.cli._common import mission_chunk
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"state": "pfp state list"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("state", help="show or remove a mission's durable state", description=__doc__)

@@ -24,6 +24,9 @@ from pfp_service.cli._common import add_coords_arg, add_session_args, positive_f
 from pfp_service.coords import Coords
 from pfp_service.natsort import natural_key
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"status": "pfp status --mission exercise1 --coords mgrs"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("status", help="list the units and threats a planner holds", description=__doc__)

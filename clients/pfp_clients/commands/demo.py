@@ -10,6 +10,9 @@ from typing import Any
 from pfp_service.cli._common import positive_float
 from pfp_service.errors import InputError
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"demo": "pfp demo --out demo.png --quick"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser("demo", help="run the whole system once and plot it", description=__doc__)

@@ -29,6 +29,10 @@ def generated_units(text: str) -> int:
     return value
 
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"fleet": "pfp fleet --team examples/demo-team.yaml --speed-up 10 --until-arrived"}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("fleet", help="simulate a fleet of vehicles (a load source)", description=__doc__)
     src = p.add_mutually_exclusive_group(required=True)

@@ -38,6 +38,10 @@ def lat_lon(text: str) -> tuple[float, float]:
     return _pair(text, "LAT,LON in decimal degrees")
 
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"handheld": "pfp handheld --unit m1 --goal 58,40"}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "handheld", help="navigation client for a dismounted soldier (TUI)", description=__doc__

@@ -14,6 +14,9 @@ from typing import Any
 
 from pfp_service.cli._common import add_coords_arg, add_session_args, positive_float, session_config
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"inject": "pfp inject examples/demo-inject.yaml --speed-up 4"}
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
@@ -58,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.script}: ok, {len(script.timeline)} actions, {len(script.expect)} expectations")
         return 0
     from pfp_clients.inject import main
+
     from pfp_service.signals import SignalStop
 
     conf = session_config(args)

@@ -63,6 +63,10 @@ def push_rate(text: str) -> float:
     return value
 
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"map": "pfp map --http 127.0.0.1:8080 --origin 58.4105,15.6213"}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("map", help="serve a live web map of the mission", description=__doc__)
     add_session_args(p)

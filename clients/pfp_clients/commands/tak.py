@@ -43,6 +43,10 @@ def _cot_url(text: str) -> str:
     return text
 
 
+# the help's example line (cli.build_parser puts it under the parser)
+EXAMPLES = {"tak": "pfp tak --origin 58.4105,15.6213 --cot-url tcp://127.0.0.1:8087"}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser("tak", help="bridge TAK (Cursor-on-Target) and the planner", description=__doc__)
     add_session_args(p)
