@@ -171,6 +171,7 @@ def test_stale_units_are_forgotten_with_an_event_and_their_memory():
         "units": 0,
         "units_stale": 0,
         "threats": 0,
+        "zones": 0,
         "deliberating": 0,
         "overload": 0,
         "rejected": 0,
@@ -215,7 +216,8 @@ def _walk_live(w, uid, pos, step, steps, t0=0.0):
         d = _one(w.apply([_state(uid, *pos, k)], t0 + k), uid)
         if d.status not in (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING):
             break
-        pos = (pos[0] + step * d.vector[0], pos[1] + step * d.vector[1])
+        s = min(step, d.distance_to_goal) if d.distance_to_goal is not None else step  # never past the goal
+        pos = (pos[0] + s * d.vector[0], pos[1] + s * d.vector[1])
         track.append(pos)
     return track, d
 

@@ -11,11 +11,11 @@ from the team file.  Roles, each a list of grants built from ``wire.keys``
     fleet       a simulator playing every unit of the team in one session
                 (``pfp fleet``): the unit grants of all of them, reading
                 every direction
-    planner     read states, goals, threats and unit tokens; publish
+    planner     read states, goals, threats, zones and unit tokens; publish
                 directions and events; serve previews, its status and its
                 world; hold its own planner token; see other planners'
                 tokens, status and world; share units' missions with them
-    reporter    put and delete threats
+    reporter    put and delete threats and keep-out zones
     commander   set and cancel any unit's goal, preview any unit
     observer    read everything of the mission, ask any planner's status and
                 world (``pfp health``, ``pfp status``)
@@ -89,7 +89,7 @@ def _publish(*key_exprs: str, delete: bool = False) -> list[Grant]:
 
 
 def _acked_write(mission: str, *key_exprs: str) -> list[Grant]:
-    """Acknowledged writes of goals and threats (``wire.delivery``): put, delete, ask a planner to take
+    """Acknowledged writes of goals, threats and zones (``wire.delivery``): put, delete, ask a planner to take
     them, and watch for planners starting."""
     return [
         *_publish(*key_exprs, delete=True),
@@ -155,9 +155,9 @@ def fleet_grants(mission: str, units: Sequence[str], own_goal: bool = True) -> l
 def planner_grants(mission: str, planner: str) -> list[Grant]:
     own = (keys.planner_status(mission, planner), keys.world(mission, planner))
     every = (keys.planner_statuses(mission), keys.worlds(mission))
-    writes = (keys.goals(mission), keys.threats(mission))
+    writes = (keys.goals(mission), keys.threats(mission), keys.zones(mission))
     return [
-        *_subscribe(keys.unit_states(mission), keys.goals(mission), keys.threats(mission)),
+        *_subscribe(keys.unit_states(mission), *writes),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
         *_publish(keys.unit_directions(mission), keys.events(mission)),
         # scale-out (`pfp serve --cluster`): planners share each unit's fixed mission
@@ -165,7 +165,7 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
         *_subscribe(keys.unit_missions(mission)),
         # its own status and world queryables; replies also on the wildcards that
         # `pfp health` and `pfp status` ask with
-        # ... and the goal and threat queryables that acknowledge writes (wire.delivery)
+        # ... and the goal, threat and zone queryables that acknowledge writes (wire.delivery)
         Grant(INGRESS, ("declare_queryable",), (keys.previews(mission), *own, *writes)),
         Grant(INGRESS, ("reply",), (keys.previews(mission), *every, *writes)),
         Grant(EGRESS, ("query",), (keys.previews(mission), *every, *writes)),
@@ -176,7 +176,7 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
 
 
 def reporter_grants(mission: str) -> list[Grant]:
-    return _acked_write(mission, keys.threats(mission))
+    return _acked_write(mission, keys.threats(mission), keys.zones(mission))
 
 
 def commander_grants(mission: str) -> list[Grant]:
@@ -220,7 +220,7 @@ ROLES: dict[str, Callable[[Mission, str], list[Grant]]] = {
 DEFAULT_PRINCIPALS: dict[str, tuple[str, ...]] = {
     "fleet": ("fleet",),
     "injector": ("reporter", "commander", "observer"),
-    "map": ("reporter", "commander", "observer"),  # pfp map shows everything and edits threats and goals
+    "map": ("reporter", "commander", "observer"),  # pfp map shows everything, edits threats, zones, goals
     "reporter": ("reporter",),
     "commander": ("commander",),
     "observer": ("observer",),

@@ -37,6 +37,7 @@ import heapq
 import time
 import traceback
 from collections.abc import Callable
+from typing import Any
 
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Stepper
@@ -132,7 +133,7 @@ class Deliberators:
         items = [(j.unit, j.token, j.kind, j.detach(), j.deadline - now) for j in chunk]  # the copy, at last
         task = Task(
             _run_chunk,
-            (field.intensity, items),
+            (field.intensity, items, field.zones),
             lambda out: self._done(out, chunk=chunk),
             budget_s=CHUNK_RUN_S,
             field=self._blobs.of(field.threats),
@@ -171,11 +172,16 @@ class Deliberators:
 
 # -- in the worker processes -------------------------------------------------------
 def _run_chunk(
-    intensity: str, items: list[tuple[str, tuple[int, int], str, Stepper, float]]
+    intensity: str, items: list[tuple[str, tuple[int, int], str, Stepper, float]], zones: Any = None
 ) -> list[tuple[Deliberated | None, str]]:
-    """``Job.run`` for each item under the field in force, each by its own deadline; an error comes back as text."""
+    """``Job.run`` for each item under the field in force (and its keep-out zones), each by its own deadline.
+
+    An error comes back as text.
+    """
     started = time.monotonic()
     field = world_field(intensity)
+    if zones:  # few, and pickled with the chunk: the threats' blob stays cached in the worker
+        field = field.with_zones(zones)
     out: list[tuple[Deliberated | None, str]] = []
     for unit, token, kind, stepper, left_s in items:
         try:

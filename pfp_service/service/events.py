@@ -16,6 +16,7 @@ from typing import Literal, Union
 import msgspec
 
 from pfp_service.core import PlannerParams, Resolved, Stepper, Threat, ThreatField
+from pfp_service.core.zones import ZoneSet
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import (
@@ -29,6 +30,7 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
+from pfp_service.wire.messages import ZoneUpdate
 
 __all__ = [
     "Deliberated",
@@ -50,6 +52,8 @@ __all__ = [
     "TokenChanged",
     "UnitView",
     "WorldSettings",
+    "ZonePut",
+    "ZoneRemoved",
     "blame",
     "inputs_from_snapshot",
     "mission_message",
@@ -104,6 +108,19 @@ class ThreatPut:
 @dataclass(frozen=True, slots=True)
 class ThreatRemoved:
     threat: str
+
+
+@dataclass(frozen=True, slots=True)
+class ZonePut:
+    """A keep-out zone put (``zone/{z}``): new, or moved or reshaped if the id is known."""
+
+    zone: str
+    update: ZoneUpdate
+
+
+@dataclass(frozen=True, slots=True)
+class ZoneRemoved:
+    zone: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,6 +198,8 @@ Input = Union[  # noqa: UP007
     GoalCancelled,
     ThreatPut,
     ThreatRemoved,
+    ZonePut,
+    ZoneRemoved,
     TokenChanged,
     InputRejected,
     Deliberated,
@@ -308,6 +327,7 @@ class UnitView:
     threats: tuple[Threat, ...]
     settings: WorldSettings
     last_vector: tuple[float, float] | None = None  # the direction given at ``position``, if moving
+    zones: ZoneSet = field(default_factory=ZoneSet)  # the keep-out zones in force: a preview never enters one
 
     def params_for(self, goal: Goal) -> PlannerParams:
         return self.settings.params_for(goal)
@@ -330,6 +350,7 @@ class WorldSettings:
     unit_forget_s: float | None = 600.0  # stale this long: forgotten (None: never)
     max_units: int = 100_000
     max_threats: int = 10_000
+    max_zones: int = 1_000  # keep-out zones held at most (each up to 4,096 vertices)
     push_retry_s: float = 0.25  # a push (a direction no report asked for) is sent again after this
     push_retries: int = 4  # ... this many times, until the unit's next report is answered
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
@@ -358,6 +379,8 @@ def blame(inp: Input, mission: str) -> tuple[str, str | None]:
             kind, ident, goal = k.UNIT_MISSION, unit, True
         case ThreatPut(ident) | ThreatRemoved(ident):
             kind, goal = k.THREAT, False
+        case ZonePut(ident) | ZoneRemoved(ident):
+            kind, goal = k.ZONE, False
         case TokenChanged(ident):
             kind, goal = k.ALIVE_UNIT, False
         case PeerPlanner(ident):
@@ -388,7 +411,7 @@ def mission_message(record: MissionRecord, planner: str) -> Mission:
 
 
 def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
-    """What a peer planner's world reply says, as inputs: its threats (with the TTL left), goals and missions.
+    """What a peer planner's world reply says, as inputs: its zones and threats (with the TTL left), goals and missions.
 
     A planner started after threats and goals were published applies these
     and guides correctly from its first direction.  Its own reply is skipped.
@@ -396,6 +419,9 @@ def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
     if snap.planner == me:
         return []
     inputs: list[Input] = []
+    for z in snap.zones:
+        zone = z.zone if z.ttl_s is None else msgspec.structs.replace(z.zone, ttl_s=max(z.ttl_s, 1e-3))
+        inputs.append(ZonePut(z.id, zone))
     for t in snap.threats:
         update = t.threat if t.ttl_s is None else msgspec.structs.replace(t.threat, ttl_s=max(t.ttl_s, 1e-3))
         inputs.append(ThreatPut(t.id, update))

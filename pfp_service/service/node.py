@@ -47,6 +47,8 @@ from pfp_service.service.events import (
     ThreatRemoved,
     Tick,
     TokenChanged,
+    ZonePut,
+    ZoneRemoved,
     mission_message,
 )
 from pfp_service.service.intake import Intake
@@ -72,6 +74,7 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
+from pfp_service.wire.messages import decode_zone
 
 __all__ = ["PlannerNode"]
 
@@ -170,6 +173,8 @@ class PlannerNode:
             # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
             s.declare_queryable(keys.goals(m), self._on_goal_query),
             s.declare_queryable(keys.threats(m), self._on_threat_query),
+            s.declare_subscriber(keys.zones(m), self._on_zone),  # keep-out zones: written as threats are
+            s.declare_queryable(keys.zones(m), self._on_zone_query),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
@@ -256,6 +261,15 @@ class PlannerNode:
         except InputError as err:
             return InputRejected(key, err)
 
+    def _zone_input(self, key: str, delete: bool, payload: bytes) -> Input:
+        try:
+            zid = keys.parse(key).id
+            if delete:
+                return ZoneRemoved(zid)
+            return ZonePut(zid, decode_zone(payload, self.cfg.bounds, self._origin))
+        except InputError as err:
+            return InputRejected(key, err)
+
     def _push_write(self, write: _Write) -> None:
         with self._lock:
             if len(self._writes) >= WRITES_MAX:  # shed: a writer asks again, a put is counted lost
@@ -289,6 +303,12 @@ class PlannerNode:
 
     def _on_threat(self, sample: zenoh.Sample) -> None:
         self._on_sample_write(sample, self._threat_input)
+
+    def _on_zone(self, sample: zenoh.Sample) -> None:
+        self._on_sample_write(sample, self._zone_input)
+
+    def _on_zone_query(self, query: zenoh.Query) -> None:
+        self._on_query_write(query, self._zone_input)
 
     def _on_goal_query(self, query: zenoh.Query) -> None:
         self._on_query_write(query, self._goal_input)

@@ -178,6 +178,9 @@ def preview(
     shared = field
     if field is not None and extra:  # the world's field, its rows reused: only the what-ifs are packed
         shared = field.plus(extra, replaced)
+    if view.zones:  # the keep-out zones in force: the preview respects them as the live unit does
+        base = shared if shared is not None else ThreatField(threats, view.settings.planner.intensity)
+        shared = base.with_zones(view.zones)
     overrides = (req.start, req.goal, req.delta, req.step, req.tolerance, req.max_iter)
     live = view.stepper
     if live is not None and all(v is None for v in overrides):

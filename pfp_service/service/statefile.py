@@ -42,7 +42,12 @@ LOCK_NAME = "state.lock"
 CORRUPT_CODES = (11, 26)  # SQLITE_CORRUPT, SQLITE_NOTADB
 SCAN_QUERIES = 10_000  # a salvage scan of one table gives up after this many queries
 # table -> (key column, column count): what salvage copies and how a lost row is named
-TABLES: dict[str, tuple[str, int]] = {"threats": ("id", 3), "goals": ("unit", 2), "missions": ("unit", 5)}
+TABLES: dict[str, tuple[str, int]] = {
+    "threats": ("id", 3),
+    "zones": ("id", 3),
+    "goals": ("unit", 2),
+    "missions": ("unit", 5),
+}
 
 
 def describe(exc: BaseException) -> str:
@@ -90,6 +95,8 @@ def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[st
         return rows, lost
     try:
         for table, (key, _width) in TABLES.items():
+            if not _has_table(db, table):  # an older file, made before the table was
+                continue
             got = _scan(db, table)
             rows[table] = list(got.values())
             have = {str(r[0]) for r in got.values()}
@@ -97,6 +104,16 @@ def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[st
     finally:
         db.close()
     return rows, lost
+
+
+def _has_table(db: sqlite3.Connection, table: str) -> bool:
+    try:
+        return (
+            db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone()
+            is not None
+        )
+    except (sqlite3.Error, UnicodeDecodeError):  # the schema page itself is damaged: try the table anyway
+        return True
 
 
 def _scan(db: sqlite3.Connection, table: str) -> dict[int, tuple[Any, ...]]:
@@ -169,7 +186,7 @@ def in_use(directory: str | Path) -> bool:
 class StateFiles:
     """A mission's state directory as ``pfp state list`` shows it.
 
-    ``counts`` holds the rows per table (``threats``, ``goals``, ``missions``,
+    ``counts`` holds the rows per table (``threats``, ``zones``, ``goals``, ``missions``,
     ``set_aside``), empty when the database cannot be read; ``error`` says why.
     """
 

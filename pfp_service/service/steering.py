@@ -50,6 +50,7 @@ STATUS = {
 }
 
 Steered = list[tuple[UnitRecord, Advice, Track]]
+ZONE_REACH = 0.25  # a zone's box is widened by this share of its diagonal: its barrier's reach, generously
 Failed = list[tuple[UnitRecord, BaseException]]
 
 
@@ -181,19 +182,30 @@ def _geo_ok(d: Direction) -> bool:
     )
 
 
-def reached(guided: list[UnitRecord], touched: list[Threat], intensity: str) -> list[bool]:
-    """Which units (each with a stepper and a position) a change of the ``touched`` threats can reach.
+def reached(
+    guided: list[UnitRecord],
+    touched: list[Threat],
+    intensity: str,
+    zones: list[tuple[float, float, float, float]] = (),  # type: ignore[assignment]
+) -> list[bool]:
+    """Which units (each with a stepper and a position) a change of the ``touched`` threats or zones can reach.
 
     A unit is reached when a touched threat's influence box (where it is not
-    culled, ``cull.influence_boxes``) meets the unit's corridor to its goal
-    (``cull.corridors_meet``).  Every other unit's direction is unchanged
-    within the cull bound.  If the vectorised test fails, every unit counts
-    as reached: dearer, never wrong.
+    culled, ``cull.influence_boxes``), or a touched zone's box (``zones``:
+    ``(xmin, ymin, xmax, ymax)``, widened by ``ZONE_REACH`` of its diagonal for
+    the barrier that bends descent away near its edge), meets the unit's
+    corridor to its goal (``cull.corridors_meet``).  Every other unit's
+    direction is unchanged within the cull bound.  If the vectorised test
+    fails, every unit counts as reached: dearer, never wrong.
     """
     if not guided:
         return []
     try:
-        boxes = influence_boxes(ThreatField(touched, intensity).packed)  # type: ignore[arg-type]
+        boxes = influence_boxes(ThreatField(touched, intensity).packed) if touched else np.zeros((0, 4))  # type: ignore[arg-type]
+        if len(zones):
+            zb = np.array(zones, dtype=float).reshape(-1, 4)
+            pad = ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
+            boxes = np.concatenate([boxes, zb + np.hstack([-pad, -pad, pad, pad])])
         starts = np.array([r.position for r in guided], dtype=float)
         ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
         return [bool(b) for b in corridors_meet(starts, ends, boxes).tolist()]
@@ -201,13 +213,23 @@ def reached(guided: list[UnitRecord], touched: list[Threat], intensity: str) -> 
         return [True] * len(guided)
 
 
-def replan(planner: str, changes: list[ThreatChange], directions: list[Direction]) -> ReplanEvent:
-    """The event of a batch that changed the threats: what changed, and the units guided afresh."""
+def replan(
+    planner: str,
+    changes: list[ThreatChange],
+    directions: list[Direction],
+    zones: list[tuple[str, str]] = (),  # type: ignore[assignment]
+) -> ReplanEvent:
+    """The event of a batch that changed the threats or zones: what changed, and the units guided afresh.
+
+    ``zones`` are ``(zone id, change)``; they are named in the reason (``zone Z put``)
+    before the threats, since ``changes`` lists threats only.
+    """
     guided = sorted(d.unit for d in directions if d.status is not DirectionStatus.NO_GOAL)
     shown = changes[:MAX_EVENT_ITEMS]
-    reason = "; ".join(f"threat {c.threat} {c.change}" for c in shown[:4])
-    if len(changes) > 4:
-        reason += f"; and {len(changes) - 4} more"
+    said = [f"zone {z} {c}" for z, c in zones] + [f"threat {c.threat} {c.change}" for c in shown]
+    reason = "; ".join(said[:4])
+    if len(zones) + len(changes) > 4:
+        reason += f"; and {len(zones) + len(changes) - 4} more"
     return ReplanEvent(
         planner=planner,
         units=guided[:MAX_EVENT_ITEMS],

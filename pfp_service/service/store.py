@@ -1,12 +1,12 @@
 """Durable state: what users gave the planner survives ``kill -9``, and survives its own damage.
 
 One SQLite database in WAL mode per mission (``--state-dir``).  It holds the
-threats in force (with their absolute expiry, in Unix time, so a restart
-honours the time that passed), the goals, and each unit's mission: ``x0``,
+threats and keep-out zones in force (with their absolute expiry, in Unix
+time, so a restart honours the time that passed), the goals, and each unit's mission: ``x0``,
 the goal and the resolved planner parameters, so a restored unit moves
 exactly as it would have.
 
-The node commits a batch's goal and threat inputs *before* it applies them
+The node commits a batch's goal, threat and zone inputs *before* it applies them
 (``commit_inputs``), so nothing a unit or a reporter saw acknowledged is
 lost; missions are derived, and recorded after ``apply`` from the world's
 ``Outputs.missions``.  ``synchronous=NORMAL`` in WAL mode survives a killed
@@ -57,6 +57,8 @@ from pfp_service.service.events import (
     MissionRestored,
     ThreatPut,
     ThreatRemoved,
+    ZonePut,
+    ZoneRemoved,
 )
 from pfp_service.service.log import get_logger
 from pfp_service.service.statefile import (
@@ -70,6 +72,7 @@ from pfp_service.service.statefile import (
     salvage,
 )
 from pfp_service.wire import Goal, ThreatUpdate, decode, encode, keys
+from pfp_service.wire.messages import ZoneUpdate
 
 __all__ = ["Restored", "Store"]
 
@@ -79,6 +82,7 @@ log = get_logger("store")
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS threats (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
+CREATE TABLE IF NOT EXISTS zones (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
 CREATE TABLE IF NOT EXISTS goals (unit TEXT PRIMARY KEY, body BLOB NOT NULL);
 CREATE TABLE IF NOT EXISTS missions (
     unit TEXT PRIMARY KEY, epoch INTEGER NOT NULL, origin_x REAL NOT NULL, origin_y REAL NOT NULL, params TEXT NOT NULL
@@ -106,6 +110,7 @@ class Restored:
     corrupt: int = 0
     set_aside: str = ""
     skipped: tuple[str, ...] = ()
+    zones: int = 0
 
 
 @dataclasses.dataclass
@@ -234,9 +239,11 @@ class Store:
 
     # -- writing -------------------------------------------------------------------------
     def commit_inputs(self, inputs: Iterable[Input], wall_now: float, default_ttl_s: float | None) -> None:
-        """Record the goal and threat inputs of one batch, in one transaction, before they are applied."""
+        """Record the goal, threat and zone inputs of one batch, in one transaction, before they are applied."""
         rows_t: list[tuple[str, bytes, float | None]] = []
         gone_t: list[tuple[str]] = []
+        rows_z: list[tuple[str, bytes, float | None]] = []
+        gone_z: list[tuple[str]] = []
         rows_g: list[tuple[str, bytes]] = []
         gone_g: list[tuple[str]] = []
         for inp in inputs:
@@ -249,7 +256,12 @@ class Store:
                 rows_g.append((inp.unit, encode(inp.goal)))
             elif isinstance(inp, GoalCancelled):
                 gone_g.append((inp.unit,))
-        if not (rows_t or gone_t or rows_g or gone_g):
+            elif isinstance(inp, ZonePut):
+                zttl = inp.update.ttl_s
+                rows_z.append((inp.zone, encode(inp.update), None if zttl is None else wall_now + zttl))
+            elif isinstance(inp, ZoneRemoved):
+                gone_z.append((inp.zone,))
+        if not (rows_t or gone_t or rows_g or gone_g or rows_z or gone_z):
             return
         with self._transaction() as db:
             # a new goal or a cancel ends the old mission: its x0 and parameters no longer hold
@@ -258,6 +270,8 @@ class Store:
             db.executemany("DELETE FROM threats WHERE id = ?", gone_t)
             db.executemany("INSERT OR REPLACE INTO goals VALUES (?, ?)", rows_g)
             db.executemany("DELETE FROM goals WHERE unit = ?", gone_g)
+            db.executemany("INSERT OR REPLACE INTO zones VALUES (?, ?, ?)", rows_z)
+            db.executemany("DELETE FROM zones WHERE id = ?", gone_z)
 
     @contextlib.contextmanager
     def _transaction(self) -> Any:
@@ -299,6 +313,8 @@ class Store:
                     kept.append(InputRejected(keys.unit_goal(mission, inp.unit), err))
                 elif isinstance(inp, ThreatPut | ThreatRemoved):
                     kept.append(InputRejected(keys.threat(mission, inp.threat), err))
+                elif isinstance(inp, ZonePut | ZoneRemoved):
+                    kept.append(InputRejected(keys.zone(mission, inp.zone), err))
                 else:
                     kept.append(inp)
             return kept
@@ -343,7 +359,7 @@ class Store:
 
     # -- reading -------------------------------------------------------------------------
     def restore(self, wall_now: float) -> Restored:
-        """The inputs that rebuild the world as it was: threats with the time left, goals, missions.
+        """The inputs that rebuild the world as it was: zones and threats with the time left, goals, missions.
 
         A row that does not decode is moved to ``set_aside`` and named; the
         rest loads.  A read that finds the file damaged (past the check at
@@ -384,6 +400,21 @@ class Store:
         inputs: list[Input] = []
         bad: list[tuple[str, int, str, Any, str]] = []  # table, rowid, key, what was stored, why
         expired = 0
+        for rowid, zid, body, expires_at in db.execute("SELECT rowid, * FROM zones ORDER BY id"):
+            try:
+                zone_id = keys.check_chunk(zid)
+                zupdate = decode(ZoneUpdate, body)
+                if expires_at is not None:
+                    zleft = float(expires_at) - wall_now
+                    if zleft <= 0:
+                        expired += 1
+                        continue
+                    zupdate = msgspec.structs.replace(zupdate, ttl_s=zleft)
+            except _BAD_ROW as exc:
+                bad.append(("zones", rowid, str(zid), body, _why(exc)))
+                continue
+            inputs.append(ZonePut(zone_id, zupdate))
+        n_zones = len(inputs)
         for rowid, tid, body, expires_at in db.execute("SELECT rowid, * FROM threats ORDER BY id"):
             try:
                 threat = keys.check_chunk(tid)
@@ -398,7 +429,7 @@ class Store:
                 bad.append(("threats", rowid, str(tid), body, _why(exc)))
                 continue
             inputs.append(ThreatPut(threat, update))
-        n_threats = len(inputs)
+        n_threats = len(inputs) - n_zones
         missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
         for rowid, unit, _epoch, ox, oy, params in db.execute("SELECT rowid, * FROM missions"):
             try:
@@ -422,9 +453,10 @@ class Store:
                 inputs.append(GoalSet(uid, goal))
         if expired or bad:
             with self._transaction() as tx:
-                tx.execute(
-                    "DELETE FROM threats WHERE expires_at IS NOT NULL AND expires_at <= ?", (wall_now,)
-                )
+                for table in ("threats", "zones"):
+                    tx.execute(
+                        f"DELETE FROM {table} WHERE expires_at IS NOT NULL AND expires_at <= ?", (wall_now,)
+                    )
                 for (
                     table,
                     rowid,
@@ -437,7 +469,7 @@ class Store:
                     )
                     tx.execute(f"DELETE FROM {table} WHERE rowid = ?", (rowid,))
         skipped = tuple(f"{table}/{key}" for table, _r, key, _b, _w in bad)
-        return Restored(inputs, n_threats, n_goals, n_missions, expired, skipped=skipped)
+        return Restored(inputs, n_threats, n_goals, n_missions, expired, skipped=skipped, zones=n_zones)
 
     def _say(self, r: Restored) -> None:
         """The one warning line: what was set aside, where it went, and what was kept."""

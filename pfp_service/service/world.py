@@ -1,4 +1,4 @@
-"""The live world: a sans-I/O state machine of one mission's units, goals and threats.
+"""The live world: a sans-I/O state machine of one mission's units, goals, threats and keep-out zones.
 
 In the manner of h11's connection: ``World.apply(inputs, now)`` takes a batch
 of frozen input events (``Input``) and returns ``Outputs``: the directions,
@@ -36,9 +36,9 @@ from pfp_service.service.limits import Limits
 from pfp_service.service.liveness import UNIT_TIMERS, Liveness
 from pfp_service.service.ownership import Ownership
 from pfp_service.service.timers import Timers
-from pfp_service.service.world_records import Records, ThreatRecord, UnitRecord
+from pfp_service.service.world_records import Records, ThreatRecord, UnitRecord, ZoneRecord
 from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
-from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
 
 __all__ = ["World", *ev.__all__]
 
@@ -54,6 +54,8 @@ class _Batch:
     dirty: set[str] = field(default_factory=set)  # units to get a fresh direction
     changes: list[ThreatChange] = field(default_factory=list)
     touched: list[Threat] = field(default_factory=list)  # threats put, moved or gone (old and new)
+    zones: list[tuple[str, str, tuple[float, float, float, float]]] = field(default_factory=list)
+    # ^ zones put, moved or gone: (id, change, box), the old box and the new for a zone moved
 
 
 class World:
@@ -82,10 +84,13 @@ class World:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec, s = self._units.get(unit_id), self.settings
         threats = self.field.threats  # the same tuple while the field stands: a desk can cache it
+        zones = self._rec.zone_set  # the same set while the zones stand
         if rec is None:
-            return UnitView(unit_id, None, None, None, None, threats, s)
+            return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
-        return UnitView(unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector)
+        return UnitView(
+            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector, zones
+        )
 
     def snapshot(
         self,
@@ -121,13 +126,14 @@ class World:
                 self._apply_one(inp, b)
             except Exception as exc:  # the bulkhead: this input alone fails
                 self._fault(b, *ev.blame(inp, self.settings.mission), exc)
-        if b.changes:
+        if b.changes or b.zones:
             self._world_changed(b)
         first = len(b.out.directions)  # before: pushes sent again by the timers
         self._directions(b)
         self._live.pushed(b.out.directions[first:], now)
-        if b.changes:
-            b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions))
+        if b.changes or b.zones:
+            zones = [(z, c) for z, c, _ in b.zones if c]
+            b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions, zones))
         b.out.cancelled, self._rec.superseded = self._rec.superseded, []
         return b.out
 
@@ -148,6 +154,10 @@ class World:
                 self._threat_put(tid, update, b)
             case ev.ThreatRemoved(tid):
                 self._threat_gone(self._rec.remove_threat(tid), tid, "removed", b)
+            case ev.ZonePut(zid, update):
+                self._zone_put(zid, update, b)
+            case ev.ZoneRemoved(zid):
+                self._zone_gone(self._rec.remove_zone(zid), zid, "removed", b)
             case ev.TokenChanged(unit, alive):
                 rec = self._units.get(unit)
                 if rec is not None:  # a token alone makes no unit: only a report does
@@ -301,6 +311,31 @@ class World:
             self._timers.set(new.expires_at, "expire", tid)
         b.changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
 
+    def _zone_put(self, zid: str, msg: ZoneUpdate, b: _Batch) -> None:
+        s = self.settings
+        if zid not in self._rec.zones and len(self._rec.zones) >= s.max_zones:
+            self.limits.overload += 1
+            self._reject(
+                keys.zone(s.mission, zid), InputError("$", f"planner at max_zones ({s.max_zones})"), b
+            )
+            return
+        try:
+            zone = msg.to_zone(zid)
+        except ValueError as exc:  # decoded, yet not a zone the engine takes: refused on its key
+            self._reject(keys.zone(s.mission, zid), InputError("$", str(exc)), b)
+            return
+        new = ZoneRecord(msg, zone, None if msg.ttl_s is None else b.now + msg.ttl_s)
+        old = self._rec.put_zone(zid, new)
+        if old is not None:
+            b.zones.append((zid, "", old.zone.bounds()))
+        b.zones.append((zid, "put", zone.bounds()))
+        if new.expires_at is not None:
+            self._timers.set(new.expires_at, "zone_expire", zid)
+
+    def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: _Batch) -> None:
+        if z is not None:
+            b.zones.append((zid, change, z.zone.bounds()))
+
     def _threat_gone(self, t: ThreatRecord | None, tid: str, change: str, b: _Batch) -> None:
         if t is not None:
             b.touched.append(t.threat)
@@ -332,10 +367,14 @@ class World:
                         self._rebalance(b)
                 elif kind == "expire":
                     self._threat_gone(self._rec.expire(ident, now), ident, "expired", b)
+                elif kind == "zone_expire":
+                    self._zone_gone(self._rec.expire_zone(ident, now), ident, "expired", b)
                 elif kind in UNIT_TIMERS and (rec := self._units.get(ident)) is not None:
                     self._live.due(kind, rec, now, b.out)
             except Exception as exc:  # the bulkhead: this timer alone fails
-                on = {"expire": K.THREAT, "peer": K.ALIVE_PLANNER}.get(kind, K.UNIT_GOAL)
+                on = {"expire": K.THREAT, "zone_expire": K.ZONE, "peer": K.ALIVE_PLANNER}.get(
+                    kind, K.UNIT_GOAL
+                )
                 self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, exc)
 
     # -- planning -------------------------------------------------------------------
@@ -350,13 +389,16 @@ class World:
             b.out.missions.append(mission)
 
     def _world_changed(self, b: _Batch) -> None:
-        """The threats changed: re-judge and re-direct the units the change can reach (``steering.reached``).
+        """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
 
         A unit out of reach, neither escaping nor deliberating, keeps its
         direction: a contingency costs what it touches, not the whole fleet.
         """
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
-        for rec, hit in zip(guided, steering.reached(guided, b.touched, self.settings.planner.intensity)):
+        reached = steering.reached(
+            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones]
+        )
+        for rec, hit in zip(guided, reached):
             try:
                 assert rec.stepper is not None
                 if hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None:

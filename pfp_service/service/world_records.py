@@ -1,11 +1,13 @@
-"""The world's records: one per unit and one per threat, and the counts kept with them.
+"""The world's records: one per unit, threat and keep-out zone, and the counts kept with them.
 
 A unit's record holds what it reported, its goal and mission, its stepper,
 its staleness, its last direction and push, and the deliberation job asked
 for it.  The methods here are the record-keeping rules the world's decisions
 are made of: a report makes a unit fresh, a unit goes stale or is forgotten,
-a mission is dropped (its job superseded), a threat is put, removed or
-expires.  They return what changed; the world decides what goes out.  Pure
+a mission is dropped (its job superseded), a threat or a zone is put,
+removed or expires.  The field in force carries the zones in force
+(``ThreatField.with_zones``, as ``core.zones`` says): whatever takes the
+field -- the stepper, deliberation jobs, previews -- sees them.  They return what changed; the world decides what goes out.  Pure
 values: ``now`` is a parameter.
 """
 
@@ -19,10 +21,12 @@ import msgspec
 from pfp_service.core import Resolved, Stepper, Threat, ThreatField
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
+from pfp_service.core.zones import Zone, ZoneSet
 from pfp_service.service.events import Job, unit_key
 from pfp_service.wire import Direction, DirectionStatus, Goal, Mission, ThreatUpdate
+from pfp_service.wire.messages import ZoneUpdate
 
-__all__ = ["Records", "ThreatRecord", "UnitRecord"]
+__all__ = ["Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
 
 
 @dataclass(slots=True)
@@ -67,29 +71,46 @@ class ThreatRecord:
     expires_at: float | None
 
 
+@dataclass(slots=True)
+class ZoneRecord:
+    update: ZoneUpdate
+    zone: Zone
+    expires_at: float | None
+
+
 class Records:
     """Every unit and threat the world holds, the counts kept as they change, and the field of the threats."""
 
     def __init__(self, intensity: str = "peak") -> None:
         self.units: dict[str, UnitRecord] = {}
         self.threats: dict[str, ThreatRecord] = {}
+        self.zones: dict[str, ZoneRecord] = {}
         self.stale = 0  # units stale
         self.deliberating = 0  # units with a job asked and not answered
         self.superseded: list[Job] = []  # jobs asked and no longer wanted, until the world says so
         self.intensity = intensity
-        self._field: ThreatField | None = None  # built when asked, until the threats change
+        self._field: ThreatField | None = None  # built when asked, until the threats or zones change
+        self._zone_set: ZoneSet | None = None  # built when asked, until the zones change
         self.cull: CullIndex | None = None
         self.stats: FieldStats | None = None
 
     @property
     def field(self) -> ThreatField:
-        """The field of the threats in force, in id order, with its cull index and stats."""
+        """The field of the threats in force, in id order, with its cull index and stats, and the zones."""
         if self._field is None:
             ordered = [self.threats[k].threat for k in sorted(self.threats)]
-            self._field = ThreatField(ordered, self.intensity)  # type: ignore[arg-type]
-            self.cull = CullIndex(self._field.packed) if len(ordered) >= MIN_THREATS else None
+            fld = ThreatField(ordered, self.intensity)  # type: ignore[arg-type]
+            self.cull = CullIndex(fld.packed) if len(ordered) >= MIN_THREATS else None
             self.stats = field_stats(ordered)
+            self._field = fld.with_zones(self.zone_set) if self.zones else fld
         return self._field
+
+    @property
+    def zone_set(self) -> ZoneSet:
+        """The zones in force, in id order (``core.zones.ZoneSet``)."""
+        if self._zone_set is None:
+            self._zone_set = ZoneSet(self.zones[k].zone for k in sorted(self.zones))
+        return self._zone_set
 
     # -- units ------------------------------------------------------------------------
     def add(self, unit_id: str, owned: bool, now: float, reported: bool) -> UnitRecord:
@@ -197,6 +218,7 @@ class Records:
             "units": len(self.units),
             "units_stale": self.stale,
             "threats": len(self.threats),
+            "zones": len(self.zones),
             "deliberating": self.deliberating,
             "units_owned": sum(1 for r in self.units.values() if r.owned),
         }
@@ -220,3 +242,28 @@ class Records:
             return None
         self._field = None
         return self.threats.pop(tid)
+
+    # -- zones --------------------------------------------------------------------------
+    def _zones_changed(self) -> None:
+        self._zone_set = None
+        self._field = None
+
+    def put_zone(self, zid: str, record: ZoneRecord) -> ZoneRecord | None:
+        """Put a zone; returns the one it replaces, if any."""
+        old = self.zones.get(zid)
+        self.zones[zid] = record
+        self._zones_changed()
+        return old
+
+    def remove_zone(self, zid: str) -> ZoneRecord | None:
+        gone = self.zones.pop(zid, None)
+        if gone is not None:
+            self._zones_changed()
+        return gone
+
+    def expire_zone(self, zid: str, now: float) -> ZoneRecord | None:
+        """Remove a zone whose TTL has run out at ``now`` (one put again since is kept); returns it."""
+        z = self.zones.get(zid)
+        if z is None or z.expires_at is None or z.expires_at > now:
+            return None
+        return self.remove_zone(zid)

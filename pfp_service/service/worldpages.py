@@ -7,6 +7,11 @@ query's parameters (``WorldQuery``: ``?units_from=ID;threats_from=ID``) ask
 for it.  Ids are cursors, not offsets, so a unit added or forgotten between
 two pages shifts nothing: each id present throughout is listed exactly once.
 
+Keep-out zones are few (``max_zones``) and listed whole on the first page
+(no cursor given), before the threats, as far as the page's bytes allow;
+``zones_total`` says how many there are, so a joining planner knows whether
+it got them all.
+
 A planner joining a mission (``fetch_world``) asks every planner once, then
 pages through the one holding the most, falling back to another from the same
 cursor if it stops answering: every planner takes every goal and threat, so
@@ -40,7 +45,7 @@ from pfp_service.wire import (
     encode,
     keys,
 )
-from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES, ZoneSummary
 
 if TYPE_CHECKING:
     from pfp_service.service.world import World
@@ -98,13 +103,22 @@ def page(
     def fits(item: msgspec.Struct) -> bool:
         nonlocal room
         size = len(msgspec.json.encode(item)) + 1  # and its comma
-        if size > room and (units or threats):
+        if size > room and (units or threats or zones):
             return False
         room -= size
         return True
 
     units: list[UnitSummary] = []
     threats: list[ThreatSummary] = []
+    zones: list[ZoneSummary] = []
+    if units_from is None and threats_from is None:  # the first page: every zone that fits
+        for zid in sorted(records.zones)[:MAX_SNAPSHOT_ITEMS]:
+            z = records.zones[zid]
+            zttl = None if z.expires_at is None else max(z.expires_at - now, 0.0)
+            zs = ZoneSummary(id=zid, zone=z.update, ttl_s=zttl)
+            if not fits(zs):
+                break
+            zones.append(zs)
     tids = sorted(records.threats)
     i = bisect.bisect_left(tids, threats_from) if threats_from is not None else 0
     tlimit = limit if threats_limit is None else threats_limit
@@ -142,6 +156,8 @@ def page(
         mission=mission,
         units=units,
         threats=threats,
+        zones=zones,
+        zones_total=len(records.zones),
         units_total=len(records.units),
         threats_total=len(records.threats),
         next_unit=uids[j] if j < len(uids) and limit else None,
@@ -179,6 +195,7 @@ class Joined:
     complete: bool = True  # every page of the peer paged through came (or there was no peer)
     units: int = 0  # units and threats listed, over every page
     threats: int = 0
+    zones: int = 0
 
     def fields(self) -> dict[str, Any]:
         return {
@@ -187,6 +204,7 @@ class Joined:
             "complete": self.complete,
             "units": self.units,
             "threats": self.threats,
+            "zones": self.zones,
             "inputs": len(self.inputs),
         }
 
@@ -287,6 +305,7 @@ def fetch_world(
         got.pages += 1
         got.units += len(page.units)
         got.threats += len(page.threats)
+        got.zones += len(page.zones)
 
     for page in first:
         take(page)
@@ -294,6 +313,8 @@ def fetch_world(
         return got
     # the fullest peer first; the others, in turn, if it stops answering
     peers = sorted(first, key=lambda p: (-(p.units_total + p.threats_total), p.planner))
+    if len(peers[0].zones) < peers[0].zones_total:
+        got.complete = False  # more zones than one page holds: those listed are in force, the rest are not
     units_next, threats_next = peers[0].next_unit, peers[0].next_threat
     for peer in peers:
         while units_next is not None or threats_next is not None:

@@ -1,0 +1,126 @@
+"""Keep-out zones in the live world: put, moved, deleted, expired; re-direction, previews, durability, peers."""
+
+from __future__ import annotations
+
+import msgspec
+import pytest
+
+from pfp_service.core import PlannerParams
+from pfp_service.service.events import inputs_from_snapshot
+from pfp_service.service.store import Store
+from pfp_service.service.world import (
+    GoalSet,
+    StateReported,
+    Tick,
+    World,
+    WorldSettings,
+    ZonePut,
+    ZoneRemoved,
+)
+from pfp_service.wire import (
+    Goal,
+    RejectedEvent,
+    ReplanEvent,
+    UnitState,
+    decode_event,
+    decode_world_snapshot,
+    encode,
+)
+from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+
+pytestmark = pytest.mark.unit
+
+WALL = ZoneUpdate(polygon=[[(40.0, -30.0), (45.0, -30.0), (45.0, 30.0), (40.0, 30.0), (40.0, -30.0)]])
+
+
+def _world(**kw) -> World:
+    return World(WorldSettings(planner=PlannerParams(intensity="density"), **kw))
+
+
+def _state(uid: str, x: float, y: float) -> StateReported:
+    return StateReported(uid, UnitState(position=(x, y)))
+
+
+def _events(out, kind):
+    return [e for e in out.events if isinstance(e, kind)]
+
+
+def _guided(w: World, units: dict[str, tuple[tuple[float, float], tuple[float, float]]]) -> None:
+    w.apply([_state(u, *a) for u, (a, _b) in units.items()], 0.0)
+    w.apply([GoalSet(u, Goal(position=b)) for u, (_a, b) in units.items()], 0.0)
+
+
+def test_a_zone_put_redirects_the_units_whose_corridor_it_meets_with_one_replan_event():
+    w = _world()
+    _guided(w, {"a": ((0, 0), (100, 0)), "b": ((0, 10), (100, 10)), "far": ((0, 5000), (100, 5000))})
+    out = w.apply([ZonePut("wall", WALL)], 1.0)
+    assert {d.unit for d in out.directions} == {"a", "b"}
+    (ev,) = _events(out, ReplanEvent)
+    assert ev.units == ["a", "b"] and ev.reason == "zone wall put"
+    decode_event(encode(ev))  # within the schema
+    assert w.counts()["zones"] == 1 and w.field.zones.ids == ("wall",)
+    moved = ZoneUpdate(circle=ZoneCircle(centre=(50.0, 5000.0), radius_m=10.0))
+    out = w.apply([ZonePut("wall", moved)], 2.0)  # moved: the units it left and the one it reaches
+    assert {d.unit for d in out.directions} == {"a", "b", "far"}
+    out = w.apply([ZoneRemoved("wall")], 3.0)
+    assert [d.unit for d in out.directions] == ["far"] and _events(out, ReplanEvent)[
+        0
+    ].reason == "zone wall removed"
+    assert not w.field.zones and w.counts()["zones"] == 0
+    assert not w.apply([ZoneRemoved("wall")], 4.0)  # never known (any more): nothing changes
+
+
+def test_a_zone_expires_at_its_ttl_and_one_put_again_lives_on():
+    w = _world()
+    _guided(w, {"a": ((0, 0), (100, 0))})
+    w.apply([ZonePut("z", msgspec.structs.replace(WALL, ttl_s=5.0))], 0.0)
+    assert not w.apply([Tick(4.9)], 4.9)
+    out = w.apply([Tick(5.0)], 5.0)
+    assert _events(out, ReplanEvent)[0].reason == "zone z expired" and not w.field.zones
+    w.apply([ZonePut("z", msgspec.structs.replace(WALL, ttl_s=5.0))], 6.0)
+    w.apply([ZonePut("z", WALL)], 7.0)  # put again without a TTL: the old timer must not expire it
+    w.apply([Tick(20.0)], 20.0)
+    assert w.field.zones.ids == ("z",)
+
+
+def test_zones_beyond_max_zones_are_refused_on_their_key():
+    w = _world(max_zones=2)
+    out = w.apply([ZonePut(f"z{i}", WALL) for i in range(3)], 0.0)
+    (rej,) = _events(out, RejectedEvent)
+    assert rej.key.endswith("/zone/z2") and "max_zones" in rej.reason
+    assert w.counts()["zones"] == 2
+    assert not _events(w.apply([ZonePut("z0", WALL)], 1.0), RejectedEvent)  # a zone held may move
+
+
+def test_the_snapshot_lists_the_zones_and_a_joining_planner_takes_them_with_the_time_left():
+    w = _world()
+    w.apply([ZonePut("a", WALL), ZonePut("b", msgspec.structs.replace(WALL, ttl_s=10.0))], 0.0)
+    snap = decode_world_snapshot(encode(w.snapshot(4.0)))
+    assert [z.id for z in snap.zones] == ["a", "b"] and snap.zones_total == 2
+    assert snap.zones[0].ttl_s is None and snap.zones[1].ttl_s == pytest.approx(6.0)
+    assert not w.snapshot(4.0, threats_from="x").zones  # the first page only
+    joined = World(WorldSettings(planner_id="p2"))
+    joined.apply(inputs_from_snapshot(snap, "p2"), 100.0)
+    assert joined.field.zones.ids == ("a", "b")
+    joined.apply([Tick(105.9)], 105.9)
+    assert joined.field.zones.ids == ("a", "b")
+    joined.apply([Tick(106.1)], 106.1)
+    assert joined.field.zones.ids == ("a",)
+
+
+def test_zones_are_stored_and_restored_with_the_time_left(tmp_path):
+    store = Store(tmp_path)
+    short = msgspec.structs.replace(WALL, ttl_s=10.0)
+    store.commit_inputs([ZonePut("a", WALL), ZonePut("b", short), ZonePut("c", short)], 1000.0, None)
+    store.commit_inputs([ZoneRemoved("c")], 1001.0, None)
+    store.close()
+    store = Store(tmp_path)
+    got = store.restore(1004.0)
+    assert got.zones == 2
+    zones = {i.zone: i.update for i in got.inputs if isinstance(i, ZonePut)}
+    assert set(zones) == {"a", "b"} and zones["a"] == WALL and zones["b"].ttl_s == pytest.approx(6.0)
+    store.close()
+    store = Store(tmp_path)
+    later = store.restore(1011.0)  # b's time ran out while the planner was down
+    assert [i.zone for i in later.inputs if isinstance(i, ZonePut)] == ["a"] and later.expired == 1
+    store.close()
