@@ -221,6 +221,7 @@ async def _main(
 
     subs = [
         session.declare_subscriber(keys.threats(mission), enqueue("threat")),
+        session.declare_subscriber(keys.zones(mission), enqueue("zone")),
         session.declare_subscriber(keys.unit_states(mission), enqueue("state")),
         session.declare_subscriber(keys.unit_directions(mission), enqueue("direction")),
         session.declare_subscriber(keys.events(mission), enqueue("event")),
@@ -270,6 +271,8 @@ async def _main(
             now = time.time()
             if kind == "threat":
                 emit(state.on_threat(key, payload, now))
+            elif kind == "zone":
+                emit(state.on_zone(key, payload, now))
             elif payload is None:
                 continue
             elif kind == "state":

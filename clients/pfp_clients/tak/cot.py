@@ -8,12 +8,23 @@ and ``to_threat_change`` maps it onto the planner's world:
   ``<track course>`` the facing, ``stale - now`` the TTL (a marker the server
   replays long after it was sent keeps only what is left of its life), and the shape
   (sigmas, skew, weight) comes from ``ThreatDefaults``;
-- a delete (``t-x-d-d``) names its target in ``<link uid>`` and becomes a ``ThreatRemoved``;
+- a drawn shape (``to_zone_change``) becomes a keep-out ``ZonePut``: a freehand
+  polygon ``u-d-f`` (its ``<link point>`` vertices; one marked
+  ``<closed value="false"/>`` or ending away from its start with fewer than 3
+  vertices is a line, not an area, and is ignored), a rectangle ``u-d-r`` (its
+  four corners) or a circle ``u-d-c-c`` (the event's point and
+  ``<shape><ellipse major minor>``, radii in metres; an ellipse becomes the
+  circle of its larger radius, which covers it).  ``stale - now`` is the TTL;
+- a delete (``t-x-d-d``) names its target in ``<link uid>`` and becomes a ``ThreatRemoved``
+  (the bridge knows whether that uid was a marker or a shape);
 - a device's own position report (``<takv>`` or ``<__group>`` in its detail) is
   flagged ``CotEvent.device``: a device that just joined gets the routes;
 - anything else, and our own markers echoed back, map to ``None``.
 
-Outbound, the builders return XML bytes: ``threat_event`` (``a-h-G``),
+Outbound, the builders return XML bytes: ``zone_event`` (a planner's zone as
+a no-go shape: ``u-d-f`` polygon or ``u-d-c-c`` circle, red outline
+``NO_GO_STROKE``, translucent red fill ``NO_GO_FILL``, remarks starting
+``pfp:keep_out``), ``threat_event`` (``a-h-G``),
 ``unit_event`` (``a-f-G-U-C`` manned, ``a-f-G-E-V`` unmanned, the direction
 as ``<track course>``, the status in ``<remarks>``), ``route_event`` (``b-m-r``
 with ordered ``<link>`` waypoints ``b-m-p-w`` at the ends and control points
@@ -44,6 +55,7 @@ __all__ = [
     "ThreatDefaults",
     "ThreatPut",
     "ThreatRemoved",
+    "ZonePut",
     "delete_event",
     "iso",
     "read_event",
@@ -51,7 +63,9 @@ __all__ = [
     "threat_event",
     "threat_id",
     "to_threat_change",
+    "to_zone_change",
     "unit_event",
+    "zone_event",
 ]
 
 MAX_EVENT_BYTES = 64 * 1024
@@ -59,6 +73,11 @@ MAX_EVENT_BYTES = 64 * 1024
 UID_PREFIX = "pfp."
 _ID_OK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 _UNKNOWN_ERR = "9999999.0"  # CoT's "unknown" circular and linear error
+SHAPE_TYPES = ("u-d-f", "u-d-r", "u-d-c-c")  # drawn shapes: a freehand polygon, a rectangle, a circle
+NO_GO_REMARK = "pfp:keep_out"  # how a planner's zone is marked in TAK: its remarks start so ...
+NO_GO_STROKE = -65536  # ... drawn in opaque red (ARGB 0xFFFF0000 as ATAK's signed int) ...
+NO_GO_FILL = 0x60FF0000  # ... filled translucent red (ARGB 0x60FF0000)
+MAX_SHAPE_POINTS = 4096  # vertices read from one drawn shape at most (a zone's bound)
 
 
 class CotError(ValueError):
@@ -80,6 +99,9 @@ class CotEvent:
         link_uids: the ``uid`` of each ``<link>`` in ``<detail>``, in order.
         callsign: ``<contact callsign>``, if present.
         device: the detail has ``<takv>`` or ``<__group>``: a TAK device's own report.
+        link_points: ``(lat, lon)`` of each ``<link point="lat,lon[,hae]">``, in order (a shape's vertices).
+        closed: ``<closed value>``, if present.
+        radius_m: the larger radius of ``<shape><ellipse major minor>``, if present.
     """
 
     uid: str
@@ -92,6 +114,9 @@ class CotEvent:
     link_uids: tuple[str, ...] = ()
     callsign: str = ""
     device: bool = False
+    link_points: tuple[tuple[float, float], ...] = ()
+    closed: bool | None = None
+    radius_m: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,6 +133,15 @@ class ThreatDefaults:
 @dataclass(frozen=True, slots=True)
 class ThreatPut:
     """Put threat ``id``: a ``ThreatUpdate`` body as a dict (position in lat/lon)."""
+
+    id: str
+    uid: str
+    body: dict[str, object]
+
+
+@dataclass(frozen=True, slots=True)
+class ZonePut:
+    """Put zone ``id``: a ``ZoneUpdate`` body as a dict (vertices or centre in lat/lon)."""
 
     id: str
     uid: str
@@ -171,6 +205,9 @@ def read_event(data: bytes) -> CotEvent:
     links: tuple[str, ...] = ()
     callsign = ""
     device = False
+    points: list[tuple[float, float]] = []
+    closed: bool | None = None
+    radius: float | None = None
     if detail is not None:
         device = detail.find("takv") is not None or detail.find("__group") is not None
         track = detail.find("track")
@@ -179,6 +216,8 @@ def read_event(data: bytes) -> CotEvent:
         links = tuple(link.get("uid", "") for link in detail.findall("link"))
         contact = detail.find("contact")
         callsign = (contact.get("callsign") or "") if contact is not None else ""
+        if typ in SHAPE_TYPES:
+            points, closed, radius = _shape(detail)
     return CotEvent(
         uid=uid,
         type=typ,
@@ -190,7 +229,39 @@ def read_event(data: bytes) -> CotEvent:
         link_uids=links,
         callsign=callsign,
         device=device,
+        link_points=tuple(points),
+        closed=closed,
+        radius_m=radius,
     )
+
+
+def _shape(detail: ET.Element) -> tuple[list[tuple[float, float]], bool | None, float | None]:
+    """A drawn shape's vertices, ``<closed>`` flag and circle radius from its ``<detail>``."""
+    points: list[tuple[float, float]] = []
+    for i, link in enumerate(detail.findall("link")):
+        text = link.get("point")
+        if text is None:
+            continue
+        if len(points) >= MAX_SHAPE_POINTS:
+            raise CotError(f"shape: more than {MAX_SHAPE_POINTS} vertices")
+        parts = text.split(",")
+        if len(parts) < 2:
+            raise CotError(f"link[{i}].point: expected 'lat,lon[,hae]', got {text[:40]!r}")
+        points.append(
+            (
+                _number(parts[0], f"link[{i}].point lat", -90.0, 90.0),
+                _number(parts[1], f"link[{i}].point lon", -180.0, 180.0),
+            )
+        )
+    flag = detail.find("closed")
+    closed = None if flag is None else (flag.get("value") or "").strip().lower() == "true"
+    ellipse = detail.find("shape/ellipse")
+    radius = None
+    if ellipse is not None:
+        major = _number(ellipse.get("major"), "shape.ellipse.major", 0.0, 1e6)
+        minor = _number(ellipse.get("minor", ellipse.get("major")), "shape.ellipse.minor", 0.0, 1e6)
+        radius = max(major, minor)
+    return points, closed, radius
 
 
 def threat_id(uid: str) -> str:
@@ -235,6 +306,40 @@ def to_threat_change(ev: CotEvent, defaults: ThreatDefaults, now: float) -> Thre
         "ttl_s": min(ttl_s, 1e9),
     }
     return ThreatPut(id=threat_id(ev.uid), uid=ev.uid, body=body)
+
+
+def to_zone_change(ev: CotEvent, now: float) -> ZonePut | ThreatRemoved | None:
+    """What a drawn shape means for the planner's keep-out zones, if anything, at ``now`` (Unix s).
+
+    A shape already stale is a removal (a ``ThreatRemoved`` naming the zone
+    id: the bridge deletes the zone key).  Our own shapes echoed back, lines
+    (not areas) and anything but a drawn shape map to ``None``.
+
+    Raises:
+        CotError: a shape that cannot be a zone (too few vertices, no radius).
+    """
+    if ev.uid.startswith(UID_PREFIX) or ev.type not in SHAPE_TYPES:
+        return None
+    zid = threat_id(ev.uid)
+    ttl_s = ev.stale - now
+    if not ttl_s > 0.0:
+        return ThreatRemoved(id=zid, uid=ev.uid)
+    body: dict[str, object] = {"kind": "keep_out", "ttl_s": min(ttl_s, 1e9)}
+    if ev.type == "u-d-c-c":
+        if not ev.radius_m:
+            raise CotError("u-d-c-c: a circle needs <shape><ellipse major> > 0")
+        body["circle"] = {"centre": {"lat": ev.lat, "lon": ev.lon}, "radius_m": ev.radius_m}
+        return ZonePut(id=zid, uid=ev.uid, body=body)
+    ring = list(ev.link_points)
+    ends_closed = len(ring) >= 2 and ring[0] == ring[-1]
+    if ev.closed is False or (ev.type == "u-d-f" and not ends_closed and len(set(ring)) < 3):
+        return None  # a line drawn, not an area
+    if ends_closed:
+        ring.pop()
+    if len(set(ring)) < 3:
+        raise CotError(f"{ev.type}: an area needs at least 3 distinct vertices, got {len(set(ring))}")
+    body["polygon"] = [[{"lat": lat, "lon": lon} for lat, lon in [*ring, ring[0]]]]
+    return ZonePut(id=zid, uid=ev.uid, body=body)
 
 
 # -- outbound ---------------------------------------------------------------------
@@ -378,6 +483,45 @@ def route_event(
             "order": "Ascending Check Points",
         },
     )
+    ET.SubElement(d, "contact", {"callsign": callsign})
+    ET.SubElement(d, "remarks").text = remarks
+    return _bytes(ev)
+
+
+def zone_event(
+    uid: str,
+    ring: Sequence[tuple[float, float]] | None,
+    centre: tuple[float, float],
+    radius_m: float | None,
+    now: float,
+    stale_s: float,
+    callsign: str,
+    remarks: str,
+    hae: float = 0.0,
+) -> bytes:
+    """A planner's keep-out zone as a no-go shape: a polygon ``u-d-f`` (``ring``: ``(lat, lon)``
+    vertices, not repeated at the end) or a circle ``u-d-c-c`` (``radius_m`` about ``centre``).
+
+    Marked as no-go: red outline (``NO_GO_STROKE``), translucent red fill
+    (``NO_GO_FILL``), and ``remarks`` that should start with ``NO_GO_REMARK``.
+    """
+    circle = radius_m is not None
+    lat0, lon0 = centre
+    ev = _event(uid, "u-d-c-c" if circle else "u-d-f", lat0, lon0, now, stale_s, how="h-e", hae=hae)
+    d = ET.SubElement(ev, "detail")
+    if circle:
+        shape = ET.SubElement(d, "shape")
+        r = repr(float(radius_m))  # type: ignore[arg-type]
+        ET.SubElement(shape, "ellipse", {"major": r, "minor": r, "angle": "360"})
+    else:
+        pts = list(ring or ())
+        for lat, lon in [*pts, pts[0]]:
+            ET.SubElement(d, "link", {"point": f"{float(lat)!r},{float(lon)!r},{float(hae)!r}"})
+        ET.SubElement(d, "closed", {"value": "true"})
+    ET.SubElement(d, "strokeColor", {"value": str(NO_GO_STROKE)})
+    ET.SubElement(d, "strokeWeight", {"value": "3.0"})
+    ET.SubElement(d, "fillColor", {"value": str(NO_GO_FILL)})
+    ET.SubElement(d, "labels_on", {"value": "true"})
     ET.SubElement(d, "contact", {"callsign": callsign})
     ET.SubElement(d, "remarks").text = remarks
     return _bytes(ev)

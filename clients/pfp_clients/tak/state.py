@@ -8,7 +8,10 @@ Nothing here opens a socket, reads the clock or logs anything but through the
 ``log`` callable it is given.
 
 Rules:
-- a threat that came from TAK is not sent back to TAK (it is already there);
+- a threat or zone that came from TAK is not sent back to TAK (it is already there);
+- a drawn shape (freehand polygon, rectangle, circle) is put as a keep-out
+  zone; the planner's own zones are shown as no-go shapes (``cot.zone_event``:
+  red, remarks ``pfp:keep_out``); a shape deleted in TAK deletes its zone;
   every uid we send starts with ``cot.UID_PREFIX`` and an echo of it is ignored;
 - markers are sent again every ``refresh_s`` so TAK clients do not grey them out;
 - a unit's route is fetched when it first gets a direction, when its status
@@ -160,6 +163,8 @@ class BridgeState:
         self.tombstones_version = 0  # bumped on every change: the driver saves them when it moves
         self._last_forget = -1e18
         self.threats: dict[str, m.ThreatUpdate] = {}  # threats we show in TAK
+        self.zones: dict[str, m.ZoneUpdate] = {}  # the planner's zones we show in TAK (in metres)
+        self.zones_from_tak: dict[str, _Marker] = {}  # zone id -> the shape TAK gave us
         self.units: dict[str, _Unit] = {}
         self._last_refresh = -1e18
         self.dropped = 0
@@ -194,6 +199,7 @@ class BridgeState:
     def picture(self, now: float) -> list[bytes]:
         """Every marker and route this bridge shows, as of ``now``, past the rate limiter."""
         out = [self._threat_cot(tid, t, now) for tid, t in self.threats.items()]
+        out += [self._zone_cot(zid, z, now) for zid, z in self.zones.items()]
         for unit, u in self.units.items():
             data = None if u.direction is None else self._unit_cot(unit, u, u.direction, now)
             if data is not None:
@@ -226,6 +232,8 @@ class BridgeState:
             del self.devices[uid]
         for tid in [i for i, mk in self.from_tak.items() if mk.stale <= now]:
             del self.from_tak[tid]  # the planner lets it go by its TTL
+        for zid in [i for i, mk in self.zones_from_tak.items() if mk.stale <= now]:
+            del self.zones_from_tak[zid]
 
     def restore_tombstones(self, saved: dict[str, Tombstone], now: float) -> None:
         """Tombstones kept from an earlier run (the driver loads them); expired ones are dropped."""
@@ -238,7 +246,8 @@ class BridgeState:
         out = Outputs()
         try:
             ev = cot.read_event(data)
-            change = cot.to_threat_change(ev, self.s.defaults, now)
+            shape = ev.type in cot.SHAPE_TYPES
+            change = cot.to_zone_change(ev, now) if shape else cot.to_threat_change(ev, self.s.defaults, now)
         except cot.CotError as exc:
             self.dropped += 1
             self.log(f"dropped a CoT event from {source}: {exc}")
@@ -247,7 +256,11 @@ class BridgeState:
             self._heard_device(ev.uid, source, now)
         if isinstance(change, cot.ThreatRemoved):
             seen = self.from_tak.pop(change.id, None)
-            if seen is not None:
+            drawn = self.zones_from_tak.pop(change.id, None)
+            if drawn is not None:  # a shape deleted (or gone stale): its zone goes
+                out.zenoh.append(ZenohDelete(keys.zone(self.s.mission, change.id)))
+                self._bury(change.uid, max(ev.time, drawn.time), max(ev.stale, drawn.stale), now)
+            elif seen is not None:
                 out.zenoh.append(ZenohDelete(keys.threat(self.s.mission, change.id)))
                 self._bury(change.uid, max(ev.time, seen.time), max(ev.stale, seen.stale), now)
             else:
@@ -265,6 +278,8 @@ class BridgeState:
                 return out
             del self.tombstones[change.uid]  # sent after the delete: a new marker
             self.tombstones_version += 1
+        if isinstance(change, cot.ZonePut):
+            return self._zone_from_tak(change, ev, now, source)
         body = dict(change.body)
         try:
             body["position"] = list(self.s.origin.localise_point(m.LatLon(**body["position"])))  # type: ignore[arg-type]
@@ -277,7 +292,64 @@ class BridgeState:
         out.zenoh.append(ZenohPut(keys.threat(self.s.mission, change.id), m.encode(update)))
         return out
 
+    def _zone_from_tak(self, change: cot.ZonePut, ev: cot.CotEvent, now: float, source: str) -> Outputs:
+        """A drawn shape as a zone put; one the planner's rules refuse is dropped here, with its reason."""
+        out = Outputs()
+        try:
+            update = m.decode_zone(msgspec.json.encode(change.body), origin=self.s.origin)
+        except InputError as exc:
+            self.dropped += 1
+            self.log(f"dropped shape {change.uid!r} from {source}: not a keep-out zone: {exc}")
+            return out
+        self.zones_from_tak[change.id] = _Marker(change.uid, ev.time, ev.stale)
+        out.zenoh.append(ZenohPut(keys.zone(self.s.mission, change.id), m.encode(update)))
+        return out
+
     # -- planner -> TAK --------------------------------------------------------
+    def _zone_cot(self, zid: str, z: m.ZoneUpdate, now: float) -> bytes:
+        stale = min(z.ttl_s, self.s.stale_s) if z.ttl_s is not None else self.s.stale_s
+        remarks = f"{cot.NO_GO_REMARK} zone {zid}: no unit's path enters it"
+        uid = self._uid("zone", zid)
+        if z.circle is not None:
+            centre = self.s.origin.to_geodetic(*z.circle.centre)
+            return cot.zone_event(
+                uid, None, centre, z.circle.radius_m, now, stale, f"no-go {zid}", remarks, self._hae
+            )
+        rings = z.polygon or [[(0.0, 0.0)]]
+        shell = np.asarray(rings[0][:-1], dtype=float)
+        ll = [(float(a), float(b)) for a, b in self.s.origin.to_geodetic_many(shell)]
+        if len(rings) > 1:  # TAK's shapes have no holes: the outline alone, and say so
+            remarks += f" (its {len(rings) - 1} hole(s) are not drawn: they are open ground)"
+        centre = (sum(p[0] for p in ll) / len(ll), sum(p[1] for p in ll) / len(ll))
+        return cot.zone_event(uid, ll, centre, None, now, stale, f"no-go {zid}", remarks, self._hae)
+
+    def on_zone(self, key: str, payload: bytes | None, now: float) -> Outputs:
+        """A zone put (``payload``) or deleted (``None``) on Zenoh: shown in TAK as a no-go shape."""
+        out = Outputs()
+        zid = keys.parse(key).id
+        if zid in self.zones_from_tak:
+            return out  # TAK's own shape: it is on the maps already
+        if payload is None:
+            z = self.zones.pop(zid, None)
+            if z is not None:
+                uid = self._uid("zone", zid)
+                typ = "u-d-c-c" if z.circle is not None else "u-d-f"
+                lat, lon = self.s.origin.to_geodetic(
+                    *(z.circle.centre if z.circle else (z.polygon or [[(0, 0)]])[0][0])
+                )
+                out.cot += self._send(
+                    uid, cot.delete_event(f"{uid}.delete", uid, typ, lat, lon, now, self._hae), now
+                )
+            return out
+        try:
+            z = m.decode_zone(payload, origin=self.s.origin)
+        except InputError as exc:
+            self.log(f"ignored zone {zid}: {exc}")
+            return out
+        self.zones[zid] = z
+        out.cot += self._send(self._uid("zone", zid), self._zone_cot(zid, z, now), now)
+        return out
+
     def _threat_cot(self, tid: str, t: m.ThreatUpdate, now: float) -> bytes:
         lat, lon = self.s.origin.to_geodetic(*t.position)
         stale = min(t.ttl_s, self.s.stale_s) if t.ttl_s is not None else self.s.stale_s
@@ -434,6 +506,8 @@ class BridgeState:
         self._last_refresh = now
         for tid, t in self.threats.items():
             out.cot += self._send(self._uid("threat", tid), self._threat_cot(tid, t, now), now)
+        for zid, z in self.zones.items():
+            out.cot += self._send(self._uid("zone", zid), self._zone_cot(zid, z, now), now)
         for unit, u in self.units.items():
             data = None if u.direction is None else self._unit_cot(unit, u, u.direction, now)
             if data is not None:
