@@ -12,6 +12,7 @@ bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Literal
 
@@ -239,10 +240,13 @@ def _in_file(p: Path, data: bytes, fmt: Literal["json", "yaml"], err: InputError
     """``err`` naming the file, and for YAML the line of its field, as team and script files do."""
     if err.path.startswith("line "):  # a YAML syntax error already knows its line and column
         return InputError(f"{p.name} {err.path}", err.reason)
-    if fmt == "yaml":
-        try:
-            root = yamlio.compose(data)
-        except yaml.YAMLError:
-            root = None
-        return yamlio.located(p, root, err)
-    return InputError(f"{p.name}, {err.path}" if err.path else p.name, err.reason)
+    if not err.path and fmt == "json":  # malformed JSON: msgspec names a byte offset, or the end
+        at = re.search(r"\(byte (\d+)\)", err.reason)
+        end = len(data.rstrip()) if at is None or "truncated" in err.reason else int(at[1])
+        line = data[:end].count(b"\n") + 1
+        return InputError(f"{p.name} line {line}", err.reason)
+    try:  # JSON is YAML too: the same node tree gives a field's line
+        root = yamlio.compose(data)
+    except yaml.YAMLError:
+        root = None
+    return yamlio.located(p, root, err)
