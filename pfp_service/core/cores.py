@@ -21,6 +21,19 @@ sliver of clearance (0.034 standard deviations across an unskewed core) and
 always passes the check.  The price is explicit: a gap whose middle is
 between 0.48 and 0.5 of peak is open by the rule but not searched through;
 ``pfp bench quality`` counts such cases as ambiguous.
+
+Keep-out zones are regions of the same kind.  ``Cores`` holds the field's
+zones (``ThreatField.zones``) beside its threat cores, so every test here --
+``inside``, ``first_hit``, ``segment_hits``, ``raster``, ``core_at`` -- covers
+both, and everything built on cores (escapes, the ``global`` route, the
+route grids, ``--avoid-cores``, the benchmark's checks) keeps out of zones with
+no other change.  Zones are tested exactly (``core.zones``: a segment's
+contact is solved, not sampled); their raster blocks every lattice node within
+1.12 lattice spacings of a zone, so no lattice edge of the route grids (a king
+or knight move, sampled at its ends, quarter points and midpoint) steps over
+one however thin; a route that still clips one is repaired as for a core
+(``GridGraph.drop_clipping``).  A hit is named by ``region``: ``zone Z`` for a
+zone, ``the core of threat T`` for a core.
 """
 
 from __future__ import annotations
@@ -33,11 +46,15 @@ import numpy as np
 
 from pfp_service.core import kernels
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.zones import ZoneSet
 
-__all__ = ["CORE_FRACTION", "SEARCH_FRACTION", "Cores"]
+__all__ = ["CORE_FRACTION", "SEARCH_FRACTION", "ZONE_PREFIX", "ZONE_RASTER_SPACINGS", "Cores"]
 
 CORE_FRACTION = 0.5
 SEARCH_FRACTION = 0.48
+# A zone blocks raster nodes this many lattice spacings from it: half a knight move's sample gap (sqrt(5)/2).
+ZONE_RASTER_SPACINGS = 1.12
+ZONE_PREFIX = "zone "  # a hit on a zone is named "zone Z" (a threat id has no space)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -107,7 +124,7 @@ class Cores:
         fraction: the share of each threat's peak that bounds its core.
     """
 
-    __slots__ = ("boxes", "fraction", "ids", "min_spread_m", "packed")
+    __slots__ = ("boxes", "fraction", "ids", "min_spread_m", "packed", "zones")
 
     def __init__(self, field: ThreatField, fraction: float = CORE_FRACTION) -> None:
         self.fraction = fraction
@@ -127,6 +144,12 @@ class Cores:
         ey = np.sqrt(qmax * packed[:, kernels.P00] / det) if len(packed) else np.zeros(0)
         cx, cy = packed[:, kernels.XI_X], packed[:, kernels.XI_Y]
         self.boxes = np.stack([cx - ex, cy - ey, cx + ex, cy + ey], axis=1)
+        self.zones: ZoneSet = field.zones
+
+    @staticmethod
+    def region(hit: str) -> str:
+        """What a hit of ``core_at`` or ``first_hit`` names: ``zone Z`` or ``the core of threat T``."""
+        return hit if hit.startswith(ZONE_PREFIX) else f"the core of threat {hit}"
 
     @classmethod
     def of(cls, field: ThreatField, fraction: float = CORE_FRACTION) -> Cores:
@@ -146,11 +169,19 @@ class Cores:
         return ratio, idx
 
     def inside(self, points: np.ndarray) -> np.ndarray:
-        """Boolean mask: which points lie in some threat's core.
+        """Boolean mask: which points lie in some threat's core or in a zone.
 
         Exact at any size; many points among many threats are cut into tiles,
         each tested against only the threats whose core box meets it.
         """
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+        out = self.inside_cores(pts)
+        if self.zones and len(pts):
+            out |= self.zones.contains(pts)
+        return out
+
+    def inside_cores(self, points: np.ndarray) -> np.ndarray:
+        """``inside`` for the threat cores alone (zones are tested exactly, segment by segment)."""
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.zeros(len(pts), dtype=np.bool_)
         if not (len(self.packed) and len(pts)):
@@ -186,29 +217,45 @@ class Cores:
         out = np.zeros(shape, dtype=np.bool_)
         if len(self.packed):
             _raster(self.packed, float(origin[0]), float(origin[1]), float(cell_m), self.fraction, out)
+        if self.zones:
+            out |= self.zones.raster(origin, cell_m, shape, ZONE_RASTER_SPACINGS * cell_m)
         return out
 
     def core_at(self, x: float, y: float) -> str:
-        """The id of the threat whose core holds ``(x, y)`` (the deepest one), or ``""``."""
+        """The id of the threat whose core holds ``(x, y)`` (the deepest one), ``zone Z``, or ``""``."""
+        zone = self.zones.zone_at(x, y) if self.zones else ""
+        if zone:
+            return ZONE_PREFIX + zone
+        if not len(self.packed):
+            return ""
         ratio, idx = self.ratio(np.array([[x, y]]))
         return self.ids[int(idx[0])] if ratio[0] >= self.fraction else ""
 
     def first_hit(self, path: np.ndarray) -> str:
-        """The id of the first core the polyline ``path`` enters, or ``""`` if none."""
-        pts = self.densify(np.asarray(path, dtype=np.float64).reshape(-1, 2))
-        if not len(self.packed) or not len(pts):
-            return ""
-        hits = np.flatnonzero(self.inside(pts))
-        if not len(hits):
-            return ""
-        _, idx = self.ratio(pts[hits[0] : hits[0] + 1])  # the deepest core at the first point inside
-        return self.ids[int(idx[0])]
+        """The id of the first core the polyline ``path`` enters, ``zone Z`` for a zone, or ``""`` if none."""
+        raw = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        seg, t, zone = self.zones.first_contact(raw) if self.zones else (-1, 0.0, "")
+        if seg >= 0:  # only the part up to the zone's segment can meet a core first
+            raw = raw[: seg + 2]
+        pts = self.densify(raw)
+        if len(self.packed) and len(pts):
+            hits = np.flatnonzero(self.inside_cores(pts))
+            if len(hits):
+                _, idx = self.ratio(pts[hits[0] : hits[0] + 1])  # the deepest core at the first point inside
+                if seg < 0:
+                    return self.ids[int(idx[0])]
+                arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+                legs = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(raw, axis=0).T))])
+                if arc[hits[0]] <= legs[seg] + t * (legs[seg + 1] - legs[seg]):
+                    return self.ids[int(idx[0])]
+        return ZONE_PREFIX + zone if zone else ""
 
     def segment_hits(self, path: np.ndarray) -> np.ndarray:
         """Per segment of the polyline ``path``: does it enter a core (sampled as ``first_hit`` samples it)?"""
         pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        zoned = self.zones.segment_hits(pts) if self.zones else np.zeros(max(len(pts) - 1, 0), dtype=bool)
         if len(pts) < 2 or not len(self.packed):
-            return np.zeros(max(len(pts) - 1, 0), dtype=bool)
+            return zoned
         seg = np.diff(pts, axis=0)
         if math.isfinite(self.min_spread_m):
             n = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / (self.min_spread_m / 4.0))).astype(
@@ -219,8 +266,10 @@ class Cores:
         which = np.repeat(np.arange(len(seg)), n + 1)  # every sample of a segment, both ends included
         k = np.arange(len(which)) - np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
         t = (k / n[which])[:, None]
-        inside = self.inside(pts[:-1][which] + t * seg[which])
-        return np.logical_or.reduceat(inside, np.cumsum(n + 1) - (n + 1))
+        inside = self.inside_cores(pts[:-1][which] + t * seg[which])
+        hits: np.ndarray = np.logical_or.reduceat(inside, np.cumsum(n + 1) - (n + 1))
+        out: np.ndarray = hits | zoned
+        return out
 
     def densify(self, path: np.ndarray) -> np.ndarray:
         """``path`` with every segment split to at most a quarter of the narrowest standard deviation."""

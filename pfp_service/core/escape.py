@@ -50,7 +50,8 @@ arrives instead, ``cheaper_route`` compares its ``J`` with the route's and
 commits to the route only when it is cheaper by more than ``AUTO_MARGIN``
 (descent down a channel between threats arrives, at a high price).  A unit
 that starts inside a core first leaves it by the shortest straight way out
-(``leave_core``; its escape is logged as ``leave core <id>``).
+(``leave_core``; its escape is logged as ``leave core <id>``, or ``leave zone <id>``
+for a keep-out zone, left past its nearest edge).
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ import numba
 import numpy as np
 
 from pfp_service.core import steprule
-from pfp_service.core.cores import Cores
+from pfp_service.core.cores import ZONE_PREFIX, Cores
 from pfp_service.core.escape_strategies import (
     AUTO_ORDER,
     STRATEGIES,
@@ -308,7 +309,7 @@ class Escaper:
         trap = self._trap(field, x, y)
         inside = trap.cores.core_at(*self.goal)
         if inside:
-            return None, f"{reason}; the goal lies in the core of threat {inside}, which no escape enters"
+            return None, f"{reason}; the goal lies in {Cores.region(inside)}, which no escape enters"
         site = self._site(x, y, max(10.0 * self.params.step, trap.margin))
         order = AUTO_ORDER if self.params.escape == "auto" else (self.params.escape,)
         refusals: list[str] = []
@@ -347,7 +348,7 @@ class Escaper:
         tr = self._trap(field, x, y)
         inside = tr.cores.core_at(*self.goal)
         if inside:
-            return None, f"{ahead} foreseen; the goal lies in the core of threat {inside}"
+            return None, f"{ahead} foreseen; the goal lies in {Cores.region(inside)}"
         poly = global_route(tr)
         if isinstance(poly, NoCandidate):
             return None, f"{ahead} foreseen; {poly.reason}"
@@ -386,6 +387,13 @@ class Escaper:
         if not inside:
             return None
         p = self.params
+        if inside.startswith(ZONE_PREFIX):  # a zone's shortest way out is exact: past its nearest edge
+            zone = inside[len(ZONE_PREFIX) :]
+            end = cores.zones.way_out(x, y, p.step)
+            if end is None:
+                return None
+            self.log.append(f"leave zone {zone}")
+            return EscapeRun(f"leave zone {zone}", resample(np.array([(x, y), end]), p.step), p.step)
         spacing = min(p.step, cores.min_spread_m / 4.0)
         reach = 6.0 * max(t.spread() for t in field.threats)
         n = min(2000, math.ceil(reach / spacing))
@@ -478,13 +486,13 @@ class Escaper:
                 return "leaves the mission bounds", none
         hit = tr.cores.first_hit(poly)
         if hit:
-            return f"passes through the core of threat {hit}", none
+            return f"passes through {Cores.region(hit)}", none
         end = (float(poly[-1, 0]), float(poly[-1, 1]))
         n = int(min(20000, math.ceil(3.0 * tr.dist / tr.step) + 4 * tr.trap_window))
         after = rollout(tr.field, end, tr.goal, tr.gain, tr.step, tr.tolerance, n)
         hit = tr.cores.first_hit(after)
         if hit:
-            return f"descent after it passes through the core of threat {hit}", after
+            return f"descent after it passes through {Cores.region(hit)}", after
         d_end = math.hypot(tr.goal[0] - after[-1, 0], tr.goal[1] - after[-1, 1])
         if d_end > tr.tolerance and d_end > tr.dist - tr.margin:
             return "descent after it ends no closer to the goal", after

@@ -80,7 +80,17 @@ Candidate = np.ndarray | NoCandidate
 
 
 @numba.njit(cache=True, nogil=True)
-def _rollout(packed: np.ndarray, unit: np.ndarray, x: float, y: float, out: np.ndarray) -> int:
+def _rollout(
+    packed: np.ndarray,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    unit: np.ndarray,
+    x: float,
+    y: float,
+    out: np.ndarray,
+) -> int:
     out[0, 0] = x
     out[0, 1] = y
     n = 1
@@ -88,7 +98,9 @@ def _rollout(packed: np.ndarray, unit: np.ndarray, x: float, y: float, out: np.n
         fx, fy, _lv, norm = kernels.point_descent(
             packed, x, y, unit[steprule.GOAL_X], unit[steprule.GOAL_Y], unit[steprule.GAIN]
         )
-        code, _dx, _dy, _dist, _move, x, y = steprule.judge(unit, x, y, fx, fy, norm, steprule.DESCENT)
+        code, _dx, _dy, _dist, _move, x, y = steprule.judge_zoned(
+            unit, edges, offsets, circles, boxes, x, y, fx, fy, norm
+        )
         if code != steprule.GO:
             break
         out[n, 0] = x
@@ -113,7 +125,7 @@ def rollout(
     """
     out = np.empty((n + 1, 2))
     unit = steprule.unit(target, gain, tol, step, watch=False)
-    k = _rollout(field.packed, unit, float(start[0]), float(start[1]), out)
+    k = _rollout(field.packed, *field.zones.packed(), unit, float(start[0]), float(start[1]), out)
     return out[:k]
 
 
@@ -288,8 +300,8 @@ def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoC
         inside = bool(walled[known.cell_of(tr.x, tr.y)])
         if goal == tr.goal and inside == (side == "source"):  # the same walled-in component as before
             return NoCandidate(
-                f"no route to the goal avoids the threat cores: the {'unit' if inside else 'goal'} is "
-                f"walled in (local grid of {known.cell_m:.3g} m cells)"
+                f"no route to the goal avoids the {_what(tr)}: the {'unit' if inside else 'goal'} is "
+                f"walled in{_walls(tr, known, walled)} (local grid of {known.cell_m:.3g} m cells)"
             )
     spreads = [t.spread() for t in tr.field.threats] or [tr.step]
     search = Cores.of(tr.field, SEARCH_FRACTION)
@@ -300,6 +312,7 @@ def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoC
             (min(tr.x, gx) - pad, min(tr.y, gy) - pad),
             (max(tr.x, gx) + pad, max(tr.y, gy) + pad),
         )
+        x0, y0, x1, y1 = _round_zones(tr, x0, y0, x1, y1)
         if tr.bounds is not None:
             (bx0, by0), (bx1, by1) = tr.bounds
             x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
@@ -328,10 +341,66 @@ def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoC
         route, grid = found.route, found.grid
         if route.walled is not None:  # remembered for the next trap under this field
             _WALLED.setdefault(tr.field, []).append((tr.goal, grid, route.walled, route.walled_side))
+        walls = _walls(tr, grid, route.walled) if route.walled is not None else ""
         return NoCandidate(
-            f"no route to the goal avoids the threat cores (local grid of {grid.cell_m:.3g} m cells)"
+            f"no route to the goal avoids the {_what(tr)}"
+            + (
+                f": the {'unit' if route.walled_side == 'source' else 'goal'} is walled in{walls}"
+                if walls
+                else ""
+            )
+            + f" (local grid of {grid.cell_m:.3g} m cells)"
         )
     return resample(found.polyline, tr.step)
+
+
+def _what(tr: Trap) -> str:
+    return "threat cores and zones" if tr.field.zones else "threat cores"
+
+
+def _round_zones(tr: Trap, x0: float, y0: float, x1: float, y1: float) -> tuple[float, float, float, float]:
+    """The search box grown to hold every keep-out zone it meets, and room to go round (twice: zones in a chain)."""
+    zones = tr.field.zones
+    if not zones:
+        return x0, y0, x1, y1
+    room = 4.0 * tr.step
+    for _ in range(2):
+        b = zones.boxes
+        meet = (b[:, 0] <= x1) & (b[:, 2] >= x0) & (b[:, 1] <= y1) & (b[:, 3] >= y0)
+        if not meet.any():
+            break
+        x0 = min(x0, float(b[meet, 0].min()) - room)
+        y0 = min(y0, float(b[meet, 1].min()) - room)
+        x1 = max(x1, float(b[meet, 2].max()) + room)
+        y1 = max(y1, float(b[meet, 3].max()) + room)
+    return x0, y0, x1, y1
+
+
+def _walls(tr: Trap, grid: GridGraph, walled: np.ndarray) -> str:
+    """`` by zone A, the core of threat B``: what the blocked nodes round a walled-in component lie in."""
+    m = walled.reshape(grid.nx, grid.ny)
+    grown = m.copy()
+    grown[1:] |= m[:-1]
+    grown[:-1] |= m[1:]
+    grown[:, 1:] |= m[:, :-1]
+    grown[:, :-1] |= m[:, 1:]
+    rim = (grown & ~m).ravel() & ~grid.open
+    pts = grid.nodes[rim]
+    if len(pts) > 4000:
+        pts = pts[:: math.ceil(len(pts) / 4000)]
+    names: list[str] = []
+    if tr.field.zones:
+        sd, ids = tr.field.zones.nearest_many(pts)
+        names += sorted({f"zone {z}" for d, z in zip(sd.tolist(), ids) if z and d <= 2.0 * grid.cell_m})
+    if len(tr.cores.packed) and len(pts):
+        ratio, idx = tr.cores.ratio(pts)
+        near = ratio >= 0.5 * SEARCH_FRACTION
+        names += sorted({f"the core of threat {tr.cores.ids[i]}" for i in idx[near].tolist() if i >= 0})
+    return (
+        (" by " + ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else ""))
+        if names
+        else ""
+    )
 
 
 def _global(tr: Trap) -> Iterator[Candidate]:

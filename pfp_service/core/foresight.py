@@ -75,7 +75,15 @@ class Foresight(NamedTuple):
 
 @numba.njit(cache=True, nogil=True)
 def _simulate(
-    packed: np.ndarray, unit: np.ndarray, x: float, y: float, budget: int
+    packed: np.ndarray,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    unit: np.ndarray,
+    x: float,
+    y: float,
+    budget: int,
 ) -> tuple[int, int, float, float, float]:
     # the stepper's own advisories: steprule.judge, advisory by advisory, and the exposure on the way
     exposure = 0.0
@@ -85,7 +93,9 @@ def _simulate(
         fx, fy, lv, norm = kernels.point_descent(
             packed, x, y, unit[steprule.GOAL_X], unit[steprule.GOAL_Y], unit[steprule.GAIN]
         )
-        code, _dx, _dy, _dist, move, tx, ty = steprule.judge(unit, x, y, fx, fy, norm, steprule.DESCENT)
+        code, _dx, _dy, _dist, move, tx, ty = steprule.judge_zoned(
+            unit, edges, offsets, circles, boxes, x, y, fx, fy, norm
+        )
         if code == steprule.BAD_POSITION:
             return _STOPS, k, x, y, exposure
         if code == steprule.OUT_OF_BOUNDS:
@@ -135,5 +145,7 @@ def simulate(
     if params.trap_window > 0:  # room for the whole watch at once: at most the steps simulated
         ring = min(params.trap_window, limit + 1)
         unit = np.concatenate([unit[: steprule.RING], np.zeros(2 * ring)])
-    code, steps, x, y, exposure = _simulate(field.packed, unit, float(start[0]), float(start[1]), limit)
+    code, steps, x, y, exposure = _simulate(
+        field.packed, *field.zones.packed(), unit, float(start[0]), float(start[1]), limit
+    )
     return Foresight(_OUTCOMES[code], steps, x, y, exposure)

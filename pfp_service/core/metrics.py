@@ -1,4 +1,4 @@
-"""Path-quality metrics: length, exposure, peak threat and clearance.
+"""Path-quality metrics: length, exposure, peak threat, clearance and zone clearance.
 
 Exposure is the line integral of the weighted threat level along the path,
 ``sum_i integral over segment i of sum_j w_j t_j ds``, by Simpson's rule per
@@ -44,6 +44,8 @@ class PathMetrics:
     exposure: float
     peak_threat: float
     min_clearance: float  # inf when no threat was ever in force
+    # least signed distance to a keep-out zone (< 0: the path enters one); inf when no zone was in force
+    min_zone_clearance: float = math.inf
 
 
 @numba.njit(cache=True, nogil=True)
@@ -90,6 +92,11 @@ def measure(path: np.ndarray, epochs: list[Epoch], deadline: Callable[[], bool] 
     exposure = 0.0
     peak = 0.0
     clearance = math.inf
+    zone_clearance = math.inf
+    for ep in epochs:
+        if ep.field.zones:  # exact per segment (``ZoneSet.clearance``)
+            part = path[min(ep.first, len(path) - 1) : max(ep.last, ep.first) + 1]
+            zone_clearance = min(zone_clearance, ep.field.zones.clearance(part))
     for ep in epochs:
         if len(ep.field) == 0:
             continue
@@ -112,7 +119,7 @@ def measure(path: np.ndarray, epochs: list[Epoch], deadline: Callable[[], bool] 
             exposure += float(np.sum(seglen[first:last] * (fa + 4.0 * fm + fb)) / 6.0)
             peak = max(peak, float(lv.max()))
             clearance = min(clearance, segment_clearance(path[first : last + 1], ep.field.positions))
-    return PathMetrics(float(seglen.sum()), exposure, peak, clearance)
+    return PathMetrics(float(seglen.sum()), exposure, peak, clearance, zone_clearance)
 
 
 def exposure(path: np.ndarray, field: ThreatField, culled: bool = False) -> float:

@@ -27,6 +27,7 @@ from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
 from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus, advise_many
 from pfp_service.core.threat import Threat, ThreatField
+from pfp_service.core.zones import ZoneSet
 
 __all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan", "predict_many", "walk", "walk_many"]
 
@@ -77,6 +78,8 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     ``pfp`` or ``optimal``; ``lambda`` is the optimal planner's exposure
     weight (``None`` for ``pfp``).  ``path_decimated`` is true when ``path``
     was thinned to fit a reply (``steps`` still counts every step).
+    ``min_zone_clearance`` is the path's least distance to a keep-out zone
+    (negative: it enters one), ``None`` when no zone was in force.
     """
 
     status: PlanStatus
@@ -97,15 +100,20 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     planner: str = "pfp"
     lam: float | None = msgspec.field(default=None, name="lambda")
     path_decimated: bool = False
+    min_zone_clearance: float | None = None
 
 
 def _field_at(
-    schedule: Sequence[Scheduled], step: int, intensity: str, cache: dict[int, ThreatField]
+    schedule: Sequence[Scheduled],
+    step: int,
+    intensity: str,
+    cache: dict[int, ThreatField],
+    zones: ZoneSet | None = None,
 ) -> ThreatField:
     active = tuple(s.threat for s in schedule if s.appear_step <= step)
     key = len(active)
     if key not in cache:
-        cache[key] = ThreatField(active, intensity)  # type: ignore[arg-type]
+        cache[key] = ThreatField(active, intensity, zones)  # type: ignore[arg-type]
     return cache[key]
 
 
@@ -229,6 +237,7 @@ def plan(
     stepper: Stepper | None = None,
     first_move: tuple[float, float] | None = None,
     field: ThreatField | None = None,
+    zones: ZoneSet | None = None,
 ) -> PlanResult:
     """Plan a path from ``start`` to ``goal`` among scheduled threats.
 
@@ -252,6 +261,8 @@ def plan(
         field: the field of every threat in ``schedule`` (all from step 0),
             already built and shared (a preview desk's, per world); ignored
             when it does not match them or the intensity.
+        zones: the keep-out zones in force throughout (default: ``field``'s,
+            if given); no step enters one (``steprule.judge_zoned``).
 
     Returns:
         A ``PlanResult``; failure is a status, never an exception.
@@ -269,10 +280,14 @@ def plan(
     if isinstance(params, PlannerParams):
         params = resolve(params, start, goal, [s.threat for s in schedule])
     cache: dict[int, ThreatField] = {}
+    if zones is None and field is not None:
+        zones = field.zones
     if field is not None and field.intensity == params.intensity and len(field) == len(schedule):
+        if zones is not None and field.zones is not zones:
+            field = field.with_zones(zones)
         cache[len(schedule)] = field  # _field_at's key: the threats active
     appear_steps = sorted({s.appear_step for s in schedule if s.appear_step > 0})
-    field = _field_at(schedule, 0, params.intensity, cache)
+    field = _field_at(schedule, 0, params.intensity, cache, zones)
     epochs: list[Epoch] = []
     epoch_start = 0
     events: list[str] = []
@@ -309,7 +324,7 @@ def plan(
             x, y = track[-1]
             epochs.append(Epoch(epoch_start, k, field))
             epoch_start = k
-            field = _field_at(schedule, k, params.intensity, cache)
+            field = _field_at(schedule, k, params.intensity, cache, zones)
             new = [s.threat.id for s in schedule if s.appear_step == k]
             events.append(f"step {k}: threat {', '.join(new)} appeared; unit at ({x:.6g}, {y:.6g})")
             stepper.world_changed()
@@ -321,11 +336,15 @@ def plan(
         break
     x, y = track[-1]
     epochs.append(Epoch(epoch_start, k, field))
-    for name in stepper.escapes:  # a start inside a core is left first: say so
+    for name in stepper.escapes:  # a start inside a core or a zone is left first: say so
         if name.startswith("leave core "):
             events.insert(
                 0,
                 f"start inside the core of threat {name[len('leave core ') :]}: left it by the shortest way out",
+            )
+        elif name.startswith("leave zone "):
+            events.insert(
+                0, f"start inside zone {name[len('leave zone ') :]}: left it by the shortest way out"
             )
     path = np.array(track)
     measured_by = None
@@ -357,4 +376,5 @@ def plan(
         escapes=stepper.escapes,
         traps=stepper.traps,
         escape_steps=stepper.escape_steps,
+        min_zone_clearance=m.min_zone_clearance if math.isfinite(m.min_zone_clearance) else None,
     )

@@ -293,13 +293,17 @@ class Stepper:
 
     def advise(self, field: ThreatField, x: float, y: float) -> Advice:
         """The next direction for a unit at ``(x, y)`` under ``field``."""
-        if self._terminal is None and self._run is None and not self._foresee:  # plain descent: one call
-            return self._descend(field, x, y)
+        if self._terminal is None and self._run is None and not self._foresee and not field.zones:
+            return self._descend(field, x, y)  # plain descent: one call
         early = self.check(x, y)
         if early is not None:
             if early.status is StepStatus.TRAPPED:
                 return early._replace(level=field.level_grad_at(x, y)[0])
             return early
+        if field.zones:
+            zoned = self._zoned(field, x, y)
+            if zoned is not None:
+                return zoned
         if self._foresee:
             if self.defer:
                 self._foresee = False
@@ -314,8 +318,50 @@ class Stepper:
         """Plain descent at ``(x, y)``: the gradient and the verdict in one compiled call."""
         if self.params.trap_window > steprule.RING_START:  # the ring may need to grow
             self._unit = steprule.roomy(self._unit)
-        code, dx, dy, level, dist, move, tx, ty = steprule.descend(field.packed, self._unit, x, y)
+        code, dx, dy, level, dist, move, tx, ty = steprule.descend(
+            field.packed, *field.zones.packed(), self._unit, x, y
+        )
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
+
+    def _zoned(self, field: ThreatField, x: float, y: float) -> Advice | None:
+        """What keep-out zones decide before descent: a goal in a zone, or a unit in one.
+
+        A goal in a zone is ``trapped`` ("the goal lies in zone Z"); a unit in a
+        zone leaves it by the shortest way out first (an escape run, ``leave
+        zone Z``), or is ``trapped`` when there is none.  ``None``: descend.
+        """
+        zones = field.zones
+        goal_in = zones.zone_at(*self.goal)
+        if goal_in:
+            dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+            self._traps += 1
+            return self._end(
+                StepStatus.TRAPPED,
+                field.level_grad_at(x, y)[0],
+                dist,
+                f"the goal lies in zone {goal_in}",
+                (x, y),
+            )
+        if self._run is not None:
+            return None
+        here = zones.zone_at(x, y)
+        if not here or (self._foresee and not self.defer):  # the look-ahead leaves first, then plans on
+            return None
+        if self._escaper is None:
+            self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
+        run = self._escaper.leave_core(field, x, y)
+        if run is None:
+            dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+            self._traps += 1
+            return self._end(
+                StepStatus.TRAPPED,
+                field.level_grad_at(x, y)[0],
+                dist,
+                f"inside zone {here}, with no straight way out that enters no other zone or core",
+                (x, y),
+            )
+        self._run = run
+        return self._escaping(field, x, y)
 
     def check(self, x: float, y: float) -> Advice | None:
         """The part of ``advise`` that needs no field: arrival, bounds, a standing verdict.
@@ -361,7 +407,14 @@ class Stepper:
         """
         if self.params.trap_window > steprule.RING_START:  # the ring may need to grow
             self._unit = steprule.roomy(self._unit)
-        code, dx, dy, dist, move, tx, ty = steprule.judge(self._unit, x, y, fx, fy, norm, steprule.DESCENT)
+        if field is not None and field.zones:
+            code, dx, dy, dist, move, tx, ty = steprule.judge_zoned(
+                self._unit, *field.zones.packed(), x, y, fx, fy, norm
+            )
+        else:
+            code, dx, dy, dist, move, tx, ty = steprule.judge(
+                self._unit, x, y, fx, fy, norm, steprule.DESCENT
+            )
         if code == steprule.GO:  # the common case, without a call (thousands of units a tick)
             self.advisories += 1
             return Advice(
@@ -565,8 +618,13 @@ def advise_many(
         kernels.descent_many(field.packed, pts, goals, gains, out)
     rows = out.tolist()
     coords = pts.tolist()
+    # a unit in a keep-out zone, or whose goal is in one, is judged by ``advise`` (``Stepper._zoned``)
+    zoned = (field.zones.contains(pts) | field.zones.contains(goals)).tolist() if field.zones else [False] * n
     result = []
-    for s, (x, y), (fx, fy, level, norm) in zip(steppers, coords, rows):
+    for s, (x, y), (fx, fy, level, norm), z in zip(steppers, coords, rows, zoned):
+        if z:
+            result.append(s.advise(field, x, y))
+            continue
         if s._terminal is None and s._run is None and not s._foresee:  # plain descent: one judge call
             result.append(s.follow(x, y, fx, fy, level, norm, field))
             continue

@@ -31,6 +31,15 @@ The rules, in order:
    is less than ``0.2 * trap_window * step`` from where it was
    ``trap_window`` advisories ago.  A watch verdict still carries the
    direction and the step (a deferring stepper descends on meanwhile).
+
+The zone rule (``judge_zoned``, which every descent driver calls instead of
+``judge``; with no zones it is ``judge``): keep-out zones (``core.zones``)
+add a smooth barrier to the gradient within ``BARRIER_STEPS`` steps of a
+zone, ``BARRIER_PUSH * |grad f| * (1 - d / rho)^2`` along the outward normal,
+so descent bends away by itself (at a zone's edge the barrier pushes out
+twice as hard as the rest of the field pulls); and a step that would touch a
+zone is cut to end ``CLEAR_STEPS`` steps short of it.  A unit that cannot
+move on is then caught by the trap watch like any other (and escapes round).
 """
 
 from __future__ import annotations
@@ -40,13 +49,16 @@ import math
 import numba
 import numpy as np
 
-from pfp_service.core import kernels
+from pfp_service.core import kernels, zones
 
 __all__ = [
     "ARRIVED",
     "BAD_GRADIENT",
     "BAD_POSITION",
+    "BARRIER_PUSH",
+    "BARRIER_STEPS",
     "CHECK",
+    "CLEAR_STEPS",
     "DESCENT",
     "GO",
     "HEADING",
@@ -59,6 +71,7 @@ __all__ = [
     "UNIT_COLUMNS",
     "descend",
     "judge",
+    "judge_zoned",
     "reset_watch",
     "roomy",
     "unit",
@@ -80,6 +93,10 @@ CHECK, DESCENT, HEADING = range(3)
 GO, ARRIVED, OUT_OF_BOUNDS, BAD_POSITION, BAD_GRADIENT, STATIONARY, NO_PROGRESS, OSCILLATING = range(8)
 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
+
+BARRIER_STEPS = 3.0  # the zone barrier reaches this many steps from a zone
+BARRIER_PUSH = 2.0  # at a zone's edge, how many times the rest of the gradient it pushes out
+CLEAR_STEPS = 0.1  # a step cut at a zone ends this many steps short of it
 
 
 def unit(
@@ -195,15 +212,67 @@ def judge(
 
 
 @numba.njit(cache=True, nogil=True)
+def judge_zoned(
+    u: np.ndarray,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    x: float,
+    y: float,
+    fx: float,
+    fy: float,
+    norm: float,
+) -> tuple[int, float, float, float, float, float, float]:
+    """``judge`` of a descent advisory under keep-out zones (the zone rule, module docstring).
+
+    Args:
+        edges, offsets, circles, boxes: the zones (``ZoneSet.packed()``; empty arrays for none).
+        fx, fy, norm: the potential's gradient at ``(x, y)`` without the zones, and its norm.
+
+    Returns:
+        As ``judge``: the direction bent by the barrier, the step cut short of any zone.
+    """
+    if boxes.shape[0] > 0 and math.isfinite(norm):
+        rho = BARRIER_STEPS * u[STEP]
+        sd, z, gx, gy = zones.point_zone(edges, offsets, circles, boxes, x, y, rho)
+        if z >= 0 and sd < rho:
+            s = 1.0 - max(sd, 0.0) / rho
+            push = BARRIER_PUSH * norm * s * s
+            fx = fx - push * gx
+            fy = fy - push * gy
+            norm = math.hypot(fx, fy)
+    code, dx, dy, dist, move, to_x, to_y = judge(u, x, y, fx, fy, norm, DESCENT)
+    if boxes.shape[0] > 0 and move > 0.0 and (code == GO or code >= NO_PROGRESS):
+        t, z = zones.segment_hit(edges, offsets, circles, boxes, x, y, to_x, to_y)
+        if z >= 0:
+            keep = max(t * move - CLEAR_STEPS * u[STEP], 0.0)
+            to_x = x + dx * keep
+            to_y = y + dy * keep
+            move = keep
+    return code, dx, dy, dist, move, to_x, to_y
+
+
+@numba.njit(cache=True, nogil=True)
 def descend(
-    packed: np.ndarray, u: np.ndarray, x: float, y: float
+    packed: np.ndarray,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    u: np.ndarray,
+    x: float,
+    y: float,
 ) -> tuple[int, float, float, float, float, float, float, float]:
     """One descent advisory in one call: the potential's gradient at ``(x, y)`` (``kernels.point_descent``), judged.
 
+    Args:
+        edges, offsets, circles, boxes: the keep-out zones (``ZoneSet.packed()``), judged by ``judge_zoned``.
+
     Returns:
-        ``(code, dx, dy, level, dist, move, to_x, to_y)``: ``judge``'s answer
+        ``(code, dx, dy, level, dist, move, to_x, to_y)``: ``judge_zoned``'s answer
         with the threat level at ``(x, y)``.
     """
     fx, fy, level, norm = kernels.point_descent(packed, x, y, u[GOAL_X], u[GOAL_Y], u[GAIN])
-    code, dx, dy, dist, move, to_x, to_y = judge(u, x, y, fx, fy, norm, DESCENT)
+    code, dx, dy, dist, move, to_x, to_y = judge_zoned(u, edges, offsets, circles, boxes, x, y, fx, fy, norm)
     return code, dx, dy, level, dist, move, to_x, to_y

@@ -425,6 +425,22 @@ def _signed_many(
 
 
 @numba.njit(cache=True, nogil=True)
+def _nearest_many(
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    pts: np.ndarray,
+    out: np.ndarray,
+    idx: np.ndarray,
+) -> None:
+    for i in range(pts.shape[0]):
+        sd, z, _, _ = point_zone(edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], math.inf)
+        out[i] = sd
+        idx[i] = z
+
+
+@numba.njit(cache=True, nogil=True)
 def _first_hit(
     edges: np.ndarray, offsets: np.ndarray, circles: np.ndarray, boxes: np.ndarray, pts: np.ndarray
 ) -> tuple[int, int]:
@@ -440,6 +456,23 @@ def _first_hit(
         if z >= 0:
             return i, z
     return -1, -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _segment_hits(
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    pts: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """``out[i]``: segment ``pts[i] -> pts[i + 1]`` touches a zone."""
+    for i in range(pts.shape[0] - 1):
+        out[i] = (
+            segment_hit(edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1])[1]
+            >= 0
+        )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -540,6 +573,15 @@ class ZoneSet:
             _signed_many(self.edges, self.offsets, self.circles, self.boxes, pts, out)
         return out
 
+    def nearest_many(self, points: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """Per point, the signed distance to the nearest zone and its id (``""`` with no zones)."""
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+        out = np.full(len(pts), math.inf)
+        idx = np.full(len(pts), -1, dtype=np.int64)
+        if self.zones and len(pts):
+            _nearest_many(self.edges, self.offsets, self.circles, self.boxes, pts, out, idx)
+        return out, [self.ids[i] if i >= 0 else "" for i in idx.tolist()]
+
     def contains(self, points: np.ndarray) -> np.ndarray:
         """Boolean mask: which points lie in some zone (boundary included)."""
         return self.signed_distance(points) <= TOUCH_M
@@ -569,6 +611,40 @@ class ZoneSet:
             return -1, ""
         i, z = _first_hit(self.edges, self.offsets, self.circles, self.boxes, pts)
         return (int(i), self.ids[z]) if z >= 0 else (-1, "")
+
+    def first_contact(self, path: np.ndarray) -> tuple[int, float, str]:
+        """``first_hit`` with where on its segment: ``(segment, fraction along it, zone id)``; ``(-1, 0, "")``."""
+        seg, zid = self.first_hit(path)
+        if seg < 0:
+            return -1, 0.0, ""
+        pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        if len(pts) < 2:
+            return 0, 0.0, zid
+        a, b = pts[seg], pts[seg + 1]
+        t, _ = segment_hit(self.edges, self.offsets, self.circles, self.boxes, a[0], a[1], b[0], b[1])
+        return seg, max(float(t), 0.0), zid
+
+    def segment_hits(self, path: np.ndarray) -> np.ndarray:
+        """Per segment of the polyline ``path``: does it touch a zone (exactly)?"""
+        pts = np.ascontiguousarray(path, dtype=np.float64).reshape(-1, 2)
+        out = np.zeros(max(len(pts) - 1, 0), dtype=np.bool_)
+        if self.zones and len(pts) > 1:
+            _segment_hits(self.edges, self.offsets, self.circles, self.boxes, pts, out)
+        return out
+
+    def way_out(self, x: float, y: float, clear_m: float) -> tuple[float, float] | None:
+        """From ``(x, y)`` in a zone, the point ``clear_m`` past the nearest edge (the shortest way out).
+
+        ``None`` when ``(x, y)`` is in no zone, or the way out ends in another zone.
+        """
+        sd, _zid, (gx, gy) = self.nearest(x, y)
+        if sd > TOUCH_M:
+            return None
+        if gx == 0.0 and gy == 0.0:  # on an edge's ray of symmetry: any outward normal will do
+            return None
+        r = -sd + clear_m
+        end = (x + gx * r, y + gy * r)
+        return None if self.zone_at(*end) else end
 
     def clearance(self, path: np.ndarray) -> float:
         """The least signed distance from the polyline ``path`` to any zone (< 0: it enters one).
