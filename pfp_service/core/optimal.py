@@ -35,6 +35,7 @@ from pfp_service.core.metrics import LAMBDA, Epoch, measure
 from pfp_service.core.plan import PlanResult, PlanStatus, Scheduled, UsedParams
 from pfp_service.core.stepper import Bounds
 from pfp_service.core.threat import Intensity, ThreatField
+from pfp_service.core.zones import ZoneSet
 
 __all__ = ["DEFAULT_CELLS", "OptimalPath", "OptimalSolver", "plan_optimal"]
 
@@ -80,7 +81,14 @@ class OptimalSolver:
                 (min(start[0], goal[0]) - pad, min(start[1], goal[1]) - pad),
                 (max(start[0], goal[0]) + pad, max(start[1], goal[1]) + pad),
             )
-        self.cores = Cores.of(field, SEARCH_FRACTION) if avoid_cores else None
+        if avoid_cores:
+            self.cores: Cores | None = Cores.of(field, SEARCH_FRACTION)
+        elif field.zones:  # keep-out zones are kept out always; threat cores only when asked
+            self.cores = Cores.of(ThreatField((), field.intensity, field.zones))
+        else:
+            self.cores = None
+        if field.zones:
+            box = _round_zones(field.zones, box, 0.02 * math.hypot(goal[0] - start[0], goal[1] - start[1]))
         (x0, y0), (x1, y1) = box
         span = max(x1 - x0, y1 - y0)
         cell_m = span / cells if span > 0 else 1.0
@@ -103,6 +111,21 @@ class OptimalSolver:
         return OptimalPath(pts, m.length, m.exposure, m.length + lam * m.exposure)
 
 
+def _round_zones(zones: ZoneSet, box: Bounds, room: float) -> Bounds:
+    """``box`` grown to hold every keep-out zone it meets, with ``room`` to go round (twice: zones in a chain)."""
+    (x0, y0), (x1, y1) = box
+    b = zones.boxes
+    for _ in range(2):
+        meet = (b[:, 0] <= x1) & (b[:, 2] >= x0) & (b[:, 1] <= y1) & (b[:, 3] >= y0)
+        if not meet.any():
+            break
+        x0 = min(x0, float(b[meet, 0].min()) - room)
+        y0 = min(y0, float(b[meet, 1].min()) - room)
+        x1 = max(x1, float(b[meet, 2].max()) + room)
+        y1 = max(y1, float(b[meet, 3].max()) + room)
+    return (x0, y0), (x1, y1)
+
+
 def plan_optimal(
     start: tuple[float, float],
     goal: tuple[float, float],
@@ -113,11 +136,13 @@ def plan_optimal(
     cells: int = DEFAULT_CELLS,
     clock: Callable[[], float] | None = None,
     avoid_cores: bool = False,
+    zones: ZoneSet | None = None,
 ) -> PlanResult:
     """``pfp plan --planner optimal``: the path minimising ``length + lam * exposure``.
 
     Args:
         avoid_cores: never enter a threat core (``--avoid-cores``).
+        zones: keep-out zones; the path never enters one (with or without ``avoid_cores``).
 
     Returns:
         A ``PlanResult`` (``planner="optimal"``): ``reached`` with the path;
@@ -125,18 +150,38 @@ def plan_optimal(
         ``invalid`` with the reason when the grid holds no route.
     """
     t0 = clock() if clock else 0.0
-    field = ThreatField([s.threat for s in schedule], intensity)
-    solver = OptimalSolver(field, start, goal, bounds, cells, avoid_cores)
-    found = solver.solve(lam)
-    used = UsedParams(None, solver.graph.cell_m, None, None, intensity, "none")  # no descent parameters
+    field = ThreatField([s.threat for s in schedule], intensity, zones)
+    why = ""
+    if field.zones:
+        for what, (x, y) in (("goal", goal), ("start", start)):
+            inside = field.zones.zone_at(float(x), float(y))
+            if inside:
+                why = f"the {what} lies in zone {inside}"
+    found = OptimalPath(np.zeros((0, 2)), math.inf, math.inf, math.inf)
+    cell_m = 0.0
+    if not why:
+        solver = OptimalSolver(field, start, goal, bounds, cells, avoid_cores)
+        found = solver.solve(lam)
+        cell_m = solver.graph.cell_m
+        hit = solver.cores.first_hit(found.path) if solver.cores is not None and len(found.path) else ""
+        if hit:  # the start or goal's link to the grid clips one: no honest path on this grid
+            why = f"the route on the {cell_m:.4g} m grid clips {Cores.region(hit)}: a finer grid is needed"
+            found = OptimalPath(np.zeros((0, 2)), math.inf, math.inf, math.inf)
+    used = UsedParams(None, cell_m, None, None, intensity, "none")  # no descent parameters
     ms = ((clock() - t0) * 1e3) if clock else 0.0
     if not len(found.path):
-        cell = f"{solver.graph.cell_m:.4g} m grid"
+        cell = f"{cell_m:.4g} m grid"
+        what = "the threat cores and zones" if avoid_cores and field.zones else "the threat cores"
+        if not avoid_cores and field.zones:
+            what = "the zones"
         return PlanResult(
-            status=PlanStatus.TRAPPED if avoid_cores else PlanStatus.INVALID,
-            reason=f"no route from start to goal avoids the threat cores ({cell})"
-            if avoid_cores
-            else "no route on the grid from start to goal",
+            status=PlanStatus.TRAPPED if avoid_cores or field.zones else PlanStatus.INVALID,
+            reason=why
+            or (
+                f"no route from start to goal avoids {what} ({cell})"
+                if avoid_cores or field.zones
+                else "no route on the grid from start to goal"
+            ),
             steps=0,
             length=0.0,
             exposure=0.0,
@@ -152,8 +197,9 @@ def plan_optimal(
     m = measure(found.path, [Epoch(0, len(found.path) - 1, field)])
     return PlanResult(
         status=PlanStatus.REACHED,
-        reason=f"minimum of length + {lam:g} * exposure on a {solver.graph.cell_m:.4g} m 16-connected grid"
-        + (", avoiding every threat core" if avoid_cores else ""),
+        reason=f"minimum of length + {lam:g} * exposure on a {cell_m:.4g} m 16-connected grid"
+        + (", avoiding every threat core" if avoid_cores else "")
+        + (", keeping out of every zone" if field.zones else ""),
         steps=len(found.path) - 1,
         length=m.length,
         exposure=m.exposure,
@@ -165,4 +211,5 @@ def plan_optimal(
         params=used,
         planner="optimal",
         lam=lam,
+        min_zone_clearance=m.min_zone_clearance if math.isfinite(m.min_zone_clearance) else None,
     )
