@@ -9,20 +9,27 @@ degrees, about a centimetre), from planner metres through the mission
 - each threat as a Point at its position (``kind: threat``) with its parameters;
 - each threat's zone (``kind: zone``), the region where its own level is at
   least ``level`` of its peak (default 10 %), and its core (``kind: core``), the
-  half-maximum region the escapes never enter (``core.cores.CORE_FRACTION``).
+  half-maximum region the escapes never enter (``core.cores.CORE_FRACTION``);
+- each keep-out zone (``kind: keep_out``, ``core.zones``) as a Polygon with its
+  holes (a circle as a ``CIRCLE_VERTICES``-gon round it, with ``radius_m``).
+
+The other way, ``zones_from_geojson`` reads keep-out zones from RFC 7946
+Polygons and MultiPolygons (bare, in a Feature or a FeatureCollection) with
+shapely, which checks each ring (closed, not crossing itself, holes inside);
+``load_zones`` reads a file of them (``pfp plan --zones``, ``pfp serve --zones``).
 
 Zones are traced as polygons of ``ZONE_VERTICES`` points: a skew-normal
 density is log-concave, so each level set is convex and every ray from the
 mode crosses its boundary once, found by bisection.  Rings are closed and run
 counter-clockwise (the right-hand rule of RFC 7946 section 3.1.6).  The
-module computes values; only ``write`` touches the file system (``pfp plan --geojson``).
+module computes values; only ``write`` (``pfp plan --geojson``) and ``load_zones`` touch the file system.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,28 +38,33 @@ import numpy as np
 
 from pfp_service.core.cores import CORE_FRACTION, Cores
 from pfp_service.core.threat import Threat, ThreatField
+from pfp_service.core.zones import Zone
 from pfp_service.errors import InputError
-from pfp_service.geo import Origin
+from pfp_service.geo import LatLon, Origin
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
     from pfp_service.scenario import Scenario
 
 __all__ = [
+    "CIRCLE_VERTICES",
     "DECIMALS",
     "ZONE_LEVEL",
     "ZONE_VERTICES",
     "check_geojson_path",
     "feature_collection",
+    "load_zones",
     "preview_reply",
     "scenario_collection",
     "write",
     "zone_ring",
+    "zones_from_geojson",
 ]
 
 DECIMALS = 7
 ZONE_LEVEL = 0.1
 ZONE_VERTICES = 96
+CIRCLE_VERTICES = 72
 _BISECTIONS = 60
 METRICS = (
     "status",
@@ -137,6 +149,7 @@ def feature_collection(
     level: float = ZONE_LEVEL,
     threat_properties: Mapping[str, Mapping[str, Any]] | None = None,
     name: str = "",
+    zones: Sequence[Zone] = (),
 ) -> dict[str, Any]:
     """The RFC 7946 FeatureCollection of a plan (as a dict for ``json.dumps``).
 
@@ -149,6 +162,7 @@ def feature_collection(
         level: the zone's share of each threat's peak, strictly between 0 and 1.
         threat_properties: extra properties by threat id (e.g. the file's facing and sigmas).
         name: the collection's name (a foreign member, as RFC 7946 section 6.1 allows).
+        zones: keep-out zones, drawn as Polygons (``kind: keep_out``).
 
     Raises:
         ValueError: ``level`` outside (0, 1).
@@ -190,10 +204,141 @@ def feature_collection(
                     {"type": "Polygon", "coordinates": [ring]}, {"kind": kind, "id": t.id, "level": share}
                 )
             )
+    for z in zones:
+        features.append(_keep_out(origin, z))
     out: dict[str, Any] = {"type": "FeatureCollection", "features": features}
     if name:
         out["name"] = name
     return out
+
+
+def _keep_out(origin: Origin, z: Zone) -> dict[str, Any]:
+    """A keep-out zone's Feature: its rings counter-clockwise, holes clockwise (RFC 7946 section 3.1.6)."""
+    props: dict[str, Any] = {"kind": "keep_out", "id": z.id, "zone_kind": z.kind}
+    if z.centre is not None:
+        theta = 2.0 * math.pi * np.arange(CIRCLE_VERTICES) / CIRCLE_VERTICES
+        r = z.radius_m / math.cos(math.pi / CIRCLE_VERTICES)  # the polygon holds the circle
+        ring = np.column_stack([z.centre[0] + r * np.cos(theta), z.centre[1] + r * np.sin(theta)])
+        props.update(radius_m=z.radius_m)
+        return _feature({"type": "Polygon", "coordinates": [_ring(origin, ring)]}, props)
+    rings = []
+    for i, ring_m in enumerate(z.rings()):
+        xy = np.asarray(ring_m, dtype=float)
+        ccw = _signed_area(xy) > 0.0
+        if ccw != (i == 0):
+            xy = xy[::-1]
+        rings.append(_ring(origin, xy))
+    return _feature({"type": "Polygon", "coordinates": rings}, props)
+
+
+def _signed_area(xy: np.ndarray) -> float:
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def zones_from_geojson(doc: Any, origin: Origin, source: str = "") -> list[Zone]:
+    """Keep-out zones from a GeoJSON document: every Polygon and MultiPolygon in it.
+
+    A Feature's zone id is its ``id`` or ``properties.id`` (or ``name``) when
+    that is 1-64 of ``[A-Za-z0-9_-]``, else ``zone-N`` (N counting polygons
+    from 1); a MultiPolygon's polygons get ``-1``, ``-2``, ... after it.
+    Coordinates are ``[lon, lat]`` (an altitude is ignored), turned into
+    metres from ``origin``.
+
+    Raises:
+        InputError: at ``source`` and the feature (``features[2].geometry``), with the reason.
+    """
+    import re
+
+    import shapely.geometry
+    from shapely.validation import explain_validity
+
+    def fail(where: str, reason: str) -> InputError:
+        return InputError(f"{source}: {where}" if source and where else source or where, reason)
+
+    if not isinstance(doc, dict):
+        raise fail("", "expected a GeoJSON object (FeatureCollection, Feature, Polygon or MultiPolygon)")
+    kind = doc.get("type")
+    if kind == "FeatureCollection":
+        items = doc.get("features")
+        if not isinstance(items, list):
+            raise fail("features", "expected a list of Features")
+        feats = [(f"features[{i}]", f) for i, f in enumerate(items)]
+    elif kind == "Feature":
+        feats = [("", doc)]
+    elif kind in ("Polygon", "MultiPolygon"):
+        feats = [("", {"type": "Feature", "geometry": doc})]
+    else:
+        raise fail("type", f"expected FeatureCollection, Feature, Polygon or MultiPolygon, got {kind!r}")
+    chunk = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+    zones: list[Zone] = []
+    seen: set[str] = set()
+    for where, f in feats:
+        at = f"{where}.geometry" if where else "geometry"
+        if not isinstance(f, dict) or f.get("type") != "Feature":
+            raise fail(where or "$", "expected a Feature")
+        geom = f.get("geometry")
+        if not isinstance(geom, dict) or geom.get("type") not in ("Polygon", "MultiPolygon"):
+            got = geom.get("type") if isinstance(geom, dict) else geom
+            raise fail(at, f"a keep-out zone must be a Polygon or MultiPolygon, got {got!r}")
+        try:
+            shape = shapely.geometry.shape(geom)
+        except Exception as exc:  # shapely's own words for malformed coordinates
+            raise fail(at, f"not a valid {geom['type']}: {exc}") from None
+        if shape.is_empty:
+            raise fail(at, "the geometry is empty")
+        if not shape.is_valid:
+            raise fail(at, f"not a valid {geom['type']}: {explain_validity(shape)}")
+        raw_props = f.get("properties")
+        props: dict[str, Any] = raw_props if isinstance(raw_props, dict) else {}
+        name = next(
+            (
+                str(v)
+                for v in (f.get("id"), props.get("id"), props.get("name"))
+                if v is not None and chunk.match(str(v))
+            ),
+            "",
+        )
+        polys = list(shape.geoms) if shape.geom_type == "MultiPolygon" else [shape]
+        for k, poly in enumerate(polys):
+            zid = (f"{name}-{k + 1}" if len(polys) > 1 else name) if name else f"zone-{len(zones) + 1}"
+            if zid in seen:
+                raise fail(where or "$", f"zone id {zid!r} is given twice")
+            seen.add(zid)
+            rings = []
+            for ring in (poly.exterior, *poly.interiors):
+                ll = np.asarray(ring.coords, dtype=float)[:, :2]
+                if not (np.all(np.abs(ll[:, 1]) <= 90.0) and np.all(np.abs(ll[:, 0]) <= 180.0)):
+                    raise fail(
+                        at, "coordinates must be [lon, lat] in degrees (lat within ±90, lon within ±180)"
+                    )
+                xy = [origin.localise_point(LatLon(lat=float(la), lon=float(lo)), at) for lo, la in ll]
+                rings.append(xy)
+            try:
+                zones.append(Zone.polygon(zid, rings[0], rings[1:]))
+            except ValueError as exc:
+                raise fail(at, str(exc)) from None
+    if not zones:
+        raise fail("", "no Polygon or MultiPolygon in it")
+    return zones
+
+
+def load_zones(path: str | Path, origin: Origin | None, what: str = "--zones") -> list[Zone]:
+    """Keep-out zones from a GeoJSON file (``zones_from_geojson``).
+
+    Raises:
+        InputError: one line naming the file (and the feature): unreadable, not JSON, no origin, a bad polygon.
+    """
+    from pfp_service.files import read_text
+
+    text = read_text(str(path))
+    if origin is None:
+        raise InputError(what, f"{path}: GeoJSON is in lon/lat and needs a mission origin ({{lat, lon}})")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(str(path), f"not JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
+    return zones_from_geojson(doc, origin, str(path))
 
 
 def preview_reply(
@@ -202,6 +347,7 @@ def preview_reply(
     threats: Sequence[Threat],
     start: Sequence[float] | None = None,
     goal: Sequence[float] | None = None,
+    zones: Sequence[Zone] = (),
 ) -> bytes:
     """The body of a preview reply asked for with ``geojson: true``: the collection as JSON bytes.
 
@@ -210,7 +356,7 @@ def preview_reply(
     """
     if origin is None:
         raise InputError("$.geojson", "needs the mission origin (pfp serve --origin LAT,LON)")
-    fc = feature_collection(origin, threats, result, start=start, goal=goal)
+    fc = feature_collection(origin, threats, result, start=start, goal=goal, zones=zones)
     return json.dumps(fc, ensure_ascii=False).encode()
 
 
@@ -229,9 +375,14 @@ def check_geojson_path(path: str | Path, what: str = "--geojson") -> Path:
 
 
 def scenario_collection(
-    scenario: Scenario, result: PlanResult | None, level: float = ZONE_LEVEL
+    scenario: Scenario,
+    result: PlanResult | None,
+    level: float = ZONE_LEVEL,
+    zones: Iterable[Zone] | None = None,
 ) -> dict[str, Any]:
     """``feature_collection`` of a scenario file's plan, its threats carrying the file's parameters.
+
+    ``zones``: the keep-out zones planned with (default: the file's own).
 
     Raises:
         InputError: at ``origin``, when the scenario has none (GeoJSON is WGS-84 only).
@@ -256,6 +407,7 @@ def scenario_collection(
         level=level,
         threat_properties=props,
         name=scenario.name,
+        zones=list(scenario.zone_set() if zones is None else zones),
     )
 
 

@@ -4,7 +4,10 @@ A scenario names a start, a goal, optional mission bounds, planner settings
 and threats (each optionally popping up at a step).  With an ``origin``
 (``{lat, lon, alt}``), every position (start, goal, bounds corners, threat
 positions) may be ``{lat, lon}`` instead of ``[x, y]`` metres; it is turned
-into metres on decoding (``geo.localise``), so the rest never sees a degree.  ``load_scenario`` is the
+into metres on decoding (``geo.localise``), so the rest never sees a degree.
+Keep-out ``zones:`` are the wire's zone form with an ``id`` (``ZoneSpec``):
+a ``polygon`` (closed rings, the outer first, vertices ``[x, y]`` or
+``{lat, lon}``) or a ``circle`` (``centre``, ``radius_m``).  ``load_scenario`` is the
 only function here that touches the file system; ``decode_scenario`` works on
 bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
 """
@@ -36,14 +39,17 @@ from pfp_service.constraints import (
 )
 from pfp_service.core import PlannerParams, Scheduled, Threat
 from pfp_service.core.params import ESCAPES, Escape, reach
+from pfp_service.core.zones import ZoneSet
 from pfp_service.errors import InputError, from_validation
 from pfp_service.geo import Origin, localise_document
+from pfp_service.wire.messages import ZoneUpdate, localise_zone
 
 __all__ = [
     "CHOICES",
     "PlannerSpec",
     "Scenario",
     "ThreatSpec",
+    "ZoneSpec",
     "decode_scenario",
     "load_scenario",
 ]
@@ -140,6 +146,12 @@ class PlannerSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
         )
 
 
+class ZoneSpec(ZoneUpdate, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A keep-out zone in a file: the wire's ``ZoneUpdate`` with its ``id`` (default ``zN``)."""
+
+    id: Id | None = None
+
+
 class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
     """A whole planning problem, as written in a scenario file."""
 
@@ -150,6 +162,7 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     bounds: tuple[Point, Point] | None = None
     planner: PlannerSpec = PlannerSpec()
     threats: list[ThreatSpec] = []
+    zones: list[ZoneSpec] = []
 
     def __post_init__(self) -> None:
         if self.bounds is not None:
@@ -168,6 +181,16 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
             if tid in seen:
                 raise ValueError(f"threats[{i}].id: duplicate id {tid!r}")
             seen.add(tid)
+        zone_ids: set[str] = set()
+        for i, z in enumerate(self.zones):
+            zid = z.id or f"z{i + 1}"
+            if zid in zone_ids:
+                raise ValueError(f"zones[{i}].id: duplicate id {zid!r}")
+            zone_ids.add(zid)
+
+    def zone_set(self) -> ZoneSet:
+        """The file's keep-out zones, for the core."""
+        return ZoneSet(z.to_zone(z.id or f"z{i + 1}") for i, z in enumerate(self.zones))
 
     def schedule(self) -> list[Scheduled]:
         return [Scheduled(t.to_threat(f"t{i + 1}"), t.appear_step) for i, t in enumerate(self.threats)]
@@ -209,6 +232,18 @@ def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
 def _convert(obj: object) -> Scenario:
     if not isinstance(obj, dict):
         raise InputError("", "a scenario must be a mapping with start, goal and threats")
+    zones = obj.get("zones")
+    if isinstance(zones, list) and any(isinstance(z, dict) for z in zones):
+        origin = localise_document({"origin": obj["origin"]}).get("origin") if "origin" in obj else None
+        obj = {
+            **obj,
+            "zones": [
+                localise_zone(
+                    z, msgspec.convert(origin, Origin) if origin is not None else None, f"zones[{i}]"
+                )
+                for i, z in enumerate(zones)
+            ],
+        }
     try:
         return msgspec.convert(localise_document(obj), Scenario)
     except msgspec.ValidationError as exc:

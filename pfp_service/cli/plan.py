@@ -89,6 +89,12 @@ def register(sub: Any) -> None:
         help=f"optimal planner: grid cells along the longer side (default {DEFAULT_CELLS})",
     )
     p.add_argument(
+        "--zones",
+        metavar="GEOJSON",
+        help="keep-out zones no path enters: RFC 7946 Polygons and MultiPolygons in lon/lat "
+        "(needs the scenario's origin), added to the file's zones:",
+    )
+    p.add_argument(
         "--avoid-cores",
         action="store_const",
         const=True,
@@ -181,6 +187,11 @@ def run(args: argparse.Namespace) -> int:
     if args.planner == "pfp" and (problem := reach(params, scenario.start, scenario.goal)) is not None:
         raise InputError("--step" if args.step is not None else f"{args.scenario}: planner.step", problem)
     schedule = scenario.schedule()
+    zones = scenario.zone_set()
+    if args.zones:
+        from pfp_service.geojson import load_zones
+
+        zones = zones.plus(load_zones(args.zones, scenario.origin))
     times = []
     for _ in range(args.repeat):
         if args.planner == "optimal":
@@ -194,10 +205,17 @@ def run(args: argparse.Namespace) -> int:
                 cells,
                 time.perf_counter,
                 avoid_cores=bool(args.avoid_cores),
+                zones=zones,
             )
         else:
             result = plan(
-                scenario.start, scenario.goal, schedule, params, scenario.bounds_tuple(), time.perf_counter
+                scenario.start,
+                scenario.goal,
+                schedule,
+                params,
+                scenario.bounds_tuple(),
+                time.perf_counter,
+                zones=zones,
             )
         times.append(result.compute_ms)
     result = msgspec.structs.replace(result, compute_ms=statistics.median(times))
@@ -208,7 +226,7 @@ def run(args: argparse.Namespace) -> int:
     if args.geojson:
         from pfp_service import geojson
 
-        geojson.write(args.geojson, geojson.scenario_collection(scenario, result, args.zone_level))
+        geojson.write(args.geojson, geojson.scenario_collection(scenario, result, args.zone_level, zones))
     if args.json:
         sys.stdout.write(msgspec.json.encode(result).decode() + "\n")
     else:

@@ -30,6 +30,7 @@ from pfp_service.wire.messages.codec import (
     decode_world_snapshot,
     decode_zone,
     encode,
+    localise_zone,
 )
 from pfp_service.wire.messages.structs import (
     CHOICES,
@@ -147,4 +148,5 @@ __all__ = [
     "decode_zone",
     "encode",
     "fit_text",
+    "localise_zone",
 ]

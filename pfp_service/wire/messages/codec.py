@@ -63,6 +63,7 @@ __all__ = [
     "decode_world_snapshot",
     "decode_zone",
     "encode",
+    "localise_zone",
 ]
 
 
@@ -186,7 +187,7 @@ def decode(
         if b'"lat"' in data or b'"lon"' in data:  # type: ignore[operator]
             # the slow path only for lat/lon: untyped, localised, then typed with the same paths
             doc = _geo_document(cls, data)  # type: ignore[arg-type]
-            doc = _localise_zone(doc, origin) if cls is ZoneUpdate else localise(doc, origin, "$")
+            doc = localise_zone(doc, origin) if cls is ZoneUpdate else localise(doc, origin, "$")
             msg: M = msgspec.convert(doc, cls)
         else:
             msg = decoder.decode(data)  # type: ignore[arg-type]
@@ -217,22 +218,28 @@ def _vertex(value: Any, origin: Origin | None, path: str) -> Any:
     return list(origin.localise_point(p, path))
 
 
-def _localise_zone(doc: Any, origin: Origin | None) -> Any:
-    """A zone document with its polygon's vertices and circle's centre in metres (``decode``'s lat/lon path)."""
+def localise_zone(doc: Any, origin: Origin | None, path: str = "$") -> Any:
+    """A zone document with its polygon's vertices and circle's centre in metres (``decode``'s lat/lon path).
+
+    Scenario files take their ``zones:`` through here too (``path`` ``zones[i]``).
+
+    Raises:
+        InputError: a bad lat/lon, or one without an origin, at its path.
+    """
     if not isinstance(doc, dict):
         return doc
     out = dict(doc)
     rings = doc.get("polygon")
     if isinstance(rings, list):
         out["polygon"] = [
-            [_vertex(v, origin, f"$.polygon[{i}][{k}]") for k, v in enumerate(ring)]
+            [_vertex(v, origin, f"{path}.polygon[{i}][{k}]") for k, v in enumerate(ring)]
             if isinstance(ring, list)
             else ring
             for i, ring in enumerate(rings)
         ]
     circle = doc.get("circle")
     if isinstance(circle, dict) and "centre" in circle:
-        out["circle"] = {**circle, "centre": _vertex(circle["centre"], origin, "$.circle.centre")}
+        out["circle"] = {**circle, "centre": _vertex(circle["centre"], origin, f"{path}.circle.centre")}
     return out
 
 
