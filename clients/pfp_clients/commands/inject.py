@@ -47,6 +47,20 @@ def register(sub: Any) -> None:
         "--no-sim", action="store_true", help="only put threats and the goal: a real unit at the start drives"
     )
     p.set_defaults(func=run)
+    _record_commands(sub)
+
+
+def _record_commands(sub: Any) -> None:
+    """``pfp record``/``replay``/``report`` come in with this module until pyproject.toml lists
+    ``record = "pfp_clients.commands.record"`` under ``pfp_service.commands`` (then this does nothing)."""
+    from importlib.metadata import entry_points
+
+    from pfp_service.cli import COMMAND_GROUP
+
+    if not entry_points(group=COMMAND_GROUP, name="record"):
+        from pfp_clients.commands import record
+
+        record.register(sub)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,7 +75,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.script}: ok, {len(script.timeline)} actions, {len(script.expect)} expectations")
         return 0
     from pfp_clients.inject import main
-
     from pfp_service.signals import SignalStop
 
     conf = session_config(args)

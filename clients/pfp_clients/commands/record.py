@@ -1,0 +1,121 @@
+"""``pfp record``, ``pfp replay`` and ``pfp report``: a mission record in MCAP, played back, summed up.
+
+Exit codes: record 0 after SIGTERM, 130 after SIGINT (the file is finished
+either way); replay 0 when the fresh planner gave the same directions, 1 when
+some differ (each one named); report 0; any bad file or flag 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from pfp_service.cli._common import add_session_args, positive_float
+
+COMMANDS = ("record", "replay", "report")
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "record",
+        help="record every key of a mission into an MCAP file",
+        description="Record every key of a mission (states, directions, goals, threats, zones, events, "
+        "liveliness) into an MCAP file with the wire's JSON schemas, until SIGTERM or SIGINT. "
+        "Example: pfp record --mission m1 m1.mcap",
+    )
+    p.add_argument("out", metavar="OUT.mcap", help="the file to write (replaced if it exists)")
+    add_session_args(p)
+    p.set_defaults(func=run_record)
+
+    p = sub.add_parser(
+        "replay",
+        help="play a record's inputs onto a mission and compare the directions",
+        description="Put a record's states, goals, threats and zones onto a mission on the recorded clock, "
+        "and compare the directions a (fresh) planner gives with the recorded ones. "
+        "Example: pfp replay m1.mcap --mission m1-replay --speed-up 5",
+    )
+    p.add_argument("record", metavar="RECORD.mcap", help="a file written by pfp record")
+    add_session_args(p)
+    p.add_argument("--speed-up", type=positive_float, default=1.0, help="recorded seconds per wall second")
+    p.set_defaults(func=run_replay, mission=None)
+
+    p = sub.add_parser(
+        "report",
+        help="an after-action summary of a record: table, plot, GeoJSON",
+        description="Per unit: track, time, exposure, replans and their causes, as a table (stdout and CSV), "
+        "a PNG plot and, when the record knows the origin, GeoJSON. Example: pfp report m1.mcap",
+    )
+    p.add_argument("record", metavar="RECORD.mcap", help="a file written by pfp record")
+    p.add_argument(
+        "--out",
+        metavar="STEM",
+        help="write STEM.csv, STEM.png and STEM.geojson (default: the record's path without .mcap, plus -report)",
+    )
+    p.add_argument(
+        "--intensity", choices=("peak", "density"), default="peak", help="the field's scale for exposure"
+    )
+    p.set_defaults(func=run_report)
+
+
+def run_record(args: argparse.Namespace) -> int:
+    import sys
+
+    from pfp_clients.common import open_session_waiting
+    from pfp_clients.record.recorder import record
+    from pfp_service.cli._common import session_config
+    from pfp_service.errors import InputError
+    from pfp_service.signals import SignalStop
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".mcap":
+        raise InputError(args.out, "a record's name ends in .mcap")
+    if not out.parent.is_dir():
+        raise InputError(args.out, f"no such directory: {out.parent}")
+    conf = session_config(args)
+    with SignalStop() as stopping:
+        session = open_session_waiting(conf, print, stopping.event)
+        if session is None:
+            return stopping.exit_code(1)
+        with session:
+            stats = record(session, args.mission, out, stopping.event, say=print)
+    kinds = ", ".join(f"{n} {k}" for k, n in sorted(stats.by_kind.items()))
+    print(
+        f"pfp record: {stats.messages} messages ({kinds or 'none'}) in {stats.wall_s:.1f} s, "
+        f"{stats.bytes / 1e6:.2f} MB, CPU {stats.cpu_s:.1f} s, deepest backlog {stats.max_backlog}",
+        flush=True,
+    )
+    sys.stdout.flush()
+    return stopping.exit_code(0)
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    from pfp_clients.common import open_session_waiting
+    from pfp_clients.record.mcapfile import read_record
+    from pfp_clients.record.replay import replay, result_lines
+    from pfp_service.cli._common import session_config
+    from pfp_service.signals import SignalStop
+
+    rec = read_record(args.record)
+    mission = args.mission or rec.mission
+    conf = session_config(args)
+    with SignalStop() as stopping:
+        session = open_session_waiting(conf, print, stopping.event)
+        if session is None:
+            return stopping.exit_code(1)
+        with session:
+            result = replay(session, rec, mission, args.speed_up, stopping.event)
+    for line in result_lines(result):
+        print(line)
+    return stopping.exit_code(0 if result.ok else 1)
+
+
+def run_report(args: argparse.Namespace) -> int:
+    from pfp_clients.record.mcapfile import read_record
+    from pfp_clients.record.report import write_report
+
+    rec = read_record(args.record)
+    src = Path(args.record)
+    stem = Path(args.out) if args.out else src.with_name(src.stem + "-report")
+    write_report(rec, stem, args.intensity)
+    return 0

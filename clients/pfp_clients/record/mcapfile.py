@@ -1,0 +1,249 @@
+"""The layout of a mission record in MCAP, its writer and its reader.
+
+One channel per Zenoh key, its topic the key with a leading ``/``
+(``/mumt/m1/unit/u1/state``: Foxglove's message paths want the slash), its
+message encoding ``json`` and its schema the wire contract's JSON Schema for
+that kind of key (``pfp_service.wire.schema``, the same text as ``schemas/``).
+A key the contract does not know is kept too, schemaless.  Besides:
+
+* ``/pfp/deleted``: a DELETE on any key (a goal cancelled, a threat removed), ``{"key": ...}``;
+* ``/pfp/alive``: liveliness tokens appearing and going, ``{"key": ..., "alive": bool}``;
+* ``/pfp/fix/{unit}``: with a known origin, each unit state as a ``foxglove.LocationFix``
+  (the Map panel draws it);
+* metadata ``pfp``: the mission, the origin (if any), the recorder's version and start time.
+
+Log times are the recorder's wall clock at receipt, in nanoseconds.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+from pfp_service.errors import InputError
+from pfp_service.geo import Origin
+from pfp_service.wire import keys
+
+__all__ = [
+    "ALIVE_TOPIC",
+    "DELETED_TOPIC",
+    "FIX_PREFIX",
+    "Entry",
+    "MissionWriter",
+    "Record",
+    "read_record",
+]
+
+DELETED_TOPIC = "/pfp/deleted"
+ALIVE_TOPIC = "/pfp/alive"
+FIX_PREFIX = "/pfp/fix/"
+METADATA = "pfp"
+PROFILE = ""  # no ROS profile: plain JSON with JSON Schema, which Foxglove reads as it is
+
+_KEY_SCHEMA = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "a DELETE on a key",
+    "type": "object",
+    "properties": {"key": {"type": "string"}},
+    "required": ["key"],
+}
+_ALIVE_SCHEMA = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "a liveliness token appeared or went",
+    "type": "object",
+    "properties": {"key": {"type": "string"}, "alive": {"type": "boolean"}},
+    "required": ["key", "alive"],
+}
+# Foxglove's own schema name: the Map panel shows any topic of this schema
+_FIX_SCHEMA = {
+    "title": "foxglove.LocationFix",
+    "type": "object",
+    "properties": {
+        "timestamp": {
+            "type": "object",
+            "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}},
+        },
+        "frame_id": {"type": "string"},
+        "latitude": {"type": "number"},
+        "longitude": {"type": "number"},
+        "altitude": {"type": "number"},
+        "position_covariance": {"type": "array", "items": {"type": "number"}},
+        "position_covariance_type": {"type": "integer"},
+    },
+}
+
+
+def _contract_schemas() -> dict[keys.KeyKind, tuple[str, bytes]]:
+    """Each published key kind's message name and JSON Schema text, from the contract itself."""
+    from pfp_service.wire import schema
+
+    files = schema.render()
+    out: dict[keys.KeyKind, tuple[str, bytes]] = {}
+    for spec in schema.MESSAGES:
+        if spec.key is not None and spec.op == "put":
+            out[spec.key] = (spec.name, files[f"{spec.name}.schema.json"].encode())
+    return out
+
+
+class MissionWriter:
+    """Writes samples as they came; one thread only (the recorder's writer thread)."""
+
+    def __init__(self, stream: IO[bytes], mission: str, origin: Origin | None, started_ns: int) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        from pfp_service import __version__
+
+        self._w = Writer(stream, compression=CompressionType.ZSTD)
+        self._w.start(profile=PROFILE, library=f"pfp-service {__version__} (pfp record)")
+        self.origin = origin
+        self._by_kind = _contract_schemas()
+        self._schema_ids: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.count = 0
+        self.by_kind: dict[str, int] = {}
+        meta = {"mission": mission, "started_ns": str(started_ns), "version": __version__}
+        if origin is not None:
+            meta["origin"] = json.dumps({"lat": origin.lat, "lon": origin.lon, "alt": origin.alt})
+        self._w.add_metadata(METADATA, meta)
+
+    def _schema(self, name: str, data: bytes) -> int:
+        sid = self._schema_ids.get(name)
+        if sid is None:
+            sid = self._w.register_schema(name=name, encoding="jsonschema", data=data)
+            self._schema_ids[name] = sid
+        return sid
+
+    def _channel(self, topic: str, schema_name: str | None, schema: bytes = b"") -> int:
+        cid = self._channels.get(topic)
+        if cid is None:
+            sid = self._schema(schema_name, schema) if schema_name is not None else 0
+            cid = self._w.register_channel(topic=topic, message_encoding="json", schema_id=sid)
+            self._channels[topic] = cid
+        return cid
+
+    def _emit(self, cid: int, t_ns: int, data: bytes, kind: str) -> None:
+        self._w.add_message(channel_id=cid, log_time=t_ns, data=data, publish_time=t_ns, sequence=self.count)
+        self.count += 1
+        self.by_kind[kind] = self.by_kind.get(kind, 0) + 1
+
+    def put(self, key: str, data: bytes, t_ns: int) -> None:
+        """A PUT on ``key`` (its payload as it came)."""
+        topic = "/" + key
+        cid = self._channels.get(topic)
+        kind = "other"
+        try:
+            parsed = keys.parse(key)
+            kind = parsed.kind.value
+        except InputError:
+            parsed = None
+        if cid is None:
+            spec = self._by_kind.get(parsed.kind) if parsed is not None else None
+            cid = self._channel(topic, spec[0] if spec else None, spec[1] if spec else b"")
+        self._emit(cid, t_ns, data, kind)
+        if self.origin is not None and parsed is not None and parsed.kind is keys.KeyKind.UNIT_STATE:
+            self._fix(parsed.id, data, t_ns)
+
+    def _fix(self, unit: str, data: bytes, t_ns: int) -> None:
+        try:
+            x, y = json.loads(data)["position"][:2]
+            assert self.origin is not None
+            lat, lon = self.origin.to_geodetic(float(x), float(y))
+        except (ValueError, KeyError, TypeError):
+            return  # the planner rejects it and the record keeps the state as it came
+        fix = {
+            "timestamp": {"sec": t_ns // 1_000_000_000, "nsec": t_ns % 1_000_000_000},
+            "frame_id": unit,
+            "latitude": lat,
+            "longitude": lon,
+            "altitude": self.origin.alt,
+            "position_covariance": [0.0] * 9,
+            "position_covariance_type": 0,
+        }
+        cid = self._channel(FIX_PREFIX + unit, "foxglove.LocationFix", json.dumps(_FIX_SCHEMA).encode())
+        self._w.add_message(channel_id=cid, log_time=t_ns, data=json.dumps(fix).encode(), publish_time=t_ns)
+
+    def delete(self, key: str, t_ns: int) -> None:
+        cid = self._channel(DELETED_TOPIC, "pfp.deleted", json.dumps(_KEY_SCHEMA).encode())
+        self._emit(cid, t_ns, json.dumps({"key": key}).encode(), "deleted")
+
+    def alive(self, key: str, alive: bool, t_ns: int) -> None:
+        cid = self._channel(ALIVE_TOPIC, "pfp.alive", json.dumps(_ALIVE_SCHEMA).encode())
+        self._emit(cid, t_ns, json.dumps({"key": key, "alive": alive}).encode(), "alive")
+
+    def finish(self) -> None:
+        self._w.finish()
+
+
+@dataclass(frozen=True, slots=True)
+class Entry:
+    """One recorded sample: when, which key, PUT (``data``) or DELETE (``data`` None)."""
+
+    t_ns: int
+    key: str
+    data: bytes | None
+
+
+@dataclass(frozen=True)
+class Record:
+    """A record's metadata and its samples in log-time order (derived ``/pfp/fix`` topics left out)."""
+
+    mission: str
+    origin: Origin | None
+    entries: list[Entry]
+    alive: list[tuple[int, str, bool]]
+
+
+def read_record(path: str | Path) -> Record:
+    """Read a whole record, checking every chunk's CRC.
+
+    Raises:
+        InputError: naming the file: unreadable, not MCAP, damaged, or not made by ``pfp record``.
+    """
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    p = Path(path)
+    mission, origin = "", None
+    entries: list[Entry] = []
+    alive: list[tuple[int, str, bool]] = []
+    try:
+        with p.open("rb") as f:
+            reader = make_reader(f, validate_crcs=True)
+            for meta in reader.iter_metadata():
+                if meta.name == METADATA:
+                    mission = meta.metadata.get("mission", "")
+                    if "origin" in meta.metadata:
+                        o = json.loads(meta.metadata["origin"])
+                        origin = Origin(lat=o["lat"], lon=o["lon"], alt=o.get("alt", 0.0))
+            for _schema, channel, msg in reader.iter_messages(log_time_order=True):
+                topic = channel.topic
+                if topic == DELETED_TOPIC:
+                    entries.append(Entry(msg.log_time, json.loads(msg.data)["key"], None))
+                elif topic == ALIVE_TOPIC:
+                    a = json.loads(msg.data)
+                    alive.append((msg.log_time, a["key"], bool(a["alive"])))
+                elif topic.startswith(FIX_PREFIX):
+                    continue
+                else:
+                    entries.append(Entry(msg.log_time, topic.lstrip("/"), bytes(msg.data)))
+    except OSError as exc:
+        raise InputError(p.name, f"cannot read: {exc.strerror or exc}") from None
+    except (McapError, ValueError, KeyError, EOFError) as exc:
+        raise InputError(p.name, f"not a readable mission record: {exc}") from None
+    if not mission:
+        raise InputError(p.name, "not a mission record of pfp record (no 'pfp' metadata)")
+    return Record(mission, origin, entries, alive)
+
+
+def iter_kind(rec: Record, kind: keys.KeyKind) -> Iterator[tuple[Entry, keys.Key]]:
+    """The record's samples on keys of ``kind``, with the parsed key."""
+    for e in rec.entries:
+        try:
+            k = keys.parse(e.key)
+        except InputError:
+            continue
+        if k.kind is kind:
+            yield e, k

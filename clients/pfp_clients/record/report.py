@@ -1,0 +1,266 @@
+"""``pfp report``: an after-action summary of a mission record.
+
+Per unit: its track (every state it reported), its time (first report to the
+planner's ``arrived``, or to its last report), its path length, its exposure
+and closest approach to a threat (measured on the track under the threats in
+force when each segment was walked, as ``pfp demo`` measures), the replans that
+named it and what caused them (the threat and zone changes of each
+``event/replan``), escapes and traps.  Times are seconds from the record's
+first message.
+
+Out: the table on stdout and as CSV, a PNG of the threats and tracks, and,
+when the record knows the mission origin, GeoJSON (RFC 7946, WGS-84) of every
+track with its row of the table, and of the threats.
+"""
+
+from __future__ import annotations
+
+import collections
+import csv
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+
+from pfp_clients.record.mcapfile import Record
+from pfp_clients.watch import Watch
+from pfp_service.errors import InputError
+from pfp_service.wire import ThreatUpdate, keys
+
+__all__ = ["UnitSummary", "summarise", "table_rows", "write_report"]
+
+COLUMNS = ("unit", "status", "time s", "path m", "exposure", "min clear m", "replans", "causes")
+
+
+@dataclass
+class UnitSummary:
+    """One unit's mission, from the record."""
+
+    unit: str
+    track: list[tuple[float, float, float]] = field(default_factory=list)  # (t_s, x, y)
+    status: str = "-"
+    arrived_s: float | None = None
+    replans: int = 0
+    causes: collections.Counter[str] = field(default_factory=collections.Counter)
+    escapes: int = 0
+    length_m: float = 0.0
+    exposure: float | None = None
+    min_clearance_m: float = math.inf
+
+    @property
+    def time_s(self) -> float | None:
+        if not self.track:
+            return None
+        end = self.arrived_s if self.arrived_s is not None else self.track[-1][0]
+        return end - self.track[0][0]
+
+
+def _natural(uid: str) -> list[Any]:
+    """Ids as people sort them: m2 before m10."""
+    return [(0, int(p), "") if p.isdigit() else (1, 0, p) for p in re.split(r"(\d+)", uid) if p]
+
+
+def _changes(ev: dict[str, Any]) -> list[str]:
+    out = []
+    for c in ev.get("changes", []) or []:
+        what = c.get("threat") or c.get("zone") or "?"
+        out.append(f"{c.get('change', 'changed')} {what}")
+    if ev.get("more"):
+        out.append(f"{ev['more']} more changes")
+    return out or [str(ev.get("reason") or "replan")]
+
+
+def summarise(rec: Record, intensity: str = "peak") -> tuple[list[UnitSummary], Watch]:
+    """Each unit's summary (natural order of ids), and the threat history, from ``rec``."""
+    from pfp_service.core.metrics import measure
+
+    t0 = rec.entries[0].t_ns if rec.entries else 0
+    units: dict[str, UnitSummary] = {}
+    watch = Watch()
+    threat_decoder = msgspec.json.Decoder(ThreatUpdate)
+
+    def unit(uid: str) -> UnitSummary:
+        return units.setdefault(uid, UnitSummary(uid))
+
+    for e in rec.entries:
+        t_s = (e.t_ns - t0) / 1e9
+        try:
+            k = keys.parse(e.key)
+        except InputError:
+            continue
+        kind = k.kind.value
+        if e.data is None:
+            if k.kind is keys.KeyKind.THREAT:
+                watch.threat_removed(k.id, t_s)
+            continue
+        try:
+            if k.kind is keys.KeyKind.THREAT:
+                watch.threat_put(k.id, threat_decoder.decode(e.data), t_s)
+                continue
+            d = json.loads(e.data)
+        except (
+            msgspec.ValidationError,
+            msgspec.DecodeError,
+            ValueError,
+        ):  # rejected by the planner: kept, not summed
+            continue
+        if not isinstance(d, dict):
+            continue
+        if kind.endswith("state"):
+            pos = d.get("position")
+            if isinstance(pos, list) and len(pos) >= 2:
+                unit(k.id).track.append((t_s, float(pos[0]), float(pos[1])))
+        elif k.kind is keys.KeyKind.UNIT_DIRECTION:
+            u = unit(k.id)
+            status = str(d.get("status"))
+            if status == "escaping" and u.status != "escaping":
+                u.escapes += 1
+            u.status = status
+            if status == "arrived" and u.arrived_s is None:
+                u.arrived_s = t_s
+            elif status not in ("arrived",):
+                u.arrived_s = None if status == "en_route" and u.arrived_s is not None else u.arrived_s
+        elif k.kind is keys.KeyKind.EVENT:
+            ev_kind = d.get("kind")
+            if ev_kind == "replan":
+                causes = _changes(d)
+                for uid in d.get("units", []) or []:
+                    u = unit(uid)
+                    u.replans += 1
+                    u.causes.update(causes)
+            elif ev_kind == "arrived" and d.get("unit"):
+                u = unit(d["unit"])
+                if u.arrived_s is None:
+                    u.arrived_s = t_s
+            elif ev_kind == "trapped" and d.get("unit"):
+                unit(d["unit"]).causes.update(["trapped: " + str(d.get("reason", ""))[:60]])
+    for u in units.values():
+        if len(u.track) < 2:
+            continue
+        path = np.array([(x, y) for _t, x, y in u.track], dtype=float)
+        epochs = [ep for ep, _ in watch.epochs([t for t, _x, _y in u.track], intensity)]
+        m = measure(path, epochs)
+        u.length_m, u.exposure, u.min_clearance_m = m.length, m.exposure, m.min_clearance
+    return sorted(units.values(), key=lambda u: _natural(u.unit)), watch
+
+
+def table_rows(rows: list[UnitSummary]) -> list[tuple[str, ...]]:
+    out: list[tuple[str, ...]] = [COLUMNS]
+    for u in rows:
+        t = u.time_s
+        causes = "; ".join(f"{c} x{n}" if n > 1 else c for c, n in u.causes.most_common(4)) or "-"
+        out.append(
+            (
+                u.unit,
+                u.status,
+                "-" if t is None else f"{t:.1f}",
+                f"{u.length_m:.1f}",
+                "-" if u.exposure is None else f"{u.exposure:.3f}",
+                "inf" if math.isinf(u.min_clearance_m) else f"{u.min_clearance_m:.2f}",
+                str(u.replans),
+                causes,
+            )
+        )
+    return out
+
+
+def _text(rows: list[tuple[str, ...]]) -> list[str]:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+
+
+def _geojson(rec: Record, rows: list[UnitSummary], watch: Watch) -> dict[str, Any]:
+    assert rec.origin is not None
+    o = rec.origin
+    feats: list[dict[str, Any]] = []
+    for u, row in zip(rows, table_rows(rows)[1:]):
+        if not u.track:
+            continue
+        xy = np.array([(x, y) for _t, x, y in u.track], dtype=float)
+        ll = o.to_geodetic_many(xy)  # (n, 2) lat, lon
+        coords = [[round(float(lon), 8), round(float(lat), 8)] for lat, lon in ll]
+        geom = {"type": "LineString", "coordinates": coords if len(coords) > 1 else coords * 2}
+        props = dict(zip(COLUMNS, row))
+        props["kind"] = "track"
+        feats.append({"type": "Feature", "geometry": geom, "properties": props})
+    for v in watch.versions:
+        lat, lon = o.to_geodetic(*v.update.position)
+        feats.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "Point", "coordinates": [round(lon, 8), round(lat, 8)]},
+                "properties": {
+                    "kind": "threat",
+                    "id": v.threat_id,
+                    "from_s": round(v.start_s, 2),
+                    "until_s": None if math.isinf(v.end_s) else round(v.end_s, 2),
+                    "sigma_range": v.update.sigma_range,
+                    "sigma_lateral": v.update.sigma_lateral,
+                    "facing_deg": v.update.facing_deg,
+                },
+            }
+        )
+    return {"type": "FeatureCollection", "features": feats}
+
+
+def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = print) -> list[Path]:
+    """Print the table and write ``STEM.csv``, ``STEM.png`` and (with an origin) ``STEM.geojson``.
+
+    Raises:
+        InputError: a file cannot be written.
+    """
+    from pfp_service.render import plot_tracks
+
+    rows, watch = summarise(rec, intensity)
+    table = table_rows(rows)
+    say(f"mission {rec.mission}: {len(rows)} units, {len(watch.versions)} threat versions")
+    for line in _text(table):
+        say(line)
+    written: list[Path] = []
+    csv_path = stem.with_suffix(".csv")
+    png = stem.with_suffix(".png")
+    try:
+        with csv_path.open("w", newline="") as f:
+            csv.writer(f).writerows(table)
+        written.append(csv_path)
+        latest: dict[str, Any] = {}
+        first: dict[str, Any] = {}
+        for v in watch.versions:
+            latest[v.threat_id] = v.threat()
+            first.setdefault(v.threat_id, v.threat())
+        moved = [(first[t], latest[t]) for t in latest if first[t].xi != latest[t].xi]
+        tracks: dict[str, Sequence[Sequence[float]]] = {
+            u.unit: [(x, y) for _t, x, y in u.track] for u in rows if u.track
+        }
+        goals: dict[str, Sequence[float]] = {
+            u.unit: u.track[-1][1:] for u in rows if u.track and u.arrived_s is not None
+        }
+        arrived = sum(u.arrived_s is not None for u in rows)
+        plot_tracks(
+            list(latest.values()),
+            intensity,
+            tracks,
+            goals,
+            png,
+            title=f"mission {rec.mission}: {arrived}/{len(rows)} arrived, "
+            f"{sum(u.replans for u in rows)} replans",
+            old_threats=moved,
+        )
+        written.append(png)
+        if rec.origin is not None:
+            gj = stem.with_suffix(".geojson")
+            gj.write_text(json.dumps(_geojson(rec, rows, watch)))
+            written.append(gj)
+    except OSError as exc:
+        raise InputError(str(stem.parent), f"cannot write the report: {exc.strerror or exc}") from None
+    for p in written:
+        say(f"wrote {p}")
+    if rec.origin is None:
+        say("no GeoJSON: the record has no origin (the planner had none when recording started)")
+    return written
