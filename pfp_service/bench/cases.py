@@ -51,6 +51,7 @@ from scipy import ndimage
 
 from pfp_service.core.cores import Cores
 from pfp_service.core.threat import Threat, ThreatField
+from pfp_service.core.zones import Zone
 
 __all__ = ["KINDS", "Case", "Verdict", "generate", "reachability"]
 
@@ -93,11 +94,12 @@ class Case:
     threats: tuple[Threat, ...]
     scale_m: float
     bounds: Bounds | None = None
+    zones: tuple[Zone, ...] = ()  # keep-out zones (``bench.zone_cases``)
 
     @property
     def enclosed(self) -> bool:
         """What the generator meant: no way avoids every core (``reachability`` decides)."""
-        return self.kind.startswith("enclosure") or self.kind == "ring-shut"
+        return self.kind.startswith(("enclosure", "zone-enclosure")) or self.kind == "ring-shut"
 
 
 def _trap(rng: np.random.Generator, pts: list[tuple[float, float]], sigma: float) -> list[_Spec]:

@@ -22,6 +22,13 @@ take the one that beats it most on both, i.e. maximise
 none beats it on both); the sweep ignores cores, so it is a lower bound.
 ``--write`` puts the tables in BENCHMARKS.md between markers, so the file can
 hold other benchmarks too.
+
+``--family zones`` runs the keep-out zone family instead (``bench.zone_cases``):
+the same table, with every plan among the case's zones, ``J*`` from the
+zone-aware optimum (``--planner optimal --avoid-cores`` with the zones), the
+entries column counting paths that touch a zone or a core (zones checked
+exactly, segment by segment) and reachability from shapely and a raster
+(``zone_cases.zone_reachability``).
 """
 
 from __future__ import annotations
@@ -45,10 +52,12 @@ from pfp_service.core.cores import Cores
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.optimal import OptimalSolver
 from pfp_service.core.params import ESCAPES
+from pfp_service.core.zones import ZoneSet
 
 __all__ = ["LAMBDAS", "add_arguments", "run"]
 
 LAMBDAS = (0.0, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+FAMILIES = ("traps", "zones")
 BEGIN, END = "<!-- pfp bench quality: begin -->", "<!-- pfp bench quality: end -->"
 
 
@@ -57,6 +66,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--scenarios", type=int, default=4 * len(KINDS), help=f"how many scenarios (default {4 * len(KINDS)})"
     )
     p.add_argument("--seed", type=int, default=2023, help="suite seed (default 2023)")
+    p.add_argument(
+        "--family",
+        choices=FAMILIES,
+        default="traps",
+        help="the threat trap suite (default) or the keep-out zone family (zones)",
+    )
     p.add_argument("--modes", default=",".join(ESCAPES), help="comma-separated escape modes")
     p.add_argument(
         "--cells", type=grid_cells, default=200, help="optimal-planner grid cells on the longer side"
@@ -98,6 +113,7 @@ class Report:
     ambiguous: list[str] = field(default_factory=list)
     rows: list[Row] = field(default_factory=list)
     targets: dict[str, object] = field(default_factory=dict)
+    family: str = "traps"
 
 
 def _pareto(length: float, exposure: float, opts: list[tuple[float, float]]) -> tuple[float, float, float]:
@@ -114,6 +130,7 @@ def _pareto(length: float, exposure: float, opts: list[tuple[float, float]]) -> 
 def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float, float]:
     """The plan, and the medians over ``repeat`` runs of its wall-clock and process CPU milliseconds."""
     sched = [Scheduled(t) for t in case.threats]
+    zones = ZoneSet(case.zones) if case.zones else None
     times, cpu, result = [], [], None
     for _ in range(repeat):
         c0 = time.process_time()
@@ -124,23 +141,32 @@ def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float, floa
             PlannerParams(escape=mode),  # type: ignore[arg-type]
             case.bounds,
             time.perf_counter,
+            zones=zones,
         )
         cpu.append(1e3 * (time.process_time() - c0))
         times.append(result.compute_ms)
     return result, statistics.median(times), statistics.median(cpu)
 
 
-def measure_suite(count: int, seed: int, modes: list[str], cells: int, log: bool = False) -> Report:
+def measure_suite(
+    count: int, seed: int, modes: list[str], cells: int, log: bool = False, family: str = "traps"
+) -> Report:
     """Run the whole benchmark and return its figures (no printing unless ``log``)."""
-    cases = generate(count, seed)
-    rep = Report(seed, count, [], [], [])
+    from pfp_service.bench.zone_cases import generate_zones, zone_reachability
+
+    cases = generate_zones(count, seed) if family == "zones" else generate(count, seed)
+    rep = Report(seed, count, [], [], [], family=family)
     plan(
-        cases[0].start, cases[0].goal, [Scheduled(t) for t in cases[0].threats], PlannerParams(escape="auto")
-    )
+        cases[0].start,
+        cases[0].goal,
+        [Scheduled(t) for t in cases[0].threats],
+        PlannerParams(escape="auto"),
+        zones=ZoneSet(cases[0].zones) if cases[0].zones else None,
+    )  # warm-up: compile the kernels outside the timings
     for case in cases:
-        fieldm = ThreatField(case.threats)
+        fieldm = ThreatField(case.threats, zones=ZoneSet(case.zones) if case.zones else None)
         d0 = math.hypot(case.goal[0] - case.start[0], case.goal[1] - case.start[1])
-        truth = reachability(case).reachable
+        truth = (zone_reachability(case) if family == "zones" else reachability(case)).reachable
         {True: rep.reachable, False: rep.enclosed, None: rep.ambiguous}[truth].append(case.name)
         if truth is not None and truth == case.enclosed:
             rep.disagreements.append(case.name)
@@ -244,16 +270,21 @@ def render(rep: Report, modes: list[str]) -> str:
     """The markdown tables."""
     lines = [
         f"Suite: {rep.scenarios} scenarios, seed {rep.seed}; {len(rep.reachable)} reachable, "
-        f"{len(rep.enclosed)} enclosed (no way avoids every threat core), {len(rep.ambiguous)} ambiguous"
+        f"{len(rep.enclosed)} enclosed (no way avoids every threat core{' and zone' if rep.family == 'zones' else ''}), "
+        f"{len(rep.ambiguous)} ambiguous"
         + (f" ({', '.join(rep.ambiguous)})" if rep.ambiguous else "")
-        + ", by a core raster independent of the planners."
+        + (
+            ", by shapely and a raster of the zones and cores, independent of the planners."
+            if rep.family == "zones"
+            else ", by a core raster independent of the planners."
+        )
         + (
             f" Generator intent and ground truth differ on: {', '.join(rep.disagreements)}."
             if rep.disagreements
             else ""
         ),
         "",
-        "| escape | reached (reachable) | honest trapped (enclosed) | paths entering a core | median / worst length "
+        f"| escape | reached (reachable) | honest trapped (enclosed) | paths entering a {'zone or ' if rep.family == 'zones' else ''}core | median / worst length "
         "(x D0) | median / worst exposure (x D0) | median / worst Pareto gap | median / max compute ms | "
         "median / max CPU ms |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -350,7 +381,7 @@ def run(args: argparse.Namespace) -> int:
     import os
 
     load0 = os.getloadavg()[0]
-    rep = measure_suite(args.scenarios, args.seed, modes, args.cells, log=not args.json)
+    rep = measure_suite(args.scenarios, args.seed, modes, args.cells, log=not args.json, family=args.family)
     load1 = os.getloadavg()[0]
     body = render(rep, modes)
     if args.json:

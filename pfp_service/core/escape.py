@@ -61,7 +61,7 @@ import math
 import numba
 import numpy as np
 
-from pfp_service.core import steprule
+from pfp_service.core import steprule, zones
 from pfp_service.core.cores import ZONE_PREFIX, Cores
 from pfp_service.core.escape_strategies import (
     AUTO_ORDER,
@@ -76,12 +76,16 @@ from pfp_service.core.grid import resample
 from pfp_service.core.metrics import path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.zones import ZoneSet
 
 __all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "EscapeRun", "Escaper"]
 
 MAX_TRAPS = 12
 AUTO_MARGIN = 0.05  # "clearly cheaper": a dearer way is taken only when it saves more than 5 % of J
 HANDOFF_STEPS = 4.0  # an escape ending this many steps from the goal steers on to it
+
+
+_NO_ZONES = ZoneSet()
 
 
 class EscapeRun:
@@ -93,7 +97,7 @@ class EscapeRun:
     stronger than the goal's pull.
     """
 
-    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step", "to_goal")
+    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step", "to_goal", "zones")
 
     def __init__(self, name: str, path: np.ndarray, step: float, to_goal: bool = False) -> None:
         self.name = name
@@ -106,6 +110,7 @@ class EscapeRun:
         self.limit = 2 * len(self.path) + 20
         self.step = step
         self.to_goal = to_goal
+        self.zones: ZoneSet = _NO_ZONES  # the zones it was last steered among (``steer``), for ``ahead``
 
     def then(self, other: EscapeRun | None) -> EscapeRun:
         """This run followed by ``other`` (which starts where this one ends)."""
@@ -136,6 +141,7 @@ class EscapeRun:
             y,
             steps,
             out,
+            *self.zones.packed(),
         )
         if n < 0:
             return None
@@ -149,16 +155,29 @@ class EscapeRun:
         return (dx, dy) if ok else None
 
     def steer(
-        self, unit: np.ndarray, x: float, y: float
+        self, unit: np.ndarray, x: float, y: float, zones: ZoneSet | None = None
     ) -> tuple[float, float, float, float, float, float] | None:
         """``direction``, judged as a step of ``unit`` (``steprule.judge``): ``(dx, dy, dist, move, to_x, to_y)``.
 
         The step ends on the goal when it is within one step (the final
         approach).  ``None`` at the exit (or abandoned), and where the unit
         is not to move on (the stepper judged arrival and bounds before).
+        Among keep-out ``zones``, a step that would cut a corner of the run
+        into one heads for the run's next point instead (``_zone_heading``).
         """
+        if zones is not None:
+            self.zones = zones
         ok, self.cursor, self.advisories, code, dx, dy, dist, move, tx, ty = _steer_step(
-            self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal, unit, x, y
+            self.path,
+            self.cursor,
+            self.advisories,
+            self.limit,
+            self.step,
+            self.to_goal,
+            unit,
+            x,
+            y,
+            *self.zones.packed(),
         )
         return (dx, dy, dist, move, tx, ty) if ok and code == steprule.GO else None
 
@@ -206,13 +225,68 @@ def _steer_step(
     unit: np.ndarray,
     x: float,
     y: float,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
 ) -> tuple[bool, int, int, int, float, float, float, float, float, float]:
     """``EscapeRun.steer``: ``_steer``, then the heading judged as a step (``steprule.judge``)."""
     ok, cursor, advisories, hx, hy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
     if not ok:
         return False, cursor, advisories, steprule.GO, 0.0, 0.0, 0.0, 0.0, x, y
-    code, dx, dy, dist, move, tx, ty = steprule.judge(unit, x, y, hx, hy, 1.0, steprule.HEADING)
+    code, dx, dy, dist, move, tx, ty = _zone_heading(
+        path, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
+    )
     return True, cursor, advisories, code, dx, dy, dist, move, tx, ty
+
+
+@numba.njit(cache=True, nogil=True)
+def _zone_heading(
+    path: np.ndarray,
+    cursor: int,
+    unit: np.ndarray,
+    x: float,
+    y: float,
+    hx: float,
+    hy: float,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+) -> tuple[int, float, float, float, float, float, float]:
+    """The heading ``(hx, hy)`` judged as a step; among zones, one that would touch a zone is replaced.
+
+    A run's own segments keep out of every zone (``Escaper._judge``), but
+    heading two points ahead cuts its corners: then head for the run's next
+    point, then its nearest; failing both, the step is cut short of the zone
+    (``steprule.CLEAR_STEPS``).
+    """
+    code, dx, dy, dist, move, tx, ty = steprule.judge(unit, x, y, hx, hy, 1.0, steprule.HEADING)
+    if boxes.shape[0] == 0 or code != steprule.GO or move <= 0.0:
+        return code, dx, dy, dist, move, tx, ty
+    t, z = zones.segment_hit(edges, offsets, circles, boxes, x, y, tx, ty)
+    if z < 0:
+        return code, dx, dy, dist, move, tx, ty
+    n = path.shape[0]
+    for k in (cursor + 1, cursor):
+        if k >= n:
+            continue
+        ax = path[k, 0] - x
+        ay = path[k, 1] - y
+        norm = math.hypot(ax, ay)
+        if norm <= 1e-9 * unit[steprule.STEP]:
+            continue
+        c2, d2x, d2y, dist2, move2, t2x, t2y = steprule.judge(
+            unit, x, y, ax / norm, ay / norm, 1.0, steprule.HEADING
+        )
+        if c2 == steprule.GO and move2 > norm:  # no farther than the point itself: the run's own segment
+            move2 = norm
+            t2x = path[k, 0]
+            t2y = path[k, 1]
+        if zones.segment_hit(edges, offsets, circles, boxes, x, y, t2x, t2y)[1] < 0:
+            return c2, d2x, d2y, dist2, move2, t2x, t2y
+    keep = max(t * move - steprule.CLEAR_STEPS * unit[steprule.STEP], 0.0)
+    return code, dx, dy, dist, keep, x + dx * keep, y + dy * keep
 
 
 @numba.njit(cache=True, nogil=True)
@@ -228,6 +302,10 @@ def _ahead(
     y: float,
     steps: int,
     out: np.ndarray,
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
 ) -> int:
     """``EscapeRun.ahead``'s loop: positions written to ``out``, or -1 where the run would end."""
     out[0, 0] = x
@@ -238,7 +316,9 @@ def _ahead(
         ok, cursor, advisories, hx, hy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
         if not ok:
             return -1
-        _code, _dx, _dy, _dist, _move, x, y = steprule.judge(unit, x, y, hx, hy, 1.0, steprule.HEADING)
+        _code, _dx, _dy, _dist, _move, x, y = _zone_heading(
+            path, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
+        )
         out[k + 1, 0] = x
         out[k + 1, 1] = y
     return steps + 1

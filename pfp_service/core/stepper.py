@@ -553,7 +553,7 @@ class Stepper:
         """Steer along the committed route; ``level`` is the threat level here when the caller has it."""
         run = self._run
         assert run is not None
-        stepped = run.steer(self._unit, x, y)
+        stepped = run.steer(self._unit, x, y, field.zones)
         if stepped is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
             self._run = None
             steprule.reset_watch(self._unit)
