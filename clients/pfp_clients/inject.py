@@ -142,6 +142,7 @@ class _Runner:
         from pfp_service.wire.delivery import Deliverer
 
         self.coords = coords or Coords()
+        self.show = self.coords.point if self.coords.geodetic else None  # metres: as the script wrote them
         self.script = script
         self.s = Deliverer(session, mission, say)  # goals and threats reach a planner that starts later
         self.m = mission
@@ -176,7 +177,7 @@ class _Runner:
                 due.append(f"a planner to take {len(pending)} write{'s' if len(pending) > 1 else ''}")
             return "timeline done; waiting for " + ", ".join(due) if due else "timeline done"
         step = tl[self.index]
-        head = f"waiting on timeline[{self.index}] ({step.describe(self.coords.point)})"
+        head = f"waiting on timeline[{self.index}] ({step.describe(self.show)})"
         if self.wait_until is not None:
             return f"{head}: {max(self.wait_until - t_s, 0.0):.1f} s left"
         if step.at_s is not None and t_s < step.at_s:
@@ -206,7 +207,7 @@ class _Runner:
             trig = ""
             if where is not None and step.when is not None:
                 trig = f"  (when {step.when.unit} at {self.coords.point(where, digits=2)})"
-            self.say(f"t={t_s:7.2f}s  {step.describe(self.coords.point)}{trig}")
+            self.say(f"t={t_s:7.2f}s  {step.describe(self.show)}{trig}")
             if isinstance(step, Wait):
                 self.wait_until = t_s + step.seconds
             else:
@@ -417,7 +418,8 @@ def report_lines(rep: InjectReport) -> list[str]:
     """The verdicts as text, one line each, then the overall result."""
     out = []
     for i in rep.unfired:
-        out.append(f"  FAIL  timeline[{i}] ({rep.script.timeline[i].describe(rep.coords.point)}) never fired")
+        show = rep.coords.point if rep.coords.geodetic else None
+        out.append(f"  FAIL  timeline[{i}] ({rep.script.timeline[i].describe(show)}) never fired")
     for v in rep.verdicts:
         out.append(f"  {'PASS' if v.held else 'FAIL'}  {v.expect.describe()}: {v.detail}")
     held = sum(v.held for v in rep.verdicts)
