@@ -30,6 +30,13 @@ the planning loop needs one core, so more CPU-bound workers only time-slice
 the other one (and cost ~150 MB each); two keep one slot for light previews
 while a heavy one runs, and they run at a lower CPU priority than the loop
 (``WORKER_NICE``), so the live stream keeps its latency under a storm.
+
+Why one of them starts with the planner and the rest on first use: an
+idle planner held 5 processes and ~480 MB (PSS), two of them preview
+workers and one their warm spare.  One warm worker still answers the first
+preview within its budget (warmed on the world's field, as ever); the
+second and the spare start when the first preview arrives, and are warm a
+few seconds later.  Until then one worker serves both lanes.
 """
 
 from __future__ import annotations
@@ -151,6 +158,7 @@ class PreviewDesk:
             warm="pfp_service.service.desk:_warm_worker",
             on_replaced=self._replaced,
             spare=True,
+            eager=1,  # one worker waits warm; the others and the spare start with the first preview
         )
 
     def wait_ready(self, timeout_s: float = 180.0) -> None:

@@ -155,6 +155,9 @@ class WorkerPool:
         warm: ``"module:function"``, run once in each worker before its first task.
         on_replaced: called with the reason each time a worker is killed or replaced.
         spare: keep one more warm worker aside, so a killed worker's slot is free again at once.
+        eager: slots whose workers start at once (default: every slot); the other slots' workers,
+            and the spare, start when the first task is submitted.  ``wait_ready`` waits for
+            the eager ones only.
     """
 
     def __init__(
@@ -168,6 +171,7 @@ class WorkerPool:
         warm: str | None = None,
         on_replaced: Callable[[str], None] | None = None,
         spare: bool = False,
+        eager: int | None = None,
     ) -> None:
         self.name = name
         self._memory_mb = memory_mb
@@ -181,7 +185,11 @@ class WorkerPool:
         self._seq = itertools.count()
         self._closed = False
         self._ready = threading.Event()
-        self._warm_left = workers
+        self._eager = workers if eager is None else max(0, min(eager, workers))
+        self._woken = self._eager >= workers  # a task was submitted: every slot starts its worker
+        self._warm_left = self._eager
+        if self._warm_left == 0:
+            self._ready.set()
         self.replaced = 0
         self._spare: tuple[Any, Connection, int] | None = None
         self._slots = [_Slot(i) for i in range(workers)]
@@ -206,6 +214,7 @@ class WorkerPool:
         with self._cond:
             if not self._closed:
                 heapq.heappush(self._lanes.setdefault(task.lane, []), (task.priority, next(self._seq), task))
+                self._woken = True  # the lazy slots start their workers now
                 self._cond.notify_all()  # the spare keeper waits on it too
                 return
         _finish(task, Outcome("closed", detail="the planner is shutting down"))
@@ -281,6 +290,9 @@ class WorkerPool:
 
     def _serve(self, slot: _Slot) -> None:
         _block_sigint()
+        with self._cond:
+            while slot.index >= self._eager and not self._woken and not self._closed:
+                self._cond.wait()  # a lazy slot: its worker starts with the pool's first task
         while True:
             if not self._ensure_worker(slot):
                 return
@@ -453,6 +465,9 @@ class WorkerPool:
         """Keep one warm worker aside, so a killed one is replaced at once, not after a warm-up."""
         _block_sigint()
         self._ready.wait()
+        with self._cond:  # with lazy slots the spare waits for them: it is started last
+            while not self._woken and not self._closed:
+                self._cond.wait()
         while True:
             with self._cond:  # a slot's own successor first: two warming at once take twice as long
                 while (self._spare is not None or not all(x.ready for x in self._slots)) and not self._closed:
