@@ -12,6 +12,7 @@ through here.  ``load_yaml(path, Struct)`` turns a bad file into one
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -76,9 +77,14 @@ def line_of(root: yaml.Node | None, path: str) -> int | None:
 
 
 def load_yaml(
-    path: str | Path, cls: type[T], choices: dict[str, tuple[str, ...]] | None = None
+    path: str | Path,
+    cls: type[T],
+    choices: dict[str, tuple[str, ...]] | None = None,
+    prepare: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
 ) -> tuple[T, yaml.Node | None]:
     """Read and validate a YAML file as ``cls``; returns the value and the node tree (for line numbers).
+
+    ``prepare`` turns what ``localise_document`` does not know into metres first (a script's zones).
 
     Raises:
         InputError: unreadable file, invalid YAML or an invalid field, with its line.
@@ -95,6 +101,8 @@ def load_yaml(
     if not isinstance(obj, dict):
         raise InputError(p.name, f"expected a mapping at the top, got {type(obj).__name__}")
     try:
+        if prepare is not None:
+            obj = prepare(obj)
         obj = localise_document(obj)  # {lat, lon} positions to metres from the file's origin
     except InputError as bad:
         raise located(p, root, bad) from None

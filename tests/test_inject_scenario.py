@@ -103,3 +103,81 @@ def test_pfp_inject_a_scenario_against_a_planner_of_another_intensity_fails_hone
         )  # fmt: skip
     assert "FAIL  live track of u1 follows the plan" in r.stdout, r.stdout[-2000:]
     assert r.returncode == 1
+
+
+ZONED = """\
+name: zoned
+start: [0, 0]
+goal: [100, 0]
+threats:
+  - {id: e1, position: [50, 25], facing_deg: 180, sigma_range: 8, sigma_lateral: 6}
+zones:
+  - {id: wall, polygon: [[[40, -20], [60, -20], [60, -0.5], [40, -0.5], [40, -20]]]}
+"""
+
+
+@pytest.mark.unit
+def test_a_scenario_zone_goes_live_with_an_expectation_to_keep_out(tmp_path):
+    from pfp_clients.script import AddZone
+
+    f = tmp_path / "zoned.yaml"
+    f.write_text(ZONED)
+    ls = live_scenario(f)
+    zones = [s for s in ls.script.timeline if isinstance(s, AddZone)]
+    assert [z.zone for z in zones] == ["wall"]
+    assert any(e.never_enters == "wall" for e in ls.script.expect)
+    assert ls.plan_status == "reached"
+    # the plan itself goes round the wall
+    from pfp_service.core.zones import track_enters
+
+    wall = [zones[0].update().to_zone("wall")]
+    assert track_enters(wall, ls.plan_path) is None
+    from pfp_service.core import plan
+
+    sc = ls.scenario  # without the zone, the threat would push the path into it
+    free = plan(sc.start, sc.goal, sc.schedule(), sc.planner.to_params())
+    assert track_enters(wall, np.asarray(free.path)) == "wall"
+
+
+@pytest.mark.unit
+def test_never_enters_sees_a_track_that_crosses_a_zone_and_one_that_does_not():
+    from pfp_clients.inject import ZoneVersion, judge
+    from pfp_clients.script import AddZone, Expect
+    from pfp_clients.watch import Watch
+
+    from pfp_service.wire.messages.structs import ZoneCircle
+
+    zone = AddZone(zone="z", circle=ZoneCircle(centre=(5.0, 0.0), radius_m=1.0)).update().to_zone("z")
+    e = Expect(unit="u", never_enters="z")
+    through, past = Watch(), Watch()
+    for i in range(11):
+        through.on_state("u", (float(i), 0.5 if i == 5 else 2.0), float(i))  # one point inside
+        past.on_state("u", (float(i), 1.5), float(i))
+    fast = Watch()  # two states either side: only the segment between them crosses it
+    fast.on_state("u", (3.0, 0.0), 0.0)
+    fast.on_state("u", (7.0, 0.0), 1.0)
+    versions = [ZoneVersion("z", zone, 0.0)]
+    assert not judge(e, through, versions).held
+    assert "entered zone z at (5.00, 0.50)" in judge(e, through, versions).detail
+    assert judge(e, past, versions).held
+    assert not judge(e, fast, versions).held
+    # a zone put after the unit went by is not held against it
+    assert judge(e, through, [ZoneVersion("z", zone, 20.0)]).detail.endswith("was in force")
+    assert not judge(e, past, []).held  # never put: nothing was checked, so it did not hold
+
+
+@pytest.mark.proc
+def test_pfp_inject_a_scenario_with_a_zone_keeps_out_of_it_live(tmp_path):
+    f = tmp_path / "zoned.yaml"
+    f.write_text(ZONED)
+    mission = "s" + uuid.uuid4().hex[:10]
+    with planner_process(mission=mission) as (endpoint, _):
+        r = run_pfp(
+            "inject", str(f), "--connect", endpoint, "--mission", mission, "--speed-up", "20", timeout=180
+        )
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-2000:]
+    assert "add zone wall" in r.stdout
+    assert re.search(r"PASS  u1 never enters zone wall: \d+ track segments checked", r.stdout), r.stdout[
+        -2000:
+    ]
+    assert "PASS  live track of u1 follows the plan" in r.stdout

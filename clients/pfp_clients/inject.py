@@ -26,10 +26,12 @@ import msgspec
 from pfp_clients.frames import learn_planner_origin, planner_origin, reframe
 from pfp_clients.script import (
     AddThreat,
+    AddZone,
     CancelGoal,
     Expect,
     MoveThreat,
     RemoveThreat,
+    RemoveZone,
     Script,
     SetGoal,
     Step,
@@ -100,8 +102,48 @@ class InjectReport:
         return not self.unfired and all(v.held for v in self.verdicts)
 
 
-def judge(e: Expect, watch: Watch) -> Verdict:
-    """Whether one expectation held, from what ``watch`` saw."""
+@dataclass(frozen=True)
+class ZoneVersion:
+    """One shape of a zone the script put, in force over ``[start_s, end_s)``."""
+
+    zone_id: str
+    zone: Any  # core.zones.Zone
+    start_s: float
+    end_s: float = math.inf
+
+
+def _never_enters(e: Expect, watch: Watch, zones: list[ZoneVersion]) -> Verdict:
+    """Every segment of the unit's track begun while a version of the zone was in force, checked exactly."""
+    from pfp_service.core.zones import track_enters
+
+    versions = [v for v in zones if v.zone_id == e.never_enters]
+    track = watch.tracks.get(e.unit, [])
+    if not versions:
+        return Verdict(e, False, f"zone {e.never_enters} was never put")
+    if len(track) < 2:
+        return Verdict(e, False, "too few states of the unit were seen to judge")
+    checked = 0
+    for v in versions:
+        idx = [i for i, (t, _x, _y) in enumerate(track) if v.start_s <= t < v.end_s]
+        if not idx:
+            continue
+        first, last = max(idx[0] - 1, 0), min(idx[-1] + 1, len(track) - 1)  # the segments into and out of it
+        pts = [(x, y) for _t, x, y in track[first : last + 1]]
+        checked += len(pts) - 1
+        if len(pts) > 1 and track_enters([v.zone], pts) is not None:
+            for t, x, y in track[first : last + 1]:
+                if v.zone.contains(x, y):
+                    return Verdict(e, False, f"entered zone {v.zone_id} at ({x:.2f}, {y:.2f}), t={t:.1f} s")
+            return Verdict(e, False, f"a segment of the track crossed zone {v.zone_id}")
+    if checked == 0:
+        return Verdict(e, False, f"{e.unit} was not seen while zone {e.never_enters} was in force")
+    return Verdict(e, True, f"{checked} track segments checked, none touches it")
+
+
+def judge(e: Expect, watch: Watch, zones: list[ZoneVersion] | None = None) -> Verdict:
+    """Whether one expectation held, from what ``watch`` saw (and the zones the script put)."""
+    if e.never_enters is not None:
+        return _never_enters(e, watch, zones or [])
     if e.arrives_within_s is not None:
         t = watch.arrived_at_s.get(e.unit)
         if t is None:
@@ -151,6 +193,19 @@ class _Runner:
         self.index = 0
         self.wait_until: float | None = None
         self.fired: list[Fired] = []
+        self.zones: list[ZoneVersion] = []
+
+    def zone_put(self, step: AddZone, t_s: float) -> None:
+        self.zone_removed(step.zone, t_s)
+        ttl = step.ttl_s
+        self.zones.append(
+            ZoneVersion(step.zone, step.update().to_zone(step.zone), t_s, t_s + ttl if ttl else math.inf)
+        )
+
+    def zone_removed(self, zone_id: str, t_s: float) -> None:
+        for i, v in enumerate(self.zones):
+            if v.zone_id == zone_id and v.end_s > t_s:
+                self.zones[i] = ZoneVersion(v.zone_id, v.zone, v.start_s, t_s)
 
     def due(self, step: Step, t_s: float) -> bool:
         if step.at_s is not None and t_s < step.at_s:
@@ -243,6 +298,21 @@ class _Runner:
             s.put(keys.unit_goal(m, step.unit), encode(step.goal()))
         elif isinstance(step, CancelGoal):
             s.delete(keys.unit_goal(m, step.unit))
+        elif isinstance(step, AddZone):
+            s.put(keys.zone(m, step.zone), encode(step.update()))
+            self.zone_put(step, t_s)
+        elif isinstance(step, RemoveZone):
+            s.delete(keys.zone(m, step.zone))
+            self.zone_removed(step.zone, t_s)
+
+
+def _zone_reframed(step: AddZone, conv: Callable[[tuple[float, float]], tuple[float, float]]) -> AddZone:
+    if step.circle is not None:
+        circle = msgspec.structs.replace(step.circle, centre=conv(step.circle.centre))
+        return msgspec.structs.replace(step, circle=circle)
+    assert step.polygon is not None
+    rings = [[conv((x, y)) for x, y in ring] for ring in step.polygon]
+    return msgspec.structs.replace(step, polygon=rings)
 
 
 def script_in_planner_frame(
@@ -258,6 +328,8 @@ def script_in_planner_frame(
         return script, None
     steps: list[Step] = []
     for step in script.timeline:
+        if isinstance(step, AddZone):
+            step = _zone_reframed(step, conv)
         if isinstance(step, AddThreat | MoveThreat | SetGoal):
             step = msgspec.structs.replace(step, position=conv(step.position))
         if step.when is not None:
@@ -384,7 +456,7 @@ def run_inject(
             with contextlib.suppress(Exception):  # already gone with the session
                 sub.undeclare()
     say(f"t={t_s:7.2f}s  inject stops: {reason}")
-    verdicts = [judge(e, w) for e in script.expect]
+    verdicts = [judge(e, w, run.zones) for e in script.expect]
     unfired = list(range(run.index, len(script.timeline)))
     return InjectReport(script, run.fired, unfired, verdicts, w, t_s, t0, speed_up, reason, coords=run.coords)
 

@@ -5,10 +5,10 @@
 
 * an injection script (``pfp_clients.script.Script``): every threat an
   ``add_threat`` (a threat that appears at plan step ``k`` is put at
-  ``k`` ticks of the simulated unit, ``at_s = k / rate_hz``), every zone an
-  ``add_zone`` (when the scenario has zones), then the unit's goal with the
-  step, tolerance and delta the plan resolves, and the expectation that the
-  unit arrives;
+  ``k`` ticks of the simulated unit, ``at_s = k / rate_hz``), every keep-out
+  zone an ``add_zone``, then the unit's goal with the step, tolerance and
+  delta the plan resolves, and the expectations that the unit arrives and
+  never enters a zone;
 * one simulated unit at ``start`` (the fleet's sim), moving one plan step per
   tick, so the live stream walks the same steps the plan does;
 * the plan itself, computed here with the same engine, to judge the live
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pfp_clients.script import AddThreat, Expect, Script, SetGoal, Step
+from pfp_clients.script import AddThreat, AddZone, Expect, Script, SetGoal, Step
 from pfp_service.errors import InputError
 from pfp_service.files import read_text
 from pfp_service.scenario import Scenario, load_scenario
@@ -91,17 +91,12 @@ def _threat_step(i: int, t: Any, tid: str, dt_s: float) -> AddThreat:
     )
 
 
-def _zone_steps(sc: Scenario) -> list[Step]:
-    """``add_zone`` entries for the scenario's zones, once scenarios and scripts both have zones."""
-    zones = getattr(sc, "zones", None) or []
-    if not zones:
-        return []
-    from pfp_clients import script as script_mod
-
-    make = getattr(script_mod, "zone_step", None)
-    if make is None:
-        raise InputError("zones", "this version cannot put zones live yet")
-    return [make(z, f"z{i + 1}") for i, z in enumerate(zones)]
+def _zone_steps(sc: Scenario) -> list[AddZone]:
+    """An ``add_zone`` entry for each of the scenario's keep-out zones (already in metres)."""
+    return [
+        AddZone(zone=z.id or f"z{i + 1}", kind=z.kind, polygon=z.polygon, circle=z.circle, ttl_s=z.ttl_s)
+        for i, z in enumerate(sc.zones)
+    ]
 
 
 def live_scenario(path: str | Path, unit: str = "u1", rate_hz: float = 5.0) -> LiveScenario:
@@ -129,7 +124,8 @@ def live_scenario(path: str | Path, unit: str = "u1", rate_hz: float = 5.0) -> L
     except InputError as err:
         raise InputError(f"{p.name}, {err.path}", err.reason) from None
     steps.append(SetGoal(unit=unit, position=sc.goal, step=r.step, tolerance=r.tolerance, delta=r.delta))
-    result = plan(sc.start, sc.goal, schedule, params, sc.bounds_tuple())
+    zones = _zone_steps(sc)
+    result = plan(sc.start, sc.goal, schedule, params, sc.bounds_tuple(), zones=sc.zone_set())
     path_xy = np.asarray(result.path, dtype=float).reshape(-1, 2)
     ticks = max(len(path_xy), 10)
     duration = ARRIVAL_MARGIN * ticks * dt_s + 10.0
@@ -138,7 +134,10 @@ def live_scenario(path: str | Path, unit: str = "u1", rate_hz: float = 5.0) -> L
         origin=sc.origin,
         duration_s=duration,
         timeline=steps,
-        expect=[Expect(unit=unit, arrives_within_s=duration)],
+        expect=[
+            Expect(unit=unit, arrives_within_s=duration),
+            *(Expect(unit=unit, never_enters=z.zone) for z in zones),
+        ],
     )
     team = Team(
         name=sc.name,

@@ -12,14 +12,23 @@ A script is YAML, validated whole before anything is sent::
          threat: e3, position: [6, 7], facing_deg: 225, sigma_range: 1.0, sigma_lateral: 0.7}
       - {do: wait, seconds: 5}
       - {do: move_threat, threat: e3, position: [6, 8]}
+      - {do: add_zone, zone: z1, circle: {centre: [8, 3], radius_m: 1.0}}
+      - {do: add_zone, zone: z2, polygon: [[[1, 7], [2, 7], [2, 9], [1, 9], [1, 7]]]}
+      - {do: remove_zone, zone: z2, at_s: 40}
     expect:
       - {unit: u1, arrives_within_s: 60}
       - {unit: u1, min_clearance_m: 1.5, to: e3}
+      - {unit: u1, never_enters: z1}
 
 Triggers: none (right after the previous entry), ``at_s`` (seconds from the
 start; at once if already past) or ``when`` (a unit within ``within_m`` of a
 point).  Actions: ``add_threat``, ``move_threat``, ``remove_threat``,
-``set_goal``, ``cancel_goal``, ``wait``.
+``add_zone`` (the wire's zone: ``polygon`` rings or a ``circle``, vertices
+``[x, y]`` or ``{lat, lon}``, optional ``ttl_s``; put again to move it),
+``remove_zone``, ``set_goal``, ``cancel_goal``, ``wait``.  Expectations:
+``arrives_within_s``, ``min_clearance_m`` (to one threat or all) and
+``never_enters`` (a zone: no segment of the unit's track while the zone was in
+force touches it, checked exactly per segment by ``core.zones.track_enters``).
 """
 
 from __future__ import annotations
@@ -35,15 +44,19 @@ from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Ske
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import Goal, ThreatUpdate
+from pfp_service.wire.messages import ZoneUpdate, localise_zone
+from pfp_service.wire.messages.structs import MAX_ZONE_RINGS, Ring, ZoneCircle, ZoneKind
 from pfp_service.yamlio import load_yaml, located
 
 __all__ = [
     "ACTIONS",
     "AddThreat",
+    "AddZone",
     "CancelGoal",
     "Expect",
     "MoveThreat",
     "RemoveThreat",
+    "RemoveZone",
     "Script",
     "SetGoal",
     "Step",
@@ -53,7 +66,16 @@ __all__ = [
 ]
 
 Angle = Annotated[float, Meta(ge=-360.0, le=360.0)]
-ACTIONS = ("add_threat", "move_threat", "remove_threat", "set_goal", "cancel_goal", "wait")
+ACTIONS = (
+    "add_threat",
+    "move_threat",
+    "remove_threat",
+    "add_zone",
+    "remove_zone",
+    "set_goal",
+    "cancel_goal",
+    "wait",
+)
 
 
 class When(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
@@ -134,6 +156,38 @@ class RemoveThreat(_Step, kw_only=True, frozen=True, tag="remove_threat"):
         return f"remove threat {self.threat}"
 
 
+class AddZone(_Step, kw_only=True, frozen=True, tag="add_zone"):
+    """Put a keep-out zone (or replace one: a zone is moved by putting it again), as the wire's ``ZoneUpdate``."""
+
+    zone: Id
+    kind: ZoneKind = "keep_out"
+    polygon: Annotated[list[Ring], Meta(min_length=1, max_length=MAX_ZONE_RINGS)] | None = None
+    circle: ZoneCircle | None = None
+    ttl_s: Positive | None = None
+
+    def __post_init__(self) -> None:
+        self.update()  # the wire's own checks: one shape, closed simple rings, bounds
+
+    def update(self) -> ZoneUpdate:
+        return ZoneUpdate(kind=self.kind, polygon=self.polygon, circle=self.circle, ttl_s=self.ttl_s)
+
+    def describe(self, show: Show = None) -> str:
+        if self.circle is not None:
+            c = self.circle
+            return f"add zone {self.zone}: a circle of {c.radius_m:g} m round {_shown(c.centre, show)}"
+        assert self.polygon is not None
+        return f"add zone {self.zone}: a polygon of {len(self.polygon[0]) - 1} vertices from {_shown(self.polygon[0][0], show)}"
+
+
+class RemoveZone(_Step, kw_only=True, frozen=True, tag="remove_zone"):
+    """Delete a keep-out zone."""
+
+    zone: Id
+
+    def describe(self, show: Show = None) -> str:
+        return f"remove zone {self.zone}"
+
+
 class SetGoal(_Step, kw_only=True, frozen=True, tag="set_goal"):
     """Give a unit a goal; ``step``/``tolerance``/``delta`` as in the wire ``Goal``."""
 
@@ -168,26 +222,32 @@ class Wait(_Step, kw_only=True, frozen=True, tag="wait"):
         return f"wait {self.seconds:g} s"
 
 
-Step = Union[AddThreat, MoveThreat, RemoveThreat, SetGoal, CancelGoal, Wait]  # noqa: UP007
+Step = Union[AddThreat, MoveThreat, RemoveThreat, AddZone, RemoveZone, SetGoal, CancelGoal, Wait]  # noqa: UP007
 
 
 class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
-    """One expectation: ``arrives_within_s``, or ``min_clearance_m`` (to threat ``to``, else to all)."""
+    """One expectation: ``arrives_within_s``, ``min_clearance_m`` (to threat ``to``, else to all) or ``never_enters``."""
 
     unit: Id
     arrives_within_s: Positive | None = None
     min_clearance_m: NonNegative | None = None
     to: Id | None = None
+    never_enters: Id | None = None
 
     def __post_init__(self) -> None:
-        if (self.arrives_within_s is None) == (self.min_clearance_m is None):
-            raise ValueError("arrives_within_s: give exactly one of arrives_within_s or min_clearance_m")
+        given = [x is not None for x in (self.arrives_within_s, self.min_clearance_m, self.never_enters)]
+        if sum(given) != 1:
+            raise ValueError(
+                "arrives_within_s: give exactly one of arrives_within_s, min_clearance_m or never_enters"
+            )
         if self.to is not None and self.min_clearance_m is None:
             raise ValueError("to: only goes with min_clearance_m")
 
     def describe(self) -> str:
         if self.arrives_within_s is not None:
             return f"{self.unit} arrives within {self.arrives_within_s:g} s"
+        if self.never_enters is not None:
+            return f"{self.unit} never enters zone {self.never_enters}"
         return f"min clearance of {self.unit} to {self.to or 'every threat'} >= {self.min_clearance_m:g} m"
 
 
@@ -211,10 +271,23 @@ def _check_references(script: Script) -> None:
             raise InputError(f"timeline[{i}].threat", f"{step.threat!r} is not added earlier in the timeline")
         if isinstance(step, RemoveThreat):
             added.discard(step.threat)
+    zones: set[str] = set()
+    for i, step in enumerate(script.timeline):
+        if isinstance(step, AddZone):
+            zones.add(step.zone)
+        elif isinstance(step, RemoveZone):
+            if step.zone not in zones:
+                raise InputError(f"timeline[{i}].zone", f"{step.zone!r} is not added earlier in the timeline")
+            zones.discard(step.zone)
     ever = {s.threat for s in script.timeline if isinstance(s, AddThreat)}
+    ever_zones = {s.zone for s in script.timeline if isinstance(s, AddZone)}
     for i, e in enumerate(script.expect):
         if e.to is not None and e.to not in ever:
             raise InputError(f"expect[{i}].to", f"{e.to!r} is never added by the timeline")
+        if e.never_enters is not None and e.never_enters not in ever_zones:
+            raise InputError(
+                f"expect[{i}].never_enters", f"zone {e.never_enters!r} is never added by the timeline"
+            )
 
 
 def load_script(path: str | Path) -> Script:
@@ -224,9 +297,34 @@ def load_script(path: str | Path) -> Script:
         InputError: naming the file, the line and the field.
     """
     p = Path(path)
-    script, root = load_yaml(p, Script, {"do": ACTIONS})
+    script, root = load_yaml(p, Script, {"do": ACTIONS}, prepare=_localise_zones)
     try:
         _check_references(script)
     except InputError as err:
         raise located(p, root, err) from None
     return script
+
+
+def _localise_zones(doc: dict[str, object]) -> dict[str, object]:
+    """``add_zone`` vertices and centres given as ``{lat, lon}`` in metres from the script's origin.
+
+    Raises:
+        InputError: a bad lat/lon, or one without an origin, at ``timeline[i].polygon[j][k]``.
+    """
+    timeline = doc.get("timeline")
+    if not isinstance(timeline, list) or not any(
+        isinstance(e, dict) and e.get("do") == "add_zone" for e in timeline
+    ):
+        return doc
+    raw = doc.get("origin")
+    origin = None
+    if isinstance(raw, dict):
+        try:
+            origin = msgspec.convert(raw, Origin)
+        except msgspec.ValidationError:
+            origin = None  # the Script's own validation names the origin's fault
+    steps = [
+        localise_zone(e, origin, f"timeline[{i}]") if isinstance(e, dict) and e.get("do") == "add_zone" else e
+        for i, e in enumerate(timeline)
+    ]
+    return {**doc, "timeline": steps}
