@@ -264,6 +264,8 @@ def _zone_heading(
     code, dx, dy, dist, move, tx, ty = steprule.judge(unit, x, y, hx, hy, 1.0, steprule.HEADING)
     if boxes.shape[0] == 0 or code != steprule.GO or move <= 0.0:
         return code, dx, dy, dist, move, tx, ty
+    if zones.point_zone(edges, offsets, circles, boxes, x, y, 0.0)[0] <= zones.TOUCH_M:
+        return code, dx, dy, dist, move, tx, ty  # in a zone: the run is the way out of it
     t, z = zones.segment_hit(edges, offsets, circles, boxes, x, y, tx, ty)
     if z < 0:
         return code, dx, dy, dist, move, tx, ty
