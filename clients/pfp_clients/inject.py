@@ -241,7 +241,8 @@ class _Runner:
             w = step.when
             pos = self.watch.position(w.unit)
             where = "not seen yet" if pos is None else f"now {math.dist(pos, w.of):.1f} m away"
-            return f"{head}: {w.unit} within {w.within_m:g} m of {self.coords.point(w.of)}, {where}"
+            of = self.show(w.of) if self.show is not None else f"({w.of[0]:g}, {w.of[1]:g})"
+            return f"{head}: {w.unit} within {w.within_m:g} m of {of}, {where}"
         return head
 
     def advance(self, t_s: float, wall_s: float) -> None:
@@ -407,7 +408,7 @@ def run_inject(
             inbox.put(("arrived", ev.unit, None))
 
     subs = [
-        session.declare_subscriber(keys.unit_states(m), on_state),
+        session.declare_subscriber(keys.unit_states_any(m), on_state),
         session.declare_subscriber(keys.unit_directions(m), on_direction),
         session.declare_subscriber(keys.events(m), on_event),
     ]
