@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import msgspec
+import numpy as np
 import pytest
 
 from pfp_service.core import PlannerParams
 from pfp_service.service.events import inputs_from_snapshot
+from pfp_service.service.preview import preview
 from pfp_service.service.store import Store
 from pfp_service.service.world import (
     GoalSet,
@@ -90,6 +92,18 @@ def test_zones_beyond_max_zones_are_refused_on_their_key():
     assert rej.key.endswith("/zone/z2") and "max_zones" in rej.reason
     assert w.counts()["zones"] == 2
     assert not _events(w.apply([ZonePut("z0", WALL)], 1.0), RejectedEvent)  # a zone held may move
+
+
+def test_a_preview_respects_the_zones_in_force():
+    w = _world()
+    _guided(w, {"a": ((0, 0), (100, 0))})
+    w.apply([ZonePut("wall", WALL)], 1.0)
+    view = w.view("a")
+    assert view.zones.ids == ("wall",)
+    result = preview(view, None, lambda: 0.0, 30.0, 200_000)
+    path = np.asarray(result.path)
+    assert not view.zones.contains(path).any()
+    assert result.status.value == "reached"
 
 
 def test_the_snapshot_lists_the_zones_and_a_joining_planner_takes_them_with_the_time_left():

@@ -118,6 +118,12 @@ def register(sub: Any) -> None:
     w.add_argument(
         "--max-threats", type=bounded_int(1, 1_000_000), help="threats held at most (default: 10000)"
     )
+    w.add_argument(
+        "--zones",
+        metavar="FILE.geojson",
+        help="keep-out zones (RFC 7946 Polygons and MultiPolygons, lon/lat: needs --origin), put when the "
+        "planner starts (default: none)",
+    )
     d = p.add_argument_group("deliberation and previews, off the planning loop")
     d.add_argument(
         "--deliberation-workers",
@@ -193,6 +199,7 @@ _FLAG_KEYS = [
     "unit_forget_s",
     "max_units",
     "max_threats",
+    "zones",
     "deliberation_workers",
     "deliberation_budget_s",
     "preview_workers",
@@ -209,4 +216,8 @@ def run(args: argparse.Namespace) -> int:
 
     flags = {k: getattr(args, k) for k in _FLAG_KEYS}
     cfg = load_config(args.config, os.environ, flags)
+    if cfg.zones is not None:  # a bad zones file is one line and exit 2, before anything starts
+        from pfp_service.geojson import load_zones
+
+        load_zones(cfg.zones, cfg.origin)
     return serve(cfg)

@@ -96,6 +96,9 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     unit_forget_s: Positive | None = 600.0
     max_units: Annotated[int, Meta(ge=1, le=10_000_000)] = 100_000
     max_threats: Annotated[int, Meta(ge=1, le=1_000_000)] = 10_000
+    zones: str | None = (
+        None  # a GeoJSON file of keep-out zones, put when the planner starts (geojson.load_zones)
+    )
     # durable state: "auto" is a per-mission directory under the user's state directory
     # (resolved by load_config), "none" turns it off
     state_dir: str = "auto"

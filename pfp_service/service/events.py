@@ -16,7 +16,7 @@ from typing import Literal, Union
 import msgspec
 
 from pfp_service.core import PlannerParams, Resolved, Stepper, Threat, ThreatField
-from pfp_service.core.zones import ZoneSet
+from pfp_service.core.zones import Zone, ZoneSet
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import (
@@ -30,7 +30,7 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
-from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
 
 __all__ = [
     "Deliberated",
@@ -60,6 +60,7 @@ __all__ = [
     "mission_of",
     "unit_key",
     "where",
+    "zone_put",
 ]
 
 
@@ -121,6 +122,15 @@ class ZonePut:
 @dataclass(frozen=True, slots=True)
 class ZoneRemoved:
     zone: str
+
+
+def zone_put(zone: Zone) -> ZonePut:
+    """A core ``Zone`` (a ``--zones`` file's, ``geojson.load_zones``) as the input a wire put of it makes."""
+    if zone.centre is not None:
+        circle = ZoneCircle(centre=zone.centre, radius_m=zone.radius_m)
+        return ZonePut(zone.id, ZoneUpdate(kind=zone.kind, circle=circle))
+    rings = [[*ring, ring[0]] for ring in zone.rings()]
+    return ZonePut(zone.id, ZoneUpdate(kind=zone.kind, polygon=rings))
 
 
 @dataclass(frozen=True, slots=True)

@@ -50,6 +50,7 @@ from pfp_service.service.events import (
     ZonePut,
     ZoneRemoved,
     mission_message,
+    zone_put,
 )
 from pfp_service.service.intake import Intake
 from pfp_service.service.log import get_logger, log_changes
@@ -163,6 +164,13 @@ class PlannerNode:
         if self.store is not None:
             restored = self.store.restore(time.time())
             self.world.apply(restored.inputs, self.clock())
+        if self.cfg.zones is not None:  # the --zones file: in force (and stored) before the first state
+            from pfp_service.geojson import load_zones
+
+            filed: list[Input] = [zone_put(z) for z in load_zones(self.cfg.zones, self._origin)]
+            if self.store is not None:
+                filed = self.store.commit_batch(filed, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
+            self.world.apply(filed, self.clock())
         # unit states arrive in a ring Zenoh keeps (no Python thread, no GIL per sample); the loop
         # drains it: the latest STATE_RING states, older ones dropped first under a flood
         self._state_ring = s.declare_subscriber(keys.unit_states(m), zenoh.handlers.RingChannel(STATE_RING))
