@@ -220,7 +220,7 @@ def run_fleet(
     # goals are acknowledged writes: put before a planner runs, in force once one starts
     goals = Deliverer(session, m, lambda line: say(f"t={t_s:7.2f}s  {line}"))
     tokens = [session.liveliness().declare_token(keys.alive_unit(m, u.id)) for u in units]
-    pubs = {u.id: session.declare_publisher(keys.unit_state(m, u.id), encoding=enc) for u in units}
+    pubs = {u.id: session.declare_publisher(keys.shard_state(m, u.id), encoding=enc) for u in units}
     t_s, tick, late = 0.0, 0, 0
     reason = "stopped"
     last_answer = clock()

@@ -157,7 +157,7 @@ class Link:
         self.unit = unit
         self.inbox: queue.Queue[Inbound] = inbox if inbox is not None else queue.Queue(INBOX_DEPTH)
         self._state_pub = session.declare_publisher(
-            keys.unit_state(mission, unit),
+            keys.shard_state(mission, unit),  # its shard: a --cluster planner hears its own shards only
             encoding=zenoh_encoding(),
             congestion_control=zenoh.CongestionControl.DROP,
             express=True,

@@ -314,7 +314,7 @@ def echo_main(endpoint: str) -> None:
             )
             query.reply(keys.planner_status(MISSION, PLANNER_ID), encode(st), encoding=jenc)
 
-        sub = session.declare_subscriber(keys.unit_states(MISSION), on_state)
+        sub = session.declare_subscriber(keys.unit_states_any(MISSION), on_state)
         qbl = session.declare_queryable(keys.planner_status(MISSION, PLANNER_ID), on_status)
         try:
             stop.wait()
@@ -362,7 +362,7 @@ class LoadGen:
         self.recv: list[Received] = []
         self.events: list[tuple[float, str, dict[str, Any]]] = []
         self.bad = 0
-        self._state_keys = {u: zenoh.KeyExpr(keys.unit_state(MISSION, u)) for u in self.ids}
+        self._state_keys = {u: zenoh.KeyExpr(keys.shard_state(MISSION, u)) for u in self.ids}
         self._subs = [
             self.session.declare_subscriber(keys.unit_directions(MISSION), self._on_direction),
             self.session.declare_subscriber(keys.events(MISSION), self._on_event),

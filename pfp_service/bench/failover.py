@@ -105,7 +105,7 @@ def failover(planners: int, units: int, kills: int, round_s: float) -> dict[str,
                 seq += 1
                 for i, u in enumerate(ids):
                     session.put(
-                        keys.unit_state(MISSION, u), json.dumps({"position": [i % 10, i // 10], "seq": seq})
+                        keys.shard_state(MISSION, u), json.dumps({"position": [i % 10, i // 10], "seq": seq})
                     )
                 time.sleep(round_s)
                 with lock:

@@ -134,7 +134,7 @@ def _watch_tokens(*key_exprs: str) -> list[Grant]:
 def unit_grants(mission: str, unit: str, own_goal: bool = True) -> list[Grant]:
     """What unit ``unit`` may do: its own state, token, direction, preview (and goal)."""
     out = [
-        *_publish(keys.unit_state(mission, unit)),
+        *_publish(keys.unit_state(mission, unit), keys.shard_state(mission, unit)),
         *_token(keys.alive_unit(mission, unit)),
         *_subscribe(keys.unit_direction(mission, unit)),
         *_ask(keys.preview(mission, unit)),
@@ -157,7 +157,7 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
     every = (keys.planner_statuses(mission), keys.worlds(mission))
     writes = (keys.goals(mission), keys.threats(mission), keys.zones(mission))
     return [
-        *_subscribe(keys.unit_states(mission), *writes),
+        *_subscribe(keys.unit_states(mission), keys.sharded_states(mission), *writes),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
         *_publish(keys.unit_directions(mission), keys.events(mission)),
         # scale-out (`pfp serve --cluster`): planners share each unit's fixed mission

@@ -77,7 +77,8 @@ class Liveness:
         elif kind == "forget" and self.records.forgettable(rec, now, s.unit_forget_s):
             stale_s = now - rec.stale_since if rec.stale_since is not None else 0.0
             self.records.forget(rec)
-            out.events.append(ForgottenEvent(planner=s.planner_id, unit=rec.id, stale_s=stale_s))
+            if rec.owned:  # another shard's unit, unheard here since its shard went: its owner speaks for it
+                out.events.append(ForgottenEvent(planner=s.planner_id, unit=rec.id, stale_s=stale_s))
 
     def pushed(self, fresh: list[Direction], now: float) -> None:
         """Directions that went out in a batch: those no report of the batch asked for are pushes."""
@@ -95,6 +96,9 @@ class Liveness:
         if self.records.go_stale(rec, now):
             assert rec.position is not None
             p = self.settings.planner_id
-            out.events.append(StaleEvent(planner=p, unit=rec.id, position=rec.position, reason=reason))
+            if (
+                rec.owned
+            ):  # under --cluster a planner hears only its own shards: another's unit is its to report
+                out.events.append(StaleEvent(planner=p, unit=rec.id, position=rec.position, reason=reason))
             if self.settings.unit_forget_s is not None:
                 self.timers.set(now + self.settings.unit_forget_s, "forget", rec.id)

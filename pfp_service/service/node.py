@@ -1,10 +1,18 @@
 """The Zenoh wiring of the planner: decode, enqueue, ``world.apply``, publish.
 
-* Unit states, the flood, wake no Python thread: Zenoh keeps them in a ring
-  (``STATE_RING``) that the loop drains every ``POLL_S`` and decodes itself,
-  latest-wins per unit.  A callback per state took the GIL 10,000 times a
-  second from the loop (measured: 52-55 % of the states answered at 10,000/s
-  with callbacks, 74 % with the ring).
+* Unit states, the flood, wake no Python thread per state: Zenoh keeps them in
+  rings (``STATE_RING``), one on the plain key and one per shard this planner
+  owns (all shards on one ring while it owns them all); the loop drains them
+  and decodes, latest-wins per unit.  A callback per state took the GIL 10,000
+  times a second from the loop (measured: 52-55 % of the states answered at
+  10,000/s with callbacks, 74 % with the ring).
+* Ticks amortise: the loop ticks at most every ``MIN_TICK_S`` while states keep
+  coming, so the per-tick cost is shared; it does not poll: once a drain finds
+  nothing, a waiter thread per ring blocks in ``recv`` (the GIL released) for
+  the next state and wakes the loop, once.
+* Under ``--cluster`` the planner subscribes to the states of its own shards
+  only (``World.shards``, rendezvous hashing); as they change, the new rings
+  are declared before the old go.
 * Callbacks for the rest decode and enqueue, nothing more: everything in
   order, queries handed to the loop.  No callback replies or puts.
 * One planning loop applies a bounded slice of it and a ``Tick`` to the
@@ -86,8 +94,9 @@ QUERIES_MAX = 4096  # status, world and preview queries waiting for the loop; mo
 EVENT_LOG_LINES = 20  # log lines per kind of event per tick; the rest are counted in one line
 INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
 STATE_RING = 16_384  # unit states Zenoh holds for the loop (1.6 s of 10,000/s); past it the oldest go first
-POLL_S = 0.0003  # the loop looks at the state ring this often (states wake no Python thread) ...
-POLL_IDLE_S = 0.001  # ... backing off to this when none came (idle: about 2 % of a core)
+MIN_TICK_S = (
+    0.002  # ticks at most this often while states come (docs/operations.md: measured 1 vs 2 vs 0.3 ms)
+)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
@@ -147,6 +156,10 @@ class PlannerNode:
         self._loop_thread: threading.Thread | None = None
         self._trim = Trim()
         self._state_keys = keys.KeyOf(keys.KeyKind.UNIT_STATE, cfg.mission)
+        # "plain", "all" or a shard number: (subscriber, its ring, the waiter's arming event)
+        self._rings: dict[str, tuple[Any, Any, threading.Event]] = {}
+        self._early: list[Any] = []  # states a waiter took while the loop idled, before the rings' rest
+        self._shards: frozenset[int] = frozenset()
         self._direction_keys = keys.KeyOf(keys.KeyKind.UNIT_DIRECTION, cfg.mission)
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
         self._desk = desk if desk is not None else preview_desk(cfg, clock)
@@ -171,11 +184,11 @@ class PlannerNode:
             if self.store is not None:
                 filed = self.store.commit_batch(filed, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
             self.world.apply(filed, self.clock())
-        # unit states arrive in a ring Zenoh keeps (no Python thread, no GIL per sample); the loop
-        # drains it: the latest STATE_RING states, older ones dropped first under a flood
-        self._state_ring = s.declare_subscriber(keys.unit_states(m), zenoh.handlers.RingChannel(STATE_RING))
+        # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
+        # drains them: the latest STATE_RING states, older ones dropped first under a flood
+        self._ring("plain", keys.unit_states(m))
+        self._sync_shards()
         self._declared += [
-            self._state_ring,
             s.declare_subscriber(keys.goals(m), self._on_goal),
             s.declare_subscriber(keys.threats(m), self._on_threat),
             # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
@@ -222,6 +235,8 @@ class PlannerNode:
         self._wake.set()
         if self._loop_thread is not None:
             self._loop_thread.join(timeout=2.0)
+        for name in list(self._rings):
+            self._unring(name)
         twins = getattr(self, "_twins_thread", None)
         if twins is not None:
             twins.join(timeout=2.0)
@@ -402,34 +417,99 @@ class PlannerNode:
             self._queries.append((kind, query, self.clock()))
         self._wake.set()
 
+    # -- state rings: the plain key and this planner's shards ------------------------------
+    def _ring(self, name: str, key: str) -> None:
+        """Subscribe a ring on ``key``, with its waiter thread (it ends when the ring is undeclared)."""
+        sub = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(STATE_RING))
+        ring, armed = sub.handler, threading.Event()  # the handler: recv on the subscriber blocks undeclare
+        self._rings[name] = (sub, ring, armed)
+        threading.Thread(
+            target=self._wait_on, args=(ring, armed), name=f"pfp-ring-{name}", daemon=True
+        ).start()
+
+    def _unring(self, name: str) -> None:
+        sub, ring, armed = self._rings.pop(name)
+        now = self.clock()
+        while (sample := ring.try_recv()) is not None:  # what it holds still counts
+            self._state(sample, now)
+        with contextlib.suppress(Exception):  # already gone with the session
+            sub.undeclare()
+        armed.set()  # its waiter, if parked, finds the ring closed and ends
+
+    def _wait_on(self, ring: Any, armed: threading.Event) -> None:
+        """While the loop idles, block for the ring's next state and wake the loop with it (once per idling)."""
+        while not self._stop.is_set():
+            armed.wait()
+            armed.clear()
+            if self._stop.is_set():
+                return
+            try:
+                sample = ring.recv()  # blocks with the GIL released; raises once the ring is undeclared
+            except Exception:
+                return
+            with self._lock:
+                self._early.append(sample)
+            self._wake.set()
+
+    def _sync_shards(self) -> None:
+        """Subscribe to the shards the world says this planner owns; new rings first, then the old go."""
+        shards = self.world.shards()
+        if shards == self._shards:
+            return
+        m = self.cfg.mission
+        want = {"all": keys.sharded_states(m)} if len(shards) == keys.SHARDS else {}
+        want = want or {str(n): keys.shard_states(m, n) for n in sorted(shards)}
+        for name, key in want.items():
+            if name not in self._rings:
+                self._ring(name, key)
+        for name in [n for n in self._rings if n != "plain" and n not in want]:
+            self._unring(name)
+        log.info("state shards", extra={"fields": {"shards": sorted(shards)}})
+        self._shards = shards
+
     # -- the planning loop ------------------------------------------------------------
     def _drain_states(self) -> int:
-        """Decode what the state ring holds (at most ``STATE_RING``), latest-wins per unit."""
-        ring = self._state_ring
-        got = 0
+        """Decode what the rings hold (at most ``STATE_RING`` each), latest-wins per unit."""
         now = self.clock()
-        while got < STATE_RING:
-            sample = ring.try_recv()
-            if sample is None:
-                break
-            got += 1
+        with self._lock:
+            early, self._early = self._early, []
+        for sample in early:  # taken by a waiter before the rest of its ring: first
             self._state(sample, now)
+        got = len(early)
+        for _sub, ring, _armed in self._rings.values():
+            n = 0
+            while n < STATE_RING:
+                sample = ring.try_recv()
+                if sample is None:
+                    break
+                n += 1
+                self._state(sample, now)
+            got += n
         return got
 
     def _loop(self) -> None:
+        """Tick at most every ``MIN_TICK_S`` while states come; idle, sleep until woken (no polling)."""
         last = -math.inf
-        poll = POLL_S
+        idle = False
         while not self._stop.is_set():
-            woke = self._wake.wait(poll)
+            if idle:  # nothing came: the waiters watch the rings, the wake event the rest
+                for _sub, _ring, armed in self._rings.values():
+                    armed.set()
+                self._wake.wait(max(last + self.cfg.tick_s - self.clock(), 0.0))
+            pause = last + MIN_TICK_S - self.clock()
+            if pause > 0:  # amortise: the states and inputs of the next MIN_TICK_S share one tick
+                time.sleep(pause)
+            woke = self._wake.is_set()
             self._wake.clear()
             got = self._drain_states()
-            poll = POLL_S if got else min(poll * 1.5, POLL_IDLE_S)  # quiet: look less often
+            idle = not got
             now = self.clock()
             if not (woke or got or now - last >= self.cfg.tick_s):
                 continue
             last = now
             try:
                 self._tick()
+                self._sync_shards()
             except Exception:  # never let one bad batch kill the planner; say so loudly
                 log.exception("planning loop error")
 

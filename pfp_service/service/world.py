@@ -292,7 +292,9 @@ class World:
                 self._rec.hand_over(rec)
                 continue
             rec.owned = True
-            if rec.goal is not None and rec.position is not None:
+            if (
+                rec.goal is not None and rec.position is not None and not rec.stale
+            ):  # stale: at its next report
                 self._start(rec, b)
             self._tell(rec, b)
 

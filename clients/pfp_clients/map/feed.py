@@ -29,9 +29,11 @@ from pfp_clients.map.model import (
     StatusSeen,
     ThreatSeen,
     WorldSeen,
+    ZoneSeen,
 )
 from pfp_service.core.plan import PlanResult
 from pfp_service.errors import InputError
+from pfp_service.geo import Origin
 from pfp_service.wire import (
     decode_direction,
     decode_error_reply,
@@ -46,6 +48,7 @@ from pfp_service.wire import (
     keys,
     zenoh_encoding,
 )
+from pfp_service.wire.messages import decode_zone
 
 __all__ = ["Feed", "PreviewError"]
 
@@ -69,8 +72,11 @@ class Feed:
         query_timeout_s: how long a status, world or preview query waits.
     """
 
-    def __init__(self, session: Any, mission: str, query_timeout_s: float = 2.0) -> None:
+    def __init__(
+        self, session: Any, mission: str, query_timeout_s: float = 2.0, origin: Origin | None = None
+    ) -> None:
         self.session = session
+        self.origin = origin  # a zone's lat/lon vertices become metres from it
         self.mission = keys.check_chunk(mission, "--mission")
         self.query_timeout_s = query_timeout_s
         self._inbox: queue.SimpleQueue[Input] = queue.SimpleQueue()
@@ -126,6 +132,11 @@ class Feed:
         def on_threat(smp: Any) -> Input:
             return ThreatSeen(chunk(smp), None if is_delete(smp) else decode_threat(smp.payload.to_bytes()))
 
+        def on_zone(smp: Any) -> Input:  # lat/lon vertices need the origin (the map's, if it has one)
+            return ZoneSeen(
+                chunk(smp), None if is_delete(smp) else decode_zone(smp.payload.to_bytes(), None, self.origin)
+            )
+
         def on_event(smp: Any) -> Input:
             return EventSeen(decode_event(smp.payload.to_bytes()))
 
@@ -133,10 +144,11 @@ class Feed:
             return AliveSeen(chunk(smp), not is_delete(smp))
 
         self._declared = [
-            s.declare_subscriber(keys.unit_states(m), self._enqueue(on_state)),
+            s.declare_subscriber(keys.unit_states_any(m), self._enqueue(on_state)),
             s.declare_subscriber(keys.unit_directions(m), self._enqueue(on_direction)),
             s.declare_subscriber(keys.goals(m), self._enqueue(on_goal)),
             s.declare_subscriber(keys.threats(m), self._enqueue(on_threat)),
+            s.declare_subscriber(keys.zones(m), self._enqueue(on_zone)),
             s.declare_subscriber(keys.events(m), self._enqueue(on_event)),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._enqueue(on_alive), history=True),
         ]

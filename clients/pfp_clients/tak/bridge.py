@@ -222,7 +222,7 @@ async def _main(
     subs = [
         session.declare_subscriber(keys.threats(mission), enqueue("threat")),
         session.declare_subscriber(keys.zones(mission), enqueue("zone")),
-        session.declare_subscriber(keys.unit_states(mission), enqueue("state")),
+        session.declare_subscriber(keys.unit_states_any(mission), enqueue("state")),
         session.declare_subscriber(keys.unit_directions(mission), enqueue("direction")),
         session.declare_subscriber(keys.events(mission), enqueue("event")),
     ]
