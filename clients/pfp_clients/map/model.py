@@ -37,6 +37,7 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
+from pfp_service.wire.messages import ZoneUpdate
 
 __all__ = [
     "MAX_REJECTED_GROUPS",
@@ -50,6 +51,7 @@ __all__ = [
     "StatusSeen",
     "ThreatSeen",
     "WorldSeen",
+    "ZoneSeen",
     "eta_s",
     "merge_deltas",
 ]
@@ -85,6 +87,14 @@ class ThreatSeen:
 
 
 @dataclass(frozen=True, slots=True)
+class ZoneSeen:
+    """A keep-out zone put, or removed (``update`` is None)."""
+
+    zone: str
+    update: ZoneUpdate | None
+
+
+@dataclass(frozen=True, slots=True)
 class AliveSeen:
     unit: str
     alive: bool
@@ -107,7 +117,17 @@ class WorldSeen:
     world: WorldSnapshot
 
 
-Input = StateSeen | DirectionSeen | GoalSeen | ThreatSeen | AliveSeen | EventSeen | StatusSeen | WorldSeen
+Input = (
+    StateSeen
+    | DirectionSeen
+    | GoalSeen
+    | ThreatSeen
+    | ZoneSeen
+    | AliveSeen
+    | EventSeen
+    | StatusSeen
+    | WorldSeen
+)
 
 
 # -- what is kept -----------------------------------------------------------------
@@ -203,6 +223,21 @@ def _threat_of(threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: flo
     )
 
 
+def _zone_view(zone_id: str, z: ZoneUpdate, now: float, ttl_left_s: float | None) -> dict[str, Any]:
+    """A zone as the page draws it: its rings (metres; a polygon's outer ring first) or its circle."""
+    return {
+        "id": zone_id,
+        "kind": z.kind,
+        "polygon": None if z.polygon is None else [[_cm(p) for p in ring] for ring in z.polygon],
+        "circle": None
+        if z.circle is None
+        else {"centre": _cm(z.circle.centre), "radius_m": z.circle.radius_m},
+        "ttl_s": z.ttl_s,
+        "put_at": now,
+        "expires_at": None if ttl_left_s is None else now + ttl_left_s,
+    }
+
+
 MAX_REJECTED_GROUPS = 100
 
 
@@ -241,6 +276,10 @@ class MapModel:
         self.track_max = track_max
         self.units: dict[str, _Unit] = {}
         self.threats: dict[str, _Threat] = {}
+        self.zones: dict[str, dict[str, Any]] = {}  # zone id -> its view
+        self.zone_updates: dict[str, ZoneUpdate] = {}  # zone id -> as put (metres), for the GeoJSON export
+        self._dirty_zones: set[str] = set()
+        self._removed_zones: set[str] = set()
         self.events: deque[dict[str, Any]] = deque(maxlen=events_max)
         self.rejected: dict[str, dict[str, Any]] = {}
         self.status: dict[str, dict[str, Any]] = {}
@@ -301,6 +340,11 @@ class MapModel:
                             self._dirty_threats.discard(threat_id)
                     else:
                         self._put_threat(threat_id, update, now, update.ttl_s)
+                case ZoneSeen(zone_id, zupdate):
+                    if zupdate is None:
+                        self._drop_zone(zone_id)
+                    else:
+                        self._put_zone(zone_id, zupdate, now, zupdate.ttl_s)
                 case AliveSeen(unit_id, alive):
                     u = self._unit(unit_id)
                     u.alive = alive
@@ -317,6 +361,18 @@ class MapModel:
         self.threats[threat_id] = _threat_of(threat_id, update, now, ttl_left_s)
         self._dirty_threats.add(threat_id)
         self._removed_threats.discard(threat_id)
+
+    def _put_zone(self, zone_id: str, z: ZoneUpdate, now: float, ttl_left_s: float | None) -> None:
+        self.zones[zone_id] = _zone_view(zone_id, z, now, ttl_left_s)
+        self.zone_updates[zone_id] = z
+        self._dirty_zones.add(zone_id)
+        self._removed_zones.discard(zone_id)
+
+    def _drop_zone(self, zone_id: str) -> None:
+        if self.zones.pop(zone_id, None) is not None:
+            self.zone_updates.pop(zone_id, None)
+            self._removed_zones.add(zone_id)
+            self._dirty_zones.discard(zone_id)
 
     def _on_world(self, world: WorldSnapshot, now: float) -> None:
         """Fill in what the samples have not told yet; a sample seen since is newer, so it wins."""
@@ -338,6 +394,9 @@ class MapModel:
         for t in world.threats:
             if t.id not in self.threats:
                 self._put_threat(t.id, t.threat, now, t.ttl_s)
+        for z in world.zones:
+            if z.id not in self.zones:
+                self._put_zone(z.id, z.zone, now, z.ttl_s)
 
     def _on_event(self, ev: Event, now: float) -> None:
         t = ev.t if ev.t is not None else now
@@ -385,6 +444,10 @@ class MapModel:
             del self.threats[tid]
             self._removed_threats.add(tid)
             self._dirty_threats.discard(tid)
+        for zid in [
+            i for i, z in self.zones.items() if z["expires_at"] is not None and z["expires_at"] <= now
+        ]:
+            self._drop_zone(zid)
 
     # -- outputs ------------------------------------------------------------------
     def take_delta(self, now: float) -> dict[str, Any] | None:
@@ -401,6 +464,11 @@ class MapModel:
             out["threats"] = {tid: self.threats[tid].view() for tid in self._dirty_threats}
         if self._removed_threats:
             out["threats_removed"] = sorted(self._removed_threats)
+        if self._dirty_zones:
+            out["zones"] = {zid: self.zones[zid] for zid in self._dirty_zones}
+        if self._removed_zones:
+            out["zones_removed"] = sorted(self._removed_zones)
+        self._dirty_zones, self._removed_zones = set(), set()
         if self._new_events:
             out["events"] = self._new_events[-(self.events.maxlen or 100) :]
         if self._dirty_rejected:
@@ -421,6 +489,7 @@ class MapModel:
             "now": now,
             "units": {uid: u.view(list(u.track)) for uid, u in self.units.items()},
             "threats": {tid: t.view() for tid, t in self.threats.items()},
+            "zones": dict(self.zones),
             "events": list(self.events),
             "rejected": {g: dict(a) for g, a in self.rejected.items()},
             "status": dict(self.status),
@@ -464,11 +533,21 @@ def merge_deltas(
     for tid in new.get("threats_removed", ()):
         threats.pop(tid, None)
         removed_threats.add(tid)
+    zones = dict(old.get("zones", {}))
+    removed_zones = set(old.get("zones_removed", ()))
+    for zid, view in new.get("zones", {}).items():
+        zones[zid] = view
+        removed_zones.discard(zid)
+    for zid in new.get("zones_removed", ()):
+        zones.pop(zid, None)
+        removed_zones.add(zid)
     for name, value in (
         ("units", units),
         ("units_removed", sorted(removed_units)),
         ("threats", threats),
         ("threats_removed", sorted(removed_threats)),
+        ("zones", zones),
+        ("zones_removed", sorted(removed_zones)),
         ("events", (old.get("events", []) + new.get("events", []))[-events_max:]),
         ("rejected", {**old.get("rejected", {}), **new.get("rejected", {})}),
         ("status", {**old.get("status", {}), **new.get("status", {})}),

@@ -25,6 +25,9 @@ HTTP API (JSON):
     DELETE /api/threat/{id}
     PUT    /api/goal/{unit}       a Goal              (--allow-edit only)
     DELETE /api/goal/{unit}
+    PUT    /api/zone/{id}         a ZoneUpdate        (--allow-edit only): a keep-out zone
+    DELETE /api/zone/{id}
+    GET    /api/geojson           threats and keep-out zones as RFC 7946 GeoJSON (needs --origin)
 Edits need the header ``X-PFP-Edit: 1``: a custom header cannot be sent
 cross-origin without a CORS preflight, which this server never grants, so
 another web page open in the operator's browser cannot edit the mission.
@@ -57,6 +60,7 @@ from pfp_clients.map.model import MapModel, eta_s, merge_deltas
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_goal, decode_threat, keys
+from pfp_service.wire.messages import decode_zone
 
 __all__ = ["STATIC_DIR", "MapOptions", "MapServer", "host_allowed", "serve"]
 
@@ -163,7 +167,7 @@ class MapServer:
     def __init__(self, session: Any, opts: MapOptions, clock: Callable[[], float] = time.time) -> None:
         self.opts = opts
         self.clock = clock
-        self.feed = Feed(session, opts.mission, opts.query_timeout_s)
+        self.feed = Feed(session, opts.mission, opts.query_timeout_s, opts.origin)
         self.model = MapModel(stale_s=opts.stale_s)
         self._browsers: list[_Browser] = []
         self._joining: list[_Browser] = []
@@ -290,6 +294,9 @@ class MapServer:
         app.router.add_delete("/api/threat/{id}", self._delete_threat)
         app.router.add_put("/api/goal/{unit}", self._put_goal)
         app.router.add_delete("/api/goal/{unit}", self._delete_goal)
+        app.router.add_put("/api/zone/{id}", self._put_zone)
+        app.router.add_delete("/api/zone/{id}", self._delete_zone)
+        app.router.add_get("/api/geojson", self._geojson)
         app.router.add_static("/static/", STATIC_DIR)
         return app
 
@@ -367,6 +374,30 @@ class MapServer:
 
     async def _delete_threat(self, request: web.Request) -> web.Response:
         return await self._edit(request, lambda t: keys.threat(self.opts.mission, t), None)
+
+    async def _put_zone(self, request: web.Request) -> web.Response:
+        def decode(body: bytes) -> Any:  # metres, or {lat, lon} with an origin
+            return decode_zone(body, None, self.opts.origin)
+
+        return await self._edit(request, lambda z: keys.zone(self.opts.mission, z), decode)
+
+    async def _delete_zone(self, request: web.Request) -> web.Response:
+        return await self._edit(request, lambda z: keys.zone(self.opts.mission, z), None)
+
+    async def _geojson(self, request: web.Request) -> web.Response:
+        """The threats and keep-out zones the map shows, as one RFC 7946 FeatureCollection."""
+        from pfp_service.geojson import feature_collection
+
+        origin = self.opts.origin
+        if origin is None:
+            return web.json_response(
+                {"error": "GeoJSON is in lon/lat: start pfp map with --origin"}, status=409
+            )
+        model = self.model
+        threats = [t.update.to_threat(tid) for tid, t in model.threats.items()]
+        zones = [z.to_zone(zid) for zid, z in model.zone_updates.items()]
+        fc = feature_collection(origin, threats, zones=zones, name=f"pfp map {self.opts.mission}")
+        return web.json_response(fc, content_type="application/geo+json")
 
     async def _put_goal(self, request: web.Request) -> web.Response:
         return await self._edit(request, lambda u: keys.unit_goal(self.opts.mission, u), decode_goal)

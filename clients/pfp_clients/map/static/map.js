@@ -24,10 +24,14 @@ const state = {
   offset: 0, // server clock minus ours, seconds
   units: new Map(), // id -> {data, marker, track, look, goal}
   threats: new Map(), // id -> {data, layers, label}
+  zones: new Map(), // id -> {data, layer}: keep-out zones
+  selectedZone: null,
+  draft: [], // the corners (metres) of a keep-out zone being drawn; a circle's centre
+  draftLayer: null,
   rejected: new Map(),
   selectedUnit: null,
   selectedThreat: null,
-  mode: null, // null | "drop-threat" | "move-threat" | "set-goal"
+  mode: null, // null | "drop-threat" | "move-threat" | "set-goal" | "zone-polygon" | "zone-centre" | "zone-edge"
   fitted: false,
   perf: { frames: 0, bytes: 0, applyMsTotal: 0, applyMsMax: 0 }, // what each frame costs the page
   userMoved: false, // the operator panned or zoomed: stop following
@@ -147,6 +151,7 @@ function createMap(config) {
   else map.setView([0, 0], 2);
   L.control.scale({ imperial: false, metric: true }).addTo(map);
   state.layers = {
+    zones: L.layerGroup().addTo(map),
     threats: L.layerGroup().addTo(map),
     tracks: L.layerGroup().addTo(map),
     look: L.layerGroup().addTo(map),
@@ -156,6 +161,7 @@ function createMap(config) {
   };
   state.renderer = L.canvas({ padding: 0.2 });
   map.on("click", onMapClick);
+  map.on("dblclick", () => state.mode === "zone-polygon" && finishPolygon());
   map.on("moveend", () => {
     const view = map.getBounds().pad(0.3);
     state.units.forEach((u) => {
@@ -172,6 +178,7 @@ function createMap(config) {
   map.zoomControl.getContainer().addEventListener("click", moved);
   map.on("mousemove", (e) => {
     const [x, y] = toMetres(e.latlng);
+    if (state.draft.length && (state.mode === "zone-polygon" || state.mode === "zone-edge")) drawDraft([x, y]);
     $("cursor").textContent = `x ${x.toFixed(1)} m, y ${y.toFixed(1)} m` + (geo ? `  (${e.latlng.lat.toFixed(6)}, ${e.latlng.lng.toFixed(6)})` : "");
   });
   state.map = map;
@@ -377,6 +384,111 @@ function removeThreat(id, replacing) {
   if (!replacing && state.selectedThreat === id) closeThreat();
 }
 
+// -- keep-out zones: no unit's path enters one; drawn black, hatched dark, named "no-go" ------------
+function upsertZone(d) {
+  removeZone(d.id, true);
+  const style = { color: "#111", weight: 2, fillColor: "#37474f", fillOpacity: 0.45 };
+  const layer = d.circle
+    ? L.circle(toLatLng(d.circle.centre), Object.assign({ radius: d.circle.radius_m }, style))
+    : L.polygon(d.polygon.map((ring) => ring.slice(0, -1).map(toLatLng)), style);
+  layer.bindTooltip(`no-go ${esc(d.id)}`, { direction: "center", className: "zone-label" });
+  layer.on("click", (e) => {
+    L.DomEvent.stopPropagation(e);
+    selectZone(d.id);
+  });
+  layer.addTo(state.layers.zones);
+  state.zones.set(d.id, { data: d, layer });
+  if (state.selectedZone === d.id) showZone();
+}
+
+function removeZone(id, replacing) {
+  const z = state.zones.get(id);
+  if (!z) return;
+  state.layers.zones.removeLayer(z.layer);
+  state.zones.delete(id);
+  if (!replacing && state.selectedZone === id) closeZone();
+}
+
+function zonePoints(d) {
+  if (d.circle) {
+    const [x, y] = d.circle.centre;
+    const r = d.circle.radius_m;
+    return [[x - r, y - r], [x + r, y + r]];
+  }
+  return d.polygon[0];
+}
+
+function showZone() {
+  const z = state.zones.get(state.selectedZone);
+  if (!z) return;
+  const d = z.data;
+  $("zone-panel").hidden = false;
+  $("zone-id").textContent = d.id;
+  const ttl = threatTtl(d);
+  const shape = d.circle
+    ? row("circle", `centre ${fmt(d.circle.centre[0])}, ${fmt(d.circle.centre[1])} m, radius ${fmt(d.circle.radius_m)} m`)
+    : row("polygon", `${d.polygon[0].length - 1} corners` + (d.polygon.length > 1 ? `, ${d.polygon.length - 1} hole(s)` : ""));
+  $("zone-info").innerHTML = row("kind", esc(d.kind)) + shape + row("TTL left", ttl === null ? "none (until deleted)" : ageText(Math.max(0, ttl)));
+}
+
+function selectZone(id) {
+  if (state.selectedUnit) closeUnit();
+  if (state.selectedThreat) closeThreat();
+  state.selectedZone = id;
+  showZone();
+}
+
+function closeZone() {
+  state.selectedZone = null;
+  $("zone-panel").hidden = true;
+}
+
+function newZoneId() {
+  const given = $("new-id").value.trim();
+  if (given) return given;
+  let id;
+  do id = `map-zone-${++state.dropCount}`;
+  while (state.zones.has(id));
+  return id;
+}
+
+function drawDraft(cursor) {
+  if (state.draftLayer) state.map.removeLayer(state.draftLayer);
+  state.draftLayer = null;
+  const pts = state.draft.map(toLatLng);
+  if (state.mode === "zone-edge" && cursor) {
+    const r = Math.hypot(cursor[0] - state.draft[0][0], cursor[1] - state.draft[0][1]);
+    state.draftLayer = L.circle(pts[0], { radius: r, color: "#111", dashArray: "4 3", weight: 2, fill: false });
+  } else if (pts.length) {
+    state.draftLayer = L.polyline(cursor ? [...pts, toLatLng(cursor)] : pts, { color: "#111", dashArray: "4 3", weight: 2 });
+  }
+  if (state.draftLayer) state.draftLayer.addTo(state.map);
+}
+
+function endDraft() {
+  state.draft = [];
+  drawDraft(null);
+  $("zone-finish").hidden = true;
+  $("zone-cancel").hidden = true;
+}
+
+function startZone(mode) {
+  endDraft();
+  setMode(mode);
+  $("zone-cancel").hidden = false;
+}
+
+async function finishPolygon() {
+  const ring = state.draft.slice();
+  if (ring.length < 3) {
+    $("edit-result").textContent = "a keep-out polygon needs at least 3 corners";
+    return;
+  }
+  setMode(null);
+  endDraft();
+  await edit("PUT", `/api/zone/${encodeURIComponent(newZoneId())}`, { kind: "keep_out", polygon: [[...ring, ring[0]]] });
+}
+
 // -- panels ------------------------------------------------------------------------------------
 function renderStatus(all) {
   const rows = Object.values(all).map((s) => {
@@ -564,9 +676,20 @@ function closeThreat() {
 // -- editing: every edit is one put or delete on the mission's keys, through the server -----------
 function setMode(mode) {
   state.mode = mode;
-  const text = { "drop-threat": "click the map to drop a threat", "move-threat": "click the map to move the threat", "set-goal": "click the map to set the goal" }[mode];
+  const text = {
+    "drop-threat": "click the map to drop a threat",
+    "move-threat": "click the map to move the threat",
+    "set-goal": "click the map to set the goal",
+    "zone-polygon": "click the zone's corners, then finish (or double-click)",
+    "zone-centre": "click the circle's centre",
+    "zone-edge": "click the circle's edge",
+  }[mode];
   $("edit-mode").textContent = text || "";
-  if (state.map) state.map.getContainer().classList.toggle("edit-mode", !!mode);
+  if (state.map) {
+    state.map.getContainer().classList.toggle("edit-mode", !!mode);
+    if (mode === "zone-polygon") state.map.doubleClickZoom.disable(); // a double-click finishes the polygon
+    else state.map.doubleClickZoom.enable();
+  }
 }
 
 async function edit(method, path, body) {
@@ -616,6 +739,28 @@ async function onMapClick(e) {
   if (!mode) {
     if (state.selectedUnit) closeUnit();
     if (state.selectedThreat) closeThreat();
+    if (state.selectedZone) closeZone();
+    return;
+  }
+  if (mode === "zone-polygon") {
+    const last = state.draft[state.draft.length - 1];
+    if (!last || last[0] !== p[0] || last[1] !== p[1]) state.draft.push(p); // a double-click's second click adds nothing
+    $("zone-finish").hidden = state.draft.length < 3;
+    drawDraft(null);
+    return;
+  }
+  if (mode === "zone-centre") {
+    state.draft = [p];
+    setMode("zone-edge");
+    drawDraft(null);
+    return;
+  }
+  if (mode === "zone-edge") {
+    const c = state.draft[0];
+    const radius = Math.round(Math.hypot(p[0] - c[0], p[1] - c[1]) * 100) / 100;
+    setMode(null);
+    endDraft();
+    await edit("PUT", `/api/zone/${encodeURIComponent(newZoneId())}`, { kind: "keep_out", circle: { centre: c, radius_m: radius } });
     return;
   }
   setMode(null);
@@ -639,6 +784,7 @@ function follow() {
     if (u.data.goal) pts.push(toLatLng(u.data.goal));
   });
   state.threats.forEach((t) => t.data.zone.forEach((p) => pts.push(toLatLng(p))));
+  state.zones.forEach((z) => zonePoints(z.data).forEach((p) => pts.push(toLatLng(p))));
   if (!pts.length) return;
   const b = L.latLngBounds(pts);
   if (state.fitted && state.map.getBounds().contains(b)) return;
@@ -652,6 +798,7 @@ function apply(msg) {
     if (!state.map) createMap(msg.config);
     [...state.units.keys()].forEach(removeUnit);
     [...state.threats.keys()].forEach((id) => removeThreat(id, false));
+    [...state.zones.keys()].forEach((id) => removeZone(id, false));
     $("events").innerHTML = "";
     state.rejected.clear();
   }
@@ -659,6 +806,8 @@ function apply(msg) {
   state.cull = !full && state.units.size > CULL_MIN_UNITS ? state.map.getBounds().pad(0.3) : null;
   Object.values(msg.threats || {}).forEach(upsertThreat);
   (msg.threats_removed || []).forEach((id) => removeThreat(id, false));
+  Object.values(msg.zones || {}).forEach(upsertZone);
+  (msg.zones_removed || []).forEach((id) => removeZone(id, false));
   Object.values(msg.units || {}).forEach((d) => upsertUnit(d, full));
   (msg.units_removed || []).forEach(removeUnit);
   if (msg.events) {
@@ -716,6 +865,7 @@ setInterval(() => {
   state.threats.forEach(paintThreat);
   if (state.selectedUnit) showUnit();
   if (state.selectedThreat) showThreat();
+  if (state.selectedZone) showZone();
   if (state.status) renderStatus(state.status);
 }, 1000);
 
@@ -726,5 +876,14 @@ $("threat-drop").onclick = () => setMode("drop-threat");
 $("threat-move").onclick = () => setMode("move-threat");
 $("threat-delete").onclick = () => state.selectedThreat && edit("DELETE", `/api/threat/${encodeURIComponent(state.selectedThreat)}`);
 $("goal-set").onclick = () => setMode("set-goal");
+$("zone-close").onclick = closeZone;
+$("zone-delete").onclick = () => state.selectedZone && edit("DELETE", `/api/zone/${encodeURIComponent(state.selectedZone)}`);
+$("zone-draw").onclick = () => startZone("zone-polygon");
+$("zone-circle").onclick = () => startZone("zone-centre");
+$("zone-finish").onclick = finishPolygon;
+$("zone-cancel").onclick = () => {
+  setMode(null);
+  endDraft();
+};
 $("goal-cancel").onclick = () => state.selectedUnit && edit("DELETE", `/api/goal/${encodeURIComponent(state.selectedUnit)}`);
 connect();
