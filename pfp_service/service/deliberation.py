@@ -29,6 +29,13 @@ shares only the machine's cores.  The processes are a ``WorkerPool``
 (``workers.py``, shared with the preview desk): a chunk still running
 ``CHUNK_RUN_S`` after it started is killed with its worker (its jobs are
 asked again later), and each worker's memory is bounded.
+
+The workers start with the first job, not with the planner (an idle
+worker is ~90 MB of PSS): the first goal's look-ahead waits a few seconds
+for one to warm, and a job still waiting at its deadline is answered
+unrun and asked again, as under any backlog.  One worker by default
+(``deliberation_workers``): on a 2-core machine the loop and the Zenoh
+threads need a core, the preview workers share the other.
 """
 
 from __future__ import annotations
@@ -89,6 +96,7 @@ class Deliberators:
             on_replaced=lambda why: log.warning(
                 "deliberation worker replaced", extra={"fields": {"why": why}}
             ),
+            eager=0,  # started by the first job: an idle planner holds no deliberation worker
         )  # jobs sent meanwhile wait for the workers
 
     def submit(self, jobs: list[Job]) -> None:
