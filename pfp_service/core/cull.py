@@ -36,6 +36,7 @@ import numpy as np
 
 from pfp_service.core import kernels, steprule
 from pfp_service.core.kernels import A_X, A_Y, ACTIVE, P00, P01, P11, SCALE, XI_X, XI_Y
+from pfp_service.core.zones import ZoneSet
 
 __all__ = [
     "MIN_THREATS",
@@ -226,14 +227,20 @@ def _culled_descent_parallel(  # type: ignore[no-untyped-def]
         )
 
 
+_NO_ZONES = ZoneSet()
+
+
 def predict(
     packed: np.ndarray,
     index: CullIndex | None,
     points: np.ndarray,
     units: np.ndarray,
     steps: int,
+    zones: ZoneSet | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Plain steepest descent of many units for ``steps`` steps, in one compiled call.
+
+    Among keep-out ``zones`` each step is ``steprule.judge_zoned``'s, as the stepper's.
 
     Each step is ``descent`` (culled through ``index`` where the bound holds,
     every threat elsewhere; every threat when ``index`` is ``None``), judged
@@ -267,14 +274,15 @@ def predict(
         args = ((0.0, 0.0, 1.0, 1, 1), np.zeros(2, np.int64), np.zeros(0, np.int64), np.zeros(1), 0.0)
         pairs = n * steps * max(packed.shape[0], 1)
     kernel = _predict_parallel if pairs >= kernels.PARALLEL_MIN_PAIRS else _predict_serial
-    kernel(packed, pts, goals, gains, units, steps, index is not None, *args, trail, lengths)
+    zp = (zones if zones is not None else _NO_ZONES).packed()
+    kernel(packed, pts, goals, gains, units, steps, index is not None, *args, trail, lengths, *zp)
     return trail, lengths
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _predict_row(  # type: ignore[no-untyped-def]
     packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
-    trail, lengths, out, flags, i,
+    trail, lengths, out, flags, i, edges, offsets, circles, boxes,
 ):  # fmt: skip
     trail[i, 0, 0] = pts[i, 0]
     trail[i, 0, 1] = pts[i, 1]
@@ -293,8 +301,8 @@ def _predict_row(  # type: ignore[no-untyped-def]
                 kernels._descent_row(packed, pts, goals, gains, out, i)
         else:
             kernels._descent_row(packed, pts, goals, gains, out, i)
-        code, _dx, _dy, _dist, _move, tx, ty = steprule.judge(
-            unit, x, y, out[i, 0], out[i, 1], out[i, 3], steprule.DESCENT
+        code, _dx, _dy, _dist, _move, tx, ty = steprule.judge_zoned(
+            unit, edges, offsets, circles, boxes, x, y, out[i, 0], out[i, 1], out[i, 3]
         )
         if code != steprule.GO:
             break
@@ -309,28 +317,28 @@ def _predict_row(  # type: ignore[no-untyped-def]
 @numba.njit(cache=True, nogil=True)
 def _predict_serial(  # type: ignore[no-untyped-def]
     packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
-    trail, lengths,
+    trail, lengths, edges, offsets, circles, boxes,
 ):  # fmt: skip
     out = np.empty((pts.shape[0], 4))
     flags = np.zeros(pts.shape[0], dtype=np.bool_)
     for i in range(pts.shape[0]):
         _predict_row(
             packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
-            trail, lengths, out, flags, i,
+            trail, lengths, out, flags, i, edges, offsets, circles, boxes,
         )  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _predict_parallel(  # type: ignore[no-untyped-def]
     packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
-    trail, lengths,
+    trail, lengths, edges, offsets, circles, boxes,
 ):  # fmt: skip
     out = np.empty((pts.shape[0], 4))
     flags = np.zeros(pts.shape[0], dtype=np.bool_)
     for i in numba.prange(pts.shape[0]):
         _predict_row(
             packed, pts, goals, gains, units, steps, culled, grid, indptr, indices, cell_need, need_outside,
-            trail, lengths, out, flags, i,
+            trail, lengths, out, flags, i, edges, offsets, circles, boxes,
         )  # fmt: skip
 
 

@@ -218,7 +218,7 @@ def predict_many(
     units = np.stack([steppers[i].rules() for i in idx])
     units[:, steprule.WINDOW] = 0.0  # unwatched
     index = cull if cull is not None and len(field) >= MIN_THREATS else None
-    trail, lengths = cull_predict(field.packed, index, pts0[plain], units, steps)
+    trail, lengths = cull_predict(field.packed, index, pts0[plain], units, steps, field.zones)
     rows = trail.tolist()
     for r, (i, n) in enumerate(zip(idx, lengths.tolist())):
         tracks[i] = list(map(tuple, rows[r][:n]))
