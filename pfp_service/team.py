@@ -8,6 +8,13 @@ A team file is YAML::
       - {id: r1, kind: unmanned, start: [0, 10], goal: [95, 60], speed_mps: 3.0}
 
 ``goal`` may be left out (the unit waits for one, e.g. from ``pfp inject``).
+Keep-out ``zones:`` are the wire's zone form with an ``id``, as in scenario
+files (``scenario.ZoneSpec``; vertices in metres, or ``{lat, lon}`` with an
+``origin``); ``pfp fleet`` puts them before the goals::
+
+    zones:
+      - {id: minefield, polygon: [[[40, 5], [46, 5], [46, 35], [40, 35], [40, 5]]]}
+      - {id: pond, circle: {centre: [20, 50], radius_m: 6}}
 """
 
 from __future__ import annotations
@@ -22,11 +29,13 @@ from msgspec import Meta
 
 from pfp_service.constraints import Id, Point
 from pfp_service.errors import InputError
-from pfp_service.geo import Origin
+from pfp_service.geo import Origin, localise_document
+from pfp_service.scenario import ZoneSpec
 from pfp_service.wire import UnitKind
+from pfp_service.wire.messages import ZoneUpdate, localise_zone
 from pfp_service.yamlio import load_yaml
 
-__all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team"]
+__all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team", "zone_updates"]
 
 Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
 CHOICES: dict[str, tuple[str, ...]] = {"kind": tuple(k.value for k in UnitKind)}
@@ -53,6 +62,7 @@ class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
     name: str = "team"
     origin: Origin | None = None  # where [0, 0] lies; positions may then be {lat, lon}
     units: Annotated[list[UnitSpec], Meta(min_length=1, max_length=10_000)]
+    zones: Annotated[list[ZoneSpec], Meta(max_length=1_000)] = []  # keep-out zones, put by pfp fleet
 
     def __post_init__(self) -> None:
         seen: set[str] = set()
@@ -60,6 +70,30 @@ class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
             if u.id in seen:
                 raise ValueError(f"units[{i}].id: duplicate id {u.id!r}")
             seen.add(u.id)
+        zone_ids: set[str] = set()
+        for i, (zid, _z) in enumerate(zone_updates(self)):
+            if zid in zone_ids:
+                raise ValueError(f"zones[{i}].id: duplicate id {zid!r}")
+            zone_ids.add(zid)
+
+
+def zone_updates(team: Team) -> list[tuple[str, ZoneUpdate]]:
+    """The team's zones as the wire puts them: ``(id, update)``, an id left out being ``zN``."""
+    fields = ZoneUpdate.__struct_fields__
+    return [
+        (z.id or f"z{i + 1}", ZoneUpdate(**{f: getattr(z, f) for f in fields}))
+        for i, z in enumerate(team.zones)
+    ]
+
+
+def _localise_zones(doc: dict[str, object]) -> dict[str, object]:
+    """A team file's zone vertices given as ``{lat, lon}`` in metres from its origin (``load_yaml``'s hook)."""
+    zones = doc.get("zones")
+    if not isinstance(zones, list):
+        return doc
+    origin = localise_document({"origin": doc["origin"]}).get("origin") if "origin" in doc else None
+    at = msgspec.convert(origin, Origin) if origin is not None else None
+    return {**doc, "zones": [localise_zone(z, at, f"zones[{i}]") for i, z in enumerate(zones)]}
 
 
 def load_team(path: str | Path) -> Team:
@@ -68,7 +102,7 @@ def load_team(path: str | Path) -> Team:
     Raises:
         InputError: naming the file, the line and the field.
     """
-    team, _root = load_yaml(path, Team, CHOICES)
+    team, _root = load_yaml(path, Team, CHOICES, prepare=_localise_zones)
     return team
 
 

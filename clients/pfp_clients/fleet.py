@@ -46,7 +46,7 @@ from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.natsort import natural_key
-from pfp_service.team import Team
+from pfp_service.team import Team, zone_updates
 from pfp_service.wire import (
     Direction,
     DirectionStatus,
@@ -123,7 +123,17 @@ def in_planner_frame(team: Team, planner: Origin | None, mission: str) -> tuple[
         return None if p is None else conv(p)
 
     units = [msgspec.structs.replace(u, start=at(u.start), goal=at(u.goal)) for u in team.units]
-    return msgspec.structs.replace(team, origin=planner, units=units), conv.line("team")
+    zones = [  # keep-out zones move with the frame too
+        msgspec.structs.replace(
+            z,
+            polygon=None if z.polygon is None else [[conv(p) for p in ring] for ring in z.polygon],
+            circle=None
+            if z.circle is None
+            else msgspec.structs.replace(z.circle, centre=conv(z.circle.centre)),
+        )
+        for z in team.zones
+    ]
+    return msgspec.structs.replace(team, origin=planner, units=units, zones=zones), conv.line("team")
 
 
 def run_fleet(
@@ -249,6 +259,9 @@ def run_fleet(
         while not stop.is_set():
             tick_start = clock()
             if tick == 0 and opts.set_goals:  # goals first: the first report starts each stepper
+                for zid, zone in zone_updates(team):  # the team's keep-out zones before its goals
+                    goals.put(keys.zone(m, zid), encode(zone))
+                    say(f"t={t_s:7.2f}s  keep-out zone {zid} put")
                 for u in units:
                     goal = _goal_of(u, dt_s)
                     if goal is not None:
