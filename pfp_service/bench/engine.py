@@ -9,7 +9,9 @@ threats; and fleet scale -- one tick of 10,000 units x 1,000 threats through
 the raw kernel (every pair, and culled) and through ``World.apply``, with a
 log-log grid of 100 to 10,000 units by 100 to 10,000 threats; and a
 platoon of 200 units with one objective, its route searches shared
-(``core.routes``) against one search per unit.
+(``core.routes``) against one search per unit; and the goal storm's
+look-aheads and the contingency wave of ``pfp bench service``, in process
+(``bench.deliberation``).
 """
 
 from __future__ import annotations
@@ -26,6 +28,13 @@ from typing import Any
 import numpy as np
 
 from pfp_service.bench._check import add_check_arg, exit_code
+from pfp_service.bench.deliberation import (
+    STORM_UNITS,
+    TARGET_LOOKAHEAD_MS,
+    TARGET_WAVE_MS,
+    print_storm_and_wave,
+    storm_and_wave,
+)
 from pfp_service.cli._common import positive_int
 
 # Table 3 of the paper: (MAXITER, size, threats) -> seconds, with its delta and step per size.
@@ -55,6 +64,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-scale", action="store_true", help="skip the fleet-scale tick and log-log grid")
     p.add_argument("--scale-only", action="store_true", help="only the fleet-scale tick and log-log grid")
+    p.add_argument(
+        "--no-deliberation",
+        action="store_true",
+        help="skip the goal storm's look-aheads and the contingency wave (in process, 1,000 units)",
+    )
     add_check_arg(p)
 
 
@@ -490,6 +504,7 @@ def run(args: argparse.Namespace) -> int:
     fleet = fleet_ms(args.repeat)
     platoon = platoon_routes(50 if args.quick else PLATOON_UNITS)
     scale = None if args.no_scale else scale_table(args.repeat, args.quick)
+    delib = None if args.no_deliberation else storm_and_wave(100 if args.quick else STORM_UNITS)
     checks = {
         "every row >= 1000x the paper": all(r.vs_paper >= TARGET_VS_PAPER for r in rows),
         "every row >= 50x the baseline": all(r.vs_baseline >= TARGET_VS_BASELINE for r in rows),
@@ -508,6 +523,14 @@ def run(args: argparse.Namespace) -> int:
         checks["one tick 10,000 x 1,000 <= 20 ms (spread, culled kernel)"] = tick <= TARGET_TICK_MS
         checks["one World.apply tick 10,000 x 1,000 <= 20 ms (spread)"] = h["tick_ms"] <= TARGET_TICK_MS
         checks["10,000 goals set <= 1 s (spread)"] = h["goals_s"] <= TARGET_GOALS_S
+    if delib is not None and not args.quick:
+        mean = delib["lookahead_cpu_ms"]["mean"]
+        checks["goal storm: look-aheads' mean worker CPU <= 4 ms"] = (
+            mean is not None and mean <= TARGET_LOOKAHEAD_MS
+        )
+        checks["contingency wave, 1,000 units: World.apply <= 10 ms"] = (
+            delib["wave"]["apply_ms_median"] <= TARGET_WAVE_MS
+        )
     if args.json:
         doc = {
             "machine": machine,
@@ -516,6 +539,7 @@ def run(args: argparse.Namespace) -> int:
             "fleet": fleet,
             "platoon": platoon,
             "scale": scale,
+            "deliberation": delib,
             "checks": checks,
         }
         print(json.dumps(doc, indent=2))
@@ -546,6 +570,8 @@ def run(args: argparse.Namespace) -> int:
     _print_platoon(platoon)
     if scale is not None:
         _print_scale(scale)
+    if delib is not None:
+        print_storm_and_wave(delib)
     print()
     for name, ok in checks.items():
         print(f"  [{'ok' if ok else 'MISSED'}] {name}")
