@@ -76,20 +76,64 @@ class Received:
 
 
 # -- meters -----------------------------------------------------------------------------
-class ProcMeter:
-    """CPU seconds and memory of one process from ``/proc`` (``None`` figures where there is none)."""
+def _stat(pid: int) -> list[str] | None:
+    """The fields of ``/proc/{pid}/stat`` after the command name (state first), ``None``: gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
 
-    def __init__(self, pid: int) -> None:
+
+def descendants(pid: int) -> list[int]:
+    """Every live process below ``pid`` (its workers, a fork server's children), from ``/proc``."""
+    children: dict[int, list[int]] = {}
+    for name in os.listdir("/proc"):
+        if name.isdigit() and (st := _stat(int(name))) is not None:
+            children.setdefault(int(st[1]), []).append(int(name))
+    out, todo = [], [pid]
+    while todo:
+        kids = children.get(todo.pop(), [])
+        out += kids
+        todo += kids
+    return out
+
+
+class ProcMeter:
+    """CPU seconds and memory of one process from ``/proc`` (``None`` figures where there is none).
+
+    ``cpu_s`` counts the whole tree: the process, every live descendant (the
+    planner's deliberation and preview workers) and the children already
+    reaped (``cutime``/``cstime``), so a responder's CPU is all it costs.
+    """
+
+    def __init__(self, pid: int, tree: bool = True) -> None:
         self.pid = pid
+        self.tree = tree
         self._tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
     def cpu_s(self) -> float | None:
-        try:
-            with open(f"/proc/{self.pid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except OSError:
+        return self._cpu(self.cpu_by_process())
+
+    def _cpu(self, each: dict[int, float] | None) -> float | None:
+        return None if each is None else sum(each.values())
+
+    def cpu_by_process(self) -> dict[int, float] | None:
+        """CPU seconds of the process and (with ``tree``) of each descendant, reaped children in their parent's."""
+        own = _stat(self.pid)
+        if own is None:
             return None
-        return (int(fields[11]) + int(fields[12])) / self._tick  # utime + stime, every thread
+        pids = descendants(self.pid) if self.tree else []
+        out: dict[int, float] = {}
+        for pid, st in [(self.pid, own), *((p, _stat(p)) for p in pids)]:
+            if st is not None:  # utime + stime of every thread (+ cutime + cstime with the tree)
+                ticks = int(st[11]) + int(st[12]) + (int(st[13]) + int(st[14]) if self.tree else 0)
+                out[pid] = ticks / self._tick
+        return out
+
+    def processes(self) -> int:
+        """How many processes the tree holds now (1 without ``tree``)."""
+        return 1 + len(descendants(self.pid)) if self.tree else 1
 
     def memory_mb(self) -> dict[str, float | None]:
         """``rss_mb`` now and ``peak_rss_mb`` (VmHWM) since the process started."""
@@ -184,6 +228,9 @@ class _SumMeter:
     def cpu_s(self) -> float | None:
         each = [m.cpu_s() for m in self.meters]
         return None if any(c is None for c in each) else sum(c for c in each if c is not None)
+
+    def processes(self) -> int:
+        return sum(m.processes() for m in self.meters)
 
     def memory_mb(self) -> dict[str, float | None]:
         out: dict[str, float | None] = {"rss_mb": 0.0, "peak_rss_mb": 0.0}
@@ -418,6 +465,7 @@ class LoadGen:
         p99 = [r["latency_p99_ms"] for r in replies if r.get("latency_p99_ms") is not None]
         summed["latency_p99_ms"] = max(p99) if p99 else None
         summed["units_owned_each"] = {r["planner"]: r.get("units_owned") for r in replies}
+        summed["msgs_in_each"] = {r["planner"]: r.get("msgs_in") for r in replies}
         return summed
 
     def wait_ready(self, timeout_s: float = 60.0) -> None:

@@ -65,7 +65,7 @@ def metered(g: LoadGen, srv: Server | Cluster) -> Iterator[dict[str, Any]]:
     ``loadavg`` (1 min, at the end) says how busy the shared machine was.
     """
     out: dict[str, Any] = {}
-    me = ProcMeter(os.getpid())
+    me = ProcMeter(os.getpid(), tree=False)
     cpu0, gen0, st0, t0 = srv.meter.cpu_s(), me.cpu_s(), g.status(), time.perf_counter()
     yield out
     cpu1, gen1, st1, t1 = srv.meter.cpu_s(), me.cpu_s(), g.status(), time.perf_counter()
@@ -74,7 +74,11 @@ def metered(g: LoadGen, srv: Server | Cluster) -> Iterator[dict[str, Any]]:
     out["generator_cpu_percent"] = None if gen0 is None or gen1 is None else 100 * (gen1 - gen0) / wall
     out["loadavg"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     out.update(srv.meter.memory_mb())
+    out["processes"] = srv.meter.processes()  # whose CPU cpu_percent counts: the responder and its workers
     if st0 is not None and st1 is not None:
+        a, b = st0.get("msgs_in_each"), st1.get("msgs_in_each")
+        if a and b:  # several planners: the states (and inputs) each applied, from its own counter
+            out["server_msgs_in_each"] = {p: b[p] - a[p] for p in b if p in a and None not in (a[p], b[p])}
         out["server_msgs_in"] = st1["msgs_in"] - st0["msgs_in"]
         out["server_msgs_out"] = st1["msgs_out"] - st0["msgs_out"]
         out["server_overload"] = st1.get("overload", 0)
@@ -86,6 +90,24 @@ def metered(g: LoadGen, srv: Server | Cluster) -> Iterator[dict[str, Any]]:
 
 
 # -- phases ----------------------------------------------------------------------------------
+def deliberations_landed(g: LoadGen, cap_s: float = 60.0) -> dict[str, Any]:
+    """Wait until the planner has no deliberation pending (its status), at most ``cap_s``.
+
+    The rate probes run after the storm's and fan-out's look-aheads have landed,
+    so they measure the live loop, not the loop sharing the cores with leftover
+    workers; ``landed`` false says they still ran (``left`` of them).
+    """
+    t0 = time.perf_counter()
+    left: int | None = None
+    while True:
+        st = g.status(2.0)
+        left = None if st is None else int(st.get("deliberating", 0))
+        if left == 0 or time.perf_counter() - t0 >= cap_s:
+            break
+        time.sleep(0.2)
+    return {"landed": left == 0, "left": left, "waited_s": time.perf_counter() - t0}
+
+
 def register(g: LoadGen, n: int) -> int:
     """Every unit (and the bystander) reports once; returns how many were answered."""
     mark = len(g.recv)
@@ -360,6 +382,7 @@ class RateSearch:
         self.left = max_probes
         self.short = 0
         self.probes: list[dict[str, Any]] = []
+        self.before: dict[str, Any] = {}  # whether the planner's deliberations had landed first
 
     def record(self, r: dict[str, Any]) -> None:
         """Judge one ``steady`` result at ``self.rate`` and choose the next rate (``None``: done)."""
@@ -372,7 +395,8 @@ class RateSearch:
         # fewer states went out than offered: the responder's back-pressure (puts BLOCK) or the generator's CPU
         short = r["sent"] < 0.9 * r["offered_per_s"] * r["spent_s"] - 2
         self.short += short
-        self.probes.append({k: r[k] for k in self.KEEP} | {"ok": ok and not short})
+        extra = {"deliberating_after": r.get("server_deliberating"), "processes": r.get("processes")}
+        self.probes.append({k: r[k] for k in self.KEEP} | extra | {"ok": ok and not short})
         if ok and not short:
             self.lo = rate
         else:
@@ -388,7 +412,7 @@ class RateSearch:
         self.rate = nxt if self.left > 0 else None
 
     def result(self, n: int) -> dict[str, Any]:
-        return {
+        return self.before | {
             "max_rate_hz": self.lo,
             "max_per_s": None if self.lo is None else self.lo * n,
             "short_probes": self.short,

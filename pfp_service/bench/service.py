@@ -52,6 +52,7 @@ from pfp_service.bench._phases import (
     STEP_M,
     Bar,
     RateSearch,
+    deliberations_landed,
     fanout,
     forget,
     register,
@@ -76,6 +77,9 @@ TARGETS = {
     "fanout_deliberated_s": 1.0,
     "rss_mb": 300.0,
     "rss_vs_idle": 1.1,
+    "cpu_per_state_vs_echo": 1.1,
+    "scale_out_share": 0.55,
+    "scale_out_cpu_vs_one": 1.1,
 }
 
 
@@ -222,6 +226,8 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
             res["planner"]["fanout"] = fanout(gens["planner"], servers["planner"], n, bar)
         if args.find_max:
             searches = {k: RateSearch(args.rate) for k in kinds}
+            if "planner" in kinds:  # the probes measure the loop, not the loop beside leftover look-aheads
+                searches["planner"].before = {"deliberations": deliberations_landed(gens["planner"])}
             while any(s.rate is not None for s in searches.values()):
                 for k, s in searches.items():
                     if s.rate is not None:
@@ -255,6 +261,18 @@ def _owned_settled(g: LoadGen, units: int, cap_s: float = 30.0) -> float | None:
     return None
 
 
+def _connected(make: Any, cap_s: float = 30.0) -> LoadGen:
+    """``make()`` once the router process listens (it starts in its own process: seconds on a loaded machine)."""
+    t0 = time.perf_counter()
+    while True:
+        try:
+            return make()  # type: ignore[no-any-return]
+        except Exception:
+            if time.perf_counter() - t0 > cap_s:
+                raise
+            time.sleep(0.3)
+
+
 def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str, Any]:
     """The steady load against 1 planner and against ``--planners`` K, each behind its own router.
 
@@ -272,7 +290,7 @@ def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[s
         for n in sizes:
             clusters[n] = start_cluster(n, args.escape)
         for n in sizes:
-            gens[n] = LoadGen(clusters[n].endpoint, lay["starts"], STEP_M, clusters[n].ids)
+            gens[n] = _connected(lambda c=clusters[n]: LoadGen(c.endpoint, lay["starts"], STEP_M, c.ids))
             gens[n].wait_ready()
         prepared = {}
         for n in sizes:
@@ -288,6 +306,10 @@ def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[s
             st["cpu_percent_by_process"] = {
                 k: None if a is None or b is None else 100 * (a - b) / wall for k, (a, b) in each.items()
             }
+            # the states each planner applied (its msgs_in: at 10 Hz a unit never reports twice in a tick)
+            got = st.get("server_msgs_in_each") or {}
+            st["states_by_planner"] = got
+            st["states_share_max"] = max(got.values()) / st["sent"] if got and st["sent"] else None
             runs.append({"planners": n, **prepared[n], "steady": st})
     finally:
         for g in gens.values():
@@ -340,6 +362,21 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
             TARGETS["find_max_vs_echo"],
             below=False,
         )
+    if e is not None and "find_max" in p:
+        before = p["find_max"].get("deliberations", {})
+        add("find-max: the planner's deliberations landed before its probes", before.get("left"), 0)
+    if e is not None:  # CPU per state, the planner with every worker process, against the echo's
+        per = [
+            r["steady"]["cpu_percent"] / r["steady"]["answered_per_s"]
+            if r["steady"].get("cpu_percent") is not None and r["steady"]["answered_per_s"]
+            else None
+            for r in (p, e)
+        ]
+        add(
+            "steady CPU per state (with workers) <= 1.1x echo",
+            None if None in per or not per[1] else per[0] / per[1],  # type: ignore[operator]
+            TARGETS["cpu_per_state_vs_echo"],
+        )
     if "storm" in p:
         s = p["storm"]
         add("storm: every unit guided within 1 s", s["all_guided_s"], TARGETS["storm_guided_s"])
@@ -367,6 +404,17 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
                 st["units_answered_by_two"],
                 0,
             )
+            if r["planners"] > 1:
+                add(
+                    f"scale-out, {r['planners']} planners: each receives <= 0.55 of the states",
+                    st.get("states_share_max"),
+                    TARGETS["scale_out_share"],
+                )
+        add(
+            "scale-out: K planners' CPU <= 1.1x one planner's",
+            doc["scale_out"]["vs_one"]["cpu_percent"],
+            TARGETS["scale_out_cpu_vs_one"],
+        )
     if "forget" in p:
         add(
             "RSS back within 10 % of idle once forgotten",
@@ -429,7 +477,7 @@ def _print(doc: dict[str, Any]) -> None:
             f"  input {st['input_per_s']:.0f}/s, output {st['output_per_s']:.0f}/s, unanswered {100 * st['unanswered_fraction']:.3f} %"
         )
         print(
-            f"  CPU {_f(st['cpu_percent'], '.0f')} % (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
+            f"  CPU {_f(st['cpu_percent'], '.0f')} % over {st.get('processes', 1)} processes (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
         )
         if "storm" in r:
             s = r["storm"]
@@ -455,8 +503,13 @@ def _print(doc: dict[str, Any]) -> None:
         if "find_max" in r:
             fm = r["find_max"]
             short = f" ({fm['short_probes']} probes could not offer their rate)" if fm["short_probes"] else ""
+            dl = fm.get("deliberations")
+            landed = ""
+            if dl is not None:
+                state = "landed" if dl["landed"] else f"NOT landed ({dl['left']} left)"
+                landed = f"; deliberations {state} after {dl['waited_s']:.1f} s"
             print(
-                f"  find-max: {_f(fm['max_per_s'], '.0f')}/s ({_f(fm['max_rate_hz'], '.2f')} Hz per unit){short}"
+                f"  find-max: {_f(fm['max_per_s'], '.0f')}/s ({_f(fm['max_rate_hz'], '.2f')} Hz per unit){short}{landed}"
             )
             for pr in fm["probes"]:
                 print(
@@ -487,7 +540,12 @@ def _print_scale_out(so: dict[str, Any], ld: dict[str, Any]) -> None:
             f"  {_f(st['cpu_percent'], '.0f'):>11}  {st['units_per_planner']}"
         )
         cpu = ", ".join(f"{k} {_f(v, '.0f')} %" for k, v in st["cpu_percent_by_process"].items())
-        print(f"            CPU by process: {cpu}")
+        print(f"            CPU by process (each with its workers): {cpu}")
+        got = ", ".join(f"{k} {v}" for k, v in st.get("states_by_planner", {}).items())
+        if got:
+            print(
+                f"            states applied by planner (of {st['sent']} sent): {got}; largest share {_f(st['states_share_max'], '.3f')}"
+            )
     v = so["vs_one"]
     print(
         f"  {so['planners']} vs 1: answered/s x{_f(v['answered_per_s'], '.2f')}, p50 x{_f(v['p50_ms'], '.2f')}, "
