@@ -1,0 +1,38 @@
+"""The look-ahead's simulation culls its gradients through the live tick's index (``cull``), and foresees the same."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pfp_service.bench.service import layout
+from pfp_service.core import PlannerParams, ThreatField, cull, foresight, resolve
+
+pytestmark = pytest.mark.unit
+
+
+def test_culled_simulation_ends_as_the_full_one_among_many_threats(monkeypatch):
+    lay = layout(40, 100, 7)
+    field = ThreatField([u.to_threat(t) for t, u in lay["threats"]])
+    assert len(field) >= cull.MIN_THREATS and foresight._index(field) is not None
+    got, want = [], []
+    for s, g in zip(lay["starts"][:40], lay["goals"][:40]):
+        params = resolve(PlannerParams(step=1.0), s, g, list(field.threats))
+        gain = params.delta / ((g[0] - s[0]) ** 2 + (g[1] - s[1]) ** 2)
+        got.append(foresight.simulate(field, s, g, gain, params))
+    monkeypatch.setattr(foresight, "_index", lambda f: None)  # every threat at every step, as before
+    for s, g in zip(lay["starts"][:40], lay["goals"][:40]):
+        params = resolve(PlannerParams(step=1.0), s, g, list(field.threats))
+        gain = params.delta / ((g[0] - s[0]) ** 2 + (g[1] - s[1]) ** 2)
+        want.append(foresight.simulate(field, s, g, gain, params))
+    assert {w.outcome for w in want} >= {foresight.Outcome.ARRIVES, foresight.Outcome.TRAPPED}
+    for a, b in zip(got, want):
+        assert (a.outcome, a.steps) == (b.outcome, b.steps)
+        assert np.hypot(a.x - b.x, a.y - b.y) <= 1e-6 * max(1.0, b.steps)
+        assert a.exposure == pytest.approx(b.exposure, rel=1e-6, abs=1e-9)
+
+
+def test_a_few_threats_are_simulated_without_an_index():
+    lay = layout(1, 5, 7)
+    field = ThreatField([u.to_threat(t) for t, u in lay["threats"]])
+    assert foresight._index(field) is None
