@@ -338,7 +338,26 @@ def load_zones(path: str | Path, origin: Origin | None, what: str = "--zones") -
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(str(path), f"not JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
-    return zones_from_geojson(doc, origin, str(path))
+    try:
+        return zones_from_geojson(doc, origin, str(path))
+    except InputError as err:
+        raise _on_line(str(path), text, err) from None
+
+
+def _on_line(source: str, text: str, err: InputError) -> InputError:
+    """``err`` with the line of its field (``features[2].geometry``), as scenario and team errors name it."""
+    import yaml
+
+    from pfp_service import yamlio
+
+    field = err.path[len(source) + 2 :] if err.path.startswith(f"{source}: ") else ""
+    try:  # JSON is YAML: the node tree gives each field's line
+        line = yamlio.line_of(yamlio.compose(text), field)
+    except yaml.YAMLError:
+        line = None
+    if line is None:
+        return err
+    return InputError(f"{source} line {line}" + (f", {field}" if field else ""), err.reason)
 
 
 def preview_reply(
