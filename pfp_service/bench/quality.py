@@ -349,15 +349,23 @@ def render(rep: Report, modes: list[str]) -> str:
     return "\n".join(lines)
 
 
-def _write(path: str, body: str, machine: str) -> None:
+def _write(path: str, body: str, machine: str, family: str = "traps") -> None:
     p = Path(path)
     text = p.read_text() if p.exists() else "# Benchmarks\n"
+    begin, end, title, flag = BEGIN, END, "Path quality", ""
+    if family != "traps":  # its own block: the trap suite's stays
+        begin, end = (
+            BEGIN.replace("quality:", f"quality {family}:"),
+            END.replace("quality:", f"quality {family}:"),
+        )
+        title, flag = f"Path quality, the {family} family", f" --family {family}"
     block = (
-        f"{BEGIN}\n## Path quality (`pfp bench quality`)\n\nRegenerate with `pfp bench quality --write`. "
-        f"Machine: {machine}.\n\n{body}\n{END}"
+        f"{begin}\n## {title} (`pfp bench quality{flag}`)\n\nRegenerate with `pfp bench quality{flag} --write`. "
+        f"Machine: {machine}.\n\n{body}\n{end}"
     )
-    if BEGIN in text and END in text:
-        text = text[: text.index(BEGIN)] + block + text[text.index(END) + len(END) :]
+    BEGIN_, END_ = begin, end
+    if BEGIN_ in text and END_ in text:
+        text = text[: text.index(BEGIN_)] + block + text[text.index(END_) + len(END_) :]
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
     p.write_text(text)
@@ -396,6 +404,7 @@ def run(args: argparse.Namespace) -> int:
             body,
             f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
             f"; 1-minute load average {load0:.1f} at the start and {load1:.1f} at the end (the machine is shared)",
+            args.family,
         )
     met = rep.targets.get("met", {})
     return exit_code(met.values() if isinstance(met, dict) else [], args.check)

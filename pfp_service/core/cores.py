@@ -124,7 +124,7 @@ class Cores:
         fraction: the share of each threat's peak that bounds its core.
     """
 
-    __slots__ = ("boxes", "fraction", "ids", "min_spread_m", "packed", "zones")
+    __slots__ = ("boxes", "fraction", "ids", "min_spread_m", "packed", "zone_margin_m", "zones")
 
     def __init__(self, field: ThreatField, fraction: float = CORE_FRACTION) -> None:
         self.fraction = fraction
@@ -145,6 +145,8 @@ class Cores:
         cx, cy = packed[:, kernels.XI_X], packed[:, kernels.XI_Y]
         self.boxes = np.stack([cx - ex, cy - ey, cx + ex, cy + ey], axis=1)
         self.zones: ZoneSet = field.zones
+        # a search's cores (below CORE_FRACTION) keep a hair's clearance from zones too
+        self.zone_margin_m = field.zones.search_margin_m if fraction < CORE_FRACTION else 0.0
 
     @staticmethod
     def region(hit: str) -> str:
@@ -177,7 +179,7 @@ class Cores:
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = self.inside_cores(pts)
         if self.zones and len(pts):
-            out |= self.zones.contains(pts)
+            out |= self.zones.contains(pts, self.zone_margin_m)
         return out
 
     def inside_cores(self, points: np.ndarray) -> np.ndarray:
@@ -218,7 +220,9 @@ class Cores:
         if len(self.packed):
             _raster(self.packed, float(origin[0]), float(origin[1]), float(cell_m), self.fraction, out)
         if self.zones:
-            out |= self.zones.raster(origin, cell_m, shape, ZONE_RASTER_SPACINGS * cell_m)
+            out |= self.zones.raster(
+                origin, cell_m, shape, ZONE_RASTER_SPACINGS * cell_m + self.zone_margin_m
+            )
         return out
 
     def core_at(self, x: float, y: float) -> str:
@@ -234,7 +238,7 @@ class Cores:
     def first_hit(self, path: np.ndarray) -> str:
         """The id of the first core the polyline ``path`` enters, ``zone Z`` for a zone, or ``""`` if none."""
         raw = np.asarray(path, dtype=np.float64).reshape(-1, 2)
-        seg, t, zone = self.zones.first_contact(raw) if self.zones else (-1, 0.0, "")
+        seg, t, zone = self.zones.first_contact(raw, self.zone_margin_m) if self.zones else (-1, 0.0, "")
         if seg >= 0:  # only the part up to the zone's segment can meet a core first
             raw = raw[: seg + 2]
         pts = self.densify(raw)
@@ -253,7 +257,11 @@ class Cores:
     def segment_hits(self, path: np.ndarray) -> np.ndarray:
         """Per segment of the polyline ``path``: does it enter a core (sampled as ``first_hit`` samples it)?"""
         pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
-        zoned = self.zones.segment_hits(pts) if self.zones else np.zeros(max(len(pts) - 1, 0), dtype=bool)
+        zoned = (
+            self.zones.segment_hits(pts, self.zone_margin_m)
+            if self.zones
+            else np.zeros(max(len(pts) - 1, 0), dtype=bool)
+        )
         if len(pts) < 2 or not len(self.packed):
             return zoned
         seg = np.diff(pts, axis=0)

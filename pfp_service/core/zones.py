@@ -56,6 +56,7 @@ KINDS = ("keep_out",)
 MAX_VERTICES = 4096  # per zone, over all its rings
 MAX_RINGS = 64  # holes plus the shell
 TOUCH_M = 1e-9  # closer to a zone than this is in it
+SEARCH_MARGIN_REL = 1e-5  # the route searches keep this share of the largest zone's extent clear
 
 Ring = tuple[tuple[float, float], ...]
 
@@ -441,17 +442,76 @@ def _nearest_many(
 
 
 @numba.njit(cache=True, nogil=True)
+def _point_segment(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+    return _edge_distance(px, py, ax, ay, bx, by)[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def segment_near(
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    x0: float,
+    y0: float,
+    x1: float,
+    y1: float,
+    margin: float,
+) -> int:
+    """The zone the segment comes within ``margin`` of (or touches), or -1; ``margin <= 0``: ``segment_hit``."""
+    if margin <= 0.0:
+        return segment_hit(edges, offsets, circles, boxes, x0, y0, x1, y1)[1]
+    sx0 = min(x0, x1) - margin
+    sx1 = max(x0, x1) + margin
+    sy0 = min(y0, y1) - margin
+    sy1 = max(y0, y1) + margin
+    dx = x1 - x0
+    dy = y1 - y0
+    for z in range(boxes.shape[0]):
+        if boxes[z, 0] > sx1 or boxes[z, 2] < sx0 or boxes[z, 1] > sy1 or boxes[z, 3] < sy0:
+            continue
+        r = circles[z, 2]
+        if r > 0.0:
+            if _point_segment(circles[z, 0], circles[z, 1], x0, y0, x1, y1) <= r + margin:
+                return z
+            continue
+        if _zone_signed(edges, offsets, circles, z, x0, y0) <= margin:
+            return z
+        for e in range(offsets[z], offsets[z + 1]):
+            ax = edges[e, 0]
+            ay = edges[e, 1]
+            bx = edges[e, 2]
+            by = edges[e, 3]
+            if _cross_t(x0, y0, dx, dy, ax, ay, bx, by) >= 0.0:
+                return z
+            d = min(
+                _point_segment(x0, y0, ax, ay, bx, by),
+                _point_segment(x1, y1, ax, ay, bx, by),
+                _point_segment(ax, ay, x0, y0, x1, y1),
+                _point_segment(bx, by, x0, y0, x1, y1),
+            )
+            if d <= margin:
+                return z
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
 def _first_hit(
-    edges: np.ndarray, offsets: np.ndarray, circles: np.ndarray, boxes: np.ndarray, pts: np.ndarray
+    edges: np.ndarray,
+    offsets: np.ndarray,
+    circles: np.ndarray,
+    boxes: np.ndarray,
+    pts: np.ndarray,
+    margin: float,
 ) -> tuple[int, int]:
-    """The first segment of the polyline ``pts`` that touches a zone, and the zone; ``(-1, -1)`` if none."""
+    """The first segment of the polyline ``pts`` within ``margin`` of a zone (touching it at 0), and the zone."""
     n = pts.shape[0]
     if n == 1:
-        sd, z, _, _ = point_zone(edges, offsets, circles, boxes, pts[0, 0], pts[0, 1], 0.0)
-        return (0, z) if sd <= TOUCH_M else (-1, -1)
+        sd, z, _, _ = point_zone(edges, offsets, circles, boxes, pts[0, 0], pts[0, 1], max(margin, 0.0))
+        return (0, z) if z >= 0 and sd <= max(TOUCH_M, margin) else (-1, -1)
     for i in range(n - 1):
-        _t, z = segment_hit(
-            edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1]
+        z = segment_near(
+            edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1], margin
         )
         if z >= 0:
             return i, z
@@ -466,11 +526,14 @@ def _segment_hits(
     boxes: np.ndarray,
     pts: np.ndarray,
     out: np.ndarray,
+    margin: float,
 ) -> None:
-    """``out[i]``: segment ``pts[i] -> pts[i + 1]`` touches a zone."""
+    """``out[i]``: segment ``pts[i] -> pts[i + 1]`` touches a zone (comes within ``margin`` of one)."""
     for i in range(pts.shape[0] - 1):
         out[i] = (
-            segment_hit(edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1])[1]
+            segment_near(
+                edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], pts[i + 1, 0], pts[i + 1, 1], margin
+            )
             >= 0
         )
 
@@ -514,7 +577,7 @@ class ZoneSet:
         ValueError: a repeated id.
     """
 
-    __slots__ = ("__weakref__", "boxes", "circles", "edges", "ids", "offsets", "zones")
+    __slots__ = ("__weakref__", "boxes", "circles", "edges", "ids", "offsets", "search_margin_m", "zones")
 
     def __init__(self, zones: Iterable[Zone] = ()) -> None:
         self.zones: tuple[Zone, ...] = tuple(zones)
@@ -539,6 +602,11 @@ class ZoneSet:
         self.offsets = np.array(offsets, dtype=np.int64)
         self.circles = circles
         self.boxes = boxes
+        # the route searches' clearance from a zone, as the 0.48 core is theirs: rounding never
+        # makes a route that grazes a corner touch it (a millimetre for a 100 m zone)
+        extent = float(np.max(boxes[:, 2:] - boxes[:, :2])) if len(boxes) else 0.0
+        scale = float(np.max(np.abs(boxes))) if len(boxes) else 0.0
+        self.search_margin_m = SEARCH_MARGIN_REL * max(extent, 1.0) + 1e-9 * scale
 
     def __len__(self) -> int:
         return len(self.zones)
@@ -582,9 +650,9 @@ class ZoneSet:
             _nearest_many(self.edges, self.offsets, self.circles, self.boxes, pts, out, idx)
         return out, [self.ids[i] if i >= 0 else "" for i in idx.tolist()]
 
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        """Boolean mask: which points lie in some zone (boundary included)."""
-        return self.signed_distance(points) <= TOUCH_M
+    def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+        """Boolean mask: which points lie in some zone (boundary included), or within ``margin_m`` of one."""
+        return self.signed_distance(points) <= max(TOUCH_M, margin_m)
 
     def zone_at(self, x: float, y: float) -> str:
         """The id of the zone holding ``(x, y)`` (the deepest), or ``""``."""
@@ -600,21 +668,22 @@ class ZoneSet:
         sd, z, gx, gy = point_zone(self.edges, self.offsets, self.circles, self.boxes, x, y, math.inf)
         return sd, self.ids[z], (gx, gy)
 
-    def first_hit(self, path: np.ndarray) -> tuple[int, str]:
+    def first_hit(self, path: np.ndarray, margin_m: float = 0.0) -> tuple[int, str]:
         """The first segment index of polyline ``path`` that touches a zone and the zone; ``(-1, "")``.
 
         Exact (each segment is solved against every edge and circle), so no
-        zone, however thin, is passed over between two points.
+        zone, however thin, is passed over between two points.  With
+        ``margin_m``, a segment that comes that close to a zone counts.
         """
         pts = np.ascontiguousarray(path, dtype=np.float64).reshape(-1, 2)
         if not self.zones or not len(pts):
             return -1, ""
-        i, z = _first_hit(self.edges, self.offsets, self.circles, self.boxes, pts)
+        i, z = _first_hit(self.edges, self.offsets, self.circles, self.boxes, pts, margin_m)
         return (int(i), self.ids[z]) if z >= 0 else (-1, "")
 
-    def first_contact(self, path: np.ndarray) -> tuple[int, float, str]:
+    def first_contact(self, path: np.ndarray, margin_m: float = 0.0) -> tuple[int, float, str]:
         """``first_hit`` with where on its segment: ``(segment, fraction along it, zone id)``; ``(-1, 0, "")``."""
-        seg, zid = self.first_hit(path)
+        seg, zid = self.first_hit(path, margin_m)
         if seg < 0:
             return -1, 0.0, ""
         pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
@@ -622,14 +691,14 @@ class ZoneSet:
             return 0, 0.0, zid
         a, b = pts[seg], pts[seg + 1]
         t, _ = segment_hit(self.edges, self.offsets, self.circles, self.boxes, a[0], a[1], b[0], b[1])
-        return seg, max(float(t), 0.0), zid
+        return seg, max(float(t), 0.0), zid  # within the margin only: where the segment starts
 
-    def segment_hits(self, path: np.ndarray) -> np.ndarray:
-        """Per segment of the polyline ``path``: does it touch a zone (exactly)?"""
+    def segment_hits(self, path: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+        """Per segment of the polyline ``path``: does it touch a zone (exactly), or come within ``margin_m``?"""
         pts = np.ascontiguousarray(path, dtype=np.float64).reshape(-1, 2)
         out = np.zeros(max(len(pts) - 1, 0), dtype=np.bool_)
         if self.zones and len(pts) > 1:
-            _segment_hits(self.edges, self.offsets, self.circles, self.boxes, pts, out)
+            _segment_hits(self.edges, self.offsets, self.circles, self.boxes, pts, out, margin_m)
         return out
 
     def way_out(self, x: float, y: float, clear_m: float) -> tuple[float, float] | None:
