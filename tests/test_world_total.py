@@ -44,6 +44,8 @@ from pfp_service.service.world import (
     TokenChanged,
     World,
     WorldSettings,
+    ZonePut,
+    ZoneRemoved,
 )
 from pfp_service.wire import (
     Goal,
@@ -57,6 +59,7 @@ from pfp_service.wire import (
     decode_mission,
     encode,
 )
+from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
 from tests.hypothesis_profiles import profiled
 
 pytestmark = pytest.mark.unit
@@ -67,6 +70,7 @@ EDGE = [0.0, -0.0, SUB, -SUB, TINY, 1e-300, -1e-300, 1e-3, 1.0, 1e9, -1e9, 999_9
 
 units = st.sampled_from(["u0", "u1", "u2", "bad", "x" * 64, "A_b-9"])
 threat_ids = st.sampled_from(["t0", "t1", "t2"])
+zone_ids = st.sampled_from(["z0", "z1", "z2"])
 planners = st.sampled_from(["planner", "p1", "p2"])
 coord = st.one_of(st.sampled_from(EDGE), st.floats(-20.0, 20.0), st.floats(-1e9, 1e9))
 point = st.tuples(coord, coord)
@@ -119,6 +123,19 @@ def _mission(r: Resolved, goal: Goal, origin: tuple[float, float]) -> Mission:
     return Mission(goal=goal, origin=origin, params=params)
 
 
+@st.composite
+def zones(draw: st.DrawFn) -> ZoneUpdate:
+    """A keep-out zone the wire accepts: a rectangle or a circle, tiny to huge, anywhere."""
+    x = draw(st.one_of(st.sampled_from(EDGE), st.floats(-20.0, 20.0)))
+    y = draw(st.one_of(st.sampled_from(EDGE), st.floats(-20.0, 20.0)))
+    size = draw(st.one_of(st.sampled_from([1e-3, 1.0, 1e5]), st.floats(1e-3, 50.0)))
+    ttl = draw(st.one_of(st.none(), st.sampled_from([SUB, 1e-3, 0.5]), st.floats(1e-3, 100.0)))
+    if draw(st.booleans()):
+        return ZoneUpdate(circle=ZoneCircle(centre=(x, y), radius_m=size), ttl_s=ttl)
+    ring = [(x, y), (x + size, y), (x + size, y + size), (x, y + size), (x, y)]
+    return ZoneUpdate(polygon=[ring], ttl_s=ttl)
+
+
 tokens = st.tuples(st.integers(-1, 5), st.integers(-1, 5))
 inputs = st.one_of(
     st.builds(
@@ -135,6 +152,8 @@ inputs = st.one_of(
     st.builds(GoalCancelled, units),
     st.builds(ThreatPut, threat_ids, threats()),
     st.builds(ThreatRemoved, threat_ids),
+    st.builds(ZonePut, zone_ids, zones()),
+    st.builds(ZoneRemoved, zone_ids),
     st.builds(TokenChanged, units, st.booleans()),
     st.builds(
         InputRejected, st.sampled_from(["mumt/m/unit/u0/goal", "junk", ""]), st.just(InputError("$", "x"))
@@ -161,6 +180,7 @@ settings_st = st.builds(
     deliberation_budget_s=st.just(0.05),
     max_units=st.sampled_from([3, 100_000]),
     max_threats=st.sampled_from([2, 10_000]),
+    max_zones=st.sampled_from([1, 1_000]),
     cluster=st.booleans(),
     origin=st.sampled_from([None, Origin(lat=48.0, lon=11.0)]),
 )
