@@ -8,6 +8,7 @@ import os
 from typing import Any
 
 from pfp_service.cli._common import (
+    add_coords_arg,
     add_session_args,
     bounded_int,
     non_negative_float,
@@ -57,6 +58,7 @@ def register(sub: Any) -> None:
         "--log-format", choices=("human", "json"), help="log lines for people or JSON (default: human)"
     )
     p.add_argument("--log-level", choices=("debug", "info", "warning", "error"), help="(default: info)")
+    add_coords_arg(p)
     g = p.add_argument_group("planner defaults (a goal message may override delta, step, tolerance)")
     # the bounds of a goal message's own delta, step and tolerance (constraints), for the same words
     g.add_argument(
@@ -180,6 +182,7 @@ _FLAG_KEYS = [
     "planner_id",
     "log_format",
     "log_level",
+    "coords",
     "delta",
     "step",
     "tolerance",

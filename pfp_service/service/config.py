@@ -55,6 +55,7 @@ DEFAULT_CONNECT = DEFAULT_ENDPOINT
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 1.5}
 LogFormat = Literal["human", "json"]
 LogLevel = Literal["debug", "info", "warning", "error"]
+CoordsStyle = Literal["latlon", "metres", "mgrs"]  # pfp_service.coords.STYLES
 Mode = Literal["router", "peer", "client"]
 
 
@@ -70,6 +71,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     multicast: bool = False
     log_format: LogFormat = "human"
     log_level: LogLevel = "info"
+    coords: CoordsStyle | None = None  # the human log's positions; None: latlon with an origin, else metres
     # planner defaults; None means the scale-free rule
     delta: Delta | None = None
     step: Step | None = None

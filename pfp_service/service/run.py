@@ -39,7 +39,7 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
     """
     from pfp_service.coords import Coords
 
-    log = setup_logging(cfg.log_format, cfg.log_level, Coords.choose(None, cfg.origin))  # lat/lon with one
+    log = setup_logging(cfg.log_format, cfg.log_level, Coords.choose(cfg.coords, cfg.origin, strict=False))
     signals = SignalStop(stop)  # on the main thread, SIGTERM and SIGINT set stop too
     stop = signals.event
     with signals:
