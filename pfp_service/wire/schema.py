@@ -453,6 +453,12 @@ def _index(ex: dict[str, list[tuple[str, Any]]]) -> dict[str, Any]:
         "evolution": "fields are only added, always with a default; readers ignore unknown fields",
         "messages": msgs,
         "liveliness": {k.value: keys.template(k) for k in LIVELINESS},
+        "shards": {
+            "key": keys.SHARD_STATE_TEMPLATE,
+            "count": keys.SHARDS,
+            "shard": f"crc32(utf8(unit)) % {keys.SHARDS}, CRC-32 as zlib's (ISO-HDLC); decimal, no leading zeros",
+            "test_vectors": {u: keys.shard_of(u) for u in ("ugv-1", "u0", "u1")},
+        },
     }
 
 
@@ -477,6 +483,14 @@ def _readme(index: dict[str, Any]) -> str:
         )
     lines += ["", "Liveliness tokens (no payload):", ""]
     lines += [f"- `{t}`" for t in index["liveliness"].values()]
+    sh = index["shards"]
+    vectors = ", ".join(f"`{u}` → {s}" for u, s in sh["test_vectors"].items())
+    lines += [
+        "",
+        f"A unit state may also go on its shard key, `{sh['key']}`, with `{{shard}}` = {sh['shard']} "
+        f"(test vectors: {vectors}). Under `--cluster` each planner subscribes to its own shards only; "
+        "every planner also reads the plain key. Publish on one of the two, not both.",
+    ]
     lines += ["", "Machine-readable: [index.json](index.json).", ""]
     return "\n".join(lines)
 
