@@ -173,7 +173,8 @@ def run_fleet(
         "latlon",
         "mgrs",
     ):  # shown on the earth: the planner's origin, since the team has none
-        answered, shown_origin = learn_planner_origin(session, m, stop, say, "team")
+        why = f"--coords {opts.coords} shows positions from its origin"
+        answered, shown_origin = learn_planner_origin(session, m, stop, say, "team", why)
         if not answered:
             return FleetResult([SimUnit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
         if shown_origin is None:

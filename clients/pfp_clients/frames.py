@@ -79,9 +79,16 @@ def planner_origin(session: Any, mission: str, timeout_s: float = 1.0) -> tuple[
 
 
 def learn_planner_origin(
-    session: Any, mission: str, stop: threading.Event, say: Callable[[str], None], what: str
+    session: Any,
+    mission: str,
+    stop: threading.Event,
+    say: Callable[[str], None],
+    what: str,
+    why: str | None = None,
 ) -> tuple[bool, Origin | None]:
     """``planner_origin``, asked every second until a planner answers or ``stop``; says it waits, once.
+
+    ``why`` is what the wait line gives as the reason (default: the ``what`` file's origin is checked).
 
     Returns:
         ``(False, None)`` if stopped before any planner answered.
@@ -92,9 +99,8 @@ def learn_planner_origin(
         if answered:
             return True, origin
         if not told:
-            say(
-                f"waiting for a planner of mission {mission!r}: the {what}'s origin is checked against its own"
-            )
+            reason = why or f"the {what}'s origin is checked against its own"
+            say(f"waiting for a planner of mission {mission!r}: {reason}")
             told = True
         stop.wait(1.0)
     return False, None

@@ -478,7 +478,9 @@ def _shown_coords(
     origin = script.origin
     if origin is None and flag != "metres":
         origin = (
-            learn_planner_origin(session, mission, stop, say, "script")[1]
+            learn_planner_origin(
+                session, mission, stop, say, "script", f"--coords {flag} shows positions from its origin"
+            )[1]
             if flag is not None
             else planner_origin(session, mission)[1]
         )
