@@ -153,13 +153,23 @@ def build_parser() -> ArgumentParser:
         register = getattr(module, "register", None)
         if register is None:
             continue
-        before = set(sub.choices)
         register(sub)
-        examples: dict[str, str] = getattr(module, "EXAMPLES", {})
-        for name in set(sub.choices) - before:
-            if name in examples and sub.choices[name].epilog is None:
-                sub.choices[name].epilog = example_epilog(examples[name])
+    examples = _examples()
+    for name, p in sub.choices.items():
+        if p.epilog is None and name in examples:
+            p.epilog = example_epilog(examples[name])
     return parser
+
+
+def _examples() -> dict[str, str]:
+    """Every loaded command module's ``EXAMPLES`` (a module's ``register`` may register another's
+    commands, so they are gathered from all of them, not only the one registering)."""
+    found: dict[str, str] = {}
+    for module in list(sys.modules.values()):
+        examples = getattr(module, "EXAMPLES", None)
+        if isinstance(examples, dict) and callable(getattr(module, "register", None)):
+            found.update(examples)
+    return found
 
 
 def _closed_pipe(command: str) -> int:

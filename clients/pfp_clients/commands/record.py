@@ -16,6 +16,14 @@ from pfp_service.cli._common import add_session_args, positive_float
 COMMANDS = ("record", "replay", "report")
 
 
+# the help's example lines (cli.build_parser puts each under its parser)
+EXAMPLES = {
+    "record": "pfp record --mission exercise1 exercise1.mcap",
+    "replay": "pfp replay exercise1.mcap --mission replay1 --speed-up 10",
+    "report": "pfp report exercise1.mcap --out exercise1",
+}
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "record",
