@@ -90,7 +90,7 @@ def run_record(args: argparse.Namespace) -> int:
     kinds = ", ".join(f"{n} {k}" for k, n in sorted(stats.by_kind.items()))
     print(
         f"pfp record: {stats.messages} messages ({kinds or 'none'}) in {stats.wall_s:.1f} s, "
-        f"{stats.bytes / 1e6:.2f} MB, CPU {stats.cpu_s:.1f} s, deepest backlog {stats.max_backlog}",
+        f"{stats.bytes / 1e6:.2f} MB, CPU {stats.cpu_s:.1f} s, largest batch {stats.max_backlog}",
         flush=True,
     )
     sys.stdout.flush()

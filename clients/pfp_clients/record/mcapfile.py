@@ -102,6 +102,7 @@ class MissionWriter:
         self._by_kind = _contract_schemas()
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
+        self._keys: dict[str, tuple[int, str, str | None]] = {}  # key -> channel, kind, unit of a state
         self.count = 0
         self.by_kind: dict[str, int] = {}
         meta = {"mission": mission, "started_ns": str(started_ns), "version": __version__}
@@ -131,20 +132,21 @@ class MissionWriter:
 
     def put(self, key: str, data: bytes, t_ns: int) -> None:
         """A PUT on ``key`` (its payload as it came)."""
-        topic = "/" + key
-        cid = self._channels.get(topic)
-        kind = "other"
-        try:
-            parsed = keys.parse(key)
-            kind = parsed.kind.value
-        except InputError:
-            parsed = None
-        if cid is None:
+        known = self._keys.get(key)
+        if known is None:  # a key's first sample: its kind, schema and channel, once
+            try:
+                parsed: keys.Key | None = keys.parse(key)
+            except InputError:
+                parsed = None
             spec = self._by_kind.get(parsed.kind) if parsed is not None else None
-            cid = self._channel(topic, spec[0] if spec else None, spec[1] if spec else b"")
+            cid = self._channel("/" + key, spec[0] if spec else None, spec[1] if spec else b"")
+            kind = parsed.kind.value if parsed is not None else "other"
+            fix = parsed.id if parsed is not None and parsed.kind is keys.KeyKind.UNIT_STATE else None
+            known = self._keys[key] = (cid, kind, fix)
+        cid, kind, fix = known
         self._emit(cid, t_ns, data, kind)
-        if self.origin is not None and parsed is not None and parsed.kind is keys.KeyKind.UNIT_STATE:
-            self._fix(parsed.id, data, t_ns)
+        if self.origin is not None and fix is not None:
+            self._fix(fix, data, t_ns)
 
     def _fix(self, unit: str, data: bytes, t_ns: int) -> None:
         try:
