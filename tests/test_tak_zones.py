@@ -7,9 +7,11 @@ deleting it.
 
 from __future__ import annotations
 
+import contextlib
 import time
 import xml.etree.ElementTree as ET
 
+import msgspec
 import pytest
 from pfp_clients.tak import cot
 from pfp_clients.tak.state import BridgeSettings, BridgeState, ZenohDelete, ZenohPut
@@ -140,12 +142,27 @@ def test_the_planners_zones_go_to_tak_as_red_no_go_shapes_and_their_delete_remov
     assert not st.on_zone(put.key, put.payload, T0 + 5).cot  # type: ignore[union-attr]
 
 
+@pytest.mark.unit
+def test_zones_a_planner_held_before_the_bridge_started_are_shown_unless_heard_since():
+    st = _state()
+    wall = m.ZoneUpdate(polygon=[[(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 0.0)]])
+    st.on_zone(keys.zone("m", "gone"), None, T0)  # deleted since the reply was made
+    held = [
+        m.ZoneSummary(id="wall", zone=wall),
+        m.ZoneSummary(id="gone", zone=wall),
+        m.ZoneSummary(id="soon", zone=msgspec.structs.replace(wall, ttl_s=600.0), ttl_s=5.0),
+    ]
+    out = st.on_zones_in_force(held, T0 + 1)
+    assert sorted(ET.fromstring(d).get("uid") for d in out.cot) == ["pfp.zone.m.soon", "pfp.zone.m.wall"]
+    assert set(st.zones) == {"wall", "soon"} and st.zones["soon"].ttl_s == 5.0  # the time left
+
+
 @pytest.mark.multi
 def test_a_polygon_drawn_on_a_device_is_a_zone_within_a_second_and_its_delete_removes_it(tmp_path):
     pytest.importorskip("taky")
     from tests.test_tak_taky import MISSION, device, running, taky_server
     from tests.test_tak_taky import ORIGIN as TAKY_ORIGIN
-    from tests.zenoh_util import Inbox, client, planner_process, put_json
+    from tests.zenoh_util import Inbox, client, planner_process, put_in_force, put_json
 
     def zones_held(s) -> list[str]:
         for r in s.get(keys.worlds(MISSION), timeout=2.0):
@@ -162,20 +179,27 @@ def test_a_polygon_drawn_on_a_device_is_a_zone_within_a_second_and_its_delete_re
     assert TAKY_ORIGIN == ORIGIN
     origin = f"{ORIGIN.lat},{ORIGIN.lon},{ORIGIN.alt}"
     with (
+        contextlib.ExitStack() as stack,
         planner_process("--state-dir", "none", "--origin", origin, mission=MISSION) as (endpoint, _p),
         taky_server(tmp_path / "taky") as port,
         client(endpoint) as s,
         device(port, "ANDROID-stand-in-zones") as dev,
-        running(endpoint, port, tmp_path / "state") as bridge,
     ):
+        # a zone the planner holds before the bridge starts reaches the device too
+        put_in_force(
+            s, MISSION, {keys.zone(MISSION, "early"): {"circle": {"centre": [0, -300], "radius_m": 30}}}
+        )
+        bridge = stack.enter_context(running(endpoint, port, tmp_path / "state"))
         bridge.wait_line("connected tcp://")
+        _t, early = dev.wait(lambda e: e.get("uid") == f"pfp.zone.{MISSION}.early", timeout=15)
+        assert early.get("type") == "u-d-c-c"
         uid = "ANDROID-stand-in-zones.poly1"
         zid = cot.threat_id(uid)
         inbox = Inbox(s, keys.zone(MISSION, zid))
         t0 = time.monotonic()
         dev.send(shape(uid, "u-d-f", time.time(), 3600, [*SQUARE, SQUARE[0]]))
         body = inbox.get(timeout=10, where=lambda msg: msg is not None)
-        wait_held(s, [zid])
+        wait_held(s, sorted(["early", zid]))
         took = time.monotonic() - t0
         print(f"drawn polygon -> zone held by the planner in {took * 1e3:.0f} ms")
         assert took < 1.0, f"{took:.2f} s from the drawing to the planner"
@@ -183,7 +207,7 @@ def test_a_polygon_drawn_on_a_device_is_a_zone_within_a_second_and_its_delete_re
         t0 = time.monotonic()
         dev.send(delete(uid, time.time()))
         inbox.get(timeout=10, where=lambda msg: msg is None)
-        wait_held(s, [])
+        wait_held(s, ["early"])
         print(
             f"deleted on the device -> zone gone from the planner in {(time.monotonic() - t0) * 1e3:.0f} ms"
         )

@@ -282,6 +282,18 @@ async def _main(
             elif kind == "event":
                 emit(state.on_event(payload, now))
 
+    async def zones_in_force() -> None:
+        """The zones a planner already holds, once at start: a bridge started late still shows them."""
+
+        def ask() -> list[m.ZoneSummary]:
+            for reply in session.get(keys.worlds(mission), timeout=PREVIEW_TIMEOUT_S):
+                if reply.ok is not None:
+                    with contextlib.suppress(InputError):
+                        return list(m.decode_world_snapshot(reply.ok.payload.to_bytes()).zones)
+            return []
+
+        emit(state.on_zones_in_force(await loop.run_in_executor(None, ask), time.time()))
+
     async def from_tak() -> None:
         while True:
             source, data = await rx.get()
@@ -295,7 +307,8 @@ async def _main(
             await asyncio.sleep(TICK_S)
 
     tasks = [
-        asyncio.create_task(c) for c in (from_zenoh(), from_tak(), ticker(), *(lk.run() for lk in links))
+        asyncio.create_task(c)
+        for c in (from_zenoh(), from_tak(), ticker(), zones_in_force(), *(lk.run() for lk in links))
     ]
     try:
         if ready is not None:

@@ -165,6 +165,7 @@ class BridgeState:
         self.threats: dict[str, m.ThreatUpdate] = {}  # threats we show in TAK
         self.zones: dict[str, m.ZoneUpdate] = {}  # the planner's zones we show in TAK (in metres)
         self.zones_from_tak: dict[str, _Marker] = {}  # zone id -> the shape TAK gave us
+        self.zones_heard: set[str] = set()  # zone ids put or deleted on Zenoh since the bridge started
         self.units: dict[str, _Unit] = {}
         self._last_refresh = -1e18
         self.dropped = 0
@@ -327,6 +328,7 @@ class BridgeState:
         """A zone put (``payload``) or deleted (``None``) on Zenoh: shown in TAK as a no-go shape."""
         out = Outputs()
         zid = keys.parse(key).id
+        self.zones_heard.add(zid)
         if zid in self.zones_from_tak:
             return out  # TAK's own shape: it is on the maps already
         if payload is None:
@@ -383,6 +385,18 @@ class BridgeState:
             return out
         self.threats[tid] = t
         out.cot += self._send(self._uid("threat", tid), self._threat_cot(tid, t, now), now)
+        return out
+
+    def on_zones_in_force(self, zones: list[m.ZoneSummary], now: float) -> Outputs:
+        """The zones a planner held when the bridge started (its world reply): shown as if put now.
+
+        A zone put or deleted on Zenoh since is newer, and is left as heard.
+        """
+        out = Outputs()
+        for z in zones:
+            if z.id not in self.zones_heard:
+                update = msgspec.structs.replace(z.zone, ttl_s=z.ttl_s)  # the time left
+                out.extend(self.on_zone(keys.zone(self.s.mission, z.id), m.encode(update), now))
         return out
 
     def on_state(self, key: str, payload: bytes) -> None:
