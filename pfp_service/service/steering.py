@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from collections.abc import Sequence
 
 import msgspec
 import numpy as np
@@ -186,7 +187,7 @@ def reached(
     guided: list[UnitRecord],
     touched: list[Threat],
     intensity: str,
-    zones: list[tuple[float, float, float, float]] = (),  # type: ignore[assignment]
+    zones: Sequence[tuple[float, float, float, float]] = (),
 ) -> list[bool]:
     """Which units (each with a stepper and a position) a change of the ``touched`` threats or zones can reach.
 
@@ -217,7 +218,7 @@ def replan(
     planner: str,
     changes: list[ThreatChange],
     directions: list[Direction],
-    zones: list[tuple[str, str]] = (),  # type: ignore[assignment]
+    zones: Sequence[tuple[str, str]] = (),
 ) -> ReplanEvent:
     """The event of a batch that changed the threats or zones: what changed, and the units guided afresh.
 
