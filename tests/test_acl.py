@@ -195,6 +195,25 @@ def test_only_a_reporter_publishes_threats(router, who):
         )
 
 
+@pytest.mark.parametrize("who", ["unit-u1", "commander", "observer"])
+def test_only_a_reporter_puts_keep_out_zones(router, who):
+    zone = {"polygon": [[[0, 0], [10, 0], [10, 10], [0, 0]]]}
+    with router.as_("observer") as obs, router.as_(who) as bad, router.as_("reporter") as rep:
+        inbox = Inbox(obs, f"mumt/{M}/zone/*")
+
+        def spoof() -> None:
+            put_json(bad, f"mumt/{M}/zone/fake", {"circle": {"centre": [5, 5], "radius_m": 100}})
+            bad.delete(f"mumt/{M}/zone/real")
+
+        _denied(
+            inbox,
+            lambda: put_json(rep, f"mumt/{M}/zone/real", zone),
+            spoof,
+            lambda m: m != zone,
+            f"a zone from {who}",
+        )
+
+
 @pytest.mark.parametrize("who", ["unit-u2", "unit-u1", "reporter", "commander", "fleet"])
 def test_only_the_planner_publishes_directions(router, who):
     with router.as_("unit-u1") as u1, router.as_(who) as bad, router.as_("planner") as planner:
