@@ -10,7 +10,9 @@ shard key and moves along its direction).  Counted, not sampled:
 * the planner's ``msgs_out`` (directions, events and missions it published,
   from its status before and after) against the record's directions, events
   and missions;
-* the states sent against the record's states;
+* the states sent against the record's states, and the directions the load
+  generator (the units) got against those in the record: the same router
+  serves both, so a loss in both is the overloaded planner's, not the recorder's;
 * the recorder's CPU (from ``/proc``: all its threads) and the file's size, as
   MB per minute of mission.
 
@@ -95,6 +97,7 @@ def run(units: int, rate_hz: float, duration_s: float, out: Path) -> dict[str, A
         cpu1 = meter.cpu_s() or 0.0
         after = gen.status() or {}
         states_sent = gen.seq - seq0
+        gen_got = sum(1 for r in gen.recv if r.seq is not None and r.seq >= seq0)  # the units' own count
         recorder.send_signal(signal.SIGTERM)
         recorder.wait(timeout=300)
         rec_log.seek(0)
@@ -121,6 +124,8 @@ def run(units: int, rate_hz: float, duration_s: float, out: Path) -> dict[str, A
         "planner_out_recorded": recorded_out,
         "lost_planner_out": out_delta - recorded_out,
         "planner_msgs_in": int(after.get("msgs_in", 0)) - int(before.get("msgs_in", 0)),
+        "directions_the_units_got": gen_got,
+        "directions_recorded": counts.get("unit_direction", 0),
         "recorder_exit": recorder.returncode if recorder is not None else None,
         "recorder_cpu_s": round(cpu1 - cpu0, 1),
         "recorder_cpu_pct_of_a_core": round(100.0 * (cpu1 - cpu0) / max(sent_s, 1e-9), 1),
