@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 
@@ -211,3 +212,29 @@ def test_a_field_carries_its_zones() -> None:
     assert f.zones is ZONES and f.packed is bare.packed and len(f) == 1
     assert f.plus([Threat.from_facing((5.0, 0.0), 0.0, 2.0, 1.0, 0.0, id="b")]).zones is ZONES
     assert f.with_threats([]).zones is ZONES
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_raster_is_exactly_within_its_margin(seed: int) -> None:
+    """Row by row (discs, edge strips, parity fill) gives what the node-by-node distance gives."""
+    rng = np.random.default_rng(seed)
+    zones: list[Zone] = []
+    for k in range(4):
+        if rng.uniform() < 0.4:
+            zones.append(Zone.circle(f"c{k}", rng.uniform(-20, 20, 2), rng.uniform(0.05, 8)))
+            continue
+        n = int(rng.integers(3, 12))
+        ang, rad, c = np.sort(rng.uniform(0, 2 * np.pi, n)), rng.uniform(0.5, 10, n), rng.uniform(-20, 20, 2)
+        shell = [(c[0] + r * math.cos(a), c[1] + r * math.sin(a)) for a, r in zip(ang, rad, strict=True)]
+        with contextlib.suppress(ValueError):  # a star whose rays go back on themselves is refused
+            zones.append(Zone.polygon(f"p{k}", shell))
+    zones.append(SQUARE_WITH_HOLE)
+    zs = ZoneSet(zones)
+    h = float(rng.uniform(0.1, 2.0))
+    margin = float(rng.uniform(0.0, 2.0)) * h
+    shape = (int(60 / h), int(60 / h))
+    got = zs.raster((-30.0, -30.0), h, shape, margin)
+    gx, gy = np.meshgrid(-30.0 + h * np.arange(shape[0]), -30.0 + h * np.arange(shape[1]), indexing="ij")
+    sd = zs.signed_distance(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(shape)
+    differ = (got != (sd <= margin)) & (np.abs(sd - margin) > 1e-9)
+    assert not differ.any(), sd[differ][:5]

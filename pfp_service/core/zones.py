@@ -550,20 +550,61 @@ def _raster(
     margin: float,
     out: np.ndarray,
 ) -> None:
-    """``out[i, k]`` |= node ``(x0 + i h, y0 + k h)`` is within ``margin`` of a zone (or in it)."""
+    """``out[i, k]`` |= node ``(x0 + i h, y0 + k h)`` is within ``margin`` of a zone (or in it).
+
+    By rows, not node by node: a circle is a disc of radius ``r + margin``; a
+    polygon is its interior (each row filled between the sorted crossings of
+    its edges, holes by parity) and a strip of ``margin`` along each edge.
+    """
     nx, ny = out.shape
+    xs = np.empty(max(edges.shape[0], 1))
     for z in range(boxes.shape[0]):
-        i0 = max(0, math.floor((boxes[z, 0] - margin - x0) / h))
-        i1 = min(nx - 1, math.ceil((boxes[z, 2] + margin - x0) / h))
-        k0 = max(0, math.floor((boxes[z, 1] - margin - y0) / h))
-        k1 = min(ny - 1, math.ceil((boxes[z, 3] + margin - y0) / h))
-        for i in range(i0, i1 + 1):
-            x = x0 + i * h
+        r = circles[z, 2]
+        if r > 0.0:
+            big = r + margin
+            cx = circles[z, 0]
+            cy = circles[z, 1]
+            k0 = max(0, math.ceil((cy - big - y0) / h))
+            k1 = min(ny - 1, math.floor((cy + big - y0) / h))
             for k in range(k0, k1 + 1):
-                if out[i, k]:
-                    continue
-                sd = _zone_signed(edges, offsets, circles, z, x, y0 + k * h)
-                if sd <= margin:
+                dy = y0 + k * h - cy
+                w = math.sqrt(max(big * big - dy * dy, 0.0))
+                i0 = max(0, math.ceil((cx - w - x0) / h))
+                i1 = min(nx - 1, math.floor((cx + w - x0) / h))
+                for i in range(i0, i1 + 1):
+                    out[i, k] = True
+            continue
+        for e in range(offsets[z], offsets[z + 1]):  # the strip along each edge
+            ax = edges[e, 0]
+            ay = edges[e, 1]
+            bx = edges[e, 2]
+            by = edges[e, 3]
+            i0 = max(0, math.floor((min(ax, bx) - margin - x0) / h))
+            i1 = min(nx - 1, math.ceil((max(ax, bx) + margin - x0) / h))
+            k0 = max(0, math.floor((min(ay, by) - margin - y0) / h))
+            k1 = min(ny - 1, math.ceil((max(ay, by) + margin - y0) / h))
+            for i in range(i0, i1 + 1):
+                x = x0 + i * h
+                for k in range(k0, k1 + 1):
+                    if not out[i, k] and _edge_distance(x, y0 + k * h, ax, ay, bx, by)[0] <= margin:
+                        out[i, k] = True
+        k0 = max(0, math.floor((boxes[z, 1] - y0) / h))  # the interior, row by row
+        k1 = min(ny - 1, math.ceil((boxes[z, 3] - y0) / h))
+        for k in range(k0, k1 + 1):
+            y = y0 + k * h
+            n = 0
+            for e in range(offsets[z], offsets[z + 1]):
+                ay = edges[e, 1]
+                by = edges[e, 3]
+                if (ay > y) != (by > y):
+                    ax = edges[e, 0]
+                    xs[n] = ax + (y - ay) * (edges[e, 2] - ax) / (by - ay)
+                    n += 1
+            row = np.sort(xs[:n])
+            for j in range(0, n - 1, 2):
+                i0 = max(0, math.ceil((row[j] - x0) / h))
+                i1 = min(nx - 1, math.floor((row[j + 1] - x0) / h))
+                for i in range(i0, i1 + 1):
                     out[i, k] = True
 
 
