@@ -138,3 +138,23 @@ def test_zones_are_stored_and_restored_with_the_time_left(tmp_path):
     later = store.restore(1011.0)  # b's time ran out while the planner was down
     assert [i.zone for i in later.inputs if isinstance(i, ZonePut)] == ["a"] and later.expired == 1
     store.close()
+
+
+def test_the_log_says_each_zone_put_and_removed_in_one_line():
+    import io
+    import logging
+
+    from pfp_service.service.log import get_logger, log_changes, setup_logging
+
+    setup_logging("human", "info")
+    out = io.StringIO()
+    logging.getLogger("pfp").handlers[0].setStream(out)  # type: ignore[attr-defined]
+    try:
+        circle = ZoneUpdate(circle=ZoneCircle(centre=(5.0, 6.0), radius_m=12.5))
+        log_changes(get_logger("test"), [ZonePut("wall", WALL), ZonePut("pond", circle), ZoneRemoved("old")])
+    finally:
+        logging.getLogger("pfp").handlers.clear()
+    text = out.getvalue()
+    assert "keep-out zone wall put: polygon of 4 corners from" in text
+    assert "keep-out zone pond put: circle of 12.5 m at" in text
+    assert "keep-out zone old removed" in text

@@ -179,13 +179,20 @@ def get_logger(name: str) -> logging.Logger:
 
 
 def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 20) -> None:
-    """One line per goal or threat change among ``inputs``, at most ``limit`` and a count of the rest.
+    """One line per goal, threat or zone change among ``inputs``, at most ``limit`` and a count of the rest.
 
     ``threat e1 put at 58.41050N 15.62130E (300 m E, 260 m N)``: the position is an ``At``,
     shown in the mission's coordinates by the human formatter.
     """
     # here, not at the top: every process logs, and only the planner holds the world's inputs
-    from pfp_service.service.events import GoalCancelled, GoalSet, ThreatPut, ThreatRemoved
+    from pfp_service.service.events import (
+        GoalCancelled,
+        GoalSet,
+        ThreatPut,
+        ThreatRemoved,
+        ZonePut,
+        ZoneRemoved,
+    )
 
     shown = 0
     for inp in inputs:
@@ -202,10 +209,23 @@ def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 2
         elif isinstance(inp, ThreatRemoved):
             what, msg, args = "threat removed", "threat %s removed", (inp.threat,)
             fields = {"threat": inp.threat}
+        elif isinstance(inp, ZonePut):
+            z = inp.update
+            shape = (
+                f"circle of {z.circle.radius_m:g} m at"
+                if z.circle is not None
+                else f"polygon of {len((z.polygon or [[]])[0]) - 1} corners from"
+            )
+            first = z.circle.centre if z.circle is not None else (z.polygon or [[(0.0, 0.0)]])[0][0]
+            what, msg, args = "zone put", "keep-out zone %s put: %s %s", (inp.zone, shape, At(*first))
+            fields = {"zone": inp.zone, "kind": z.kind}
+        elif isinstance(inp, ZoneRemoved):
+            what, msg, args = "zone removed", "keep-out zone %s removed", (inp.zone,)
+            fields = {"zone": inp.zone}
         else:
             continue
         shown += 1
         if shown <= limit:
             logger.info(msg, *args, extra={"fields": _json_only(fields), "json_msg": what})
     if shown > limit:
-        logger.info("more goal and threat changes", extra={"fields": {"count": shown - limit}})
+        logger.info("more goal, threat and zone changes", extra={"fields": {"count": shown - limit}})
