@@ -592,6 +592,7 @@ function showPreview(body) {
     row("length", `${fmt(p.length)} m`) +
     row("exposure", fmt(p.exposure, 3)) +
     row("min clearance", p.min_clearance === null ? "no threat" : `${fmt(p.min_clearance, 2)} m`) +
+    (p.min_zone_clearance === null || p.min_zone_clearance === undefined ? "" : row("zone clearance", `${fmt(p.min_zone_clearance, 2)} m`)) +
     row("ETA", p.eta_s === null ? "unknown speed" : `${ageText(p.eta_s)} at ${fmt(p.speed_mps)} m/s`) +
     row("steps", `${p.steps} (${fmt(p.compute_ms, 0)} ms)`) +
     (p.escapes && p.escapes.length ? row("escapes", esc(p.escapes.join(", "))) : "") +
