@@ -124,8 +124,8 @@ def summarise(rec: Record, intensity: str = "peak") -> tuple[list[UnitSummary], 
             u.status = status
             if status == "arrived" and u.arrived_s is None:
                 u.arrived_s = t_s
-            elif status not in ("arrived",):
-                u.arrived_s = None if status == "en_route" and u.arrived_s is not None else u.arrived_s
+            elif status in ("en_route", "escaping"):
+                u.arrived_s = None  # a new goal after an arrival: the time runs to the next one
         elif k.kind is keys.KeyKind.EVENT:
             ev_kind = d.get("kind")
             if ev_kind == "replan":
