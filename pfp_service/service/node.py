@@ -94,9 +94,7 @@ QUERIES_MAX = 4096  # status, world and preview queries waiting for the loop; mo
 EVENT_LOG_LINES = 20  # log lines per kind of event per tick; the rest are counted in one line
 INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
 STATE_RING = 16_384  # unit states Zenoh holds for the loop (1.6 s of 10,000/s); past it the oldest go first
-MIN_TICK_S = (
-    0.002  # ticks at most this often while states come (docs/operations.md: measured 1 vs 2 vs 0.3 ms)
-)
+MIN_TICK_S = 0.002  # ticks at most this often while states come (measured: docs/operations.md)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
