@@ -19,6 +19,7 @@ No I/O: a pure function of the point, the origin and the style.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -60,6 +61,16 @@ def mgrs_ref(lat: float, lon: float) -> str:
     raw = str(mgrs.MGRS().toMGRS(lat, lon, MGRSPrecision=5))
     head, digits = raw[:-10], raw[-10:]
     return f"{head} {digits[:5]} {digits[5:]}"
+
+
+@functools.lru_cache(maxsize=4096)
+def _geodetic_cm(origin: Origin, x_cm: int, y_cm: int) -> tuple[float, float]:
+    """``origin.to_geodetic`` of a point given to the centimetre (the text shows about a metre).
+
+    One point costs pymap3d's fixed overhead (a few hundred µs on a loaded machine): a
+    planner logging the same goal for a platoon, or a parked unit going stale, pays it once.
+    """
+    return origin.to_geodetic(x_cm / 100.0, y_cm / 100.0)
 
 
 @dataclass(frozen=True)
@@ -116,9 +127,12 @@ class Coords:
             return [f"({x:.{digits}f}, {y:.{digits}f})" for x, y in pts]
         if not pts:
             return []
-        import numpy as np
+        if len(pts) == 1:  # a log line: the same points recur (a platoon's goal, a parked unit)
+            ll = [_geodetic_cm(self.origin, round(pts[0][0] * 100), round(pts[0][1] * 100))]
+        else:
+            import numpy as np
 
-        ll = self.origin.to_geodetic_many(np.array(pts, dtype=float)).tolist()
+            ll = self.origin.to_geodetic_many(np.array(pts, dtype=float)).tolist()
         show = degrees if self.style == "latlon" else mgrs_ref
         out = []
         for (x, y), (lat, lon) in zip(pts, ll):
