@@ -158,3 +158,23 @@ def test_the_log_says_each_zone_put_and_removed_in_one_line():
     assert "keep-out zone wall put: polygon of 4 corners from" in text
     assert "keep-out zone pond put: circle of 12.5 m at" in text
     assert "keep-out zone old removed" in text
+
+
+def test_a_zone_change_keeps_the_threats_field_and_a_threat_change_keeps_the_zones():
+    from pfp_service.wire import ThreatUpdate
+
+    w = _world()
+    threat = ThreatUpdate(position=(500.0, 500.0), facing_deg=0.0, sigma_range=5.0, sigma_lateral=3.0)
+    w.apply(
+        [StateReported("a", UnitState(position=(0.0, 0.0))), GoalSet("a", Goal(position=(100.0, 0.0)))], 0.0
+    )
+    from pfp_service.service.world import ThreatPut
+
+    w.apply([ThreatPut("t", threat)], 0.0)
+    before = w.field
+    w.apply([ZonePut("wall", WALL)], 1.0)
+    after = w.field
+    assert after is not before and after.threats is before.threats  # the desk's cached blob still holds
+    assert after.packed is before.packed and after.zones.ids == ("wall",)
+    w.apply([ThreatPut("t2", threat)], 2.0)
+    assert w.field.zones.ids == ("wall",) and len(w.field) == 2

@@ -89,7 +89,8 @@ class Records:
         self.deliberating = 0  # units with a job asked and not answered
         self.superseded: list[Job] = []  # jobs asked and no longer wanted, until the world says so
         self.intensity = intensity
-        self._field: ThreatField | None = None  # built when asked, until the threats or zones change
+        self._bare: ThreatField | None = None  # the threats' field, built when asked, until they change
+        self._field: ThreatField | None = None  # ... and with the zones: until the threats or zones change
         self._zone_set: ZoneSet | None = None  # built when asked, until the zones change
         self.cull: CullIndex | None = None
         self.stats: FieldStats | None = None
@@ -98,11 +99,12 @@ class Records:
     def field(self) -> ThreatField:
         """The field of the threats in force, in id order, with its cull index and stats, and the zones."""
         if self._field is None:
-            ordered = [self.threats[k].threat for k in sorted(self.threats)]
-            fld = ThreatField(ordered, self.intensity)  # type: ignore[arg-type]
-            self.cull = CullIndex(fld.packed) if len(ordered) >= MIN_THREATS else None
-            self.stats = field_stats(ordered)
-            self._field = fld.with_zones(self.zone_set) if self.zones else fld
+            if self._bare is None:  # a zone change keeps the threats' field, its cull index and stats
+                ordered = [self.threats[k].threat for k in sorted(self.threats)]
+                self._bare = ThreatField(ordered, self.intensity)  # type: ignore[arg-type]
+                self.cull = CullIndex(self._bare.packed) if len(ordered) >= MIN_THREATS else None
+                self.stats = field_stats(ordered)
+            self._field = self._bare.with_zones(self.zone_set) if self.zones else self._bare
         return self._field
 
     @property
@@ -228,11 +230,11 @@ class Records:
         """Put a threat; returns the one it replaces, if any."""
         old = self.threats.get(tid)
         self.threats[tid] = record
-        self._field = None
+        self._bare = self._field = None
         return old
 
     def remove_threat(self, tid: str) -> ThreatRecord | None:
-        self._field = None
+        self._bare = self._field = None
         return self.threats.pop(tid, None)
 
     def expire(self, tid: str, now: float) -> ThreatRecord | None:
@@ -240,7 +242,7 @@ class Records:
         t = self.threats.get(tid)
         if t is None or t.expires_at is None or t.expires_at > now:
             return None
-        self._field = None
+        self._bare = self._field = None
         return self.threats.pop(tid)
 
     # -- zones --------------------------------------------------------------------------
