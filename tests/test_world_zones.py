@@ -178,3 +178,17 @@ def test_a_zone_change_keeps_the_threats_field_and_a_threat_change_keeps_the_zon
     assert after.packed is before.packed and after.zones.ids == ("wall",)
     w.apply([ThreatPut("t2", threat)], 2.0)
     assert w.field.zones.ids == ("wall",) and len(w.field) == 2
+
+
+def test_a_zone_put_on_a_units_goal_traps_it_and_one_put_round_a_unit_leads_it_out_first():
+    from pfp_service.wire import DirectionStatus, TrappedEvent
+
+    w = _world()
+    _guided(w, {"inside": ((42.0, 0.0), (100.0, 0.0)), "goal_in": ((0.0, 10.0), (43.0, 10.0))})
+    out = w.apply([ZonePut("wall", WALL)], 1.0)
+    said = {d.unit: d for d in out.directions}
+    assert said["goal_in"].status is DirectionStatus.TRAPPED
+    (trapped,) = _events(out, TrappedEvent)
+    assert trapped.unit == "goal_in" and trapped.reason == "the goal lies in zone wall"
+    assert said["inside"].status is DirectionStatus.ESCAPING and "leave zone wall" in said["inside"].reason
+    assert said["inside"].vector == pytest.approx((-1.0, 0.0))  # the shortest way out: 2 m west
