@@ -30,7 +30,7 @@ from pfp_service.geojson import zones_from_geojson
 from pfp_service.service.events import zone_put
 from pfp_service.wire import encode, keys
 from pfp_service.wire.messages import decode_zone
-from tests.zenoh_util import ROOT, client, planner_process, put_in_force
+from tests.zenoh_util import ROOT, Inbox, client, planner_process, put_in_force
 
 ORIGIN = Origin(lat=58.4105, lon=15.6213, alt=87.5)
 ORIGIN_ARG = f"{ORIGIN.lat},{ORIGIN.lon},{ORIGIN.alt}"
@@ -98,6 +98,20 @@ def test_serve_with_zones_holds_them_from_the_start(tmp_path):
         (reply,) = [r for r in s.get(keys.worlds(m), timeout=5) if r.ok is not None]
         snap = decode_world_snapshot(reply.ok.payload.to_bytes())
         assert [z.id for z in snap.zones] == ["mines"] and snap.zones_total == 1
+
+        # a ring that crosses itself, put on the wire, is refused: the writer's ack and a rejected
+        # event name the key and the field
+        from pfp_service.wire.delivery import Deliverer
+
+        rejected = Inbox(s, keys.event(m, "rejected"))
+        said: list[str] = []
+        bowtie = {"polygon": [[[0, 0], [10, 10], [10, 0], [0, 10], [0, 0]]]}
+        with Deliverer(s, m, said.append) as d:
+            d.put(keys.zone(m, "bowtie"), json.dumps(bowtie).encode())
+            assert d.wait_delivered(20)
+        assert any("rejected" in line and "polygon[0]" in line for line in said), said
+        ev = rejected.get(timeout=10, where=lambda e: e["key"].endswith("/zone/bowtie"))
+        assert ev["field"].startswith("$.polygon[0]") and "crosses itself" in ev["reason"], ev
 
 
 # -- a zone put across a fleet ---------------------------------------------------------------
