@@ -87,7 +87,17 @@ def test_serve_with_zones_holds_them_from_the_start(tmp_path):
     p = _write(tmp_path, doc)
     m = "z" + uuid.uuid4().hex[:8]
     with (
-        planner_process("--state-dir", "none", "--origin", ORIGIN_ARG, "--zones", str(p), mission=m) as (
+        planner_process(
+            "--state-dir",
+            "none",
+            "--origin",
+            ORIGIN_ARG,
+            "--zones",
+            str(p),
+            "--preview-budget-ms",
+            "5000",  # a budget a loaded CI machine cannot spend: not what is tested here
+            mission=m,
+        ) as (
             ep,
             _pr,
         ),
@@ -112,6 +122,21 @@ def test_serve_with_zones_holds_them_from_the_start(tmp_path):
         assert any("rejected" in line and "polygon[0]" in line for line in said), said
         ev = rejected.get(timeout=10, where=lambda e: e["key"].endswith("/zone/bowtie"))
         assert ev["field"].startswith("$.polygon[0]") and "crosses itself" in ev["reason"], ev
+
+        # a preview (a worker process, the unit's own stepper) goes round the file's zone
+        (zone,) = zones_from_geojson(doc, ORIGIN)
+        x0, y0, x1, y1 = zone.bounds()
+        cx = (x0 + x1) / 2
+        put_in_force(s, m, {keys.unit_goal(m, "u1"): {"position": [cx, y1 + 60]}})
+        s.put(keys.unit_state(m, "u1"), json.dumps({"position": [cx, y0 - 60]}).encode())
+        time.sleep(0.5)
+        replies = list(s.get(keys.preview(m, "u1"), timeout=20))
+        assert replies and replies[0].ok is not None, [r.err.payload.to_bytes() for r in replies if r.err]
+        plan = json.loads(replies[0].ok.payload.to_bytes())
+        assert plan["status"] == "reached", plan["reason"]
+        assert plan["min_zone_clearance"] is not None and plan["min_zone_clearance"] > 0
+        assert not shapely.LineString(plan["path"]).intersects(zone.geometry)
+        print(f"preview round the file's zone: {plan['steps']} steps in {plan['compute_ms']:.0f} ms")
 
 
 # -- a zone put across a fleet ---------------------------------------------------------------
