@@ -56,7 +56,7 @@ def test_fleet_joins_a_usrpwd_router_with_its_acl_identity(acl_router):
     out, _endpoint, team = acl_router
     observer = zenoh.open(zenoh.Config.from_file(str(out / "clients" / "observer.json5")))
     try:
-        states = Inbox(observer, f"mumt/{M}/unit/*/state")
+        states = Inbox(observer, f"mumt/{M}/**/unit/*/state")  # fleet publishes on the shard key
         done = _fleet(team, "--zenoh-config", str(out / "clients" / "fleet.json5"))
         assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
         assert states.get(timeout=10)["position"] == [0.0, 0.0]  # u1's state came through the router

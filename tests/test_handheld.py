@@ -336,7 +336,7 @@ def test_arrow_keys_nudge_the_published_position(planner):
 
     async def scenario():
         with client(endpoint) as s:
-            states = Inbox(s, keys.unit_state(mission, uid))
+            states = Inbox(s, keys.shard_state(mission, uid))  # the handheld publishes on its shard
             directions = Inbox(s, keys.unit_direction(mission, uid))
             with open_link([endpoint], mission, uid) as link:
                 app = _app(link, mission, Settings(unit=uid, walk=False, nudge_m=0.5), start=(3.0, 4.0))
@@ -382,7 +382,7 @@ def test_nmea_file_drives_the_position(planner, tmp_path: Path):
 
     async def scenario():
         with client(endpoint) as s:
-            states = Inbox(s, keys.unit_state(mission, uid))
+            states = Inbox(s, keys.shard_state(mission, uid))  # the handheld publishes on its shard
             with open_link([endpoint], mission, uid) as link:
                 reader = NmeaReader(open_nmea(str(nmea)), frame, link.inbox)
                 app = _app(
