@@ -47,20 +47,6 @@ def register(sub: Any) -> None:
         "--no-sim", action="store_true", help="only put threats and the goal: a real unit at the start drives"
     )
     p.set_defaults(func=run)
-    _record_commands(sub)
-
-
-def _record_commands(sub: Any) -> None:
-    """``pfp record``/``replay``/``report`` come in with this module until pyproject.toml lists
-    ``record = "pfp_clients.commands.record"`` under ``pfp_service.commands`` (then this does nothing)."""
-    from importlib.metadata import entry_points
-
-    from pfp_service.cli import COMMAND_GROUP
-
-    if not entry_points(group=COMMAND_GROUP, name="record"):
-        from pfp_clients.commands import record
-
-        record.register(sub)
 
 
 def run(args: argparse.Namespace) -> int:
