@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pfp_service.bench.service import layout
+from pfp_service.bench.layout import layout
 from pfp_service.core import PlannerParams, ThreatField, cull, foresight, resolve
 
 pytestmark = pytest.mark.unit
@@ -14,13 +14,13 @@ pytestmark = pytest.mark.unit
 def test_culled_simulation_ends_as_the_full_one_among_many_threats(monkeypatch):
     lay = layout(40, 100, 7)
     field = ThreatField([u.to_threat(t) for t, u in lay["threats"]])
-    assert len(field) >= cull.MIN_THREATS and foresight._index(field) is not None
+    assert len(field) >= cull.MIN_THREATS and cull.index_of(field) is not None
     got, want = [], []
     for s, g in zip(lay["starts"][:40], lay["goals"][:40]):
         params = resolve(PlannerParams(step=1.0), s, g, list(field.threats))
         gain = params.delta / ((g[0] - s[0]) ** 2 + (g[1] - s[1]) ** 2)
         got.append(foresight.simulate(field, s, g, gain, params))
-    monkeypatch.setattr(foresight, "_index", lambda f: None)  # every threat at every step, as before
+    monkeypatch.setattr(cull, "index_of", lambda f: None)  # every threat at every step, as before
     for s, g in zip(lay["starts"][:40], lay["goals"][:40]):
         params = resolve(PlannerParams(step=1.0), s, g, list(field.threats))
         gain = params.delta / ((g[0] - s[0]) ** 2 + (g[1] - s[1]) ** 2)
@@ -35,4 +35,4 @@ def test_culled_simulation_ends_as_the_full_one_among_many_threats(monkeypatch):
 def test_a_few_threats_are_simulated_without_an_index():
     lay = layout(1, 5, 7)
     field = ThreatField([u.to_threat(t) for t, u in lay["threats"]])
-    assert foresight._index(field) is None
+    assert cull.index_of(field) is None

@@ -43,8 +43,6 @@ import sys
 import time
 from typing import Any
 
-import numpy as np
-
 from pfp_service.bench._check import add_check_arg, exit_code
 from pfp_service.bench._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
 from pfp_service.bench._phases import (
@@ -59,10 +57,10 @@ from pfp_service.bench._phases import (
     steady,
     storm,
 )
+from pfp_service.bench.layout import AREA_M, layout
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
-AREA_M = 2000.0
 FORGET_STALE_S = 20.0  # with --forget: silence before stale (longer than any quiet window of the phases)
 FORGET_AFTER_S = 5.0  # ... and stale this long before forgotten
 TARGETS = {
@@ -119,31 +117,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=2023, help="layout seed (default 2023)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_check_arg(p)
-
-
-# -- the field and the fleet --------------------------------------------------------------------
-def layout(units: int, threats: int, seed: int) -> dict[str, Any]:
-    """Units on the west edge with goals on the east edge, threats in the middle facing west (traps)."""
-    from pfp_service.wire import ThreatUpdate
-
-    rng = np.random.default_rng(seed)
-    starts = np.column_stack([rng.uniform(0, 0.1, units + 1), rng.uniform(0.05, 0.95, units + 1)]) * AREA_M
-    goals = np.column_stack([rng.uniform(0.9, 1.0, units + 1), rng.uniform(0.05, 0.95, units + 1)]) * AREA_M
-    field = []
-    for j in range(threats):
-        xy = (float(rng.uniform(0.25, 0.75) * AREA_M), float(rng.uniform(0.0, 1.0) * AREA_M))
-        facing = float((270.0 + rng.uniform(-45, 45)) % 360)
-        field.append(
-            (
-                f"t{j}",
-                ThreatUpdate(position=xy, facing_deg=facing, sigma_range=40.0, sigma_lateral=28.0, skew=2.0),
-            )
-        )
-    return {
-        "starts": [(float(x), float(y)) for x, y in starts],  # the last one is the bystander's
-        "goals": [(float(x), float(y)) for x, y in goals],
-        "threats": field,
-    }
 
 
 # -- figures ---------------------------------------------------------------------------------

@@ -30,6 +30,8 @@ a tick costs O(units x nearby threats).
 from __future__ import annotations
 
 import math
+import weakref
+from typing import Any
 
 import numba
 import numpy as np
@@ -43,7 +45,9 @@ __all__ = [
     "Q_CUT",
     "RELATIVE_BOUND",
     "CullIndex",
+    "cell_level",
     "corridors_meet",
+    "index_of",
     "influence_boxes",
     "predict",
 ]
@@ -372,3 +376,42 @@ def corridors_meet(
     for x0, y0, x1, y1 in boxes:
         hit |= (lo[:, 0] <= x1) & (hi[:, 0] >= x0) & (lo[:, 1] <= y1) & (hi[:, 1] >= y0)
     return hit
+
+
+@numba.njit(cache=True, nogil=True)
+def _cell_level(packed, pts, grid, indptr, indices, out):  # type: ignore[no-untyped-def]
+    ox, oy, cell, nx, ny = grid
+    for i in range(pts.shape[0]):
+        x = pts[i, 0]
+        y = pts[i, 1]
+        v = 0.0
+        if math.isfinite(x) and math.isfinite(y):
+            ci = math.floor((x - ox) / cell)
+            ck = math.floor((y - oy) / cell)
+            if 0 <= ci < nx and 0 <= ck < ny:
+                c = ck * nx + ci
+                for p in range(indptr[c], indptr[c + 1]):
+                    v += kernels.threat_term(packed, indices[p], x, y, 0.0, False)[0]
+        out[i] = v
+
+
+def cell_level(index: CullIndex, points: np.ndarray) -> np.ndarray:
+    """The level at ``points`` from the threats each point's cell lists (off by at most ``index.level_bound``)."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    out = np.empty(len(pts))
+    grid = (index.origin[0], index.origin[1], index.cell, index.nx, index.ny)
+    _cell_level(index.packed, pts, grid, index.indptr, index.indices, out)
+    return out.reshape(np.shape(points)[:-1])
+
+
+_INDEX: weakref.WeakKeyDictionary[Any, CullIndex | None] = weakref.WeakKeyDictionary()
+
+
+def index_of(field: Any) -> CullIndex | None:
+    """A ``ThreatField``'s index, built once per field (fields are immutable); ``None`` below ``MIN_THREATS``."""
+    if len(field) < MIN_THREATS:
+        return None
+    got = _INDEX.get(field)
+    if got is None:
+        got = _INDEX[field] = CullIndex(field.packed)
+    return got

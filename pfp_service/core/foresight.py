@@ -25,7 +25,6 @@ and a trap is still caught when it happens.
 
 from __future__ import annotations
 
-import weakref
 from enum import StrEnum
 from typing import NamedTuple
 
@@ -162,7 +161,7 @@ def simulate(
     if params.trap_window > 0:  # room for the whole watch at once: at most the steps simulated
         ring = min(params.trap_window, limit + 1)
         unit = np.concatenate([unit[: steprule.RING], np.zeros(2 * ring)])
-    index = _index(field)
+    index = cull.index_of(field)
     if index is not None:
         grid = (index.origin[0], index.origin[1], index.cell, index.nx, index.ny)
         args = (
@@ -185,15 +184,3 @@ def simulate(
         *args,
     )
     return Foresight(_OUTCOMES[code], steps, x, y, exposure)
-
-
-_INDEX: weakref.WeakKeyDictionary[ThreatField, cull.CullIndex | None] = weakref.WeakKeyDictionary()
-
-
-def _index(field: ThreatField) -> cull.CullIndex | None:
-    """The field's spatial index (built once per field), or ``None`` below ``cull.MIN_THREATS`` threats."""
-    if len(field) < cull.MIN_THREATS:
-        return None
-    if field not in _INDEX:
-        _INDEX[field] = cull.CullIndex(field.packed)
-    return _INDEX[field]

@@ -28,6 +28,7 @@ from scipy.sparse.csgraph import breadth_first_order, dijkstra
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
+from pfp_service.core.cull import cell_level, index_of
 from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
 __all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut", "shortcut_kept"]
@@ -307,7 +308,8 @@ def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) 
     """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
     t = np.linspace(0.0, 1.0, _SAMPLES)
     pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
-    lv = field.level_culled(pts)
+    index = index_of(field)  # many threats: each point sums only its cell's (cull.py)
+    lv = field.level_culled(pts) if index is None else cell_level(index, pts)
     w = np.ones(_SAMPLES)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     length = np.hypot(*(b - a).T)
