@@ -123,7 +123,7 @@ def test_a_bad_field_names_the_file_and_its_line(tmp_path):
     assert str(e.value) == "bad.yaml line 4, threats[0].sigma_range: must be >= 0.001"
     q = tmp_path / "bad.json"
     q.write_text('{"start": [0, 0], "goal": [10, 0], "step": -1}')
-    with pytest.raises(InputError, match=r"^bad\.json, step: "):
+    with pytest.raises(InputError, match=r"^bad\.json line 1, step: "):
         load_scenario(q)
 
 

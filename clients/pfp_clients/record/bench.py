@@ -49,7 +49,7 @@ def _count(path: Path) -> dict[str, int]:
         channels = summary.channels
         for cid, n in summary.statistics.channel_message_counts.items():
             topic = channels[cid].topic
-            if not topic.startswith("/mumt/"):
+            if not topic.startswith(f"/{keys.PREFIX}/"):
                 counts[topic] = counts.get(topic, 0) + n
                 continue
             try:
