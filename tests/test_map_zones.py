@@ -121,8 +121,6 @@ def mission() -> str:
 
 @pytest.mark.unit
 def test_the_geojson_export_has_the_zones_as_keep_out_polygons():
-    import asyncio
-
     from pfp_clients.map.server import MapOptions, MapServer
 
     from pfp_service.geo import Origin
@@ -137,7 +135,7 @@ def test_the_geojson_export_has_the_zones_as_keep_out_polygons():
         ],
         0.0,
     )
-    resp = asyncio.run(srv._geojson(None))  # type: ignore[arg-type]
+    resp = _run(srv._geojson(None))  # type: ignore[arg-type]
     fc = json.loads(resp.body)
     kept = [f for f in fc["features"] if f["properties"]["kind"] == "keep_out"]
     assert sorted(f["properties"]["id"] for f in kept) == ["c", "sq"]
@@ -145,4 +143,13 @@ def test_the_geojson_export_has_the_zones_as_keep_out_polygons():
     assert back["sq"].area_m2() == pytest.approx(100.0, rel=1e-3)  # lon/lat kept to the centimetre
     assert back["c"].contains(50.0, 4.99)  # the circle's polygon holds the circle
     none = MapServer(None, MapOptions(mission="m"))
-    assert asyncio.run(none._geojson(None)).status == 409  # type: ignore[arg-type]
+    assert _run(none._geojson(None)).status == 409  # type: ignore[arg-type]
+
+
+def _run(coro):
+    """Run a coroutine on a loop of its own thread (a browser test in the session may hold this one's)."""
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, coro).result()

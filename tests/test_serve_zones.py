@@ -316,7 +316,7 @@ def test_a_zone_put_across_a_fleet_redirects_every_unit_its_corridor_meets():
 def test_no_track_of_a_fleet_driven_round_a_zone_enters_it():
     with _fleet_under_a_zone(min(ZONE_UNITS, 200)) as (fleet, _affected, _told):
         rounds = 0
-        while fleet.round() and rounds < 400:
+        while fleet.round() and rounds < 1200:  # units wait on deliberation workers for their routes
             rounds += 1
         zone = shapely.Polygon(_wall(len(fleet.ids)))
         entered = [u for u in fleet.ids if shapely.LineString(fleet.track[u]).intersects(zone)]
