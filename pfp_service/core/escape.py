@@ -61,7 +61,7 @@ import math
 import numba
 import numpy as np
 
-from pfp_service.core import steprule, zones
+from pfp_service.core import cull, steprule, zones
 from pfp_service.core.cores import ZONE_PREFIX, Cores
 from pfp_service.core.escape_strategies import (
     AUTO_ORDER,
@@ -73,7 +73,7 @@ from pfp_service.core.escape_strategies import (
     rollout,
 )
 from pfp_service.core.grid import resample
-from pfp_service.core.metrics import path_cost
+from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 from pfp_service.core.zones import ZoneSet
@@ -86,6 +86,25 @@ HANDOFF_STEPS = 4.0  # an escape ending this many steps from the goal steers on 
 
 
 _NO_ZONES = ZoneSet()
+
+
+def route_cost(path: np.ndarray, field: ThreatField, lam: float = LAMBDA) -> float:
+    """``metrics.path_cost`` of a way to rank, each level summed over its own cell of the field's index.
+
+    Simpson on every segment, as ``path_cost``; among many threats each point
+    sums only the threats its cell of ``cull.index_of(field)`` lists (off by
+    at most the index's ``level_bound``), and each vertex is evaluated once.
+    """
+    index = cull.index_of(field)
+    pts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+    if index is None or len(pts) < 2:
+        return path_cost(pts, field, lam)
+    mid = 0.5 * (pts[:-1] + pts[1:])
+    lv = cull.cell_level(index, np.concatenate([pts, mid]))
+    vert, half = lv[: len(pts)], lv[len(pts) :]
+    seglen = np.hypot(*np.diff(pts, axis=0).T)
+    exposure = float(np.sum(seglen * (vert[:-1] + 4.0 * half + vert[1:])) / 6.0)
+    return float(seglen.sum()) + lam * exposure
 
 
 class EscapeRun:
@@ -457,7 +476,7 @@ class Escaper:
         poly = global_route(tr)
         if isinstance(poly, NoCandidate) or self._judge(tr, poly)[0]:
             return None
-        if path_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
+        if route_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
             return None
         self.log.append("global")
         return self._run("global (cheaper than descent)", poly, tr)
@@ -547,7 +566,7 @@ class Escaper:
         """``J`` of the escape, the descent after it, and the straight remainder to the goal."""
         pts = np.concatenate([poly, after[1:]])
         rest = math.hypot(tr.goal[0] - pts[-1, 0], tr.goal[1] - pts[-1, 1])
-        return path_cost(pts, tr.field) + rest
+        return route_cost(pts, tr.field) + rest
 
     def _site(self, x: float, y: float, radius: float) -> _Site:
         for s in self._sites:
