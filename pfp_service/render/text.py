@@ -55,7 +55,8 @@ def summary(
         lines.append(f"  end   {coords.point(r.path[-1], digits=2)}")
     lines += [
         f"  steps {r.steps}, length {_m(r.length)}, final distance {_m(r.final_distance)}",
-        f"  exposure {r.exposure:.4g}, peak threat {r.peak_threat:.4g}, min clearance {_m(r.min_clearance)}",
+        f"  exposure {r.exposure:.4g}, peak threat {r.peak_threat:.4g}, min clearance {_m(r.min_clearance)}"
+        + (f", min zone clearance {_m(r.min_zone_clearance)}" if r.min_zone_clearance is not None else ""),
         (
             f"  planner optimal, lambda {r.lam:g}, grid {p.step:.4g} m, intensity {p.intensity}"
             if r.planner == "optimal" and r.lam is not None
@@ -64,6 +65,7 @@ def summary(
         ),
         f"  compute {r.compute_ms:.3f} ms",
     ]
+
     if r.traps:
         lines.append(
             f"  traps {r.traps}, escapes {', '.join(r.escapes) or 'none'}, {r.escape_steps} steps escaping"

@@ -171,7 +171,7 @@ class WriteOrder:
 
 
 def describe_key(key: str) -> str:
-    """``goal u1`` or ``threat t1`` for a goal or threat key; the key itself otherwise."""
+    """``goal u1``, ``threat t1`` or ``zone z1`` for a goal, threat or zone key; the key itself otherwise."""
     try:
         k = keys.parse(key)
     except InputError:
@@ -180,6 +180,8 @@ def describe_key(key: str) -> str:
         return f"goal {k.id}"
     if k.kind is keys.KeyKind.THREAT:
         return f"threat {k.id}"
+    if k.kind is keys.KeyKind.ZONE:
+        return f"zone {k.id}"
     return key
 
 
