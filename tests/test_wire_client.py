@@ -132,6 +132,18 @@ BUILT: dict[str, list[dict[str, Any]]] = {
             "ttl_s": 60,
         },
     ],
+    "zone": [
+        {"polygon": [[[0, 0], [30, 0], [30, 10], [0, 10], [0, 0]]]},
+        {
+            "kind": "keep_out",
+            "polygon": [
+                [[0, 0], [60, 0], [60, 60], [0, 60], [0, 0]],
+                [[20, 20], [40, 20], [40, 40], [20, 40], [20, 20]],
+            ],
+            "ttl_s": 600,
+        },
+        {"circle": {"centre": [50, -20], "radius_m": 12.5}},
+    ],
     "preview_request": [
         {},
         {"goal": [5, 5], "max_iter": 500},
@@ -270,7 +282,7 @@ def test_the_schema_check_can_fail(message: str, bad: dict[str, Any]) -> None:
 
 
 def test_client_puts_reach_the_planner_and_decode(sessions: tuple[zenoh.Session, zenoh.Session]) -> None:
-    from pfp_service.wire import decode_goal, decode_threat, decode_unit_state, keys
+    from pfp_service.wire import decode_goal, decode_threat, decode_unit_state, decode_zone, keys
 
     router, client = sessions
     inbox: queue.Queue[tuple[str, zenoh.SampleKind, bytes, str]] = queue.Queue()
@@ -285,12 +297,17 @@ def test_client_puts_reach_the_planner_and_decode(sessions: tuple[zenoh.Session,
             inbox,
             lambda i: i[0] == probe,
         )
-        decoders = {"unit_state": decode_unit_state, "goal": decode_goal, "threat": decode_threat}
+        decoders = {
+            "unit_state": decode_unit_state,
+            "goal": decode_goal,
+            "threat": decode_threat,
+            "zone": decode_zone,
+        }
         sent = 0
         for name, body in all_messages():
             if name not in decoders:
                 continue
-            chunk = {"threat": f"t{sent}"} if name == "threat" else {"unit": f"u{sent}"}
+            chunk = {name: f"{name[0]}{sent}"} if name in ("threat", "zone") else {"unit": f"u{sent}"}
             key = key_for(name, **chunk)
             client.put(key, json.dumps(body), encoding=ENCODING)
             sent += 1
@@ -303,7 +320,7 @@ def test_client_puts_reach_the_planner_and_decode(sessions: tuple[zenoh.Session,
             )
             decoders[name](payload)
         assert sent >= 7
-        for name, chunk in (("goal", {"unit": "u1"}), ("threat", {"threat": "t9"})):
+        for name, chunk in (("goal", {"unit": "u1"}), ("threat", {"threat": "t9"}), ("zone", {"zone": "z9"})):
             client.delete(key_for(name, **chunk))
             got_key, kind, payload, _ = inbox.get(timeout=TIMEOUT_S)
             assert (got_key, kind, payload) == (key_for(name, **chunk), zenoh.SampleKind.DELETE, b"")

@@ -120,6 +120,8 @@ class SimUnit:
             dist = self.spec.speed_mps * dt_s
             if d.distance_to_goal is not None:
                 dist = min(dist, d.distance_to_goal)  # slow down at the goal rather than overshoot it
+            if d.reach_m is not None:
+                dist = min(dist, d.reach_m)  # never past the planner's step: it stops short of keep-out zones
             vx, vy = d.vector
             norm = math.hypot(vx, vy)
             if norm > 0 and dist > 0:

@@ -148,6 +148,9 @@ def direction(
         reason=adv.reason[:1024],
         deliberating=adv.deliberating or deliberating,
         planner=planner,
+        reach_m=min(max(adv.reach, 0.0), FINITE_LIMIT)
+        if not adv.status.terminal and math.isfinite(adv.reach)
+        else None,
     )
     return d, event
 

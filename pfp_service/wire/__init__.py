@@ -59,6 +59,7 @@ from pfp_service.wire.messages import (
     decode_unit_state,
     decode_world_query,
     decode_world_snapshot,
+    decode_zone,
     encode,
 )
 
@@ -111,6 +112,7 @@ __all__ = [
     "decode_unit_state",
     "decode_world_query",
     "decode_world_snapshot",
+    "decode_zone",
     "encode",
     "keys",
     "zenoh_encoding",

@@ -202,6 +202,7 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                     distance_to_goal=10.2,
                     threat_level=0.031,
                     lookahead=[(1.56, 2.33), (1.62, 2.41)],
+                    reach_m=0.1,
                 ),
             )
         ],

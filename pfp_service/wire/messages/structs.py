@@ -377,6 +377,10 @@ class Direction(_Message, frozen=True, kw_only=True):
         deliberating: a route for this unit is being computed off the planning
             loop; until it is adopted the vector is plain steepest descent.
         planner: the planner that computed it (several may share a mission).
+        reach_m: how far along ``vector`` the planner's step goes: the step, less on the final
+            approach or where the step stops short of a keep-out zone (0: hold here); null when
+            not moving.  A unit should not move further than this before its next direction:
+            past it, it leaves the path the planner judged, and may enter a keep-out zone.
     """
 
     unit: Id
@@ -392,6 +396,7 @@ class Direction(_Message, frozen=True, kw_only=True):
     planner: Id | None = None
     true_bearing_deg: Angle | None = None
     lookahead_geo: Annotated[list[LatLon], Meta(max_length=MAX_LOOKAHEAD)] = []
+    reach_m: NonNegative | None = None
 
 
 class ErrorReply(_Message, frozen=True, kw_only=True):

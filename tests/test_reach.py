@@ -1,0 +1,65 @@
+"""A direction says how far its step goes (``reach_m``), and a vehicle that keeps to it never enters a zone.
+
+The planner cuts a step short of a keep-out zone; the vector alone cannot say so.  A
+simulated vehicle fast enough to cover ten steps between two directions is driven
+against a wall across its way: it must go round, never through.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pfp_clients.sim import SimUnit
+from shapely.geometry import LineString, Point, Polygon
+
+from pfp_service.core import PlannerParams
+from pfp_service.service.world import GoalSet, StateReported, Tick, World, WorldSettings, ZonePut
+from pfp_service.team import UnitSpec
+from pfp_service.wire import Goal, UnitState
+from pfp_service.wire.messages import ZoneUpdate
+
+pytestmark = pytest.mark.unit
+
+RING = [(40.0, -30.0), (45.0, -30.0), (45.0, 30.0), (40.0, 30.0), (40.0, -30.0)]
+
+
+def test_a_vehicle_keeping_to_reach_never_enters_a_zone_even_at_ten_steps_a_tick():
+    params = PlannerParams(intensity="density")
+    w = World(WorldSettings(planner=params))
+    wall = Polygon(RING)
+    w.apply([ZonePut("wall", ZoneUpdate(polygon=[RING]))], 0.0)
+    w.apply([StateReported("u", UnitState(position=(0.0, 1.0)))], 0.0)
+    w.apply([GoalSet("u", Goal(position=(100.0, 1.0)))], 0.0)
+    unit = SimUnit(UnitSpec(id="u", start=(0.0, 1.0), speed_mps=1e6), position=(0.0, 1.0))
+    reaches: list[float] = []
+    t = 0.0
+    for seq in range(1, 3000):
+        t += 1.0
+        out = w.apply([StateReported("u", UnitState(position=unit.position, seq=seq)), Tick(t)], t)
+        mine = [d for d in out.directions if d.unit == "u" and d.seq == seq]
+        if not mine:
+            continue
+        d = mine[-1]
+        unit.on_direction(d, t)
+        if d.status.value in ("arrived", "trapped"):
+            break
+        assert d.reach_m is not None and math.isfinite(d.reach_m)
+        reaches.append(d.reach_m)
+        unit.advance(1.0, t, t)
+        assert not wall.contains(Point(unit.position)), f"entered the zone at {unit.position}"
+    assert unit.direction is not None and unit.direction.status.value == "arrived"
+
+
+def test_the_reach_of_every_direction_near_a_wall_stays_out_of_it():
+    w = World(WorldSettings(planner=PlannerParams(intensity="density", step=5.0)))
+    w.apply([ZonePut("wall", ZoneUpdate(polygon=[RING]))], 0.0)
+    starts = {f"u{i}": (38.0 - 0.5 * (i % 8), -40.0 + 10.0 * (i // 8)) for i in range(72)}
+    w.apply([StateReported(u, UnitState(position=p)) for u, p in starts.items()], 0.0)
+    out = w.apply([GoalSet(u, Goal(position=(100.0, p[1]))) for u, p in starts.items()], 0.0)
+    assert len(out.directions) == len(starts)
+    for d in out.directions:
+        x0, y0 = starts[d.unit]
+        assert d.reach_m is not None and 0.0 <= d.reach_m <= 5.0 + 1e-9
+        end = (x0 + d.vector[0] * d.reach_m, y0 + d.vector[1] * d.reach_m)
+        assert not Polygon(RING).intersects(LineString([(x0, y0), end])), (d.unit, d.reach_m, d.vector)
