@@ -281,6 +281,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
                 "units",
                 "units_stale",
                 "threats",
+                "zones",
                 "msgs_in",
                 "msgs_out",
                 "rejected",

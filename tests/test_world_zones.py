@@ -112,7 +112,7 @@ def test_the_snapshot_lists_the_zones_and_a_joining_planner_takes_them_with_the_
     snap = decode_world_snapshot(encode(w.snapshot(4.0)))
     assert [z.id for z in snap.zones] == ["a", "b"] and snap.zones_total == 2
     assert snap.zones[0].ttl_s is None and snap.zones[1].ttl_s == pytest.approx(6.0)
-    assert not w.snapshot(4.0, threats_from="x").zones  # the first page only
+    assert not w.snapshot(4.0, threats_from="x", zones_limit=0).zones  # left out when asked
     joined = World(WorldSettings(planner_id="p2"))
     joined.apply(inputs_from_snapshot(snap, "p2"), 100.0)
     assert joined.field.zones.ids == ("a", "b")

@@ -62,7 +62,15 @@ class _Peers:
             if pid in self.silent and params:
                 continue
             w = self.worlds[pid]
-            page = w.snapshot(1.0, q.units_limit, q.units_from, q.threats_from, threats_limit=q.threats_limit)
+            page = w.snapshot(
+                1.0,
+                q.units_limit,
+                q.units_from,
+                q.threats_from,
+                threats_limit=q.threats_limit,
+                zones_from=q.zones_from,
+                zones_limit=q.zones_limit,
+            )
             out.append(encode(page))
         return out
 

@@ -213,6 +213,7 @@ class PlannerNode:
                 goals=restored.goals,
                 missions=restored.missions,
                 expired=restored.expired,
+                zones=restored.zones,
                 corrupt=restored.corrupt,
                 set_aside=restored.set_aside,
             )
@@ -671,6 +672,7 @@ class PlannerNode:
             units=c["units"],
             units_stale=c["units_stale"],
             threats=c["threats"],
+            zones=c["zones"],
             msgs_in=self.counters["msgs_in"],
             msgs_out=self.counters["msgs_out"],
             rejected=c["rejected"],

@@ -100,10 +100,12 @@ class World:
         threats_from: str | None = None,
         max_bytes: int | None = None,
         threats_limit: int | None = None,
+        zones_from: str | None = None,
+        zones_limit: int | None = None,
     ) -> WorldSnapshot:
         """One page of what the planner holds, for the world queryable (``worldpages.page``)."""
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        return worldpages.page(self._rec, now, s.mission, s.planner_id, *page)
+        return worldpages.page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
 
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""

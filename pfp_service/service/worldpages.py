@@ -1,20 +1,19 @@
 """The world queryable in pages: answering one page, and a joining planner fetching every page.
 
-A ``WorldSnapshot`` lists at most ``MAX_SNAPSHOT_ITEMS`` units and threats and
-stops short of ``SNAPSHOT_PAGE_BYTES`` of JSON, so every reply decodes; its
-``next_unit`` and ``next_threat`` say where the next page starts, and the
-query's parameters (``WorldQuery``: ``?units_from=ID;threats_from=ID``) ask
-for it.  Ids are cursors, not offsets, so a unit added or forgotten between
-two pages shifts nothing: each id present throughout is listed exactly once.
-
-Keep-out zones are few (``max_zones``) and listed whole on the first page
-(no cursor given), before the threats, as far as the page's bytes allow;
-``zones_total`` says how many there are, so a joining planner knows whether
-it got them all.
+A ``WorldSnapshot`` lists at most ``MAX_SNAPSHOT_ITEMS`` zones, threats and
+units each (in that order: a zone matters most to a joining planner) and stops
+short of ``SNAPSHOT_PAGE_BYTES`` of JSON, so every reply decodes; its
+``next_zone``, ``next_threat`` and ``next_unit`` say where the next page
+starts, and the query's parameters (``WorldQuery``:
+``?zones_from=ID;threats_from=ID;units_from=ID``) ask for it.  Ids are
+cursors, not offsets, so an item added or removed between two pages shifts
+nothing: each id present throughout is listed exactly once.  A zone may be
+large (up to 4,096 vertices, about 100 KB of JSON), so a world of many zones
+takes several pages.
 
 A planner joining a mission (``fetch_world``) asks every planner once, then
 pages through the one holding the most, falling back to another from the same
-cursor if it stops answering: every planner takes every goal and threat, so
+cursor if it stops answering: every planner takes every goal, threat and zone, so
 one peer's pages are the whole world.  The fetch is bounded by a page count
 and a deadline, and says whether it got everything.
 """
@@ -78,22 +77,25 @@ def page(
     threats_from: str | None = None,
     max_bytes: int | None = None,
     threats_limit: int | None = None,
+    zones_from: str | None = None,
+    zones_limit: int | None = None,
 ) -> WorldSnapshot:
-    """One page of what a planner holds, for the world queryable: threats, then units, sorted by id.
+    """One page of what a planner holds, for the world queryable: zones, threats, then units, sorted by id.
 
     Args:
         records: the world's records (read only).
         now: the clock, for TTLs left and time since last seen.
         mission, planner: name the page.
-        limit: at most this many units, and this many threats unless
-            ``threats_limit`` says otherwise.
-        units_from, threats_from: the first ids listed (a former page's
-            ``next_unit`` and ``next_threat``); ``None``: from the first.
+        limit: at most this many units, and this many threats and zones
+            unless ``threats_limit`` and ``zones_limit`` say otherwise.
+        units_from, threats_from, zones_from: the first ids listed (a former
+            page's ``next_unit``, ``next_threat`` and ``next_zone``); ``None``:
+            from the first.
         max_bytes: the page's items stop short of this much JSON
             (default ``SNAPSHOT_PAGE_BYTES``, so a reply always decodes).
 
     Returns:
-        The page; its ``next_unit`` and ``next_threat`` say where the next
+        The page; its ``next_unit``, ``next_threat`` and ``next_zone`` say where the next
         one starts (``None``: that list is complete, or was not asked for
         with a limit of 0).  A page with room for nothing still lists one
         item, so paging always ends.
@@ -111,14 +113,17 @@ def page(
     units: list[UnitSummary] = []
     threats: list[ThreatSummary] = []
     zones: list[ZoneSummary] = []
-    if units_from is None and threats_from is None:  # the first page: every zone that fits
-        for zid in sorted(records.zones)[:MAX_SNAPSHOT_ITEMS]:
-            z = records.zones[zid]
-            zttl = None if z.expires_at is None else max(z.expires_at - now, 0.0)
-            zs = ZoneSummary(id=zid, zone=z.update, ttl_s=zttl)
-            if not fits(zs):
-                break
-            zones.append(zs)
+    zids = sorted(records.zones)
+    k = bisect.bisect_left(zids, zones_from) if zones_from is not None else 0
+    zlimit = limit if zones_limit is None else zones_limit
+    while k < len(zids) and len(zones) < zlimit:
+        z = records.zones[zids[k]]
+        zttl = None if z.expires_at is None else max(z.expires_at - now, 0.0)
+        zs = ZoneSummary(id=zids[k], zone=z.update, ttl_s=zttl)
+        if not fits(zs):
+            break
+        zones.append(zs)
+        k += 1
     tids = sorted(records.threats)
     i = bisect.bisect_left(tids, threats_from) if threats_from is not None else 0
     tlimit = limit if threats_limit is None else threats_limit
@@ -162,6 +167,7 @@ def page(
         threats_total=len(records.threats),
         next_unit=uids[j] if j < len(uids) and limit else None,
         next_threat=tids[i] if i < len(tids) and tlimit else None,
+        next_zone=zids[k] if k < len(zids) and zlimit else None,
     )
 
 
@@ -181,7 +187,15 @@ def answer_world(query: Any, world: World, now: float, mission: str, planner: st
     except InputError as err:
         query.reply_err(encode(ErrorReply.of(err)), encoding=zenoh_encoding())
         return
-    page = world.snapshot(now, q.units_limit, q.units_from, q.threats_from, threats_limit=q.threats_limit)
+    page = world.snapshot(
+        now,
+        q.units_limit,
+        q.units_from,
+        q.threats_from,
+        threats_limit=q.threats_limit,
+        zones_from=q.zones_from,
+        zones_limit=q.zones_limit,
+    )
     query.reply(keys.world(mission, planner), encode(page), encoding=zenoh_encoding())
 
 
@@ -221,15 +235,33 @@ def _decode(payloads: list[bytes], me: str) -> list[WorldSnapshot]:
     return out
 
 
-def _next_page(
-    ask: Ask, mission: str, planner: str, units_next: str | None, threats_next: str | None, timeout_s: float
-) -> WorldSnapshot | None:
+@dataclass(frozen=True)
+class _Cursors:
+    """Where each list of a planner's world goes on (``None``: that list is complete)."""
+
+    units: str | None = None
+    threats: str | None = None
+    zones: str | None = None
+
+    @classmethod
+    def after(cls, page: WorldSnapshot) -> _Cursors:
+        return cls(page.next_unit, page.next_threat, page.next_zone)
+
+    @property
+    def done(self) -> bool:
+        return self.units is None and self.threats is None and self.zones is None
+
+
+def _next_page(ask: Ask, mission: str, planner: str, at: _Cursors, timeout_s: float) -> WorldSnapshot | None:
     """The page of ``planner``'s world from these cursors (a list whose cursor is ``None`` left out)."""
+    full = WorldQuery()
     q = WorldQuery(
-        units_from=units_next,
-        threats_from=threats_next,
-        units_limit=WorldQuery().units_limit if units_next is not None else 0,
-        threats_limit=WorldQuery().threats_limit if threats_next is not None else 0,
+        units_from=at.units,
+        threats_from=at.threats,
+        zones_from=at.zones,
+        units_limit=full.units_limit if at.units is not None else 0,
+        threats_limit=full.threats_limit if at.threats is not None else 0,
+        zones_limit=full.zones_limit if at.zones is not None else 0,
     )
     sel = f"{keys.world(mission, planner)}?{q.selector_parameters()}"
     pages = [p for p in _decode(ask(sel, timeout_s), "") if p.planner == planner]
@@ -253,23 +285,30 @@ def whole_world(
         planner's silence cuts it short.
     """
     end = clock() + deadline_s
-    units, threats = list(first.units), list(first.threats)
-    units_next, threats_next = first.next_unit, first.next_threat
+    units, threats, zones = list(first.units), list(first.threats), list(first.zones)
+    at = _Cursors.after(first)
     pages = 1
-    while units_next is not None or threats_next is not None:
+    while not at.done:
         if pages >= max_pages or clock() >= end:
             break
-        page = _next_page(ask, mission, first.planner, units_next, threats_next, page_timeout_s)
+        page = _next_page(ask, mission, first.planner, at, page_timeout_s)
         if page is None:
             break
         pages += 1
         units += page.units
         threats += page.threats
-        units_next, threats_next = page.next_unit, page.next_threat
+        zones += page.zones
+        at = _Cursors.after(page)
     merged = msgspec.structs.replace(
-        first, units=units, threats=threats, next_unit=units_next, next_threat=threats_next
+        first,
+        units=units,
+        threats=threats,
+        zones=zones,
+        next_unit=at.units,
+        next_threat=at.threats,
+        next_zone=at.zones,
     )
-    return merged, units_next is None and threats_next is None
+    return merged, at.done
 
 
 def fetch_world(
@@ -312,20 +351,18 @@ def fetch_world(
     if not first:
         return got
     # the fullest peer first; the others, in turn, if it stops answering
-    peers = sorted(first, key=lambda p: (-(p.units_total + p.threats_total), p.planner))
-    if len(peers[0].zones) < peers[0].zones_total:
-        got.complete = False  # more zones than one page holds: those listed are in force, the rest are not
-    units_next, threats_next = peers[0].next_unit, peers[0].next_threat
+    peers = sorted(first, key=lambda p: (-(p.units_total + p.threats_total + p.zones_total), p.planner))
+    at = _Cursors.after(peers[0])
     for peer in peers:
-        while units_next is not None or threats_next is not None:
+        while not at.done:
             if got.pages >= max_pages or clock() >= end:
                 got.complete = False
                 return got
-            more = _next_page(ask, mission, peer.planner, units_next, threats_next, page_timeout_s)
+            more = _next_page(ask, mission, peer.planner, at, page_timeout_s)
             if more is None:
                 break  # this peer is gone or will not answer: the next one, from the same cursor
             take(more)
-            units_next, threats_next = more.next_unit, more.next_threat  # a list left out has none
+            at = _Cursors.after(more)  # a list left out has none
         else:
             return got
     got.complete = False

@@ -244,6 +244,7 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                     units=12,
                     units_stale=1,
                     threats=5,
+                    zones=2,
                     msgs_in=43200,
                     msgs_out=43190,
                     rejected=3,
@@ -302,8 +303,18 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                             ttl_s=25.0,
                         )
                     ],
+                    zones=[
+                        m.ZoneSummary(
+                            id="minefield",
+                            zone=m.ZoneUpdate(
+                                polygon=[[(20.0, 0.0), (30.0, 0.0), (30.0, 8.0), (20.0, 8.0), (20.0, 0.0)]]
+                            ),
+                        )
+                    ],
                     units_total=1,
                     threats_total=1,
+                    zones_total=2,
+                    next_zone="pond",
                 ),
             )
         ],
@@ -334,7 +345,7 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             ("event.arrived", m.ArrivedEvent(unit="ugv-1", position=(9.97, 10.02), distance_to_goal=0.036)),
             ("event.stale", m.StaleEvent(unit="ugv-3", position=(120.0, 40.5), reason="silent for 10 s")),
             ("event.forgotten", m.ForgottenEvent(unit="ugv-3", stale_s=600.0)),
-            ("event.restored", m.RestoredEvent(threats=20, goals=50, missions=48, expired=1)),
+            ("event.restored", m.RestoredEvent(threats=20, goals=50, missions=48, expired=1, zones=3)),
             (
                 "event.conflict",
                 m.ConflictEvent(other="planner-2", reason="a second planner on mission default"),

@@ -92,7 +92,7 @@ MAX_PAYLOAD_BYTES = 256 * 1024
 MAX_WHATIF_THREATS = 256
 MAX_LOOKAHEAD = 1000
 MAX_EVENT_ITEMS = 64  # ids listed in one event; the rest are counted
-MAX_SNAPSHOT_ITEMS = 1000  # units or threats listed in one world reply (one page)
+MAX_SNAPSHOT_ITEMS = 1000  # units, threats or zones listed in one world reply (one page)
 # A world reply's units and threats stop short of this many bytes of JSON, so a page always
 # decodes (MAX_PAYLOAD_BYTES) with room for the envelope: 1,000 units with missions are ~680 KB.
 SNAPSHOT_PAGE_BYTES = 192 * 1024
@@ -420,6 +420,7 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     units: Count = 0
     units_stale: Count = 0
     threats: Count = 0
+    zones: Count = 0  # keep-out zones in force
     msgs_in: Count = 0
     msgs_out: Count = 0
     rejected: Count = 0
@@ -521,7 +522,8 @@ class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
     threats: Count = 0
     goals: Count = 0
     missions: Count = 0
-    expired: Count = 0  # threats whose TTL ran out while the planner was down
+    expired: Count = 0  # threats and zones whose TTL ran out while the planner was down
+    zones: Count = 0  # keep-out zones restored
     corrupt: Count = 0  # rows skipped as unreadable, plus the damaged pages of a state file set aside
     set_aside: Text = ""  # where a damaged state file was moved (kept), if one was
 
@@ -609,16 +611,17 @@ class ThreatSummary(_Message, frozen=True, kw_only=True):
 
 
 class WorldSnapshot(_Message, frozen=True, kw_only=True):
-    """Reply of ``mumt/{m}/planner/{p}/world``: one page of the units and threats a planner holds.
+    """Reply of ``mumt/{m}/planner/{p}/world``: one page of the zones, threats and units a planner holds.
 
     Lists are sorted by id, each capped at ``MAX_SNAPSHOT_ITEMS`` (or the query's
-    ``limit``) and both together at ``SNAPSHOT_PAGE_BYTES`` of JSON; ``units_total``
-    and ``threats_total`` say how many there are in all.  ``next_unit`` and
-    ``next_threat`` are where the next page starts: ask again with
-    ``?units_from=<next_unit>;threats_from=<next_threat>`` (``WorldQuery``; a
-    list already complete is left out with ``units_limit=0`` or
-    ``threats_limit=0``); null means that list is complete in this page, or was
-    left out.
+    limits) and all together at ``SNAPSHOT_PAGE_BYTES`` of JSON, zones first;
+    ``zones_total``, ``threats_total`` and ``units_total`` say how many there are
+    in all.  ``next_zone``, ``next_threat`` and ``next_unit`` are where the next
+    page starts: ask again with
+    ``?zones_from=<next_zone>;threats_from=<next_threat>;units_from=<next_unit>``
+    (``WorldQuery``; a list already complete is left out with ``zones_limit=0``,
+    ``threats_limit=0`` or ``units_limit=0``); null means that list is complete
+    in this page, or was left out.
     """
 
     planner: Id
@@ -631,15 +634,17 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     next_threat: Id | None = None
     zones: Annotated[list[ZoneSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
     zones_total: Count = 0
+    next_zone: Id | None = None
 
 
 class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The parameters of a world query: which page (``…/world?units_from=ID;threats_from=ID``).
+    """The parameters of a world query: which page (``…/world?units_from=ID;threats_from=ID;zones_from=ID``).
 
     Not a payload: Zenoh selector parameters, ``;``-separated, each at most
-    once.  ``units_from`` and ``threats_from`` are the first ids the page lists
-    (a reply's ``next_unit`` and ``next_threat``); without one a list starts at
-    its first id.  ``units_limit`` and ``threats_limit`` cap each list (0 to
+    once.  ``units_from``, ``threats_from`` and ``zones_from`` are the first ids
+    the page lists (a reply's ``next_unit``, ``next_threat`` and ``next_zone``);
+    without one a list starts at its first id.  ``units_limit``,
+    ``threats_limit`` and ``zones_limit`` cap each list (0 to
     ``MAX_SNAPSHOT_ITEMS``; 0 leaves it out, for a list already complete).
     An unknown, repeated or malformed parameter is refused (``decode_world_query``).
     """
@@ -648,6 +653,8 @@ class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     threats_from: Id | None = None
     units_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
     threats_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
+    zones_from: Id | None = None
+    zones_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
 
     def selector_parameters(self) -> str:
         """These parameters as a selector's ``?…`` part, without the ``?`` (empty: all defaults)."""
