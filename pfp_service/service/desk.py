@@ -32,7 +32,7 @@ while a heavy one runs, and they run at a lower CPU priority than the loop
 (``WORKER_NICE``), so the live stream keeps its latency under a storm.
 
 Why one of them starts with the planner and the rest on first use: an
-idle planner held 5 processes and ~480 MB (PSS), two of them preview
+idle planner held 5 processes and ~520 MB (PSS), two of them preview
 workers and one their warm spare.  One warm worker still answers the first
 preview within its budget (warmed on the world's field, as ever); the
 second and the spare start when the first preview arrives, and are warm a
