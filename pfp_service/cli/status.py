@@ -1,15 +1,17 @@
-"""``pfp status``: list what each planner of the mission holds: its units and the threats in force.
+"""``pfp status``: list what each planner of the mission holds: its units, threats and keep-out zones.
 
 Asks the world queryable (``mumt/{m}/planner/*/world``) and the status of
 every planner.  Without ``--json``, a table of the live planners first (units
-owned, latency, deliberations, overload: several share a mission under
-``--cluster``), then two tables per planner: units (id, kind, status, last
-seen, distance to goal, position) and threats (id, position, TTL left), ids in
-natural order (m2 before m10).  Positions are lat/lon with the metres from the
-origin when the planner has one (``--coords`` chooses: latlon, metres, mgrs).  With
-``--json``, one JSON array of every planner's full ``WorldSnapshot``: every page
-of it, merged (``service.worldpages.whole_world``); the tables show a planner's
-first page (up to 1,000 units and threats) and count the rest.
+owned, threats and zones in force, latency, deliberations, overload: several
+share a mission under ``--cluster``), then up to three tables per planner:
+units (id, kind, status, last seen, distance to goal, position), threats (id,
+position, TTL left) and keep-out zones (id, kind, shape, centroid, TTL left),
+ids in natural order (m2 before m10).  Positions are lat/lon with the metres
+from the origin when the planner has one (``--coords`` chooses: latlon,
+metres, mgrs).  With ``--json``, one JSON array of every planner's full
+``WorldSnapshot``: every page of it, merged (``service.worldpages.whole_world``);
+the tables show a planner's first page (up to 1,000 units and threats, and the
+zones that fit) and count the rest.
 Exit codes: 0 a planner answered; 1 none did; 2 a bad flag.
 """
 
@@ -29,7 +31,9 @@ EXAMPLES = {"status": "pfp status --mission exercise1 --coords mgrs"}
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("status", help="list the units and threats a planner holds", description=__doc__)
+    p = sub.add_parser(
+        "status", help="list the units, threats and keep-out zones a planner holds", description=__doc__
+    )
     add_session_args(p)
     p.add_argument(
         "--timeout", type=positive_float, default=2.0, metavar="S", help="seconds to wait for answers"
@@ -51,7 +55,7 @@ def _num(value: float | None, unit: str = "", digits: int = 1) -> str:
 def planner_lines(statuses: Sequence[Any]) -> list[str]:
     """The live planners as a table: who guides how many units, how fast, and how loaded."""
     rows: list[tuple[str, ...]] = [
-        ("planner", "owns", "units", "stale", "threats", "p50", "p99", "deliberating", "overload")
+        ("planner", "owns", "units", "stale", "threats", "zones", "p50", "p99", "deliberating", "overload")
     ]
     ids = [st.planner for st in statuses]
     for st in statuses:
@@ -63,6 +67,7 @@ def planner_lines(statuses: Sequence[Any]) -> list[str]:
                 str(st.units),
                 str(st.units_stale),
                 str(st.threats),
+                str(st.zones),
                 _num(st.latency_p50_ms, " ms", 2),
                 _num(st.latency_p99_ms, " ms", 2),
                 str(st.deliberating),
@@ -72,8 +77,35 @@ def planner_lines(statuses: Sequence[Any]) -> list[str]:
     return _table(rows)
 
 
+def zone_shape(update: Any) -> str:
+    """A zone's shape in words: ``polygon, 5 vertices, 1 hole`` or ``circle, radius 25.0 m``."""
+    if update.circle is not None:
+        return f"circle, radius {update.circle.radius_m:.1f} m"
+    shell, *holes = update.polygon
+    text = f"polygon, {len(shell) - 1} vertices"
+    if holes:
+        text += f", {len(holes)} hole" + ("s" if len(holes) > 1 else "")
+    return text
+
+
+def zone_centroid(update: Any) -> tuple[float, float]:
+    """Where a zone lies: a circle's centre, a polygon's centroid (its holes left out), in metres."""
+    if update.circle is not None:
+        cx, cy = update.circle.centre
+        return float(cx), float(cy)
+    import shapely
+
+    shell, *holes = update.polygon
+    c = shapely.Polygon(shell, holes).centroid
+    return float(c.x), float(c.y)
+
+
+def _ttl(ttl_s: float | None) -> str:
+    return "no expiry" if ttl_s is None else f"{ttl_s:.1f} s"
+
+
 def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
-    """One planner's snapshot as text: a heading, the units table and the threats table.
+    """One planner's snapshot as text: a heading, then the units, threats and keep-out zones tables.
 
     Args:
         snap: the planner's ``WorldSnapshot``.
@@ -81,7 +113,8 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
     """
     coords = coords or Coords()
     lines = [
-        f"planner {snap.planner}, mission {snap.mission}: {snap.units_total} units, {snap.threats_total} threats"
+        f"planner {snap.planner}, mission {snap.mission}: {snap.units_total} units, "
+        f"{snap.threats_total} threats, {snap.zones_total} zones"
     ]
     if snap.units:
         rows: list[tuple[str, ...]] = [("unit", "kind", "status", "last seen", "to goal", "position")]
@@ -109,13 +142,20 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
         rows = [("threat", "position", "facing", "TTL left")]
         threats = sorted(snap.threats, key=lambda t: natural_key(t.id))
         for t, pos in zip(threats, coords.points([t.threat.position for t in threats])):
-            ttl = "no expiry" if t.ttl_s is None else f"{t.ttl_s:.1f} s"
-            rows.append((t.id, pos, f"{t.threat.facing_deg:g}°", ttl))
+            rows.append((t.id, pos, f"{t.threat.facing_deg:g}°", _ttl(t.ttl_s)))
         lines += ["", *_table(rows)]
         if snap.threats_total > len(snap.threats):
             lines.append(
                 f"... and {snap.threats_total - len(snap.threats)} more threats (--json lists them all)"
             )
+    if snap.zones:
+        rows = [("zone", "kind", "shape", "centroid", "TTL left")]
+        zones = sorted(snap.zones, key=lambda z: natural_key(z.id))
+        for z, pos in zip(zones, coords.points([zone_centroid(z.zone) for z in zones])):
+            rows.append((z.id, z.zone.kind, zone_shape(z.zone), pos, _ttl(z.ttl_s)))
+        lines += ["", *_table(rows)]
+        if snap.zones_total > len(snap.zones):
+            lines.append(f"... and {snap.zones_total - len(snap.zones)} more zones (--json lists them all)")
     return lines
 
 
@@ -141,8 +181,9 @@ def _whole(session: Any, args: argparse.Namespace, first: Any) -> Any:
     merged, complete = whole_world(ask, args.mission, first, page_timeout_s=args.timeout)
     if not complete:
         print(
-            f"pfp status: planner {first.planner}: stopped after {len(merged.units)} units and "
-            f"{len(merged.threats)} threats (of {merged.units_total} and {merged.threats_total})",
+            f"pfp status: planner {first.planner}: stopped after {len(merged.units)} units, "
+            f"{len(merged.threats)} threats and {len(merged.zones)} zones "
+            f"(of {merged.units_total}, {merged.threats_total} and {merged.zones_total})",
             file=sys.stderr,
         )
     return merged
