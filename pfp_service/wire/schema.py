@@ -118,9 +118,10 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "reply",
         "planner",
         "any",
-        "units and threats the planner holds, a page at a time: `next_unit`/`next_threat` say where "
-        "the next page starts, asked with `?units_from=ID;threats_from=ID` (and `units_limit`, "
-        "`threats_limit`: 0 to 1000, 0 leaves a list out); a bad parameter gets an error_reply; "
+        "keep-out zones, threats and units the planner holds, a page at a time: "
+        "`next_zone`/`next_threat`/`next_unit` say where the next page starts, asked with "
+        "`?zones_from=ID;threats_from=ID;units_from=ID` (and `zones_limit`, `threats_limit`, "
+        "`units_limit`: 0 to 1000, 0 leaves a list out); a bad parameter gets an error_reply; "
         "`pfp status` asks every planner",
     ),
     MessageSpec(
