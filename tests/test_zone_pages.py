@@ -41,7 +41,7 @@ def _settings(pid: str) -> WorldSettings:
 
 
 def _detailed(cx: float, cy: float, vertices: int = 3000, r: float = 40.0) -> ZoneUpdate:
-    """A closed many-sided polygon round (cx, cy): one big zone on the wire (~70 KB at 3,000 vertices)."""
+    """A closed many-sided polygon round (cx, cy): one big zone on the wire (~100 KB at 3,000 vertices)."""
     ring = [
         (
             round(cx + r * math.cos(2 * math.pi * k / vertices), 6),
@@ -144,7 +144,7 @@ def test_zones_past_one_page_are_paged_by_cursor_each_listed_once():
             threats_limit=0 if page.next_threat is None else 1000,
             units_limit=0 if page.next_unit is None else 1000,
         )
-    assert pages >= 4  # 12 polygons of ~70 KB cannot share one 192 KB page
+    assert pages >= 4  # 12 polygons of ~100 KB take two to a 192 KB page
     assert zones == sorted(set(zones)) and len(zones) == 16
     assert threats == sorted(set(threats)) and len(threats) == 30
     assert units == sorted(set(units)) and len(units) == 40

@@ -1,7 +1,7 @@
 """More keep-out zones than one world reply holds reach a joining planner, and the counts say so.
 
 A router in the test process, planners as subprocesses (tier multi): nine
-detailed zones (~70 KB of JSON each) put on planner A take several pages of
+detailed zones (~100 KB of JSON each) put on planner A take several pages of
 its world reply; planner B, started after, pages through them all
 (``zones_from``/``next_zone``) and its status counts nine.  A killed and
 restarted A says in its ``restored`` event how many zones it restored.
