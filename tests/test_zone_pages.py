@@ -1,6 +1,6 @@
 """Keep-out zones page like threats: a world with more zones than one reply holds reaches a joiner whole.
 
-A zone may carry up to 4,096 vertices (~100 KB of JSON), so a handful of
+A zone may carry up to 4,096 vertices (90 to 165 KB of JSON), so a handful of
 detailed zones already overflow one 192 KB page; before zone paging a joining
 planner took only the zones of the first page.
 """

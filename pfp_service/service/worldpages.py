@@ -8,7 +8,7 @@ starts, and the query's parameters (``WorldQuery``:
 ``?zones_from=ID;threats_from=ID;units_from=ID``) ask for it.  Ids are
 cursors, not offsets, so an item added or removed between two pages shifts
 nothing: each id present throughout is listed exactly once.  A zone may be
-large (up to 4,096 vertices, about 100 KB of JSON), so a world of many zones
+large (up to 4,096 vertices: 90 to 165 KB of JSON), so a world of many zones
 takes several pages.
 
 A planner joining a mission (``fetch_world``) asks every planner once, then
