@@ -57,6 +57,7 @@ EXPECTED = [
     "decode_unit_state",
     "decode_world_query",
     "decode_world_snapshot",
+    "decode_zone",
     "encode",
     "keys",
     "zenoh_encoding",

@@ -268,6 +268,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "planner": ("id", OPT),
         "true_bearing_deg": ("angle", OPT),
         "lookahead_geo": ("latlons", DEF),
+        "reach_m": ("nonneg", OPT),
     },
     "error_reply": {"error": ("text", REQ), "field": ("text", DEF)},
     "planner_status": {
