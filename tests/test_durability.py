@@ -296,12 +296,20 @@ def _alive(pid: int) -> bool:
 
 def test_a_planner_killed_takes_its_worker_processes_with_it():
     """Preview and deliberation workers watch their planner: SIGKILL leaves no orphan running."""
-    from tests.zenoh_util import planner_process
+    from pfp_service.wire import keys
+    from tests.zenoh_util import client, planner_process
 
-    with planner_process("--state-dir", "none", mission="orphans") as (_endpoint, proc):
+    with planner_process("--state-dir", "none", mission="orphans") as (endpoint, proc):
+        # one preview worker starts with the planner; a first preview starts the second and the spare
+        with client(endpoint) as s:
+            list(
+                s.get(
+                    keys.preview("orphans", "u1"), payload=b'{"start": [0, 0], "goal": [50, 0]}', timeout=20
+                )
+            )
         deadline = time.monotonic() + 60
         workers: set[int] = set()
-        while time.monotonic() < deadline and len(workers) < 3:  # 2 preview workers, 1 deliberation
+        while time.monotonic() < deadline and len(workers) < 3:  # 2 preview workers and their spare
             workers = {k for k in _children(proc.pid) if b"pfp_service.service.workerproc" in _cmdline(k)}
             time.sleep(0.2)
         assert len(workers) >= 3, workers
