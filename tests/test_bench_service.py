@@ -52,6 +52,9 @@ def test_bench_service_json_has_every_figure():
         fm = doc[kind]["find_max"]
         assert fm["probes"] and {"rate_hz", "p99_ms", "unanswered_fraction", "ok"} <= fm["probes"][0].keys()
         assert "max_per_s" in fm
+    assert doc["planner"]["find_max"]["deliberations"].keys() >= {"landed", "left", "waited_s"}
+    assert doc["planner"]["steady"]["processes"] >= 2  # the planner and its worker processes, all counted
+    assert doc["echo"]["steady"]["processes"] == 1
     assert all({"target", "measured", "limit", "met"} <= t.keys() for t in doc["targets"])
 
 
@@ -72,4 +75,6 @@ def test_bench_service_planners_compares_one_with_k_and_counts_doubles():
         assert len(st["cpu_percent_by_process"]) == run["planners"] + 1  # the router and each planner
         assert run["exit"]["exit_code"] == 0 and run["exit"]["error_lines"] == 0, run["exit"]
     assert sum(so["runs"][1]["steady"]["units_per_planner"].values()) == 12
+    got = so["runs"][1]["steady"]["states_by_planner"]  # each planner's own count, from its status
+    assert set(got) == {"planner", "planner-1"} and all(n > 0 for n in got.values()), got
     assert set(so["vs_one"]) >= {"answered_per_s", "p50_ms", "p99_ms"}
