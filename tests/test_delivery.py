@@ -211,9 +211,13 @@ def test_inject_and_fleet_started_before_pfp_serve_are_in_force_within_2s_of_its
             assert t_force - t_status <= 2.0
             _wait_for("inject ends once its writes are taken", lambda: inject.poll() is not None, 30, logs)
         out = _text(ilog)
-        assert "waiting for a planner of mission" in out and "threat t1 taken by planner" in out, out
+        # a writer says it waits once a write is 0.5 s unanswered, and then says when a planner took it;
+        # a planner that starts within that half second takes the writes before there is anything to say
+        if "waiting for a planner of mission" in out:
+            assert "threat t1 taken by planner" in out, out
         assert inject.returncode == 0, out
-        assert "waiting for a planner of mission" in _text(flog) and "goal f1 taken by planner" in _text(flog)
+        if "waiting for a planner of mission" in _text(flog):
+            assert "goal f1 taken by planner" in _text(flog), _text(flog)
 
 
 @pytest.mark.proc

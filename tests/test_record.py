@@ -160,7 +160,7 @@ def test_record_replay_report_a_mission(tmp_path):
     assert compared >= counts["unit_state"] - 2 and same + differ == compared
     if differ:
         assert r.returncode == 1 and "DIFFERENT directions" in text
-        assert re.search(r"by at most ([\d.e+-]+) deg; 0 in status; 0 unanswered", text), text[-3000:]
+        assert re.search(r"by at most ([\d.e+-]+) deg; \d+ in status; 0 unanswered", text), text[-3000:]
         assert all(": " in ln for ln in text.splitlines() if ln.startswith("  t="))
     else:
         assert r.returncode == 0 and "replay: the same directions" in text
