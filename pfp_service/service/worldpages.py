@@ -23,15 +23,15 @@ from __future__ import annotations
 import bisect
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
 
 from pfp_service.errors import InputError
 from pfp_service.service.events import Input, inputs_from_snapshot, mission_of
-from pfp_service.service.world_records import Records
+from pfp_service.service.world_records import Records, UnitRecord
 from pfp_service.wire import (
     ErrorReply,
     ThreatSummary,
@@ -62,6 +62,9 @@ __all__ = [
 JOIN_MAX_PAGES = 1024  # 100,000 units (max_units) with missions are about 350 pages
 JOIN_DEADLINE_S = 30.0
 JOIN_PAGE_TIMEOUT_S = 2.0
+
+R = TypeVar("R")  # a record of the world's (unit, threat, zone)
+S = TypeVar("S", bound=msgspec.Struct)  # its summary on the page
 
 # ask(selector, timeout_s) -> the payloads of the replies that came (``ok`` ones only)
 Ask = Callable[[str, float], list[bytes]]
@@ -113,34 +116,31 @@ def page(
     units: list[UnitSummary] = []
     threats: list[ThreatSummary] = []
     zones: list[ZoneSummary] = []
-    zids = sorted(records.zones)
-    k = bisect.bisect_left(zids, zones_from) if zones_from is not None else 0
-    zlimit = limit if zones_limit is None else zones_limit
-    while k < len(zids) and len(zones) < zlimit:
-        z = records.zones[zids[k]]
-        zttl = None if z.expires_at is None else max(z.expires_at - now, 0.0)
-        zs = ZoneSummary(id=zids[k], zone=z.update, ttl_s=zttl)
-        if not fits(zs):
-            break
-        zones.append(zs)
-        k += 1
-    tids = sorted(records.threats)
-    i = bisect.bisect_left(tids, threats_from) if threats_from is not None else 0
-    tlimit = limit if threats_limit is None else threats_limit
-    while i < len(tids) and len(threats) < tlimit:
-        t = records.threats[tids[i]]
-        ttl = None if t.expires_at is None else max(t.expires_at - now, 0.0)
-        summary = ThreatSummary(id=tids[i], threat=t.update, ttl_s=ttl)
-        if not fits(summary):
-            break
-        threats.append(summary)
-        i += 1
-    uids = sorted(records.units)
-    j = bisect.bisect_left(uids, units_from) if units_from is not None else 0
-    while j < len(uids) and len(units) < limit:
-        r = records.units[uids[j]]
-        unit = UnitSummary(
-            id=uids[j],
+
+    def listing(
+        records_of: Mapping[str, R],
+        start: str | None,
+        most: int,
+        summary: Callable[[str, R], S],
+        out: list[S],
+    ) -> str | None:
+        """Fill ``out`` from ``start`` on, in id order, while ``most`` and the page's room allow; the next id."""
+        ids = sorted(records_of)
+        i = bisect.bisect_left(ids, start) if start is not None else 0
+        while i < len(ids) and len(out) < most:
+            item = summary(ids[i], records_of[ids[i]])
+            if not fits(item):
+                break
+            out.append(item)
+            i += 1
+        return ids[i] if i < len(ids) and most else None
+
+    def ttl(expires_at: float | None) -> float | None:
+        return None if expires_at is None else max(expires_at - now, 0.0)
+
+    def unit_summary(uid: str, r: UnitRecord) -> UnitSummary:
+        return UnitSummary(
+            id=uid,
             kind=UnitKind(r.kind) if r.kind is not None else None,
             status=r.last_status,
             position=r.position,
@@ -152,10 +152,22 @@ def page(
             reason=r.last_reason[:1024],
             mission=mission_of(r.shared, planner if r.owned else None),
         )
-        if not fits(unit):
-            break
-        units.append(unit)
-        j += 1
+
+    next_zone = listing(
+        records.zones,
+        zones_from,
+        limit if zones_limit is None else zones_limit,
+        lambda zid, z: ZoneSummary(id=zid, zone=z.update, ttl_s=ttl(z.expires_at)),
+        zones,
+    )
+    next_threat = listing(
+        records.threats,
+        threats_from,
+        limit if threats_limit is None else threats_limit,
+        lambda tid, t: ThreatSummary(id=tid, threat=t.update, ttl_s=ttl(t.expires_at)),
+        threats,
+    )
+    next_unit = listing(records.units, units_from, limit, unit_summary, units)
     return WorldSnapshot(
         planner=planner,
         mission=mission,
@@ -165,9 +177,9 @@ def page(
         zones_total=len(records.zones),
         units_total=len(records.units),
         threats_total=len(records.threats),
-        next_unit=uids[j] if j < len(uids) and limit else None,
-        next_threat=tids[i] if i < len(tids) and tlimit else None,
-        next_zone=zids[k] if k < len(zids) and zlimit else None,
+        next_unit=next_unit,
+        next_threat=next_threat,
+        next_zone=next_zone,
     )
 
 
