@@ -40,9 +40,9 @@ import os
 import re
 import sqlite3
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import msgspec
 
@@ -73,6 +73,8 @@ from pfp_service.service.statefile import (
 )
 from pfp_service.wire import Goal, ThreatUpdate, decode, encode, keys
 from pfp_service.wire.messages import ZoneUpdate
+
+U = TypeVar("U", ThreatUpdate, ZoneUpdate)  # a write that expires
 
 __all__ = ["Restored", "Store"]
 
@@ -400,36 +402,30 @@ class Store:
         inputs: list[Input] = []
         bad: list[tuple[str, int, str, Any, str]] = []  # table, rowid, key, what was stored, why
         expired = 0
-        for rowid, zid, body, expires_at in db.execute("SELECT rowid, * FROM zones ORDER BY id"):
-            try:
-                zone_id = keys.check_chunk(zid)
-                zupdate = decode(ZoneUpdate, body)
-                if expires_at is not None:
-                    zleft = float(expires_at) - wall_now
-                    if zleft <= 0:
-                        expired += 1
-                        continue
-                    zupdate = msgspec.structs.replace(zupdate, ttl_s=zleft)
-            except _BAD_ROW as exc:
-                bad.append(("zones", rowid, str(zid), body, _why(exc)))
-                continue
-            inputs.append(ZonePut(zone_id, zupdate))
-        n_zones = len(inputs)
-        for rowid, tid, body, expires_at in db.execute("SELECT rowid, * FROM threats ORDER BY id"):
-            try:
-                threat = keys.check_chunk(tid)
-                update = decode(ThreatUpdate, body)
-                if expires_at is not None:
-                    left = float(expires_at) - wall_now
-                    if left <= 0:
-                        expired += 1
-                        continue
-                    update = msgspec.structs.replace(update, ttl_s=left)
-            except _BAD_ROW as exc:
-                bad.append(("threats", rowid, str(tid), body, _why(exc)))
-                continue
-            inputs.append(ThreatPut(threat, update))
-        n_threats = len(inputs) - n_zones
+
+        def timed(table: str, kind: type[U], put: Callable[[str, U], Input]) -> int:
+            """The rows of a table of writes that expire (zones, threats), with the time each has left."""
+            nonlocal expired
+            n = 0
+            for rowid, key, body, expires_at in db.execute(f"SELECT rowid, * FROM {table} ORDER BY id"):
+                try:
+                    chunk = keys.check_chunk(key)
+                    update = decode(kind, body)
+                    if expires_at is not None:
+                        left = float(expires_at) - wall_now
+                        if left <= 0:
+                            expired += 1
+                            continue
+                        update = msgspec.structs.replace(update, ttl_s=left)
+                except _BAD_ROW as exc:
+                    bad.append((table, rowid, str(key), body, _why(exc)))
+                    continue
+                inputs.append(put(chunk, update))
+                n += 1
+            return n
+
+        n_zones = timed("zones", ZoneUpdate, ZonePut)
+        n_threats = timed("threats", ThreatUpdate, ThreatPut)
         missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
         for rowid, unit, _epoch, ox, oy, params in db.execute("SELECT rowid, * FROM missions"):
             try:
