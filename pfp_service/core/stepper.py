@@ -333,15 +333,7 @@ class Stepper:
         zones = field.zones
         goal_in = zones.zone_at(*self.goal)
         if goal_in:
-            dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
-            self._traps += 1
-            return self._end(
-                StepStatus.TRAPPED,
-                field.level_grad_at(x, y)[0],
-                dist,
-                f"the goal lies in zone {goal_in}",
-                (x, y),
-            )
+            return self._walled(field, x, y, f"the goal lies in zone {goal_in}")
         if self._run is not None:
             return None
         here = zones.zone_at(x, y)
@@ -351,17 +343,17 @@ class Stepper:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
         run = self._escaper.leave_core(field, x, y)
         if run is None:
-            dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
-            self._traps += 1
-            return self._end(
-                StepStatus.TRAPPED,
-                field.level_grad_at(x, y)[0],
-                dist,
-                f"inside zone {here}, with no straight way out that enters no other zone or core",
-                (x, y),
+            return self._walled(
+                field, x, y, f"inside zone {here}, with no straight way out that enters no other zone or core"
             )
         self._run = run
         return self._escaping(field, x, y)
+
+    def _walled(self, field: ThreatField, x: float, y: float, reason: str) -> Advice:
+        """``trapped`` by keep-out zones where the unit stands, for ``reason``."""
+        self._traps += 1
+        dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        return self._end(StepStatus.TRAPPED, field.level_grad_at(x, y)[0], dist, reason, (x, y))
 
     def check(self, x: float, y: float) -> Advice | None:
         """The part of ``advise`` that needs no field: arrival, bounds, a standing verdict.
