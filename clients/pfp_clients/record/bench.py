@@ -22,6 +22,7 @@ Exit code 0 iff nothing was lost.
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import os
 import signal
@@ -33,6 +34,19 @@ from pathlib import Path
 from typing import Any
 
 PLANNER_OUT = ("unit_direction", "unit_mission", "event")
+
+
+def _directions(path: Path) -> collections.Counter[tuple[str, int | None]]:
+    """The record's directions as (unit, seq) with how often each came."""
+    from mcap.reader import make_reader
+
+    got: collections.Counter[tuple[str, int | None]] = collections.Counter()
+    with path.open("rb") as f:
+        for _schema, channel, msg in make_reader(f).iter_messages():
+            if channel.topic.endswith("/direction"):
+                d = json.loads(msg.data)
+                got[(d["unit"], d.get("seq"))] += 1
+    return got
 
 
 def _count(path: Path) -> dict[str, int]:
@@ -60,12 +74,26 @@ def _count(path: Path) -> dict[str, int]:
     return counts
 
 
-def run(units: int, rate_hz: float, duration_s: float, out: Path) -> dict[str, Any]:
+def run(
+    units: int, rate_hz: float, duration_s: float, out: Path, planner_zenoh: Path | None = None
+) -> dict[str, Any]:
+    """One run; ``planner_zenoh``: the planner's Zenoh JSON5 file (``PFP_ZENOH_CONFIG``), if any."""
     from pfp_service.bench._load import MISSION, LoadGen, ProcMeter, start_server
     from pfp_service.bench._phases import STEP_M
     from pfp_service.wire import Goal, keys
 
-    server = start_server("planner")
+    saved = os.environ.get("PFP_ZENOH_CONFIG")
+    if planner_zenoh is not None:
+        os.environ["PFP_ZENOH_CONFIG"] = str(planner_zenoh)
+    else:
+        os.environ.pop("PFP_ZENOH_CONFIG", None)
+    try:
+        server = start_server("planner")
+    finally:
+        if saved is None:
+            os.environ.pop("PFP_ZENOH_CONFIG", None)
+        else:
+            os.environ["PFP_ZENOH_CONFIG"] = saved
     rec_log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - closed below
     recorder = None
     gen = None
@@ -97,7 +125,9 @@ def run(units: int, rate_hz: float, duration_s: float, out: Path) -> dict[str, A
         cpu1 = meter.cpu_s() or 0.0
         after = gen.status() or {}
         states_sent = gen.seq - seq0
-        gen_got = sum(1 for r in gen.recv if r.seq is not None and r.seq >= seq0)  # the units' own count
+        units_got: collections.Counter[tuple[str, int | None]] = collections.Counter(
+            (r.unit, r.seq) for r in gen.recv if r.seq is not None and r.seq >= seq0
+        )
         recorder.send_signal(signal.SIGTERM)
         recorder.wait(timeout=300)
         rec_log.seek(0)
@@ -111,6 +141,8 @@ def run(units: int, rate_hz: float, duration_s: float, out: Path) -> dict[str, A
         server.stop()
         rec_log.close()
     counts = _count(out)
+    recorded = _directions(out)
+    recorded = collections.Counter({k: n for k, n in recorded.items() if k[1] is not None and k[1] >= seq0})
     out_delta = int(after.get("msgs_out", 0)) - int(before.get("msgs_out", 0))
     recorded_out = sum(counts.get(k, 0) for k in PLANNER_OUT)
     size_mb = out.stat().st_size / 1e6
@@ -124,8 +156,12 @@ def run(units: int, rate_hz: float, duration_s: float, out: Path) -> dict[str, A
         "planner_out_recorded": recorded_out,
         "lost_planner_out": out_delta - recorded_out,
         "planner_msgs_in": int(after.get("msgs_in", 0)) - int(before.get("msgs_in", 0)),
-        "directions_the_units_got": gen_got,
+        "directions_the_units_got": sum(units_got.values()),
         "directions_recorded": counts.get("unit_direction", 0),
+        # matched by (unit, seq): lost on the recorder's link only, or on the units' link only
+        "directions_only_the_record_lacks": sum((units_got - recorded).values()),
+        "directions_only_the_units_lack": sum((recorded - units_got).values()),
+        "planner_zenoh_config": str(planner_zenoh) if planner_zenoh is not None else None,
         "recorder_exit": recorder.returncode if recorder is not None else None,
         "recorder_cpu_s": round(cpu1 - cpu0, 1),
         "recorder_cpu_pct_of_a_core": round(100.0 * (cpu1 - cpu0) / max(sent_s, 1e-9), 1),
@@ -143,9 +179,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=float, default=10.0, help="reports per unit per second")
     p.add_argument("--duration", type=float, default=60.0, help="seconds of load")
     p.add_argument("--out", type=Path, help="the record (default: a temporary file, removed)")
+    p.add_argument(
+        "--planner-zenoh-config",
+        type=Path,
+        metavar="JSON5",
+        help="the planner's Zenoh file, e.g. examples/zenoh-planner-recording.json5 (default: Zenoh's defaults)",
+    )
     args = p.parse_args(argv)
+    if args.planner_zenoh_config is not None and not args.planner_zenoh_config.is_file():
+        p.error(f"--planner-zenoh-config: no such file: {args.planner_zenoh_config}")
     out = args.out or Path(tempfile.mkdtemp()) / "bench.mcap"
-    result = run(args.units, args.rate, args.duration, out)
+    result = run(args.units, args.rate, args.duration, out, args.planner_zenoh_config)
     print(json.dumps(result, indent=1))
     if args.out is None:
         out.unlink(missing_ok=True)
