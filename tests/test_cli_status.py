@@ -120,7 +120,7 @@ def test_health_prints_rounded_figures_and_json_for_scripts(world):
     r = run_pfp("health", "--connect", endpoint, "--mission", mission, timeout=60)
     assert r.returncode == 0 and "None" not in r.stdout
     assert re.fullmatch(
-        r"planner ok: mission \w+, up [\d.]+ s, 2 units \(\d stale\), 2 threats; messages in \d+, out \d+, "
+        r"planner ok: mission \w+, up [\d.]+ s, 2 units \(\d stale\), 2 threats, 2 zones; messages in \d+, out \d+, "
         r"rejected \d+; latency p50 (\d+\.\d\d ms|-), p99 (\d+\.\d\d ms|-)\n",
         r.stdout,
     ), r.stdout

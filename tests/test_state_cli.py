@@ -56,6 +56,7 @@ def test_list_shows_every_mission_and_clear_removes_one(tmp_path):
     human = _pfp(tmp_path, "state", "list").stdout
     assert "alpha" in human and "beta" in human and str(beta) in human
 
+    (beta / "tak-tombstones.json").write_text("{}")  # the TAK bridge's durable state, the same mission's
     r = _pfp(tmp_path, "state", "clear", "--mission", "beta")
     assert r.returncode == 0, r.stderr
     assert "cleared mission beta" in r.stdout and not beta.exists()

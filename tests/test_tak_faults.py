@@ -260,3 +260,12 @@ def test_the_keeper_writes_on_change_and_says_a_failure_once(tmp_path):
         s.on_cot(delete(f"more{i}", t=T0 + 5), T0 + 5)
         blocked.keep(s)
     assert len(notes) == 1 and "cannot save tombstones" in notes[0]
+
+
+def test_pfp_state_clear_knows_the_tombstone_file_by_the_bridges_own_name():
+    """``pfp state clear`` removes the bridge's tombstones with the mission's state (pfp_service names the file)."""
+    from pfp_clients.tak.tombfile import FILE_NAME
+
+    from pfp_service.service.statefile import COMPANION_NAMES
+
+    assert FILE_NAME in COMPANION_NAMES

@@ -34,7 +34,7 @@ def status_line(st: Any) -> str:
     """One planner's status for people: rounded figures, units named, no ``None``."""
     return (
         f"{st.planner} ok: mission {st.mission}, up {st.uptime_s:.1f} s, {st.units} units "
-        f"({st.units_stale} stale), {st.threats} threats; messages in {st.msgs_in}, out {st.msgs_out}, "
+        f"({st.units_stale} stale), {st.threats} threats, {st.zones} zones; messages in {st.msgs_in}, out {st.msgs_out}, "
         f"rejected {st.rejected}; latency p50 {_ms(st.latency_p50_ms)}, p99 {_ms(st.latency_p99_ms)}"
     )
 

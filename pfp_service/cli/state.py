@@ -6,7 +6,8 @@ from the same flags, ``PFP_*`` variables and ``--config`` file as serve's.
 
 ``list`` without ``--mission`` shows every mission under the state home;
 ``clear`` removes one mission's state (``--mission``, default ``default``):
-the database, its WAL, and damaged files set aside.  ``clear`` refuses, with
+the database, its WAL, damaged files set aside, and the TAK bridge's
+tombstones (``tak-tombstones.json``).  ``clear`` refuses, with
 exit code 2 and nothing removed, while a planner runs on that state (it
 holds ``state.lock``): stop the planner first.
 

@@ -39,6 +39,9 @@ __all__ = [
 
 DB_NAME = "state.sqlite3"
 LOCK_NAME = "state.lock"
+# Other durable state kept in a mission's directory by our clients, removed with it: the TAK bridge's
+# tombstones (``pfp_clients.tak.tombfile.FILE_NAME``; a test checks the two names agree), and their damaged copies.
+COMPANION_NAMES = ("tak-tombstones.json",)
 CORRUPT_CODES = (11, 26)  # SQLITE_CORRUPT, SQLITE_NOTADB
 SCAN_QUERIES = 10_000  # a salvage scan of one table gives up after this many queries
 # table -> (key column, column count): what salvage copies and how a lost row is named
@@ -222,7 +225,8 @@ def state_files(directory: str | Path) -> StateFiles:
 
 
 def clear(directory: str | Path) -> list[tuple[Path, int]]:
-    """Remove a mission's state files (the database, its WAL, files set aside, the lock); the directory if empty.
+    """Remove a mission's state files (the database, its WAL, files set aside, the TAK bridge's tombstones, the
+    lock); the directory if empty.
 
     Returns:
         Each file removed, with its size; empty when there was nothing.
@@ -232,7 +236,8 @@ def clear(directory: str | Path) -> list[tuple[Path, int]]:
         OSError: a file could not be removed.
     """
     d = Path(directory)
-    files = [p for p in d.glob(f"{DB_NAME}*") if p.is_file()] if d.is_dir() else []
+    names = (DB_NAME, *COMPANION_NAMES)
+    files = [p for n in names for p in d.glob(f"{n}*") if p.is_file()] if d.is_dir() else []
     if not files:
         return []
     lock_path = d / LOCK_NAME
