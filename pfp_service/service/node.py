@@ -542,6 +542,8 @@ class PlannerNode:
         self._trim.due(now)
         for d in out.directions:
             self._put(self._direction_keys.key(d.unit), encode(d), direction=True)
+        if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
+            self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
         with self._lock:
             raised, self._inbox_events = self._inbox_events, []

@@ -38,7 +38,18 @@ from pfp_service.wire import (
 from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.wire.messages import MAX_EVENT_ITEMS
 
-__all__ = ["STATUS", "direction", "geodetic", "no_goal", "reached", "rejected", "replan", "steer"]
+__all__ = [
+    "STATUS",
+    "advise",
+    "ahead",
+    "direction",
+    "geodetic",
+    "no_goal",
+    "reached",
+    "rejected",
+    "replan",
+    "steer",
+]
 
 STATUS = {
     StepStatus.EN_ROUTE: DirectionStatus.EN_ROUTE,
@@ -64,6 +75,20 @@ def steer(
         (unit, advice, look-ahead) for each unit steered, in the order given,
         and (unit, error) for each unit that failed alone.
     """
+    advised, failed = advise(guided, fld, cull)
+    steered, lost = ahead(advised, fld, cull, n)
+    return steered, failed + lost
+
+
+def advise(
+    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None
+) -> tuple[list[tuple[UnitRecord, Advice]], Failed]:
+    """Advise the units (each with a stepper and a position): the first half of ``steer``, no look-ahead.
+
+    Returns:
+        (unit, advice) for each unit advised, in the order given, and (unit,
+        error) for each unit that failed alone or whose direction is not finite.
+    """
     failed: Failed = []
     try:
         advices = _advise(guided, fld, cull)
@@ -83,18 +108,31 @@ def steer(
             else:
                 failed.append((rec, FloatingPointError(f"a direction that is not finite at {rec.position}")))
         guided, advices = [r for r, _ in kept], [a for _, a in kept]
+    return list(zip(guided, advices)), failed
+
+
+def ahead(
+    advised: list[tuple[UnitRecord, Advice]], fld: ThreatField, cull: CullIndex | None, n: int
+) -> tuple[Steered, Failed]:
+    """The ``n`` look-ahead points of units advised (``advise``): the second half of ``steer``.
+
+    A wave's directions go out before this (``World``): the points are
+    computed from the same advice once the directions are on their way.
+    """
+    failed: Failed = []
+    guided, advices = [r for r, _ in advised], [a for _, a in advised]
     try:
-        ahead = _ahead(guided, advices, fld, cull, n)
+        tracks = _ahead(guided, advices, fld, cull, n)
     except Exception:
-        ahead, pairs, guided, advices = [], list(zip(guided, advices)), [], []
+        tracks, pairs, guided, advices = [], list(zip(guided, advices)), [], []
         for rec, adv in pairs:
             try:
-                ahead += _ahead([rec], [adv], fld, cull, n)
+                tracks += _ahead([rec], [adv], fld, cull, n)
                 guided.append(rec)
                 advices.append(adv)
             except Exception as exc:
                 failed.append((rec, exc))
-    return [(r, a, within_map(t)) for r, a, t in zip(guided, advices, ahead)], failed
+    return [(r, a, within_map(t)) for r, a, t in zip(guided, advices, tracks)], failed
 
 
 def _advise(guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None) -> list[Advice]:

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from pfp_service.core import Threat, ThreatField
+from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.service import events as ev
 from pfp_service.service import missions, steering, worldpages
@@ -43,6 +44,10 @@ from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
 __all__ = ["World", *ev.__all__]
 
 K = keys.KeyKind
+# A contingency that re-directs more guided units than this sends their directions first and their
+# look-ahead points in the next ``apply`` (``World.owes``): the points were 40-45 % of a 1,000-unit
+# wave's ``apply`` (measured: bench.deliberation's wave row, docs/operations.md)
+WAVE_FIRST = 64
 
 
 @dataclass(slots=True)
@@ -56,6 +61,9 @@ class _Batch:
     touched: list[Threat] = field(default_factory=list)  # threats put, moved or gone (old and new)
     zones: list[tuple[str, str, tuple[float, float, float, float]]] = field(default_factory=list)
     # ^ zones put, moved or gone: (id, change, box), the old box and the new for a zone moved
+    wave: set[str] = field(
+        default_factory=set
+    )  # units sent their direction first, the rest in the next apply
 
 
 class World:
@@ -70,6 +78,8 @@ class World:
         self._live = Liveness(s, self._rec, self._timers)
         self._own = Ownership(s.planner_id, s.cluster)
         self.limits = Limits()
+        # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
+        self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
 
     # -- queries (read-only) ------------------------------------------------------
     @property
@@ -107,6 +117,10 @@ class World:
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
         return worldpages.page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
 
+    def owes(self) -> bool:
+        """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon."""
+        return bool(self._owed)
+
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
         return self._own.owns(unit_id)
@@ -132,7 +146,10 @@ class World:
             self._world_changed(b)
         first = len(b.out.directions)  # before: pushes sent again by the timers
         self._directions(b)
-        self._live.pushed(b.out.directions[first:], now)
+        pushed = b.out.directions[first:]
+        if b.wave:  # a wave's directions are pushes once they carry their points, in the next apply
+            pushed = [d for d in pushed if d.unit not in b.wave]
+        self._live.pushed(pushed, now)
         if b.changes or b.zones:
             zones = [(z, c) for z, c, _ in b.zones if c]
             b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions, zones))
@@ -418,17 +435,37 @@ class World:
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
         out.directions += [steering.no_goal(r, p) for r in live if r.stepper is None]
         guided = [r for r in live if r.stepper is not None]
-        if not guided:
+        owed, self._owed = self._owed, []
+        later = [  # a wave's units, untouched since: their points now, from the advice they were sent
+            (r, a)
+            for r, a, stepper, version, seq in owed
+            if r.id not in b.dirty and self._units.get(r.id) is r and r.live() and r.seq == seq
+            if r.stepper is stepper and stepper.version == version
+        ]
+        if not guided and not later:
             return
-        fld = self.field
-        steered, failed = steering.steer(guided, fld, self._rec.cull, self.settings.lookahead)
+        fld, cull, n = self.field, self._rec.cull, self.settings.lookahead
+        steered: steering.Steered = []
+        failed: steering.Failed = []
+        if (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0:  # the wave first
+            advised, failed = steering.advise(guided, fld, cull)
+            steered = [(r, a, []) for r, a in advised]
+            self._owed = [(r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None]
+            b.wave = {r.id for r, _ in advised}
+        elif guided:
+            steered, failed = steering.steer(guided, fld, cull, n)
+        if later:
+            tracked, lost = steering.ahead(later, fld, cull, n)
+            steered += tracked
+            failed += lost
         for rec, exc in failed:
             self._unit_fault(b, rec, exc)
         first, sent = len(out.directions), []
         for rec, adv, points in steered:
             try:
                 d, event = steering.direction(rec, adv, points, p, rec.job is not None)
-                if rec.stepper is not None and rec.stepper.pending is not None and rec.job is None:
+                asking = rec.stepper is not None and rec.stepper.pending is not None and rec.job is None
+                if asking and rec.id not in b.wave:  # a wave's jobs are asked with its points
                     self._ask(rec, fld, b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
