@@ -339,6 +339,7 @@ def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoC
         pad *= 3.0
     if not len(found.polyline):
         route, grid = found.route, found.grid
+        assert grid is not None  # no route: the whole grid was built (A* answers only when it finds one)
         if route.walled is not None:  # remembered for the next trap under this field
             _WALLED.setdefault(tr.field, []).append((tr.goal, grid, route.walled, route.walled_side))
         walls = _walls(tr, grid, route.walled) if route.walled is not None else ""

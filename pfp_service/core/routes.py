@@ -62,6 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pfp_service.core.astar import lazy_route
 from pfp_service.core.cores import Cores
 from pfp_service.core.grid import GridGraph, Route, shortcut_kept
 from pfp_service.core.threat import ThreatField
@@ -120,14 +121,15 @@ class Found:
             or to the first node a remembered tail goes on from (``points``
             empty when there is none; ``sealed`` and ``walled`` as
             ``GridGraph.walk`` says).
-        grid: the grid it was walked on (shared: read, never change it).
+        grid: the grid it was walked on (shared: read, never change it); ``None``
+            when A* found the route without building one (a lone unit's).
         polyline: when there is a route, the whole way from ``source`` to the
             goal, shortcut (not resampled); else empty.
         shared: the grid had been searched before this ask (a hit).
     """
 
     route: Route
-    grid: GridGraph
+    grid: GridGraph | None
     polyline: np.ndarray
     shared: bool
 
@@ -144,6 +146,8 @@ class RouteStats:
         evictions: grids dropped to keep the bounds (or because their field went).
         entries: grids kept now.
         nodes: their nodes in all.
+        lazy: asks of a lone unit answered by A* (``astar.lazy_route``), with no grid built.
+        expanded: the nodes those A* searches expanded, in all.
     """
 
     searches: int
@@ -153,6 +157,8 @@ class RouteStats:
     evictions: int
     entries: int
     nodes: int
+    lazy: int = 0
+    expanded: int = 0
 
 
 class _Entry:
@@ -213,6 +219,7 @@ class RouteCache:
         self._shared: OrderedDict[tuple[object, ...], None] = OrderedDict()
         self._nodes = 0
         self._searches = self._hits = self._misses = self._tails = self._evictions = 0
+        self._lazy = self._expanded = 0
 
     def stats(self) -> RouteStats:
         """The counters now."""
@@ -224,6 +231,8 @@ class RouteCache:
             self._evictions,
             len(self._lru),
             self._nodes,
+            self._lazy,
+            self._expanded,
         )
 
     def clear(self) -> None:
@@ -244,7 +253,20 @@ class RouteCache:
         entry = min((e for e in slot.entries if e.serves(ask)), key=lambda e: e.cell_m, default=None)
         shared = entry is not None
         if entry is None:
-            entry = self._build(ask, slot, goal_key)
+            group = self._note(ask, slot, goal_key)
+            if not group:  # a lone unit: A* over the same grid, touching only what it needs
+                lazy = lazy_route(
+                    ask.field, ask.box, ask.cores, ask.cell_m, ask.source, ask.goal, ask.lam, _REPAIRS
+                )
+                if lazy is not None:
+                    self._misses += 1
+                    self._searches += lazy.searches
+                    self._lazy += 1
+                    self._expanded += lazy.expanded
+                    route = Route(lazy.points, lazy.cost, nodes=lazy.nodes)
+                    _, pts, tail = _joined(ask, lazy.nodes, lazy.points, None)
+                    return Found(route, None, _shortcut(ask, pts, tail), False)
+            entry = self._build(ask, slot, group)
         else:
             self._touch(entry)
         grid = entry.grid
@@ -253,13 +275,8 @@ class RouteCache:
             return Found(route, grid, np.zeros((0, 2)), shared)
         assert route.nodes is not None
         chain = route.nodes  # to the goal's node, or to the first node with a tail
-        tail = entry.tails.get(int(chain[-1]))
         generation = entry.generation
-        end = np.array([ask.goal]) if tail is None else np.zeros((0, 2))
-        ids = np.concatenate([[-1], chain, np.full(len(end), -1)]).astype(np.int64)
-        pts = np.concatenate([[ask.source], grid.nodes[chain], end])
-        keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])
-        pts, ids = pts[keep], ids[keep]
+        ids, pts, tail = _joined(ask, chain, grid.nodes[chain], entry.tails.get(int(chain[-1])))
         kept = shortcut_kept(ask.field, pts, ask.lam, ask.cores)
         head = pts[kept]
         polyline = head if tail is None else np.concatenate([head, tail[1:]])
@@ -282,9 +299,8 @@ class RouteCache:
         self._slots.move_to_end(key)
         return slot
 
-    def _build(self, ask: Ask, slot: _Slot, goal_key: tuple[object, ...]) -> _Entry:
-        """A new search for ``ask``: tight, or with room when the goal is shared."""
-        self._misses += 1
+    def _note(self, ask: Ask, slot: _Slot, goal_key: tuple[object, ...]) -> bool:
+        """Note who asks for this goal; is it shared (a second unit, now or under an earlier field)?"""
         if len(slot.units) < 2:
             slot.units.add(ask.unit)
         shared = len(slot.units) > 1 or goal_key in self._shared
@@ -293,6 +309,11 @@ class RouteCache:
             self._shared.move_to_end(goal_key)
             while len(self._shared) > _SHARED_GOALS:
                 self._shared.popitem(last=False)
+        return shared
+
+    def _build(self, ask: Ask, slot: _Slot, shared: bool) -> _Entry:
+        """A new search for ``ask``: tight, or with room when the goal is shared."""
+        self._misses += 1
         box, cell = self._shape(ask) if shared and self.room > 0 else (ask.box, ask.cell_m)
         grid = GridGraph(ask.field, box, cores=ask.cores, cell_m=cell)
         entry = _Entry(ask.field, grid, box, grid.nearest(*ask.goal), ask.lam)
@@ -379,6 +400,25 @@ class RouteCache:
         for k, node in enumerate(ids.tolist()):
             if node >= 0 and node not in entry.tails:
                 entry.tails[int(node)] = polyline[k:]
+
+
+def _joined(
+    ask: Ask, chain: np.ndarray, nodes: np.ndarray, tail: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The way to shortcut: the unit, the chain's nodes, and the goal unless a tail goes on; repeats dropped.
+
+    Returns ``(node ids, -1 for the unit and the goal; points; tail)``.
+    """
+    end = np.array([ask.goal]) if tail is None else np.zeros((0, 2))
+    ids = np.concatenate([[-1], chain, np.full(len(end), -1)]).astype(np.int64)
+    pts = np.concatenate([[ask.source], nodes, end])
+    keep = np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])
+    return ids[keep], pts[keep], tail
+
+
+def _shortcut(ask: Ask, pts: np.ndarray, tail: np.ndarray | None) -> np.ndarray:
+    head = pts[shortcut_kept(ask.field, pts, ask.lam, ask.cores)]
+    return head if tail is None else np.concatenate([head, tail[1:]])
 
 
 ROUTES = RouteCache()

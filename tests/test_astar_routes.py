@@ -1,0 +1,88 @@
+"""A lone unit's route by lazy A* (``core.astar``) is a cheapest path of the very grid Dijkstra searches."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pfp_service.core import Threat, ThreatField
+from pfp_service.core.astar import lazy_route
+from pfp_service.core.cores import SEARCH_FRACTION, Cores
+from pfp_service.core.escape_strategies import global_route
+from pfp_service.core.grid import GridGraph
+from pfp_service.core.metrics import LAMBDA
+from pfp_service.core.routes import RouteCache
+from tests.test_shared_routes import GOAL, platoon, trap_rich, traps
+
+pytestmark = pytest.mark.unit
+
+BOX = ((-30.0, -30.0), (140.0, 130.0))
+
+
+def random_field(seed: int, n: int = 30) -> ThreatField:
+    rng = np.random.default_rng(seed)
+    threats = []
+    for k in range(n):
+        x, y = rng.uniform(0.0, 110.0, 2)
+        if min(math.dist((x, y), (0.0, 0.0)), math.dist((x, y), GOAL)) < 15.0:
+            continue
+        sr, sl = rng.uniform(2.0, 8.0, 2)
+        threats.append(
+            Threat.from_facing((float(x), float(y)), float(rng.uniform(0, 360)), sr, sl, 1.0, 1.0, f"t{k}")
+        )
+    return ThreatField(threats)
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("cell", [1.0, 2.5])
+def test_lazy_a_star_costs_what_dijkstra_on_the_whole_grid_costs(seed: int, cell: float) -> None:
+    field = random_field(seed)
+    cores = Cores.of(field, SEARCH_FRACTION)
+    grid = GridGraph(field, BOX, cores=cores, cell_m=cell)
+    src, dst = grid.cell_of(0.0, 0.0), grid.cell_of(*GOAL)
+    lazy = lazy_route(field, BOX, cores, cell, (0.0, 0.0), GOAL, LAMBDA, 0)
+    if not (grid.open[src] and grid.open[dst]):
+        assert lazy is None
+        return
+    dist, _ = grid.cost_to(dst, LAMBDA)
+    if not math.isfinite(dist[src]):
+        assert lazy is None  # no path: the caller builds the grid to say who is walled in
+        return
+    assert lazy is not None, seed
+    assert lazy.cost == pytest.approx(float(dist[src]), rel=1e-9), (seed, cell)
+    # it is a path of the grid: consecutive nodes are king or knight moves, from the unit's node to the goal's
+    assert lazy.nodes[0] == src and lazy.nodes[-1] == dst
+    ij = np.stack([lazy.nodes // grid.ny, lazy.nodes % grid.ny], axis=1)
+    steps = {tuple(sorted(map(abs, d))) for d in np.diff(ij, axis=0).tolist()}
+    assert steps <= {(0, 1), (1, 1), (1, 2)}
+    assert np.array_equal(lazy.points, grid.nodes[lazy.nodes])
+    # and it touched less than the whole grid
+    assert 0 < lazy.expanded < len(grid.nodes)
+
+
+def test_lazy_a_star_leaves_a_unit_in_a_core_to_the_whole_grid() -> None:
+    field = random_field(1)
+    cores = Cores.of(field, SEARCH_FRACTION)
+    grid = GridGraph(field, BOX, cores=cores, cell_m=1.0)
+    shut = grid.nodes[np.flatnonzero(~grid.open)[0]]
+    assert lazy_route(field, BOX, cores, 1.0, (float(shut[0]), float(shut[1])), GOAL, LAMBDA, 0) is None
+    assert lazy_route(field, BOX, cores, 1.0, (0.0, 0.0), (float(shut[0]), float(shut[1])), LAMBDA, 0) is None
+
+
+def test_a_lone_units_route_comes_from_a_star_and_matches_the_whole_grids_cost() -> None:
+    field = ThreatField(trap_rich())
+    (tr,) = traps(field, platoon(1))
+    cache = RouteCache()
+    got = global_route(tr, cache)
+    assert isinstance(got, np.ndarray) and len(got) > 2
+    st = cache.stats()
+    assert st.lazy == 1 and st.entries == 0 and st.expanded > 0
+    whole = RouteCache(max_entries=0)  # the same ask with A* unable to answer: a goal shared ...
+    whole._shared[(tr.goal, LAMBDA, tr.bounds, SEARCH_FRACTION)] = None  # ... is searched on the whole grid
+    ref = global_route(tr, whole)
+    assert isinstance(ref, np.ndarray) and whole.stats().lazy == 0
+    from pfp_service.core.metrics import path_cost
+
+    assert path_cost(got, field) == pytest.approx(path_cost(ref, field), rel=0.01)
