@@ -139,6 +139,13 @@ def test_record_replay_report_a_mission(tmp_path):
     assert counts["threat"] == 3 and counts["unit_goal"] == 2
     # nothing the planner sent was lost: every message it counted is in the record
     assert sum(counts.get(k, 0) for k in PLANNER_OUT) == after - before, counts
+    # and the record says so itself, from the planner's counters it asked at its start and end
+    from pfp_clients.record.mcapfile import read_record
+
+    cov = read_record(rec).coverage
+    assert cov is not None and cov["counted"] and cov["planners"] == 1, cov
+    assert cov["published"] >= after - before and cov["missed_at_least"] == 0, cov
+    assert "pfp record: planner outputs: " in rest and "missed" in rest, rest
 
     # a fresh planner, the same inputs: the same directions, or each difference named with its cause
     with planner_process("--origin", ORIGIN, mission=mission + "b") as (endpoint, _):
@@ -194,6 +201,9 @@ def test_record_stops_on_sigint_with_a_whole_file(tmp_path):
         recorder.send_signal(signal.SIGINT)
         out, _ = recorder.communicate(timeout=60)
     assert recorder.returncode == 130, out
+    assert re.search(r"pfp record: planner outputs: \d+ published by 1 planner\(s\) while recording", out), (
+        out
+    )
     from mcap.reader import make_reader
 
     with rec.open("rb") as f:

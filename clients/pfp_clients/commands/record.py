@@ -70,6 +70,7 @@ def run_record(args: argparse.Namespace) -> int:
     import sys
 
     from pfp_clients.common import open_session_waiting
+    from pfp_clients.record.coverage import describe
     from pfp_clients.record.recorder import record
     from pfp_service.cli._common import session_config
     from pfp_service.errors import InputError
@@ -93,6 +94,7 @@ def run_record(args: argparse.Namespace) -> int:
         f"{stats.bytes / 1e6:.2f} MB, CPU {stats.cpu_s:.1f} s, largest batch {stats.max_backlog}",
         flush=True,
     )
+    print(f"pfp record: {describe(stats.coverage)}", flush=True)
     sys.stdout.flush()
     return stopping.exit_code(0)
 

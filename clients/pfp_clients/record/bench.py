@@ -49,6 +49,13 @@ def _directions(path: Path) -> collections.Counter[tuple[str, int | None]]:
     return got
 
 
+def _coverage(path: Path) -> dict[str, object] | None:
+    """What the record itself says it missed (its ``pfp.coverage`` metadata)."""
+    from pfp_clients.record.mcapfile import read_record
+
+    return read_record(path).coverage
+
+
 def _count(path: Path) -> dict[str, int]:
     from mcap.reader import make_reader
 
@@ -168,7 +175,8 @@ def run(
         "file_mb": round(size_mb, 1),
         "mb_per_min": round(size_mb / max(sent_s / 60.0, 1e-9), 1),
         "counts": counts,
-        "recorder_says": [ln for ln in rec_text.splitlines() if ln.startswith("pfp record:")][-1:],
+        "recorder_says": [ln for ln in rec_text.splitlines() if ln.startswith("pfp record:")][-2:],
+        "record_coverage": _coverage(out),
         "loadavg_1min": float(Path("/proc/loadavg").read_text().split()[0]),
     }
 

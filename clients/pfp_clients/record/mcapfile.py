@@ -10,7 +10,9 @@ A key the contract does not know is kept too, schemaless.  Besides:
 * ``/pfp/alive``: liveliness tokens appearing and going, ``{"key": ..., "alive": bool}``;
 * ``/pfp/fix/{unit}``: with a known origin, each unit state as a ``foxglove.LocationFix``
   (the Map panel draws it);
-* metadata ``pfp``: the mission, the origin (if any), the recorder's version and start time.
+* metadata ``pfp``: the mission, the origin (if any), the recorder's version and start time;
+* metadata ``pfp.coverage``: what the record missed of the planners' outputs (``coverage.py``),
+  each value JSON text.
 
 Log times are the recorder's wall clock at receipt, in nanoseconds.
 """
@@ -41,6 +43,7 @@ DELETED_TOPIC = "/pfp/deleted"
 ALIVE_TOPIC = "/pfp/alive"
 FIX_PREFIX = "/pfp/fix/"
 METADATA = "pfp"
+COVERAGE = "pfp.coverage"
 PROFILE = ""  # no ROS profile: plain JSON with JSON Schema, which Foxglove reads as it is
 
 _KEY_SCHEMA = {
@@ -130,8 +133,8 @@ class MissionWriter:
         self.count += 1
         self.by_kind[kind] = self.by_kind.get(kind, 0) + 1
 
-    def put(self, key: str, data: bytes, t_ns: int) -> None:
-        """A PUT on ``key`` (its payload as it came)."""
+    def put(self, key: str, data: bytes, t_ns: int) -> str:
+        """A PUT on ``key`` (its payload as it came); returns the key's kind (``other``: unknown)."""
         known = self._keys.get(key)
         if known is None:  # a key's first sample: its kind, schema and channel, once
             try:
@@ -147,6 +150,7 @@ class MissionWriter:
         self._emit(cid, t_ns, data, kind)
         if self.origin is not None and fix is not None:
             self._fix(fix, data, t_ns)
+        return kind
 
     def _fix(self, unit: str, data: bytes, t_ns: int) -> None:
         try:
@@ -175,6 +179,10 @@ class MissionWriter:
         cid = self._channel(ALIVE_TOPIC, "pfp.alive", json.dumps(_ALIVE_SCHEMA).encode())
         self._emit(cid, t_ns, json.dumps({"key": key, "alive": alive}).encode(), "alive")
 
+    def coverage(self, cov: dict[str, object]) -> None:
+        """What the record missed (``Coverage.result``), as metadata ``pfp.coverage``."""
+        self._w.add_metadata(COVERAGE, {k: json.dumps(v) for k, v in cov.items()})
+
     def finish(self) -> None:
         self._w.finish()
 
@@ -196,6 +204,7 @@ class Record:
     origin: Origin | None
     entries: list[Entry]
     alive: list[tuple[int, str, bool]]
+    coverage: dict[str, object] | None = None  # None: a record made before pfp.coverage
 
 
 def read_record(path: str | Path) -> Record:
@@ -209,6 +218,7 @@ def read_record(path: str | Path) -> Record:
 
     p = Path(path)
     mission, origin = "", None
+    coverage: dict[str, object] | None = None
     entries: list[Entry] = []
     alive: list[tuple[int, str, bool]] = []
     try:
@@ -220,6 +230,8 @@ def read_record(path: str | Path) -> Record:
                     if "origin" in meta.metadata:
                         o = json.loads(meta.metadata["origin"])
                         origin = Origin(lat=o["lat"], lon=o["lon"], alt=o.get("alt", 0.0))
+                elif meta.name == COVERAGE:
+                    coverage = {k: json.loads(v) for k, v in meta.metadata.items()}
             for _schema, channel, msg in reader.iter_messages(log_time_order=True):
                 topic = channel.topic
                 if topic == DELETED_TOPIC:
@@ -237,7 +249,7 @@ def read_record(path: str | Path) -> Record:
         raise InputError(p.name, f"not a readable mission record: {exc}") from None
     if not mission:
         raise InputError(p.name, "not a mission record of pfp record (no 'pfp' metadata)")
-    return Record(mission, origin, entries, alive)
+    return Record(mission, origin, entries, alive, coverage)
 
 
 def iter_kind(rec: Record, kind: keys.KeyKind) -> Iterator[tuple[Entry, keys.Key]]:

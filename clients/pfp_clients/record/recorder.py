@@ -10,7 +10,10 @@ event) ends the subscriptions, the writer drains what is left and the file is
 finished (summary, index, CRCs), so a stopped recording is a whole file.
 
 The planner's origin is asked once at the start (its status) and written in
-the file's metadata, so ``pfp report`` can give lat/lon and GeoJSON.
+the file's metadata, so ``pfp report`` can give lat/lon and GeoJSON.  The
+planners' ``msgs_out`` is asked again once the subscriptions are in place and
+when the recording stops, and what the record missed of it goes into the
+metadata ``pfp.coverage`` (``coverage.py``): a recording says what it lacks.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pfp_clients.record.coverage import Counted, Coverage
 from pfp_clients.record.mcapfile import MissionWriter
 from pfp_service.errors import InputError
 from pfp_service.wire import keys
@@ -33,6 +37,25 @@ __all__ = ["RecordStats", "record"]
 _ALIVE, _GONE = 2, 3
 DRAIN_EVERY_S = 0.02
 FIFO_DEPTH = 1_000_000  # samples Zenoh may hold for the writer: 100 s of 1,000 units x 10 Hz
+SETTLE_S = 0.5  # after the last status answer, what was published before it still arrives
+
+
+def _counted(session: Any, mission: str, timeout_s: float = 2.0) -> Counted:
+    """Every planner's ``msgs_out`` now (none: no planner answered)."""
+    from pfp_service.errors import InputError
+    from pfp_service.wire import decode_planner_status
+
+    asked = time.time_ns()
+    out: dict[tuple[str, str], int] = {}
+    for reply in session.get(keys.planner_statuses(mission), timeout=timeout_s):
+        if reply.ok is None:
+            continue
+        try:
+            st = decode_planner_status(reply.ok.payload.to_bytes())
+        except InputError:
+            continue
+        out[(st.planner, st.session)] = st.msgs_out
+    return Counted(out, asked, time.time_ns())
 
 
 def _when(sample: Any) -> int:
@@ -53,6 +76,7 @@ class RecordStats:
     wall_s: float = 0.0
     cpu_s: float = 0.0
     bytes: int = 0
+    coverage: dict[str, Any] = field(default_factory=dict)
 
 
 def record(
@@ -113,6 +137,8 @@ def record(
             session.liveliness().declare_subscriber(keys.alive_units(m), on_token, history=True),
             session.liveliness().declare_subscriber(keys.alive_planners(m), on_token, history=True),
         ]
+        coverage = Coverage()
+        coverage.begin(_counted(session, m))  # nothing drained yet: every sample is counted after it
 
         def drain() -> int:
             n = 0
@@ -120,7 +146,7 @@ def record(
                 n += 1
                 t_ns = _when(sample)
                 if sample.kind == zenoh.SampleKind.PUT:
-                    writer.put(str(sample.key_expr), sample.payload.to_bytes(), t_ns)
+                    coverage.seen(writer.put(str(sample.key_expr), sample.payload.to_bytes(), t_ns), t_ns)
                 else:
                     writer.delete(str(sample.key_expr), t_ns)
             while tokens:
@@ -129,13 +155,16 @@ def record(
             return n
 
         try:
-            while True:
-                stopping = stop.is_set()
+            while not stop.is_set():
                 stats.max_backlog = max(stats.max_backlog, drain())
-                if stopping:
-                    break
                 # drained: sleep a little rather than poll (the FIFO holds what comes meanwhile)
                 stop.wait(DRAIN_EVERY_S)
+            stats.max_backlog = max(stats.max_backlog, drain())
+            coverage.end(_counted(session, m))
+            settle_until = time.monotonic() + SETTLE_S
+            while time.monotonic() < settle_until:  # what was published before the answer still comes
+                drain()
+                time.sleep(DRAIN_EVERY_S)
         finally:
             for s in subs[1:]:
                 with contextlib.suppress(Exception):  # gone with the session
@@ -143,6 +172,8 @@ def record(
             with contextlib.suppress(Exception):
                 drain()  # what came before the stop
                 data_sub.undeclare()
+            stats.coverage = coverage.result()
+            writer.coverage(stats.coverage)
             writer.finish()
     stats.messages = writer.count
     stats.by_kind = dict(writer.by_kind)

@@ -215,11 +215,14 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
     Raises:
         InputError: a file cannot be written.
     """
+    from pfp_clients.record.coverage import describe
     from pfp_service.render import plot_tracks
 
     rows, watch = summarise(rec, intensity)
     table = table_rows(rows)
     say(f"mission {rec.mission}: {len(rows)} units, {len(watch.versions)} threat versions")
+    if rec.coverage is not None:
+        say(f"record: {describe(rec.coverage)}")
     for line in _text(table):
         say(line)
     written: list[Path] = []
