@@ -53,6 +53,11 @@ def test_bench_service_json_has_every_figure():
         assert fm["probes"] and {"rate_hz", "p99_ms", "unanswered_fraction", "ok"} <= fm["probes"][0].keys()
         assert "max_per_s" in fm
     assert doc["planner"]["find_max"]["deliberations"].keys() >= {"landed", "left", "waited_s"}
+    for kind in ("planner", "echo"):  # CPU per state compared at 5,000/s, the deliberations landed first
+        assert doc[kind]["cpu_rate"].keys() >= STEADY, kind
+    assert doc["planner"]["cpu_rate"]["deliberations"].keys() >= {"landed", "left", "waited_s"}
+    assert doc["planner"]["steady_after"]["deliberations"]["landed"] in (True, False)
+    assert any(t["target"].startswith("CPU per state at 5000/s") for t in doc["targets"])
     assert doc["planner"]["steady"]["processes"] >= 2  # the planner and its worker processes, all counted
     assert doc["echo"]["steady"]["processes"] == 1
     assert all({"target", "measured", "limit", "met"} <= t.keys() for t in doc["targets"])

@@ -76,6 +76,7 @@ TARGETS = {
     "rss_mb": 300.0,
     "rss_vs_idle": 1.1,
     "cpu_per_state_vs_echo": 1.1,
+    "cpu_rate_per_s": 5000.0,  # issue 23: CPU per state is compared at this offered rate, deliberations landed
     "scale_out_share": 0.55,
     "scale_out_cpu_vs_one": 1.1,
 }
@@ -193,14 +194,23 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
         for k in kinds:
             idle = servers[k].meter.memory_mb()["rss_mb"]
             res[k] = _prepare(k, gens[k], servers[k], args, lay, bar) | {"idle_rss_mb": idle}
+        # the steady load measures the loop, not the loop beside the storm's leftover look-aheads
+        res["planner"]["steady_after"] = {"deliberations": deliberations_landed(gens["planner"])}
         for k in kinds:
             res[k]["steady"] = steady(gens[k], servers[k], n, args.rate, args.duration, bar, k)
         if not args.no_fanout:
             res["planner"]["fanout"] = fanout(gens["planner"], servers["planner"], n, bar)
+        landed = deliberations_landed(gens["planner"]) if args.echo or args.find_max else None
+        if args.echo:  # CPU per state where neither saturates (issue 23: 5,000/s), in turn, workers counted
+            rate = TARGETS["cpu_rate_per_s"] / n
+            for k in kinds:
+                cpu = steady(gens[k], servers[k], n, rate, min(args.duration, 6.0), bar, f"{k} CPU")
+                res[k]["cpu_rate"] = cpu | ({"deliberations": landed} if k == "planner" else {})
+                gens[k].settle(0.5, 5.0)
         if args.find_max:
             searches = {k: RateSearch(args.rate) for k in kinds}
             if "planner" in kinds:  # the probes measure the loop, not the loop beside leftover look-aheads
-                searches["planner"].before = {"deliberations": deliberations_landed(gens["planner"])}
+                searches["planner"].before = {"deliberations": landed}
             while any(s.rate is not None for s in searches.values()):
                 for k, s in searches.items():
                     if s.rate is not None:
@@ -338,15 +348,17 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
     if e is not None and "find_max" in p:
         before = p["find_max"].get("deliberations", {})
         add("find-max: the planner's deliberations landed before its probes", before.get("left"), 0)
-    if e is not None:  # CPU per state, the planner with every worker process, against the echo's
+    if e is not None:  # CPU per state at 5,000/s, the planner with every worker process, against the echo's
+        phase = "cpu_rate" if "cpu_rate" in p and "cpu_rate" in e else "steady"
         per = [
-            r["steady"]["cpu_percent"] / r["steady"]["answered_per_s"]
-            if r["steady"].get("cpu_percent") is not None and r["steady"]["answered_per_s"]
+            r[phase]["cpu_percent"] / r[phase]["answered_per_s"]
+            if r[phase].get("cpu_percent") is not None and r[phase]["answered_per_s"]
             else None
             for r in (p, e)
         ]
+        at = f"at {TARGETS['cpu_rate_per_s']:.0f}/s" if phase == "cpu_rate" else "steady"
         add(
-            "steady CPU per state (with workers) <= 1.1x echo",
+            f"CPU per state {at} (with workers) <= 1.1x echo",
             None if None in per or not per[1] else per[0] / per[1],  # type: ignore[operator]
             TARGETS["cpu_per_state_vs_echo"],
         )
@@ -424,6 +436,12 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     return doc
 
 
+def _per_state_us(st: dict[str, Any]) -> float | None:
+    """CPU microseconds per state answered (cpu_percent of one core over answered_per_s)."""
+    cpu, rate = st.get("cpu_percent"), st.get("answered_per_s")
+    return None if cpu is None or not rate else 1e4 * cpu / rate
+
+
 def _f(v: float | None, fmt: str = ".2f") -> str:
     return "-" if v is None else format(v, fmt)
 
@@ -442,7 +460,13 @@ def _print(doc: dict[str, Any]) -> None:
         if r is None:
             continue
         st = r["steady"]
-        print(f"\n[{kind}] steady {ld['duration_s']:g} s:")
+        after = r.get("steady_after", {}).get("deliberations")
+        first = (
+            ""
+            if after is None
+            else f" (after the storm's deliberations: {'landed' if after['landed'] else 'NOT landed'}, waited {after['waited_s']:.1f} s)"
+        )
+        print(f"\n[{kind}] steady {ld['duration_s']:g} s{first}:")
         print(
             f"  latency p50 {_f(st['p50_ms'], '.3f')} ms, p90 {_f(st['p90_ms'], '.3f')}, p99 {_f(st['p99_ms'], '.3f')}, max {_f(st['max_ms'], '.1f')}"
         )
@@ -452,6 +476,19 @@ def _print(doc: dict[str, Any]) -> None:
         print(
             f"  CPU {_f(st['cpu_percent'], '.0f')} % over {st.get('processes', 1)} processes (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
         )
+        if "cpu_rate" in r:
+            c = r["cpu_rate"]
+            landed = c.get("deliberations")
+            note = (
+                ""
+                if landed is None
+                else f"; deliberations {'landed' if landed['landed'] else 'NOT landed'} first"
+            )
+            print(
+                f"  at {c['input_per_s']:.0f}/s: CPU {_f(c['cpu_percent'], '.0f')} % over {c.get('processes', 1)} processes, "
+                f"{_f(_per_state_us(c), '.0f')} us per state answered, p50 {_f(c['p50_ms'], '.3f')} ms, p99 {_f(c['p99_ms'], '.2f')} ms, "
+                f"unanswered {100 * c['unanswered_fraction']:.3f} % (load avg {_f(c['loadavg'], '.1f')}){note}"
+            )
         if "storm" in r:
             s = r["storm"]
             b = s["bystander"]
