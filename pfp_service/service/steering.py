@@ -12,6 +12,7 @@ event.  Pure values in and out (a unit's last verdict is kept on its record).
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -132,7 +133,15 @@ def ahead(
                 advices.append(adv)
             except Exception as exc:
                 failed.append((rec, exc))
-    return [(r, a, within_map(t)) for r, a, t in zip(guided, advices, tracks)], failed
+    if not _within(tracks):  # rare: some track leaves the map; each is cut where it does
+        tracks = [within_map(t) for t in tracks]
+    return list(zip(guided, advices, tracks)), failed
+
+
+def _within(tracks: list[Track]) -> bool:
+    """Whether every point of every track is on the wire's map (``within_map``), in one vectorised test."""
+    flat = np.fromiter(itertools.chain.from_iterable(itertools.chain.from_iterable(tracks)), dtype=float)
+    return bool(np.all(np.abs(flat) <= FINITE_LIMIT))  # NaN is not within
 
 
 def _advise(guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None) -> list[Advice]:
