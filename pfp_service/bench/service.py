@@ -362,6 +362,12 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
             None if None in per or not per[1] else per[0] / per[1],  # type: ignore[operator]
             TARGETS["cpu_per_state_vs_echo"],
         )
+        behind = max(p[phase]["unanswered_fraction"], e[phase]["unanswered_fraction"])
+        if behind > 10 * TARGETS["unanswered"]:  # CPU per state answered means little for one falling behind
+            rows[-1]["met"] = None
+            rows[-1]["note"] = (
+                f"a responder fell behind ({100 * behind:.1f} % unanswered): starved or saturated"
+            )
     if "storm" in p:
         s = p["storm"]
         add("storm: every unit guided within 1 s", s["all_guided_s"], TARGETS["storm_guided_s"])
