@@ -2,7 +2,9 @@
 
 ``workers.WorkerPool`` starts ``python -c "...; boot(ARG)"``, so this module is
 what a worker imports first; nothing in the planner's process imports it but
-the tasks that run in workers (``world_field``, ``retire``).
+the tasks that run in workers (``world_field``, ``retire``).  Where the planner
+forked a zygote (``workers.ForkServer``), ``zygote`` is its loop, and each
+worker it forks enters ``_worker_main`` from there, already warm.
 """
 
 from __future__ import annotations
@@ -12,7 +14,9 @@ import importlib
 import json
 import os
 import pickle
+import select
 import signal
+import socket
 import threading
 import time
 import traceback
@@ -23,7 +27,7 @@ from typing import Any
 from pfp_service.service.log import get_logger
 from pfp_service.service.workers import ORPHAN_POLL_S
 
-__all__ = ["boot", "forget_fields", "retire", "world_field", "world_threats"]
+__all__ = ["boot", "forget_fields", "retire", "world_field", "world_threats", "zygote"]
 
 log = get_logger("workers")
 
@@ -72,10 +76,61 @@ def boot(arg: str) -> None:
     _worker_main(Connection(fd), parent, memory_mb, nice, fn)
 
 
+def zygote(sock: socket.socket, lifeline: int) -> None:
+    """The fork server's loop (``workers.ForkServer``): fork one worker per request, until the planner goes.
+
+    A request is ``[memory_mb, nice]`` with the worker's socket end; the reply is its process id.
+    The planner's end of ``sock`` and of ``lifeline`` close when it dies: either ends the loop.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the planner stops us
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the planner's handlers would only set its stop event
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # its workers are reaped by the kernel
+    while True:
+        ready, _, _ = select.select([sock.fileno(), lifeline], [], [])
+        if lifeline in ready:
+            return
+        try:
+            msg, fds, _, _ = socket.recv_fds(sock, 1024, 1)
+        except OSError:
+            return
+        if not msg or not fds:
+            return
+        memory_mb, nice = json.loads(msg)
+        try:
+            pid = os.fork()
+        except OSError:  # answered "x": the pool starts this one as a fresh interpreter
+            pid = -1
+        if pid == 0:  # the worker: it never returns into the zygote's loop
+            code = 1
+            try:
+                sock.close()
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                threading.Thread(
+                    target=_watch_lifeline, args=(lifeline,), name="pfp-orphan-watch", daemon=True
+                ).start()
+                _worker_main(Connection(fds[0]), None, memory_mb, nice, None)
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(fds[0])
+        try:
+            sock.sendall(str(pid).encode() if pid > 0 else b"x")
+        except OSError:
+            return
+
+
+def _watch_lifeline(fd: int) -> None:
+    with contextlib.suppress(OSError):
+        while os.read(fd, 1):
+            pass
+    os._exit(0)  # the planner is gone (its end of the pipe closed): nobody will ask again
+
+
 def _worker_main(
-    conn: Connection, parent: int, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
+    conn: Connection, parent: int | None, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
 ) -> None:
-    threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
+    if parent is not None:  # a forked worker watches the lifeline instead (``zygote``)
+        threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
     if warm is not None:
         warm()  # at the planner's priority: a killed worker's successor is wanted soon
     if nice:

@@ -1,8 +1,9 @@
 """Worker processes for the planner's off-loop work (previews, deliberation): one small pool both use.
 
-A ``WorkerPool`` runs each worker as its own fresh interpreter (a fork of a
-process holding a Zenoh session is unsafe) with its own socket pipe, driven
-by one parent thread per slot.  The slot thread takes the next task, sends it,
+A ``WorkerPool`` runs each worker as a fork of the zygote ``pfp serve``
+forked before its Zenoh session opened (``ForkServer``; a fork of a process
+holding a Zenoh session is unsafe), or where there is none as its own fresh
+interpreter, with its own socket pipe, driven by one parent thread per slot.  The slot thread takes the next task, sends it,
 waits for the result until the task's hard stop (its budget plus
 ``KILL_GRACE_S``), and past it kills that one process, answers the task
 ``killed`` and starts a fresh worker in the slot.  Why not a
@@ -14,8 +15,9 @@ Each worker:
 
 * loads the numba kernels once (``warm_up``) before it takes a task;
 * ignores SIGINT (Ctrl-C to the process group reaches it: the parent shuts
-  it down, no traceback) and watches its parent, so a planner that dies,
-  even by ``SIGKILL``, takes it along within ``ORPHAN_POLL_S``;
+  it down, no traceback) and watches its planner, so a planner that dies,
+  even by ``SIGKILL``, takes it along (a forked worker at once, by its
+  lifeline pipe; a fresh interpreter within ``ORPHAN_POLL_S``);
 * runs at a lower CPU priority (``nice``), so the live loop wins the cores;
 * has its address space bounded (``RLIMIT_AS``: its size once warm, plus
   ``memory_mb``).  An allocation past it raises ``MemoryError`` in the task,
@@ -41,6 +43,7 @@ import json
 import math
 import os
 import pickle
+import select
 import signal
 import socket
 import subprocess
@@ -59,6 +62,7 @@ __all__ = [
     "ORPHAN_POLL_S",
     "Blobs",
     "FieldBlob",
+    "ForkServer",
     "Outcome",
     "Task",
     "WorkerPool",
@@ -93,6 +97,146 @@ class Blobs:
             self._threats = threats
             self._blob = FieldBlob(self._version, pickle.dumps(threats, protocol=pickle.HIGHEST_PROTOCOL))
         return self._blob
+
+
+class ForkServer:
+    """A zygote: a copy of the warm planner, forked before any thread or Zenoh session, that forks workers.
+
+    ``start`` forks it from the planner once the heavy libraries are imported
+    and the numba kernels loaded (``desk.warm_up``), and only while the process
+    has no other Python thread (forking a process with Zenoh's threads is
+    unsafe; OpenBLAS stops its own pool around a fork).  Each worker is then a
+    fork of the zygote: it shares the loaded libraries, the compiled kernels
+    and the interpreter's heap copy-on-write with the zygote, its siblings and
+    the planner, so it costs only the pages it writes, and starts in
+    milliseconds instead of seconds.  The caller should ``gc.freeze()`` first,
+    so the collector's passes in any of them do not write (and so copy) every
+    object's header.
+
+    A worker's socket end comes to the zygote by ``send_fds``; its process id
+    comes back.  A worker is not the planner's child: the pool watches and
+    kills it through a pidfd (``Forked``).  Every worker and the zygote hold the
+    read end of a lifeline pipe whose only write end is the planner's, so the
+    moment the planner dies, even by ``SIGKILL``, each of them reads its end
+    of file and exits.
+    """
+
+    def __init__(self, pid: int, sock: socket.socket, lifeline: int) -> None:
+        self.pid = pid
+        self._sock = sock
+        self._lifeline = lifeline
+        self._lock = threading.Lock()
+        self._dead = False
+
+    @classmethod
+    def start(cls) -> ForkServer | None:
+        """Fork the zygote from this process; ``None`` where it would be unsafe (other threads) or unsupported."""
+        if threading.active_count() > 1 or not hasattr(os, "pidfd_open") or not hasattr(socket, "send_fds"):
+            return None
+        ours, theirs = socket.socketpair()
+        life_r, life_w = os.pipe()
+        try:
+            pid = os.fork()
+        except OSError:
+            for fd in (life_r, life_w):
+                os.close(fd)
+            ours.close()
+            theirs.close()
+            return None
+        if pid == 0:  # the zygote: it never returns into the planner's code
+            code = 1
+            try:
+                ours.close()
+                os.close(life_w)
+                from pfp_service.service.workerproc import zygote
+
+                zygote(theirs, life_r)
+                code = 0
+            finally:
+                os._exit(code)
+        theirs.close()
+        os.close(life_r)
+        return cls(pid, ours, life_w)
+
+    def spawn(self, fd: int, memory_mb: float | None, nice: int) -> Forked | None:
+        """A worker forked by the zygote on the socket end ``fd``; ``None`` if the zygote is gone."""
+        with self._lock:
+            if self._dead:
+                return None
+            try:
+                socket.send_fds(self._sock, [json.dumps([memory_mb, nice]).encode()], [fd])
+                reply = self._sock.recv(32)
+            except OSError:
+                reply = b""
+            if not reply:  # the zygote died (the OOM killer, say): the pool starts fresh interpreters
+                self._dead = True
+                log.warning("the worker fork server is gone; workers start as new interpreters")
+                return None
+        try:
+            return Forked(int(reply))
+        except (ValueError, OSError):  # the worker is already gone: its start failed
+            return None
+
+    def close(self) -> None:
+        """Stop the zygote (its workers stop with their pools, or with the planner)."""
+        with self._lock:
+            self._dead = True
+            with contextlib.suppress(OSError):
+                self._sock.close()
+            with contextlib.suppress(OSError):
+                os.close(self._lifeline)
+            with contextlib.suppress(OSError):
+                os.kill(self.pid, signal.SIGKILL)
+            with contextlib.suppress(OSError):
+                os.waitpid(self.pid, 0)
+
+
+_FORK_SERVER: list[ForkServer | None] = [None]
+
+
+def install_fork_server(server: ForkServer | None) -> None:
+    """Pools made from now on fork their workers from ``server`` (``None``: fresh interpreters again)."""
+    _FORK_SERVER[0] = server
+
+
+class Forked:
+    """A worker the zygote forked (not our child): ``subprocess.Popen``'s ``poll``/``kill``/``wait``, on a pidfd."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self._fd: int | None = os.pidfd_open(pid)
+        self._lock = threading.Lock()
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        return self._wait(0.0)
+
+    def wait(self, timeout: float | None = None) -> int:
+        code = self._wait(timeout)
+        if code is None:
+            raise subprocess.TimeoutExpired(f"worker {self.pid}", timeout or 0.0)
+        return code
+
+    def _wait(self, timeout: float | None) -> int | None:
+        with self._lock:
+            fd = self._fd
+        if fd is None:
+            return self.returncode
+        with contextlib.suppress(OSError, ValueError):
+            if not select.select([fd], [], [], timeout)[0]:
+                return None
+        with self._lock:
+            if self._fd is not None:
+                os.close(self._fd)
+                self._fd = None
+                self.returncode = -1  # gone; its status went to the zygote, which reaps it
+        return self.returncode
+
+    def kill(self) -> None:
+        with self._lock:
+            if self._fd is not None:
+                with contextlib.suppress(OSError):
+                    signal.pidfd_send_signal(self._fd, signal.SIGKILL)
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,6 +322,7 @@ class WorkerPool:
         self._nice = nice
         self._caps = dict(lane_caps or {})
         self._warm = warm
+        self._forker = _FORK_SERVER[0]
         self._on_replaced = on_replaced
         self._cond = threading.Condition()
         self._lanes: dict[int, list[tuple[float, int, Task]]] = {}
@@ -427,23 +572,31 @@ class WorkerPool:
                         self._ready.set()
         return True
 
-    def _start_worker(self, slot: _Slot | None) -> tuple[subprocess.Popen[bytes], Connection, int] | None:
-        """A new worker, warm (``slot`` shows it meanwhile, so a shutdown can kill it); ``None`` if it failed."""
+    def _start_worker(self, slot: _Slot | None) -> tuple[Any, Connection, int] | None:
+        """A new worker, warm (``slot`` shows it meanwhile, so a shutdown can kill it); ``None`` if it failed.
+
+        Forked by the zygote where there is one (``ForkServer``), else a fresh interpreter."""
         ours_sock, theirs_sock = socket.socketpair()
         ours = Connection(ours_sock.detach())
         theirs = theirs_sock.detach()
-        boot = [os.getpid(), theirs, self._memory_mb, self._nice, self._warm]
-        code = "import sys; from pfp_service.service.workerproc import boot; boot(sys.argv[1])"
-        try:
-            # a fresh interpreter, not multiprocessing's spawn: it keeps the SIGINT blocked in this
-            # thread (``_block_sigint``) until it ignores it, and it imports no __main__ of ours
-            proc = subprocess.Popen(
-                [sys.executable, "-c", code, json.dumps(boot)], pass_fds=(theirs,), stdin=subprocess.DEVNULL
-            )
-        except Exception:  # no process to be had now (out of memory, too many processes)
-            os.close(theirs)
-            ours.close()
-            return None
+        proc: Any = None
+        if self._forker is not None:
+            proc = self._forker.spawn(theirs, self._memory_mb, self._nice)
+        if proc is None:
+            boot = [os.getpid(), theirs, self._memory_mb, self._nice, self._warm]
+            code = "import sys; from pfp_service.service.workerproc import boot; boot(sys.argv[1])"
+            try:
+                # a fresh interpreter, not multiprocessing's spawn: it keeps the SIGINT blocked in this
+                # thread (``_block_sigint``) until it ignores it, and it imports no __main__ of ours
+                proc = subprocess.Popen(
+                    [sys.executable, "-c", code, json.dumps(boot)],
+                    pass_fds=(theirs,),
+                    stdin=subprocess.DEVNULL,
+                )
+            except Exception:  # no process to be had now (out of memory, too many processes)
+                os.close(theirs)
+                ours.close()
+                return None
         os.close(theirs)
         if slot is not None:
             slot.proc, slot.conn = proc, ours
