@@ -86,3 +86,17 @@ def test_a_lone_units_route_comes_from_a_star_and_matches_the_whole_grids_cost()
     from pfp_service.core.metrics import path_cost
 
     assert path_cost(got, field) == pytest.approx(path_cost(ref, field), rel=0.01)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_shortcut_keeps_what_the_whole_window_evaluation_keeps(seed: int) -> None:
+    from pfp_service.core.grid import _shortcut_kept_numpy, shortcut_kept
+
+    field = random_field(seed, 60)
+    cores = Cores.of(field, SEARCH_FRACTION)
+    rng = np.random.default_rng(seed)
+    pts = np.cumsum(rng.normal(1.5, 1.0, (90, 2)), axis=0)
+    for c in (cores, None):
+        got = shortcut_kept(field, pts, LAMBDA, c)
+        assert np.array_equal(got, _shortcut_kept_numpy(field, pts, LAMBDA, c)), seed
+        assert got[0] == 0 and got[-1] == len(pts) - 1

@@ -321,14 +321,123 @@ def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | Non
     return np.asarray(pts[shortcut_kept(field, pts, lam, cores)])
 
 
+@numba.njit(cache=True, nogil=True)
+def _segment_cost(  # type: ignore[no-untyped-def]
+    packed, grid, indptr, indices, ax, ay, bx, by, lam, w
+):  # fmt: skip
+    """``segment_costs`` of one segment, each sample's level from its cell of the index (``cull._cell_level``)."""
+    ox, oy, cell, nx, ny = grid
+    dx, dy = bx - ax, by - ay
+    acc = 0.0
+    for s in range(_SAMPLES):
+        t = s * (1.0 / (_SAMPLES - 1))
+        x, y = ax + t * dx, ay + t * dy
+        v = 0.0
+        if math.isfinite(x) and math.isfinite(y):
+            ci = math.floor((x - ox) / cell)
+            ck = math.floor((y - oy) / cell)
+            if 0 <= ci < nx and 0 <= ck < ny:
+                c = ck * nx + ci
+                for p in range(indptr[c], indptr[c + 1]):
+                    v += kernels.threat_term(packed, indices[p], x, y, 0.0, False)[0]
+        acc += v * w[s]
+    length = math.hypot(dx, dy)
+    return length + lam * length * acc / (3.0 * (_SAMPLES - 1))
+
+
+@numba.njit(cache=True, nogil=True)
+def _clear(cpacked, boxes, fraction, ax, ay, bx, by, spacing):  # type: ignore[no-untyped-def]
+    """The segment enters no threat core, sampled as ``Cores.first_hit`` samples it (``densify``)."""
+    n = 1
+    if math.isfinite(spacing):
+        n = max(1, math.ceil(math.hypot(bx - ax, by - ay) / spacing))
+    for k in range(n + 1):
+        t = k / n
+        x, y = ax + t * (bx - ax), ay + t * (by - ay)
+        for j in range(cpacked.shape[0]):
+            near = boxes[j, 0] <= x <= boxes[j, 2] and boxes[j, 1] <= y <= boxes[j, 3]
+            if near and kernels.threat_term(cpacked, j, x, y, fraction, False)[0] >= fraction:
+                return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _shortcut_kept(  # type: ignore[no-untyped-def]
+    pts, lam, packed, grid, indptr, indices, check, cpacked, boxes, fraction, spacing
+):  # fmt: skip
+    """``shortcut_kept`` compiled: from each kept point the farthest candidate first, and only until one passes."""
+    n = pts.shape[0]
+    w = np.ones(_SAMPLES)
+    for s in range(1, _SAMPLES - 1):
+        w[s] = 4.0 if s % 2 == 1 else 2.0
+    prefix = np.zeros(n)
+    for k in range(n - 1):
+        seg = _segment_cost(
+            packed, grid, indptr, indices, pts[k, 0], pts[k, 1], pts[k + 1, 0], pts[k + 1, 1], lam, w
+        )
+        prefix[k + 1] = prefix[k] + seg
+    keep = np.empty(n, dtype=np.int64)
+    keep[0] = 0
+    m = 1
+    i = 0
+    while i < n - 1:
+        best = i + 1
+        for j in range(min(n - 1, i + _WINDOW), i + 1, -1):
+            direct = _segment_cost(
+                packed, grid, indptr, indices, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1], lam, w
+            )
+            if direct > (prefix[j] - prefix[i]) * (1.0 + 1e-12):
+                continue
+            if not check or _clear(
+                cpacked, boxes, fraction, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1], spacing
+            ):
+                best = j
+                break
+        keep[m] = best
+        m += 1
+        i = best
+    return keep[:m].copy()
+
+
 def shortcut_kept(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
     """The indices of ``pts`` that ``shortcut`` keeps, first and last included.
 
     Greedy and forward-looking: which points are kept from index ``i`` on
-    depends only on ``pts[i:]``.
+    depends only on ``pts[i:]``.  From each kept point the candidates are
+    tried farthest first, and a candidate's ``J`` is computed only when it is
+    tried (compiled, where the field has a cull index and no zone is in the
+    cores): the first that costs no more and enters no core is the one the
+    whole window's evaluation would pick.
     """
     if len(pts) < 3:
         return np.arange(len(pts))
+    index = index_of(field)
+    if index is not None and (cores is None or not cores.zones):
+        grid = (index.origin[0], index.origin[1], index.cell, index.nx, index.ny)
+        check = cores is not None and len(cores.packed) > 0
+        cp = cores.packed if check and cores is not None else np.zeros((0, len(kernels.PACKED_COLUMNS)))
+        boxes = cores.boxes if check and cores is not None else np.zeros((0, 4))
+        fraction = float(cores.fraction) if cores is not None else 1.0
+        spacing = cores.min_spread_m / 4.0 if cores is not None else math.inf
+        out: np.ndarray = _shortcut_kept(
+            np.ascontiguousarray(pts, dtype=np.float64),
+            float(lam),
+            index.packed,
+            grid,
+            index.indptr,
+            index.indices,
+            check,
+            np.ascontiguousarray(cp),
+            np.ascontiguousarray(boxes),
+            fraction,
+            float(spacing),
+        )
+        return out
+    return _shortcut_kept_numpy(field, pts, lam, cores)
+
+
+def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
+    """``shortcut_kept`` with every candidate of a window evaluated at once (any field, zones included)."""
     seg = segment_costs(field, pts[:-1], pts[1:], lam)
     prefix = np.concatenate([[0.0], np.cumsum(seg)])
     keep = [0]
