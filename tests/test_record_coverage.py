@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 
 import pytest
-from pfp_clients.record.coverage import Counted, Coverage, describe
+from pfp_clients.record.coverage import Counted, Coverage, describe, describe_gaps, seq_gaps
 from pfp_clients.record.mcapfile import MissionWriter, read_record
 
 pytestmark = pytest.mark.unit
@@ -78,3 +78,15 @@ def test_the_verdict_is_in_the_file_metadata(tmp_path):
     rec = read_record(path)
     assert rec.coverage is not None
     assert rec.coverage["published"] == 2 and rec.coverage["missed_at_least"] == 1
+
+
+def test_states_missing_by_their_seq():
+    assert seq_gaps([1, 2, 3, 4]) == 0
+    assert seq_gaps([1, 2, 4, 5, 8]) == 3
+    assert seq_gaps([3, 4, 4, 5]) == 0  # a state recorded twice (plain and shard key) is not a gap
+    assert seq_gaps([10, 11, 13, 0, 1, 3]) == 2  # restarted at 0: each run counted on its own
+    assert seq_gaps([0, 1000, 2000, 3000]) is None  # a shared counter: gaps say nothing
+    line = describe_gaps({"u1": 0, "u2": 2, "u10": 1, "x": None})
+    assert line == "states: 3 missing by their seq (u2: 2, u10: 1)"
+    assert describe_gaps({"u1": 0}) == "states: none missing by their seq (1 units)"
+    assert "not counted" in describe_gaps({"x": None})

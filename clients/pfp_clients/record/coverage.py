@@ -18,10 +18,11 @@ times, and says what it found; the recorder does the asking.
 from __future__ import annotations
 
 import bisect
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["PLANNER_OUT", "Counted", "Coverage", "describe"]
+__all__ = ["PLANNER_OUT", "Counted", "Coverage", "describe", "describe_gaps", "seq_gaps"]
 
 # the key kinds a planner's msgs_out counts (keys.KeyKind values)
 PLANNER_OUT = frozenset({"unit_direction", "unit_mission", "event"})
@@ -97,3 +98,40 @@ def describe(cov: dict[str, Any]) -> str:
         f"while recording, {int(cov['recorded']):,} recorded (+{int(cov['recorded_at_the_edges'])} "
         f"at the edges): {missed}"
     )
+
+
+def seq_gaps(seqs: Sequence[int]) -> int | None:
+    """How many of a unit's states are missing between its first and last recorded ``seq``.
+
+    ``None`` when its seq does not count one by one (most steps other than 1: a load generator's
+    shared counter, a bridge's own numbering), so that gaps say nothing.  A unit that restarted
+    (its seq fell) is counted from the restart.
+    """
+    run: list[int] = []
+    missing, steps, ones = 0, 0, 0
+    for s in seqs:
+        if run and s < run[-1]:  # restarted: count the run so far, then the new one
+            missing += run[-1] - run[0] + 1 - len(set(run))
+            run = []
+        if run and s != run[-1]:
+            steps += 1
+            ones += s - run[-1] == 1
+        run.append(s)
+    if run:
+        missing += run[-1] - run[0] + 1 - len(set(run))
+    if steps and ones * 2 < steps:
+        return None
+    return missing
+
+
+def describe_gaps(gaps: dict[str, int | None], shown: int = 8) -> str:
+    """One line for people: the states missing by their seq, per unit (natural order given)."""
+    counted = {u: n for u, n in gaps.items() if n is not None}
+    if not counted:
+        return "states: no unit counts its seq one by one: gaps not counted"
+    short = {u: n for u, n in counted.items() if n}
+    if not short:
+        return f"states: none missing by their seq ({len(counted)} units)"
+    listed = ", ".join(f"{u}: {n}" for u, n in list(short.items())[:shown])
+    more = f", and {len(short) - shown} more units" if len(short) > shown else ""
+    return f"states: {sum(short.values())} missing by their seq ({listed}{more})"

@@ -52,6 +52,7 @@ class UnitSummary:
     length_m: float = 0.0
     exposure: float | None = None
     min_clearance_m: float = math.inf
+    seqs: list[int] = field(default_factory=list)  # its states' seq, as recorded
 
     @property
     def time_s(self) -> float | None:
@@ -116,6 +117,8 @@ def summarise(rec: Record, intensity: str = "peak") -> tuple[list[UnitSummary], 
             pos = d.get("position")
             if isinstance(pos, list) and len(pos) >= 2:
                 unit(k.id).track.append((t_s, float(pos[0]), float(pos[1])))
+            if isinstance(d.get("seq"), int):
+                unit(k.id).seqs.append(d["seq"])
         elif k.kind is keys.KeyKind.UNIT_DIRECTION:
             u = unit(k.id)
             status = str(d.get("status"))
@@ -215,7 +218,7 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
     Raises:
         InputError: a file cannot be written.
     """
-    from pfp_clients.record.coverage import describe
+    from pfp_clients.record.coverage import describe, describe_gaps, seq_gaps
     from pfp_service.render import plot_tracks
 
     rows, watch = summarise(rec, intensity)
@@ -223,6 +226,7 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
     say(f"mission {rec.mission}: {len(rows)} units, {len(watch.versions)} threat versions")
     if rec.coverage is not None:
         say(f"record: {describe(rec.coverage)}")
+    say(f"record: {describe_gaps({u.unit: seq_gaps(u.seqs) for u in rows if u.seqs})}")
     for line in _text(table):
         say(line)
     written: list[Path] = []
