@@ -69,6 +69,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="skip the goal storm's look-aheads and the contingency wave (in process, 1,000 units)",
     )
+    p.add_argument(
+        "--deliberation-only",
+        action="store_true",
+        help="only the goal storm's look-aheads and the contingency wave (about a minute)",
+    )
     add_check_arg(p)
 
 
@@ -492,6 +497,23 @@ def run(args: argparse.Namespace) -> int:
     machine = (
         f"{platform.machine()}, {platform.processor() or 'cpu'}, numba threads {numba.get_num_threads()}"
     )
+    if args.deliberation_only:
+        alone = storm_and_wave(100 if args.quick else STORM_UNITS)
+        mean = alone["lookahead_cpu_ms"]["mean"]
+        only = {
+            "goal storm: look-aheads' mean worker CPU <= 4 ms": mean is not None
+            and mean <= TARGET_LOOKAHEAD_MS,
+            "contingency wave, 1,000 units: World.apply <= 10 ms": alone["wave"]["apply_ms_median"]
+            <= TARGET_WAVE_MS,
+        }
+        if args.json:
+            print(json.dumps({"machine": machine, "deliberation": alone, "checks": only}, indent=2))
+        else:
+            print_storm_and_wave(alone)
+            print()
+            for name, ok in only.items():
+                print(f"  [{'ok' if ok else 'MISSED'}] {name}")
+        return exit_code(only.values(), args.check)
     if args.scale_only:
         only = scale_table(args.repeat, args.quick)
         if args.json:
