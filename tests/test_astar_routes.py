@@ -100,3 +100,19 @@ def test_the_compiled_shortcut_keeps_what_the_whole_window_evaluation_keeps(seed
         got = shortcut_kept(field, pts, LAMBDA, c)
         assert np.array_equal(got, _shortcut_kept_numpy(field, pts, LAMBDA, c)), seed
         assert got[0] == 0 and got[-1] == len(pts) - 1
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_core_checks_answer_what_the_cores_answer(seed: int) -> None:
+    from pfp_service.core.grid import polyline_clear, segment_hits
+
+    field = random_field(seed, 60)
+    rng = np.random.default_rng(seed + 100)
+    for fraction in (SEARCH_FRACTION, 0.5):
+        cores = Cores.of(field, fraction)
+        for steps in (rng.normal(1.5, 1.0, (60, 2)), rng.normal(0.3, 0.2, (200, 2))):
+            pts = np.cumsum(steps, axis=0)
+            assert np.array_equal(segment_hits(cores, pts), cores.segment_hits(pts)), seed
+            for k in range(0, len(pts) - 3, 7):  # pieces that miss and pieces that hit
+                piece = pts[k : k + 4]
+                assert polyline_clear(cores, piece) == (not cores.first_hit(piece)), (seed, k)

@@ -37,6 +37,7 @@ import numpy as np
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
+from pfp_service.core.grid import segment_hits
 from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
 __all__ = ["LazyRoute", "lazy_route"]
@@ -371,7 +372,7 @@ def lazy_route(
         pts = np.stack([x0 + h * (chain // ny), y0 + h * (chain % ny)], axis=1)
         if attempt == repairs:
             break
-        bad = np.flatnonzero(cores.segment_hits(pts)) if len(pts) >= 2 else np.zeros(0, dtype=np.int64)
+        bad = np.flatnonzero(segment_hits(cores, pts)) if len(pts) >= 2 else np.zeros(0, dtype=np.int64)
         if not len(bad):
             break
         dropped.extend((int(chain[b]), int(chain[b + 1])) for b in bad)

@@ -72,7 +72,7 @@ from pfp_service.core.escape_strategies import (
     global_route,
     rollout,
 )
-from pfp_service.core.grid import resample
+from pfp_service.core.grid import polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
@@ -585,13 +585,13 @@ class Escaper:
             (x0, y0), (x1, y1) = self.bounds
             if np.any((poly[:, 0] < x0) | (poly[:, 0] > x1) | (poly[:, 1] < y0) | (poly[:, 1] > y1)):
                 return "leaves the mission bounds", none
-        hit = tr.cores.first_hit(poly)
+        hit = "" if polyline_clear(tr.cores, poly) else tr.cores.first_hit(poly)
         if hit:
             return f"passes through {Cores.region(hit)}", none
         end = (float(poly[-1, 0]), float(poly[-1, 1]))
         n = int(min(20000, math.ceil(3.0 * tr.dist / tr.step) + 4 * tr.trap_window))
         after = rollout(tr.field, end, tr.goal, tr.gain, tr.step, tr.tolerance, n)
-        hit = tr.cores.first_hit(after)
+        hit = "" if polyline_clear(tr.cores, after) else tr.cores.first_hit(after)
         if hit:
             return f"descent after it passes through {Cores.region(hit)}", after
         d_end = math.hypot(tr.goal[0] - after[-1, 0], tr.goal[1] - after[-1, 1])

@@ -31,7 +31,16 @@ from pfp_service.core.cores import Cores
 from pfp_service.core.cull import cell_level, index_of
 from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
-__all__ = ["GridGraph", "Route", "resample", "segment_costs", "shortcut", "shortcut_kept"]
+__all__ = [
+    "GridGraph",
+    "Route",
+    "polyline_clear",
+    "resample",
+    "segment_costs",
+    "segment_hits",
+    "shortcut",
+    "shortcut_kept",
+]
 
 _KING = ((1, 0), (0, 1), (1, 1), (1, -1))
 _KNIGHT = ((2, 1), (1, 2), (2, -1), (1, -2))
@@ -323,11 +332,20 @@ def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | Non
 
 @numba.njit(cache=True, nogil=True)
 def _segment_cost(  # type: ignore[no-untyped-def]
-    packed, grid, indptr, indices, ax, ay, bx, by, lam, w
+    packed, grid, indptr, indices, ax, ay, bx, by, lam, w, limit
 ):  # fmt: skip
-    """``segment_costs`` of one segment, each sample's level from its cell of the index (``cull._cell_level``)."""
+    """``segment_costs`` of one segment, each sample's level from its cell of the index (``cull._cell_level``).
+
+    Past ``limit`` it stops early and answers ``inf``: every term is at least
+    zero, so the running sum (rounded up or down, never down past a smaller
+    sum) only grows, and the whole would exceed ``limit`` too.
+    """
     ox, oy, cell, nx, ny = grid
     dx, dy = bx - ax, by - ay
+    length = math.hypot(dx, dy)
+    if length > limit:
+        return math.inf
+    scale = lam * length / (3.0 * (_SAMPLES - 1))
     acc = 0.0
     for s in range(_SAMPLES):
         t = s * (1.0 / (_SAMPLES - 1))
@@ -341,7 +359,8 @@ def _segment_cost(  # type: ignore[no-untyped-def]
                 for p in range(indptr[c], indptr[c + 1]):
                     v += kernels.threat_term(packed, indices[p], x, y, 0.0, False)[0]
         acc += v * w[s]
-    length = math.hypot(dx, dy)
+        if length + scale * acc > limit * (1.0 + 1e-9):  # clearly past it, whatever the rounding
+            return math.inf
     return length + lam * length * acc / (3.0 * (_SAMPLES - 1))
 
 
@@ -362,6 +381,84 @@ def _clear(cpacked, boxes, fraction, ax, ay, bx, by, spacing):  # type: ignore[n
 
 
 @numba.njit(cache=True, nogil=True)
+def _segment_hits(cpacked, boxes, fraction, pts, spacing):  # type: ignore[no-untyped-def]
+    """Per segment of ``pts``: does it enter a core (sampled as ``Cores.segment_hits`` samples it)?"""
+    out = np.zeros(max(pts.shape[0] - 1, 0), dtype=np.bool_)
+    for k in range(pts.shape[0] - 1):
+        out[k] = not _clear(
+            cpacked, boxes, fraction, pts[k, 0], pts[k, 1], pts[k + 1, 0], pts[k + 1, 1], spacing
+        )
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _in_core(cpacked, boxes, fraction, x, y):  # type: ignore[no-untyped-def]
+    for j in range(cpacked.shape[0]):
+        near = boxes[j, 0] <= x <= boxes[j, 2] and boxes[j, 1] <= y <= boxes[j, 3]
+        if near and kernels.threat_term(cpacked, j, x, y, fraction, False)[0] >= fraction:
+            return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True)
+def _polyline_clear(cpacked, boxes, fraction, pts, spacing):  # type: ignore[no-untyped-def]
+    """No point of ``Cores.densify(pts)`` (the very points, computed as it computes them) lies in a core."""
+    m = pts.shape[0]
+    counts = np.ones(max(m - 1, 0), dtype=np.int64)
+    dense = False
+    if math.isfinite(spacing):
+        for k in range(m - 1):
+            d = math.hypot(pts[k + 1, 0] - pts[k, 0], pts[k + 1, 1] - pts[k, 1])
+            counts[k] = max(1, math.ceil(d / spacing))
+            dense = dense or counts[k] > 1
+    if not dense:  # densify gives the path itself
+        for k in range(m):  # noqa: SIM110 (compiled: no generators)
+            if _in_core(cpacked, boxes, fraction, pts[k, 0], pts[k, 1]):
+                return False
+        return True
+    if _in_core(cpacked, boxes, fraction, pts[0, 0], pts[0, 1]):
+        return False
+    for k in range(m - 1):
+        dx, dy = pts[k + 1, 0] - pts[k, 0], pts[k + 1, 1] - pts[k, 1]
+        for r in range(1, counts[k] + 1):
+            t = r / counts[k]
+            if _in_core(cpacked, boxes, fraction, pts[k, 0] + t * dx, pts[k, 1] + t * dy):
+                return False
+    return True
+
+
+def polyline_clear(cores: Cores, path: np.ndarray) -> bool:
+    """``not cores.first_hit(path)`` for the threat cores, compiled; ``False`` when zones are in (ask ``first_hit``)."""
+    if cores.zones:
+        return False
+    if not len(cores.packed):
+        return True
+    return bool(
+        _polyline_clear(
+            cores.packed,
+            cores.boxes,
+            float(cores.fraction),
+            np.ascontiguousarray(np.asarray(path, dtype=np.float64).reshape(-1, 2)),
+            float(cores.min_spread_m / 4.0),
+        )
+    )
+
+
+def segment_hits(cores: Cores, pts: np.ndarray) -> np.ndarray:
+    """``cores.segment_hits(pts)``, compiled with each sample tested only against the cores whose box holds it."""
+    if cores.zones or len(pts) < 2 or not len(cores.packed):
+        return cores.segment_hits(pts)
+    out: np.ndarray = _segment_hits(
+        cores.packed,
+        cores.boxes,
+        float(cores.fraction),
+        np.ascontiguousarray(pts, dtype=np.float64),
+        float(cores.min_spread_m / 4.0),
+    )
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
 def _shortcut_kept(  # type: ignore[no-untyped-def]
     pts, lam, packed, grid, indptr, indices, check, cpacked, boxes, fraction, spacing
 ):  # fmt: skip
@@ -373,7 +470,17 @@ def _shortcut_kept(  # type: ignore[no-untyped-def]
     prefix = np.zeros(n)
     for k in range(n - 1):
         seg = _segment_cost(
-            packed, grid, indptr, indices, pts[k, 0], pts[k, 1], pts[k + 1, 0], pts[k + 1, 1], lam, w
+            packed,
+            grid,
+            indptr,
+            indices,
+            pts[k, 0],
+            pts[k, 1],
+            pts[k + 1, 0],
+            pts[k + 1, 1],
+            lam,
+            w,
+            math.inf,
         )
         prefix[k + 1] = prefix[k] + seg
     keep = np.empty(n, dtype=np.int64)
@@ -383,10 +490,11 @@ def _shortcut_kept(  # type: ignore[no-untyped-def]
     while i < n - 1:
         best = i + 1
         for j in range(min(n - 1, i + _WINDOW), i + 1, -1):
+            limit = (prefix[j] - prefix[i]) * (1.0 + 1e-12)
             direct = _segment_cost(
-                packed, grid, indptr, indices, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1], lam, w
+                packed, grid, indptr, indices, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1], lam, w, limit
             )
-            if direct > (prefix[j] - prefix[i]) * (1.0 + 1e-12):
+            if direct > limit:
                 continue
             if not check or _clear(
                 cpacked, boxes, fraction, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1], spacing
