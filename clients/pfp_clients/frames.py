@@ -13,6 +13,7 @@ the planner's from its status before it sends anything, and then
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_planner_status, keys
 
-__all__ = ["Reframe", "learn_planner_origin", "planner_origin", "reframe", "shown"]
+__all__ = ["Reframe", "check_origin", "learn_planner_origin", "planner_origin", "reframe", "shown"]
 
 Point = tuple[float, float]
 
@@ -64,6 +65,36 @@ def reframe(mine: Origin | None, planner: Origin | None, mission: str, what: str
             f"start it with --origin {shown(mine)}, or leave origin out of the {what} file",
         )
     return Reframe(mine, planner)
+
+
+def check_origin(
+    session: Any, mission: str, mine: Origin, flag: str = "--origin", timeout_s: float = 1.0
+) -> str | None:
+    """A client that draws or converts with ``mine`` (the map, the TAK bridge) against the planner's own origin.
+
+    Such a client has no file of its own metres: its origin only turns the planner's metres into lat/lon
+    and back, so any origin but the planner's puts every position at the wrong place on the earth.
+
+    Returns:
+        ``None`` when a planner answered with the same origin; a line to log when none answered yet
+        (nothing could be checked), or when the planner has none (its metres are taken from ``mine``).
+
+    Raises:
+        InputError: at ``flag``, when the planner's origin differs (naming both, and how far apart).
+    """
+    answered, planner = planner_origin(session, mission, timeout_s)
+    if not answered:
+        return f"no planner of mission {mission!r} answered yet: {flag} {shown(mine)} is not checked against its origin"
+    if planner == mine:
+        return None
+    if planner is None:  # the planner works in plain metres: this client's origin says where they lie
+        return f"the planner of mission {mission!r} has no origin: its metres are taken from {flag} {shown(mine)}"
+    x, y = planner.to_local(mine.lat, mine.lon)
+    raise InputError(
+        flag,
+        f"{shown(mine)} differs from the origin of the planner of mission {mission!r}, {shown(planner)} "
+        f"({math.hypot(x, y):,.0f} m away): every position would be off by that much; use {flag} {shown(planner)}",
+    )
 
 
 def planner_origin(session: Any, mission: str, timeout_s: float = 1.0) -> tuple[bool, Origin | None]:

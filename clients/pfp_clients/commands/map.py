@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 from typing import Any
 
 from pfp_service.cli._common import add_session_args, positive_float, session_config
@@ -133,7 +134,13 @@ def run(args: argparse.Namespace) -> int:
     )
     conf = session_config(args)
     with SignalStop() as stopping, open_session(conf) as session:
-        if stopping.signalled:  # while the session opened
+        if opts.origin is not None and not stopping.signalled:  # drawn with another origin, all would be off
+            from pfp_clients.frames import check_origin
+
+            note = check_origin(session, opts.mission, opts.origin)
+            if note is not None:
+                print(f"pfp map: {note}", file=sys.stderr, flush=True)
+        if stopping.signalled:  # while the session opened, or the origin was checked
             return stopping.exit_code(0)
         code = asyncio.run(_serve(session, opts, stopping))
         stopping.install()  # the closed loop put the default handlers back; the session closes next
@@ -158,4 +165,6 @@ async def _serve(session: Any, opts: Any, stopping: SignalStop) -> int:
     loop = asyncio.get_running_loop()
     for sig in SIGNALS:
         loop.add_signal_handler(sig, signalled, sig)
+    if stopping.signalled:  # came before the loop's handlers were in place
+        stop.set()
     return await task

@@ -368,6 +368,11 @@ def run(
     with map_zenoh_errors("--connect"):
         session = zenoh.open(zenoh_conf)
     with session:
+        from pfp_clients.frames import check_origin
+
+        note = check_origin(session, settings.mission, settings.origin)  # InputError: another origin
+        if note is not None:
+            log.info("tak: %s", note)
         code = asyncio.run(_main(settings, urls, tls, session, stop or asyncio.Event(), ready, tombstones))
         _hold_signals()
     return code
