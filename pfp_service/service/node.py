@@ -75,6 +75,7 @@ from pfp_service.wire import (
     PlannerStatus,
     RejectedEvent,
     RestoredEvent,
+    UnitState,
     decode_goal,
     decode_mission,
     decode_threat,
@@ -99,6 +100,7 @@ TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world a
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
 PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
+KEY_CACHE = 16_384  # state key -> unit id, unit id -> direction key, remembered; past it, forgotten at once
 
 
 class _Write:
@@ -159,6 +161,9 @@ class PlannerNode:
         self._early: list[Any] = []  # states a waiter took while the loop idled, before the rings' rest
         self._shards: frozenset[int] = frozenset()
         self._direction_keys = keys.KeyOf(keys.KeyKind.UNIT_DIRECTION, cfg.mission)
+        # a unit's keys parsed or built once (a shard's state key took the full parse, ~5 us a state)
+        self._uid_of: dict[str, str] = {}
+        self._direction_of: dict[str, zenoh.KeyExpr] = {}
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
         self._desk = desk if desk is not None else preview_desk(cfg, clock)
 
@@ -253,17 +258,36 @@ class PlannerNode:
         if taken:
             self._wake.set()
 
-    def _state(self, sample: zenoh.Sample, received: float) -> None:
-        """One state from the ring (the loop thread): decoded, latest-wins per unit."""
+    def _state(self, sample: zenoh.Sample) -> tuple[str, UnitState] | None:
+        """One state from a ring (the loop thread), decoded; ``None``: rejected (an event says why)."""
         key = str(sample.key_expr)
         try:
-            uid = self._state_keys.id(key)
-            msg = decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
+            uid = self._uid_of.get(key)
+            if uid is None:
+                uid = self._state_keys.id(key)
+                if len(self._uid_of) >= KEY_CACHE:
+                    self._uid_of.clear()
+                self._uid_of[key] = uid
+            return uid, decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
         except InputError as err:
             self._push(InputRejected(key, err))
-            return
+            return None
+
+    def _states(self, samples: list[Any], received: float) -> None:
+        """States from the rings, decoded and queued latest-wins per unit, under one lock."""
+        got = [st for sample in samples if (st := self._state(sample)) is not None]
         with self._lock:
-            self._intake.state(uid, msg, received)
+            for uid, msg in got:
+                self._intake.state(uid, msg, received)
+
+    def _direction_key(self, unit: str) -> zenoh.KeyExpr:
+        key = self._direction_of.get(unit)
+        if key is None:
+            key = zenoh.KeyExpr(self._direction_keys.key(unit))
+            if len(self._direction_of) >= KEY_CACHE:
+                self._direction_of.clear()
+            self._direction_of[unit] = key
+        return key
 
     def _goal_input(self, key: str, delete: bool, payload: bytes) -> Input:
         try:
@@ -428,9 +452,10 @@ class PlannerNode:
 
     def _unring(self, name: str) -> None:
         sub, ring, armed = self._rings.pop(name)
-        now = self.clock()
+        left = []
         while (sample := ring.try_recv()) is not None:  # what it holds still counts
-            self._state(sample, now)
+            left.append(sample)
+        self._states(left, self.clock())
         with contextlib.suppress(Exception):  # already gone with the session
             sub.undeclare()
         armed.set()  # its waiter, if parked, finds the ring closed and ends
@@ -471,10 +496,7 @@ class PlannerNode:
         """Decode what the rings hold (at most ``STATE_RING`` each), latest-wins per unit."""
         now = self.clock()
         with self._lock:
-            early, self._early = self._early, []
-        for sample in early:  # taken by a waiter before the rest of its ring: first
-            self._state(sample, now)
-        got = len(early)
+            samples, self._early = self._early, []  # taken by a waiter before the rest of its ring: first
         for _sub, ring, _armed in self._rings.values():
             n = 0
             while n < STATE_RING:
@@ -482,9 +504,10 @@ class PlannerNode:
                 if sample is None:
                     break
                 n += 1
-                self._state(sample, now)
-            got += n
-        return got
+                samples.append(sample)
+        if samples:
+            self._states(samples, now)
+        return len(samples)
 
     def _loop(self) -> None:
         """Tick at most every ``MIN_TICK_S`` while states come; idle, sleep until woken (no polling)."""
@@ -541,7 +564,7 @@ class PlannerNode:
             self._trim.forgot(len(forgotten), now)
         self._trim.due(now)
         for d in out.directions:
-            self._put(self._direction_keys.key(d.unit), encode(d), direction=True)
+            self._put(self._direction_key(d.unit), encode(d), direction=True)
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
@@ -611,7 +634,7 @@ class PlannerNode:
             w.query.drop()
 
     # -- output -----------------------------------------------------------------------
-    def _put(self, key: str, payload: bytes, direction: bool = False) -> None:
+    def _put(self, key: str | zenoh.KeyExpr, payload: bytes, direction: bool = False) -> None:
         if direction:
             # not express: Zenoh batches a tick's directions. Measured on loopback, an express put
             # costs the loop 20-26 us and a batched one 4.5-5.5 us; and express bursts overflowed
