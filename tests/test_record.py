@@ -221,3 +221,35 @@ def test_bad_record_files_are_one_line_exit_2(tmp_path):
     assert "Traceback" not in r.stderr
     r = run_pfp("record", str(tmp_path / "x.txt"))
     assert r.returncode == 2 and "x.txt: a record's name ends in .mcap" in r.stderr
+
+
+@pytest.mark.proc
+def test_the_record_bench_counts_every_message_with_the_recording_planner_file(tmp_path):
+    """A small load through a planner given examples/zenoh-planner-recording.json5: nothing lost, and
+    the record's own verdict agrees with the bench's count."""
+    cmd = [
+        sys.executable,
+        "-m",
+        "pfp_clients.record.bench",
+        "--units",
+        "40",
+        "--rate",
+        "5",
+        "--duration",
+        "3",
+    ]
+    r = subprocess.run(
+        [*cmd, "--planner-zenoh-config", str(ROOT / "examples" / "zenoh-planner-recording.json5")],
+        cwd=ROOT, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    res = json.loads(r.stdout)
+    assert res["states_sent"] > 100 and res["states_recorded"] == res["states_sent"]
+    assert res["planner_msgs_out"] > 0 and res["lost_planner_out"] == 0
+    assert res["directions_only_the_record_lacks"] == 0
+    cov = res["record_coverage"]
+    assert cov["counted"] and cov["missed_at_least"] == 0 and cov["published"] >= res["planner_msgs_out"]
+    bad = subprocess.run([*cmd, "--planner-zenoh-config", str(tmp_path / "nope.json5")],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert bad.returncode == 2 and "--planner-zenoh-config: no such file" in bad.stderr
+    assert "Traceback" not in bad.stderr
