@@ -42,7 +42,16 @@ from pfp_service.bench.roundtrip import _client
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.wire import keys
 
-__all__ = ["SCENARIOS", "add_arguments", "bombs", "run", "storm", "tree_pss_mb", "whatifs"]
+__all__ = [
+    "SCENARIOS",
+    "add_arguments",
+    "bombs",
+    "run",
+    "storm",
+    "tree_pss_by_process",
+    "tree_pss_mb",
+    "whatifs",
+]
 
 PROBE = "live-1"
 ANSWER_S = 5.0  # the bars: every preview answered within this
@@ -111,16 +120,21 @@ def _tree(pid: int) -> list[int]:
 
 def tree_pss_mb(pid: int) -> float:
     """The PSS of ``pid`` and all its descendants, in MB (``/proc/*/smaps_rollup``)."""
-    total_kb = 0
+    return sum(tree_pss_by_process(pid).values())
+
+
+def tree_pss_by_process(pid: int) -> dict[int, float]:
+    """The PSS of ``pid`` and of each of its descendants, in MB, by process id."""
+    out: dict[int, float] = {}
     for p in _tree(pid):
         try:
             for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines():
                 if line.startswith("Pss:"):
-                    total_kb += int(line.split()[1])
+                    out[p] = int(line.split()[1]) / 1024
                     break
         except OSError:
             continue
-    return total_kb / 1024
+    return out
 
 
 class _Probe:
