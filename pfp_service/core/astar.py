@@ -190,6 +190,10 @@ def _astar(
     hval[0] = src
     size = 1
     m = offsets.shape[0]
+    steps = np.empty((2 * m, 2), dtype=np.int64)
+    for o in range(2 * m):
+        sign = 1 if o < m else -1
+        steps[o, 0], steps[o, 1] = sign * offsets[o % m, 0], sign * offsets[o % m, 1]
     expanded = 0
     while size > 0:
         u = hval[0]
@@ -216,52 +220,46 @@ def _astar(
             break
         i, j = u // ny, u % ny
         gu = g[u]
+        # the tiles this node's edges read, filled once here (its edges reach two cells)
+        for ti in range(max(0, 2 * i - 4) // _TILE, min(fx - 1, 2 * i + 4) // _TILE + 1):
+            for tk in range(max(0, 2 * j - 4) // _TILE, min(fy - 1, 2 * j + 4) // _TILE + 1):
+                if not fdone[ti, tk]:
+                    _fill_level(packed, lbox, luse, x0, y0, hh, lfloor, fine, ti, tk)
+                    fdone[ti, tk] = True
+        if check:
+            for ti in range(max(0, 4 * i - 8) // _TILE, min(bx - 1, 4 * i + 8) // _TILE + 1):
+                for tk in range(max(0, 4 * j - 8) // _TILE, min(by - 1, 4 * j + 8) // _TILE + 1):
+                    if not bdone[ti, tk]:
+                        _fill_cores(cpacked, cbox, cuse, x0, y0, hq, fraction, blocked, ti, tk)
+                        bdone[ti, tk] = True
+        lv0 = fine[2 * i, 2 * j]
         for o in range(2 * m):
-            sign = 1 if o < m else -1
-            di, dj = sign * offsets[o % m, 0], sign * offsets[o % m, 1]
+            di, dj = steps[o, 0], steps[o, 1]
             ti, tj = i + di, j + dj
             if ti < 0 or ti >= nx or tj < 0 or tj >= ny:
                 continue
             v = ti * ny + tj
             if closed[v]:
                 continue
-            if check:
-                shut = False
-                for q in range(4):  # the target node, then the quarter, mid and three-quarter points
-                    pi, pk = (4 * ti, 4 * tj) if q == 0 else (4 * i + q * di, 4 * j + q * dj)
-                    ci, ck = pi // _TILE, pk // _TILE
-                    if not bdone[ci, ck]:
-                        _fill_cores(cpacked, cbox, cuse, x0, y0, hq, fraction, blocked, ci, ck)
-                        bdone[ci, ck] = True
-                    if blocked[pi, pk]:
-                        shut = True
-                        break
-                if shut:
-                    continue
-            gone = False
-            for d in range(dropped.shape[0]):
-                if (dropped[d, 0] == u and dropped[d, 1] == v) or (dropped[d, 0] == v and dropped[d, 1] == u):
-                    gone = True
-                    break
-            if gone:
+            if check and (
+                blocked[4 * ti, 4 * tj]
+                or blocked[4 * i + di, 4 * j + dj]
+                or blocked[4 * i + 2 * di, 4 * j + 2 * dj]
+                or blocked[4 * i + 3 * di, 4 * j + 3 * dj]
+            ):
                 continue
-            lv0 = 0.0
-            lv1 = 0.0
-            lv2 = 0.0
-            for q in range(3):  # the ends and the midpoint, on the half-cell lattice
-                pi, pk = (
-                    (2 * i, 2 * j) if q == 0 else (2 * i + di, 2 * j + dj) if q == 1 else (2 * ti, 2 * tj)
-                )
-                ci, ck = pi // _TILE, pk // _TILE
-                if not fdone[ci, ck]:
-                    _fill_level(packed, lbox, luse, x0, y0, hh, lfloor, fine, ci, ck)
-                    fdone[ci, ck] = True
-                if q == 0:
-                    lv0 = fine[pi, pk]
-                elif q == 1:
-                    lv1 = fine[pi, pk]
-                else:
-                    lv2 = fine[pi, pk]
+            if dropped.shape[0]:
+                gone = False
+                for d in range(dropped.shape[0]):
+                    if (dropped[d, 0] == u and dropped[d, 1] == v) or (
+                        dropped[d, 0] == v and dropped[d, 1] == u
+                    ):
+                        gone = True
+                        break
+                if gone:
+                    continue
+            lv1 = fine[2 * i + di, 2 * j + dj]
+            lv2 = fine[2 * ti, 2 * tj]
             ln = h * math.sqrt(di * di + dj * dj)
             cost = gu + (ln + lam * (ln * (lv0 + 4.0 * lv1 + lv2) / 6.0))
             if cost >= g[v]:
