@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pfp_service.core import Threat, ThreatField
-from pfp_service.core.astar import lazy_route
+from pfp_service.core.astar import cell_ladder, clear_lattices, lazy_route
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.escape_strategies import global_route
 from pfp_service.core.grid import GridGraph
@@ -35,13 +35,23 @@ def random_field(seed: int, n: int = 30) -> ThreatField:
     return ThreatField(threats)
 
 
+def snapped(box, cell):  # the lattice lazy_route searches for this box and cell, as a GridGraph box
+    _, h = cell_ladder(cell)
+    (x0, y0), (x1, y1) = box
+    i0, k0 = math.ceil(x0 / h), math.ceil(y0 / h)
+    return ((i0 * h, k0 * h), (math.floor(x1 / h) * h, math.floor(y1 / h) * h)), h
+
+
 @pytest.mark.parametrize("seed", range(8))
 @pytest.mark.parametrize("cell", [1.0, 2.5])
 def test_lazy_a_star_costs_what_dijkstra_on_the_whole_grid_costs(seed: int, cell: float) -> None:
     field = random_field(seed)
     cores = Cores.of(field, SEARCH_FRACTION)
-    grid = GridGraph(field, BOX, cores=cores, cell_m=cell)
+    box, h = snapped(BOX, cell)
+    assert h <= cell and h > cell / 1.1  # the ladder's rung at or just under the asked cell
+    grid = GridGraph(field, box, cores=cores, cell_m=h)
     src, dst = grid.cell_of(0.0, 0.0), grid.cell_of(*GOAL)
+    clear_lattices()
     lazy = lazy_route(field, BOX, cores, cell, (0.0, 0.0), GOAL, LAMBDA, 0)
     if not (grid.open[src] and grid.open[dst]):
         assert lazy is None
@@ -57,15 +67,23 @@ def test_lazy_a_star_costs_what_dijkstra_on_the_whole_grid_costs(seed: int, cell
     ij = np.stack([lazy.nodes // grid.ny, lazy.nodes % grid.ny], axis=1)
     steps = {tuple(sorted(map(abs, d))) for d in np.diff(ij, axis=0).tolist()}
     assert steps <= {(0, 1), (1, 1), (1, 2)}
-    assert np.array_equal(lazy.points, grid.nodes[lazy.nodes])
+    assert np.allclose(lazy.points, grid.nodes[lazy.nodes], rtol=0, atol=1e-9)
     # and it touched less than the whole grid
     assert 0 < lazy.expanded < len(grid.nodes)
+    # a second search under the field reads the kept lattice: the same answer
+    again = lazy_route(field, BOX, cores, cell, (0.0, 0.0), GOAL, LAMBDA, 0)
+    assert again is not None and again.cost == lazy.cost and np.array_equal(again.nodes, lazy.nodes)
+    # and after a search over another box first (the lattice grown, filled elsewhere): the same answer
+    clear_lattices()
+    lazy_route(field, ((40.0, -60.0), (200.0, 60.0)), cores, cell, (50.0, 0.0), (150.0, 0.0), LAMBDA, 0)
+    third = lazy_route(field, BOX, cores, cell, (0.0, 0.0), GOAL, LAMBDA, 0)
+    assert third is not None and third.cost == lazy.cost and np.array_equal(third.nodes, lazy.nodes)
 
 
 def test_lazy_a_star_leaves_a_unit_in_a_core_to_the_whole_grid() -> None:
     field = random_field(1)
     cores = Cores.of(field, SEARCH_FRACTION)
-    grid = GridGraph(field, BOX, cores=cores, cell_m=1.0)
+    grid = GridGraph(field, BOX, cores=cores, cell_m=1.0)  # 1 m is on the ladder, BOX on its lattice
     shut = grid.nodes[np.flatnonzero(~grid.open)[0]]
     assert lazy_route(field, BOX, cores, 1.0, (float(shut[0]), float(shut[1])), GOAL, LAMBDA, 0) is None
     assert lazy_route(field, BOX, cores, 1.0, (0.0, 0.0), (float(shut[0]), float(shut[1])), LAMBDA, 0) is None

@@ -90,7 +90,7 @@ def test_a_platoon_walks_one_search_and_each_route_is_as_good_as_its_own():
         assert path_cost(b, moved) <= (1.0 + TOLERANCE) * path_cost(mine[k], field), (SEED, k)
 
 
-def test_a_lone_unit_gets_exactly_the_route_its_own_search_gave():
+def test_a_lone_unit_gets_a_route_as_good_as_its_own_whole_grid_search_gave():
     field = ThreatField(trap_rich())
     (tr,) = traps(field, platoon(1))
     got = global_route(tr, RouteCache())
@@ -109,7 +109,10 @@ def test_a_lone_unit_gets_exactly_the_route_its_own_search_gave():
     pts = np.concatenate([[[tr.x, tr.y]], route.points, [GOAL]])
     pts = pts[np.concatenate([[True], np.any(np.diff(pts, axis=0) != 0.0, axis=1)])]
     want = resample(shortcut(field, pts, LAMBDA, search), tr.step)
-    assert isinstance(got, np.ndarray) and np.array_equal(got, want)
+    # A* searches the field's lattice at the ladder's cell at or just under this one (astar.cell_ladder)
+    assert isinstance(got, np.ndarray)
+    assert path_cost(got, field) <= (1.0 + TOLERANCE) * path_cost(want, field), SEED
+    assert not search.first_hit(got) and np.array_equal(got[-1], GOAL)
 
 
 def test_a_new_field_never_uses_an_old_fields_search():

@@ -14,10 +14,13 @@ key holds the field by a weak reference, which equals another only while both
 fields live (identity), so a gone field's key never matches a new field's.
 
 Box and cell.  A request (``Ask``) names the box and the cell its own search
-would use (``route_cell``).  On a miss the grid is built for the request,
-tight, exactly as an uncached search would be, used for that ask and not kept:
-a lone unit pays nothing extra, gets what it got before, and takes no room
-from a group's grid.  Once a goal is known to be shared (a second unit, by
+would use (``route_cell``).  A lone unit's miss (its goal not known to be
+shared) builds no grid: A* (``astar.lazy_route``) searches from the unit to
+the goal on the field's lattice at the cell at or just under the asked one
+(``astar.cell_ladder``), filling levels and cores only where it looks and
+keeping them for the next lone search under the field; it falls back to the
+tight grid (used for that ask and not kept) where A* does not apply (zones,
+a unit or goal in a core, no path).  Once a goal is known to be shared (a second unit, by
 ``Ask.unit``, asked for it under this field or an earlier one) a miss builds a
 grid for everyone: ``ROOM`` of the box's span to spare on every side, so the
 rest of the group lands inside it, at ``1 / REFINE`` of the asked cell, since
