@@ -25,11 +25,11 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from pfp_service.service.log import get_logger
-from pfp_service.service.workers import ORPHAN_POLL_S
 
-__all__ = ["boot", "forget_fields", "retire", "world_field", "world_threats", "zygote"]
+__all__ = ["ORPHAN_POLL_S", "boot", "forget_fields", "retire", "world_field", "world_threats", "zygote"]
 
 log = get_logger("workers")
+ORPHAN_POLL_S = 0.5  # a fresh-interpreter worker checks its parent this often
 
 # -- in the worker processes -------------------------------------------------------------
 _WORLD: dict[str, Any] = {"version": None, "threats": (), "fields": {}}

@@ -56,6 +56,7 @@ from multiprocessing.connection import Connection
 from typing import Any, Literal
 
 from pfp_service.service.log import get_logger
+from pfp_service.service.workerproc import ORPHAN_POLL_S, zygote
 
 __all__ = [
     "KILL_GRACE_S",
@@ -69,7 +70,6 @@ __all__ = [
 ]
 
 log = get_logger("workers")
-ORPHAN_POLL_S = 0.5
 KILL_GRACE_S = 0.25  # a task this long past its budget is killed with its worker
 READY_TIMEOUT_S = 180.0  # a worker not warm by then is started again
 OutcomeKind = Literal["done", "error", "memory", "killed", "died", "late", "closed"]
@@ -148,8 +148,6 @@ class ForkServer:
             try:
                 ours.close()
                 os.close(life_w)
-                from pfp_service.service.workerproc import zygote
-
                 zygote(theirs, life_r)
                 code = 0
             finally:
