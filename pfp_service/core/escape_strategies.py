@@ -280,6 +280,9 @@ def route_cell(span_m: float, s_min_m: float, fine: bool = True) -> float:
     return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
 
 
+_WIDEST: weakref.WeakKeyDictionary[ThreatField, float] = weakref.WeakKeyDictionary()
+
+
 def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoCandidate:
     """The whole way from the trap point to the goal, or why there is none.
 
@@ -303,7 +306,10 @@ def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoC
                 f"no route to the goal avoids the {_what(tr)}: the {'unit' if inside else 'goal'} is "
                 f"walled in{_walls(tr, known, walled)} (local grid of {known.cell_m:.3g} m cells)"
             )
-    spreads = [t.spread() for t in tr.field.threats] or [tr.step]
+    widest = _WIDEST.get(tr.field)
+    if widest is None:  # a field is immutable: its widest threat is found once
+        widest = _WIDEST[tr.field] = max((t.spread() for t in tr.field.threats), default=0.0)
+    spreads = [widest] if tr.field.threats else [tr.step]
     search = Cores.of(tr.field, SEARCH_FRACTION)
     s_min = tr.cores.min_spread_m if math.isfinite(tr.cores.min_spread_m) else tr.dist
     pad = max(0.3 * tr.dist, 3.0 * max(spreads))
