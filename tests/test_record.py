@@ -137,8 +137,9 @@ def test_record_replay_report_a_mission(tmp_path):
     counts = _validate(rec)
     assert counts["unit_state"] > 20 and counts["unit_direction"] > 20  # a loaded planner may skip late ones
     assert counts["threat"] == 3 and counts["unit_goal"] == 2
-    # nothing the planner sent was lost: every message it counted is in the record
-    assert sum(counts.get(k, 0) for k in PLANNER_OUT) == after - before, counts
+    # nothing the planner sent was lost: every message it counted is in the record (the record runs on
+    # a little after `after` was asked, so it may hold a late push more; its own verdict below is exact)
+    assert sum(counts.get(k, 0) for k in PLANNER_OUT) >= after - before, counts
     # and the record says so itself, from the planner's counters it asked at its start and end
     from pfp_clients.record.mcapfile import read_record
 
@@ -176,6 +177,9 @@ def test_record_replay_report_a_mission(tmp_path):
     r = run_pfp("report", str(rec), "--out", str(stem), timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "unit  status" in r.stdout
+    # the record says what it lacks: nothing of the planner's, no state of either unit (fleet counts seq one by one)
+    assert "record: planner outputs: " in r.stdout and "none missed" in r.stdout, r.stdout[:2000]
+    assert "record: states: none missing by their seq (2 units)" in r.stdout, r.stdout[:2000]
     rows = list(csv.reader((tmp_path / "aar.csv").open()))
     assert rows[0][:4] == ["unit", "status", "time s", "path m"]
     by_unit = {row[0]: row for row in rows[1:]}
