@@ -95,6 +95,13 @@ def run_record(args: argparse.Namespace) -> int:
         flush=True,
     )
     print(f"pfp record: {describe(stats.coverage)}", flush=True)
+    if int(stats.coverage.get("missed_at_least", 0)) > 0:  # the router dropped them on this link (DROP)
+        print(
+            "pfp record: a planner's router dropped these on the way here; a planner or router with "
+            "examples/zenoh-planner-recording.json5 (deeper transmit queues) records without loss "
+            "(docs/clients.md, the mission record)",
+            flush=True,
+        )
     sys.stdout.flush()
     return stopping.exit_code(0)
 
