@@ -1,25 +1,31 @@
-"""One unit's route on ``grid.GridGraph``'s lattice by A*, with the lattice's levels and cores computed lazily.
+"""One unit's route on the field's lattice by A*, with its levels and cores computed lazily and kept.
 
 A lone unit's route search (``routes.RouteCache`` when its goal is not
 shared) needs one path, not a cost-to-go from every node: building the whole
 grid (its level raster, its core raster, every edge) and running Dijkstra
-over all of it cost about 20 ms a look-ahead.  ``lazy_route`` searches the
-*same graph*, node for node and edge for edge, but from the unit to the
-goal by A* and computes only what the search touches:
+over all of it cost about 20 ms a look-ahead.  ``lazy_route`` searches a
+``grid.GridGraph`` graph (16-connected, the same edges and edge costs) from
+the unit to the goal by A*, and computes only what the search touches:
 
-* the levels at half a cell and the cores at a quarter cell are filled tile by
-  tile (``_TILE`` lattice points a side) the first time the search reads a
-  point of the tile, by the rasters' own rules (``kernels.raster_level``, the
-  cores' ``_raster``), each threat over its own box clipped to the tile, the
-  threats in the same order: every value equals the whole raster's;
+* the grid is the field's *lattice* for the cell ladder's rung at or just
+  under the asked cell (``cell_ladder``: ``2 ** (k / LADDER)`` m, at most 9 %
+  finer), its nodes at whole multiples of the cell, inside the asked box;
+* the levels at half a cell and the cores at a quarter cell are filled tile
+  by tile (``_TILE`` lattice points a side) the first time a search reads the
+  tile, by the rasters' own rules (``kernels.raster_level``, the cores'
+  ``_raster``), and kept per field and rung (``_KEPT`` lattices, at most
+  ``_MAX_POINTS`` levels each), so the searches under one field share them.
+  A value depends only on its absolute lattice index, never on what was
+  filled before, so a preview and the live unit find the same route;
 * an edge's length and Simpson exposure are computed when its node is
   expanded, by ``grid._edges``' formula.
 
 The heuristic is the straight-line distance to the goal: an edge costs
 ``length + lambda * exposure`` with exposure never negative, so it is a lower
 bound (and consistent), and the path found is a cheapest path of the graph,
-as Dijkstra's is (where two paths cost exactly the same, either may come).
-A search stays within the ellipse of cost ``J*`` round the unit and the goal.
+as Dijkstra's would be (where two paths cost exactly the same, either may
+come).  A search stays within the ellipse of cost ``J*`` round the unit and
+the goal.
 
 ``lazy_route`` answers ``None`` where it does not apply, and the caller
 builds the whole grid instead: keep-out zones in the search (their raster is
@@ -94,10 +100,15 @@ def _fill_level(
     ti: int,
     tk: int,
 ) -> None:
-    """The levels of tile ``(ti, tk)`` of ``out``, as ``kernels.raster_level`` sums them (threat by threat)."""
+    """The levels of tile ``(ti, tk)`` of ``out``, as ``kernels.raster_level`` sums them (threat by threat).
+
+    Summed apart and then stored, so two searches filling one tile at once
+    (threads, the GIL released) store the same values rather than adding twice.
+    """
     nx, ny = out.shape  # out[0, 0] is lattice point (base_i, base_k), at (base_i h, base_k h)
     a0, a1 = base_i + ti * _TILE, base_i + min(nx - 1, ti * _TILE + _TILE - 1)
     b0, b1 = base_k + tk * _TILE, base_k + min(ny - 1, tk * _TILE + _TILE - 1)
+    tile = np.zeros((a1 - a0 + 1, b1 - b0 + 1))
     for j in range(packed.shape[0]):
         if not use[j]:
             continue
@@ -106,7 +117,8 @@ def _fill_level(
         for i in range(i0, i1 + 1):
             x = i * h
             for k in range(k0, k1 + 1):
-                out[i - base_i, k - base_k] += kernels.threat_term(packed, j, x, k * h, floor, False)[0]
+                tile[i - a0, k - b0] += kernels.threat_term(packed, j, x, k * h, floor, False)[0]
+    out[a0 - base_i : a1 - base_i + 1, b0 - base_k : b1 - base_k + 1] = tile
 
 
 @numba.njit(cache=True, nogil=True)
