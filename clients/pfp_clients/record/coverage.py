@@ -92,7 +92,7 @@ def describe(cov: dict[str, Any]) -> str:
     if not cov.get("counted"):
         return f"planner outputs not counted: {cov.get('why', 'unknown')}"
     lo, hi = int(cov["missed_at_least"]), int(cov["missed_at_most"])
-    missed = "none missed" if hi == 0 else (f"{lo} missed" if lo == hi else f"{lo} to {hi} missed")
+    missed = "none missed" if hi == 0 else (f"{lo:,} missed" if lo == hi else f"{lo:,} to {hi:,} missed")
     return (
         f"planner outputs: {int(cov['published']):,} published by {int(cov['planners'])} planner(s) "
         f"while recording, {int(cov['recorded']):,} recorded (+{int(cov['recorded_at_the_edges'])} "
