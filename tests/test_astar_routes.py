@@ -70,6 +70,13 @@ def test_lazy_a_star_costs_what_dijkstra_on_the_whole_grid_costs(seed: int, cell
     assert np.allclose(lazy.points, grid.nodes[lazy.nodes], rtol=0, atol=1e-9)
     # and it touched less than the whole grid
     assert 0 < lazy.expanded < len(grid.nodes)
+    # its corners: first and last, and between two corners one straight run of equal steps
+    c = lazy.corners
+    assert c[0] == 0 and c[-1] == len(lazy.nodes) - 1 and np.all(np.diff(c) > 0)
+    d = np.diff(ij, axis=0)
+    for a, b in zip(c[:-1], c[1:]):
+        assert (d[a:b] == d[a]).all()
+    assert all((d[k] != d[k - 1]).any() for k in c[1:-1])
     # a second search under the field reads the kept lattice: the same answer
     again = lazy_route(field, BOX, cores, cell, (0.0, 0.0), GOAL, LAMBDA, 0)
     assert again is not None and again.cost == lazy.cost and np.array_equal(again.nodes, lazy.nodes)

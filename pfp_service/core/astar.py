@@ -393,11 +393,18 @@ def cell_ladder(cell_m: float) -> tuple[int, float]:
 class LazyRoute:
     """A path found by ``lazy_route``: its nodes, their coordinates, its cost and the searches' work."""
 
-    __slots__ = ("cost", "expanded", "nodes", "points", "searches")
+    __slots__ = ("corners", "cost", "expanded", "nodes", "points", "searches")
 
     def __init__(
-        self, nodes: np.ndarray, points: np.ndarray, cost: float, expanded: int, searches: int
+        self,
+        nodes: np.ndarray,
+        points: np.ndarray,
+        cost: float,
+        expanded: int,
+        searches: int,
+        corners: np.ndarray,
     ) -> None:
+        self.corners = corners  # indices of the nodes where the path turns, first and last included
         self.nodes = nodes
         self.points = points
         self.cost = cost
@@ -461,4 +468,8 @@ def lazy_route(
         if not len(bad):
             break
         dropped.extend((int(chain[b]), int(chain[b + 1])) for b in bad)
-    return LazyRoute(chain, pts, float(cost), expanded, attempt + 1)
+    ij = np.stack([chain // ny, chain % ny], axis=1)
+    step = np.diff(ij, axis=0)
+    turn = np.flatnonzero(np.any(step[1:] != step[:-1], axis=1)) + 1  # where the heading changes
+    corners = np.concatenate([[0], turn, [len(chain) - 1]]) if len(chain) > 1 else np.zeros(1)
+    return LazyRoute(chain, pts, float(cost), expanded, attempt + 1, corners.astype(np.int64))

@@ -267,7 +267,9 @@ class RouteCache:
                     self._lazy += 1
                     self._expanded += lazy.expanded
                     route = Route(lazy.points, lazy.cost, nodes=lazy.nodes)
-                    _, pts, tail = _joined(ask, lazy.nodes, lazy.points, None)
+                    # a straight run of grid edges is one segment to the shortcut (the same way, fewer points)
+                    corners = lazy.corners
+                    _, pts, tail = _joined(ask, lazy.nodes[corners], lazy.points[corners], None)
                     return Found(route, None, _shortcut(ask, pts, tail), False)
             entry = self._build(ask, slot, group)
         else:
