@@ -45,6 +45,9 @@ report["killed"] = run(time.sleep, (30.0,), budget_s=0.2)[0]
 report["memory"] = run(bytearray, (1 << 31,))[0]
 report["after"] = run(math.hypot, (6.0, 8.0))
 report["replaced"] = pool.replaced
+deadline = time.monotonic() + 30
+while (pool.ready_slots() < 2 or len(pool.pids()) < 3) and time.monotonic() < deadline:
+    time.sleep(0.02)  # the replacements ready (niced and capped before they say so), and a new spare
 report["live"] = pool.pids()
 print(json.dumps(report), flush=True)
 time.sleep(600)
