@@ -354,8 +354,8 @@ class _Lattice:
         return int(self.fine.nbytes + self.blocked.nbytes + self.fdone.nbytes + self.bdone.nbytes)
 
 
-_MAX_POINTS = 1 << 19  # a kept lattice: at most this many levels (4 MB) and 4x as many core flags (2 MB)
-_KEPT = 3  # lattices kept per process, the least recently used dropped first
+_MAX_POINTS = 1 << 18  # a kept lattice: at most this many levels (2 MB) and 4x as many core flags (1 MB)
+_KEPT = 6  # lattices kept per process, the least recently used dropped first (a storm meets 4-5 rungs)
 _LATTICES: OrderedDict[tuple[weakref.ref[ThreatField], float, int], _Lattice] = OrderedDict()
 
 
