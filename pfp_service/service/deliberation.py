@@ -30,10 +30,11 @@ shares only the machine's cores.  The processes are a ``WorkerPool``
 ``CHUNK_RUN_S`` after it started is killed with its worker (its jobs are
 asked again later), and each worker's memory is bounded.
 
-The workers start with the first job, not with the planner (an idle
-worker is ~90 MB of PSS): the first goal's look-ahead waits a few seconds
-for one to warm, and a job still waiting at its deadline is answered
-unrun and asked again, as under any backlog.  One worker by default
+The workers start with the first job, not with the planner: they are
+forked from the planner's fork server (``workers.ForkServer``), warm and
+sharing its pages, in milliseconds (a fresh interpreter, where no fork
+server runs, takes seconds); a job still waiting at its deadline is
+answered unrun and asked again, as under any backlog.  One worker by default
 (``deliberation_workers``): on a 2-core machine the loop and the Zenoh
 threads need a core, the preview workers share the other.
 """
