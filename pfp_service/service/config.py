@@ -86,6 +86,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     liveliness_debounce_s: NonNegative = 2.0
     lookahead: int = 5
     tick_s: Positive = 0.05
+    loop_trace: str | None = None  # a file: the planning loop's time, a JSON line a second (LoopTrace)
     preview_budget_ms: Positive = 500.0
     preview_max_iter: int = 200_000
     preview_workers: Annotated[int, Meta(ge=1, le=64)] = 2

@@ -62,7 +62,7 @@ from pfp_service.service.events import (
 )
 from pfp_service.service.intake import Intake
 from pfp_service.service.log import get_logger, log_changes
-from pfp_service.service.loopstats import Latency, Trim
+from pfp_service.service.loopstats import Latency, LoopTrace, Trim
 from pfp_service.service.store import Store
 from pfp_service.service.twins import watch_twins
 from pfp_service.service.world import World
@@ -155,6 +155,7 @@ class PlannerNode:
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
         self._trim = Trim()
+        self._trace = LoopTrace(cfg.loop_trace, clock)  # off unless configured
         self._state_keys = keys.KeyOf(keys.KeyKind.UNIT_STATE, cfg.mission)
         # "plain", "all" or a shard number: (subscriber, its ring, the waiter's arming event)
         self._rings: dict[str, tuple[Any, Any, threading.Event]] = {}
@@ -246,6 +247,7 @@ class PlannerNode:
             twins.join(timeout=2.0)
         self._deliberators.shutdown()
         self._desk.shutdown()
+        self._trace.close()
         for d in self._declared:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
                 d.undeclare()
@@ -523,9 +525,12 @@ class PlannerNode:
                 time.sleep(pause)
             woke = self._wake.is_set()
             self._wake.clear()
+            t0 = self.clock()
             got = self._drain_states()
             idle = not got
             now = self.clock()
+            if self._trace.on:
+                self._trace.part("drain", now - t0)
             if not (woke or got or now - last >= self.cfg.tick_s):
                 continue
             last = now
@@ -555,7 +560,10 @@ class PlannerNode:
         if self.store is not None:  # applied only once committed
             batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
         log_changes(log, inbox)
+        tr = self._trace
+        t_apply = self.clock()
         out = self.world.apply(batch, now)
+        t_applied = self.clock()
         self._acknowledge(acks, batch)
         forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
         if self.store is not None and (out.missions or forgotten):
@@ -565,6 +573,7 @@ class PlannerNode:
         self._trim.due(now)
         for d in out.directions:
             self._put(self._direction_key(d.unit), encode(d), direction=True)
+        t_put = self.clock()
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
@@ -592,6 +601,15 @@ class PlannerNode:
         for kind, query, t_recv in queries:
             self._answer(kind, query, t_recv)
         self._desk.expire(self.clock())
+        if tr.on:
+            end = self.clock()
+            tr.part("intake", t_apply - now)
+            tr.part("apply", t_applied - t_apply)
+            tr.part("put", t_put - t_applied)
+            tr.part("after", done - t_put)
+            tr.part("queries", end - done)
+            oldest = max((done - t for _m, t in states.values()), default=0.0)
+            tr.tick(end - now, len(states), oldest, end)
 
     def _admit(
         self, writes: collections.deque[_Write], inbox: collections.deque[Input]
