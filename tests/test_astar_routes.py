@@ -141,3 +141,19 @@ def test_the_compiled_core_checks_answer_what_the_cores_answer(seed: int) -> Non
             for k in range(0, len(pts) - 3, 7):  # pieces that miss and pieces that hit
                 piece = pts[k : k + 4]
                 assert polyline_clear(cores, piece) == (not cores.first_hit(piece)), (seed, k)
+
+
+def test_a_search_past_every_lattices_cap_goes_to_the_whole_grid_instead_of_writing_outside_one() -> None:
+    """A box whose lattice no kept or fresh ``_Lattice`` may hold: ``None`` (the whole grid's search).
+
+    It once ran A* on a lattice that did not cover the box: its compiled fill wrote past the arrays
+    (heap corruption: 'double free or corruption' at exit, an LLVM assertion in another test).
+    """
+    field = random_field(3)
+    cores = Cores.of(field, SEARCH_FRACTION)
+    clear_lattices()
+    huge = ((-600.0, -600.0), (700.0, 700.0))  # 1,300 x 1,300 nodes at 1 m, far past _MAX_POINTS
+    assert lazy_route(field, huge, cores, 1.0, (0.0, 0.0), GOAL, LAMBDA, 0) is None
+    assert (
+        lazy_route(field, BOX, cores, 1.0, (0.0, 0.0), GOAL, LAMBDA, 0) is not None
+    )  # and a fitting box still

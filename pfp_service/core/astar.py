@@ -447,7 +447,8 @@ def lazy_route(
     lat = _lattice(field, cores, packed, lfloor, k, h)
     if not lat.cover(gi0, gk0, nx, ny):  # too big to keep: this search's own
         lat = _Lattice(packed, lfloor, cores, h)
-        lat.cover(gi0, gk0, nx, ny)
+        if not lat.cover(gi0, gk0, nx, ny):  # past any lattice's cap: the kernel would write outside it
+            return None
     cpacked = np.ascontiguousarray(cores.packed)
     dropped: list[tuple[int, int]] = []
     expanded = 0
