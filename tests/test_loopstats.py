@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import json
+import os
 
 import pytest
+import zenoh
 
-from pfp_service.service.loopstats import LoopTrace
-
-pytestmark = pytest.mark.unit
+from pfp_service.service.loopstats import LoopTrace, demote_native_threads
 
 
 class _Clock:
@@ -20,6 +21,7 @@ class _Clock:
         return self.t
 
 
+@pytest.mark.unit
 def test_a_trace_writes_one_line_a_second_with_the_parts_states_and_collections(tmp_path):
     path = tmp_path / "loop.jsonl"
     clock = _Clock()
@@ -50,6 +52,7 @@ def test_a_trace_writes_one_line_a_second_with_the_parts_states_and_collections(
     assert trace._gc not in gc.callbacks
 
 
+@pytest.mark.unit
 def test_off_without_a_path_and_an_unwritable_file_turns_it_off(tmp_path):
     clock = _Clock()
     off = LoopTrace(None, clock)
@@ -59,3 +62,34 @@ def test_off_without_a_path_and_an_unwritable_file_turns_it_off(tmp_path):
     clock.t += 2.0
     bad.tick(0.001, 1, 0.0, clock.t)  # the write fails: the trace stops, the caller goes on
     assert not bad.on and bad._gc not in gc.callbacks
+
+
+@pytest.mark.net
+@pytest.mark.skipif(not hasattr(os, "SCHED_BATCH"), reason="SCHED_BATCH is Linux's")
+def test_zenohs_threads_go_under_sched_batch_and_pythons_keep_the_default():
+    import threading
+
+    from tests.zenoh_util import free_port
+
+    conf = zenoh.Config()
+    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{free_port()}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    stop = threading.Event()
+    waiter = threading.Thread(target=stop.wait, name="pfp-test-waiter")
+    waiter.start()
+    session = zenoh.open(conf)
+    try:
+        demote_native_threads()
+        python = {t.native_id for t in threading.enumerate()}
+        native = [int(t) for t in os.listdir("/proc/self/task") if int(t) not in python]
+        assert native, "a Zenoh session starts threads of its own"
+        for tid in native:
+            with contextlib.suppress(OSError):  # a thread that ended meanwhile
+                assert os.sched_getscheduler(tid) == os.SCHED_BATCH, tid
+        for tid in python:
+            assert os.sched_getscheduler(tid) == os.SCHED_OTHER, tid
+        assert demote_native_threads() == 0  # already moved: nothing more
+    finally:
+        session.close()
+        stop.set()
+        waiter.join()

@@ -62,7 +62,7 @@ from pfp_service.service.events import (
 )
 from pfp_service.service.intake import Intake
 from pfp_service.service.log import get_logger, log_changes
-from pfp_service.service.loopstats import Latency, LoopTrace, Trim
+from pfp_service.service.loopstats import Latency, LoopTrace, Trim, demote_native_threads
 from pfp_service.service.store import Store
 from pfp_service.service.twins import watch_twins
 from pfp_service.service.world import World
@@ -100,6 +100,7 @@ TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world a
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
 WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
 PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
+DEMOTE_EVERY_S = 5.0  # Zenoh's threads are put under SCHED_BATCH this often (threads it starts later too)
 KEY_CACHE = 16_384  # state key -> unit id, unit id -> direction key, remembered; past it, forgotten at once
 
 
@@ -515,7 +516,11 @@ class PlannerNode:
         """Tick at most every ``MIN_TICK_S`` while states come; idle, sleep until woken (no polling)."""
         last = -math.inf
         idle = False
+        demoted = -math.inf
         while not self._stop.is_set():
+            if self.clock() - demoted >= DEMOTE_EVERY_S:
+                demote_native_threads()  # Zenoh's threads (new ones too) no longer preempt a tick
+                demoted = self.clock()
             if idle:  # nothing came: the waiters watch the rings, the wake event the rest
                 for _sub, _ring, armed in self._rings.values():
                     armed.set()
@@ -571,8 +576,15 @@ class PlannerNode:
         if forgotten:
             self._trim.forgot(len(forgotten), now)
         self._trim.due(now)
-        for d in out.directions:
-            self._put(self._direction_key(d.unit), encode(d), direction=True)
+        if tr.on:  # each put timed: a put that waits (Zenoh's queue, the GIL) shows apart from its CPU
+            for d in out.directions:
+                key, body = self._direction_key(d.unit), encode(d)
+                t = self.clock()
+                self._put(key, body, direction=True)
+                tr.put(self.clock() - t)
+        else:
+            for d in out.directions:
+                self._put(self._direction_key(d.unit), encode(d), direction=True)
         t_put = self.clock()
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
