@@ -43,3 +43,34 @@ def test_an_idle_planner_spends_under_2_percent_and_answers_the_first_state_at_o
             timeout=5.0
         )  # the waiter woke the loop: answered (a poll-free loop that never woke would not)
         assert time.monotonic() - t_put < 5.0
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_BATCH"), reason="SCHED_BATCH and /proc are Linux's")
+def test_a_serving_planner_traces_its_loop_and_zenohs_threads_do_not_preempt_it(tmp_path, monkeypatch):
+    """``loop_trace`` (here ``PFP_LOOP_TRACE``) gets a JSON line a second; Zenoh's tx/rx run under SCHED_BATCH."""
+    import json
+
+    trace = tmp_path / "loop.jsonl"
+    monkeypatch.setenv("PFP_LOOP_TRACE", str(trace))
+    mission = "trace" + str(os.getpid())
+    with planner_process("--state-dir", "none", mission=mission) as (endpoint, proc), client(endpoint) as s:
+        inbox = Inbox(s, keys.unit_direction(mission, "u1"))
+        time.sleep(0.3)
+        for i in range(30):  # 3 s of one unit at 10 Hz
+            put_json(s, keys.shard_state(mission, "u1"), {"position": [float(i), 0.0], "seq": i})
+            time.sleep(0.1)
+        inbox.get(timeout=5.0)
+        policies = {}
+        for tid in os.listdir(f"/proc/{proc.pid}/task"):
+            with open(f"/proc/{proc.pid}/task/{tid}/comm") as f:
+                name = f.read().strip()
+            if name.split("-")[0] in ("rx", "tx"):
+                policies[name] = os.sched_getscheduler(int(tid))
+    assert policies and all(p == os.SCHED_BATCH for p in policies.values()), policies
+    lines = [json.loads(ln) for ln in trace.read_text().splitlines()]
+    assert sum(ln["states"] for ln in lines) >= 10, lines
+    assert all(
+        {"ticks", "apply_ms", "wall_max_ms", "loop_preempted", "gc"} <= ln.keys()
+        for ln in lines
+        if ln["states"]
+    )
