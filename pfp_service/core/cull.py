@@ -49,6 +49,7 @@ __all__ = [
     "corridors_meet",
     "index_of",
     "influence_boxes",
+    "point_level",
     "predict",
 ]
 
@@ -379,20 +380,24 @@ def corridors_meet(
 
 
 @numba.njit(cache=True, nogil=True)
-def _cell_level(packed, pts, grid, indptr, indices, out):  # type: ignore[no-untyped-def]
+def point_level(packed, grid, indptr, indices, x, y):  # type: ignore[no-untyped-def]
+    """The level at ``(x, y)`` from the threats its cell of the index lists (0 off the index or not finite)."""
     ox, oy, cell, nx, ny = grid
+    v = 0.0
+    if math.isfinite(x) and math.isfinite(y):
+        ci = math.floor((x - ox) / cell)
+        ck = math.floor((y - oy) / cell)
+        if 0 <= ci < nx and 0 <= ck < ny:
+            c = ck * nx + ci
+            for p in range(indptr[c], indptr[c + 1]):
+                v += kernels.threat_term(packed, indices[p], x, y, 0.0, False)[0]
+    return v
+
+
+@numba.njit(cache=True, nogil=True)
+def _cell_level(packed, pts, grid, indptr, indices, out):  # type: ignore[no-untyped-def]
     for i in range(pts.shape[0]):
-        x = pts[i, 0]
-        y = pts[i, 1]
-        v = 0.0
-        if math.isfinite(x) and math.isfinite(y):
-            ci = math.floor((x - ox) / cell)
-            ck = math.floor((y - oy) / cell)
-            if 0 <= ci < nx and 0 <= ck < ny:
-                c = ck * nx + ci
-                for p in range(indptr[c], indptr[c + 1]):
-                    v += kernels.threat_term(packed, indices[p], x, y, 0.0, False)[0]
-        out[i] = v
+        out[i] = point_level(packed, grid, indptr, indices, pts[i, 0], pts[i, 1])
 
 
 def cell_level(index: CullIndex, points: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import breadth_first_order, dijkstra
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
-from pfp_service.core.cull import cell_level, index_of
+from pfp_service.core.cull import cell_level, index_of, point_level
 from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
 __all__ = [
@@ -340,7 +340,6 @@ def _segment_cost(  # type: ignore[no-untyped-def]
     zero, so the running sum (rounded up or down, never down past a smaller
     sum) only grows, and the whole would exceed ``limit`` too.
     """
-    ox, oy, cell, nx, ny = grid
     dx, dy = bx - ax, by - ay
     length = math.hypot(dx, dy)
     if length > limit:
@@ -349,19 +348,19 @@ def _segment_cost(  # type: ignore[no-untyped-def]
     acc = 0.0
     for s in range(_SAMPLES):
         t = s * (1.0 / (_SAMPLES - 1))
-        x, y = ax + t * dx, ay + t * dy
-        v = 0.0
-        if math.isfinite(x) and math.isfinite(y):
-            ci = math.floor((x - ox) / cell)
-            ck = math.floor((y - oy) / cell)
-            if 0 <= ci < nx and 0 <= ck < ny:
-                c = ck * nx + ci
-                for p in range(indptr[c], indptr[c + 1]):
-                    v += kernels.threat_term(packed, indices[p], x, y, 0.0, False)[0]
-        acc += v * w[s]
+        acc += point_level(packed, grid, indptr, indices, ax + t * dx, ay + t * dy) * w[s]
         if length + scale * acc > limit * (1.0 + 1e-9):  # clearly past it, whatever the rounding
             return math.inf
     return length + lam * length * acc / (3.0 * (_SAMPLES - 1))
+
+
+@numba.njit(cache=True, nogil=True)
+def _in_core(cpacked, boxes, fraction, x, y):  # type: ignore[no-untyped-def]
+    for j in range(cpacked.shape[0]):
+        near = boxes[j, 0] <= x <= boxes[j, 2] and boxes[j, 1] <= y <= boxes[j, 3]
+        if near and kernels.threat_term(cpacked, j, x, y, fraction, False)[0] >= fraction:
+            return True
+    return False
 
 
 @numba.njit(cache=True, nogil=True)
@@ -372,11 +371,8 @@ def _clear(cpacked, boxes, fraction, ax, ay, bx, by, spacing):  # type: ignore[n
         n = max(1, math.ceil(math.hypot(bx - ax, by - ay) / spacing))
     for k in range(n + 1):
         t = k / n
-        x, y = ax + t * (bx - ax), ay + t * (by - ay)
-        for j in range(cpacked.shape[0]):
-            near = boxes[j, 0] <= x <= boxes[j, 2] and boxes[j, 1] <= y <= boxes[j, 3]
-            if near and kernels.threat_term(cpacked, j, x, y, fraction, False)[0] >= fraction:
-                return False
+        if _in_core(cpacked, boxes, fraction, ax + t * (bx - ax), ay + t * (by - ay)):
+            return False
     return True
 
 
@@ -389,15 +385,6 @@ def _segment_hits(cpacked, boxes, fraction, pts, spacing):  # type: ignore[no-un
             cpacked, boxes, fraction, pts[k, 0], pts[k, 1], pts[k + 1, 0], pts[k + 1, 1], spacing
         )
     return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _in_core(cpacked, boxes, fraction, x, y):  # type: ignore[no-untyped-def]
-    for j in range(cpacked.shape[0]):
-        near = boxes[j, 0] <= x <= boxes[j, 2] and boxes[j, 1] <= y <= boxes[j, 3]
-        if near and kernels.threat_term(cpacked, j, x, y, fraction, False)[0] >= fraction:
-            return True
-    return False
 
 
 @numba.njit(cache=True, nogil=True)
