@@ -56,6 +56,11 @@ def test_zenoh_config_defaults_to_the_embedded_router():
     assert json.loads(conf.get_json("listen/endpoints")) in ([DEFAULT_LISTEN], {"router": [DEFAULT_LISTEN]})
     assert json.loads(conf.get_json("mode")) == "router"
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+    sizes = json.loads(conf.get_json("transport/link/tx/queue/size"))
+    assert (sizes["interactive_high"], sizes["data"]) == (16, 16)  # directions are not dropped at 2 batches
+    assert sizes["control"] == json.loads(
+        zenoh.Config().get_json("transport/link/tx/queue/size/control")
+    )  # Zenoh's own
 
 
 def test_cli_config_errors_are_one_line(tmp_path):
@@ -123,6 +128,9 @@ def test_zenoh_json5_file_is_passed_through(tmp_path):
     )
     conf = zenoh_config(load_config(None, {}, {"zenoh_config": str(j5), "mode": "client"}))
     assert json.loads(conf.get_json("transport/link/tx/lease")) == 3000  # from the file
+    assert (
+        json.loads(conf.get_json("transport/link/tx/queue/size/data")) == 2
+    )  # the file's (Zenoh's), not ours
     assert f"tcp/127.0.0.1:{port}" in json.dumps(json.loads(conf.get_json("listen/endpoints")))
     assert json.loads(conf.get_json("mode")) == "client"  # our flag wins over the file
     with pytest.raises(InputError, match=r"^zenoh_config: .*missing.json5: no such file or directory$"):
