@@ -73,6 +73,52 @@ def test_advise_many_equals_advise_one_by_one():
     assert batch[3].status is StepStatus.ARRIVED and batch[7].status is StepStatus.INVALID
 
 
+def test_advise_many_asks_a_deferred_look_ahead_as_advise_does():
+    """After a change of the world, deferring steppers (the live wave) give what ``advise`` gives, one by one.
+
+    The batch judges such a unit in one call (``Stepper.foresee_follow``);
+    one arrived, one out of bounds and one reporting garbage keep their
+    verdict without asking the look-ahead, as ``check`` then ``follow`` do.
+    """
+    rng = np.random.default_rng(11)
+    threats = [
+        Threat.from_facing(rng.uniform(0, 10, 2), rng.uniform(0, 360), 1.0, 0.7, 2.0) for _ in range(6)
+    ]
+    field = ThreatField(threats)
+    pos = rng.uniform(0, 10, (40, 2))
+    goals = rng.uniform(0, 10, (40, 2))
+    pos[3] = goals[3]  # arrived
+    pos[5] = (30.0, 5.0)  # out of bounds
+    pos[7, 0] = math.nan  # garbage
+    params = resolve(PlannerParams(escape="auto"), (0.0, 0.0), (10.0, 10.0), threats)
+    bounds = ((-1.0, -1.0), (11.0, 11.0))
+
+    def steppers() -> list[Stepper]:
+        out = []
+        for g, p in zip(goals, pos):
+            s = Stepper((0.0, 0.0), tuple(g), params, bounds)
+            s.defer = True
+            s.advise(field, *np.nan_to_num(p) % 10.0)  # asks its first look-ahead
+            s.pending = None
+            s.world_changed()  # the wave: look ahead again
+            out.append(s)
+        return out
+
+    a, b = steppers(), steppers()
+    batch = advise_many(a, field, pos)
+    single = [s.advise(field, *p) for s, p in zip(b, pos)]
+    assert [x._replace(distance=0.0) for x in batch] == [x._replace(distance=0.0) for x in single]
+    assert [x.distance for x in batch][8:] == [x.distance for x in single][8:]
+    assert [(s.pending, s.advisories) for s in a] == [(s.pending, s.advisories) for s in b]
+    assert batch[3].status is StepStatus.ARRIVED and a[3].pending is None
+    assert batch[5].status is StepStatus.OUT_OF_BOUNDS and a[5].pending is None
+    assert batch[7].status is StepStatus.INVALID and a[7].pending is None
+    assert all(x.deliberating for i, x in enumerate(batch) if i not in (3, 5, 7))
+    again = [s.advise(field, *p) for s, p in zip(a, pos)]  # the watch went on alike
+    alike = [s.advise(field, *p) for s, p in zip(b, pos)]
+    assert again[:7] + again[8:] == alike[:7] + alike[8:]
+
+
 def _trapped_stepper():
     block = [Threat.from_facing((5.0, 5.0), 225.0, 1.0, 1.0, 0.0)]
     params = resolve(PlannerParams(delta=0.05, escape="none"), (0.0, 0.0), (10.0, 10.0), block)

@@ -414,6 +414,31 @@ class Stepper:
             )
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
+    def foresee_follow(
+        self, x: float, y: float, fx: float, fy: float, level: float, norm: float, field: ThreatField
+    ) -> Advice:
+        """``advise`` of a deferring stepper that is to look ahead, with no verdict, route or zones: one judge call.
+
+        What ``check`` then ``follow`` give (``advise_many``, after a change of
+        the world): an arrival or bounds verdict ends it as ``check`` would,
+        before the look-ahead is asked; else the look-ahead is asked
+        (``pending``) and plain descent answers meanwhile.
+        """
+        if self.params.trap_window > steprule.RING_START:  # the ring may need to grow
+            self._unit = steprule.roomy(self._unit)
+        code, dx, dy, dist, move, tx, ty = steprule.judge(self._unit, x, y, fx, fy, norm, steprule.DESCENT)
+        if (
+            steprule.GO < code <= steprule.BAD_POSITION
+        ):  # judged before the gradient and the watch, as ``check``
+            status, reason = _VERDICTS[code]
+            return self._end(status, 0.0, dist, reason)
+        self._foresee = False
+        self.pending = Need("foresee", x, y)
+        if code == steprule.GO:
+            self.advisories += 1
+            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, tx, ty)
+        return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
+
     def _judged(
         self,
         field: ThreatField | None,
@@ -598,11 +623,8 @@ def advise_many(
     """
     pts = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
     n = len(steppers)
-    goals = np.empty((n, 2))
-    gains = np.empty(n)
-    for i, s in enumerate(steppers):
-        goals[i] = s.goal
-        gains[i] = s.goal_gain
+    goals = np.array([s.goal for s in steppers], dtype=np.float64).reshape(n, 2)
+    gains = np.fromiter([s.goal_gain for s in steppers], dtype=np.float64, count=n)
     out = np.empty((n, 4))
     if cull is not None and len(field) >= MIN_THREATS:
         cull.descent(pts, goals, gains, out)
@@ -617,9 +639,13 @@ def advise_many(
         if z:
             result.append(s.advise(field, x, y))
             continue
-        if s._terminal is None and s._run is None and not s._foresee:  # plain descent: one judge call
-            result.append(s.follow(x, y, fx, fy, level, norm, field))
-            continue
+        if s._terminal is None and s._run is None:
+            if not s._foresee:  # plain descent: one judge call
+                result.append(s.follow(x, y, fx, fy, level, norm, field))
+                continue
+            if s.defer and not field.zones:  # a wave's unit: ask for the look-ahead, descend, one call
+                result.append(s.foresee_follow(x, y, fx, fy, level, norm, field))
+                continue
         early = s.check(x, y)
         if early is not None:
             result.append(early._replace(level=level) if early.status is StepStatus.TRAPPED else early)
