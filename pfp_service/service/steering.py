@@ -164,40 +164,48 @@ def direction(
 ) -> tuple[Direction, Event | None]:
     """The unit's direction for its advice, and the event its change of status fires (if any)."""
     assert rec.position is not None
-    status = STATUS[adv.status]
+    # called per unit of a wave: the advice unpacked once, and min/max spelt as the comparisons they make
+    step_status, dx, dy, level, distance, why, asking, reach, _tx, _ty = adv
+    status = STATUS[step_status]
+    reason = why[:1024]
     event: Event | None = None
     if status is not rec.last_status:
         if status is DirectionStatus.ARRIVED:
             event = ArrivedEvent(
-                planner=planner, unit=rec.id, position=rec.position, distance_to_goal=adv.distance
+                planner=planner, unit=rec.id, position=rec.position, distance_to_goal=distance
             )
         elif status is DirectionStatus.TRAPPED:
-            event = TrappedEvent(
-                planner=planner, unit=rec.id, position=rec.position, reason=adv.reason[:1024]
-            )
+            event = TrappedEvent(planner=planner, unit=rec.id, position=rec.position, reason=reason)
+    terminal = step_status.terminal
     rec.last_status = status
-    rec.last_reason = adv.reason
-    rec.last_distance = min(adv.distance, FINITE_LIMIT)  # the wire's bound: a diagonal of the map is more
-    rec.last_vector = None if adv.status.terminal else (adv.dx, adv.dy)
+    rec.last_reason = why
+    # min(distance, FINITE_LIMIT): the wire's bound, a diagonal of the map is more
+    rec.last_distance = FINITE_LIMIT if distance > FINITE_LIMIT else distance
+    rec.last_vector = None if terminal else (dx, dy)
     heading = None
-    if not adv.status.terminal and (adv.dx or adv.dy):
-        heading = math.degrees(math.atan2(adv.dx, adv.dy)) % 360.0
+    if not terminal and (dx or dy):
+        heading = math.degrees(math.atan2(dx, dy)) % 360.0
         heading = 0.0 if heading >= 360.0 else heading  # -1e-300 % 360 is 360.0
+    # min(max(level, 0.0), FINITE_LIMIT): the wire's bound, even for absurd weights
+    low = 0.0 if level < 0.0 else level
+    if not terminal and math.isfinite(reach):
+        far = 0.0 if reach < 0.0 else reach
+        reach_m: float | None = FINITE_LIMIT if far > FINITE_LIMIT else far
+    else:
+        reach_m = None
     d = Direction(
         unit=rec.id,
         seq=rec.seq,
         status=status,
-        vector=(adv.dx, adv.dy),
+        vector=(dx, dy),
         heading_deg=heading,
         distance_to_goal=rec.last_distance,
-        threat_level=min(max(adv.level, 0.0), FINITE_LIMIT),  # the wire's bound, even for absurd weights
+        threat_level=FINITE_LIMIT if low > FINITE_LIMIT else low,
         lookahead=points,
-        reason=adv.reason[:1024],
-        deliberating=adv.deliberating or deliberating,
+        reason=reason,
+        deliberating=asking or deliberating,
         planner=planner,
-        reach_m=min(max(adv.reach, 0.0), FINITE_LIMIT)
-        if not adv.status.terminal and math.isfinite(adv.reach)
-        else None,
+        reach_m=reach_m,
     )
     return d, event
 
