@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from pfp_service.bench.memory import TARGETS, targets
+from pfp_service.bench.memory import TARGETS, pss_by_mapping, targets
 
 
 @pytest.mark.unit
@@ -23,6 +23,26 @@ def test_targets_judge_the_idle_tree_and_the_loaded_peak():
     assert [r["met"] for r in rows] == [False, True]
     assert "10000 units at 1 Hz" in rows[1]["target"]
     assert [r["met"] for r in targets({"units": 5, "rate_hz": 2.0, "idle": {}, "loaded": {}})] == [None, None]
+
+
+@pytest.mark.unit
+def test_a_process_pss_is_split_by_kind_of_mapping():
+    smaps = "\n".join(
+        [
+            "55d0c0000000-55d0c8000000 rw-p 00000000 00:00 0                          [heap]",
+            "Size:             131072 kB",
+            "Pss:               20480 kB",
+            "7f0000000000-7f0004000000 rw-p 00000000 00:00 0 ",
+            "Pss:               10240 kB",
+            "7f0010000000-7f0010100000 r-xp 00000000 08:01 42                         /usr/lib/libc.so.6",
+            "Pss:                1024 kB",
+            "7ffd00000000-7ffd00021000 rw-p 00000000 00:00 0                          [stack]",
+            "Pss:                 512 kB",
+            "7f0020000000-7f0020001000 rw-p 00000000 00:00 0",
+            "Pss:                1024 kB",
+        ]
+    )
+    assert pss_by_mapping(smaps) == {"heap": 20.0, "anon": 11.0, "file": 1.0, "other": 0.5}
 
 
 @pytest.mark.proc
@@ -41,3 +61,6 @@ def test_the_bench_measures_the_planner_and_its_forked_workers():
     assert 20.0 < idle["pss_mb"] == pytest.approx(sum(idle["pss_mb_by_process"]), abs=0.5)
     assert peak["processes"] >= idle["processes"] and peak["pss_mb"] > 0
     assert doc["exit"]["exit_code"] == 0 and doc["loaded"]["answered_per_s"] > 0
+    split = doc["quiet"]["planner_by_mapping"]  # the planner's own PSS, by kind of mapping
+    assert split["file"] > 1.0 and split["heap"] + split["anon"] > 1.0
+    assert sum(split.values()) == pytest.approx(doc["quiet"]["pss_mb_by_process"][0], abs=1.0)

@@ -8,7 +8,15 @@ loopback port); this process is the load generator.  Phases:
    process under it (its fork server and workers), summed, and each one's;
 2. **loaded**: ``--threats`` threats are put, ``--units`` units report and
    get goals, then report at ``--rate`` Hz for ``--load-s`` seconds; the tree's
-   PSS is sampled every second, and its peak and last value reported.
+   PSS is sampled every second, and its peak and last value reported;
+3. **quiet**: ``QUIET_S`` seconds after the load stopped, once more: what the
+   planner gives back when its backlog is gone.
+
+Each figure also splits the planner's own PSS by mapping (``/proc/PID/smaps``):
+``heap`` (glibc's main arena, ``[heap]``), ``anon`` (anonymous mappings: the
+other malloc arena, large ``mmap`` allocations, CPython's object arenas and
+Zenoh's buffers), ``file`` (libraries and compiled kernels) and ``other``
+(stacks, vdso), to say where growth goes.
 
 PSS counts a page shared by k processes as 1/k in each, so the sum over the
 tree is what the tree costs the machine.  A library's file pages are shared
@@ -21,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import threading
 import time
 from typing import Any
@@ -36,6 +45,8 @@ __all__ = ["TARGETS", "add_arguments", "run", "targets"]
 
 TARGETS = {"idle_pss_mb": 250.0, "loaded_pss_mb": 400.0}  # issue 23, at 10,000 units and 1 Hz
 SAMPLE_S = 1.0
+QUIET_S = 5.0  # after the load stops, this long before the quiet figure
+_MAPPING = re.compile(r"^[0-9a-f]+-[0-9a-f]+ ")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -59,12 +70,46 @@ def _loadavg() -> float:
         return float(f.read().split()[0])
 
 
+def pss_by_mapping(smaps: str) -> dict[str, float]:
+    """PSS in MB of one process by kind of mapping, from the text of its ``/proc/PID/smaps``.
+
+    ``heap`` is ``[heap]``; ``anon`` a mapping with no name; ``file`` one named by
+    a path; ``other`` the rest (``[stack]``, ``[vdso]`` ...).
+    """
+    kb = {"heap": 0, "anon": 0, "file": 0, "other": 0}
+    kind = "other"
+    for line in smaps.splitlines():
+        if _MAPPING.match(line):
+            parts = line.split(maxsplit=5)
+            name = parts[5].strip() if len(parts) > 5 else ""
+            if name == "[heap]":
+                kind = "heap"
+            elif not name:
+                kind = "anon"
+            elif name.startswith("/"):
+                kind = "file"
+            else:
+                kind = "other"
+        elif line.startswith("Pss:"):
+            kb[kind] += int(line.split()[1])
+    return {k: round(v / 1024, 1) for k, v in kb.items()}
+
+
+def _by_mapping(pid: int) -> dict[str, float] | None:
+    try:
+        with open(f"/proc/{pid}/smaps") as f:
+            return pss_by_mapping(f.read())
+    except OSError:
+        return None
+
+
 def _snapshot(pid: int) -> dict[str, Any]:
     each = tree_pss_by_process(pid)
     return {
         "pss_mb": round(sum(each.values()), 1),
         "processes": len(each),
         "pss_mb_by_process": [round(v, 1) for v in each.values()],  # the planner first, then its tree
+        "planner_by_mapping": _by_mapping(pid),
         "loadavg": _loadavg(),
     }
 
@@ -122,6 +167,8 @@ def measure(args: argparse.Namespace, bar: Bar) -> dict[str, Any]:
             "unanswered": st.get("unanswered_fraction"),
             "p99_ms": st.get("p99_ms"),
         }
+        time.sleep(QUIET_S)  # the load has stopped: what the planner keeps once its backlog is gone
+        res["quiet"] = _snapshot(srv.proc.pid)
     finally:
         if g is not None:
             g.close()
@@ -158,11 +205,15 @@ def run(args: argparse.Namespace) -> int:
             f"{idle.get('pss_mb_by_process')} after {idle.get('after_s')} s, load avg {idle.get('loadavg')}"
         )
         loaded = doc.get("loaded", {})
-        for which in ("peak", "last"):
-            s = loaded.get(which) or {}
+        for which, s in (
+            ("loaded peak", loaded.get("peak") or {}),
+            ("loaded last", loaded.get("last") or {}),
+            (f"quiet {QUIET_S:g} s after", doc.get("quiet") or {}),
+        ):
             print(
-                f"loaded {which}: {s.get('pss_mb')} MB PSS in {s.get('processes')} processes "
-                f"{s.get('pss_mb_by_process')}, load avg {s.get('loadavg')}"
+                f"{which}: {s.get('pss_mb')} MB PSS in {s.get('processes')} processes "
+                f"{s.get('pss_mb_by_process')} (planner by mapping {s.get('planner_by_mapping')}), "
+                f"load avg {s.get('loadavg')}"
             )
         print(
             f"load: {doc['units']} units x {doc['rate_hz']:g} Hz, answered {loaded.get('answered_per_s')}/s, "
