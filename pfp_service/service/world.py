@@ -419,13 +419,17 @@ class World:
         reached = steering.reached(
             guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones]
         )
+        supersede, dirty = self._rec.supersede, b.dirty  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
-                assert rec.stepper is not None
-                if hit or rec.stepper.escaping or rec.job is not None or rec.stepper.pending is not None:
-                    rec.stepper.world_changed()
-                    self._rec.supersede(rec)
-                    self._tell(rec, b)
+                st = rec.stepper
+                assert st is not None
+                if hit or st.escaping or rec.job is not None or st.pending is not None:
+                    st.world_changed()
+                    if rec.job is not None:
+                        supersede(rec)
+                    if not rec.stale:  # ``_tell``: every unit here has a position
+                        dirty.add(rec.id)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
 
@@ -461,18 +465,21 @@ class World:
         for rec, exc in failed:
             self._unit_fault(b, rec, exc)
         first, sent = len(out.directions), []
-        for rec, adv, points in steered:
+        direction, wave, events, directions = steering.direction, b.wave, out.events, out.directions
+        for rec, adv, points in steered:  # per unit of a wave: names looked up once, above
             try:
-                d, event = steering.direction(rec, adv, points, p, rec.job is not None)
-                asking = rec.stepper is not None and rec.stepper.pending is not None and rec.job is None
-                if asking and rec.id not in b.wave:  # a wave's jobs are asked with its points
-                    self._ask(rec, fld, b)
+                job = rec.job
+                d, event = direction(rec, adv, points, p, job is not None)
+                st = rec.stepper
+                if st is not None and st.pending is not None and job is None and rec.id not in wave:
+                    self._ask(rec, fld, b)  # a wave's jobs are asked with its points
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
                 failed.append((rec, exc))
                 continue
-            out.events.extend(() if event is None else (event,))
-            out.directions.append(d)
+            if event is not None:
+                events.append(event)
+            directions.append(d)
             sent.append(rec.position)
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
