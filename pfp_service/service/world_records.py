@@ -93,7 +93,7 @@ class Records:
         self._field: ThreatField | None = None  # ... and with the zones: until the threats or zones change
         self._zone_set: ZoneSet | None = None  # built when asked, until the zones change
         self.cull: CullIndex | None = None
-        self.stats: FieldStats | None = None
+        self._stats: FieldStats | None = None  # the threats' ``field_stats``: at first use, until they change
 
     @property
     def field(self) -> ThreatField:
@@ -103,9 +103,16 @@ class Records:
                 ordered = [self.threats[k].threat for k in sorted(self.threats)]
                 self._bare = ThreatField(ordered, self.intensity)  # type: ignore[arg-type]
                 self.cull = CullIndex(self._bare.packed) if len(ordered) >= MIN_THREATS else None
-                self.stats = field_stats(ordered)
+                self._stats = None  # a wave changes the threats and starts no mission: ``stats`` when asked
             self._field = self._bare.with_zones(self.zone_set) if self.zones else self._bare
         return self._field
+
+    @property
+    def stats(self) -> FieldStats | None:
+        """The threats' ``field_stats`` (``resolve``'s figures), computed at first use; ``None`` before ``field``."""
+        if self._stats is None and self._bare is not None:
+            self._stats = field_stats(self._bare.threats)
+        return self._stats
 
     @property
     def zone_set(self) -> ZoneSet:
