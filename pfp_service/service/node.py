@@ -33,7 +33,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import msgspec
 import zenoh
@@ -102,6 +102,18 @@ WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write qu
 PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
 DEMOTE_EVERY_S = 5.0  # Zenoh's threads are put under SCHED_BATCH this often (threads it starts later too)
 KEY_CACHE = 16_384  # state key -> unit id, unit id -> direction key, remembered; past it, forgotten at once
+_V = TypeVar("_V")
+
+
+def _remembered(cache: dict[str, _V], key: str, make: Callable[[str], _V]) -> _V:
+    """``make(key)``, kept in ``cache``; a full cache (``KEY_CACHE``) is forgotten at once, not evicted piecemeal."""
+    value = cache.get(key)
+    if value is None:
+        value = make(key)
+        if len(cache) >= KEY_CACHE:
+            cache.clear()
+        cache[key] = value
+    return value
 
 
 class _Write:
@@ -265,12 +277,7 @@ class PlannerNode:
         """One state from a ring (the loop thread), decoded; ``None``: rejected (an event says why)."""
         key = str(sample.key_expr)
         try:
-            uid = self._uid_of.get(key)
-            if uid is None:
-                uid = self._state_keys.id(key)
-                if len(self._uid_of) >= KEY_CACHE:
-                    self._uid_of.clear()
-                self._uid_of[key] = uid
+            uid = _remembered(self._uid_of, key, self._state_keys.id)
             return uid, decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
         except InputError as err:
             self._push(InputRejected(key, err))
@@ -284,13 +291,7 @@ class PlannerNode:
                 self._intake.state(uid, msg, received)
 
     def _direction_key(self, unit: str) -> zenoh.KeyExpr:
-        key = self._direction_of.get(unit)
-        if key is None:
-            key = zenoh.KeyExpr(self._direction_keys.key(unit))
-            if len(self._direction_of) >= KEY_CACHE:
-                self._direction_of.clear()
-            self._direction_of[unit] = key
-        return key
+        return _remembered(self._direction_of, unit, lambda u: zenoh.KeyExpr(self._direction_keys.key(u)))
 
     def _goal_input(self, key: str, delete: bool, payload: bytes) -> Input:
         try:
