@@ -419,7 +419,7 @@ class World:
         reached = steering.reached(
             guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones]
         )
-        supersede, dirty = self._rec.supersede, b.dirty  # per unit of a wave: looked up once
+        supersede, tell = self._rec.supersede, self._tell  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
                 st = rec.stepper
@@ -428,8 +428,7 @@ class World:
                     st.world_changed()
                     if rec.job is not None:
                         supersede(rec)
-                    if not rec.stale:  # ``_tell``: every unit here has a position
-                        dirty.add(rec.id)
+                    tell(rec, b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
 
