@@ -69,7 +69,7 @@ from pfp_service.core.escape_strategies import (
     Bounds,
     NoCandidate,
     Trap,
-    global_route,
+    global_corners,
     rollout,
 )
 from pfp_service.core.grid import polyline_clear, resample
@@ -114,29 +114,76 @@ class EscapeRun:
     on to the goal (arrival is judged along the route) instead of being handed
     back to plain descent, whose threat gradient near the goal may be far
     stronger than the goal's pull.
+
+    The path is kept in one of two forms, each read through ``_point``:
+    ``path``, its points ``(K, 2)``; or, for a route made of long straight
+    legs (``along``: a global route, a way out of a core), ``segs``, one row
+    ``(ax, ay, dx, dy, last)`` a leg, whose points are exactly those
+    ``grid.resample`` makes (``a + (j / m) d``, ``j = 1..m``; ``last`` the
+    index of the leg's final point).  A 2 km route at a 1 m step is then a
+    few hundred bytes instead of 30 KB, in the world's books and in every
+    worker's answer.
     """
 
-    __slots__ = ("advisories", "cursor", "limit", "name", "path", "step", "to_goal", "zones")
+    __slots__ = ("advisories", "cursor", "limit", "n", "name", "path", "segs", "step", "to_goal", "zones")
 
-    def __init__(self, name: str, path: np.ndarray, step: float, to_goal: bool = False) -> None:
+    def __init__(
+        self,
+        name: str,
+        path: np.ndarray,
+        step: float,
+        to_goal: bool = False,
+        *,
+        segs: np.ndarray | None = None,
+    ) -> None:
         self.name = name
-        # (K, 2) float64, never changed once made (copies share it): 16 bytes a point, where a
-        # list of float tuples took about 110 (a thousand units on routes of 300 points: 33 MB)
-        self.path: np.ndarray = np.array(path, dtype=np.float64).reshape(-1, 2)
+        # never changed once made (copies share them): 16 bytes a point, or 40 a leg
+        if segs is None:
+            self.path: np.ndarray = np.array(path, dtype=np.float64).reshape(-1, 2)
+            self.segs: np.ndarray = _NO_SEGS
+            self.n = len(self.path)
+        else:
+            self.path = _NO_POINTS
+            self.segs = np.ascontiguousarray(segs, dtype=np.float64).reshape(-1, 5)
+            self.n = int(self.segs[-1, 4]) + 1
         self.path.flags.writeable = False
+        self.segs.flags.writeable = False
         self.cursor = 0
         self.advisories = 0
-        self.limit = 2 * len(self.path) + 20
+        self.limit = 2 * self.n + 20
         self.step = step
         self.to_goal = to_goal
         self.zones: ZoneSet = _NO_ZONES  # the zones it was last steered among (``steer``), for ``ahead``
+
+    @classmethod
+    def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
+        """The run along ``corners`` resampled at ``step`` (``grid.resample``), kept as its legs."""
+        return cls(name, _NO_POINTS, step, to_goal, segs=legs(corners, step))
+
+    def points(self) -> np.ndarray:
+        """The path's points ``(K, 2)``, the same in either form."""
+        if not len(self.segs):
+            return self.path
+        return _points(self.path, self.segs, self.n)
+
+    def end(self) -> tuple[float, float]:
+        """The path's last point."""
+        x, y = _point(self.path, self.segs, self.n - 1)
+        return float(x), float(y)
 
     def then(self, other: EscapeRun | None) -> EscapeRun:
         """This run followed by ``other`` (which starts where this one ends)."""
         if other is None:
             return self
-        pts = np.concatenate([self.path, other.path[1:]])
-        return EscapeRun(f"{self.name}, then {other.name}", pts, self.step, other.to_goal)
+        name = f"{self.name}, then {other.name}"
+        if len(self.segs) and len(other.segs):  # other's first point is this one's last: dropped
+            tail = other.segs.copy()
+            tail[:, 4] += self.n - 1
+            return EscapeRun(
+                name, _NO_POINTS, self.step, other.to_goal, segs=np.concatenate([self.segs, tail])
+            )
+        pts = np.concatenate([self.points(), other.points()[1:]])
+        return EscapeRun(name, pts, self.step, other.to_goal)
 
     def ahead(self, unit: np.ndarray, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
         """The next ``steps`` positions of ``unit`` (``steprule.unit``) at ``(x, y)`` steering along this run.
@@ -150,6 +197,8 @@ class EscapeRun:
         out = np.empty((steps + 1, 2))
         n = _ahead(
             self.path,
+            self.segs,
+            self.n,
             self.cursor,
             self.advisories,
             self.limit,
@@ -169,7 +218,16 @@ class EscapeRun:
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """``(dx, dy)``: the heading towards the path ahead; ``None`` once at the exit (or abandoned)."""
         ok, self.cursor, self.advisories, dx, dy = _steer(
-            self.path, self.cursor, self.advisories, self.limit, self.step, self.to_goal, x, y
+            self.path,
+            self.segs,
+            self.n,
+            self.cursor,
+            self.advisories,
+            self.limit,
+            self.step,
+            self.to_goal,
+            x,
+            y,
         )
         return (dx, dy) if ok else None
 
@@ -188,6 +246,8 @@ class EscapeRun:
             self.zones = zones
         ok, self.cursor, self.advisories, code, dx, dy, dist, move, tx, ty = _steer_step(
             self.path,
+            self.segs,
+            self.n,
             self.cursor,
             self.advisories,
             self.limit,
@@ -201,9 +261,72 @@ class EscapeRun:
         return (dx, dy, dist, move, tx, ty) if ok and code == steprule.GO else None
 
 
+_NO_POINTS = np.empty((0, 2))
+_NO_POINTS.flags.writeable = False
+_NO_SEGS = np.empty((0, 5))
+_NO_SEGS.flags.writeable = False
+
+
+def legs(corners: np.ndarray, step: float) -> np.ndarray:
+    """``EscapeRun.segs`` for ``grid.resample(corners, step)``: each leg's start, delta and last index.
+
+    The leg counts are ``resample``'s own (every segment split evenly into
+    pieces of at most ``step``), so ``_point`` gives its points bit for bit.
+    A single corner is one leg of no length (its one point, twice): callers
+    pass routes of at least two.
+    """
+    pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    if len(pts) < 2:
+        pts = np.concatenate([pts, pts])
+    seg = np.diff(pts, axis=0)
+    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / step)).astype(np.int64)
+    out = np.empty((len(seg), 5))
+    out[:, :2] = pts[:-1]
+    out[:, 2:4] = seg
+    out[:, 4] = np.cumsum(k)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _point(path: np.ndarray, segs: np.ndarray, i: int) -> tuple[float, float]:
+    """Point ``i`` of a run's path, in either form (``EscapeRun``)."""
+    if segs.shape[0] == 0:
+        return path[i, 0], path[i, 1]
+    if i == 0:
+        return segs[0, 0], segs[0, 1]
+    lo = 0
+    hi = segs.shape[0] - 1
+    while lo < hi:  # the first leg whose last index is at or past i
+        mid = (lo + hi) // 2
+        if segs[mid, 4] >= i:
+            hi = mid
+        else:
+            lo = mid + 1
+    first = segs[lo - 1, 4] if lo > 0 else 0.0
+    t = (i - first) / (segs[lo, 4] - first)  # j / m, as grid.resample divides them
+    return segs[lo, 0] + t * segs[lo, 2], segs[lo, 1] + t * segs[lo, 3]
+
+
+@numba.njit(cache=True, nogil=True)
+def _points(path: np.ndarray, segs: np.ndarray, n: int) -> np.ndarray:
+    out = np.empty((n, 2))
+    for i in range(n):
+        out[i, 0], out[i, 1] = _point(path, segs, i)
+    return out
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _steer(
-    path: np.ndarray, cursor: int, advisories: int, limit: int, step: float, to_goal: bool, x: float, y: float
+    path: np.ndarray,
+    segs: np.ndarray,
+    n: int,
+    cursor: int,
+    advisories: int,
+    limit: int,
+    step: float,
+    to_goal: bool,
+    x: float,
+    y: float,
 ) -> tuple[bool, int, int, float, float]:
     """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy)``; not ``ok`` at the exit or past the limit.
 
@@ -214,19 +337,20 @@ def _steer(
     advisories += 1
     if advisories > limit:
         return False, cursor, advisories, 0.0, 0.0
-    n = path.shape[0]
     best = math.inf
     i = cursor
     for j in range(cursor, min(cursor + 16, n)):
-        d = (path[j, 0] - x) * (path[j, 0] - x) + (path[j, 1] - y) * (path[j, 1] - y)
+        px, py = _point(path, segs, j)
+        d = (px - x) * (px - x) + (py - y) * (py - y)
         if d < best:
             best = d
             i = j
-    if i >= n - 2 and math.hypot(path[n - 1, 0] - x, path[n - 1, 1] - y) <= step and not to_goal:
+    lx, ly = _point(path, segs, n - 1)
+    if i >= n - 2 and math.hypot(lx - x, ly - y) <= step and not to_goal:
         return False, i, advisories, 0.0, 0.0
-    t = min(i + 2, n - 1)
-    dx = path[t, 0] - x
-    dy = path[t, 1] - y
+    tx, ty = _point(path, segs, min(i + 2, n - 1))
+    dx = tx - x
+    dy = ty - y
     norm = math.hypot(dx, dy)
     if norm <= 1e-9 * step:
         return False, i, advisories, 0.0, 0.0
@@ -236,6 +360,8 @@ def _steer(
 @numba.njit(cache=True, nogil=True)
 def _steer_step(
     path: np.ndarray,
+    segs: np.ndarray,
+    n: int,
     cursor: int,
     advisories: int,
     limit: int,
@@ -250,11 +376,11 @@ def _steer_step(
     boxes: np.ndarray,
 ) -> tuple[bool, int, int, int, float, float, float, float, float, float]:
     """``EscapeRun.steer``: ``_steer``, then the heading judged as a step (``steprule.judge``)."""
-    ok, cursor, advisories, hx, hy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
+    ok, cursor, advisories, hx, hy = _steer(path, segs, n, cursor, advisories, limit, step, to_goal, x, y)
     if not ok:
         return False, cursor, advisories, steprule.GO, 0.0, 0.0, 0.0, 0.0, x, y
     code, dx, dy, dist, move, tx, ty = _zone_heading(
-        path, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
+        path, segs, n, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
     )
     return True, cursor, advisories, code, dx, dy, dist, move, tx, ty
 
@@ -262,6 +388,8 @@ def _steer_step(
 @numba.njit(cache=True, nogil=True)
 def _zone_heading(
     path: np.ndarray,
+    segs: np.ndarray,
+    n: int,
     cursor: int,
     unit: np.ndarray,
     x: float,
@@ -288,12 +416,12 @@ def _zone_heading(
     t, z = zones.segment_hit(edges, offsets, circles, boxes, x, y, tx, ty)
     if z < 0:
         return code, dx, dy, dist, move, tx, ty
-    n = path.shape[0]
     for k in (cursor + 1, cursor):
         if k >= n:
             continue
-        ax = path[k, 0] - x
-        ay = path[k, 1] - y
+        px, py = _point(path, segs, k)
+        ax = px - x
+        ay = py - y
         norm = math.hypot(ax, ay)
         if norm <= 1e-9 * unit[steprule.STEP]:
             continue
@@ -302,8 +430,8 @@ def _zone_heading(
         )
         if c2 == steprule.GO and move2 > norm:  # no farther than the point itself: the run's own segment
             move2 = norm
-            t2x = path[k, 0]
-            t2y = path[k, 1]
+            t2x = px
+            t2y = py
         if zones.segment_hit(edges, offsets, circles, boxes, x, y, t2x, t2y)[1] < 0:
             return c2, d2x, d2y, dist2, move2, t2x, t2y
     keep = max(t * move - steprule.CLEAR_STEPS * unit[steprule.STEP], 0.0)
@@ -313,6 +441,8 @@ def _zone_heading(
 @numba.njit(cache=True, nogil=True)
 def _ahead(
     path: np.ndarray,
+    segs: np.ndarray,
+    n: int,
     cursor: int,
     advisories: int,
     limit: int,
@@ -334,11 +464,11 @@ def _ahead(
     for k in range(steps):
         if steprule.judge(unit, x, y, 0.0, 0.0, 0.0, steprule.CHECK)[0] != steprule.GO:
             return k + 1  # arrived, out of bounds or not finite: the ghost stops here
-        ok, cursor, advisories, hx, hy = _steer(path, cursor, advisories, limit, step, to_goal, x, y)
+        ok, cursor, advisories, hx, hy = _steer(path, segs, n, cursor, advisories, limit, step, to_goal, x, y)
         if not ok:
             return -1
         _code, _dx, _dy, _dist, _move, x, y = _zone_heading(
-            path, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
+            path, segs, n, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
         )
         out[k + 1, 0] = x
         out[k + 1, 1] = y
@@ -450,14 +580,15 @@ class Escaper:
         inside = tr.cores.core_at(*self.goal)
         if inside:
             return None, f"{ahead} foreseen; the goal lies in {Cores.region(inside)}"
-        poly = global_route(tr)
-        if isinstance(poly, NoCandidate):
-            return None, f"{ahead} foreseen; {poly.reason}"
+        corners = global_corners(tr)
+        if isinstance(corners, NoCandidate):
+            return None, f"{ahead} foreseen; {corners.reason}"
+        poly = resample(corners, tr.step)
         verdict, _ = self._judge(tr, poly)
         if verdict:
             return None, f"{ahead} foreseen; global: {verdict}"
         self.log.append("global")
-        return self._run(f"global ({ahead} foreseen)", poly, tr), ""
+        return self._run(f"global ({ahead} foreseen)", poly, tr, corners), ""
 
     def cheaper_route(self, field: ThreatField, x: float, y: float, foreseen_cost: float) -> EscapeRun | None:
         """Plain descent from ``(x, y)`` is foreseen to arrive at ``J = foreseen_cost``: is going round clearly cheaper?
@@ -473,13 +604,14 @@ class Escaper:
         tr = self._trap(field, x, y)
         if tr.cores.core_at(*self.goal):
             return None
-        poly = global_route(tr)
-        if isinstance(poly, NoCandidate) or self._judge(tr, poly)[0]:
+        corners = global_corners(tr)
+        if isinstance(corners, NoCandidate):
             return None
-        if route_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
+        poly = resample(corners, tr.step)
+        if self._judge(tr, poly)[0] or route_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
             return None
         self.log.append("global")
-        return self._run("global (cheaper than descent)", poly, tr)
+        return self._run("global (cheaper than descent)", poly, tr, corners)
 
     def leave_core(self, field: ThreatField, x: float, y: float) -> EscapeRun | None:
         """``None`` unless ``(x, y)`` lies in a threat core; then the shortest straight way out of every core."""
@@ -494,7 +626,7 @@ class Escaper:
             if end is None:
                 return None
             self.log.append(f"leave zone {zone}")
-            return EscapeRun(f"leave zone {zone}", resample(np.array([(x, y), end]), p.step), p.step)
+            return EscapeRun.along(f"leave zone {zone}", np.array([(x, y), end]), p.step)
         spacing = min(p.step, cores.min_spread_m / 4.0)
         reach = 6.0 * max(t.spread() for t in field.threats)
         n = min(2000, math.ceil(reach / spacing))
@@ -509,20 +641,28 @@ class Escaper:
         r = d[min(out[k], n - 1)] + p.step  # one step clear of the core's edge
         end = (x + math.sin(angles[k]) * r, y + math.cos(angles[k]) * r)
         self.log.append(f"leave core {inside}")
-        return EscapeRun(
-            f"leave the core of threat {inside}", resample(np.array([(x, y), end]), p.step), p.step
-        )
+        return EscapeRun.along(f"leave the core of threat {inside}", np.array([(x, y), end]), p.step)
 
-    def _run(self, name: str, path: np.ndarray, tr: Trap) -> EscapeRun:
-        """The run for a committed path; one ending near the goal goes on to it (``EscapeRun.to_goal``)."""
+    def _run(self, name: str, path: np.ndarray, tr: Trap, corners: np.ndarray | None = None) -> EscapeRun:
+        """The run for a committed path; one ending near the goal goes on to it (``EscapeRun.to_goal``).
+
+        ``corners``: ``path`` is ``resample(corners, step)``, and the run keeps only its legs.
+        """
         gx, gy = self.goal
         ex, ey = path[-1]
         near = math.hypot(gx - ex, gy - ey) <= HANDOFF_STEPS * tr.step
-        if near and not tr.cores.first_hit(np.array([(ex, ey), (gx, gy)])):
-            if (ex, ey) != (gx, gy):
-                path = np.concatenate([path, resample(np.array([(ex, ey), (gx, gy)]), tr.step)[1:]])
-            return EscapeRun(name, path, tr.step, to_goal=True)
-        return EscapeRun(name, path, tr.step)
+        to_goal = bool(near and not tr.cores.first_hit(np.array([(ex, ey), (gx, gy)])))
+        tail = np.array([(ex, ey), (gx, gy)]) if to_goal and (ex, ey) != (gx, gy) else None
+        if corners is None:
+            if tail is not None:
+                path = np.concatenate([path, resample(tail, tr.step)[1:]])
+            return EscapeRun(name, path, tr.step, to_goal)
+        segs = legs(corners, tr.step)
+        if tail is not None:
+            more = legs(tail, tr.step)
+            more[:, 4] += segs[-1, 4]
+            segs = np.concatenate([segs, more])
+        return EscapeRun(name, _NO_POINTS, tr.step, to_goal, segs=segs)
 
     def _trap(self, field: ThreatField, x: float, y: float) -> Trap:
         p = self.params

@@ -57,6 +57,7 @@ __all__ = [
     "NoCandidate",
     "Strategy",
     "Trap",
+    "global_corners",
     "global_route",
     "rollout",
     "route_cell",
@@ -284,15 +285,22 @@ _WIDEST: weakref.WeakKeyDictionary[ThreatField, float] = weakref.WeakKeyDictiona
 
 
 def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoCandidate:
-    """The whole way from the trap point to the goal, or why there is none.
+    """``global_corners`` resampled at ``step``: the points the stepper follows."""
+    corners = global_corners(tr, routes)
+    return corners if isinstance(corners, NoCandidate) else resample(corners, tr.step)
+
+
+def global_corners(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoCandidate:
+    """The whole way from the trap point to the goal as its corners, or why there is none.
 
     Dijkstra cost-to-go, cost ``1 + LAMBDA T``, on a local grid without the
     search cores (``cores.SEARCH_FRACTION``: the check's cores and a sliver,
     so a route between grid nodes never clips one), coarse to fine: the
     coarse ``route_cell`` first, and the fine one only when the coarse grid
     finds no route (a gap too narrow for it, or no way at all); then shortcut
-    wherever a straight segment costs no more and stays out of them, and
-    resampled at ``step`` for the stepper to follow.
+    wherever a straight segment costs no more and stays out of them.
+    ``global_route`` resamples it at ``step``; a committed run keeps only
+    the corners (``EscapeRun.along``).
 
     The search comes from ``routes`` (default ``routes.ROUTES``): units with
     one goal under one field share it, and each walks its own way down it.
@@ -358,7 +366,7 @@ def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoC
             )
             + f" (local grid of {grid.cell_m:.3g} m cells)"
         )
-    return resample(found.polyline, tr.step)
+    return np.asarray(found.polyline, dtype=np.float64)
 
 
 def _what(tr: Trap) -> str:

@@ -485,7 +485,7 @@ class Stepper:
         if self._escaper is None:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
         out = self._escaper.leave_core(field, x, y)
-        ox, oy = (x, y) if out is None else (float(out.path[-1, 0]), float(out.path[-1, 1]))
+        ox, oy = (x, y) if out is None else out.end()
         sim = foresight.simulate(field, (ox, oy), self.goal, self.goal_gain, self.params, self.bounds)
         run = None
         if sim.outcome.fails:
