@@ -40,6 +40,7 @@ import zenoh
 
 from pfp_service import __version__
 from pfp_service.errors import InputError
+from pfp_service.service import gcpause
 from pfp_service.service.config import ServeConfig
 from pfp_service.service.deliberation import Deliberators
 from pfp_service.service.desk import PreviewDesk, preview_desk, warm_up
@@ -568,24 +569,25 @@ class PlannerNode:
         log_changes(log, inbox)
         tr = self._trace
         t_apply = self.clock()
-        out = self.world.apply(batch, now)
-        t_applied = self.clock()
-        self._acknowledge(acks, batch)
-        forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
-        if self.store is not None and (out.missions or forgotten):
-            self.store.record(out.missions, forgotten)
-        if forgotten:
-            self._trim.forgot(len(forgotten), now)
-        self._trim.due(now)
-        if tr.on:  # each put timed: a put that waits (Zenoh's queue, the GIL) shows apart from its CPU
-            for d in out.directions:
-                key, body = self._direction_key(d.unit), encode(d)
-                t = self.clock()
-                self._put(key, body, direction=True)
-                tr.put(self.clock() - t)
-        else:
-            for d in out.directions:
-                self._put(self._direction_key(d.unit), encode(d), direction=True)
+        with gcpause.paused():  # the collector runs once the directions are out (gcpause)
+            out = self.world.apply(batch, now)
+            t_applied = self.clock()
+            self._acknowledge(acks, batch)
+            forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
+            if self.store is not None and (out.missions or forgotten):
+                self.store.record(out.missions, forgotten)
+            if forgotten:
+                self._trim.forgot(len(forgotten), now)
+            self._trim.due(now)
+            if tr.on:  # each put timed: a put that waits (Zenoh's queue, the GIL) shows apart from its CPU
+                for d in out.directions:
+                    key, body = self._direction_key(d.unit), encode(d)
+                    t = self.clock()
+                    self._put(key, body, direction=True)
+                    tr.put(self.clock() - t)
+            else:
+                for d in out.directions:
+                    self._put(self._direction_key(d.unit), encode(d), direction=True)
         t_put = self.clock()
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
