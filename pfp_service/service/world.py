@@ -48,6 +48,11 @@ K = keys.KeyKind
 # look-ahead points in the next ``apply`` (``World.owes``): the points were 40-45 % of a 1,000-unit
 # wave's ``apply`` (measured: bench.deliberation's wave row, docs/operations.md)
 WAVE_FIRST = 64
+# ... and those points (and the jobs asked with them) follow at most this many units an ``apply``,
+# the rest owed to the next: a 1,000-unit wave's follow-up was one 8-13 ms apply in process (83-121
+# ms in ``pfp bench service``'s fan-out), every other unit's direction waiting on it; in chunks of
+# 128 the largest is 2.1-2.5 ms, 9.1 ms in all against 8.8 in one (same run, load 1.0)
+OWED_PER_TICK = 128
 
 
 @dataclass(slots=True)
@@ -118,7 +123,10 @@ class World:
         return worldpages.page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
 
     def owes(self) -> bool:
-        """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon."""
+        """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon.
+
+        Each ``apply`` pays at most ``OWED_PER_TICK`` units of them; ``owes`` stays true until the last.
+        """
         return bool(self._owed)
 
     def owns(self, unit_id: str) -> bool:
@@ -446,13 +454,7 @@ class World:
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
         out.directions += [steering.no_goal(r, p) for r in live if r.stepper is None]
         guided = [r for r in live if r.stepper is not None]
-        owed, self._owed = self._owed, []
-        later = [  # a wave's units, untouched since: their points now, from the advice they were sent
-            (r, a)
-            for r, a, stepper, version, seq in owed
-            if r.id not in b.dirty and self._units.get(r.id) is r and r.live() and r.seq == seq
-            if r.stepper is stepper and stepper.version == version
-        ]
+        later = self._later(b)  # a wave's units owed their points: the next share of them
         if not guided and not later:
             return
         fld, cull, n = self.field, self._rec.cull, self.settings.lookahead
@@ -461,7 +463,7 @@ class World:
         if (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0:  # the wave first
             advised, failed = steering.advise(guided, fld, cull)
             steered = [(r, a, []) for r, a in advised]
-            self._owed = [(r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None]
+            self._owed += [(r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None]
             b.wave = {r.id for r, _ in advised}
         elif guided:
             steered, failed = steering.steer(guided, fld, cull, n)
@@ -492,6 +494,26 @@ class World:
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         # a unit whose step failed lost its goal: told so, once the rest are out
         out.directions += [steering.no_goal(r, p) for r, _ in failed if r.id in self._units and r.live()]
+
+    def _later(self, b: _Batch) -> list[tuple[UnitRecord, Advice]]:
+        """The next ``OWED_PER_TICK`` of a wave's units still owed their points, untouched since; the rest stay owed.
+
+        A unit heard, re-advised or gone since its direction went out is
+        answered otherwise and dropped; the points come from the advice it
+        was sent, so a wave paid in chunks gives what one pass would.
+        """
+        owed, self._owed, units = self._owed, [], self._units
+        later: list[tuple[UnitRecord, Advice]] = []
+        for i, (r, a, stepper, version, seq) in enumerate(owed):
+            if r.id in b.dirty or units.get(r.id) is not r or not r.live() or r.seq != seq:
+                continue  # heard, gone or stale since: answered otherwise
+            if r.stepper is not stepper or stepper.version != version:
+                continue  # a new goal or world since: its direction went out afresh
+            if len(later) == OWED_PER_TICK:
+                self._owed = owed[i:]  # checked again when their turn comes
+                break
+            later.append((r, a))
+        return later
 
     def _ask(self, rec: UnitRecord, fld: ThreatField, b: _Batch) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
