@@ -112,3 +112,15 @@ def test_a_second_wave_while_a_follow_up_is_owed_leaves_no_unit_without_its_poin
             latest[d.unit] = d
     assert all(d.lookahead for d in latest.values())
     assert not w.owes()
+
+
+def test_the_bench_times_every_follow_up_apply(monkeypatch):
+    from pfp_service.bench.deliberation import storm_and_wave
+
+    monkeypatch.setattr(world_mod, "WAVE_FIRST", 4)
+    monkeypatch.setattr(world_mod, "OWED_PER_TICK", 5)
+    wave = storm_and_wave(units=24, repeat=1)["wave"]
+    assert wave["directions"] > 4
+    assert wave["then_ticks"] == -(-wave["directions"] // 5)
+    assert 0.0 < wave["then_apply_ms_median"] <= wave["then_apply_ms_max"]
+    assert wave["held_off_gc_ms_median"] >= 0.0

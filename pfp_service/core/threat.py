@@ -221,6 +221,24 @@ class ThreatField:
         self._reach: np.ndarray | None = None
         self.zones: ZoneSet = zones if zones is not None else _NO_ZONES
 
+    @classmethod
+    def from_rows(
+        cls, threats: Sequence[Threat], rows: Sequence[np.ndarray], intensity: Intensity = "peak"
+    ) -> ThreatField:
+        """The field of ``threats`` from rows packed before (``rows[j]``: a ``packed`` row of ``threats[j]``).
+
+        The live world keeps each threat's row while it stands: a threat put
+        among a hundred packs one row, not a hundred.
+        """
+        out = cls.__new__(cls)
+        out.threats = tuple(threats)
+        out.intensity = intensity
+        out.packed = np.array(rows, dtype=np.float64).reshape(len(out.threats), len(PACKED_COLUMNS))
+        out.positions = out.packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
+        out._reach = None
+        out.zones = _NO_ZONES
+        return out
+
     def __len__(self) -> int:
         return len(self.threats)
 

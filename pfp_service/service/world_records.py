@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass
 
 import msgspec
+import numpy as np
 
 from pfp_service.core import Resolved, Stepper, Threat, ThreatField
 from pfp_service.core.cull import MIN_THREATS, CullIndex
@@ -69,6 +70,7 @@ class ThreatRecord:
     update: ThreatUpdate
     threat: Threat
     expires_at: float | None
+    row: np.ndarray | None = None  # the threat's packed row in the field, once packed (``Records.field``)
 
 
 @dataclass(slots=True)
@@ -100,8 +102,12 @@ class Records:
         """The field of the threats in force, in id order, with its cull index and stats, and the zones."""
         if self._field is None:
             if self._bare is None:  # a zone change keeps the threats' field, its cull index and stats
-                ordered = [self.threats[k].threat for k in sorted(self.threats)]
-                self._bare = ThreatField(ordered, self.intensity)  # type: ignore[arg-type]
+                ordered = [self.threats[k] for k in sorted(self.threats)]
+                for t in ordered:  # a threat put packs its row; the others keep theirs
+                    if t.row is None:
+                        t.row = ThreatField([t.threat], self.intensity).packed[0]  # type: ignore[arg-type]
+                threats, rows = [t.threat for t in ordered], [t.row for t in ordered]
+                self._bare = ThreatField.from_rows(threats, rows, self.intensity)  # type: ignore[arg-type]
                 self.cull = CullIndex(self._bare.packed) if len(ordered) >= MIN_THREATS else None
                 self._stats = None  # a wave changes the threats and starts no mission: ``stats`` when asked
             self._field = self._bare.with_zones(self.zone_set) if self.zones else self._bare
