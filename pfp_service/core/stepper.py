@@ -126,6 +126,9 @@ class Need(NamedTuple):
     reason: str = ""
 
 
+_tuple = tuple.__new__  # a NamedTuple from all its fields, in order, without its Python-level __new__
+
+
 class Stepper:
     """Steepest descent on ``f = sum_j w_j t_j + delta ||goal - x||^2 / ||goal - x0||^2``.
 
@@ -433,10 +436,10 @@ class Stepper:
             status, reason = _VERDICTS[code]
             return self._end(status, 0.0, dist, reason)
         self._foresee = False
-        self.pending = Need("foresee", x, y)
+        self.pending = _tuple(Need, ("foresee", x, y, ""))  # per unit of a wave: a NamedTuple's __new__ is 2x
         if code == steprule.GO:
             self.advisories += 1
-            return Advice(StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, tx, ty)
+            return _tuple(Advice, (StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, tx, ty))
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
     def _judged(
