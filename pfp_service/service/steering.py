@@ -265,9 +265,10 @@ def reached(
             zb = np.array(zones, dtype=float).reshape(-1, 4)
             pad = ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
             boxes = np.concatenate([boxes, zb + np.hstack([-pad, -pad, pad, pad])])
-        starts = np.array([r.position for r in guided], dtype=float)
-        ends = np.array([r.stepper.goal for r in guided], dtype=float)  # type: ignore[union-attr, type-var]
-        return [bool(b) for b in corridors_meet(starts, ends, boxes).tolist()]
+        n = len(guided)  # each unit's start and goal in one pass: a wave's first look at every unit
+        ends = itertools.chain.from_iterable((*r.position, *r.stepper.goal) for r in guided)  # type: ignore[misc, union-attr]
+        flat = np.fromiter(ends, dtype=float, count=4 * n).reshape(n, 4)
+        return corridors_meet(flat[:, :2], flat[:, 2:], boxes).tolist()  # type: ignore[no-any-return]
     except Exception:
         return [True] * len(guided)
 
