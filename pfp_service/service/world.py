@@ -479,9 +479,10 @@ class World:
             try:
                 job = rec.job
                 d, event = direction(rec, adv, points, p, job is not None)
-                st = rec.stepper
-                if st is not None and st.pending is not None and job is None and rec.id not in wave:
-                    self._ask(rec, fld, b)  # a wave's jobs are asked with its points
+                if job is None and rec.id not in wave:  # a wave's jobs are asked with its points
+                    st = rec.stepper
+                    if st is not None and st.pending is not None:
+                        self._ask(rec, fld, b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
                 failed.append((rec, exc))
