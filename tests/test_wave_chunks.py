@@ -44,7 +44,7 @@ def _put(tid: str = "c", y: float = 40.0) -> ThreatPut:
 
 
 def _follow(w: World, now: float, limit: int = 100) -> list[Outputs]:
-    outs = []
+    outs: list[Outputs] = []
     while w.owes():
         assert len(outs) < limit, "the follow-up never ends"
         now += 0.002

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from pfp_service.core import ThreatField
@@ -40,7 +41,8 @@ def test_the_field_from_kept_rows_is_the_field_packed_afresh_through_puts_moves_
         assert got.positions.tobytes() == want.positions.tobytes()
         assert got.threats == want.threats and got.intensity == want.intensity == intensity
         assert r.cull is not None and r.cull.packed is got.packed
-        assert got.level([[5.0, 1.0]]).tobytes() == want.level([[5.0, 1.0]]).tobytes()
+        at = np.array([[5.0, 1.0]])
+        assert got.level(at).tobytes() == want.level(at).tobytes()
 
 
 def test_a_threat_put_again_is_packed_again_and_the_others_keep_their_rows():
