@@ -63,6 +63,7 @@ _PRIORITY = {"escape": 0, "foresee": 1}  # a unit trapped now before a look-ahea
 CHUNK_RUN_S = 60.0  # a chunk still running this long after it started is killed: a runaway, not a search
 WORKER_MEMORY_MB = 1024.0  # address space a deliberation worker may add to its warm size
 WORKER_NICE = 5  # below the live loop, above the preview workers
+SWEEP_MIN = 256  # cancelled jobs the queue may hold before it is swept, whatever its length
 
 
 class Deliberators:
@@ -82,6 +83,7 @@ class Deliberators:
         self._deliver = deliver
         self._waiting: list[tuple[int, int, Job]] = []  # (priority, seq, job)
         self._seq = 0
+        self._cancelled = 0  # jobs cancelled since the queue was last swept (some had already left it)
         self._in_flight = 0  # chunks in the pool (only the loop thread changes it, in feed and _done)
         self._blobs = Blobs()
         self._closed = False
@@ -107,9 +109,20 @@ class Deliberators:
             heapq.heappush(self._waiting, (_PRIORITY.get(job.kind, 1), self._seq, job))
 
     def cancel(self, jobs: list[Job]) -> None:
-        """The world no longer wants these jobs (``Outputs.cancelled``): one still waiting is dropped unrun."""
+        """The world no longer wants these jobs (``Outputs.cancelled``): one still waiting is dropped unrun.
+
+        A cancelled job leaves the queue when it comes to the top, or sooner: once more jobs were
+        cancelled since the last sweep than half the queue (and ``SWEEP_MIN``), the queue is rebuilt
+        without them.  So wave after wave of superseded look-aheads, while the worker is behind,
+        cannot grow it past about twice the jobs still wanted, nor keep their old fields alive.
+        """
         for job in jobs:
             job.cancelled = True
+        self._cancelled += len(jobs)
+        if self._cancelled > max(SWEEP_MIN, len(self._waiting) // 2):
+            self._waiting = [item for item in self._waiting if not item[2].cancelled]
+            heapq.heapify(self._waiting)  # (priority, seq) keys are unique: the same order as before
+            self._cancelled = 0
 
     def feed(self) -> None:
         """Send waiting jobs to the pool while it has room; drop superseded ones, answer late ones."""
