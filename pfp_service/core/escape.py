@@ -288,23 +288,34 @@ def legs(corners: np.ndarray, step: float) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _point(path: np.ndarray, segs: np.ndarray, i: int) -> tuple[float, float]:
-    """Point ``i`` of a run's path, in either form (``EscapeRun``)."""
-    if segs.shape[0] == 0:
-        return path[i, 0], path[i, 1]
-    if i == 0:
-        return segs[0, 0], segs[0, 1]
-    lo = 0
+def _leg(segs: np.ndarray, i: int, lo: int = 0) -> int:
+    """The leg holding point ``i`` (the first whose last index is at or past it), searched from leg ``lo``."""
     hi = segs.shape[0] - 1
-    while lo < hi:  # the first leg whose last index is at or past i
+    while lo < hi:
         mid = (lo + hi) // 2
         if segs[mid, 4] >= i:
             hi = mid
         else:
             lo = mid + 1
-    first = segs[lo - 1, 4] if lo > 0 else 0.0
-    t = (i - first) / (segs[lo, 4] - first)  # j / m, as grid.resample divides them
-    return segs[lo, 0] + t * segs[lo, 2], segs[lo, 1] + t * segs[lo, 3]
+    return lo
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _on_leg(segs: np.ndarray, leg: int, i: int) -> tuple[float, float]:
+    """Point ``i`` of a run kept as legs, on its leg ``leg`` (``_leg``)."""
+    if i == 0:
+        return segs[0, 0], segs[0, 1]
+    first = segs[leg - 1, 4] if leg > 0 else 0.0
+    t = (i - first) / (segs[leg, 4] - first)  # j / m, as grid.resample divides them
+    return segs[leg, 0] + t * segs[leg, 2], segs[leg, 1] + t * segs[leg, 3]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _point(path: np.ndarray, segs: np.ndarray, i: int) -> tuple[float, float]:
+    """Point ``i`` of a run's path, in either form (``EscapeRun``)."""
+    if segs.shape[0] == 0:
+        return path[i, 0], path[i, 1]
+    return _on_leg(segs, _leg(segs, i), i)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -339,16 +350,24 @@ def _steer(
         return False, cursor, advisories, 0.0, 0.0
     best = math.inf
     i = cursor
+    legs = segs.shape[0]
+    leg = _leg(segs, cursor) if legs else 0  # then walked along: the window is 16 points
     for j in range(cursor, min(cursor + 16, n)):
-        px, py = _point(path, segs, j)
+        if legs:
+            while segs[leg, 4] < j:
+                leg += 1
+            px, py = _on_leg(segs, leg, j)
+        else:
+            px, py = path[j, 0], path[j, 1]
         d = (px - x) * (px - x) + (py - y) * (py - y)
         if d < best:
             best = d
             i = j
-    lx, ly = _point(path, segs, n - 1)
+    lx, ly = _on_leg(segs, legs - 1, n - 1) if legs else (path[n - 1, 0], path[n - 1, 1])
     if i >= n - 2 and math.hypot(lx - x, ly - y) <= step and not to_goal:
         return False, i, advisories, 0.0, 0.0
-    tx, ty = _point(path, segs, min(i + 2, n - 1))
+    t = min(i + 2, n - 1)
+    tx, ty = _on_leg(segs, _leg(segs, t, _leg(segs, i)), t) if legs else (path[t, 0], path[t, 1])
     dx = tx - x
     dy = ty - y
     norm = math.hypot(dx, dy)
