@@ -23,7 +23,15 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_planner_status, keys
 
-__all__ = ["Reframe", "check_origin", "learn_planner_origin", "planner_origin", "reframe", "shown"]
+__all__ = [
+    "Reframe",
+    "check_origin",
+    "judge_origin",
+    "learn_planner_origin",
+    "planner_origin",
+    "reframe",
+    "shown",
+]
 
 Point = tuple[float, float]
 
@@ -85,6 +93,18 @@ def check_origin(
     answered, planner = planner_origin(session, mission, timeout_s)
     if not answered:
         return f"no planner of mission {mission!r} answered yet: {flag} {shown(mine)} is not checked against its origin"
+    return judge_origin(planner, mission, mine, flag)
+
+
+def judge_origin(planner: Origin | None, mission: str, mine: Origin, flag: str = "--origin") -> str | None:
+    """``check_origin``'s verdict once the planner has answered with its origin ``planner``.
+
+    Returns:
+        ``None`` when the two agree; a line to log when the planner has none.
+
+    Raises:
+        InputError: at ``flag``, when they differ.
+    """
     if planner == mine:
         return None
     if planner is None:  # the planner works in plain metres: this client's origin says where they lie

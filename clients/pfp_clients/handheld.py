@@ -34,6 +34,7 @@ from pfp_clients.handheld_link import (
     NmeaReader,
     NmeaRejected,
     NoFixIn,
+    OriginChecked,
     PlannerUp,
     RetryingLink,
     WireRejected,
@@ -235,6 +236,8 @@ class HandheldApp(App[int]):
                     self.model.on_link(False, reason)
                 case PlannerUp():
                     self.model.on_planner_up()
+                case OriginChecked(ok=ok, text=text):
+                    self.model.on_origin(ok, text)
                 case GoalIn(position=position):
                     self.model.on_goal(position)
         now = self.clock()

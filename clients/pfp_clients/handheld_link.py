@@ -11,6 +11,12 @@ set or cancelled by anyone (``GoalIn``) and a planner's liveliness token
 appearing (``PlannerUp``), so the handheld can re-send its goal to a
 restarted planner and still respect a cancel.
 
+With a GPS, positions are metres from ``--origin``; ``RetryingLink`` checks
+that origin against the planner's own (its status) once connected and again
+whenever a planner comes up (``OriginChecked``).  When they differ no
+position is sent, so the planner never guides a soldier from a place
+kilometres off; the screen says why and which origin to use.
+
 The NMEA reader paces a regular file by the sentences' own UTC times (or at
 ``rate_hz``), and reads lines of bounded length, so a binary file is a run
 of rejected sentences that ends, never a spinning core.
@@ -30,8 +36,10 @@ from typing import IO, Any
 
 import zenoh
 
+from pfp_clients.frames import judge_origin, planner_origin
 from pfp_clients.nmea import IGNORED, Fix, LocalFrame, read_sentence
 from pfp_service.errors import InputError, ZenohError, map_zenoh_errors
+from pfp_service.geo import Origin
 from pfp_service.service.config import client_zenoh_config
 from pfp_service.wire import (
     Direction,
@@ -57,6 +65,7 @@ __all__ = [
     "NmeaReader",
     "NmeaRejected",
     "NoFixIn",
+    "OriginChecked",
     "PlannerUp",
     "RetryingLink",
     "WireRejected",
@@ -115,6 +124,14 @@ class PlannerUp:
 
 
 @dataclass(frozen=True, slots=True)
+class OriginChecked:
+    """``--origin`` against the planner's (``frames.judge_origin``): ``ok`` False, no position is sent."""
+
+    ok: bool
+    text: str  # why not, or a line to show ("" when the two agree)
+
+
+@dataclass(frozen=True, slots=True)
 class GoalIn:
     """The unit's goal as put on the wire by anyone (``None``: cancelled)."""
 
@@ -131,6 +148,7 @@ Inbound = (
     | LinkUp
     | LinkDown
     | PlannerUp
+    | OriginChecked
     | GoalIn
 )
 
@@ -150,9 +168,15 @@ class Link:
     """One unit's side of the wire: state out, directions in, a liveliness token while open."""
 
     def __init__(
-        self, session: zenoh.Session, mission: str, unit: str, inbox: queue.Queue[Inbound] | None = None
+        self,
+        session: zenoh.Session,
+        mission: str,
+        unit: str,
+        inbox: queue.Queue[Inbound] | None = None,
+        on_planner: Callable[[], None] | None = None,
     ) -> None:
         self.session = session
+        self._planner_up = on_planner  # told (on Zenoh's thread: it must not block) when a planner appears
         self.mission = mission
         self.unit = unit
         self.inbox: queue.Queue[Inbound] = inbox if inbox is not None else queue.Queue(INBOX_DEPTH)
@@ -189,6 +213,8 @@ class Link:
     def _on_planner(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
             _offer(self.inbox, PlannerUp(str(sample.key_expr).rsplit("/", 1)[-1]))
+            if self._planner_up is not None:
+                self._planner_up()
 
     def _on_direction(self, sample: zenoh.Sample) -> None:
         # decode and enqueue only: this runs on Zenoh's callback thread
@@ -259,8 +285,12 @@ class RetryingLink:
         mission: str,
         unit: str,
         retry_s: float = 1.0,
+        origin: Origin | None = None,
     ) -> None:
         self.mission = keys.check_chunk(mission, "--mission")
+        self.origin = origin  # the GPS's frame: checked against the planner's once connected
+        self.origin_refused = False  # it differs: no position is sent
+        self._recheck = threading.Event()
         self.unit = keys.check_chunk(unit, "--unit")
         self.where = where
         self.retry_s = retry_s
@@ -292,12 +322,46 @@ class RetryingLink:
                 if self._stop.is_set():
                     session.close()
                     return
-                self._link = Link(session, self.mission, self.unit, self.inbox)
+                self._link = Link(session, self.mission, self.unit, self.inbox, self._recheck.set)
             _offer(self.inbox, LinkUp(self.where))
+            if self.origin is not None:
+                self._watch_origin(session, self.origin)
             return
 
+    def _watch_origin(self, session: zenoh.Session, mine: Origin) -> None:
+        """Judge ``mine`` against the planner's origin now and whenever a planner comes up; until closed.
+
+        A planner not answering yet is asked again every ``retry_s``; positions
+        go out meanwhile (as they did before any check), and stop the moment
+        one answers with another origin.
+        """
+        self._recheck.set()
+        while True:
+            self._recheck.wait()
+            if self._stop.is_set():
+                return
+            self._recheck.clear()
+            while not self._stop.is_set():
+                try:
+                    answered, planner = planner_origin(session, self.mission, timeout_s=self.retry_s)
+                except Exception:  # the session is closing: nothing left to check
+                    return
+                if answered:
+                    break
+                self._stop.wait(self.retry_s)
+            else:
+                return
+            try:
+                note = judge_origin(planner, self.mission, mine)
+            except InputError as err:
+                self.origin_refused = True
+                _offer(self.inbox, OriginChecked(False, f"positions not sent: {err.reason}"))
+                continue
+            self.origin_refused = False
+            _offer(self.inbox, OriginChecked(True, note or ""))
+
     def publish_state(self, state: UnitState) -> None:
-        if self._link is not None:
+        if self._link is not None and not self.origin_refused:
             self._link.publish_state(state)
 
     def put_goal(self, goal: Goal) -> None:
@@ -305,8 +369,9 @@ class RetryingLink:
             self._link.put_goal(goal)
 
     def close(self) -> None:
-        """Stop trying; close the link if it is up."""
+        """Stop trying (and checking); close the link if it is up."""
         self._stop.set()
+        self._recheck.set()
         self._thread.join(timeout=5.0)
         with self._lock:
             if self._link is not None:

@@ -244,6 +244,7 @@ class HandheldModel:
         self.goal = settings.goal  # what this handheld asks for: --goal, the g prompt or the wire's
         self.connected = True  # False while the link has no session (the router is down)
         self.link_note = ""
+        self.origin_note = ""  # set while --origin differs from the planner's: no position is sent
         self._goal_sent_s: float | None = None
         self._goal_acked = False
 
@@ -267,6 +268,12 @@ class HandheldModel:
         self.link_note = "" if up else text
         if up:
             self._goal_sent_s = None  # send the goal at once
+
+    def on_origin(self, ok: bool, text: str) -> None:
+        """``--origin`` judged against the planner's: ``ok`` False, positions are not sent (``text`` says why)."""
+        self.origin_note = "" if ok else text
+        if ok and text:
+            self.note = text
 
     def on_planner_up(self) -> None:
         """A planner's liveliness token appeared: a new planner knows nothing of our goal yet."""
@@ -373,7 +380,7 @@ class HandheldModel:
     # -- outputs --------------------------------------------------------------------
     def stale(self, now: float) -> bool:
         """True when the last update (or the start, if none came) is older than ``stale_after_s``."""
-        if not self.connected:
+        if not self.connected or self.origin_note:
             return True
         since = self.last_update_s if self.last_update_s is not None else self.started_s
         return now - since > self.settings.stale_after_s
@@ -452,5 +459,5 @@ class HandheldModel:
             heading_deg=self.heading_deg,
             speed_mps=self.speed_mps,
             walking=self.walking,
-            note=self.link_note or self.note,
+            note=self.origin_note or self.link_note or self.note,
         )

@@ -74,7 +74,10 @@ def register(sub: Any) -> None:
         help="replay a file's GGA sentences at this rate (default: by their own UTC times)",
     )
     g.add_argument(
-        "--origin", type=lat_lon, metavar="LAT,LON", help="local frame origin (needed with --nmea)"
+        "--origin",
+        type=lat_lon,
+        metavar="LAT,LON",
+        help="the planner's (0, 0) as LAT,LON (needed with --nmea); checked against the planner's own origin once connected: when they differ no position is sent",
     )
     p.set_defaults(func=run)
 
@@ -150,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
     frame = LocalFrame(*args.origin) if gps else None
     stream = open_nmea(args.nmea, args.nmea_baud) if gps else None
     where = ", ".join(args.connect or [DEFAULT_CONNECT])
-    link = RetryingLink(lambda: session_config(args), where, args.mission, args.unit)
+    origin = frame.origin if frame is not None else None  # checked against the planner's once connected
+    link = RetryingLink(lambda: session_config(args), where, args.mission, args.unit, origin=origin)
     with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the link has closed
         try:
             reader = None
