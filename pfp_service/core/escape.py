@@ -171,6 +171,10 @@ class EscapeRun:
         x, y = _point(self.path, self.segs, self.n - 1)
         return float(x), float(y)
 
+    def _track(self) -> tuple[np.ndarray, np.ndarray, int, int, int, int, float, bool]:
+        """What the compiled kernels read of this run: its path (either form) and how far along it is."""
+        return self.path, self.segs, self.n, self.cursor, self.advisories, self.limit, self.step, self.to_goal
+
     def then(self, other: EscapeRun | None) -> EscapeRun:
         """This run followed by ``other`` (which starts where this one ends)."""
         if other is None:
@@ -195,40 +199,14 @@ class EscapeRun:
         advisory limit): plain descent takes over there, so walk a ghost.
         """
         out = np.empty((steps + 1, 2))
-        n = _ahead(
-            self.path,
-            self.segs,
-            self.n,
-            self.cursor,
-            self.advisories,
-            self.limit,
-            self.step,
-            self.to_goal,
-            unit,
-            x,
-            y,
-            steps,
-            out,
-            *self.zones.packed(),
-        )
+        n = _ahead(*self._track(), unit, x, y, steps, out, *self.zones.packed())
         if n < 0:
             return None
         return list(map(tuple, out[:n].tolist()))
 
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """``(dx, dy)``: the heading towards the path ahead; ``None`` once at the exit (or abandoned)."""
-        ok, self.cursor, self.advisories, dx, dy = _steer(
-            self.path,
-            self.segs,
-            self.n,
-            self.cursor,
-            self.advisories,
-            self.limit,
-            self.step,
-            self.to_goal,
-            x,
-            y,
-        )
+        ok, self.cursor, self.advisories, dx, dy = _steer(*self._track(), x, y)
         return (dx, dy) if ok else None
 
     def steer(
@@ -245,18 +223,7 @@ class EscapeRun:
         if zones is not None:
             self.zones = zones
         ok, self.cursor, self.advisories, code, dx, dy, dist, move, tx, ty = _steer_step(
-            self.path,
-            self.segs,
-            self.n,
-            self.cursor,
-            self.advisories,
-            self.limit,
-            self.step,
-            self.to_goal,
-            unit,
-            x,
-            y,
-            *self.zones.packed(),
+            *self._track(), unit, x, y, *self.zones.packed()
         )
         return (dx, dy, dist, move, tx, ty) if ok and code == steprule.GO else None
 
