@@ -234,6 +234,11 @@ _NO_SEGS = np.empty((0, 5))
 _NO_SEGS.flags.writeable = False
 
 
+def _length(corners: np.ndarray) -> float:
+    seg = np.diff(corners, axis=0)
+    return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+
+
 def legs(corners: np.ndarray, step: float) -> np.ndarray:
     """``EscapeRun.segs`` for ``grid.resample(corners, step)``: each leg's start, delta and last index.
 
@@ -593,6 +598,8 @@ class Escaper:
         corners = global_corners(tr)
         if isinstance(corners, NoCandidate):
             return None
+        if _length(corners) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
+            return None  # its J is at least its length (exposure is never negative): no need to price it
         poly = resample(corners, tr.step)
         if self._judge(tr, poly)[0] or route_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
             return None
