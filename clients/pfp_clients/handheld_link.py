@@ -36,7 +36,7 @@ from typing import IO, Any
 
 import zenoh
 
-from pfp_clients.frames import judge_origin, planner_origin
+from pfp_clients.frames import judge_origin, learn_planner_origin
 from pfp_clients.nmea import IGNORED, Fix, LocalFrame, read_sentence
 from pfp_service.errors import InputError, ZenohError, map_zenoh_errors
 from pfp_service.geo import Origin
@@ -151,6 +151,10 @@ Inbound = (
     | OriginChecked
     | GoalIn
 )
+
+
+def _quiet(_line: str) -> None:
+    """Positions go out while no planner has answered: nothing to say of the wait."""
 
 
 def _offer(inbox: queue.Queue[Inbound], item: Inbound) -> None:
@@ -331,25 +335,20 @@ class RetryingLink:
     def _watch_origin(self, session: zenoh.Session, mine: Origin) -> None:
         """Judge ``mine`` against the planner's origin now and whenever a planner comes up; until closed.
 
-        A planner not answering yet is asked again every ``retry_s``; positions
-        go out meanwhile (as they did before any check), and stop the moment
-        one answers with another origin.
+        A planner not answering yet is asked again every second
+        (``learn_planner_origin``); positions go out meanwhile (as they did
+        before any check), and stop the moment one answers with another origin.
         """
         self._recheck.set()
-        while True:
-            self._recheck.wait()
-            if self._stop.is_set():
-                return
+        while self._recheck.wait() and not self._stop.is_set():
             self._recheck.clear()
-            while not self._stop.is_set():
-                try:
-                    answered, planner = planner_origin(session, self.mission, timeout_s=self.retry_s)
-                except Exception:  # the session is closing: nothing left to check
-                    return
-                if answered:
-                    break
-                self._stop.wait(self.retry_s)
-            else:
+            try:
+                answered, planner = learn_planner_origin(
+                    session, self.mission, self._stop, _quiet, "handheld"
+                )
+            except Exception:  # the session is closing: nothing left to check
+                return
+            if not answered:  # closed meanwhile
                 return
             try:
                 note = judge_origin(planner, self.mission, mine)
