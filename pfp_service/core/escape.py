@@ -72,7 +72,7 @@ from pfp_service.core.escape_strategies import (
     global_corners,
     rollout,
 )
-from pfp_service.core.grid import polyline_clear, resample
+from pfp_service.core.grid import pieces, polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
@@ -242,16 +242,14 @@ def _length(corners: np.ndarray) -> float:
 def legs(corners: np.ndarray, step: float) -> np.ndarray:
     """``EscapeRun.segs`` for ``grid.resample(corners, step)``: each leg's start, delta and last index.
 
-    The leg counts are ``resample``'s own (every segment split evenly into
-    pieces of at most ``step``), so ``_point`` gives its points bit for bit.
+    The leg counts are ``resample``'s own (``grid.pieces``), so ``_point`` gives its points bit for bit.
     A single corner is one leg of no length (its one point, twice): callers
     pass routes of at least two.
     """
     pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
     if len(pts) < 2:
         pts = np.concatenate([pts, pts])
-    seg = np.diff(pts, axis=0)
-    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / step)).astype(np.int64)
+    seg, k = pieces(pts, step)
     out = np.empty((len(seg), 5))
     out[:, :2] = pts[:-1]
     out[:, 2:4] = seg
@@ -260,8 +258,9 @@ def legs(corners: np.ndarray, step: float) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _leg(segs: np.ndarray, i: int, lo: int = 0) -> int:
-    """The leg holding point ``i`` (the first whose last index is at or past it), searched from leg ``lo``."""
+def _leg(segs: np.ndarray, i: int) -> int:
+    """The leg holding point ``i``: the first whose last index is at or past it."""
+    lo = 0
     hi = segs.shape[0] - 1
     while lo < hi:
         mid = (lo + hi) // 2
@@ -335,11 +334,10 @@ def _steer(
         if d < best:
             best = d
             i = j
-    lx, ly = _on_leg(segs, legs - 1, n - 1) if legs else (path[n - 1, 0], path[n - 1, 1])
+    lx, ly = _point(path, segs, n - 1)
     if i >= n - 2 and math.hypot(lx - x, ly - y) <= step and not to_goal:
         return False, i, advisories, 0.0, 0.0
-    t = min(i + 2, n - 1)
-    tx, ty = _on_leg(segs, _leg(segs, t, _leg(segs, i)), t) if legs else (path[t, 0], path[t, 1])
+    tx, ty = _point(path, segs, min(i + 2, n - 1))
     dx = tx - x
     dy = ty - y
     norm = math.hypot(dx, dy)

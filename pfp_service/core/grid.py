@@ -553,10 +553,15 @@ def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores:
     return np.array(keep)
 
 
-def resample(pts: np.ndarray, spacing: float) -> np.ndarray:
-    """``pts`` with every segment split evenly into pieces of at most ``spacing``."""
+def pieces(pts: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each segment of ``pts`` as its delta, and how many even pieces of at most ``spacing`` it is split into."""
     seg = np.diff(pts, axis=0)
-    k = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / spacing)).astype(np.int64)
+    return seg, np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / spacing)).astype(np.int64)
+
+
+def resample(pts: np.ndarray, spacing: float) -> np.ndarray:
+    """``pts`` with every segment split evenly into pieces of at most ``spacing`` (``pieces``)."""
+    seg, k = pieces(pts, spacing)
     parts = [pts[:1]]
     for a, d, m in zip(pts[:-1], seg, k.tolist()):
         parts.append(a + (np.arange(1, m + 1)[:, None] / m) * d)
