@@ -120,15 +120,18 @@ def test_a_threat_on_the_committed_route_is_seen_and_avoided():
     assert not _core_entry([*threats, blocker], r.path[len(r0.path) // 4 :])
 
 
-def test_look_ahead_is_bounded_and_a_cut_short_simulation_foresees_nothing():
+def test_look_ahead_is_bounded_and_a_step_too_fine_for_it_is_simulated_coarser():
     import time
 
     threat = Threat.from_facing((5e4, 3.0), 0.0, 10.0, 10.0, 0.0)
     params = resolve(PlannerParams(step=1e-4), (0.0, 0.0), (1e5, 0.0), [threat])
     field = ThreatField([threat])
     sim = foresight.simulate(field, (0.0, 0.0), (1e5, 0.0), params.delta / 1e10, params)
-    assert sim.outcome is foresight.Outcome.RUNS_ON
-    assert sim.steps == foresight.FORESIGHT_MAX_STEPS
+    # a billion steps of 0.1 mm do not fit the budget: the same descent at 20 m does, and arrives
+    assert sim.outcome is foresight.Outcome.ARRIVES and sim.step == 20.0
+    assert sim.steps <= foresight.FORESIGHT_MAX_STEPS
+    cut = foresight.simulate(field, (0.0, 0.0), (1e5, 0.0), params.delta / 1e10, params, budget=100)
+    assert cut.outcome is foresight.Outcome.RUNS_ON and cut.steps == 100  # cut short: foresees nothing
     stepper = Stepper((0.0, 0.0), (1e5, 0.0), params)
     t0 = time.perf_counter()
     advice = stepper.advise(field, 0.0, 0.0)

@@ -60,6 +60,6 @@ def test_the_reach_of_every_direction_near_a_wall_stays_out_of_it():
     assert len(out.directions) == len(starts)
     for d in out.directions:
         x0, y0 = starts[d.unit]
-        assert d.reach_m is not None and 0.0 <= d.reach_m <= 5.0 + 1e-9
+        assert d.reach_m is not None and d.reach_m >= 0.0  # past the step on a route, never into the wall
         end = (x0 + d.vector[0] * d.reach_m, y0 + d.vector[1] * d.reach_m)
         assert not Polygon(RING).intersects(LineString([(x0, y0), end])), (d.unit, d.reach_m, d.vector)

@@ -185,6 +185,14 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         ([[0.0, 0.0], [1.0]], "[1]", "expected array of length 2"),
         ([[0.0, BIG]], "[0][1]", "expected a finite number"),
     ],
+    "route": [
+        ("detour", "", "expected one of: , descent, lower_exposure, around_trap, escape, leave"),
+        (0, "", "expected str"),
+    ],
+    "progress": [
+        ("stuck", "", "expected one of: , moving, holding, stalled"),
+        (0, "", "expected str"),
+    ],
     "bool": [(1, "", "expected bool"), ("true", "", "expected bool")],
     "latlons": [
         ("x", "", "expected array"),
@@ -269,6 +277,8 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "true_bearing_deg": ("angle", OPT),
         "lookahead_geo": ("latlons", DEF),
         "reach_m": ("nonneg", OPT),
+        "route": ("route", DEF),
+        "progress": ("progress", DEF),
     },
     "error_reply": {"error": ("text", REQ), "field": ("text", DEF)},
     "planner_status": {

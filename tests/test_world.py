@@ -457,19 +457,34 @@ def test_deliberated_for_an_unknown_unit_is_ignored():
 
 
 def test_deferred_trap_escape_is_searched_off_the_loop():
+    """A live unit's look-ahead and its escape are both deliberation (``core.tracking``).
+
+    Under ``contour`` the look-ahead foresees descent trapped in the
+    horseshoe: the unit tracks the descent to there, and only there is the
+    escape searched, off the loop.
+    """
     w = _deferred(planner=PlannerParams(escape="contour"))
-    w.apply([*_horseshoe(), _state("u", 0, 0), GoalSet("u", Goal(position=(100, 100)))], 0.0)
+    out = w.apply([*_horseshoe(), _state("u", 0, 0), GoalSet("u", Goal(position=(100, 100)))], 0.0)
+    kinds = [job.kind for job in out.jobs]
+    assert kinds == ["foresee"] and _one(out, "u").deliberating
+    d = _one(w.apply([out.jobs[0].run(0.0)], 0.0), "u")  # the route lands
+    assert d.route == "descent" and not d.deliberating
     step = w.view("u").stepper.params.step
     pos = (0.0, 0.0)
     for k in range(1, 3000):
         out = w.apply([_state("u", *pos, k)], float(k))
         d = _one(out, "u")
         if out.jobs:
-            break
+            kinds.append(out.jobs[0].kind)
+            if out.jobs[0].kind == "escape":
+                break
+            assert d.deliberating
+            d = _one(w.apply([out.jobs[0].run(float(k))], float(k)), "u")  # the route lands
         assert d.status is DirectionStatus.EN_ROUTE
         pos = (pos[0] + step * d.vector[0], pos[1] + step * d.vector[1])
     else:
         pytest.fail("no escape job")
+    assert kinds == ["foresee", "escape"]
     assert d.deliberating and out.jobs[0].kind == "escape"
     d = _one(w.apply([out.jobs[0].run(float(k)), _state("u", *pos)], float(k)), "u")
     assert d.status is DirectionStatus.ESCAPING

@@ -222,12 +222,37 @@ def test_restored_units_are_stale_until_they_report_and_forgotten_on_the_usual_c
     assert not [e for e in out.events if isinstance(e, ArrivedEvent)]
 
 
-def test_a_deliberation_that_fails_where_it_runs_costs_its_unit_the_goal_and_no_one_else_anything():
+def test_a_mission_of_a_denormal_step_deliberates_at_a_step_it_can_afford():
     # a peer's or a restored mission may carry a step of 2.2e-308 m when its tolerance covered the distance
-    # then; from 100 m away its look-ahead overflows (6 * 100 / 2.2e-308 steps) in the worker
+    # then; from 100 m away its look-ahead once overflowed (6 * 100 / 2.2e-308 steps) in the worker: it is
+    # now simulated, and its route kept, at a step the look-ahead's budget covers (foresight.resolution)
     params = Resolved(1.0, 2.2250738585072014e-308, 300, 10.0, "peak", "auto", 20, 200, 0)
     w = World(WorldSettings(deliberation="deferred", planner=PlannerParams(intensity="density", delta=0.08)))
     w.apply([MissionRestored("odd", Goal(position=(5.0, 0.0)), (0.0, 0.0), params)], 0.0)
+    out = w.apply([StateReported("odd", UnitState(position=(100.0, 0.0)))], 0.0)
+    results = [job.run(0.0) for job in out.jobs]
+    assert [r.error for r in results] == [None]
+    out = w.apply([*results, StateReported("odd", UnitState(position=(100.0, 0.0)))], 0.1)
+    (d,) = [d for d in out.directions if d.unit == "odd"]
+    assert d.status is DirectionStatus.EN_ROUTE and d.route == "descent" and d.vector[0] < -0.99
+
+
+def test_a_deliberation_that_fails_where_it_runs_costs_its_unit_the_goal_and_no_one_else_anything(
+    monkeypatch,
+):
+    # a look-ahead that raises in the worker (injected: no field this planner accepts makes it raise now)
+    from pfp_service.core import foresight
+
+    real = foresight.simulate
+
+    def simulate(field, start, *args, **kwargs):
+        if start == (100.0, 0.0):
+            raise OverflowError("injected")
+        return real(field, start, *args, **kwargs)
+
+    monkeypatch.setattr(foresight, "simulate", simulate)
+    w = World(WorldSettings(deliberation="deferred", planner=PlannerParams(intensity="density", delta=0.08)))
+    w.apply([GoalSet("odd", Goal(position=(5.0, 0.0)))], 0.0)
     w.apply([GoalSet(u, Goal(position=(10.0, 12.0))) for u in INNOCENTS], 0.0)
     out = w.apply([StateReported("odd", UnitState(position=(100.0, 0.0))), *_states(0.0)], 0.0)
     results = [job.run(0.0) for job in out.jobs]  # as a worker runs them: an answer saying so, never a raise
@@ -241,4 +266,4 @@ def test_a_deliberation_that_fails_where_it_runs_costs_its_unit_the_goal_and_no_
     (ev,) = [e for e in out.events if isinstance(e, RejectedEvent)]
     assert ev.key == keys.unit_goal("default", "odd") and "OverflowError" in ev.reason
     (f,) = out.faults
-    assert f.error == "OverflowError" and f.where.startswith("core/")
+    assert f.error == "OverflowError" and f.where.startswith("test_world_bulkheads")  # where it raised

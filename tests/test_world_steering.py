@@ -8,6 +8,7 @@ import pytest
 
 from pfp_service.core import PlannerParams, Stepper, StepStatus, ThreatField, resolve
 from pfp_service.core.stepper import Advice
+from pfp_service.core.tracking import Route
 from pfp_service.errors import FINITE_LIMIT
 from pfp_service.geo import Origin
 from pfp_service.service import steering
@@ -102,6 +103,7 @@ def _fields(status: StepStatus) -> tuple:
         "reach": 1.0,
         "to_x": 0.0,
         "to_y": 1.0,
+        "route": Route.NONE,
     }
     return tuple(values[f] for f in Advice._fields)
 

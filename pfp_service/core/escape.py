@@ -76,6 +76,7 @@ from pfp_service.core.grid import pieces, polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.tracking import LEAD_STEPS, Route
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "EscapeRun", "Escaper"]
@@ -125,7 +126,22 @@ class EscapeRun:
     worker's answer.
     """
 
-    __slots__ = ("advisories", "cursor", "limit", "n", "name", "path", "segs", "step", "to_goal", "zones")
+    __slots__ = (
+        "advisories",
+        "ahead_m",
+        "cursor",
+        "lead",
+        "limit",
+        "n",
+        "name",
+        "off_m",
+        "path",
+        "route",
+        "segs",
+        "step",
+        "to_goal",
+        "zones",
+    )
 
     def __init__(
         self,
@@ -154,6 +170,10 @@ class EscapeRun:
         self.step = step
         self.to_goal = to_goal
         self.zones: ZoneSet = _NO_ZONES  # the zones it was last steered among (``steer``), for ``ahead``
+        self.route = Route.ESCAPE  # what it is, for the direction (the stepper names the others)
+        self.lead = LEAD_STEPS  # the pursuit point is this many points past the nearest (``tracking``)
+        self.off_m = 0.0  # at the last ``steer``: the unit's distance from the nearest point of the run
+        self.ahead_m = 0.0  # ... and from the pursuit point
 
     @classmethod
     def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
@@ -171,9 +191,19 @@ class EscapeRun:
         x, y = _point(self.path, self.segs, self.n - 1)
         return float(x), float(y)
 
-    def _track(self) -> tuple[np.ndarray, np.ndarray, int, int, int, int, float, bool]:
+    def _track(self) -> tuple[np.ndarray, np.ndarray, int, int, int, int, float, bool, int]:
         """What the compiled kernels read of this run: its path (either form) and how far along it is."""
-        return self.path, self.segs, self.n, self.cursor, self.advisories, self.limit, self.step, self.to_goal
+        return (
+            self.path,
+            self.segs,
+            self.n,
+            self.cursor,
+            self.advisories,
+            self.limit,
+            self.step,
+            self.to_goal,
+            self.lead,
+        )
 
     def then(self, other: EscapeRun | None) -> EscapeRun:
         """This run followed by ``other`` (which starts where this one ends)."""
@@ -206,7 +236,7 @@ class EscapeRun:
 
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """``(dx, dy)``: the heading towards the path ahead; ``None`` once at the exit (or abandoned)."""
-        ok, self.cursor, self.advisories, dx, dy = _steer(*self._track(), x, y)
+        ok, self.cursor, self.advisories, dx, dy, self.off_m, self.ahead_m = _steer(*self._track(), x, y)
         return (dx, dy) if ok else None
 
     def steer(
@@ -222,8 +252,8 @@ class EscapeRun:
         """
         if zones is not None:
             self.zones = zones
-        ok, self.cursor, self.advisories, code, dx, dy, dist, move, tx, ty = _steer_step(
-            *self._track(), unit, x, y, *self.zones.packed()
+        ok, self.cursor, self.advisories, code, dx, dy, dist, move, tx, ty, self.off_m, self.ahead_m = (
+            _steer_step(*self._track(), unit, x, y, *self.zones.packed())
         )
         return (dx, dy, dist, move, tx, ty) if ok and code == steprule.GO else None
 
@@ -307,23 +337,30 @@ def _steer(
     limit: int,
     step: float,
     to_goal: bool,
+    lead: int,
     x: float,
     y: float,
-) -> tuple[bool, int, int, float, float]:
-    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy)``; not ``ok`` at the exit or past the limit.
+) -> tuple[bool, int, int, float, float, float, float]:
+    """``EscapeRun.direction``: ``(ok, cursor, advisories, dx, dy, off, ahead)``; not ``ok`` at the exit or past the limit.
 
-    The cursor moves to the nearest of the next 16 points (the first on a
-    tie), and the unit heads for the point two beyond it.  The last step of
-    a ``to_goal`` run ends on the goal: ``steprule.judge``'s final approach.
+    The cursor moves to the nearest of the next points (the first on a
+    tie), and the unit heads for the point ``lead`` beyond it; ``off`` is its
+    distance from the nearest point, ``ahead`` from the point it heads for.
+    The window is 16 points, and as many more as the unit could have
+    driven past since the cursor's point, so a fast unit reporting seldom is
+    not left behind.  The last step of a ``to_goal`` run ends on the goal:
+    ``steprule.judge``'s final approach.
     """
     advisories += 1
     if advisories > limit:
-        return False, cursor, advisories, 0.0, 0.0
+        return False, cursor, advisories, 0.0, 0.0, 0.0, 0.0
     best = math.inf
     i = cursor
     legs = segs.shape[0]
-    leg = _leg(segs, cursor) if legs else 0  # then walked along: the window is 16 points
-    for j in range(cursor, min(cursor + 16, n)):
+    leg = _leg(segs, cursor) if legs else 0  # then walked along the window
+    cx, cy = _point(path, segs, cursor)
+    window = 16 + lead + 2 * int(min(math.hypot(cx - x, cy - y) / step, 1e9))
+    for j in range(cursor, min(cursor + window, n)):
         if legs:
             while segs[leg, 4] < j:
                 leg += 1
@@ -334,16 +371,17 @@ def _steer(
         if d < best:
             best = d
             i = j
+    off = math.sqrt(best)
     lx, ly = _point(path, segs, n - 1)
     if i >= n - 2 and math.hypot(lx - x, ly - y) <= step and not to_goal:
-        return False, i, advisories, 0.0, 0.0
-    tx, ty = _point(path, segs, min(i + 2, n - 1))
+        return False, i, advisories, 0.0, 0.0, off, 0.0
+    tx, ty = _point(path, segs, min(i + lead, n - 1))
     dx = tx - x
     dy = ty - y
     norm = math.hypot(dx, dy)
     if norm <= 1e-9 * step:
-        return False, i, advisories, 0.0, 0.0
-    return True, i, advisories, dx / norm, dy / norm
+        return False, i, advisories, 0.0, 0.0, off, 0.0
+    return True, i, advisories, dx / norm, dy / norm, off, norm
 
 
 @numba.njit(cache=True, nogil=True)
@@ -356,6 +394,7 @@ def _steer_step(
     limit: int,
     step: float,
     to_goal: bool,
+    lead: int,
     unit: np.ndarray,
     x: float,
     y: float,
@@ -363,15 +402,17 @@ def _steer_step(
     offsets: np.ndarray,
     circles: np.ndarray,
     boxes: np.ndarray,
-) -> tuple[bool, int, int, int, float, float, float, float, float, float]:
+) -> tuple[bool, int, int, int, float, float, float, float, float, float, float, float]:
     """``EscapeRun.steer``: ``_steer``, then the heading judged as a step (``steprule.judge``)."""
-    ok, cursor, advisories, hx, hy = _steer(path, segs, n, cursor, advisories, limit, step, to_goal, x, y)
+    ok, cursor, advisories, hx, hy, off, ahead = _steer(
+        path, segs, n, cursor, advisories, limit, step, to_goal, lead, x, y
+    )
     if not ok:
-        return False, cursor, advisories, steprule.GO, 0.0, 0.0, 0.0, 0.0, x, y
+        return False, cursor, advisories, steprule.GO, 0.0, 0.0, 0.0, 0.0, x, y, off, ahead
     code, dx, dy, dist, move, tx, ty = _zone_heading(
         path, segs, n, cursor, unit, x, y, hx, hy, edges, offsets, circles, boxes
     )
-    return True, cursor, advisories, code, dx, dy, dist, move, tx, ty
+    return True, cursor, advisories, code, dx, dy, dist, move, tx, ty, off, ahead
 
 
 @numba.njit(cache=True, nogil=True)
@@ -437,6 +478,7 @@ def _ahead(
     limit: int,
     step: float,
     to_goal: bool,
+    lead: int,
     unit: np.ndarray,
     x: float,
     y: float,
@@ -453,7 +495,9 @@ def _ahead(
     for k in range(steps):
         if steprule.judge(unit, x, y, 0.0, 0.0, 0.0, steprule.CHECK)[0] != steprule.GO:
             return k + 1  # arrived, out of bounds or not finite: the ghost stops here
-        ok, cursor, advisories, hx, hy = _steer(path, segs, n, cursor, advisories, limit, step, to_goal, x, y)
+        ok, cursor, advisories, hx, hy, _off, _ahead = _steer(
+            path, segs, n, cursor, advisories, limit, step, to_goal, lead, x, y
+        )
         if not ok:
             return -1
         _code, _dx, _dy, _dist, _move, x, y = _zone_heading(
@@ -462,6 +506,11 @@ def _ahead(
         out[k + 1, 0] = x
         out[k + 1, 1] = y
     return steps + 1
+
+
+def _leaving(run: EscapeRun) -> EscapeRun:
+    run.route = Route.LEAVE
+    return run
 
 
 class _Site:
@@ -577,7 +626,7 @@ class Escaper:
         if verdict:
             return None, f"{ahead} foreseen; global: {verdict}"
         self.log.append("global")
-        return self._run(f"global ({ahead} foreseen)", poly, tr, corners), ""
+        return self._run(f"global ({ahead} foreseen)", poly, tr, corners, Route.AROUND_TRAP), ""
 
     def cheaper_route(self, field: ThreatField, x: float, y: float, foreseen_cost: float) -> EscapeRun | None:
         """Plain descent from ``(x, y)`` is foreseen to arrive at ``J = foreseen_cost``: is going round clearly cheaper?
@@ -602,7 +651,7 @@ class Escaper:
         if self._judge(tr, poly)[0] or route_cost(poly, field) * (1.0 + AUTO_MARGIN) >= foreseen_cost:
             return None
         self.log.append("global")
-        return self._run("global (cheaper than descent)", poly, tr, corners)
+        return self._run("global (cheaper than descent)", poly, tr, corners, Route.LOWER_EXPOSURE)
 
     def leave_core(self, field: ThreatField, x: float, y: float) -> EscapeRun | None:
         """``None`` unless ``(x, y)`` lies in a threat core; then the shortest straight way out of every core."""
@@ -617,7 +666,7 @@ class Escaper:
             if end is None:
                 return None
             self.log.append(f"leave zone {zone}")
-            return EscapeRun.along(f"leave zone {zone}", np.array([(x, y), end]), p.step)
+            return _leaving(EscapeRun.along(f"leave zone {zone}", np.array([(x, y), end]), p.step))
         spacing = min(p.step, cores.min_spread_m / 4.0)
         reach = 6.0 * max(t.spread() for t in field.threats)
         n = min(2000, math.ceil(reach / spacing))
@@ -632,13 +681,28 @@ class Escaper:
         r = d[min(out[k], n - 1)] + p.step  # one step clear of the core's edge
         end = (x + math.sin(angles[k]) * r, y + math.cos(angles[k]) * r)
         self.log.append(f"leave core {inside}")
-        return EscapeRun.along(f"leave the core of threat {inside}", np.array([(x, y), end]), p.step)
+        return _leaving(
+            EscapeRun.along(f"leave the core of threat {inside}", np.array([(x, y), end]), p.step)
+        )
 
-    def _run(self, name: str, path: np.ndarray, tr: Trap, corners: np.ndarray | None = None) -> EscapeRun:
+    def _run(
+        self,
+        name: str,
+        path: np.ndarray,
+        tr: Trap,
+        corners: np.ndarray | None = None,
+        route: Route = Route.ESCAPE,
+    ) -> EscapeRun:
         """The run for a committed path; one ending near the goal goes on to it (``EscapeRun.to_goal``).
 
         ``corners``: ``path`` is ``resample(corners, step)``, and the run keeps only its legs.
+        ``route``: what the run is, for the direction.
         """
+        run = self._made(name, path, tr, corners)
+        run.route = route
+        return run
+
+    def _made(self, name: str, path: np.ndarray, tr: Trap, corners: np.ndarray | None) -> EscapeRun:
         gx, gy = self.goal
         ex, ey = path[-1]
         near = math.hypot(gx - ex, gy - ey) <= HANDOFF_STEPS * tr.step
@@ -671,7 +735,7 @@ class Escaper:
             trap_window=p.trap_window,
             dist=dist,
             margin=max(4.0 * p.step, 0.05 * dist),
-            budget=int(min(8000, max(10 * p.trap_window, math.ceil(6.0 * dist / p.step)))),
+            budget=int(min(8000, max(10 * p.trap_window, math.ceil(min(6.0 * dist / p.step, 8000.0))))),
             bounds=self.bounds,
             rng=np.random.default_rng([p.seed & 0xFFFFFFFF, self.unit_key & 0xFFFFFFFF, self.traps]),
             unit_key=self.unit_key,

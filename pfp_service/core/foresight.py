@@ -25,6 +25,8 @@ and a trap is still caught when it happens.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from enum import StrEnum
 from typing import NamedTuple
 
@@ -35,9 +37,12 @@ from pfp_service.core import cull, kernels, steprule
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["FORESIGHT_MAX_STEPS", "Foresight", "Outcome", "simulate"]
+__all__ = ["FORESIGHT_MAX_STEPS", "Foresight", "Outcome", "resolution", "simulate"]
 
 FORESIGHT_MAX_STEPS = 20_000
+STEPS_PER_LENGTH = 4.0  # a descent's path is rarely more than this many straight lines long
+TOLERANCE_SHARE = 0.75  # core.params' derived tolerance, as a share of the step
+_NO_TRAIL = np.empty((0, 2))
 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
@@ -74,12 +79,16 @@ class Foresight(NamedTuple):
     x: float
     y: float
     exposure: float = 0.0
+    path: np.ndarray | None = (
+        None  # the simulated positions ``(steps + 1, 2)``, when asked for (``keep_path``)
+    )
+    step: float = 0.0  # the step simulated: the stepper's, or coarser (``resolution``)
 
 
 @numba.njit(cache=True, nogil=True)
 def _simulate(  # type: ignore[no-untyped-def]
     packed, edges, offsets, circles, boxes, unit, x, y, budget,
-    culled, grid, indptr, indices, cell_need, need_outside,
+    culled, grid, indptr, indices, cell_need, need_outside, trail,
 ):  # fmt: skip
     # the stepper's own advisories: steprule.judge, advisory by advisory, and the exposure on the way;
     # each gradient culled as the live tick's is (cull.py: the threats the cell lists, where the
@@ -95,7 +104,11 @@ def _simulate(  # type: ignore[no-untyped-def]
     gains[0] = unit[steprule.GAIN]
     out = np.empty((1, 4))
     flags = np.zeros(1, dtype=np.bool_)
+    keep = trail.shape[0] > budget  # the caller asked for the path: position k goes to trail[k]
     for k in range(budget + 1):
+        if keep:
+            trail[k, 0] = x
+            trail[k, 1] = y
         if culled:
             pts[0, 0] = x
             pts[0, 1] = y
@@ -133,6 +146,26 @@ def _simulate(  # type: ignore[no-untyped-def]
     return _RUNS_ON, budget, x, y, exposure
 
 
+def resolution(params: Resolved, dist: float, budget: int) -> Resolved:
+    """``params``, or a coarser copy whose step reaches ``dist`` within ``budget / STEPS_PER_LENGTH`` steps.
+
+    ``max_iter`` becomes the budget, and the tolerance grows with
+    the step up to ``TOLERANCE_SHARE`` of it (the derived share: an explicit
+    tolerance is never made finer); the trap windows count steps, so they
+    keep their meaning at any step.
+    """
+    if not (dist > 0.0 and math.isfinite(dist)) or params.step * budget >= STEPS_PER_LENGTH * dist:
+        return params
+    step = STEPS_PER_LENGTH * dist / budget
+    scale = step / params.step
+    return dataclasses.replace(
+        params,
+        step=step,
+        tolerance=max(params.tolerance, min(params.tolerance * scale, TOLERANCE_SHARE * step)),
+        max_iter=budget,
+    )
+
+
 def simulate(
     field: ThreatField,
     start: tuple[float, float],
@@ -141,6 +174,7 @@ def simulate(
     params: Resolved,
     bounds: Bounds | None = None,
     budget: int | None = None,
+    keep_path: bool = False,
 ) -> Foresight:
     """Plain descent from ``start``, judged by a fresh stepper's rules.
 
@@ -152,7 +186,14 @@ def simulate(
         bounds: the mission bounds, if any.
         budget: most steps simulated; default ``params.max_iter``.  Never
             more than ``FORESIGHT_MAX_STEPS``.
+        keep_path: return the simulated positions too (``Foresight.path``).
+
+    A step so fine that the way to the goal would not fit in the budget is
+    simulated at a coarser one (``resolution``): descent is scale-free, so
+    the coarser simulation foresees the same trap or the same arrival, where
+    the fine one would run out of steps half way and foresee nothing.
     """
+    params = resolution(params, math.hypot(goal[0] - start[0], goal[1] - start[1]), FORESIGHT_MAX_STEPS)
     limit = params.max_iter if budget is None else budget
     limit = min(limit, FORESIGHT_MAX_STEPS)
     unit = steprule.unit(
@@ -173,6 +214,7 @@ def simulate(
         )
     else:
         args = ((0.0, 0.0, 1.0, 1, 1), np.zeros(2, np.int64), np.zeros(0, np.int64), np.zeros(1), 0.0)
+    trail = np.empty((limit + 1, 2)) if keep_path else _NO_TRAIL
     code, steps, x, y, exposure = _simulate(
         field.packed,
         *field.zones.packed(),
@@ -182,5 +224,7 @@ def simulate(
         limit,
         index is not None,
         *args,
+        trail,
     )
-    return Foresight(_OUTCOMES[code], steps, x, y, exposure)
+    path = trail[: steps + 1] if keep_path else None
+    return Foresight(_OUTCOMES[code], steps, x, y, exposure, path, params.step)

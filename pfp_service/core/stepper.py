@@ -59,12 +59,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pfp_service.core import foresight, kernels, steprule
+from pfp_service.core import foresight, kernels, steprule, tracking, zones
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.escape import Escaper, EscapeRun
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.tracking import Route
 
 __all__ = ["Advice", "Bounds", "Need", "StepStatus", "Stepper", "advise_many"]
 
@@ -95,9 +96,10 @@ class Advice(NamedTuple):
     ``level`` is the weighted threat level at the position; ``distance`` is the
     distance to the goal in metres.  ``reach`` is how far a simulated unit
     moves along it: ``step``, or less on the final approach, which ends on the
-    goal; ``to`` (``to_x, to_y``) is where that step ends (``steprule.judge``):
-    a driver moves there.  A terminal advice has ``reach`` infinite and ``to``
-    not a number.
+    goal; a tracking stepper's unit on a route may go on to the pursuit point
+    (``tracking``), which is farther.  ``to`` (``to_x, to_y``) is where one
+    planner step ends (``steprule.judge``): a simulating driver moves there.
+    A terminal advice has ``reach`` infinite and ``to`` not a number.
     """
 
     status: StepStatus
@@ -110,6 +112,7 @@ class Advice(NamedTuple):
     reach: float = math.inf
     to_x: float = math.nan  # two floats, not a tuple: no container for the collector per advice
     to_y: float = math.nan
+    route: Route = Route.NONE  # what the route the unit follows is (``tracking``)
 
     @property
     def to(self) -> tuple[float, float]:
@@ -142,9 +145,11 @@ class Stepper:
     """
 
     __slots__ = (
+        "_ends",
         "_escaper",
         "_foresee",
         "_ghost",
+        "_lead",
         "_run",
         "_terminal",
         "_trap_at",
@@ -158,6 +163,8 @@ class Stepper:
         "origin",
         "params",
         "pending",
+        "speed_mps",
+        "tracking",
         "unit_key",
         "version",
     )
@@ -198,6 +205,10 @@ class Stepper:
         self.defer = False  # record deliberation as ``pending`` instead of running it inline
         self.pending: Need | None = None
         self.version = 0  # bumped by every world change: a deliberation is for one version
+        self.tracking = False  # a live unit's: traps from the field, routes tracked (``track``)
+        self.speed_mps = 0.0  # the unit's speed, as the driver last knew it (``pace``)
+        self._lead = tracking.LEAD_STEPS  # its pursuit point's lead, in route points (``pace``)
+        self._ends = ""  # a tracked route that ends where descent is foreseen trapped: why
 
     def __deepcopy__(self, memo: dict[int, object]) -> Stepper:
         """A detached copy (previews, deliberation): shares the immutable parts, copies the state."""
@@ -222,10 +233,38 @@ class Stepper:
         new._run = copy.copy(self._run)  # the route is shared; only its cursor moves
         new._foresee = False
         new._ghost = True
+        new.tracking = False
+        new.speed_mps = self.speed_mps
+        new._lead = self._lead
+        new._ends = ""
         new.defer = False
         new.pending = None
         new.version = self.version
         return new
+
+    def track(self) -> None:
+        """Guide a live unit, whatever it does between two reports (``core.tracking``).
+
+        Its reports are never judged as steps: the trap watch is off, a trap
+        is what the look-ahead foresees from where the unit is (under every
+        ``escape``), and the route it foresees is tracked.
+        """
+        p = self.params
+        self.tracking = True
+        self._unit = steprule.unit(self.goal, self.goal_gain, p.tolerance, p.step, self.bounds, watch=False)
+        self._foresee = not self._ghost
+
+    def pace(self, speed_mps: float) -> None:
+        """The unit's speed over the ground, as last reported or measured: its pursuit point's lead.
+
+        The lead (in route points) changes only when the speed changes it by
+        more than a point and a quarter, so a measured speed's jitter never
+        moves the pursuit point between two reports.
+        """
+        self.speed_mps = speed_mps if math.isfinite(speed_mps) and speed_mps > 0.0 else 0.0
+        lead = tracking.lead_points(self.params.step, self.speed_mps)
+        if abs(lead - self._lead) > max(1.0, 0.25 * self._lead):
+            self._lead = lead
 
     def deliberate(self, field: ThreatField) -> None:
         """Run the pending deliberation inline (on a detached copy, off the planning loop)."""
@@ -259,6 +298,7 @@ class Stepper:
         self._escaper = done._escaper
         self._traps = done._traps
         self._run = done._run
+        self._ends = done._ends
         if done._terminal is not None and done._terminal.status is StepStatus.TRAPPED:
             self._terminal, self._trap_at = done._terminal, done._trap_at
         changed = self._run is not None or self._terminal is not None
@@ -285,7 +325,8 @@ class Stepper:
         """Threats appeared, moved or vanished: judge progress afresh from here."""
         steprule.reset_watch(self._unit)
         self._run = None  # judged under the old field
-        self._foresee = self.params.escape == "auto" and not self._ghost
+        self._ends = ""
+        self._foresee = (self.params.escape == "auto" or self.tracking) and not self._ghost
         self.pending = None  # asked under the old field
         self.version += 1
         if self._escaper is not None:
@@ -439,7 +480,9 @@ class Stepper:
         self.pending = _tuple(Need, ("foresee", x, y, ""))  # per unit of a wave: a NamedTuple's __new__ is 2x
         if code == steprule.GO:
             self.advisories += 1
-            return _tuple(Advice, (StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, tx, ty))
+            return _tuple(
+                Advice, (StepStatus.EN_ROUTE, dx, dy, level, dist, "", True, move, tx, ty, Route.NONE)
+            )
         return self._judged(field, x, y, level, code, dx, dy, dist, move, tx, ty)
 
     def _judged(
@@ -489,19 +532,47 @@ class Stepper:
             self._escaper = Escaper(self.params, self.goal, self.goal_gain, self.bounds, self.unit_key)
         out = self._escaper.leave_core(field, x, y)
         ox, oy = (x, y) if out is None else out.end()
-        sim = foresight.simulate(field, (ox, oy), self.goal, self.goal_gain, self.params, self.bounds)
+        sim = foresight.simulate(
+            field, (ox, oy), self.goal, self.goal_gain, self.params, self.bounds, keep_path=self.tracking
+        )
+        auto = self.params.escape == "auto"
         run = None
-        if sim.outcome.fails:
+        self._ends = ""
+        if sim.outcome.fails and auto:
             run, _why = self._escaper.foresee(field, ox, oy, sim.outcome.value.replace("_", " "))
             if run is not None:  # else descend and meet the trap as usual
                 self._traps += 1
-        elif sim.outcome is foresight.Outcome.ARRIVES:
-            foreseen = sim.steps * self.params.step + LAMBDA * sim.exposure
+        elif sim.outcome is foresight.Outcome.ARRIVES and auto:
+            foreseen = sim.steps * sim.step + LAMBDA * sim.exposure
             run = self._escaper.cheaper_route(field, ox, oy, foreseen)
+        if run is None and self.tracking and sim.path is not None:
+            run = self._descent_route(sim)
         if out is not None:
             run = out.then(run)
         if run is not None:
             self._run = run
+
+    def _descent_route(self, sim: foresight.Foresight) -> EscapeRun | None:
+        """The foreseen descent as a route to track: to the goal, or to where it is foreseen trapped.
+
+        Descent foreseen trapped (or out of bounds) ends there: the unit is
+        judged trapped when it gets there (``_ends``), and escapes as the
+        stepper's ``escape`` says.  Descent cut short by the simulation's
+        budget is a route to where it got, chosen again there.
+        """
+        assert sim.path is not None
+        if len(sim.path) < 2:
+            return None
+        corners = tracking.simplify(sim.path, tracking.SIMPLIFY_STEPS * sim.step)
+        arrives = sim.outcome is foresight.Outcome.ARRIVES
+        if arrives and (corners[-1, 0], corners[-1, 1]) != self.goal:
+            corners = np.concatenate([corners, np.array([self.goal])])
+        run = EscapeRun.along("descent", corners, sim.step, to_goal=arrives)  # at the resolution simulated
+        run.route = Route.DESCENT
+        run.limit = _NO_LIMIT
+        if sim.outcome.fails:
+            self._ends = f"{sim.outcome.value.replace('_', ' ')} foreseen where descent stalls"
+        return run
 
     def _trapped(
         self,
@@ -535,7 +606,12 @@ class Stepper:
 
     @property
     def escaping(self) -> bool:
-        """Following a committed escape route."""
+        """Following a committed route other than the foreseen descent (which a change far off leaves be)."""
+        return self._run is not None and self._run.route is not Route.DESCENT
+
+    @property
+    def on_route(self) -> bool:
+        """Following a committed route: an escape, or a tracked descent (``core.tracking``)."""
         return self._run is not None
 
     def route_ahead(self, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
@@ -563,28 +639,71 @@ class Stepper:
     def look_ahead_again(self) -> None:
         """A look-ahead asked for was dropped (its deadline passed): ask again at the next advisory."""
         self.pending = None
-        self._foresee = self.params.escape == "auto" and not self._ghost
+        self._foresee = (self.params.escape == "auto" or self.tracking) and not self._ghost
 
     def check_terminal(self) -> bool:
         """A standing verdict (trapped) that ``check`` would repeat, so a prediction must ask the stepper."""
         return self._terminal is not None
 
-    def _escaping(self, field: ThreatField, x: float, y: float, level: float | None = None) -> Advice:
-        """Steer along the committed route; ``level`` is the threat level here when the caller has it."""
+    def _escaping(
+        self, field: ThreatField, x: float, y: float, level: float | None = None, again: bool = True
+    ) -> Advice:
+        """Steer along the committed route; ``level`` is the threat level here when the caller has it.
+
+        ``again``: a tracked route that ends here may be chosen again at once (not twice in one advice).
+        """
         run = self._run
         assert run is not None
+        if self.tracking:
+            run.lead = self._lead
+            run.limit = _NO_LIMIT  # a route is left by the corridor, never by counting reports
         stepped = run.steer(self._unit, x, y, field.zones)
+        if self.tracking and run.off_m > tracking.corridor(self.params.step):
+            stepped = None  # reported off its route: chosen again from here
+            self._ends = ""
         if stepped is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
             self._run = None
             steprule.reset_watch(self._unit)
+            if self.tracking:
+                return self._route_ended(field, x, y, level, again)
             return self._descend(field, x, y)
         dx, dy, dist, move, tx, ty = stepped
         self.advisories += 1
-        if self._escaper is not None:  # a ghost has none: it only predicts
+        route = run.route
+        if self._escaper is not None and route.escaping:  # a ghost has none: it only predicts
             self._escaper.escape_steps += 1
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
-        return Advice(StepStatus.ESCAPING, dx, dy, level, dist, f"escape: {run.name}", False, move, tx, ty)
+        reach = move
+        if self.tracking and move >= min(self.params.step, dist) * 0.999:  # not cut short of a zone
+            reach = max(move, min(run.ahead_m, dist))
+            if reach > move and field.zones:  # the way to the pursuit point may cut a zone's corner
+                hit, zone = zones.segment_hit(*field.zones.packed(), x, y, x + dx * reach, y + dy * reach)
+                if zone >= 0:
+                    reach = max(move, hit * reach - steprule.CLEAR_STEPS * self.params.step)
+        if route.escaping:
+            status, why = StepStatus.ESCAPING, f"{route.words}: {run.name}"
+        else:
+            status, why = StepStatus.EN_ROUTE, route.words
+        return Advice(status, dx, dy, level, dist, why, False, reach, tx, ty, route)
+
+    def _route_ended(
+        self, field: ThreatField, x: float, y: float, level: float | None, again: bool
+    ) -> Advice:
+        """A tracked route ended short of the goal, or the unit left it: a trap foreseen there, or choose again."""
+        ends, self._ends = self._ends, ""
+        if ends:
+            lv = field.level_grad_at(x, y)[0] if level is None else level
+            return self._trapped(field, x, y, lv, math.hypot(self.goal[0] - x, self.goal[1] - y), ends)
+        self._foresee = not self._ghost
+        if self._foresee and not self.defer and again:
+            self._look_ahead(field, x, y)
+            if self._run is not None:
+                return self._escaping(field, x, y, level, again=False)
+        elif self._foresee:
+            self._foresee = False
+            self.pending = Need("foresee", x, y)
+        return self._descend(field, x, y)
 
     def _end(
         self,
@@ -600,6 +719,8 @@ class Stepper:
             self._trap_at = at
         return advice
 
+
+_NO_LIMIT = 1 << 62  # a tracked route's advisory limit: none
 
 # what a verdict of ``steprule.judge`` found before any gradient means
 _VERDICTS = {

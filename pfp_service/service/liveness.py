@@ -15,11 +15,12 @@ from __future__ import annotations
 from pfp_service.service.events import Outputs, WorldSettings
 from pfp_service.service.timers import Timers
 from pfp_service.service.world_records import Records, UnitRecord
-from pfp_service.wire import Direction, ForgottenEvent, StaleEvent, UnitState
+from pfp_service.wire import Direction, DirectionStatus, ForgottenEvent, StaleEvent, UnitState
 
 __all__ = ["UNIT_TIMERS", "Liveness"]
 
 UNIT_TIMERS = ("silence", "token", "push", "forget")  # the kinds of timer ``Liveness.due`` answers
+_MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 
 
 class Liveness:
@@ -43,7 +44,12 @@ class Liveness:
     def heard(self, rec: UnitRecord, state: UnitState, now: float) -> None:
         """A report: the unit is fresh, and is stale again if it falls silent."""
         kind = state.kind.value if state.kind is not None else None
-        self.records.heard(rec, (state.position[0], state.position[1]), state.seq, kind, now)
+        told_to_move = rec.last_vector is not None and rec.last_status in _MOVING
+        x, y = state.position[0], state.position[1]
+        rec.progress.report(x, y, state.t, now, state.speed_mps, told_to_move)
+        self.records.heard(rec, (x, y), state.seq, kind, now)
+        if rec.stepper is not None:
+            rec.stepper.pace(rec.progress.speed_mps)
         if not rec.silence_timer:
             rec.silence_timer = True
             self.timers.set(now + self.settings.unit_stale_s, "silence", rec.id)

@@ -70,4 +70,6 @@ def start(
     rec.origin = origin
     rec.stepper = Stepper(origin, (goal.position[0], goal.position[1]), resolved, settings.bounds, rec.key)
     rec.stepper.defer = settings.deliberation == "deferred"
+    rec.stepper.track()  # a live unit: guided whatever it does between two reports (core.tracking)
+    rec.stepper.pace(rec.progress.speed_mps)
     return MissionRecord(rec.id, rec.epoch, origin, goal, resolved)

@@ -33,6 +33,7 @@ from pfp_service.wire import (
     Event,
     RejectedEvent,
     ReplanEvent,
+    RouteKind,
     ThreatChange,
     TrappedEvent,
 )
@@ -165,7 +166,7 @@ def direction(
     """The unit's direction for its advice, and the event its change of status fires (if any)."""
     assert rec.position is not None
     # called per unit of a wave: the advice unpacked once, and min/max spelt as the comparisons they make
-    step_status, dx, dy, level, distance, why, asking, reach, _tx, _ty = adv
+    step_status, dx, dy, level, distance, why, asking, reach, _tx, _ty, route = adv
     status = STATUS[step_status]
     reason = why[:1024]
     event: Event | None = None
@@ -206,6 +207,8 @@ def direction(
         deliberating=asking or deliberating,
         planner=planner,
         reach_m=reach_m,
+        route=RouteKind(route.value),
+        progress=rec.progress.verdict,
     )
     return d, event
 

@@ -14,7 +14,7 @@ values: ``now`` is a parameter.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import msgspec
 import numpy as np
@@ -24,6 +24,7 @@ from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.zones import Zone, ZoneSet
 from pfp_service.service.events import Job, unit_key
+from pfp_service.service.progress import ProgressWatch
 from pfp_service.wire import Direction, DirectionStatus, Goal, Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
 
@@ -55,6 +56,7 @@ class UnitRecord:
     push_tries: int = 0
     owned: bool = True  # this planner guides it (scale-out: rendezvous over the live planners)
     shared: tuple[Goal, tuple[float, float], Resolved] | None = None  # a mission another planner fixed
+    progress: ProgressWatch = field(default_factory=ProgressWatch)  # what its reports show of its motion
 
     def token(self) -> tuple[int, int]:
         """What a deliberation result must match to be adopted: the goal's epoch and the world's version."""

@@ -32,6 +32,7 @@ from pfp_service.wire.messages.codec import (
     encode,
     localise_zone,
 )
+from pfp_service.wire.messages.guidance import Progress, RouteKind
 from pfp_service.wire.messages.structs import (
     CHOICES,
     CONTENT_TYPE,
@@ -114,9 +115,11 @@ __all__ = [
     "Origin",
     "PlannerStatus",
     "PreviewRequest",
+    "Progress",
     "RejectedEvent",
     "ReplanEvent",
     "RestoredEvent",
+    "RouteKind",
     "StaleEvent",
     "ThreatChange",
     "ThreatSummary",

@@ -28,6 +28,7 @@ from pfp_service.constraints import (
 )
 from pfp_service.errors import InputError
 from pfp_service.geo import LatLon, Origin
+from pfp_service.wire.messages.guidance import Progress, RouteKind
 
 if TYPE_CHECKING:
     from pfp_service.core.threat import Threat
@@ -135,6 +136,8 @@ class DirectionStatus(StrEnum):
 CHOICES: dict[str, tuple[str, ...]] = {
     "kind": tuple(k.value for k in UnitKind),
     "status": tuple(s.value for s in DirectionStatus),
+    "route": tuple(r.value for r in RouteKind),
+    "progress": tuple(p.value for p in Progress),
 }
 
 
@@ -377,10 +380,15 @@ class Direction(_Message, frozen=True, kw_only=True):
         deliberating: a route for this unit is being computed off the planning
             loop; until it is adopted the vector is plain steepest descent.
         planner: the planner that computed it (several may share a mission).
-        reach_m: how far along ``vector`` the planner's step goes: the step, less on the final
-            approach or where the step stops short of a keep-out zone (0: hold here); null when
-            not moving.  A unit should not move further than this before its next direction:
-            past it, it leaves the path the planner judged, and may enter a keep-out zone.
+        reach_m: how far along ``vector`` this direction stays good: on a route, to the point the
+            unit is steered at (a few seconds of driving ahead at its own speed; the goal, on the
+            final approach); before a route is chosen, one planner step; less where it stops
+            short of a keep-out zone (0: hold here); null when not moving.  A unit may drive at its
+            own speed and should not go further than this before its next direction.
+        route: what the route behind the direction is (``descent``, ``lower_exposure``,
+            ``around_trap``, ``escape``, ``leave``; empty before one is chosen).
+        progress: what the unit's own reports show: ``moving``, ``holding`` (it said
+            ``speed_mps`` 0), ``stalled`` (told to move, it has not); empty when unknown.
     """
 
     unit: Id
@@ -397,6 +405,8 @@ class Direction(_Message, frozen=True, kw_only=True):
     true_bearing_deg: Angle | None = None
     lookahead_geo: Annotated[list[LatLon], Meta(max_length=MAX_LOOKAHEAD)] = []
     reach_m: NonNegative | None = None
+    route: RouteKind = RouteKind.NONE
+    progress: Progress = Progress.UNKNOWN
 
 
 class ErrorReply(_Message, frozen=True, kw_only=True):
