@@ -6,8 +6,13 @@ A team file is YAML::
     units:
       - {id: u1, kind: manned, start: [0, 0], goal: [90, 80], speed_mps: 1.4}
       - {id: r1, kind: unmanned, start: [0, 10], goal: [95, 60], speed_mps: 3.0}
+      - {id: r2, start: [0, 20], goal: [95, 40], speed_mps: 8, rate_hz: 2, gps_sigma_m: 3,
+         stops: [{at_s: 10, for_s: 15}]}
 
 ``goal`` may be left out (the unit waits for one, e.g. from ``pfp inject``).
+A unit never says a planner step: it drives at ``speed_mps`` and reports at
+``rate_hz``, with its fix off by ``gps_sigma_m`` and its ``stops``, as a real
+vehicle does (``core.tracking``).
 Keep-out ``zones:`` are the wire's zone form with an ``id``, as in scenario
 files (``scenario.ZoneSpec``; vertices in metres, or ``{lat, lon}`` with an
 ``origin``); ``pfp fleet`` puts them before the goals::
@@ -35,9 +40,12 @@ from pfp_service.wire import UnitKind
 from pfp_service.wire.messages import ZoneUpdate, localise_zone
 from pfp_service.yamlio import load_yaml
 
-__all__ = ["CHOICES", "SPEEDS_MPS", "Team", "UnitSpec", "generate_team", "load_team", "zone_updates"]
+__all__ = ["CHOICES", "SPEEDS_MPS", "Stop", "Team", "UnitSpec", "generate_team", "load_team", "zone_updates"]
 
 Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
+RateHz = Annotated[float, Meta(gt=0.0, le=50.0)]
+SigmaM = Annotated[float, Meta(ge=0.0, le=100.0)]
+Seconds = Annotated[float, Meta(ge=0.0, le=1e7)]
 CHOICES: dict[str, tuple[str, ...]] = {"kind": tuple(k.value for k in UnitKind)}
 # Typical ground speeds used by generated teams: a soldier walking, a small robot driving.
 SPEEDS_MPS: dict[UnitKind, tuple[float, float]] = {
@@ -46,14 +54,29 @@ SPEEDS_MPS: dict[UnitKind, tuple[float, float]] = {
 }
 
 
+class Stop(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A halt of a simulated vehicle: ``at_s`` simulated seconds into the run, for ``for_s`` seconds."""
+
+    at_s: Seconds
+    for_s: Annotated[float, Meta(gt=0.0, le=1e7)]
+
+
 class UnitSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
-    """One unit of a team: its id, kind, start, optional goal and ground speed."""
+    """One unit of a team: its id, kind, start, optional goal, ground speed, and how it behaves as a vehicle.
+
+    ``rate_hz`` (its own report rate), ``stops`` and ``gps_sigma_m`` (the
+    standard deviation of its reported fix, metres, per axis) default to the
+    fleet's (``pfp fleet --rate-hz --stops --gps-sigma-m``).
+    """
 
     id: Id
     kind: UnitKind = UnitKind.UNMANNED
     start: Point
     goal: Point | None = None
     speed_mps: Speed = 1.5
+    rate_hz: RateHz | None = None
+    stops: Annotated[list[Stop], Meta(max_length=1_000)] | None = None
+    gps_sigma_m: SigmaM | None = None
 
 
 class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):

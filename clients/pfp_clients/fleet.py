@@ -1,18 +1,19 @@
 """``pfp fleet``: a headless fleet of simulated vehicles on Zenoh, following the planner's directions.
 
-Each tick every unit publishes its state (with a fresh ``seq``), the fleet
-waits for the planner's answers, then every unit moves ``speed_mps * dt`` along
-its newest direction.  Ticks are paced at ``dt / speed_up`` of wall time, so
+Each tick every unit whose report is due (at its own ``rate_hz``) publishes
+its state (with a fresh ``seq``), the fleet waits for the planner's answers,
+then every unit moves ``speed_mps * dt`` along its newest direction, unless it
+is in one of its stops (``sim.SimUnit``: real speeds, report rates, stops and
+GPS noise, never the planner's step).  Ticks are paced at ``dt / speed_up`` of wall time, so
 ``--speed-up 10`` runs ten simulated seconds per second; if the planner answers
 late the fleet waits up to ``reply_timeout_s`` (lockstep), so acceleration never
 outruns the planner.  A unit whose answer still has not come moves along the
 direction it had, as a vehicle would.  Each unit holds a liveliness token
 ``mumt/{m}/alive/unit/{u}`` while the fleet runs.
 
-Goals from the team file are put with ``step = speed_mps * dt``: the planner's
-stepper then expects exactly the motion it gets, so its preview matches the
-track and its trap detection judges real progress.  They are acknowledged
-writes (``wire.delivery``): put before a planner runs, they are in force once
+Goals from the team file are put with no ``step``: the planning resolution is
+the planner's business, and its guidance holds whatever a vehicle does
+between two reports (``core.tracking``).  They are acknowledged writes (``wire.delivery``): put before a planner runs, they are in force once
 one starts, and the fleet says it is waiting meanwhile.
 
 A team file with an ``origin`` is checked against the planner's (from its
@@ -46,7 +47,7 @@ from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.natsort import natural_key
-from pfp_service.team import Team, zone_updates
+from pfp_service.team import Team, UnitSpec, zone_updates
 from pfp_service.wire import (
     Direction,
     DirectionStatus,
@@ -67,7 +68,7 @@ class FleetOptions:
 
     Attributes:
         mission: the mission's key chunk.
-        rate_hz: state reports per simulated second, per unit.
+        rate_hz: state reports per simulated second, per unit without its own ``rate_hz``.
         speed_up: simulated seconds per wall second.
         duration_s: stop after this much simulated time (None: run until stopped).
         until_arrived: stop as soon as the planner reports every unit arrived.
@@ -75,6 +76,9 @@ class FleetOptions:
         reply_timeout_s: wall seconds to wait for late answers before moving on.
         coords: how positions are shown (``--coords``: latlon, metres, mgrs; None: latlon
             when an origin is known, else metres).
+        gps_sigma_m: each unit's fix error (metres per axis), unless its spec says.
+        stops: ``(at_s, for_s)`` halts of each unit, unless its spec says.
+        seed: seeds the GPS noise (with each unit's id).
     """
 
     mission: str = keys.DEFAULT_MISSION
@@ -85,6 +89,15 @@ class FleetOptions:
     set_goals: bool = True
     reply_timeout_s: float = 1.0
     coords: str | None = None
+    gps_sigma_m: float = 0.0
+    stops: tuple[tuple[float, float], ...] = ()
+    seed: int = 0
+
+    def unit(self, spec: UnitSpec) -> SimUnit:
+        """The simulated vehicle of ``spec``, with the fleet's defaults where the spec says nothing."""
+        return SimUnit(
+            spec, rate_hz=self.rate_hz, gps_sigma_m=self.gps_sigma_m, stops=self.stops, seed=self.seed
+        )
 
 
 @dataclass
@@ -103,10 +116,10 @@ class FleetResult:
         return all(u.arrived for u in self.units)
 
 
-def _goal_of(u: SimUnit, dt_s: float) -> Goal | None:
+def _goal_of(u: SimUnit) -> Goal | None:
     if u.spec.goal is None:
         return None
-    return Goal(position=u.spec.goal, step=u.spec.speed_mps * dt_s)
+    return Goal(position=u.spec.goal)  # no step: the planner's resolution is its own
 
 
 def in_planner_frame(team: Team, planner: Origin | None, mission: str) -> tuple[Team, str | None]:
@@ -164,7 +177,7 @@ def run_fleet(
     if team.origin is not None:  # before anything is sent: metres from two origins never mix
         answered, origin = learn_planner_origin(session, m, stop, say, "team")
         if not answered:
-            return FleetResult([SimUnit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
+            return FleetResult([opts.unit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
         team, line = in_planner_frame(team, origin, m)
         if line is not None:
             say(line)
@@ -176,7 +189,7 @@ def run_fleet(
         why = f"--coords {opts.coords} shows positions from its origin"
         answered, shown_origin = learn_planner_origin(session, m, stop, say, "team", why)
         if not answered:
-            return FleetResult([SimUnit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
+            return FleetResult([opts.unit(spec) for spec in team.units], 0.0, 0, 0, "stopped")
         if shown_origin is None:
             say(
                 f"--coords {opts.coords}: neither the team nor the planner has an origin; positions are in metres"
@@ -184,9 +197,9 @@ def run_fleet(
     elif opts.coords is None:  # the default: lat/lon if a planner already running has an origin
         shown_origin = planner_origin(session, m)[1]
     coords = Coords.choose(opts.coords, shown_origin, strict=False)
-    units = [SimUnit(spec) for spec in team.units]
+    units = [opts.unit(spec) for spec in team.units]
     by_id = {u.id: u for u in units}
-    dt_s = 1.0 / opts.rate_hz
+    dt_s = 1.0 / max(u.rate_hz for u in units)  # a tick per report of the fastest unit
     inbox: queue.Queue[tuple[str, Direction]] = queue.Queue()
 
     def on_direction(sample: zenoh.Sample) -> None:  # decode and enqueue, nothing more
@@ -221,7 +234,7 @@ def run_fleet(
 
     def reput(u: SimUnit, why: str) -> None:
         """Belt and braces: a planner that lost a unit's goal gets it again (at most every 2 s)."""
-        goal = _goal_of(u, dt_s) if opts.set_goals and not u.arrived and u.id not in cancelled else None
+        goal = _goal_of(u) if opts.set_goals and not u.arrived and u.id not in cancelled else None
         if goal is None or clock() - reput_at.get(u.id, -1e9) < 2.0:
             return
         reput_at[u.id] = clock()
@@ -237,9 +250,9 @@ def run_fleet(
     last_answer = clock()
     silent_warned = False
 
-    def drain(deadline: float, need_seq: int | None) -> None:
+    def drain(deadline: float, need: dict[str, int] | None) -> None:
         while True:
-            if need_seq is not None and all(u.answered >= need_seq for u in units):
+            if need is not None and all(by_id[uid].answered >= seq for uid, seq in need.items()):
                 return
             left = deadline - clock()
             try:
@@ -264,7 +277,7 @@ def run_fleet(
                     goals.put(keys.zone(m, zid), encode(zone))
                     say(f"t={t_s:7.2f}s  keep-out zone {zid} put")
                 for u in units:
-                    goal = _goal_of(u, dt_s)
+                    goal = _goal_of(u)
                     if goal is not None:
                         goals.put(keys.unit_goal(m, u.id), encode(goal))
                         say(f"t={t_s:7.2f}s  {u.id} ({u.spec.kind.value}) goal {coords.point(goal.position)}")
@@ -272,14 +285,16 @@ def run_fleet(
                 new_planner.clear()
                 for u in units:
                     reput(u, "a planner started")
+            need: dict[str, int] = {}
             for u in units:
-                pubs[u.id].put(encode(u.state(t_s)))
+                if u.due(t_s):
+                    pubs[u.id].put(encode(u.state(t_s)))
+                    need[u.id] = u.seq
             # pace the tick, then (lockstep) wait a while longer for answers still missing
             drain(tick_start + dt_s / opts.speed_up, None)
-            need = units[0].seq
             if clock() - last_answer < 2 * opts.reply_timeout_s:  # lockstep only while a planner answers
                 drain(clock() + opts.reply_timeout_s, need)
-            late += sum(1 for u in units if u.answered < need)
+            late += sum(1 for uid, seq in need.items() if by_id[uid].answered < seq)
             silent_s = clock() - last_answer
             if silent_s > 3.0 and not silent_warned:
                 say(f"t={t_s:7.2f}s  no direction from any planner of mission {m!r} for {silent_s:.0f} s")

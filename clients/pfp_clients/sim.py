@@ -1,16 +1,24 @@
 """Sans-I/O simulated vehicles: they report where they are and move along the directions they get.
 
 A ``SimUnit`` never reads the clock or touches the network.  The fleet driver
-asks it for a ``UnitState`` (which bumps ``seq``), hands it every ``Direction``
-received, and calls ``advance(dt_s, t_s)`` once per tick: it then moves
-``speed_mps * dt_s`` along the newest direction -- never past the goal -- unless
-the planner said it is arrived, trapped or has no goal.  Arrival is only ever
-what the planner reported (status ``arrived`` within its tolerance).
+asks it whether a report is due (``due``, at its own ``rate_hz``) and for a
+``UnitState`` (which bumps ``seq``), hands it every ``Direction`` received,
+and calls ``advance(dt_s, t_s)`` once per tick: it then moves
+``speed_mps * dt_s`` along the newest direction -- never past the goal, and
+never further from where it reported than the direction's ``reach_m`` --
+unless the planner said it is arrived, trapped or has no goal, or it is in
+one of its ``stops``.  It behaves as a real vehicle does, not as the
+planner's step: its own speed and report rate, its stops (reported as
+``speed_mps`` 0), and a fix off by a seeded Gaussian ``gps_sigma_m`` per
+axis.  Arrival is only ever what the planner reported (status ``arrived``
+within its tolerance).
 """
 
 from __future__ import annotations
 
 import math
+import random
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -44,9 +52,35 @@ class SimUnit:
     trapped_reason: str = ""
     replies: int = 0  # directions received
     track: list[TrackPoint] = field(default_factory=list)
+    rate_hz: float = 5.0  # its reports per simulated second (the spec's, else the fleet's)
+    gps_sigma_m: float = 0.0  # its fix's error, metres per axis (the spec's, else the fleet's)
+    stops: tuple[tuple[float, float], ...] = ()  # (at_s, for_s): halts (the spec's, else the fleet's)
+    seed: int = 0
+    next_report_s: float = 0.0
+    reported_at: tuple[float, float] | None = None  # the true position when it last reported
+    _rng: random.Random = field(init=False, repr=False)
+    _left_m: float = field(default=math.inf, init=False, repr=False)  # reach_m left of the newest direction
 
     def __post_init__(self) -> None:
         self.position = (float(self.spec.start[0]), float(self.spec.start[1]))
+        if self.spec.rate_hz is not None:
+            self.rate_hz = self.spec.rate_hz
+        if self.spec.gps_sigma_m is not None:
+            self.gps_sigma_m = self.spec.gps_sigma_m
+        if self.spec.stops is not None:
+            self.stops = tuple((s.at_s, s.for_s) for s in self.spec.stops)
+        self._rng = random.Random(zlib.crc32(self.spec.id.encode()) ^ (self.seed * 0x9E3779B1))
+
+    def stopped(self, t_s: float) -> bool:
+        """Whether it is halted at simulated time ``t_s`` (in one of its stops)."""
+        return any(at <= t_s < at + dur for at, dur in self.stops)
+
+    def due(self, t_s: float) -> bool:
+        """Whether its next report is due at simulated time ``t_s`` (at its own rate); if so, the next is booked."""
+        if t_s + 1e-9 < self.next_report_s:
+            return False
+        self.next_report_s = max(self.next_report_s + 1.0 / self.rate_hz, t_s)
+        return True
 
     @property
     def id(self) -> str:
@@ -68,17 +102,23 @@ class SimUnit:
         return -1 if d is None or d.seq is None else d.seq
 
     def state(self, t_s: float) -> UnitState:
-        """The next report: the current position with a fresh ``seq``."""
+        """The next report: the current position (off by its GPS error) with a fresh ``seq``, and its speed."""
         self.seq += 1
         heading = None
         if self.direction is not None and self.direction.heading_deg is not None:
             heading = self.direction.heading_deg
+        x, y = self.position
+        self.reported_at = self.position
+        if self.gps_sigma_m > 0.0:
+            x += self._rng.gauss(0.0, self.gps_sigma_m)
+            y += self._rng.gauss(0.0, self.gps_sigma_m)
+        moving = self.direction is not None and self.direction.status in _MOVING and not self.stopped(t_s)
         return UnitState(
-            position=self.position,
+            position=(x, y),
             t=max(t_s, 0.0),
             seq=self.seq,
             kind=self.spec.kind,
-            speed_mps=self.spec.speed_mps,
+            speed_mps=self.spec.speed_mps if moving else 0.0,
             heading_deg=heading,
         )
 
@@ -95,6 +135,7 @@ class SimUnit:
         before = self.status
         self.direction = d
         self.replies += 1
+        self._left_m = math.inf if d.reach_m is None else d.reach_m
         if d.status is DirectionStatus.ARRIVED:
             if self.arrived_at_s is None:
                 self.arrived_at_s = t_s
@@ -116,16 +157,15 @@ class SimUnit:
         d = self.direction
         if not self.track:
             self.track.append(TrackPoint(t_s - dt_s, wall_s, *self.position))
-        if d is not None and d.status in _MOVING:
-            dist = self.spec.speed_mps * dt_s
+        if d is not None and d.status in _MOVING and not self.stopped(t_s - dt_s):
+            dist = min(self.spec.speed_mps * dt_s, self._left_m)  # never past how far the direction is good
             if d.distance_to_goal is not None:
                 dist = min(dist, d.distance_to_goal)  # slow down at the goal rather than overshoot it
-            if d.reach_m is not None:
-                dist = min(dist, d.reach_m)  # never past the planner's step: it stops short of keep-out zones
             vx, vy = d.vector
             norm = math.hypot(vx, vy)
             if norm > 0 and dist > 0:
                 self.position = (self.position[0] + dist * vx / norm, self.position[1] + dist * vy / norm)
+                self._left_m -= dist
         self.track.append(TrackPoint(t_s, wall_s, *self.position))
 
     def path_length_m(self) -> float:

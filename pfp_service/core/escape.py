@@ -76,7 +76,7 @@ from pfp_service.core.grid import pieces, polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
-from pfp_service.core.tracking import LEAD_STEPS, Route
+from pfp_service.core.tracking import LEAD_STEPS, PURSUIT_TOLERANCE_STEPS, Route
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "EscapeRun", "Escaper"]
@@ -375,13 +375,47 @@ def _steer(
     lx, ly = _point(path, segs, n - 1)
     if i >= n - 2 and math.hypot(lx - x, ly - y) <= step and not to_goal:
         return False, i, advisories, 0.0, 0.0, off, 0.0
-    tx, ty = _point(path, segs, min(i + lead, n - 1))
+    k = _pursuit(path, segs, n, i, lead, step)
+    tx, ty = _point(path, segs, k)
     dx = tx - x
     dy = ty - y
     norm = math.hypot(dx, dy)
     if norm <= 1e-9 * step:
         return False, i, advisories, 0.0, 0.0, off, 0.0
     return True, i, advisories, dx / norm, dy / norm, off, norm
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pursuit(path: np.ndarray, segs: np.ndarray, n: int, i: int, lead: int, step: float) -> int:
+    """The point a unit nearest point ``i`` heads for: ``lead`` points on, or nearer where the run bends.
+
+    The chord from point ``i`` to it keeps every point between within
+    ``PURSUIT_TOLERANCE_STEPS`` steps (halving the lead until it does, never
+    below ``LEAD_STEPS``), so a long lead never cuts a bend of the run.
+    """
+    k = min(i + lead, n - 1)
+    low = min(i + LEAD_STEPS, n - 1)
+    tol = PURSUIT_TOLERANCE_STEPS * step
+    ax, ay = _point(path, segs, i)
+    while k > low:
+        bx, by = _point(path, segs, k)
+        cx = bx - ax
+        cy = by - ay
+        norm = math.hypot(cx, cy)
+        ok = True
+        for j in range(i + 1, k):
+            px, py = _point(path, segs, j)
+            if norm > 0.0:
+                d = abs((px - ax) * cy - (py - ay) * cx) / norm
+            else:
+                d = math.hypot(px - ax, py - ay)
+            if d > tol:
+                ok = False
+                break
+        if ok:
+            return k
+        k = max(i + (k - i) // 2, low)
+    return low
 
 
 @numba.njit(cache=True, nogil=True)

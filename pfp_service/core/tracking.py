@@ -15,7 +15,9 @@ the planner's ``step`` is its own resolution, not the vehicle's.
   ``SIMPLIFY_STEPS`` steps off them).  The unit is steered from wherever it
   reports towards the point of the route ``lead`` metres past its nearest
   one (pure pursuit), the lead growing with its speed (``LEAD_S`` seconds of
-  driving, at least ``LEAD_STEPS`` steps), and ``reach_m`` is how far that
+  driving, at least ``LEAD_STEPS`` steps), but never so far that the chord
+  to it strays more than ``PURSUIT_TOLERANCE_STEPS`` steps from the route
+  (``escape._pursuit``: a bend shortens it); ``reach_m`` is how far that
   heading stays on the route: to the pursuit point.
 * **A route is re-chosen** when the world changes, when the unit reports
   more than ``corridor(step)`` metres off it (a person drove it elsewhere),
@@ -40,6 +42,8 @@ __all__ = [
     "CORRIDOR_STEPS",
     "LEAD_S",
     "LEAD_STEPS",
+    "MAX_LEAD_POINTS",
+    "PURSUIT_TOLERANCE_STEPS",
     "SIMPLIFY_STEPS",
     "Route",
     "corridor",
@@ -54,6 +58,8 @@ LEAD_STEPS = 2  # ... and never nearer than this many planner steps (the escape 
 CORRIDOR_STEPS = 4.0  # a unit reported farther than this many steps off its route ...
 CORRIDOR_MIN_M = 25.0  # ... and this many metres (8 sigma of a 3 m GPS fix) has left it: re-chosen
 SIMPLIFY_STEPS = 0.05  # the legs of a descent route stay within this many steps of the simulated descent
+PURSUIT_TOLERANCE_STEPS = 0.5  # the chord to the pursuit point stays within this many steps of the route
+MAX_LEAD_POINTS = 256
 
 
 class Route(StrEnum):
@@ -92,7 +98,7 @@ def lead_points(step: float, speed_mps: float) -> int:
     """The pursuit point's distance ahead, in route points (``step`` apart), for a unit at ``speed_mps``."""
     if not (step > 0.0 and math.isfinite(speed_mps) and speed_mps > 0.0):
         return LEAD_STEPS
-    return max(LEAD_STEPS, min(math.ceil(LEAD_S * speed_mps / step - 1e-9), 1 << 20))
+    return max(LEAD_STEPS, min(math.ceil(LEAD_S * speed_mps / step - 1e-9), MAX_LEAD_POINTS))
 
 
 def simplify(path: np.ndarray, tolerance: float) -> np.ndarray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from pfp_service.cli._common import (
@@ -29,6 +30,34 @@ def generated_units(text: str) -> int:
     return value
 
 
+def gps_sigma(text: str) -> float:
+    """``--gps-sigma-m``: 0 to 100 metres."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected metres from 0 to 100, got {text!r}") from None
+    if not 0.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"expected metres from 0 to 100, got {text!r}")
+    return value
+
+
+def stops(text: str) -> tuple[tuple[float, float], ...]:
+    """``--stops 20:15,60:10``: halts as (at_s, for_s), each at >= 0 s and for > 0 s."""
+    out = []
+    for part in text.split(","):
+        at, sep, dur = part.partition(":")
+        try:
+            pair = (float(at), float(dur))
+        except ValueError:
+            pair = (math.nan, math.nan)
+        if not sep or not (0.0 <= pair[0] <= 1e7 and 0.0 < pair[1] <= 1e7):
+            raise argparse.ArgumentTypeError(f"expected AT:FOR seconds (AT >= 0, FOR > 0), got {part!r}")
+        out.append(pair)
+    if len(out) > 1000:
+        raise argparse.ArgumentTypeError("at most 1000 stops")
+    return tuple(out)
+
+
 # the help's example line (cli.build_parser puts it under the parser)
 EXAMPLES = {"fleet": "pfp fleet --team examples/demo-team.yaml --speed-up 10 --until-arrived"}
 
@@ -48,7 +77,26 @@ def register(sub: Any) -> None:
         "--area", type=positive_float, metavar="M", help="side of the generated square in m (default: 100)"
     )
     add_session_args(p)
-    p.add_argument("--rate-hz", type=positive_float, default=5.0, help="state reports per simulated second")
+    p.add_argument(
+        "--rate-hz",
+        type=positive_float,
+        default=5.0,
+        help="state reports per simulated second, of each unit without its own rate_hz (default: 5)",
+    )
+    p.add_argument(
+        "--gps-sigma-m",
+        type=gps_sigma,
+        default=0.0,
+        metavar="M",
+        help="each reported fix is off by a Gaussian of M metres per axis, unless the unit says (default: 0)",
+    )
+    p.add_argument(
+        "--stops",
+        type=stops,
+        default=(),
+        metavar="AT:FOR[,AT:FOR...]",
+        help="every unit without its own stops halts AT simulated seconds in, for FOR seconds",
+    )
     p.add_argument("--speed-up", type=positive_float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
         "--duration-s",
@@ -95,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
         set_goals=not args.no_goals,
         reply_timeout_s=args.reply_timeout_s,
         coords=args.coords,
+        gps_sigma_m=args.gps_sigma_m,
+        stops=args.stops,
     )
     conf = session_config(args)
     with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the fleet has closed
