@@ -275,7 +275,10 @@ class HandheldApp(App[int]):
         self._set("title", Text(f"{m.settings.unit} · {self.mission} · {mode}"))
         self._set("arrow", Text("\n".join(v.arrow)))
         self._set("bearing", Text(v.bearing))
-        self._set("status", Text(v.status_label, style=STATUS_STYLES.get(v.status_label, "bold")))
+        status = Text(v.status_label, style=STATUS_STYLES.get(v.status_label, "bold"))
+        if v.why:
+            status.append(f"  {v.why}", style="dim")
+        self._set("status", status)
         dist = "--" if v.distance_m is None else f"{v.distance_m:.1f} m"
         self._set("nav", Text(f"Dist {dist}  ETA {format_duration(v.eta_s)} @{m.eta_speed_mps():.3g} m/s"))
         bar_w = max(min(self.size.width - 28, 20), 5)

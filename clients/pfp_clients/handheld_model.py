@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Final
 
-from pfp_service.wire import Direction, DirectionStatus, Goal, UnitKind, UnitState
+from pfp_service.wire import Direction, DirectionStatus, Goal, Progress, UnitKind, UnitState
 
 __all__ = [
     "CARDINALS",
@@ -33,6 +33,7 @@ __all__ = [
     "eta_s",
     "format_duration",
     "threat_bar",
+    "why_text",
 ]
 
 CARDINALS: Final = (
@@ -221,6 +222,19 @@ class View:
     speed_mps: float
     walking: bool
     note: str
+    why: str = ""  # the direction's reason and the planner's word on its progress, in words
+
+
+def why_text(d: Direction | None) -> str:
+    """Why the direction says what it says, for a person: its reason, and what the planner sees of the walk."""
+    if d is None:
+        return ""
+    parts = [d.reason] if d.reason else []
+    if d.progress is Progress.STALLED:
+        parts.append("no progress seen for 10 s")
+    elif d.progress is Progress.HOLDING:
+        parts.append("holding")
+    return "; ".join(parts)
 
 
 class HandheldModel:
@@ -460,4 +474,5 @@ class HandheldModel:
             speed_mps=self.speed_mps,
             walking=self.walking,
             note=self.origin_note or self.link_note or self.note,
+            why=why_text(d),
         )

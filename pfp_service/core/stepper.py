@@ -405,7 +405,10 @@ class Stepper:
         A standing ``trapped`` verdict comes back with this position's distance
         and the level it was given with (``advise`` fills in this position's);
         it is dropped, and ``None`` returned, once the unit is more than
-        ``trap_window * step`` from where it was trapped.
+        ``trap_window * step`` from where it was trapped.  A tracked unit's
+        ``arrived`` stands likewise while it reports within the route corridor
+        (``tracking.corridor``) of its goal: a fix that jitters past the
+        tolerance once the unit has arrived is not a new trip.
         """
         code, _dx, _dy, dist, _move, _tx, _ty = steprule.judge(
             self._unit, x, y, 0.0, 0.0, 0.0, steprule.CHECK
@@ -414,6 +417,11 @@ class Stepper:
             status, reason = _VERDICTS[code]
             return self._end(status, 0.0, dist, reason)
         if self._terminal is None:
+            return None
+        if self._terminal.status is StepStatus.ARRIVED:  # a tracked unit that arrived: its fix may jitter out
+            if dist <= tracking.corridor(self.params.step):
+                return self._terminal._replace(distance=dist)
+            self._terminal = None  # driven away from the goal: guided again
             return None
         if self._trap_at is not None:
             tx, ty = self._trap_at
@@ -717,6 +725,9 @@ class Stepper:
         if status is StepStatus.TRAPPED:
             self._terminal = advice
             self._trap_at = at
+        elif status is StepStatus.ARRIVED and self.tracking:  # stands while the unit stays near the goal
+            self._terminal = advice
+            self._trap_at = None
         return advice
 
 

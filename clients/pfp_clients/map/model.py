@@ -146,6 +146,8 @@ class _Unit:
     last_seen: float | None = None
     status: str | None = None
     reason: str = ""
+    route: str = ""  # what the route behind its direction is (docs/wire.md's statuses)
+    progress: str = ""  # what its reports show: moving, holding, stalled
     distance_to_goal: float | None = None
     threat_level: float = 0.0
     lookahead: list[tuple[float, float]] = field(default_factory=list)
@@ -168,6 +170,8 @@ class _Unit:
             "last_seen": self.last_seen,
             "status": self.status,
             "reason": self.reason,
+            "route": self.route,
+            "progress": self.progress,
             "distance_to_goal": self.distance_to_goal,
             "threat_level": self.threat_level,
             "lookahead": [_cm(p) for p in self.lookahead],
@@ -326,6 +330,8 @@ class MapModel:
                     u = self._unit(unit_id)
                     u.status = str(d.status)
                     u.reason = d.reason
+                    u.route = d.route.value
+                    u.progress = d.progress.value
                     u.distance_to_goal = d.distance_to_goal
                     u.threat_level = d.threat_level
                     u.lookahead = [(float(x), float(y)) for x, y in d.lookahead]

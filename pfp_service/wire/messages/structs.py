@@ -173,10 +173,12 @@ class Goal(_Message, frozen=True, kw_only=True):
         position: ``[x, y]`` in metres.
         delta: goal weight (1e-9 to 1e9); derived by the scale-free rule when absent.
         tolerance: arrival radius in metres (>= 0.001); derived when absent.
-        step: step length in metres (>= 0.001); derived when absent.  A step
-            that would need more than ``max_iter`` steps to reach the goal from
-            where the unit is is refused when the mission is fixed (a
-            ``rejected`` event on the goal's key, field ``$.step``).
+        step: a planning-resolution hint in metres (>= 0.001); derived when absent,
+            as a vehicle should leave it: guidance holds whatever the vehicle does
+            between two reports, at any rate and speed.  A step that would need
+            more than ``max_iter`` steps to reach the goal from where the unit is
+            is refused when the mission is fixed (a ``rejected`` event on the
+            goal's key, field ``$.step``).
     """
 
     position: Point

@@ -555,6 +555,20 @@ function row(k, v) {
   return `<tr><td>${esc(k)}</td><td>${v}</td></tr>`;
 }
 
+// what a direction's route and progress mean, in words (docs/wire.md's statuses)
+const ROUTE_WORDS = {
+  descent: "the foreseen descent",
+  lower_exposure: "round the threats, for lower exposure",
+  around_trap: "round a trap ahead",
+  escape: "out of a trap met",
+  leave: "out of a core or zone",
+};
+const PROGRESS_WORDS = {
+  moving: "moving",
+  holding: "holding (the unit says it is stopped)",
+  stalled: "stalled: told to move, it has not moved for 10 s",
+};
+
 function showUnit() {
   const u = state.units.get(state.selectedUnit);
   if (!u) return;
@@ -566,6 +580,8 @@ function showUnit() {
     row("kind", esc(d.kind || "?")) +
     row("status", `<span style="color:${unitColour(d)}">■</span> ${esc(d.stale ? "stale" : d.status || "no direction yet")}`) +
     (d.reason ? row("reason", esc(d.reason)) : "") +
+    (d.route ? row("route", esc(ROUTE_WORDS[d.route] || d.route)) : "") +
+    (d.progress ? row("progress", esc(PROGRESS_WORDS[d.progress] || d.progress)) : "") +
     row("position", d.position ? `${fmt(d.position[0])}, ${fmt(d.position[1])} m` : "–") +
     row("heading", d.heading_deg === null ? "–" : `${fmt(d.heading_deg, 0)}°`) +
     row("speed", d.speed_mps === null ? "–" : `${fmt(d.speed_mps)} m/s`) +
