@@ -173,3 +173,15 @@ def test_the_handheld_and_the_map_say_why_in_words():
     assert delta is not None
     view = delta["units"]["u"]
     assert view["route"] == "around_trap" and view["progress"] == "stalled"
+
+
+@pytest.mark.unit
+def test_before_its_route_lands_a_unit_may_drive_along_its_predicted_descent_not_one_step():
+    w = World(WorldSettings(deliberation="deferred", lookahead=5))
+    out = w.apply(
+        [StateReported("v", UnitState(position=(0.0, 0.0))), GoalSet("v", Goal(position=(3000.0, 0.0)))], 0.0
+    )
+    (d,) = [d for d in out.directions if d.unit == "v"]
+    step = w.view("v").stepper.params.step
+    assert d.deliberating and d.route == "" and out.jobs
+    assert d.reach_m is not None and d.reach_m > 4.0 * step  # the five predicted steps lie on its line

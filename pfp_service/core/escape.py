@@ -346,9 +346,10 @@ def _steer(
     The cursor moves to the nearest of the next points (the first on a
     tie), and the unit heads for the point ``lead`` beyond it; ``off`` is its
     distance from the nearest point, ``ahead`` from the point it heads for.
-    The window is 16 points, and as many more as the unit could have
-    driven past since the cursor's point, so a fast unit reporting seldom is
-    not left behind.  The last step of a ``to_goal`` run ends on the goal:
+    The window is 16 points (a unit that moves a step at a time, as a
+    preview's, keeps to it), and as many more as the lead is long and as
+    the unit could have driven past since the cursor's point, so a fast
+    unit reporting seldom is not left behind.  The last step of a ``to_goal`` run ends on the goal:
     ``steprule.judge``'s final approach.
     """
     advisories += 1
@@ -359,7 +360,7 @@ def _steer(
     legs = segs.shape[0]
     leg = _leg(segs, cursor) if legs else 0  # then walked along the window
     cx, cy = _point(path, segs, cursor)
-    window = 16 + lead + 2 * int(min(math.hypot(cx - x, cy - y) / step, 1e9))
+    window = 16 + (lead - LEAD_STEPS) + 2 * int(min(math.hypot(cx - x, cy - y) / step, 1e9))
     for j in range(cursor, min(cursor + window, n)):
         if legs:
             while segs[leg, 4] < j:

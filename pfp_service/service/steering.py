@@ -22,6 +22,7 @@ import numpy as np
 from pfp_service.core import StepStatus, Threat, ThreatField
 from pfp_service.core.cull import CullIndex, corridors_meet, influence_boxes
 from pfp_service.core.stepper import Advice, advise_many
+from pfp_service.core.tracking import PURSUIT_TOLERANCE_STEPS, Route
 from pfp_service.errors import FINITE_LIMIT, InputError
 from pfp_service.geo import Origin
 from pfp_service.service.lookahead import Track, lookahead, within_map
@@ -136,7 +137,17 @@ def ahead(
                 failed.append((rec, exc))
     if not _within(tracks):  # rare: some track leaves the map; each is cut where it does
         tracks = [within_map(t) for t in tracks]
+    if not fld.zones:  # before its route lands, a unit's reach runs along its predicted descent
+        advices = [_along_prediction(r, a, t) for r, a, t in zip(guided, advices, tracks)]
     return list(zip(guided, advices, tracks)), failed
+
+
+def _along_prediction(rec: UnitRecord, adv: Advice, points: Track) -> Advice:
+    if adv.route is not Route.NONE or not points or adv.status.terminal or rec.stepper is None:
+        return adv
+    assert rec.position is not None
+    reach = _straight_reach(rec.position, adv.dx, adv.dy, adv.reach, points, rec.stepper.params.step)
+    return adv if reach == adv.reach else adv._replace(reach=reach)
 
 
 def _within(tracks: list[Track]) -> bool:
@@ -211,6 +222,29 @@ def direction(
         progress=rec.progress.verdict,
     )
     return d, event
+
+
+def _straight_reach(
+    at: tuple[float, float], dx: float, dy: float, reach: float, points: Track, step: float
+) -> float:
+    """Before a route lands: how far along ``(dx, dy)`` the predicted descent (``points``) stays beside it.
+
+    The direction stays good as far as the look-ahead's points keep within
+    ``tracking.PURSUIT_TOLERANCE_STEPS`` steps of its line; never less than
+    the step judged (``reach``), nor more where that was cut short (the
+    final approach).  Only where there are no keep-out zones (``ahead``).
+    """
+    if not reach >= step * 0.999:  # cut short of a zone, or the final approach: as judged
+        return reach
+    tol = PURSUIT_TOLERANCE_STEPS * step
+    x0, y0 = at
+    good = reach
+    for px, py in points:
+        along = (px - x0) * dx + (py - y0) * dy
+        if abs((px - x0) * dy - (py - y0) * dx) > tol or along <= good - step:
+            break
+        good = max(good, along)
+    return good
 
 
 def no_goal(rec: UnitRecord, planner: str) -> Direction:
