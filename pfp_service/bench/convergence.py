@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from pathlib import Path
 
@@ -97,7 +98,9 @@ def run(args: argparse.Namespace) -> int:
 
     factors = (0.1, 0.01) if args.quick else FACTORS
     count = 5 if args.quick else args.count
-    print(f"# pfp bench convergence (load average {_load()}): length and exposure at step x{list(factors)}")
+    print(
+        f"# pfp bench convergence (load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}): length and exposure at step x{list(factors)}"
+    )
     misses: list[str] = []
     worst = 0.0
     t0 = time.perf_counter()
@@ -130,11 +133,3 @@ def run(args: argparse.Namespace) -> int:
     if not misses:
         print("every target met")
     return 1 if args.check and misses else 0
-
-
-def _load() -> str:
-    try:
-        with open("/proc/loadavg", encoding="ascii") as f:
-            return " ".join(f.read().split()[:3])
-    except OSError:
-        return "unknown"
