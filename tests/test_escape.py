@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, plan, resolve
+from pfp_service.core.batch import advise_many
 from pfp_service.core.cores import CORE_FRACTION, Cores
-from pfp_service.core.stepper import Stepper, StepStatus, advise_many
+from pfp_service.core.stepper import Stepper, StepStatus
 
 pytestmark = pytest.mark.unit
 
@@ -296,7 +297,7 @@ def test_a_start_inside_a_core_leaves_it_first_and_says_so():
 
 
 def test_an_escape_ending_at_the_goal_steers_on_to_it():
-    from pfp_service.core.escape import EscapeRun
+    from pfp_service.core.route import EscapeRun
 
     path = np.array([[float(k), 0.0] for k in range(11)])
     handed = EscapeRun("global", path, 1.0)

@@ -9,9 +9,10 @@ import pytest
 
 from pfp_service.bench.cases import generate
 from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, foresight, plan, resolve
+from pfp_service.core.batch import advise_many
 from pfp_service.core.cores import Cores
 from pfp_service.core.optimal import plan_optimal
-from pfp_service.core.stepper import Stepper, StepStatus, advise_many
+from pfp_service.core.stepper import Stepper, StepStatus
 
 pytestmark = pytest.mark.unit
 

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from pfp_service.core import PlannerParams, PlanStatus, Scheduled, Threat, plan, steprule
-from pfp_service.core.escape import EscapeRun
 from pfp_service.core.metrics import LAMBDA
+from pfp_service.core.route import EscapeRun
 
 pytestmark = pytest.mark.unit
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pfp_service.core import PlannerParams, Stepper, StepStatus, Threat, ThreatField, resolve
-from pfp_service.core.stepper import advise_many
+from pfp_service.core.batch import advise_many
 
 pytestmark = pytest.mark.unit
 

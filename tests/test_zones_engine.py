@@ -12,9 +12,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, plan
+from pfp_service.core.batch import advise_many
 from pfp_service.core.optimal import plan_optimal
 from pfp_service.core.params import resolve
-from pfp_service.core.stepper import Stepper, StepStatus, advise_many
+from pfp_service.core.stepper import Stepper, StepStatus
 from pfp_service.core.steprule import judge_zoned, unit
 from pfp_service.core.zones import Zone, ZoneSet, track_enters
 from pfp_service.errors import InputError

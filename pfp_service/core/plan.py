@@ -21,11 +21,12 @@ import msgspec
 import numpy as np
 
 from pfp_service.core import steprule
+from pfp_service.core.batch import advise_many
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.cull import predict as cull_predict
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
-from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus, advise_many
+from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus
 from pfp_service.core.threat import Threat, ThreatField
 from pfp_service.core.zones import ZoneSet
 

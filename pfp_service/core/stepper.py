@@ -54,79 +54,21 @@ from __future__ import annotations
 
 import copy
 import math
-from enum import StrEnum
-from typing import NamedTuple
 
 import numpy as np
 
-from pfp_service.core import foresight, kernels, steprule, tracking, zones
-from pfp_service.core.cull import MIN_THREATS, CullIndex
-from pfp_service.core.escape import Escaper, EscapeRun
+from pfp_service.core import foresight, steprule, tracking, zones
+from pfp_service.core.advice import Advice, Need, StepStatus
+from pfp_service.core.escape import Escaper
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.params import Resolved
+from pfp_service.core.route import NO_LIMIT, EscapeRun, descent_route
 from pfp_service.core.threat import ThreatField
 from pfp_service.core.tracking import Route
 
-__all__ = ["Advice", "Bounds", "Need", "StepStatus", "Stepper", "advise_many"]
+__all__ = ["Advice", "Bounds", "Need", "StepStatus", "Stepper"]
 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
-
-
-class StepStatus(StrEnum):
-    """What the stepper says about the unit at this position."""
-
-    EN_ROUTE = "en_route"
-    ESCAPING = "escaping"
-    ARRIVED = "arrived"
-    TRAPPED = "trapped"
-    OUT_OF_BOUNDS = "out_of_bounds"
-    INVALID = "invalid"
-
-    terminal: bool  # the unit is no longer moving: set on each member below (read per advice, so no property)
-
-
-for _status in StepStatus:
-    _status.terminal = _status not in (StepStatus.EN_ROUTE, StepStatus.ESCAPING)
-
-
-class Advice(NamedTuple):
-    """One answer of the stepper.
-
-    ``dx, dy`` is a unit vector (``0, 0`` when the status is terminal);
-    ``level`` is the weighted threat level at the position; ``distance`` is the
-    distance to the goal in metres.  ``reach`` is how far a simulated unit
-    moves along it: ``step``, or less on the final approach, which ends on the
-    goal; a tracking stepper's unit on a route may go on to the pursuit point
-    (``tracking``), which is farther.  ``to`` (``to_x, to_y``) is where one
-    planner step ends (``steprule.judge``): a simulating driver moves there.
-    A terminal advice has ``reach`` infinite and ``to`` not a number.
-    """
-
-    status: StepStatus
-    dx: float
-    dy: float
-    level: float
-    distance: float
-    reason: str = ""
-    deliberating: bool = False
-    reach: float = math.inf
-    to_x: float = math.nan  # two floats, not a tuple: no container for the collector per advice
-    to_y: float = math.nan
-    route: Route = Route.NONE  # what the route the unit follows is (``tracking``)
-
-    @property
-    def to(self) -> tuple[float, float]:
-        """Where the step along this advice ends."""
-        return (self.to_x, self.to_y)
-
-
-class Need(NamedTuple):
-    """Deliberation a deferring stepper asks for: ``foresee`` (look-ahead) or ``escape`` (a trap)."""
-
-    kind: str
-    x: float
-    y: float
-    reason: str = ""
 
 
 _tuple = tuple.__new__  # a NamedTuple from all its fields, in order, without its Python-level __new__
@@ -554,33 +496,11 @@ class Stepper:
             foreseen = sim.steps * sim.step + LAMBDA * sim.exposure
             run = self._escaper.cheaper_route(field, ox, oy, foreseen)
         if run is None and self.tracking and sim.path is not None:
-            run = self._descent_route(sim)
+            run, self._ends = descent_route(sim, self.goal)
         if out is not None:
             run = out.then(run)
         if run is not None:
             self._run = run
-
-    def _descent_route(self, sim: foresight.Foresight) -> EscapeRun | None:
-        """The foreseen descent as a route to track: to the goal, or to where it is foreseen trapped.
-
-        Descent foreseen trapped (or out of bounds) ends there: the unit is
-        judged trapped when it gets there (``_ends``), and escapes as the
-        stepper's ``escape`` says.  Descent cut short by the simulation's
-        budget is a route to where it got, chosen again there.
-        """
-        assert sim.path is not None
-        if len(sim.path) < 2:
-            return None
-        corners = tracking.simplify(sim.path, tracking.SIMPLIFY_STEPS * sim.step)
-        arrives = sim.outcome is foresight.Outcome.ARRIVES
-        if arrives and (corners[-1, 0], corners[-1, 1]) != self.goal:
-            corners = np.concatenate([corners, np.array([self.goal])])
-        run = EscapeRun.along("descent", corners, sim.step, to_goal=arrives)  # at the resolution simulated
-        run.route = Route.DESCENT
-        run.limit = _NO_LIMIT
-        if sim.outcome.fails:
-            self._ends = f"{sim.outcome.value.replace('_', ' ')} foreseen where descent stalls"
-        return run
 
     def _trapped(
         self,
@@ -664,7 +584,7 @@ class Stepper:
         assert run is not None
         if self.tracking:
             run.lead = self._lead
-            run.limit = _NO_LIMIT  # a route is left by the corridor, never by counting reports
+            run.limit = NO_LIMIT  # a route is left by the corridor, never by counting reports
         stepped = run.steer(self._unit, x, y, field.zones)
         if self.tracking and run.off_m > tracking.corridor(self.params.step):
             stepped = None  # reported off its route: chosen again from here
@@ -731,67 +651,9 @@ class Stepper:
         return advice
 
 
-_NO_LIMIT = 1 << 62  # a tracked route's advisory limit: none
-
 # what a verdict of ``steprule.judge`` found before any gradient means
 _VERDICTS = {
     steprule.ARRIVED: (StepStatus.ARRIVED, "within tolerance"),
     steprule.OUT_OF_BOUNDS: (StepStatus.OUT_OF_BOUNDS, "left the mission bounds"),
     steprule.BAD_POSITION: (StepStatus.INVALID, "position is not finite"),
 }
-
-
-def advise_many(
-    steppers: list[Stepper], field: ThreatField, positions: np.ndarray, cull: CullIndex | None = None
-) -> list[Advice]:
-    """``advise`` for many units under one field, with one vectorised kernel call.
-
-    Args:
-        steppers: one stepper per unit.
-        field: the threats in force.
-        positions: ``(N, 2)`` reported positions, row i for ``steppers[i]``.
-        cull: ``field``'s cull index: only nearby threats are evaluated, within
-            the bound ``core.cull`` proves (used from ``cull.MIN_THREATS`` threats).
-
-    Returns:
-        One ``Advice`` per stepper, in order; identical to calling ``advise`` one by one.
-    """
-    pts = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
-    n = len(steppers)
-    goals = np.array([s.goal for s in steppers], dtype=np.float64).reshape(n, 2)
-    gains = np.fromiter([s.goal_gain for s in steppers], dtype=np.float64, count=n)
-    out = np.empty((n, 4))
-    if cull is not None and len(field) >= MIN_THREATS:
-        cull.descent(pts, goals, gains, out)
-    else:
-        kernels.descent_many(field.packed, pts, goals, gains, out)
-    rows = out.tolist()
-    coords = pts.tolist()
-    # a unit in a keep-out zone, or whose goal is in one, is judged by ``advise`` (``Stepper._zoned``)
-    zoned = (field.zones.contains(pts) | field.zones.contains(goals)).tolist() if field.zones else [False] * n
-    result = []
-    for s, (x, y), (fx, fy, level, norm), z in zip(steppers, coords, rows, zoned):
-        if z:
-            result.append(s.advise(field, x, y))
-            continue
-        if s._terminal is None and s._run is None:
-            if not s._foresee:  # plain descent: one judge call
-                result.append(s.follow(x, y, fx, fy, level, norm, field))
-                continue
-            if s.defer and not field.zones:  # a wave's unit: ask for the look-ahead, descend, one call
-                result.append(s.foresee_follow(x, y, fx, fy, level, norm, field))
-                continue
-        early = s.check(x, y)
-        if early is not None:
-            result.append(early._replace(level=level) if early.status is StepStatus.TRAPPED else early)
-        elif s._foresee and not s.defer:  # looking ahead inline (a preview): not the batch's descent
-            result.append(s.advise(field, x, y))
-        else:
-            if s._foresee:  # deferred: ask for the look-ahead and descend meanwhile, as ``advise`` does
-                s._foresee = False
-                s.pending = Need("foresee", x, y)
-            if s._run is not None:  # on a route: the batch gave this position's level
-                result.append(s._escaping(field, x, y, level))
-            else:
-                result.append(s.follow(x, y, fx, fy, level, norm, field))
-    return result

@@ -20,8 +20,9 @@ import msgspec
 import numpy as np
 
 from pfp_service.core import StepStatus, Threat, ThreatField
+from pfp_service.core.advice import Advice
+from pfp_service.core.batch import advise_many
 from pfp_service.core.cull import CullIndex, corridors_meet, influence_boxes
-from pfp_service.core.stepper import Advice, advise_many
 from pfp_service.core.tracking import PURSUIT_TOLERANCE_STEPS, Route
 from pfp_service.errors import FINITE_LIMIT, InputError
 from pfp_service.geo import Origin
