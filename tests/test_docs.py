@@ -95,6 +95,8 @@ SHRINK: dict[str, tuple[set[str], list[str]]] = {
     ),
     "failover": (set(), ["--planners", "2", "--units", "6", "--kills", "1"]),
     "memory": (set(), ["--units", "20", "--threats", "5", "--idle-s", "3", "--load-s", "2"]),
+    "vehicles": (set(), ["--quick"]),
+    "convergence": (set(), ["--quick"]),
     "quality": (set(), ["--scenarios", "2", "--modes", "none,contour", "--cells", "60"]),
 }
 START_TIMEOUT_S = 90.0

@@ -289,7 +289,7 @@ def test_arrow_and_bearing_follow_the_planner(planner, tmp_path: Path):
                 east_arrow = _text(app, "arrow")
                 assert len(east_arrow.splitlines()) >= 9  # the arrow is the biggest thing on 50x20
                 assert _text(app, "bearing") == "090° E"
-                assert _text(app, "status") == "EN ROUTE"
+                assert _text(app, "status") == "EN ROUTE  holding"  # not walking: it says speed 0
                 assert _text(app, "nav").startswith("Dist 20.0 m  ETA 14 s")
                 assert _points_along(east_arrow.splitlines(), 90)
 

@@ -70,7 +70,7 @@ def advise_many(
                 s._foresee = False
                 s.pending = Need("foresee", x, y)
             if s._run is not None:  # on a route: the batch gave this position's level
-                result.append(s._escaping(field, x, y, level))
+                result.append(s._escaping(field, x, y, level, grad=(fx, fy, level, norm)))
             else:
                 result.append(s.follow(x, y, fx, fy, level, norm, field))
     return result

@@ -201,7 +201,7 @@ def predict_many(
     tracks: list[list[tuple[float, float]]] = [[] for _ in steppers]
     esc = []
     for i, s in enumerate(steppers):
-        if s.on_route or s.check_terminal():
+        if s.escaping or s.check_terminal():
             track = s.route_ahead(float(pts0[i, 0]), float(pts0[i, 1]), steps)  # compiled, when it can
             if track is None:
                 esc.append(i)  # a ghost walks it
@@ -211,7 +211,7 @@ def predict_many(
         for i, t in zip(esc, walk_many([steppers[i].ghost() for i in esc], field, pts0[esc], steps, cull)):
             tracks[i] = t
     plain = np.array(
-        [i for i, s in enumerate(steppers) if not (s.on_route or s.check_terminal())], dtype=np.int64
+        [i for i, s in enumerate(steppers) if not (s.escaping or s.check_terminal())], dtype=np.int64
     )
     if plain.size == 0:
         return tracks

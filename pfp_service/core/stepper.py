@@ -574,16 +574,29 @@ class Stepper:
         return self._terminal is not None
 
     def _escaping(
-        self, field: ThreatField, x: float, y: float, level: float | None = None, again: bool = True
+        self,
+        field: ThreatField,
+        x: float,
+        y: float,
+        level: float | None = None,
+        again: bool = True,
+        grad: tuple[float, float, float, float] | None = None,
     ) -> Advice:
         """Steer along the committed route; ``level`` is the threat level here when the caller has it.
 
-        ``again``: a tracked route that ends here may be chosen again at once (not twice in one advice).
+        On a tracked descent the direction is descent's own (so a unit moved
+        a step at a time is exactly where the preview's descent goes), and
+        the route gives the corridor and the reach; ``grad`` is the batch's
+        ``(fx, fy, level, norm)`` here, if it has it.  ``again``: a tracked
+        route that ends here may be chosen again at once (not twice in one
+        advice).
         """
         run = self._run
         assert run is not None
         if self.tracking:
-            run.lead = self._lead
+            # among keep-out zones a route hugs their edges: the pursuit point stays two points on,
+            # where a chord never cuts a zone's corner (``route._zone_heading``'s own rule)
+            run.lead = tracking.LEAD_STEPS if field.zones else self._lead
             run.limit = NO_LIMIT  # a route is left by the corridor, never by counting reports
         stepped = run.steer(self._unit, x, y, field.zones)
         if self.tracking and run.off_m > tracking.corridor(self.params.step):
@@ -595,25 +608,59 @@ class Stepper:
             if self.tracking:
                 return self._route_ended(field, x, y, level, again)
             return self._descend(field, x, y)
+        if run.route is Route.DESCENT:
+            return self._along_descent(field, x, y, grad)
         dx, dy, dist, move, tx, ty = stepped
+        if self.tracking and not move > 1e-9 * self.params.step:  # the route's way on is walled off here
+            self._run = None
+            lv = field.level_grad_at(x, y)[0] if level is None else level
+            return self._trapped(field, x, y, lv, dist, f"{run.name}: blocked by a keep-out zone")
         self.advisories += 1
         route = run.route
         if self._escaper is not None and route.escaping:  # a ghost has none: it only predicts
             self._escaper.escape_steps += 1
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
-        reach = move
-        if self.tracking and move >= min(self.params.step, dist) * 0.999:  # not cut short of a zone
-            reach = max(move, min(run.ahead_m, dist))
-            if reach > move and field.zones:  # the way to the pursuit point may cut a zone's corner
-                hit, zone = zones.segment_hit(*field.zones.packed(), x, y, x + dx * reach, y + dy * reach)
-                if zone >= 0:
-                    reach = max(move, hit * reach - steprule.CLEAR_STEPS * self.params.step)
+        reach = self._reach(field, x, y, dx, dy, dist, move, run.ahead_m) if self.tracking else move
         if route.escaping:
             status, why = StepStatus.ESCAPING, f"{route.words}: {run.name}"
         else:
             status, why = StepStatus.EN_ROUTE, route.words
         return Advice(status, dx, dy, level, dist, why, False, reach, tx, ty, route)
+
+    def _along_descent(
+        self, field: ThreatField, x: float, y: float, grad: tuple[float, float, float, float] | None
+    ) -> Advice:
+        """On a tracked descent route (``_run`` steered already): descent's advice, reaching on along the route."""
+        adv = self._descend(field, x, y) if grad is None else self.follow(x, y, *grad, field)
+        if adv.status is not StepStatus.EN_ROUTE or self._run is None:
+            return adv
+        reach = self._reach(field, x, y, adv.dx, adv.dy, adv.distance, adv.reach, self._run.ahead_m)
+        return adv._replace(reach=reach, route=Route.DESCENT)
+
+    def _reach(
+        self,
+        field: ThreatField,
+        x: float,
+        y: float,
+        dx: float,
+        dy: float,
+        dist: float,
+        move: float,
+        ahead: float,
+    ) -> float:
+        """How far along ``(dx, dy)`` a tracked unit may go: to its pursuit point ``ahead`` metres off, not into a zone.
+
+        A step cut short (of a zone) stays as judged.
+        """
+        if not move >= min(self.params.step, dist) * 0.999:
+            return move
+        reach = max(move, min(ahead, dist))
+        if reach > move and field.zones:  # the way to the pursuit point may cut a zone's corner
+            hit, zone = zones.segment_hit(*field.zones.packed(), x, y, x + dx * reach, y + dy * reach)
+            if zone >= 0:
+                reach = max(move, hit * reach - steprule.CLEAR_STEPS * self.params.step)
+        return reach
 
     def _route_ended(
         self, field: ThreatField, x: float, y: float, level: float | None, again: bool
