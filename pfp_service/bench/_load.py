@@ -409,11 +409,20 @@ class LoadGen:
         self.recv: list[Received] = []
         self.events: list[tuple[float, str, dict[str, Any]]] = []
         self.bad = 0
-        self._state_keys = {u: zenoh.KeyExpr(keys.shard_state(MISSION, u)) for u in self.ids}
+        # the key each state goes on: its shard (our clients) or the plain key (a client that does not shard)
+        self._keys_by = {
+            "shard": {u: zenoh.KeyExpr(keys.shard_state(MISSION, u)) for u in self.ids},
+            "plain": {u: zenoh.KeyExpr(keys.unit_state(MISSION, u)) for u in self.ids},
+        }
+        self._state_keys = self._keys_by["shard"]
         self._subs = [
             self.session.declare_subscriber(keys.unit_directions(MISSION), self._on_direction),
             self.session.declare_subscriber(keys.events(MISSION), self._on_event),
         ]
+
+    def use_key(self, name: str) -> None:
+        """Put the states that follow on ``name``'s key: ``shard`` (the default) or ``plain``."""
+        self._state_keys = self._keys_by[name]
 
     def close(self) -> None:
         for s in self._subs:

@@ -61,6 +61,7 @@ from pfp_service.bench.layout import AREA_M, layout
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
+STATE_KEYS = ("shard", "plain", "both")
 FORGET_STALE_S = 20.0  # with --forget: silence before stale (longer than any quiet window of the phases)
 FORGET_AFTER_S = 5.0  # ... and stale this long before forgotten
 TARGETS = {
@@ -78,6 +79,7 @@ TARGETS = {
     "cpu_per_state_vs_echo": 1.1,
     "cpu_rate_per_s": 5000.0,  # issue 23: CPU per state is compared at this offered rate, deliberations landed
     "scale_out_share": 0.55,
+    "plain_vs_shard": 1.2,  # issue 34: the plain key within 20 % of the shard key (p50, unanswered)
     "scale_out_cpu_vs_one": 1.1,
 }
 
@@ -99,6 +101,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--probe-s", type=positive_float, default=4.0, help="seconds per --find-max probe (default 4)"
+    )
+    p.add_argument(
+        "--state-keys",
+        choices=STATE_KEYS,
+        default="shard",
+        help="the key the units' states go on: their shard key (our clients), the plain key (a client that "
+        "does not shard) or both, the steady load on each in turn in one run (default shard)",
     )
     p.add_argument("--echo", action="store_true", help="run the same load against an echo responder first")
     p.add_argument("--no-storm", action="store_true", help="skip the goal storm")
@@ -189,15 +198,23 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
     n = args.units
     try:
         for k in kinds:
-            gens[k] = LoadGen(servers[k].endpoint, lay["starts"], STEP_M)
+            gens[k] = _connected(lambda e=servers[k].endpoint: LoadGen(e, lay["starts"], STEP_M))
             gens[k].wait_ready()
         for k in kinds:
             idle = servers[k].meter.memory_mb()["rss_mb"]
             res[k] = _prepare(k, gens[k], servers[k], args, lay, bar) | {"idle_rss_mb": idle}
         # the steady load measures the loop, not the loop beside the storm's leftover look-aheads
         res["planner"]["steady_after"] = {"deliberations": deliberations_landed(gens["planner"])}
+        on = ["shard", "plain"] if args.state_keys == "both" else [args.state_keys]
+        for key in on:  # with both, the keys take turns against the same planner: they share the noise
+            for k in kinds:
+                gens[k].use_key(key)
+                st = steady(gens[k], servers[k], n, args.rate, args.duration, bar, f"{k}, {key} key")
+                res[k].setdefault("steady_by_key", {})[key] = st
+                res[k].setdefault("steady", st)  # the first key's (the shard's with both): the targets'
+                gens[k].settle(0.5, 5.0)
         for k in kinds:
-            res[k]["steady"] = steady(gens[k], servers[k], n, args.rate, args.duration, bar, k)
+            gens[k].use_key(on[0])
         if not args.no_fanout:
             res["planner"]["fanout"] = fanout(gens["planner"], servers["planner"], n, bar)
         landed = deliberations_landed(gens["planner"]) if args.echo or args.find_max else None
@@ -329,6 +346,23 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
 
     st = p["steady"]
     add("steady p50 <= 1 ms", st["p50_ms"], TARGETS["steady_p50_ms"])
+    by_key = p.get("steady_by_key", {})
+    if "plain" in by_key and "shard" in by_key:  # issue 34: a client that does not shard is served as well
+        sh, pl = by_key["shard"], by_key["plain"]
+        add(
+            "plain key p50 <= 1.2x shard key p50",
+            None if not sh["p50_ms"] or pl["p50_ms"] is None else pl["p50_ms"] / sh["p50_ms"],
+            TARGETS["plain_vs_shard"],
+        )
+        # a share near 0 on both has no ratio: within 20 % of the shard's, or of the 0.1 % target
+        slack = max(TARGETS["plain_vs_shard"] - 1.0, 0.0) * max(
+            sh["unanswered_fraction"], TARGETS["unanswered"]
+        )
+        add(
+            "plain key unanswered <= shard key's + 20 %",
+            pl["unanswered_fraction"] - sh["unanswered_fraction"],
+            slack,
+        )
     add("steady unanswered <= 0.1 %", st["unanswered_fraction"], TARGETS["unanswered"])
     if e is not None and st["p99_ms"] is not None and e["steady"]["p99_ms"]:
         add("steady p99 <= 2x echo p99", st["p99_ms"] / e["steady"]["p99_ms"], TARGETS["steady_p99_vs_echo"])
@@ -482,6 +516,15 @@ def _print(doc: dict[str, Any]) -> None:
         print(
             f"  CPU {_f(st['cpu_percent'], '.0f')} % over {st.get('processes', 1)} processes (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
         )
+        by_key = r.get("steady_by_key", {})
+        if len(by_key) > 1:
+            print("  state key  p50 ms   p90 ms   p99 ms   unanswered  answered/s  CPU %  load avg")
+            for key, ks in by_key.items():
+                print(
+                    f"  {key:<9}  {_f(ks['p50_ms'], '.3f'):>6}  {_f(ks['p90_ms'], '.3f'):>7}  {_f(ks['p99_ms'], '.3f'):>7}"
+                    f"  {100 * ks['unanswered_fraction']:>8.3f} %  {ks['answered_per_s']:>10.0f}  {_f(ks['cpu_percent'], '.0f'):>5}"
+                    f"  {_f(ks['loadavg'], '.1f'):>8}"
+                )
         if "cpu_rate" in r:
             c = r["cpu_rate"]
             landed = c.get("deliberations")

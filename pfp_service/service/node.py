@@ -188,13 +188,23 @@ class PlannerNode:
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
+        """Listen first, then warm up, restore and join; the planner's token says it is ready.
+
+        Every subscriber and queryable is declared before anything slow (the
+        workers' warm-up, the store, the peers): a state, goal or threat that
+        reaches the router from then on is held for the loop, not lost, and
+        restored goals are applied before it (the live write is the newer).
+        The liveliness token ``alive/planner/{id}`` comes last: a client that
+        waits for it knows its writes are taken (docs/wire.md, readiness).
+        """
+        m, p = self.cfg.mission, self.cfg.planner_id
+        s = self.session
+        self._listen(s)
         # Python threads (previews, deliberation) take the GIL for 5 ms at a time by default;
         # measured: loop p99 9.0 ms with two busy preview threads, 2.4 ms at 0.5 ms.
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         warm_up(self.world.settings)
         self._desk.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them
-        m, p = self.cfg.mission, self.cfg.planner_id
-        s = self.session
         restored = None
         if self.store is not None:
             restored = self.store.restore(time.time())
@@ -206,26 +216,6 @@ class PlannerNode:
             if self.store is not None:
                 filed = self.store.commit_batch(filed, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
             self.world.apply(filed, self.clock())
-        # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
-        # drains them: the latest STATE_RING states, older ones dropped first under a flood
-        self._ring("plain", keys.unit_states(m))
-        self._sync_shards()
-        self._declared += [
-            s.declare_subscriber(keys.goals(m), self._on_goal),
-            s.declare_subscriber(keys.threats(m), self._on_threat),
-            # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
-            s.declare_queryable(keys.goals(m), self._on_goal_query),
-            s.declare_queryable(keys.threats(m), self._on_threat_query),
-            s.declare_subscriber(keys.zones(m), self._on_zone),  # keep-out zones: written as threats are
-            s.declare_queryable(keys.zones(m), self._on_zone_query),
-            s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
-            s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
-            s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
-            s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
-            s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
-        ]
-        if self.cfg.cluster:
-            self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
         self._join(s)
         if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
             self._peers_known(s)
@@ -252,6 +242,31 @@ class PlannerNode:
         )
         self._twins_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
+
+    def _listen(self, s: zenoh.Session) -> None:
+        """Declare every subscriber and queryable; their callbacks only enqueue, so the loop need not run yet."""
+        m, p = self.cfg.mission, self.cfg.planner_id
+        # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
+        # drains them: the latest STATE_RING states, older ones dropped first under a flood
+        self._ring("plain", keys.unit_states(m))
+        self._sync_shards()
+        self._declared += [
+            s.declare_subscriber(keys.goals(m), self._on_goal),
+            s.declare_subscriber(keys.threats(m), self._on_threat),
+            # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
+            s.declare_queryable(keys.goals(m), self._on_goal_query),
+            s.declare_queryable(keys.threats(m), self._on_threat_query),
+            s.declare_subscriber(keys.zones(m), self._on_zone),  # keep-out zones: written as threats are
+            s.declare_queryable(keys.zones(m), self._on_zone_query),
+            s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
+            s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
+            s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
+            s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
+            s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
+        ]
+        if self.cfg.cluster:
+            self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
+        log.info("listening", extra={"fields": {"mission": m, "planner": p}})
 
     def stop(self) -> None:
         self._stop.set()
