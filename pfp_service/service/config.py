@@ -303,6 +303,13 @@ def _queue_sizes(conf: Any) -> dict[str, int]:
     return {**sizes, **TX_QUEUE_BATCHES}
 
 
+def tx_queue_sizes() -> dict[str, int]:
+    """``transport/link/tx/queue/size`` as ``pfp serve`` sets it without a file: what ``pfp acl`` writes too."""
+    import zenoh
+
+    return _queue_sizes(zenoh.Config())
+
+
 def client_zenoh_config(
     connect: Sequence[str] | None = None,
     multicast: bool = False,
