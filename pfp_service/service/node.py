@@ -167,6 +167,7 @@ class PlannerNode:
         self._order = WriteOrder()
         self.zid = str(session.info.zid())
         self._inbox_events: list[Event] = []  # events raised off the loop (a twin under --cluster)
+        self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
@@ -422,7 +423,19 @@ class PlannerNode:
             pid = keys.parse(str(sample.key_expr)).id
         except InputError:
             return
-        self._push(PeerPlanner(pid, sample.kind == zenoh.SampleKind.PUT))
+        alive = sample.kind == zenoh.SampleKind.PUT
+        if (
+            not self.cfg.cluster and pid != self.cfg.planner_id
+        ):  # not a peer but a twin: both guide every unit
+            self._twinned(pid, alive)
+        self._push(PeerPlanner(pid, alive))
+
+    def _twinned(self, name: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self._twins.add(name)
+            else:
+                self._twins.discard(name)
 
     def _peers_known(self, s: zenoh.Session) -> None:
         """Enqueue a ``PeerPlanner`` for each live planner of the mission, once its token has answered.
@@ -441,6 +454,7 @@ class PlannerNode:
 
     def _twin(self, zid: str, alive: bool) -> None:
         name = f"{self.cfg.planner_id[:50]}-{zid[:12]}"
+        self._twinned(name, alive)
         if not self.cfg.cluster:
             self._push(PeerPlanner(name, alive))
             return
@@ -713,6 +727,8 @@ class PlannerNode:
         fields = {k: v for k, v in msgspec.structs.asdict(ev).items() if k not in ("t", "planner")}
         if isinstance(ev, RejectedEvent):
             log.warning("rejected input", extra={"fields": fields})
+        elif isinstance(ev, ConflictEvent):  # two planners guiding one unit: a vehicle overshot its goal
+            log.warning("conflict: a twin planner", extra={"fields": fields})
         else:
             log.info(str(kind), extra={"fields": fields})
 
@@ -763,4 +779,5 @@ class PlannerNode:
             session=self.zid,
             origin=self.cfg.origin,
             faults=c["faults"],
+            twins=tuple(sorted(self._twins))[:64],
         )

@@ -434,6 +434,9 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     session: Text = ""  # the planner's Zenoh session id: planners that share an id are told apart by it
     origin: Origin | None = None  # where its [0, 0] lies; clients check or convert their own against it
     faults: Count = 0  # inputs dropped because applying them failed inside the planner (each also rejected)
+    # twins: other planners this one sees answering the same units (another id while not --cluster, or a
+    # second session under its own id), each "ID" or "ID-SESSION"; pfp status and pfp health warn of them
+    twins: Annotated[tuple[Text, ...], Meta(max_length=64)] = ()
 
 
 # -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
