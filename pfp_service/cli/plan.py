@@ -231,7 +231,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from pfp_service.render import plot_plan
 
-        plot_plan(scenario, result, args.plot, coords)
+        plot_plan(scenario, result, args.plot, coords, zones=list(zones))
     if args.geojson:
         from pfp_service import geojson
 
