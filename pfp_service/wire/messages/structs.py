@@ -147,7 +147,8 @@ class UnitState(_Message, frozen=True, kw_only=True):
     """Where a unit is; published on ``mumt/{m}/unit/{u}/state``.
 
     Attributes:
-        position: ``[x, y]`` in metres (x east, y north).
+        position: ``[x, y]`` in metres (x east, y north), or ``{"lat", "lon"}`` in WGS-84
+            degrees when the planner has a mission origin.
         t: the sender's time of the fix in seconds, if it has one.
         seq: the sender's sequence number; the direction answering it echoes it.
         kind: ``manned`` or ``unmanned``.
@@ -167,7 +168,8 @@ class Goal(_Message, frozen=True, kw_only=True):
     """Where a unit should go; put on ``mumt/{m}/unit/{u}/goal``, a DELETE cancels it.
 
     Attributes:
-        position: ``[x, y]`` in metres.
+        position: ``[x, y]`` in metres (x east, y north), or ``{"lat", "lon"}`` in WGS-84
+            degrees when the planner has a mission origin.
         delta: goal weight (1e-9 to 1e9); derived by the scale-free rule when absent.
         tolerance: arrival radius in metres (>= 0.001); derived when absent.
         step: step length in metres (>= 0.001); derived when absent.  A step
@@ -186,7 +188,8 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
     """A threat, put on ``mumt/{m}/threat/{t}`` (the id is the key's last chunk); a DELETE removes it.
 
     Attributes:
-        position: the enemy position ``[x, y]`` in metres.
+        position: the enemy position, ``[x, y]`` in metres or ``{"lat", "lon"}`` in WGS-84
+            degrees when the planner has a mission origin.
         facing_deg: the direction it faces, compass degrees.
         sigma_range: spread along the facing, metres (>= 0.001).
         sigma_lateral: spread across the facing, metres (>= 0.001).
