@@ -61,7 +61,7 @@ from pfp_service.bench.layout import AREA_M, layout
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
-STATE_KEYS = ("shard", "plain", "both")
+STATE_KEYS = ("shard", "plain", "both", "mixed")
 FORGET_STALE_S = 20.0  # with --forget: silence before stale (longer than any quiet window of the phases)
 FORGET_AFTER_S = 5.0  # ... and stale this long before forgotten
 TARGETS = {
@@ -107,7 +107,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=STATE_KEYS,
         default="shard",
         help="the key the units' states go on: their shard key (our clients), the plain key (a client that "
-        "does not shard) or both, the steady load on each in turn in one run (default shard)",
+        "does not shard), both (the steady load on each in turn) or mixed (half the units on each at once, "
+        "each half's figures apart) (default shard)",
     )
     p.add_argument("--echo", action="store_true", help="run the same load against an echo responder first")
     p.add_argument("--no-storm", action="store_true", help="skip the goal storm")
@@ -206,6 +207,8 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
         # the steady load measures the loop, not the loop beside the storm's leftover look-aheads
         res["planner"]["steady_after"] = {"deliberations": deliberations_landed(gens["planner"])}
         on = ["shard", "plain"] if args.state_keys == "both" else [args.state_keys]
+        if args.state_keys == "mixed":
+            on = ["mixed"]
         for key in on:  # with both, the keys take turns against the same planner: they share the noise
             for k in kinds:
                 gens[k].use_key(key)
@@ -346,7 +349,9 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
 
     st = p["steady"]
     add("steady p50 <= 1 ms", st["p50_ms"], TARGETS["steady_p50_ms"])
-    by_key = p.get("steady_by_key", {})
+    by_key = dict(p.get("steady_by_key", {}))
+    if "mixed" in by_key:
+        by_key = by_key["mixed"].get("by_key", {})
     if "plain" in by_key and "shard" in by_key:  # issue 34: a client that does not shard is served as well
         sh, pl = by_key["shard"], by_key["plain"]
         add(
@@ -516,12 +521,21 @@ def _print(doc: dict[str, Any]) -> None:
         print(
             f"  CPU {_f(st['cpu_percent'], '.0f')} % over {st.get('processes', 1)} processes (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
         )
-        by_key = r.get("steady_by_key", {})
+        by_key = dict(r.get("steady_by_key", {}))
+        if "mixed" in by_key:  # each half of the same run, with the run's CPU and load
+            mixed = by_key.pop("mixed")
+            for k, half in mixed.get("by_key", {}).items():
+                by_key[f"{k} (mixed)"] = {
+                    **half,
+                    "answered_per_s": half["answered"] / mixed["spent_s"],
+                    "cpu_percent": mixed["cpu_percent"],
+                    "loadavg": mixed["loadavg"],
+                }
         if len(by_key) > 1:
-            print("  state key  p50 ms   p90 ms   p99 ms   unanswered  answered/s  CPU %  load avg")
+            print("  state key      p50 ms   p90 ms   p99 ms   unanswered  answered/s  CPU %  load avg")
             for key, ks in by_key.items():
                 print(
-                    f"  {key:<9}  {_f(ks['p50_ms'], '.3f'):>6}  {_f(ks['p90_ms'], '.3f'):>7}  {_f(ks['p99_ms'], '.3f'):>7}"
+                    f"  {key:<13}  {_f(ks['p50_ms'], '.3f'):>6}  {_f(ks['p90_ms'], '.3f'):>7}  {_f(ks['p99_ms'], '.3f'):>7}"
                     f"  {100 * ks['unanswered_fraction']:>8.3f} %  {ks['answered_per_s']:>10.0f}  {_f(ks['cpu_percent'], '.0f'):>5}"
                     f"  {_f(ks['loadavg'], '.1f'):>8}"
                 )
