@@ -615,6 +615,8 @@ class PlannerNode:
 
     def _status(self) -> PlannerStatus:
         p50, p99 = self.latency.quantiles_ms()
+        with self._lock:  # the callbacks' threads change it
+            twins = tuple(sorted(self._twins))[:64]
         c = self.world.counts()
         return PlannerStatus(
             planner=self.cfg.planner_id,
@@ -638,5 +640,5 @@ class PlannerNode:
             session=self.zid,
             origin=self.cfg.origin,
             faults=c["faults"],
-            twins=tuple(sorted(self._twins))[:64],
+            twins=twins,
         )
