@@ -9,6 +9,12 @@ acknowledged write.  Two kinds, in every run:
   The planner declares every subscriber before its token, so the one put is taken.
 * **eager**: puts its goal the moment its session opens, before any planner may
   listen, and again whenever a direction says ``no_goal`` (the visible answer).
+* **once**: puts its goal the moment its session opens and never again (the README's
+  vehicle before issue 34).  Its put is taken only if the planner already listens:
+  before, ``pfp serve``'s router spent Zenoh's 500 ms scouting delay inside ``open()``
+  with its port open and no subscriber (2 of 15 taken, against 15 of 15 now, measured);
+  about 20 ms remain between the port opening and the planner's subscriptions, so a
+  once-client is required to be taken in at least one run of each order, not in all.
 
 A goal is in force once a direction for the unit says ``en_route``, ``escaping`` or
 ``arrived``; each client must see that within ``IN_FORCE_S`` of the planner's token
@@ -69,6 +75,7 @@ class Vehicle:
     mission: str
     unit: str
     eager: bool
+    again: bool = True  # says its goal again on no_goal (the eager one)
     done: threading.Event = field(default_factory=threading.Event)
     stop: threading.Event = field(default_factory=threading.Event)
     ready_t: float | None = None  # the planner's token reached this client
@@ -121,7 +128,7 @@ class Vehicle:
                 status = json.loads(got.payload.to_bytes())["status"]
                 if status in GUIDED:
                     self.guided_t = time.monotonic()
-                elif status == "no_goal" and self.eager:
+                elif status == "no_goal" and self.eager and self.again:
                     put_goal()
         directions.undeclare()
         token.undeclare()
@@ -140,7 +147,7 @@ def _serve(endpoint: str, mission: str, log: object) -> subprocess.Popen[str]:
     )
 
 
-def _one_run(order: str, n: int) -> list[str]:
+def _one_run(order: str, n: int) -> tuple[list[str], bool]:
     """Start the planner and two clients in ``order``; what went wrong (empty: both in force in time)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     mission = f"order-{order}-{n}-{os.getpid()}"
@@ -148,33 +155,34 @@ def _one_run(order: str, n: int) -> list[str]:
         Vehicle(endpoint, mission, "patient", eager=False),
         Vehicle(endpoint, mission, "eager", eager=True),
     ]
+    once = Vehicle(endpoint, mission, "once", eager=True, again=False)
     proc: subprocess.Popen[str] | None = None
     with tempfile.TemporaryFile("w+") as log:
         try:
             if order == "before":
-                for c in cars:
+                for c in [*cars, once]:
                     c.start()
                 time.sleep(GAP_S)  # the clients' sessions are waiting for a router that is not there yet
                 proc = _serve(endpoint, mission, log)
             elif order == "with":
                 proc = _serve(endpoint, mission, log)
-                for c in cars:
+                for c in [*cars, once]:
                     c.start()
             else:
                 proc = _serve(endpoint, mission, log)
                 time.sleep(GAP_S)  # about when the router starts to listen (1.2 s on these machines)
-                for c in cars:
+                for c in [*cars, once]:
                     c.start()
             deadline = time.monotonic() + CAP_S
-            for c in cars:
+            for c in [*cars, once]:
                 while c.guided_t is None and c.error is None and time.monotonic() < deadline:
                     if c.ready_t is not None and time.monotonic() - c.ready_t > IN_FORCE_S + 1.0:
                         break
                     time.sleep(0.05)
         finally:
-            for c in cars:
+            for c in [*cars, once]:
                 c.stop.set()
-            for c in cars:
+            for c in [*cars, once]:
                 c.done.wait(10.0)
             if proc is not None:
                 proc.terminate()
@@ -196,14 +204,25 @@ def _one_run(order: str, n: int) -> list[str]:
             bad.append(f"{where}: goal not in force {IN_FORCE_S + 1:.0f} s after the planner's token")
         elif c.guided_t - c.ready_t > IN_FORCE_S:
             bad.append(f"{where}: goal in force {c.guided_t - c.ready_t:.2f} s after the planner's token")
+    delays = [f"{c.unit} {c.guided_t - c.ready_t:.2f} s" for c in cars if c.guided_t and c.ready_t]
+    taken = once.guided_t is not None
+    print(
+        f"{order} #{n}: in force after the token: {', '.join(delays)}; once-put {'taken' if taken else 'lost'}"
+    )
     if "Traceback" in text:
         bad.append(f"{order} #{n}: the planner printed a traceback:\n{text[-2000:]}")
-    return bad
+    return bad, taken
 
 
 @pytest.mark.parametrize("order", ["before", "with", "after"])
 def test_a_client_started_before_with_or_after_the_planner_has_its_goal_in_force(order: str) -> None:
     bad: list[str] = []
+    taken = 0
     for n in range(RUNS):
-        bad += _one_run(order, n)
+        more, once = _one_run(order, n)
+        bad += more
+        taken += once
     assert bad == []
+    assert taken >= 1, (
+        f"a goal put once at session open was lost in all {RUNS} runs started {order} the planner"
+    )

@@ -228,12 +228,13 @@ class PlannerNode:
     def _listen(self, s: zenoh.Session) -> None:
         """Declare every subscriber and queryable; their callbacks only enqueue, so the loop need not run yet."""
         m, p = self.cfg.mission, self.cfg.planner_id
+        # the writes first: a lost goal stays lost, a lost state is followed by the unit's next report
+        self._declared += self._writes.declare(s, m)
         # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
         # drains them: the latest STATE_RING states, older ones dropped first under a flood
         self._ring("plain", keys.unit_states(m))
         self._sync_shards()
         self._declared += [
-            *self._writes.declare(s, m),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
