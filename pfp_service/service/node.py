@@ -14,7 +14,12 @@
   only (``World.shards``, rendezvous hashing); as they change, the new rings
   are declared before the old go.
 * Callbacks for the rest decode and enqueue, nothing more: everything in
-  order, queries handed to the loop.  No callback replies or puts.
+  order, queries handed to the loop.  No callback replies or puts.  Goal,
+  threat and zone writes (plain puts and acknowledged writes) are
+  ``writes.Writes``'.
+* Every subscriber and queryable is declared the moment the session opens,
+  the planner's liveliness token last: the token is its readiness
+  (docs/wire.md), and a write from then on is held for the loop.
 * One planning loop applies a bounded slice of it and a ``Tick`` to the
   ``World`` and publishes what it returns.  Every decision is the world's.
   Directions go out batched by Zenoh, not express: a fifth of the cost per
