@@ -112,3 +112,37 @@ def test_the_app_learns_the_origin_shows_and_takes_its_coordinates_and_quits_on_
             link.close()
 
     assert asyncio.run(scenario()) == 130
+
+
+@pytest.mark.net
+def test_a_goal_given_in_mgrs_at_start_is_set_once_the_planners_origin_is_learnt(geo_planner):
+    """``pfp handheld --goal "33VWE ..."`` without ``--origin``: the goal waits for the planner's origin."""
+    pytest.importorskip("textual")
+    from pfp_clients.handheld import HandheldApp
+    from pfp_clients.handheld_link import RetryingLink, client_config
+    from pfp_clients.handheld_model import HandheldModel, Settings
+
+    endpoint, mission = geo_planner
+    uid = "coords-start"
+    goal = (-25.0, 30.0)
+    typed = Coords.choose("mgrs", ORIGIN).point(goal, offset=False)
+
+    async def scenario() -> tuple[float, float] | None:
+        link = RetryingLink(lambda: client_config([endpoint]), endpoint, mission, uid)
+        try:
+            model = HandheldModel(Settings(unit=uid, walk=False), (0.0, 0.0), time.monotonic())
+            app = HandheldApp(model, link, mission=mission, publish_hz=5.0, goal_text=typed)
+            async with app.run_test(size=SIZE) as pilot:
+                assert app.model.goal is None  # no origin yet: nothing to put
+                await _until(pilot, lambda: app.model.goal is not None, "the goal, once the origin is learnt")
+                await _until(
+                    pilot,
+                    lambda: app.last_view is not None and app.last_view.status_label == "EN ROUTE",
+                    "guidance to it",
+                )
+                return app.model.goal
+        finally:
+            link.close()
+
+    got = asyncio.run(scenario())
+    assert got is not None and abs(got[0] - goal[0]) < 1.5 and abs(got[1] - goal[1]) < 1.5, (typed, got)

@@ -215,13 +215,17 @@ class HandheldApp(App[int]):
         if self.fixed_origin is None:  # the GPS's frame is what the screen shows
             self.origin = origin
             self.coords = Coords.choose(self.coords_flag, origin, strict=False)
-        if self.goal_text is not None and self.origin is not None:
-            goal = parse_goal(self.goal_text, self.origin)
-            self.goal_text = None
-            if isinstance(goal, str):
-                self.model.note = f"--goal: {goal}"
-            else:
-                self.model.set_goal(goal)
+        if self.goal_text is None:
+            return
+        if self.origin is None:  # the planner works in bare metres: lat/lon and MGRS mean nothing to it
+            self.model.note = f"--goal {self.goal_text}: the planner has no origin; give X,Y in metres"
+            return
+        goal = parse_goal(self.goal_text, self.origin)
+        self.goal_text = None
+        if isinstance(goal, str):
+            self.model.note = f"--goal: {goal}"
+        else:
+            self.model.set_goal(goal)
 
     # -- actions ------------------------------------------------------------------
     def action_nudge(self, east: int, north: int) -> None:
