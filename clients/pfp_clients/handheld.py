@@ -4,15 +4,18 @@ A timer drains the link's queue (directions, GPS fixes), advances the
 simulated walk, publishes the unit's state at ``publish_hz`` and redraws from
 ``model.view(now)``.  Laid out for a 50x20 terminal; the arrow grows with
 the terminal.  Keys: arrows nudge, space pauses the walk, g sets the goal
-(a prompt for ``X,Y``), q quits.
+(a prompt for ``X,Y`` metres, ``58.41N 15.62E`` or an MGRS reference), q
+quits, and Ctrl-C quits as an interrupt (exit 130), as in any command.
+With the mission origin (``--origin``, or learnt from the planner) the
+position is shown as lat/lon or MGRS (``--coords``).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
 import queue
+import signal
 import time
 from collections.abc import Callable
 from typing import ClassVar
@@ -35,12 +38,15 @@ from pfp_clients.handheld_link import (
     NmeaRejected,
     NoFixIn,
     OriginChecked,
+    OriginLearnt,
     PlannerUp,
     RetryingLink,
     WireRejected,
 )
 from pfp_clients.handheld_model import HandheldModel, Severity, View, format_duration, threat_bar
-from pfp_service.signals import SIGNALS, SignalStop
+from pfp_service.coords import Coords, parse_point
+from pfp_service.geo import Origin
+from pfp_service.signals import EXIT_CODES, SIGNALS, SignalStop
 
 __all__ = ["GoalPrompt", "HandheldApp", "parse_goal"]
 
@@ -56,43 +62,45 @@ STATUS_STYLES = {
 ARROW_ROWS = (3, 15)
 
 
-def parse_goal(text: str) -> tuple[float, float] | str:
-    """``"120,80"`` as metres, or the reason it is not a point."""
-    parts = text.replace(" ", "").split(",")
-    try:
-        x, y = (float(v) for v in parts)
-    except ValueError:
-        return f"expected X,Y in metres, got {text!r}"
-    if not (math.isfinite(x) and math.isfinite(y)):
-        return f"expected finite numbers, got {text!r}"
-    return x, y
+def parse_goal(text: str, origin: Origin | None = None) -> tuple[float, float] | str:
+    """``"120,80"`` metres, ``"58.4105N 15.6213E"`` or an MGRS reference (with ``origin``), or why not."""
+    return parse_point(text, origin)
 
 
 class GoalPrompt(ModalScreen[tuple[float, float] | None]):
-    """Asks for a goal ``X,Y``; Enter sets it, Escape keeps the old one."""
+    """Asks for a goal: ``X,Y`` metres, or with the origin lat/lon or MGRS; Enter sets it, Escape keeps the old one."""
 
     CSS = """
     GoalPrompt { align: center middle; }
-    #box { width: 40; height: auto; border: round $accent; padding: 0 1; background: $surface; }
+    #box { width: 46; height: auto; border: round $accent; padding: 0 1; background: $surface; }
     #why { color: $warning; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "cancel", show=False)]
 
-    def __init__(self, current: tuple[float, float] | None) -> None:
+    def __init__(self, current: tuple[float, float] | None, coords: Coords | None = None) -> None:
         super().__init__()
         self.current = current
+        self.coords = coords or Coords()
 
     def compose(self) -> ComposeResult:
         from textual.containers import Vertical
 
         with Vertical(id="box"):
-            yield Label("Goal X,Y in metres (Enter sets, Esc keeps)")
-            value = "" if self.current is None else f"{self.current[0]:g},{self.current[1]:g}"
+            if self.coords.origin is not None:
+                yield Label("Goal: X,Y m, 58.41N 15.62E or MGRS (Enter sets, Esc keeps)")
+            else:
+                yield Label("Goal X,Y in metres (Enter sets, Esc keeps)")
+            if self.current is None:
+                value = ""
+            elif self.coords.geodetic:
+                value = self.coords.point(self.current, offset=False)
+            else:
+                value = f"{self.current[0]:g},{self.current[1]:g}"
             yield Input(value=value, placeholder="120,80", id="goal")
             yield Label("", id="why")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
-        result = parse_goal(event.value)
+        result = parse_goal(event.value, self.coords.origin)
         if isinstance(result, str):
             self.query_one("#why", Label).update(result)
             return
@@ -123,6 +131,8 @@ class HandheldApp(App[int]):
         Binding("space", "toggle_walk", "walk", show=False),
         Binding("g", "goal_prompt", "goal", show=False),
         Binding("q", "quit", "quit", show=False),
+        # the terminal is raw: Ctrl-C is a key here, not SIGINT; it ends the app as SIGINT would
+        Binding("ctrl+c", "interrupt", "interrupt", show=False, priority=True),
     ]
 
     def __init__(
@@ -138,8 +148,19 @@ class HandheldApp(App[int]):
         clock: Callable[[], float] = time.monotonic,
         wallclock: Callable[[], float] = time.time,
         stopping: SignalStop | None = None,
+        coords: str | None = None,
+        origin: Origin | None = None,
+        goal_text: str | None = None,
     ) -> None:
+        """``coords``: ``--coords`` (``None``: lat/lon once an origin is known); ``origin``: the GPS's
+        ``--origin``, else the planner's once learnt; ``goal_text``: a ``--goal`` in lat/lon or MGRS,
+        set once the planner's origin is learnt."""
         super().__init__()
+        self.goal_text = goal_text
+        self.coords_flag = coords
+        self.fixed_origin = origin
+        self.coords = Coords.choose(coords, origin, strict=False)
+        self.origin: Origin | None = origin  # for typed goals in lat/lon or MGRS
         self.stopping = stopping  # SIGTERM and SIGINT end the app (and say which came)
         self.model = model
         self.link = link
@@ -184,6 +205,28 @@ class HandheldApp(App[int]):
         self.stopping.note(signum)
         self.exit()
 
+    def action_interrupt(self) -> None:
+        """Ctrl-C: quit at once with 130, as SIGINT ends every other command."""
+        if self.stopping is not None:
+            self.stopping.note(signal.SIGINT)
+        self.exit(EXIT_CODES[signal.SIGINT])
+
+    def _learnt(self, origin: Origin | None) -> None:
+        if self.fixed_origin is None:  # the GPS's frame is what the screen shows
+            self.origin = origin
+            self.coords = Coords.choose(self.coords_flag, origin, strict=False)
+        if self.goal_text is None:
+            return
+        if self.origin is None:  # the planner works in bare metres: lat/lon and MGRS mean nothing to it
+            self.model.note = f"--goal {self.goal_text}: the planner has no origin; give X,Y in metres"
+            return
+        goal = parse_goal(self.goal_text, self.origin)
+        self.goal_text = None
+        if isinstance(goal, str):
+            self.model.note = f"--goal: {goal}"
+        else:
+            self.model.set_goal(goal)
+
     # -- actions ------------------------------------------------------------------
     def action_nudge(self, east: int, north: int) -> None:
         step = self.model.settings.nudge_m
@@ -197,7 +240,8 @@ class HandheldApp(App[int]):
                 self.model.set_goal(goal)
                 self.tick()
 
-        self.push_screen(GoalPrompt(self.model.goal), chosen)
+        shown = self.coords if self.coords.origin is not None else Coords("metres", self.origin)
+        self.push_screen(GoalPrompt(self.model.goal, shown), chosen)
 
     def action_toggle_walk(self) -> None:
         if self.source == "nmea":  # the receiver gives the position; a simulated walk would fight it
@@ -240,6 +284,8 @@ class HandheldApp(App[int]):
                     self.model.on_origin(ok, text)
                 case GoalIn(position=position):
                     self.model.on_goal(position)
+                case OriginLearnt(origin=origin):
+                    self._learnt(origin)
         now = self.clock()
         self.model.advance(now)
         goal = self.model.goal_to_send(now)
@@ -291,7 +337,12 @@ class HandheldApp(App[int]):
         if v.position is None:
             pos = "Pos: no fix yet"
         else:
-            pos = f"Pos E {v.position[0]:.1f} N {v.position[1]:.1f} m  {v.speed_mps:.1f} m/s"
+            where = (
+                self.coords.point(v.position, offset=False)
+                if self.coords.geodetic
+                else f"E {v.position[0]:.1f} N {v.position[1]:.1f} m"
+            )
+            pos = f"Pos {where}  {v.speed_mps:.1f} m/s"
         self._set("pos", Text(pos))
         self._set("note", Text(v.note, style="yellow", overflow="ellipsis", no_wrap=True))
 

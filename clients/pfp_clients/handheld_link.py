@@ -66,6 +66,7 @@ __all__ = [
     "NmeaRejected",
     "NoFixIn",
     "OriginChecked",
+    "OriginLearnt",
     "PlannerUp",
     "RetryingLink",
     "WireRejected",
@@ -132,6 +133,13 @@ class OriginChecked:
 
 
 @dataclass(frozen=True, slots=True)
+class OriginLearnt:
+    """The planner's origin, asked once connected and whenever a planner comes up (``None``: it has none)."""
+
+    origin: Origin | None
+
+
+@dataclass(frozen=True, slots=True)
 class GoalIn:
     """The unit's goal as put on the wire by anyone (``None``: cancelled)."""
 
@@ -140,6 +148,7 @@ class GoalIn:
 
 Inbound = (
     DirectionIn
+    | OriginLearnt
     | WireRejected
     | FixIn
     | NoFixIn
@@ -328,16 +337,18 @@ class RetryingLink:
                     return
                 self._link = Link(session, self.mission, self.unit, self.inbox, self._recheck.set)
             _offer(self.inbox, LinkUp(self.where))
-            if self.origin is not None:
-                self._watch_origin(session, self.origin)
+            self._watch_origin(session, self.origin)
             return
 
-    def _watch_origin(self, session: zenoh.Session, mine: Origin) -> None:
-        """Judge ``mine`` against the planner's origin now and whenever a planner comes up; until closed.
+    def _watch_origin(self, session: zenoh.Session, mine: Origin | None) -> None:
+        """Learn the planner's origin (``OriginLearnt``), and judge ``mine`` against it, now and whenever a
+        planner comes up; until closed.
 
         A planner not answering yet is asked again every second
         (``learn_planner_origin``); positions go out meanwhile (as they did
         before any check), and stop the moment one answers with another origin.
+        Without ``mine`` (the simulated walk is in the planner's metres) the
+        learnt origin only lets the screen show lat/lon and MGRS.
         """
         self._recheck.set()
         while self._recheck.wait() and not self._stop.is_set():
@@ -350,6 +361,9 @@ class RetryingLink:
                 return
             if not answered:  # closed meanwhile
                 return
+            _offer(self.inbox, OriginLearnt(planner))
+            if mine is None:
+                continue
             try:
                 note = judge_origin(planner, self.mission, mine)
             except InputError as err:

@@ -409,11 +409,30 @@ class LoadGen:
         self.recv: list[Received] = []
         self.events: list[tuple[float, str, dict[str, Any]]] = []
         self.bad = 0
-        self._state_keys = {u: zenoh.KeyExpr(keys.shard_state(MISSION, u)) for u in self.ids}
+        # the key each state goes on: its shard (our clients) or the plain key (a client that does not shard)
+        self._keys_by = {
+            "shard": {u: zenoh.KeyExpr(keys.shard_state(MISSION, u)) for u in self.ids},
+            "plain": {u: zenoh.KeyExpr(keys.unit_state(MISSION, u)) for u in self.ids},
+        }
+        # mixed: the even units on their shard key, the odd on the plain key (our fleet beside outside vehicles)
+        self._keys_by["mixed"] = {
+            u: self._keys_by["plain" if i % 2 else "shard"][u] for i, u in enumerate(self.ids)
+        }
+        self._state_keys = self._keys_by["shard"]
+        self.mixed = False
         self._subs = [
             self.session.declare_subscriber(keys.unit_directions(MISSION), self._on_direction),
             self.session.declare_subscriber(keys.events(MISSION), self._on_event),
         ]
+
+    def use_key(self, name: str) -> None:
+        """Put the states that follow on ``name``'s key: ``shard`` (the default), ``plain`` or ``mixed``."""
+        self._state_keys = self._keys_by[name]
+        self.mixed = name == "mixed"
+
+    def key_of(self, unit: str) -> str:
+        """Which key ``unit``'s states go on now: ``shard`` or ``plain``."""
+        return "plain" if str(self._state_keys[unit]) == str(self._keys_by["plain"][unit]) else "shard"
 
     def close(self) -> None:
         for s in self._subs:

@@ -127,6 +127,11 @@ def steady(
         g.settle()
     recv = g.recv[mark:]
     lat = latency(g, range(first, end), recv)
+    if g.mixed:  # half the units on each key at once: each half's own figures, from the same moments
+        halves: dict[str, list[int]] = {"shard": [], "plain": []}
+        for seq in range(first, end):
+            halves[g.key_of(g.seq_unit[seq])].append(seq)
+        lat["by_key"] = {k: latency(g, seqs, recv) for k, seqs in halves.items()}
     last: dict[str, str] = {}
     by_seq: dict[int | None, set[str | None]] = {}
     by_unit: dict[str, set[str | None]] = {}

@@ -57,10 +57,12 @@ from pfp_service.bench._phases import (
     steady,
     storm,
 )
+from pfp_service.bench._service_text import print_doc
 from pfp_service.bench.layout import AREA_M, layout
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
+STATE_KEYS = ("shard", "plain", "both", "mixed")
 FORGET_STALE_S = 20.0  # with --forget: silence before stale (longer than any quiet window of the phases)
 FORGET_AFTER_S = 5.0  # ... and stale this long before forgotten
 TARGETS = {
@@ -78,6 +80,7 @@ TARGETS = {
     "cpu_per_state_vs_echo": 1.1,
     "cpu_rate_per_s": 5000.0,  # issue 23: CPU per state is compared at this offered rate, deliberations landed
     "scale_out_share": 0.55,
+    "plain_vs_shard": 1.2,  # issue 34: the plain key within 20 % of the shard key (p50, unanswered)
     "scale_out_cpu_vs_one": 1.1,
 }
 
@@ -99,6 +102,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--probe-s", type=positive_float, default=4.0, help="seconds per --find-max probe (default 4)"
+    )
+    p.add_argument(
+        "--state-keys",
+        choices=STATE_KEYS,
+        default="shard",
+        help="the key the units' states go on: their shard key (our clients), the plain key (a client that "
+        "does not shard), both (the steady load on each in turn) or mixed (half the units on each at once, "
+        "each half's figures apart) (default shard)",
     )
     p.add_argument("--echo", action="store_true", help="run the same load against an echo responder first")
     p.add_argument("--no-storm", action="store_true", help="skip the goal storm")
@@ -189,15 +200,25 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
     n = args.units
     try:
         for k in kinds:
-            gens[k] = LoadGen(servers[k].endpoint, lay["starts"], STEP_M)
+            gens[k] = _connected(lambda e=servers[k].endpoint: LoadGen(e, lay["starts"], STEP_M))
             gens[k].wait_ready()
         for k in kinds:
             idle = servers[k].meter.memory_mb()["rss_mb"]
             res[k] = _prepare(k, gens[k], servers[k], args, lay, bar) | {"idle_rss_mb": idle}
         # the steady load measures the loop, not the loop beside the storm's leftover look-aheads
         res["planner"]["steady_after"] = {"deliberations": deliberations_landed(gens["planner"])}
+        on = ["shard", "plain"] if args.state_keys == "both" else [args.state_keys]
+        if args.state_keys == "mixed":
+            on = ["mixed"]
+        for key in on:  # with both, the keys take turns against the same planner: they share the noise
+            for k in kinds:
+                gens[k].use_key(key)
+                st = steady(gens[k], servers[k], n, args.rate, args.duration, bar, f"{k}, {key} key")
+                res[k].setdefault("steady_by_key", {})[key] = st
+                res[k].setdefault("steady", st)  # the first key's (the shard's with both): the targets'
+                gens[k].settle(0.5, 5.0)
         for k in kinds:
-            res[k]["steady"] = steady(gens[k], servers[k], n, args.rate, args.duration, bar, k)
+            gens[k].use_key(on[0])
         if not args.no_fanout:
             res["planner"]["fanout"] = fanout(gens["planner"], servers["planner"], n, bar)
         landed = deliberations_landed(gens["planner"]) if args.echo or args.find_max else None
@@ -329,6 +350,25 @@ def targets(doc: dict[str, Any]) -> list[dict[str, Any]]:
 
     st = p["steady"]
     add("steady p50 <= 1 ms", st["p50_ms"], TARGETS["steady_p50_ms"])
+    by_key = dict(p.get("steady_by_key", {}))
+    if "mixed" in by_key:
+        by_key = by_key["mixed"].get("by_key", {})
+    if "plain" in by_key and "shard" in by_key:  # issue 34: a client that does not shard is served as well
+        sh, pl = by_key["shard"], by_key["plain"]
+        add(
+            "plain key p50 <= 1.2x shard key p50",
+            None if not sh["p50_ms"] or pl["p50_ms"] is None else pl["p50_ms"] / sh["p50_ms"],
+            TARGETS["plain_vs_shard"],
+        )
+        # a share near 0 on both has no ratio: within 20 % of the shard's, or of the 0.1 % target
+        slack = max(TARGETS["plain_vs_shard"] - 1.0, 0.0) * max(
+            sh["unanswered_fraction"], TARGETS["unanswered"]
+        )
+        add(
+            "plain key unanswered <= shard key's + 20 %",
+            pl["unanswered_fraction"] - sh["unanswered_fraction"],
+            slack,
+        )
     add("steady unanswered <= 0.1 %", st["unanswered_fraction"], TARGETS["unanswered"])
     if e is not None and st["p99_ms"] is not None and e["steady"]["p99_ms"]:
         add("steady p99 <= 2x echo p99", st["p99_ms"] / e["steady"]["p99_ms"], TARGETS["steady_p99_vs_echo"])
@@ -442,133 +482,6 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     return doc
 
 
-def _per_state_us(st: dict[str, Any]) -> float | None:
-    """CPU microseconds per state answered (cpu_percent of one core over answered_per_s)."""
-    cpu, rate = st.get("cpu_percent"), st.get("answered_per_s")
-    return None if cpu is None or not rate else 1e4 * cpu / rate
-
-
-def _f(v: float | None, fmt: str = ".2f") -> str:
-    return "-" if v is None else format(v, fmt)
-
-
-def _print(doc: dict[str, Any]) -> None:
-    m, ld = doc["machine"], doc["load"]
-    print(
-        f"pfp bench service on {m['arch']}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, zenoh {m['zenoh']}, "
-        f"tree {m['tree']}, load avg {[round(x, 1) for x in m['loadavg_at_start'] or []]}"
-    )
-    print(
-        f"  {ld['units']} units x {ld['rate_hz']:g} Hz = {ld['offered_per_s']:g}/s offered, {ld['threats']} threats, escape {ld['escape']}; {ld['via']}"
-    )
-    for kind in ("echo", "planner"):
-        r = doc.get(kind)
-        if r is None:
-            continue
-        st = r["steady"]
-        after = r.get("steady_after", {}).get("deliberations")
-        first = (
-            ""
-            if after is None
-            else f" (after the storm's deliberations: {'landed' if after['landed'] else 'NOT landed'}, waited {after['waited_s']:.1f} s)"
-        )
-        print(f"\n[{kind}] steady {ld['duration_s']:g} s{first}:")
-        print(
-            f"  latency p50 {_f(st['p50_ms'], '.3f')} ms, p90 {_f(st['p90_ms'], '.3f')}, p99 {_f(st['p99_ms'], '.3f')}, max {_f(st['max_ms'], '.1f')}"
-        )
-        print(
-            f"  input {st['input_per_s']:.0f}/s, output {st['output_per_s']:.0f}/s, unanswered {100 * st['unanswered_fraction']:.3f} %"
-        )
-        print(
-            f"  CPU {_f(st['cpu_percent'], '.0f')} % over {st.get('processes', 1)} processes (load generator {_f(st['generator_cpu_percent'], '.0f')} %, load avg {_f(st['loadavg'], '.1f')}), RSS {_f(st['rss_mb'], '.0f')} MB, peak {_f(r['final_memory']['peak_rss_mb'], '.0f')} MB; statuses {st['statuses']}"
-        )
-        if "cpu_rate" in r:
-            c = r["cpu_rate"]
-            landed = c.get("deliberations")
-            note = (
-                ""
-                if landed is None
-                else f"; deliberations {'landed' if landed['landed'] else 'NOT landed'} first"
-            )
-            print(
-                f"  at {c['input_per_s']:.0f}/s: CPU {_f(c['cpu_percent'], '.0f')} % over {c.get('processes', 1)} processes, "
-                f"{_f(_per_state_us(c), '.0f')} us per state answered, p50 {_f(c['p50_ms'], '.3f')} ms, p99 {_f(c['p99_ms'], '.2f')} ms, "
-                f"unanswered {100 * c['unanswered_fraction']:.3f} % (load avg {_f(c['loadavg'], '.1f')}){note}"
-            )
-        if "storm" in r:
-            s = r["storm"]
-            b = s["bystander"]
-            print(
-                f"  goal storm: {s['guided']}/{s['goals']} guided, all in {_f(s['all_guided_s'], '.3f')} s (p50 {_f(s['guided_p50_s'], '.3f')} s); "
-                f"deliberations {s['deliberations_ended']}/{s['deliberations_started']} ended, all in {_f(s['all_deliberated_s'], '.2f')} s; "
-                f"bystander p99 {_f(b['p99_ms'], '.1f')} ms, max {_f(b['max_ms'], '.1f')} ms, unanswered {100 * b['unanswered_fraction']:.1f} %"
-            )
-        if "fanout" in r:
-            f = r["fanout"]
-            print(
-                f"  fan-out: {f['redirected']}/{f['affected']} re-directed, all in {_f(f['all_redirected_ms'], '.1f')} ms (p50 {_f(f['redirected_p50_ms'], '.1f')}); "
-                f"deliberations {f['deliberations_ended']}/{f['deliberations_started']}, all in {_f(f['all_deliberated_s'], '.2f')} s; "
-                f"pushes sent {f['pushes_sent']} (first copies {f['pushes_first_copies']}, re-sent {f['pushes_resent']}), delivered {f['pushes_delivered']}"
-            )
-        if "forget" in r:
-            fg = r["forget"]
-            print(
-                f"  forgotten: {fg['units_left']} units left after {_f(fg['all_forgotten_s'], '.1f')} s; RSS "
-                f"{_f(fg['rss_before_mb'], '.0f')} -> {_f(fg['rss_after_mb'], '.0f')} MB (idle {_f(fg['idle_rss_mb'], '.0f')} MB)"
-            )
-        if "find_max" in r:
-            fm = r["find_max"]
-            short = f" ({fm['short_probes']} probes could not offer their rate)" if fm["short_probes"] else ""
-            dl = fm.get("deliberations")
-            landed = ""
-            if dl is not None:
-                state = "landed" if dl["landed"] else f"NOT landed ({dl['left']} left)"
-                landed = f"; deliberations {state} after {dl['waited_s']:.1f} s"
-            print(
-                f"  find-max: {_f(fm['max_per_s'], '.0f')}/s ({_f(fm['max_rate_hz'], '.2f')} Hz per unit){short}{landed}"
-            )
-            for pr in fm["probes"]:
-                print(
-                    f"    {pr['offered_per_s']:>8.0f}/s: p99 {_f(pr['p99_ms'], '.2f')} ms, unanswered {100 * pr['unanswered_fraction']:.2f} %, CPU {_f(pr['cpu_percent'], '.0f')} % {'ok' if pr['ok'] else 'fail'}"
-                )
-        ex = r["exit"]
-        if ex["error_lines"]:
-            print(f"  {kind} log: {ex['error_lines']} error lines, first: {ex['first_errors'][:2]}")
-    if "scale_out" in doc:
-        _print_scale_out(doc["scale_out"], ld)
-    print()
-    for t in doc["targets"]:
-        flag = "n/a" if t["met"] is None else ("ok" if t["met"] else "MISSED")
-        note = f"; {t['note']}" if "note" in t else ""
-        print(f"  [{flag}] {t['target']}: {_f(t['measured'], '.4g')} (limit {t['limit']:g}{note})")
-
-
-def _print_scale_out(so: dict[str, Any], ld: dict[str, Any]) -> None:
-    print(f"\n[scale-out] steady {ld['duration_s']:g} s, 1 vs {so['planners']} planners; {so['via']}:")
-    print(
-        "  planners  answered/s  p50 ms   p99 ms   unanswered  answered twice  units by two  CPU % (all)  units per planner"
-    )
-    for r in so["runs"]:
-        st = r["steady"]
-        print(
-            f"  {r['planners']:>8}  {st['answered_per_s']:>10.0f}  {_f(st['p50_ms'], '.2f'):>7}  {_f(st['p99_ms'], '.1f'):>7}"
-            f"  {100 * st['unanswered_fraction']:>9.2f} %  {st['answered_twice']:>14}  {st['units_answered_by_two']:>12}"
-            f"  {_f(st['cpu_percent'], '.0f'):>11}  {st['units_per_planner']}"
-        )
-        cpu = ", ".join(f"{k} {_f(v, '.0f')} %" for k, v in st["cpu_percent_by_process"].items())
-        print(f"            CPU by process (each with its workers): {cpu}")
-        got = ", ".join(f"{k} {v}" for k, v in st.get("states_by_planner", {}).items())
-        if got:
-            print(
-                f"            states applied by planner (of {st['sent']} sent): {got}; largest share {_f(st['states_share_max'], '.3f')}"
-            )
-    v = so["vs_one"]
-    print(
-        f"  {so['planners']} vs 1: answered/s x{_f(v['answered_per_s'], '.2f')}, p50 x{_f(v['p50_ms'], '.2f')}, "
-        f"p99 x{_f(v['p99_ms'], '.2f')}, CPU x{_f(v['cpu_percent'], '.2f')} (load avg {_f(so['runs'][-1]['steady']['loadavg'], '.1f')})"
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     if args.threats < 0:
         print("pfp bench service: --threats: must be >= 0", file=sys.stderr)
@@ -581,5 +494,5 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     else:
-        _print(doc)
+        print_doc(doc)
     return exit_code((t["met"] for t in doc["targets"]), args.check)

@@ -74,6 +74,14 @@ MAX_MESSAGE_BYTES = 2 * MAX_PAYLOAD_BYTES
 INGRESS, EGRESS = "ingress", "egress"
 
 
+def _tx() -> dict[str, Any]:
+    """The transmit queues ``pfp serve`` sets without a Zenoh file (``config.TX_QUEUE_BATCHES``), for every config:
+    under Zenoh's 2 batches, directions were dropped whenever a send thread was late (docs/operations.md)."""
+    from pfp_service.service.config import tx_queue_sizes
+
+    return {"queue": {"size": tx_queue_sizes()}}
+
+
 @dataclass(frozen=True)
 class Grant:
     """Allow ``messages`` in one ``flow`` (seen from the router) on ``key_exprs``."""
@@ -301,7 +309,7 @@ def router_config(
         runtime_dir: where credentials.txt (or the PEM files) are when the router runs.
         tls: mutual TLS with ``cert_common_names`` subjects instead of user/password.
     """
-    link: dict[str, Any] = {"rx": {"max_message_size": MAX_MESSAGE_BYTES}}
+    link: dict[str, Any] = {"rx": {"max_message_size": MAX_MESSAGE_BYTES}, "tx": _tx()}
     transport: dict[str, Any] = {"link": link, "shared_memory": {"enabled": False}}
     if tls:
         link["tls"] = {
@@ -335,7 +343,7 @@ def client_config(
 ) -> dict[str, Any]:
     """A client config for one principal: ``password`` for usrpwd, or its certificate with ``tls``."""
     transport: dict[str, Any] = {
-        "link": {"rx": {"max_message_size": MAX_MESSAGE_BYTES}},
+        "link": {"rx": {"max_message_size": MAX_MESSAGE_BYTES}, "tx": _tx()},
         "shared_memory": {"enabled": False},
     }
     if tls:

@@ -1,7 +1,9 @@
 """``pfp health``: exit 0 when a planner of the mission answers its status query, 1 otherwise.
 
 Exit codes: 0 a planner answered; 1 none answered (or no router at the
-endpoint); 2 a bad flag, such as a malformed ``--connect`` endpoint.
+endpoint), or a twin planner serves the mission (two planners answering the
+same units: a WARNING line names them); 2 a bad flag, such as a malformed
+``--connect`` endpoint.
 ``--json`` prints one JSON array of every planner's status, for scripts.
 """
 
@@ -37,6 +39,29 @@ def status_line(st: Any) -> str:
         f"({st.units_stale} stale), {st.threats} threats, {st.zones} zones; messages in {st.msgs_in}, out {st.msgs_out}, "
         f"rejected {st.rejected}; latency p50 {_ms(st.latency_p50_ms)}, p99 {_ms(st.latency_p99_ms)}"
     )
+
+
+def twin_warnings(statuses: list[Any]) -> list[str]:
+    """A WARNING line per planner that answers the same units as another (``PlannerStatus.twins``).
+
+    Planners sharing an id from several sessions count too, as their replies show them (a planner too old
+    to name its twins).
+    """
+    lines = []
+    for st in statuses:
+        if st.twins:
+            lines.append(
+                f"WARNING: twin planner: {', '.join(st.twins)} also answer(s) the units of planner {st.planner} "
+                f"(session {st.session[:12]}) on mission {st.mission}; two planners on one mission need "
+                "--cluster and each its own --planner-id"
+            )
+    ids = [st.planner for st in statuses]
+    for pid in sorted(set(ids)):
+        same = [st for st in statuses if st.planner == pid]
+        if len(same) > 1 and not any(st.twins for st in same):
+            sessions = ", ".join(st.session[:12] or "?" for st in same)
+            lines.append(f"WARNING: twin planner: {len(same)} sessions answer as planner {pid} ({sessions})")
+    return lines
 
 
 def run(args: argparse.Namespace) -> int:
@@ -78,4 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         for st in found:
             print(status_line(st))
-    return 0
+    twins = twin_warnings(found)
+    for line in twins:
+        print(f"pfp health: {line}", file=sys.stderr)
+    return 1 if twins else 0

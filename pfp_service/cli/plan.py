@@ -153,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
     from pfp_service.files import read_text
     from pfp_service.render import summary
     from pfp_service.scenario import load_scenario
+    from pfp_service.signals import interruptible
 
     check_flags(args)
     lam = LAMBDA if args.lam is None else args.lam
@@ -192,37 +193,45 @@ def run(args: argparse.Namespace) -> int:
         from pfp_service.geojson import load_zones
 
         zones = zones.plus(load_zones(args.zones, scenario.origin))
-    times = []
-    for _ in range(args.repeat):
-        if args.planner == "optimal":
-            result = plan_optimal(
-                scenario.start,
-                scenario.goal,
-                schedule,
-                lam,
-                params.intensity,
-                scenario.bounds_tuple(),
-                cells,
-                time.perf_counter,
-                avoid_cores=bool(args.avoid_cores),
-                zones=zones,
-            )
-        else:
-            result = plan(
-                scenario.start,
-                scenario.goal,
-                schedule,
-                params,
-                scenario.bounds_tuple(),
-                time.perf_counter,
-                zones=zones,
-            )
-        times.append(result.compute_ms)
+
+    def planned() -> list[Any]:
+        """Every repeat's plan; on a worker thread, so Ctrl-C never lands inside a kernel (signals)."""
+        results = []
+        for _ in range(args.repeat):
+            if args.planner == "optimal":
+                result = plan_optimal(
+                    scenario.start,
+                    scenario.goal,
+                    schedule,
+                    lam,
+                    params.intensity,
+                    scenario.bounds_tuple(),
+                    cells,
+                    time.perf_counter,
+                    avoid_cores=bool(args.avoid_cores),
+                    zones=zones,
+                )
+            else:
+                result = plan(
+                    scenario.start,
+                    scenario.goal,
+                    schedule,
+                    params,
+                    scenario.bounds_tuple(),
+                    time.perf_counter,
+                    zones=zones,
+                )
+            results.append(result)
+        return results
+
+    results = interruptible(planned)
+    result = results[-1]
+    times = [r.compute_ms for r in results]
     result = msgspec.structs.replace(result, compute_ms=statistics.median(times))
     if args.plot:
         from pfp_service.render import plot_plan
 
-        plot_plan(scenario, result, args.plot, coords)
+        plot_plan(scenario, result, args.plot, coords, zones=list(zones))
     if args.geojson:
         from pfp_service import geojson
 

@@ -5,7 +5,9 @@ colour bar, each threat at its peak with an arrow along its facing, start
 (circle) and goal (square) markers in the legend, and the legend beside the
 axes so it never covers the data.  Earlier positions of moved threats and
 earlier goals are drawn faded; a plan that did not reach its goal marks
-where it stopped, with the reason.
+where it stopped, with the reason.  Keep-out zones are hatched grey, each
+labelled with its id and "no-go" (the artist's gid is ``zone:ID``); a threat
+that popped up mid-run is orange, labelled with when it appeared.
 
 With a mission origin (``coords.Coords`` geodetic), the bottom and left axes
 carry longitude and latitude ticks at round values along those edges, with a
@@ -24,6 +26,7 @@ import numpy as np
 
 from pfp_service.coords import Coords
 from pfp_service.core import PlanResult, Threat, ThreatField
+from pfp_service.core.zones import Zone
 from pfp_service.errors import InputError
 from pfp_service.scenario import Scenario
 
@@ -33,10 +36,15 @@ __all__ = [
     "facing",
     "geo_ticks",
     "peak",
+    "plan_figure",
     "plan_title",
     "plot_plan",
     "plot_tracks",
+    "tracks_figure",
+    "zone_corners",
 ]
+
+ZONE_STYLE: dict[str, Any] = dict(facecolor="0.55", edgecolor="black", alpha=0.45, hatch="xx", linewidth=1.0)
 
 
 def _pyplot() -> Any:
@@ -84,6 +92,43 @@ def extent(
     x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
     pad = margin * max(x1 - x0, y1 - y0, 1e-9)
     return x0 - pad, x1 + pad, y0 - pad, y1 + pad
+
+
+def zone_corners(zones: Sequence[Zone]) -> list[tuple[float, float]]:
+    """Two corners of each zone's box, for ``extent``: a plot shows every zone it draws whole."""
+    out: list[tuple[float, float]] = []
+    for z in zones:
+        x0, y0, x1, y1 = z.bounds()
+        out += [(x0, y0), (x1, y1)]
+    return out
+
+
+def _zones(ax: Any, zones: Sequence[Zone]) -> int:
+    """Each keep-out zone as a hatched patch (holes left open) labelled ``ID (no-go)``; returns how many."""
+    from matplotlib.patches import Circle, PathPatch
+    from matplotlib.path import Path as MPath
+
+    for z in zones:
+        if z.centre is not None:
+            patch: Any = Circle(z.centre, z.radius_m, **ZONE_STYLE)
+            at = z.centre
+        else:
+            verts: list[tuple[float, float]] = []
+            codes: list[int] = []
+            for ring in z.rings():
+                verts += [*ring, ring[0]]
+                codes += [int(MPath.MOVETO)] + [int(MPath.LINETO)] * (len(ring) - 1) + [int(MPath.CLOSEPOLY)]
+            patch = PathPatch(MPath(verts, codes), **ZONE_STYLE)
+            c = z.geometry.representative_point()
+            at = (float(c.x), float(c.y))
+        patch.set_gid(f"zone:{z.id}")
+        patch.set_zorder(3)
+        ax.add_patch(patch)
+        ax.annotate(
+            f"{z.id} (no-go)", at, fontsize=8, ha="center", va="center", zorder=4,
+            bbox=dict(boxstyle="round", fc="white", ec="none", alpha=0.7),
+        )  # fmt: skip
+    return len(zones)
 
 
 def peak(threat: Threat, intensity: str, n: int = 161) -> tuple[float, float]:
@@ -172,7 +217,15 @@ def _proxies(plt: Any, *kinds: str) -> list[Any]:
         ),
         "stuck": dict(marker="X", color="black", markersize=10, label="where the plan stopped"),
     }
-    return [Line2D([], [], linestyle="none", **{"markersize": 8, **style[k]}) for k in kinds]
+    out: list[Any] = []
+    for k in kinds:
+        if k == "zone":
+            from matplotlib.patches import Patch
+
+            out.append(Patch(**ZONE_STYLE, label="keep-out zone (no-go)"))
+        else:
+            out.append(Line2D([], [], linestyle="none", **{"markersize": 8, **style[k]}))
+    return out
 
 
 def _colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
@@ -288,19 +341,44 @@ def plan_title(name: str, result: PlanResult) -> str:
     return f"{name}: {planner}, {result.status.value}, {result.steps} steps, exposure {result.exposure:.3g}"
 
 
-def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path, coords: Coords | None = None) -> None:
-    """Threat contours (all threats, pop-ups included), start, goal, the path, and where it stopped.
+def plot_plan(
+    scenario: Scenario,
+    result: PlanResult,
+    out: str | Path,
+    coords: Coords | None = None,
+    zones: Sequence[Zone] | None = None,
+) -> None:
+    """``plan_figure`` written to the PNG ``out``."""
+    plt = _pyplot()
+    fig = plan_figure(scenario, result, coords, zones)
+    try:
+        _save(fig, out, "--plot")
+    finally:
+        plt.close(fig)
 
-    With a geodetic ``coords``, the axes carry lat/lon ticks (and the metres on the top and right).
+
+def plan_figure(
+    scenario: Scenario, result: PlanResult, coords: Coords | None = None, zones: Sequence[Zone] | None = None
+) -> Any:
+    """Threat contours (all threats, pop-ups included), keep-out zones, start, goal, the path, and where it stopped.
+
+    Args:
+        zones: the zones the plan kept out of (the scenario's and ``--zones``); the scenario's when ``None``.
+        coords: geodetic: the axes carry lat/lon ticks (and the metres on the top and right).
+
+    Returns:
+        the matplotlib figure (the caller saves and closes it).
     """
     plt = _pyplot()
     intensity = result.params.intensity
     schedule = scenario.schedule()
     threats = [s.threat for s in schedule]
+    kept_out = list(scenario.zone_set() if zones is None else zones)
     field = ThreatField(threats, intensity)  # type: ignore[arg-type]
-    box = extent([scenario.start, scenario.goal, *result.path], threats)
+    box = extent([scenario.start, scenario.goal, *result.path, *zone_corners(kept_out)], threats)
     fig, ax = plt.subplots(figsize=(8.6, 7.4), dpi=110)
     mappable = _contours(ax, field, box)
+    drawn = _zones(ax, kept_out)
     known = [s.threat for s in schedule if s.appear_step == 0]
     _threat_marks(ax, known, intensity)
     for s in schedule:
@@ -316,6 +394,8 @@ def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path, coords: C
         kinds.append("popup")
     if struck:
         kinds.append("struck")
+    if drawn:
+        kinds.append("zone")
     if result.status.value != "reached":
         x, y = result.path[-1]
         ax.plot([x], [y], "X", color="black", markersize=12, zorder=6)
@@ -332,10 +412,7 @@ def plot_plan(scenario: Scenario, result: PlanResult, out: str | Path, coords: C
     _legend(ax, handles, geo)
     _colourbar(fig, ax, mappable, geo)
     fig.tight_layout()
-    try:
-        _save(fig, out, "--plot")
-    finally:
-        plt.close(fig)
+    return fig
 
 
 def plot_tracks(
@@ -344,12 +421,30 @@ def plot_tracks(
     tracks: dict[str, Sequence[Sequence[float]]],
     goals: dict[str, Sequence[float]],
     out: str | Path,
+    **figure: Any,
+) -> None:
+    """``tracks_figure(threats, intensity, tracks, goals, **figure)`` written to the PNG ``out``."""
+    plt = _pyplot()
+    fig = tracks_figure(threats, intensity, tracks, goals, **figure)
+    try:
+        _save(fig, out, "--out")
+    finally:
+        plt.close(fig)
+
+
+def tracks_figure(
+    threats: Sequence[Threat],
+    intensity: str,
+    tracks: dict[str, Sequence[Sequence[float]]],
+    goals: dict[str, Sequence[float]],
     title: str = "",
     marks: Sequence[tuple[float, float, str]] = (),
     old_threats: Sequence[tuple[Threat, Threat]] = (),
     old_goals: dict[str, Sequence[float]] | None = None,
     coords: Coords | None = None,
-) -> None:
+    zones: Sequence[Zone] = (),
+    popups: dict[str, str] | None = None,
+) -> Any:
     """Several units' tracks over one threat field, with labelled marks (e.g. contingencies).
 
     Args:
@@ -357,22 +452,33 @@ def plot_tracks(
         intensity: the field's intensity scale.
         tracks: each unit's positions, in order.
         goals: each unit's final goal.
-        out: the PNG to write.
         title: the plot's title.
         marks: ``(x, y, label)`` stars, e.g. where a contingency struck.
         old_threats: ``(before, after)`` for each threat that moved: ``before`` is drawn faded,
             with a dotted line to where it went.
         old_goals: goals a unit had before it was given a new one, drawn faded.
         coords: with an origin (geodetic), lat/lon ticks on the axes.
+        zones: keep-out zones, hatched.
+        popups: threat id -> when it appeared (e.g. ``"from 312 s"``): those threats are drawn
+            orange with that label, not as if there from the start.
+
+    Returns:
+        the matplotlib figure (the caller saves and closes it).
     """
     plt = _pyplot()
     old_goals = old_goals or {}
+    popups = popups or {}
     field = ThreatField(threats, intensity)  # type: ignore[arg-type]
     pts = [p for tr in tracks.values() for p in tr] + list(goals.values()) + list(old_goals.values())
+    pts += zone_corners(zones)
     box = extent(pts or [(0.0, 0.0)], [*threats, *(b for b, _ in old_threats)])
     fig, ax = plt.subplots(figsize=(9.4, 8.4), dpi=110)
     mappable = _contours(ax, field, box)
-    _threat_marks(ax, threats, intensity)
+    drawn = _zones(ax, zones)
+    _threat_marks(ax, [t for t in threats if t.id not in popups], intensity)
+    for t in threats:
+        if t.id in popups:
+            _threat_marks(ax, [t], intensity, label=f"({popups[t.id]})", colour="orange")
     for before, after in old_threats:
         _threat_marks(ax, [before], intensity, label="(before it moved)", faded=True)
         (bx, by), (ax_, ay) = peak(before, intensity), peak(after, intensity)
@@ -396,17 +502,18 @@ def plot_tracks(
         ax.plot([x], [y], marker="*", color="orange", markersize=15, markeredgecolor="black", zorder=5)
         ax.annotate(label, (x, y), textcoords="offset points", xytext=(8, -12), fontsize=8)
     kinds = ["start", "goal", "threat"]
+    if popups:
+        kinds.append("popup")
     if old_goals:
         kinds.append("old goal")
     if old_threats:
         kinds.append("old threat")
     if marks:
         kinds.append("struck")
+    if drawn:
+        kinds.append("zone")
     geo = _frame(ax, box, title, coords)
     _legend(ax, handles + _proxies(plt, *kinds), geo)
     _colourbar(fig, ax, mappable, geo)
     fig.tight_layout()
-    try:
-        _save(fig, out, "--out")
-    finally:
-        plt.close(fig)
+    return fig

@@ -59,6 +59,13 @@ CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_
 # recorder's alike, measured with `python -m pfp_clients.record.bench`); 16 dropped none. A batch is allocated
 # only when a link falls behind: 150 links with traffic cost 3-5 MB more (within noise).
 TX_QUEUE_BATCHES = {"interactive_high": 16, "data": 16}
+# A router-mode session binds its listeners, then spends Zenoh's scouting delay (500 ms by default) in
+# open() before it returns: clients connected and put meanwhile, and every goal put in that window was
+# lost, the planner having no subscriber yet (issue 34: a plain put 1.2 s after `pfp serve` launched).
+# With multicast scouting off there is nothing to wait for: open() returns as the port opens (measured:
+# 500 -> 0 ms after the port opened), and the planner subscribes about 20 ms later. A file's own
+# scouting/delay, and a planner that scouts by multicast, keep theirs.
+ROUTER_SCOUTING_DELAY_MS = 0
 LogFormat = Literal["human", "json"]
 LogLevel = Literal["debug", "info", "warning", "error"]
 CoordsStyle = Literal["latlon", "metres", "mgrs"]  # pfp_service.coords.STYLES
@@ -294,6 +301,8 @@ def zenoh_config(cfg: ServeConfig) -> Any:
     )
     if cfg.zenoh_config is None:  # a file's own transport settings win
         conf.insert_json5("transport/link/tx/queue/size", json.dumps(_queue_sizes(conf)))
+    if cfg.mode == "router" and not cfg.multicast and conf.get_json("scouting/delay") == "null":
+        conf.insert_json5("scouting/delay", json.dumps(ROUTER_SCOUTING_DELAY_MS))
     return conf
 
 
@@ -301,6 +310,13 @@ def _queue_sizes(conf: Any) -> dict[str, int]:
     """Zenoh's transmit queue sizes with ``TX_QUEUE_BATCHES`` over them (the whole object: see CONNECT_RETRY)."""
     sizes = dict(json.loads(conf.get_json("transport/link/tx/queue/size")))
     return {**sizes, **TX_QUEUE_BATCHES}
+
+
+def tx_queue_sizes() -> dict[str, int]:
+    """``transport/link/tx/queue/size`` as ``pfp serve`` sets it without a file: what ``pfp acl`` writes too."""
+    import zenoh
+
+    return _queue_sizes(zenoh.Config())
 
 
 def client_zenoh_config(

@@ -14,7 +14,12 @@
   only (``World.shards``, rendezvous hashing); as they change, the new rings
   are declared before the old go.
 * Callbacks for the rest decode and enqueue, nothing more: everything in
-  order, queries handed to the loop.  No callback replies or puts.
+  order, queries handed to the loop.  No callback replies or puts.  Goal,
+  threat and zone writes (plain puts and acknowledged writes) are
+  ``writes.Writes``'.
+* Every subscriber and queryable is declared the moment the session opens,
+  the planner's liveliness token last: the token is its readiness
+  (docs/wire.md), and a write from then on is held for the loop.
 * One planning loop applies a bounded slice of it and a ``Tick`` to the
   ``World`` and publishes what it returns.  Every decision is the world's.
   Directions go out batched by Zenoh, not express: a fifth of the cost per
@@ -45,19 +50,13 @@ from pfp_service.service.config import ServeConfig
 from pfp_service.service.deliberation import Deliberators
 from pfp_service.service.desk import PreviewDesk, preview_desk, warm_up
 from pfp_service.service.events import (
-    GoalCancelled,
-    GoalSet,
     Input,
     InputRejected,
     MissionShared,
     PeerPlanner,
     StateReported,
-    ThreatPut,
-    ThreatRemoved,
     Tick,
     TokenChanged,
-    ZonePut,
-    ZoneRemoved,
     mission_message,
     zone_put,
 )
@@ -68,6 +67,7 @@ from pfp_service.service.store import Store
 from pfp_service.service.twins import watch_twins
 from pfp_service.service.world import World
 from pfp_service.service.worldpages import answer_world, fetch_world
+from pfp_service.service.writes import Writes
 from pfp_service.wire import (
     ConflictEvent,
     ErrorReply,
@@ -77,15 +77,11 @@ from pfp_service.wire import (
     RejectedEvent,
     RestoredEvent,
     UnitState,
-    decode_goal,
     decode_mission,
-    decode_threat,
     decode_unit_state,
     encode,
     keys,
 )
-from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
-from pfp_service.wire.messages import decode_zone
 
 __all__ = ["PlannerNode"]
 
@@ -103,7 +99,6 @@ STATE_RING = 4_096
 MIN_TICK_S = 0.002  # ticks at most this often while states come (measured: docs/operations.md)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
-WRITES_MAX = INBOX_MAX  # goal and threat writes (puts and acknowledged-write queries) waiting; more are shed
 PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
 DEMOTE_EVERY_S = 5.0  # Zenoh's threads are put under SCHED_BATCH this often (threads it starts later too)
 KEY_CACHE = 16_384  # state key -> unit id, unit id -> direction key, remembered; past it, forgotten at once
@@ -119,15 +114,6 @@ def _remembered(cache: dict[str, _V], key: str, make: Callable[[str], _V]) -> _V
             cache.clear()
         cache[key] = value
     return value
-
-
-class _Write:
-    """A goal or threat write from a put (``query`` None) or an acknowledged-write query."""
-
-    __slots__ = ("input", "key", "mark", "query", "received")
-
-    def __init__(self, key: str, mark: WriteMark | None, inp: Input, received: float, query: Any) -> None:
-        self.key, self.mark, self.input, self.received, self.query = key, mark, inp, received, query
 
 
 class PlannerNode:
@@ -163,12 +149,13 @@ class PlannerNode:
         self.latency = Latency()
         self._lock = threading.Lock()
         self._intake = Intake(INBOX_MAX, TICK_INPUTS, TICK_UNITS)  # inputs and states, for the loop
-        self._writes: collections.deque[_Write] = collections.deque()
-        self._order = WriteOrder()
         self.zid = str(session.info.zid())
         self._inbox_events: list[Event] = []  # events raised off the loop (a twin under --cluster)
+        self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
+        # goals, threats and zones: puts and acknowledged-write queries, waiting for the loop (writes.py)
+        self._writes = Writes(cfg, self.zid, self._lock, self._wake.set, self._intake.refused)
         self._stop = threading.Event()
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
@@ -188,13 +175,23 @@ class PlannerNode:
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
+        """Listen first, then warm up, restore and join; the planner's token says it is ready.
+
+        Every subscriber and queryable is declared before anything slow (the
+        workers' warm-up, the store, the peers): a state, goal or threat that
+        reaches the router from then on is held for the loop, not lost, and
+        restored goals are applied before it (the live write is the newer).
+        The liveliness token ``alive/planner/{id}`` comes last: a client that
+        waits for it knows its writes are taken (docs/wire.md, readiness).
+        """
+        m, p = self.cfg.mission, self.cfg.planner_id
+        s = self.session
+        self._listen(s)
         # Python threads (previews, deliberation) take the GIL for 5 ms at a time by default;
         # measured: loop p99 9.0 ms with two busy preview threads, 2.4 ms at 0.5 ms.
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         warm_up(self.world.settings)
         self._desk.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them
-        m, p = self.cfg.mission, self.cfg.planner_id
-        s = self.session
         restored = None
         if self.store is not None:
             restored = self.store.restore(time.time())
@@ -206,26 +203,6 @@ class PlannerNode:
             if self.store is not None:
                 filed = self.store.commit_batch(filed, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
             self.world.apply(filed, self.clock())
-        # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
-        # drains them: the latest STATE_RING states, older ones dropped first under a flood
-        self._ring("plain", keys.unit_states(m))
-        self._sync_shards()
-        self._declared += [
-            s.declare_subscriber(keys.goals(m), self._on_goal),
-            s.declare_subscriber(keys.threats(m), self._on_threat),
-            # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
-            s.declare_queryable(keys.goals(m), self._on_goal_query),
-            s.declare_queryable(keys.threats(m), self._on_threat_query),
-            s.declare_subscriber(keys.zones(m), self._on_zone),  # keep-out zones: written as threats are
-            s.declare_queryable(keys.zones(m), self._on_zone_query),
-            s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
-            s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
-            s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
-            s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
-            s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
-        ]
-        if self.cfg.cluster:
-            self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
         self._join(s)
         if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
             self._peers_known(s)
@@ -252,6 +229,26 @@ class PlannerNode:
         )
         self._twins_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
+
+    def _listen(self, s: zenoh.Session) -> None:
+        """Declare every subscriber and queryable; their callbacks only enqueue, so the loop need not run yet."""
+        m, p = self.cfg.mission, self.cfg.planner_id
+        # the writes first: a lost goal stays lost, a lost state is followed by the unit's next report
+        self._declared += self._writes.declare(s, m)
+        # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
+        # drains them: the latest STATE_RING states, older ones dropped first under a flood
+        self._ring("plain", keys.unit_states(m))
+        self._sync_shards()
+        self._declared += [
+            s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
+            s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
+            s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
+            s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
+            s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
+        ]
+        if self.cfg.cluster:
+            self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
+        log.info("listening", extra={"fields": {"mission": m, "planner": p}})
 
     def stop(self) -> None:
         self._stop.set()
@@ -298,79 +295,6 @@ class PlannerNode:
     def _direction_key(self, unit: str) -> zenoh.KeyExpr:
         return _remembered(self._direction_of, unit, lambda u: zenoh.KeyExpr(self._direction_keys.key(u)))
 
-    def _goal_input(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            uid = keys.parse(key).id
-            if delete:
-                return GoalCancelled(uid)
-            return GoalSet(uid, decode_goal(payload, self.cfg.bounds, self._origin))
-        except InputError as err:
-            return InputRejected(key, err)
-
-    def _threat_input(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            tid = keys.parse(key).id
-            if delete:
-                return ThreatRemoved(tid)
-            return ThreatPut(tid, decode_threat(payload, self.cfg.bounds, self._origin))
-        except InputError as err:
-            return InputRejected(key, err)
-
-    def _zone_input(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            zid = keys.parse(key).id
-            if delete:
-                return ZoneRemoved(zid)
-            return ZonePut(zid, decode_zone(payload, self.cfg.bounds, self._origin))
-        except InputError as err:
-            return InputRejected(key, err)
-
-    def _push_write(self, write: _Write) -> None:
-        with self._lock:
-            if len(self._writes) >= WRITES_MAX:  # shed: a writer asks again, a put is counted lost
-                self._intake.refused()
-                if write.query is not None:
-                    write.query.drop()
-                return
-            self._writes.append(write)
-        self._wake.set()
-
-    def _on_sample_write(self, sample: zenoh.Sample, make: Callable[[str, bool, bytes], Input]) -> None:
-        key = str(sample.key_expr)
-        att = sample.attachment
-        mark = decode_mark(att.to_bytes() if att is not None else None)
-        inp = make(key, sample.kind == zenoh.SampleKind.DELETE, sample.payload.to_bytes())
-        self._push_write(_Write(key, mark, inp, time.time(), None))
-
-    def _on_query_write(self, query: zenoh.Query, make: Callable[[str, bool, bytes], Input]) -> None:
-        key = str(query.key_expr)
-        att = query.attachment
-        mark = decode_mark(att.to_bytes() if att is not None else None)
-        if mark is None:  # not a write: a plain get on a goal or threat key has nothing to learn here
-            query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
-            return
-        body = query.payload
-        inp = make(key, mark.delete, body.to_bytes() if body is not None else b"")
-        self._push_write(_Write(key, mark, inp, time.time(), query))
-
-    def _on_goal(self, sample: zenoh.Sample) -> None:
-        self._on_sample_write(sample, self._goal_input)
-
-    def _on_threat(self, sample: zenoh.Sample) -> None:
-        self._on_sample_write(sample, self._threat_input)
-
-    def _on_zone(self, sample: zenoh.Sample) -> None:
-        self._on_sample_write(sample, self._zone_input)
-
-    def _on_zone_query(self, query: zenoh.Query) -> None:
-        self._on_query_write(query, self._zone_input)
-
-    def _on_goal_query(self, query: zenoh.Query) -> None:
-        self._on_query_write(query, self._goal_input)
-
-    def _on_threat_query(self, query: zenoh.Query) -> None:
-        self._on_query_write(query, self._threat_input)
-
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
             uid = keys.parse(str(sample.key_expr)).id
@@ -407,7 +331,19 @@ class PlannerNode:
             pid = keys.parse(str(sample.key_expr)).id
         except InputError:
             return
-        self._push(PeerPlanner(pid, sample.kind == zenoh.SampleKind.PUT))
+        alive = sample.kind == zenoh.SampleKind.PUT
+        if (
+            not self.cfg.cluster and pid != self.cfg.planner_id
+        ):  # not a peer but a twin: both guide every unit
+            self._twinned(pid, alive)
+        self._push(PeerPlanner(pid, alive))
+
+    def _twinned(self, name: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self._twins.add(name)
+            else:
+                self._twins.discard(name)
 
     def _peers_known(self, s: zenoh.Session) -> None:
         """Enqueue a ``PeerPlanner`` for each live planner of the mission, once its token has answered.
@@ -426,6 +362,7 @@ class PlannerNode:
 
     def _twin(self, zid: str, alive: bool) -> None:
         name = f"{self.cfg.planner_id[:50]}-{zid[:12]}"
+        self._twinned(name, alive)
         if not self.cfg.cluster:
             self._push(PeerPlanner(name, alive))
             return
@@ -556,14 +493,11 @@ class PlannerNode:
             got = self._intake.take()
             inbox, states = got.inputs, got.states
             queries, self._queries = self._queries, collections.deque()
-            if len(self._writes) <= TICK_INPUTS:
-                writes, self._writes = self._writes, collections.deque()
-            else:
-                writes = collections.deque(self._writes.popleft() for _ in range(TICK_INPUTS))
-            if got.more or self._writes:
+            writes = self._writes.take(TICK_INPUTS)
+            if got.more or self._writes.waiting():
                 self._wake.set()  # the rest at once, in the next tick
         now = self.clock()
-        acks = self._admit(writes, inbox)
+        acks = self._writes.admit(writes, inbox)
         batch: list[Input] = list(inbox)
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
         batch.append(Tick(now, got.shed))
@@ -576,7 +510,7 @@ class PlannerNode:
         with gcpause.paused():  # the collector runs once the directions are out (gcpause)
             out = self.world.apply(batch, now)
             t_applied = self.clock()
-            self._acknowledge(acks, batch)
+            self._writes.acknowledge(acks, batch)
             forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
             if self.store is not None and (out.missions or forgotten):
                 self.store.record(out.missions, forgotten)
@@ -630,46 +564,6 @@ class PlannerNode:
             oldest = max((done - t for _m, t in states.values()), default=0.0)
             tr.tick(end - now, len(states), oldest, end)
 
-    def _admit(
-        self, writes: collections.deque[_Write], inbox: collections.deque[Input]
-    ) -> list[tuple[_Write, str]]:
-        """The writes to apply join ``inbox`` (``WriteOrder``); the outcome of each write.
-
-        Live puts apply in the order they arrive.  A write's put and its query
-        carry one mark: the second is a duplicate.  An older write asked again
-        (a put while no planner ran, then a delete from another writer) is
-        superseded, never applied over the newer one.
-        """
-        acks: list[tuple[_Write, str]] = []
-        for w in writes:
-            if isinstance(w.input, InputRejected):
-                outcome = "rejected"  # never ordered: a bad write supersedes nothing
-                if w.query is None:
-                    inbox.append(w.input)  # the rejected event comes from the put; the writer's ask hears why
-            else:
-                outcome = self._order.admit(w.key, w.mark, w.received, asked=w.query is not None)
-                if outcome == "applied":
-                    inbox.append(w.input)
-            if w.query is not None:
-                acks.append((w, outcome))
-        return acks
-
-    def _acknowledge(self, acks: list[tuple[_Write, str]], applied: list[Input]) -> None:
-        """Answer each acknowledged-write query, once its write is committed and applied (or refused)."""
-        if not acks:
-            return
-        kept = {id(inp) for inp in applied}
-        for w, outcome in acks:
-            reason = ""
-            if isinstance(w.input, InputRejected):
-                reason = f"{w.input.error.path}: {w.input.error.reason}"
-            elif outcome == "applied" and id(w.input) not in kept:  # the store refused it
-                outcome, reason = "rejected", "not stored (see the planner's rejected event)"
-            ack = WriteAck(planner=self.cfg.planner_id, session=self.zid, outcome=outcome, reason=reason)  # type: ignore[arg-type]
-            with contextlib.suppress(Exception):  # the writer gave up waiting: nothing to answer
-                w.query.reply(w.key, msgspec.json.encode(ack), encoding=_JSON)
-            w.query.drop()
-
     # -- output -----------------------------------------------------------------------
     def _put(self, key: str | zenoh.KeyExpr, payload: bytes, direction: bool = False) -> None:
         if direction:
@@ -698,6 +592,8 @@ class PlannerNode:
         fields = {k: v for k, v in msgspec.structs.asdict(ev).items() if k not in ("t", "planner")}
         if isinstance(ev, RejectedEvent):
             log.warning("rejected input", extra={"fields": fields})
+        elif isinstance(ev, ConflictEvent):  # two planners guiding one unit: a vehicle overshot its goal
+            log.warning("conflict: a twin planner", extra={"fields": fields})
         else:
             log.info(str(kind), extra={"fields": fields})
 
@@ -725,6 +621,8 @@ class PlannerNode:
 
     def _status(self) -> PlannerStatus:
         p50, p99 = self.latency.quantiles_ms()
+        with self._lock:  # the callbacks' threads change it
+            twins = tuple(sorted(self._twins))[:64]
         c = self.world.counts()
         return PlannerStatus(
             planner=self.cfg.planner_id,
@@ -748,4 +646,5 @@ class PlannerNode:
             session=self.zid,
             origin=self.cfg.origin,
             faults=c["faults"],
+            twins=twins,
         )

@@ -51,7 +51,8 @@ def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Even
     import zenoh
 
     from pfp_service.service.desk import preview_desk
-    from pfp_service.service.store import Store
+    from pfp_service.service.node import PlannerNode  # noqa: F401 -- imported before the router listens: the
+    from pfp_service.service.store import Store  # node subscribes the moment the session opens (issue 34)
 
     zygote: Any = contextlib.nullcontext()
     if threading.current_thread() is threading.main_thread():

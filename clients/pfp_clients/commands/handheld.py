@@ -3,7 +3,9 @@
 Shows the planner's direction as a big arrow with the compass bearing, the
 distance and ETA to the goal, the threat level, the planner status and how
 fresh the last update is.  The position comes from a simulated walk along the
-directions, the arrow keys, or NMEA 0183 GGA sentences (``--nmea``).
+directions, the arrow keys, or NMEA 0183 GGA sentences (``--nmea``).  With
+the mission origin (``--origin``, or the planner's, learnt once connected)
+positions show as lat/lon or MGRS (``--coords``), and a goal may be typed so.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 from typing import Any
 
 from pfp_service.cli._common import add_session_args, positive_float, positive_int, session_config
+from pfp_service.coords import STYLES, parse_point
 
 __all__ = ["register", "run"]
 
@@ -50,9 +53,15 @@ def register(sub: Any) -> None:
     add_session_args(p)
     p.add_argument(
         "--goal",
-        type=point,
-        metavar="X,Y",
-        help="ask the planner to guide this unit here (default: none; g sets one)",
+        metavar="WHERE",
+        help="ask the planner to guide this unit here: X,Y metres, 58.4105N 15.6213E or an MGRS reference "
+        "(those two once the origin is known) (default: none; g sets one)",
+    )
+    p.add_argument(
+        "--coords",
+        choices=STYLES,
+        help="how positions show: latlon or mgrs (with the mission origin), metres (default: latlon once "
+        "an origin is known, else metres)",
     )
     p.add_argument("--start", type=point, default=(0.0, 0.0), metavar="X,Y", help="simulated start")
     p.add_argument("--speed-mps", type=positive_float, default=1.4, help="walking speed")
@@ -101,6 +110,18 @@ def check_flags(args: argparse.Namespace) -> None:
             raise InputError(flag, "only goes with --nmea")
     if args.nmea is not None and args.no_walk:
         raise InputError("--no-walk", "the GPS gives the position: there is no simulated walk with --nmea")
+    if args.goal is not None:
+        origin = _origin(args)
+        got = parse_point(args.goal, origin)
+        if isinstance(got, str) and (origin is not None or "needs the mission origin" not in got):
+            raise InputError("--goal", got)
+
+
+def _origin(args: argparse.Namespace) -> Any:
+    """The ``--origin`` as an ``Origin`` (``None`` without one)."""
+    from pfp_service.geo import Origin
+
+    return None if args.origin is None else Origin(lat=args.origin[0], lon=args.origin[1], alt=0.0)
 
 
 def check_terminal(nmea: str | None) -> None:
@@ -147,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         stale_after_s=args.stale_s,
         threat_full_scale=args.threat_full_scale,
         nudge_m=args.nudge_m,
-        goal=args.goal,
+        goal=metres if isinstance(metres := parse_point(args.goal or "", _origin(args)), tuple) else None,
         gps=gps,
     )
     frame = LocalFrame(*args.origin) if gps else None
@@ -170,6 +191,9 @@ def run(args: argparse.Namespace) -> int:
                 nmea=reader,
                 publish_hz=args.rate_hz,
                 stopping=stopping,
+                coords=args.coords,
+                origin=origin,
+                goal_text=args.goal if settings.goal is None else None,  # set once the origin is learnt
             )
             app.run()
             stopping.install()  # the app's closed loop put the default handlers back

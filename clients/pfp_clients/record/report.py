@@ -5,12 +5,15 @@ planner's ``arrived``, or to its last report), its path length, its exposure
 and closest approach to a threat (measured on the track under the threats in
 force when each segment was walked, as ``pfp demo`` measures), the replans that
 named it and what caused them (the threat and zone changes of each
-``event/replan``), escapes and traps.  Times are seconds from the record's
-first message.
+``event/replan``), escapes and traps.  Times are the units' own clocks when
+every state carries its ``t`` (``pfp fleet``'s simulated seconds, at any
+``--speed-up``), else seconds of the record's wall clock; the report says which.
 
 Out: the table on stdout and as CSV, a PNG of the threats and tracks, and,
 when the record knows the mission origin, GeoJSON (RFC 7946, WGS-84) of every
-track with its row of the table, and of the threats.
+track with its row of the table, and of the threats.  The PNG draws the
+keep-out zones in force at the end, a threat that appeared after the units
+set out in orange with when it appeared, and, with an origin, lat/lon axes.
 """
 
 from __future__ import annotations
@@ -30,10 +33,11 @@ import numpy as np
 
 from pfp_clients.record.mcapfile import Record
 from pfp_clients.watch import Watch
+from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.wire import ThreatUpdate, keys
 
-__all__ = ["UnitSummary", "summarise", "table_rows", "write_report"]
+__all__ = ["UnitSummary", "clock_name", "popups", "summarise", "table_rows", "write_report", "zones_at_end"]
 
 COLUMNS = ("unit", "status", "time s", "path m", "exposure", "min clear m", "replans", "causes")
 
@@ -53,12 +57,21 @@ class UnitSummary:
     exposure: float | None = None
     min_clearance_m: float = math.inf
     seqs: list[int] = field(default_factory=list)  # its states' seq, as recorded
+    clock: list[tuple[float, float]] = field(default_factory=list)  # (record s, the state's own t)
+
+    @property
+    def own_clock(self) -> bool:
+        """Every state carried its ``t``: times are the unit's (simulated, under ``pfp fleet``)."""
+        return bool(self.track) and len(self.clock) == len(self.track)
 
     @property
     def time_s(self) -> float | None:
         if not self.track:
             return None
         end = self.arrived_s if self.arrived_s is not None else self.track[-1][0]
+        if self.own_clock:  # the unit's time at its last report by then
+            seen = [t for rec_s, t in self.clock if rec_s <= end] or [self.clock[0][1]]
+            return seen[-1] - self.clock[0][1]
         return end - self.track[0][0]
 
 
@@ -117,6 +130,8 @@ def summarise(rec: Record, intensity: str = "peak") -> tuple[list[UnitSummary], 
             pos = d.get("position")
             if isinstance(pos, list) and len(pos) >= 2:
                 unit(k.id).track.append((t_s, float(pos[0]), float(pos[1])))
+                if isinstance(d.get("t"), int | float):
+                    unit(k.id).clock.append((t_s, float(d["t"])))
             if isinstance(d.get("seq"), int):
                 unit(k.id).seqs.append(d["seq"])
         elif k.kind is keys.KeyKind.UNIT_DIRECTION:
@@ -173,6 +188,59 @@ def table_rows(rows: list[UnitSummary]) -> list[tuple[str, ...]]:
     return out
 
 
+def clock_name(rows: list[UnitSummary]) -> str:
+    """Which clock the times are on: the units' own (every state carried ``t``) or the record's."""
+    tracked = [u for u in rows if u.track]
+    if tracked and all(u.own_clock for u in tracked):
+        return "the units' own clocks (each state's t: simulated seconds under pfp fleet)"
+    return "the record's wall clock (the states carry no t)"
+
+
+def popups(rows: list[UnitSummary], watch: Watch) -> dict[str, str]:
+    """Threat id -> ``"appeared at 312 s"`` for each threat first put after the first unit's first report.
+
+    On the units' clocks when they all have one (the record's seconds mapped onto theirs), so the
+    figure agrees with the table.
+    """
+    starts = [u.track[0][0] for u in rows if u.track]
+    if not starts:
+        return {}
+    first: dict[str, float] = {}
+    for v in watch.versions:
+        first.setdefault(v.threat_id, v.start_s)
+    pairs = sorted(p for u in rows if u.own_clock for p in u.clock)
+    own = bool(pairs) and all(u.own_clock for u in rows if u.track)
+    out = {}
+    for tid, t in first.items():
+        if t > min(starts):
+            at = float(np.interp(t, [r for r, _ in pairs], [c for _, c in pairs])) if own else t
+            out[tid] = f"appeared at {at:.0f} s"
+    return out
+
+
+def zones_at_end(rec: Record) -> list[Any]:
+    """The keep-out zones in force when the record ends (each put and not since removed), as core ``Zone``s."""
+    from pfp_service.core.zones import Zone
+    from pfp_service.wire.messages import decode_zone
+
+    held: dict[str, Any] = {}
+    for e in rec.entries:
+        try:
+            k = keys.parse(e.key)
+        except InputError:
+            continue
+        if k.kind is not keys.KeyKind.ZONE:
+            continue
+        if e.data is None:
+            held.pop(k.id, None)
+            continue
+        try:
+            held[k.id] = Zone.from_update(k.id, decode_zone(e.data, None, rec.origin))
+        except (InputError, ValueError):  # refused by the planner too: not in force
+            continue
+    return list(held.values())
+
+
 def _text(rows: list[tuple[str, ...]]) -> list[str]:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
@@ -227,6 +295,8 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
     if rec.coverage is not None:
         say(f"record: {describe(rec.coverage)}")
     say(f"record: {describe_gaps({u.unit: seq_gaps(u.seqs) for u in rows if u.seqs})}")
+    clock = clock_name(rows)
+    say(f"times (time s): {clock}")
     for line in _text(table):
         say(line)
     written: list[Path] = []
@@ -249,6 +319,7 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
             u.unit: u.track[-1][1:] for u in rows if u.track and u.arrived_s is not None
         }
         arrived = sum(u.arrived_s is not None for u in rows)
+        simulated = "simulated" if clock.startswith("the units'") else "wall-clock"
         plot_tracks(
             list(latest.values()),
             intensity,
@@ -256,8 +327,11 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
             goals,
             png,
             title=f"mission {rec.mission}: {arrived}/{len(rows)} arrived, "
-            f"{sum(u.replans for u in rows)} replans",
+            f"{sum(u.replans for u in rows)} replans (times in {simulated} seconds)",
             old_threats=moved,
+            coords=Coords.choose("latlon", rec.origin) if rec.origin is not None else None,
+            zones=zones_at_end(rec),
+            popups=popups(rows, watch),
         )
         written.append(png)
         if rec.origin is not None:

@@ -150,7 +150,8 @@ class UnitState(_Message, frozen=True, kw_only=True):
     """Where a unit is; published on ``mumt/{m}/unit/{u}/state``.
 
     Attributes:
-        position: ``[x, y]`` in metres (x east, y north).
+        position: ``[x, y]`` in metres (x east, y north), or ``{"lat", "lon"}`` in WGS-84
+            degrees when the planner has a mission origin.
         t: the sender's time of the fix in seconds, if it has one.
         seq: the sender's sequence number; the direction answering it echoes it.
         kind: ``manned`` or ``unmanned``.
@@ -170,7 +171,8 @@ class Goal(_Message, frozen=True, kw_only=True):
     """Where a unit should go; put on ``mumt/{m}/unit/{u}/goal``, a DELETE cancels it.
 
     Attributes:
-        position: ``[x, y]`` in metres.
+        position: ``[x, y]`` in metres (x east, y north), or ``{"lat", "lon"}`` in WGS-84
+            degrees when the planner has a mission origin.
         delta: goal weight (1e-9 to 1e9); derived by the scale-free rule when absent.
         tolerance: arrival radius in metres (>= 0.001); derived when absent.
         step: a planning-resolution hint in metres (>= 0.001); derived when absent,
@@ -191,7 +193,8 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
     """A threat, put on ``mumt/{m}/threat/{t}`` (the id is the key's last chunk); a DELETE removes it.
 
     Attributes:
-        position: the enemy position ``[x, y]`` in metres.
+        position: the enemy position, ``[x, y]`` in metres or ``{"lat", "lon"}`` in WGS-84
+            degrees when the planner has a mission origin.
         facing_deg: the direction it faces, compass degrees.
         sigma_range: spread along the facing, metres (>= 0.001).
         sigma_lateral: spread across the facing, metres (>= 0.001).
@@ -446,6 +449,9 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     session: Text = ""  # the planner's Zenoh session id: planners that share an id are told apart by it
     origin: Origin | None = None  # where its [0, 0] lies; clients check or convert their own against it
     faults: Count = 0  # inputs dropped because applying them failed inside the planner (each also rejected)
+    # twins: other planners this one sees answering the same units (another id while not --cluster, or a
+    # second session under its own id), each "ID" or "ID-SESSION"; pfp status and pfp health warn of them
+    twins: Annotated[tuple[Text, ...], Meta(max_length=64)] = ()
 
 
 # -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
