@@ -79,7 +79,7 @@ LIMITS: dict[str, Limit] = {
         "16 zones of the wire's 4,096 vertices; about 1 s to localise",
     ),
     "mcap_chunk_bytes": Limit(
-        64 * MiB,
+        16 * MiB,
         "bytes of one chunk, compressed or declared uncompressed",
         "MCAP (`pfp report`, `pfp replay`)",
         "the recorder writes 1 MiB chunks",
