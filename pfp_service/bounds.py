@@ -96,6 +96,12 @@ LIMITS: dict[str, Limit] = {
         "MCAP",
         "bounds a decompression bomb's memory and time",
     ),
+    "mcap_span_s": Limit(
+        7 * 86_400,
+        "seconds from a recording's first log time to its last (none may be in the future)",
+        "MCAP",
+        "pfp replay waits out the recorded clock: a far-future time held it until signalled",
+    ),
     "mcap_messages": Limit(
         2_000_000,
         "messages read from a recording",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +46,7 @@ DELETED_TOPIC = "/pfp/deleted"
 ALIVE_TOPIC = "/pfp/alive"
 FIX_PREFIX = "/pfp/fix/"
 METADATA = "pfp"
+_CLOCK_SLACK_NS = 3600 * 10**9  # recorders' clocks may run an hour ahead of this machine's
 COVERAGE = "pfp.coverage"
 PROFILE = ""  # no ROS profile: plain JSON with JSON Schema, which Foxglove reads as it is
 
@@ -209,7 +211,7 @@ class Record:
     coverage: dict[str, object] | None = None  # None: a record made before pfp.coverage
 
 
-def read_record(path: str | Path) -> Record:
+def read_record(path: str | Path, now_ns: int | None = None) -> Record:
     """Read a whole record, checking every chunk's CRC, within the bounds of ``mcapcheck``.
 
     The chunks' headers are checked first (``mcapcheck.check_record``); the file is then read in
@@ -262,7 +264,28 @@ def read_record(path: str | Path) -> Record:
         raise InputError(p.name, "not a mission record of pfp record (no 'pfp' metadata)")
     entries.sort(key=lambda e: e.t_ns)  # log-time order, stable as the reader's was
     alive.sort(key=lambda a: a[0])
+    _check_times(
+        p.name, [e.t_ns for e in entries[:1] + entries[-1:]] + [a[0] for a in alive[:1] + alive[-1:]], now_ns
+    )
     return Record(mission, origin, entries, alive, coverage)
+
+
+def _check_times(name: str, ends_ns: list[int], now_ns: int | None) -> None:
+    """Refuse log times after ``now_ns`` (plus a clock's slack) or spanning more than ``mcap_span_s``:
+    a replay waits out the recorded clock, so a far-future time would hold it until signalled."""
+    if not ends_ns:
+        return
+    now = time.time_ns() if now_ns is None else now_ns
+    latest, span_s = max(ends_ns), (max(ends_ns) - min(ends_ns)) / 1e9
+    if latest > now + _CLOCK_SLACK_NS:
+        when = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(min(latest / 1e9, 253402300799)))
+        raise InputError(
+            name, f"a message's log time ({when}) is in the future; a recorder logs its receipt time"
+        )
+    if span_s > limit("mcap_span_s"):
+        raise InputError(
+            name, f"log times span {span_s:,.0f} s; the limit is {limit('mcap_span_s'):,} s (mcap_span_s)"
+        )
 
 
 def _take(msg: Any, topic: str, entries: list[Entry], alive: list[tuple[int, str, bool]]) -> None:
