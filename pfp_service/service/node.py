@@ -198,6 +198,7 @@ class PlannerNode:
         restored = None
         if self.store is not None:
             restored = self.store.restore(time.time())
+            self._order.load(restored.order)  # an older write asked again stays superseded
             self.world.apply(restored.inputs, self.clock())
         if self.cfg.zones is not None:  # the --zones file: in force (and stored) before the first state
             from pfp_service.geojson import load_zones
@@ -568,15 +569,19 @@ class PlannerNode:
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
         batch.append(Tick(now, got.shed))
         self.counters["msgs_in"] += len(batch) - 1
-        if self.store is not None:  # applied only once committed
-            batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
+        refused = None
+        if self.store is not None:  # applied only once committed, with the write order it makes
+            batch, refused = self.store.commit_writes(
+                batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission, self._order.batch_rows()
+            )
+        self._order.settle(refused is None)  # the order is never ahead of the store
         log_changes(log, inbox)
         tr = self._trace
         t_apply = self.clock()
         with gcpause.paused():  # the collector runs once the directions are out (gcpause)
             out = self.world.apply(batch, now)
             t_applied = self.clock()
-            self._acknowledge(acks, batch)
+            self._acknowledge(acks, refused)
             forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
             if self.store is not None and (out.missions or forgotten):
                 self.store.record(out.missions, forgotten)
@@ -641,6 +646,7 @@ class PlannerNode:
         superseded, never applied over the newer one.
         """
         acks: list[tuple[_Write, str]] = []
+        self._order.settle(True)  # a batch of its own: nothing held from before
         for w in writes:
             if isinstance(w.input, InputRejected):
                 outcome = "rejected"  # never ordered: a bad write supersedes nothing
@@ -654,17 +660,23 @@ class PlannerNode:
                 acks.append((w, outcome))
         return acks
 
-    def _acknowledge(self, acks: list[tuple[_Write, str]], applied: list[Input]) -> None:
-        """Answer each acknowledged-write query, once its write is committed and applied (or refused)."""
+    def _acknowledge(self, acks: list[tuple[_Write, str]], refused: str | None) -> None:
+        """Answer each acknowledged-write query, once its write is committed and applied (or refused).
+
+        ``refused``: why the store refused this batch.  Then only what the store already held is
+        acknowledged (a duplicate of a stored write, or one a stored write supersedes), against the
+        order as it was before the batch; every other write is ``rejected``, naming the cause.
+        """
         if not acks:
             return
-        kept = {id(inp) for inp in applied}
         for w, outcome in acks:
             reason = ""
             if isinstance(w.input, InputRejected):
                 reason = f"{w.input.error.path}: {w.input.error.reason}"
-            elif outcome == "applied" and id(w.input) not in kept:  # the store refused it
-                outcome, reason = "rejected", "not stored (see the planner's rejected event)"
+            elif refused is not None:
+                outcome = self._order.outcome(w.key, w.mark, w.received, asked=True)
+                if outcome == "applied":  # not stored: an explicit refusal, never "duplicate"
+                    outcome, reason = "rejected", refused
             ack = WriteAck(planner=self.cfg.planner_id, session=self.zid, outcome=outcome, reason=reason)  # type: ignore[arg-type]
             with contextlib.suppress(Exception):  # the writer gave up waiting: nothing to answer
                 w.query.reply(w.key, msgspec.json.encode(ack), encoding=_JSON)

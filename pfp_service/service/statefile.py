@@ -50,6 +50,7 @@ TABLES: dict[str, tuple[str, int]] = {
     "zones": ("id", 3),
     "goals": ("unit", 2),
     "missions": ("unit", 5),
+    "write_order": ("key", 5),
 }
 
 
