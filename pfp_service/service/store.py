@@ -60,11 +60,14 @@ from pfp_service.service.log import get_logger
 from pfp_service.service.statefile import (
     CORRUPT_CODES,
     DB_NAME,
+    FILE_MODE,
     LOCK_NAME,
     TABLES,
     describe,
     hold_shared,
     lenient_text,
+    private_dir,
+    private_files,
     salvage,
 )
 from pfp_service.service.staterows import OrderRow, Restored, read_state
@@ -131,8 +134,9 @@ class Store:
         self._complained: set[str] = set()
         self._order_commits = 0
         try:
-            path.mkdir(parents=True, exist_ok=True)
+            private_dir(path)  # 0700, parents made too; the files 0600 (SQLite gives its WAL the db's mode)
             self._lock = hold_shared(path / LOCK_NAME)
+            private_files(path, (LOCK_NAME, DB_NAME, f"{DB_NAME}-wal", f"{DB_NAME}-shm"))
         except OSError as exc:
             raise InputError(
                 "--state-dir", f"{path}: cannot use the state directory: {describe(exc)}"
@@ -152,6 +156,8 @@ class Store:
 
     # -- opening, checking, recovering ---------------------------------------------------
     def _connect(self) -> sqlite3.Connection:
+        if not self.path.exists():  # made 0600 here: SQLite would take the umask's mode
+            os.close(os.open(self.path, os.O_RDWR | os.O_CREAT, FILE_MODE))
         db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
         db.text_factory = lenient_text  # a damaged key reads as text, and is then refused as a key
         return db

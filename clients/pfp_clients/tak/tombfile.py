@@ -30,6 +30,7 @@ import msgspec
 from pfp_clients.tak.cot import MAX_UID_CHARS
 from pfp_clients.tak.state import BridgeState
 from pfp_clients.tak.tombs import MAX_TOMBSTONES, Tombstone
+from pfp_service.service.statefile import FILE_MODE, private_dir
 
 __all__ = ["FILE_NAME", "Keeper", "Loaded", "load", "save"]
 
@@ -96,8 +97,8 @@ def save(path: Path, tombstones: dict[str, Tombstone]) -> str | None:
     )
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as f:
+        private_dir(path.parent)  # the mission's state: its owner's only (0700, the file 0600)
+        with open(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, FILE_MODE), "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
