@@ -41,9 +41,8 @@ def read_text(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> str:
     except OSError as exc:
         raise InputError(name, f"cannot read: {exc.strerror or exc}") from None
     if len(data) > max_bytes:
-        raise InputError(
-            name, f"larger than {max_bytes:,} bytes, the limit for this kind of file (see LIMITS)"
-        )
+        which = next((n for n, lim in LIMITS.items() if n.endswith("_bytes") and lim.value == max_bytes), "")
+        raise InputError(name, f"larger than {max_bytes:,} bytes, the limit for this kind of file ({which})")
     if b"\x00" in data:
         raise InputError(name, "is a binary file (it holds NUL bytes), not text")
     try:
