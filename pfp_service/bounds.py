@@ -72,10 +72,10 @@ LIMITS: dict[str, Limit] = {
         "every YAML, JSON, GeoJSON and TOML file",
         "the deepest real file is 6 levels (a zone's rings); deeper ends in a recursion error",
     ),
-    "zone_positions": Limit(
+    "json_positions": Limit(
         65_536,
-        "coordinate positions in a zones file",
-        "GeoJSON zones (`--zones`)",
+        "coordinate positions (arrays of numbers) in a JSON file",
+        "GeoJSON zones (`--zones`), JSON scenarios",
         "16 zones of the wire's 4,096 vertices; about 1 s to localise",
     ),
     "mcap_chunk_bytes": Limit(
@@ -200,7 +200,7 @@ def _check_squashed(squashed: bytes, source: str, positions: int | None) -> None
         found = sum(squashed.count(b"[" + bytes([d])) for d in _DIGITS)
         if found > positions:
             raise InputError(
-                source, f"holds {found:,} positions; the limit is {positions:,} (zone_positions)"
+                source, f"holds {found:,} positions; the limit is {positions:,} (json_positions)"
             )
     if _max_depth(squashed.translate(None, _DIGITS)) > limit("depth"):
         raise _too_deep(source)

@@ -335,7 +335,7 @@ def load_zones(path: str | Path, origin: Origin | None, what: str = "--zones") -
     text = read_text(str(path))
     if origin is None:
         raise InputError(what, f"{path}: GeoJSON is in lon/lat and needs a mission origin ({{lat, lon}})")
-    bounds.scan_json(text, str(path), positions=bounds.limit("zone_positions"))  # before the parse
+    bounds.scan_json(text, str(path), positions=bounds.limit("json_positions"))  # before the parse
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -215,7 +215,7 @@ def decode_scenario(data: bytes, fmt: Literal["json", "yaml"], source: str = "")
 def _document(data: bytes, fmt: Literal["json", "yaml"], source: str) -> tuple[object, yaml.Node | None]:
     """The parsed document and, for YAML, its node tree; JSON is scanned for its depth first."""
     if fmt == "json":
-        bounds.scan_json(data, source)
+        bounds.scan_json(data, source, positions=bounds.limit("json_positions"))
         if b'"lat"' not in data and b'"lon"' not in data:
             return None, None  # nothing to localise: _convert decodes it straight into a Scenario
         try:

@@ -200,14 +200,22 @@ def test_a_zones_file_past_its_position_budget_is_refused_before_the_parse(tmp_p
     p.write_text(text())
     assert p.stat().st_size > 12 * 1024 * 1024
     monkeypatch.setattr(json, "loads", lambda *a, **k: pytest.fail("parsed a file past its budget"))
-    assert "(zone_positions)" in _refused(_zones, p)
+    assert "(json_positions)" in _refused(_zones, p)
+
+
+@pytest.mark.unit
+def test_a_json_scenario_past_its_position_budget_is_refused(tmp_path):
+    p = tmp_path / "s.json"
+    zone = {"polygon": [[[0, 0], [1, 0], [1, 1], [0, 0]]]}
+    p.write_text(json.dumps({"start": [0, 0], "goal": [5, 5], "zones": [zone] * 20_000}))
+    assert "(json_positions)" in _refused(_scenario, p)
 
 
 @pytest.mark.unit
 def test_a_zones_file_at_its_budget_loads_and_an_error_line_needs_no_yaml(tmp_path, monkeypatch):
     import yaml
 
-    n = bounds.limit("zone_positions") // 16 - 1
+    n = bounds.limit("json_positions") // 16 - 1
     p = tmp_path / "full.geojson"
     p.write_text(_collection(*[_ring(n) for _ in range(16)]).replace("},{", "},\n{"))
     t0 = time.perf_counter()
@@ -287,8 +295,8 @@ def baseline(tmp_path_factory) -> tuple[float, float]:
         ("deep.json", '{"start": [0, 0], "goal": [1, 1], "x": ' + "[" * DEEP + "]" * DEEP + "}", ["plan"], "depth"),
         ("deep-team.yaml", "name: d\nunits: " + "[" * DEEP + "]" * DEEP + "\n", ["acl", "--out", "{tmp}/acl"], "depth"),
         ("deep.toml", "x = " + "[" * DEEP + "]" * DEEP + "\n", ["serve", "--config"], "depth"),
-        ("ring.geojson", _collection(_ring(800_000)), ["plan", "examples/geo-simple.yaml", "--zones"], "zone_positions"),
-        ("squares.geojson", _many_squares(100_000), ["plan", "examples/geo-simple.yaml", "--zones"], "zone_positions"),
+        ("ring.geojson", _collection(_ring(800_000)), ["plan", "examples/geo-simple.yaml", "--zones"], "json_positions"),
+        ("squares.geojson", _many_squares(100_000), ["plan", "examples/geo-simple.yaml", "--zones"], "json_positions"),
         ("deep.geojson", '{"features": ' + "[" * DEEP + "]" * DEEP + "}", ["plan", "examples/geo-simple.yaml", "--zones"], "depth"),
         ("big.yaml", "start: [0, 0]\ngoal: [1, 1]\nthreats:\n" + "  - {position: [1, 1], sigma_range: 1, sigma_lateral: 1}\n" * 40_000, ["plan"], "(yaml_bytes)"),
     ],
