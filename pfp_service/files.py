@@ -11,12 +11,12 @@ import os
 import stat
 from pathlib import Path
 
+from pfp_service.bounds import LIMITS
 from pfp_service.errors import InputError
 
 __all__ = ["MAX_TEXT_BYTES", "read_text"]
 
-# Team files and scripts hold at most 10 000 entries of ~200 bytes: 16 MiB is far past any real one.
-MAX_TEXT_BYTES = 16 * 1024 * 1024
+MAX_TEXT_BYTES = LIMITS["text_bytes"].value
 
 
 def read_text(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> str:
@@ -41,7 +41,8 @@ def read_text(path: str | Path, max_bytes: int = MAX_TEXT_BYTES) -> str:
     except OSError as exc:
         raise InputError(name, f"cannot read: {exc.strerror or exc}") from None
     if len(data) > max_bytes:
-        raise InputError(name, f"larger than {max_bytes // (1024 * 1024)} MiB; not a text file of this tool")
+        which = next((n for n, lim in LIMITS.items() if n.endswith("_bytes") and lim.value == max_bytes), "")
+        raise InputError(name, f"larger than {max_bytes:,} bytes, the limit for this kind of file ({which})")
     if b"\x00" in data:
         raise InputError(name, "is a binary file (it holds NUL bytes), not text")
     try:

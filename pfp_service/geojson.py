@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import msgspec
 import numpy as np
 
+from pfp_service import bounds
 from pfp_service.core.cores import CORE_FRACTION, Cores
 from pfp_service.core.threat import Threat, ThreatField
 from pfp_service.core.zones import Zone
@@ -334,6 +335,7 @@ def load_zones(path: str | Path, origin: Origin | None, what: str = "--zones") -
     text = read_text(str(path))
     if origin is None:
         raise InputError(what, f"{path}: GeoJSON is in lon/lat and needs a mission origin ({{lat, lon}})")
+    bounds.scan_json(text, str(path), positions=bounds.limit("json_positions"))  # before the parse
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -346,15 +348,8 @@ def load_zones(path: str | Path, origin: Origin | None, what: str = "--zones") -
 
 def _on_line(source: str, text: str, err: InputError) -> InputError:
     """``err`` with the line of its field (``features[2].geometry``), as scenario and team errors name it."""
-    import yaml
-
-    from pfp_service import yamlio
-
     field = err.path[len(source) + 2 :] if err.path.startswith(f"{source}: ") else ""
-    try:  # JSON is YAML: the node tree gives each field's line
-        line = yamlio.line_of(yamlio.compose(text), field)
-    except yaml.YAMLError:
-        line = None
+    line = bounds.json_line_of(text, field)  # one pass over the tokens; never parsed again
     if line is None:
         return err
     return InputError(f"{source} line {line}" + (f", {field}" if field else ""), err.reason)

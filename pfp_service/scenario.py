@@ -22,7 +22,7 @@ from typing import Literal
 import msgspec
 import yaml
 
-from pfp_service import yamlio
+from pfp_service import bounds, yamlio
 from pfp_service.constraints import (
     Delta,
     Finite,
@@ -41,6 +41,7 @@ from pfp_service.core import PlannerParams, Scheduled, Threat
 from pfp_service.core.params import ESCAPES, Escape, reach
 from pfp_service.core.zones import ZoneSet
 from pfp_service.errors import InputError, from_validation
+from pfp_service.files import read_text
 from pfp_service.geo import Origin, localise_document
 from pfp_service.wire.messages import ZoneUpdate, localise_zone
 
@@ -202,34 +203,40 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
         return (x0, y0), (x1, y1)
 
 
-def decode_scenario(data: bytes, fmt: Literal["json", "yaml"]) -> Scenario:
-    """Decode and validate a scenario.
+def decode_scenario(data: bytes, fmt: Literal["json", "yaml"], source: str = "") -> Scenario:
+    """Decode and validate a scenario, within the file bounds (``bounds.LIMITS``).
 
     Raises:
-        InputError: with the field path and the reason.
+        InputError: with the field path and the reason, or the limit passed.
     """
+    return _convert(_document(data, fmt, source)[0], fmt, data)
+
+
+def _document(data: bytes, fmt: Literal["json", "yaml"], source: str) -> tuple[object, yaml.Node | None]:
+    """The parsed document and, for YAML, its node tree; JSON is scanned for its depth first."""
     if fmt == "json":
+        bounds.scan_json(data, source, positions=bounds.limit("json_positions"))
         if b'"lat"' not in data and b'"lon"' not in data:
-            try:
-                return msgspec.json.decode(data, type=Scenario)
-            except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-                raise from_validation(exc, CHOICES) from exc
+            return None, None  # nothing to localise: _convert decodes it straight into a Scenario
         try:
-            raw = msgspec.json.decode(data)
+            return msgspec.json.decode(data), None
         except msgspec.DecodeError as exc:
             raise from_validation(exc, CHOICES) from exc
-        return _convert(raw)
     try:
-        obj = yamlio.load(data)
+        return yamlio.parse(data, source)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "file"
         problem = getattr(exc, "problem", None) or "invalid YAML"
         raise InputError(where, f"invalid YAML: {problem}") from exc
-    return _convert(obj)
 
 
-def _convert(obj: object) -> Scenario:
+def _convert(obj: object, fmt: Literal["json", "yaml"], data: bytes) -> Scenario:
+    if fmt == "json" and b'"lat"' not in data and b'"lon"' not in data:
+        try:  # nothing to localise: msgspec decodes and validates in one pass
+            return msgspec.json.decode(data, type=Scenario)
+        except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+            raise from_validation(exc, CHOICES) from exc
     if not isinstance(obj, dict):
         raise InputError("", "a scenario must be a mapping with start, goal and threats")
     zones = obj.get("zones")
@@ -260,28 +267,31 @@ def load_scenario(path: str | Path) -> Scenario:
     suffix = p.suffix.lower()
     if suffix not in (".json", ".yaml", ".yml"):
         raise InputError(str(p), "scenario files must end in .yaml, .yml or .json")
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise InputError(str(p), f"cannot read: {exc.strerror or exc}") from exc
     fmt: Literal["json", "yaml"] = "json" if suffix == ".json" else "yaml"
+    data = read_text(p, bounds.limit("yaml_bytes" if fmt == "yaml" else "text_bytes")).encode()
+    root = None
     try:
-        return decode_scenario(data, fmt)
+        obj, root = _document(data, fmt, p.name)
+        return _convert(obj, fmt, data)
     except InputError as err:
-        raise _in_file(p, data, fmt, err) from None
+        raise _in_file(p, data, fmt, root, err) from None
 
 
-def _in_file(p: Path, data: bytes, fmt: Literal["json", "yaml"], err: InputError) -> InputError:
-    """``err`` naming the file, and for YAML the line of its field, as team and script files do."""
-    if err.path.startswith("line "):  # a YAML syntax error already knows its line and column
+def _in_file(
+    p: Path, data: bytes, fmt: Literal["json", "yaml"], root: yaml.Node | None, err: InputError
+) -> InputError:
+    """``err`` naming the file, and the line of its field, as team and script files do."""
+    if err.path == p.name or err.path.startswith(f"{p.name} "):  # a bound, naming the file already
+        return err
+    if err.path.startswith("line "):  # a YAML syntax error knows its line and column
         return InputError(f"{p.name} {err.path}", err.reason)
     if not err.path and fmt == "json":  # malformed JSON: msgspec names a byte offset, or the end
         at = re.search(r"\(byte (\d+)\)", err.reason)
         end = len(data.rstrip()) if at is None or "truncated" in err.reason else int(at[1])
         line = data[:end].count(b"\n") + 1
         return InputError(f"{p.name} line {line}", err.reason)
-    try:  # JSON is YAML too: the same node tree gives a field's line
-        root = yamlio.compose(data)
-    except yaml.YAMLError:
-        root = None
+    if fmt == "json":  # the tokens give a field's line; the file is never parsed again as YAML
+        field_line = bounds.json_line_of(data.decode(), err.path)
+        where = f"{p.name} line {field_line}" if field_line is not None else p.name
+        return InputError(f"{where}, {err.path}" if err.path else where, err.reason)
     return yamlio.located(p, root, err)

@@ -150,3 +150,57 @@ def test_host_allowed(header, bind, extra, ok):
     from pfp_clients.map.server import host_allowed
 
     assert host_allowed(header, bind, extra) is ok
+
+
+def _ws_origin_status(url: str, origin: str | None) -> tuple[int, bytes]:
+    """An upgrade to ``/ws`` with the right ``Host`` and this ``Origin``; the status and the first bytes."""
+    u = urlparse(url)
+    conn = http.client.HTTPConnection(u.hostname, u.port, timeout=10)
+    try:
+        conn.putrequest("GET", "/ws", skip_host=True, skip_accept_encoding=True)
+        conn.putheader("Host", f"127.0.0.1:{u.port}")
+        if origin is not None:
+            conn.putheader("Origin", origin.format(port=u.port))
+        for k, v in WS_UPGRADE.items():
+            conn.putheader(k, v)
+        conn.endheaders()
+        r = conn.getresponse()
+        return r.status, (r.read() if r.status != 101 else b"")
+    finally:
+        conn.close()
+
+
+@pytest.mark.proc
+def test_a_websocket_from_another_origin_gets_403_and_no_picture(router):
+    mission = "origin" + uuid.uuid4().hex[:8]
+    with map_process(router, mission) as url:
+        for origin in ("http://evil.example", "http://127.0.0.1:1", "null", "https://evil.example:{port}"):
+            status, body = _ws_origin_status(url, origin)
+            assert status == 403 and mission.encode() not in body, (origin, status, body[:80])
+        assert _ws_origin_status(url, "http://127.0.0.1:{port}")[0] == 101  # the map's own page
+        assert _ws_origin_status(url, None)[0] == 101  # no browser: as /api/state
+        port = urlparse(url).port
+        stats = json.loads(_request(url, "/api/stats", f"127.0.0.1:{port}")[1])
+        assert stats["refused_origins"] == 4
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    ("origin", "host", "ok"),
+    [
+        (None, "127.0.0.1:8080", True),
+        ("http://127.0.0.1:8080", "127.0.0.1:8080", True),
+        ("http://LOCALHOST:8080", "localhost:8080", True),
+        ("https://map.example.", "map.example", True),
+        ("http://[::1]:8080", "[::1]:8080", True),
+        ("http://evil.example", "127.0.0.1:8080", False),
+        ("http://127.0.0.1:9090", "127.0.0.1:8080", False),
+        ("null", "127.0.0.1:8080", False),
+        ("file://", "127.0.0.1:8080", False),
+        ("http://127.0.0.1:8080", None, False),
+    ],
+)
+def test_origin_allowed(origin, host, ok):
+    from pfp_clients.map.server import origin_allowed
+
+    assert origin_allowed(origin, host) is ok

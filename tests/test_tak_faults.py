@@ -124,7 +124,7 @@ def test_a_deleted_marker_is_not_revived_by_a_replay_until_its_stale_time():
     marker = hostile(t=T0, ttl=600)
     (put,) = _puts(s.on_cot(marker, T0 + 1))
     assert s.on_cot(delete("ANDROID-7f.h1", t=T0 + 10), T0 + 10).zenoh == [ZenohDelete(put.key)]
-    assert s.tombstones["ANDROID-7f.h1"] == Tombstone(after=T0 + 10, until=T0 + 600)
+    assert s.tombstones["ANDROID-7f.h1"] == Tombstone(after=T0 + 10, until=T0 + 600, source="TAK")
     # the server replays its copy on every (re)connection
     for now in (T0 + 20, T0 + 300, T0 + 599):
         assert s.on_cot(marker, now).zenoh == []
@@ -153,13 +153,13 @@ def test_a_delete_before_the_marker_and_a_marker_gone_stale_leave_tombstones():
 
 
 def test_tombstones_are_bounded_and_restored(monkeypatch):
-    from pfp_clients.tak import state as state_mod
+    from pfp_clients.tak import tombs as tombs_mod
 
-    monkeypatch.setattr(state_mod, "MAX_TOMBSTONES", 100)
+    monkeypatch.setattr(tombs_mod, "MAX_TOMBSTONES", 100)
     s = _state()
-    for i in range(state_mod.MAX_TOMBSTONES + 50):
+    for i in range(tombs_mod.MAX_TOMBSTONES + 50):
         s.on_cot(delete(f"d{i}", t=T0 + i), T0 + i)
-    assert len(s.tombstones) == state_mod.MAX_TOMBSTONES
+    assert len(s.tombstones) == tombs_mod.MAX_TOMBSTONES
     other = _state()
     other.restore_tombstones({"x": Tombstone(T0, T0 + 100), "old": Tombstone(T0 - 200, T0 - 100)}, T0)
     assert set(other.tombstones) == {"x"}

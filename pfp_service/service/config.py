@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 import msgspec
 from msgspec import Meta
 
+from pfp_service.bounds import check_depth, scan_toml
 from pfp_service.constraints import Delta, Finite, Id, NonNegative, Positive, Step, Tolerance
 from pfp_service.core import PlannerParams
 from pfp_service.core.params import Escape
@@ -233,10 +234,12 @@ def load_config(file: str | Path | None, env: Mapping[str, str], flags: Mapping[
     if file is not None:
         path = Path(file)
         text = read_text(path)
+        scan_toml(text, str(path))  # nesting past the bound would end tomllib in a RecursionError
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise InputError(str(path), f"invalid TOML: {exc}") from None
+        check_depth(data, str(path))  # dotted keys nest without brackets
         layers.append((str(path), data))
     layers.append(("env", _from_env(env)))
     layers.append(("flag", {k: v for k, v in flags.items() if v is not None}))

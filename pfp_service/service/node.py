@@ -195,6 +195,7 @@ class PlannerNode:
         restored = None
         if self.store is not None:
             restored = self.store.restore(time.time())
+            self._writes.order.load(restored.order)  # an older write asked again stays superseded
             self.world.apply(restored.inputs, self.clock())
         if self.cfg.zones is not None:  # the --zones file: in force (and stored) before the first state
             from pfp_service.geojson import load_zones
@@ -502,15 +503,19 @@ class PlannerNode:
         batch += [StateReported(uid, msg) for uid, (msg, _t) in states.items()]
         batch.append(Tick(now, got.shed))
         self.counters["msgs_in"] += len(batch) - 1
-        if self.store is not None:  # applied only once committed
-            batch = self.store.commit_batch(batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
+        refused = None
+        if self.store is not None:  # applied only once committed, with the write order it makes
+            batch, refused = self.store.commit_writes(
+                batch, time.time(), self.cfg.threat_ttl_s, self.cfg.mission, self._writes.order.batch_rows()
+            )
+        self._writes.order.settle(refused is None)  # the order is never ahead of the store
         log_changes(log, inbox)
         tr = self._trace
         t_apply = self.clock()
         with gcpause.paused():  # the collector runs once the directions are out (gcpause)
             out = self.world.apply(batch, now)
             t_applied = self.clock()
-            self._writes.acknowledge(acks, batch)
+            self._writes.acknowledge(acks, refused)
             forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]
             if self.store is not None and (out.missions or forgotten):
                 self.store.record(out.missions, forgotten)

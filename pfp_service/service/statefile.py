@@ -14,6 +14,7 @@ import contextlib
 import dataclasses
 import os
 import sqlite3
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,8 @@ except ImportError:  # pragma: no cover
 __all__ = [
     "CORRUPT_CODES",
     "DB_NAME",
+    "DIR_MODE",
+    "FILE_MODE",
     "LOCK_NAME",
     "TABLES",
     "StateFiles",
@@ -33,6 +36,8 @@ __all__ = [
     "hold_shared",
     "in_use",
     "lenient_text",
+    "private_dir",
+    "private_files",
     "salvage",
     "state_files",
 ]
@@ -50,6 +55,7 @@ TABLES: dict[str, tuple[str, int]] = {
     "zones": ("id", 3),
     "goals": ("unit", 2),
     "missions": ("unit", 5),
+    "write_order": ("key", 5),
 }
 
 
@@ -151,12 +157,41 @@ def _index_keys(db: sqlite3.Connection, table: str, key: str) -> list[str]:
 
 
 # -- who holds it, what is there (``pfp state``) ----------------------------------------
+# The state is the mission (goals, threats, positions): only its owner reads it, whatever the umask.
+DIR_MODE = 0o700
+FILE_MODE = 0o600
+
+
+def private_dir(path: Path) -> None:
+    """Make ``path`` and each missing parent with mode 0700, and set 0700 on ``path`` if it exists.
+
+    Raises:
+        OSError: it cannot be made.
+    """
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    for p in reversed(missing):
+        with contextlib.suppress(FileExistsError):  # made meanwhile by another process
+            p.mkdir(mode=DIR_MODE)
+    if (path.stat().st_mode & 0o777) != DIR_MODE:
+        with contextlib.suppress(PermissionError):  # not ours to change: used as it is
+            os.chmod(path, DIR_MODE)
+
+
+def private_files(directory: Path, names: Iterable[str]) -> None:
+    """Mode 0600 on each of ``names`` in ``directory`` that exists (a file an older planner made 0644)."""
+    for name in names:
+        with contextlib.suppress(FileNotFoundError, PermissionError):
+            f = directory / name
+            if (f.stat().st_mode & 0o777) != FILE_MODE:
+                os.chmod(f, FILE_MODE)
+
+
 def hold_shared(lock_path: Path) -> int | None:
     """A shared flock on ``state.lock``, held until closed; retried if ``clear`` removed the file meanwhile."""
     if fcntl is None:  # pragma: no cover
         return None
     for _ in range(100):
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, FILE_MODE)
         try:
             fcntl.flock(fd, fcntl.LOCK_SH)
             if os.fstat(fd).st_ino == os.stat(lock_path).st_ino:
@@ -241,7 +276,7 @@ def clear(directory: str | Path) -> list[tuple[Path, int]]:
     if not files:
         return []
     lock_path = d / LOCK_NAME
-    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, FILE_MODE)
     try:
         if fcntl is not None:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # BlockingIOError while a planner holds it

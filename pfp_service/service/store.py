@@ -40,13 +40,10 @@ import os
 import re
 import sqlite3
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-import msgspec
-
-from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
 from pfp_service.service.events import (
     GoalCancelled,
@@ -54,7 +51,6 @@ from pfp_service.service.events import (
     Input,
     InputRejected,
     MissionRecord,
-    MissionRestored,
     ThreatPut,
     ThreatRemoved,
     ZonePut,
@@ -64,17 +60,19 @@ from pfp_service.service.log import get_logger
 from pfp_service.service.statefile import (
     CORRUPT_CODES,
     DB_NAME,
+    FILE_MODE,
     LOCK_NAME,
     TABLES,
     describe,
     hold_shared,
     lenient_text,
+    private_dir,
+    private_files,
     salvage,
 )
-from pfp_service.wire import Goal, ThreatUpdate, decode, encode, keys
-from pfp_service.wire.messages import ZoneUpdate
-
-U = TypeVar("U", ThreatUpdate, ZoneUpdate)  # a write that expires
+from pfp_service.service.staterows import OrderRow, Restored, read_state
+from pfp_service.wire import encode, keys
+from pfp_service.wire.delivery import ORDER_KEYS_MAX
 
 __all__ = ["Restored", "Store"]
 
@@ -90,29 +88,11 @@ CREATE TABLE IF NOT EXISTS missions (
     unit TEXT PRIMARY KEY, epoch INTEGER NOT NULL, origin_x REAL NOT NULL, origin_y REAL NOT NULL, params TEXT NOT NULL
 );
 CREATE TABLE IF NOT EXISTS set_aside (tbl TEXT NOT NULL, key TEXT, body BLOB, reason TEXT NOT NULL, at REAL);
+CREATE TABLE IF NOT EXISTS write_order (
+    key TEXT PRIMARY KEY, newest_t REAL NOT NULL, newest_w TEXT NOT NULL, applied_t REAL NOT NULL, applied_w TEXT NOT NULL
+);
 """
-_BAD_ROW = (InputError, ValueError, TypeError, KeyError, msgspec.MsgspecError)
 _PAGE = re.compile(r"\bPage (\d+)")
-
-
-@dataclasses.dataclass(frozen=True)
-class Restored:
-    """What a restart found: inputs to apply, and the counts for the ``restored`` event.
-
-    ``corrupt`` counts the rows skipped as unreadable (named in ``skipped`` as
-    ``table/key``), plus the damaged pages of a file set aside (at least one);
-    ``set_aside`` is where that file was moved, or ``""``.
-    """
-
-    inputs: list[Input]
-    threats: int
-    goals: int
-    missions: int
-    expired: int
-    corrupt: int = 0
-    set_aside: str = ""
-    skipped: tuple[str, ...] = ()
-    zones: int = 0
 
 
 @dataclasses.dataclass
@@ -152,9 +132,11 @@ class Store:
         self.damage: _Damage | None = None
         self._lock: int | None = None
         self._complained: set[str] = set()
+        self._order_commits = 0
         try:
-            path.mkdir(parents=True, exist_ok=True)
+            private_dir(path)  # 0700, parents made too; the files 0600 (SQLite gives its WAL the db's mode)
             self._lock = hold_shared(path / LOCK_NAME)
+            private_files(path, (LOCK_NAME, DB_NAME, f"{DB_NAME}-wal", f"{DB_NAME}-shm"))
         except OSError as exc:
             raise InputError(
                 "--state-dir", f"{path}: cannot use the state directory: {describe(exc)}"
@@ -174,6 +156,8 @@ class Store:
 
     # -- opening, checking, recovering ---------------------------------------------------
     def _connect(self) -> sqlite3.Connection:
+        if not self.path.exists():  # made 0600 here: SQLite would take the umask's mode
+            os.close(os.open(self.path, os.O_RDWR | os.O_CREAT, FILE_MODE))
         db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
         db.text_factory = lenient_text  # a damaged key reads as text, and is then refused as a key
         return db
@@ -240,8 +224,19 @@ class Store:
             self._lock = None
 
     # -- writing -------------------------------------------------------------------------
-    def commit_inputs(self, inputs: Iterable[Input], wall_now: float, default_ttl_s: float | None) -> None:
-        """Record the goal, threat and zone inputs of one batch, in one transaction, before they are applied."""
+    def commit_inputs(
+        self,
+        inputs: Iterable[Input],
+        wall_now: float,
+        default_ttl_s: float | None,
+        order: Iterable[OrderRow] = (),
+    ) -> None:
+        """Record the goal, threat and zone inputs of one batch, in one transaction, before they are applied.
+
+        ``order``: the write order of the keys the batch wrote (``WriteOrder.batch_rows``), kept in
+        the same transaction, so a restarted planner knows which write each key saw last.
+        """
+        order_rows = list(order)
         rows_t: list[tuple[str, bytes, float | None]] = []
         gone_t: list[tuple[str]] = []
         rows_z: list[tuple[str, bytes, float | None]] = []
@@ -263,9 +258,17 @@ class Store:
                 rows_z.append((inp.zone, encode(inp.update), None if zttl is None else wall_now + zttl))
             elif isinstance(inp, ZoneRemoved):
                 gone_z.append((inp.zone,))
-        if not (rows_t or gone_t or rows_g or gone_g or rows_z or gone_z):
+        if not (rows_t or gone_t or rows_g or gone_g or rows_z or gone_z or order_rows):
             return
         with self._transaction() as db:
+            db.executemany("INSERT OR REPLACE INTO write_order VALUES (?, ?, ?, ?, ?)", order_rows)
+            self._order_commits += bool(order_rows)
+            if order_rows and self._order_commits % 1024 == 0:  # as many keys as the planner remembers
+                db.execute(
+                    "DELETE FROM write_order WHERE key NOT IN "
+                    "(SELECT key FROM write_order ORDER BY newest_t DESC LIMIT ?)",
+                    (ORDER_KEYS_MAX,),
+                )
             # a new goal or a cancel ends the old mission: its x0 and parameters no longer hold
             db.executemany("DELETE FROM missions WHERE unit = ?", [(u,) for u, _ in rows_g] + gone_g)
             db.executemany("INSERT OR REPLACE INTO threats VALUES (?, ?, ?)", rows_t)
@@ -297,15 +300,26 @@ class Store:
     def commit_batch(
         self, batch: list[Input], wall_now: float, default_ttl_s: float | None, mission: str
     ) -> list[Input]:
-        """``commit_inputs``, or, if the store fails, the batch with its goal and threat changes refused.
+        """``commit_writes`` without a write order: the batch to apply."""
+        return self.commit_writes(batch, wall_now, default_ttl_s, mission)[0]
 
-        Nothing is applied that was not committed: a refused change becomes an
-        ``InputRejected`` naming the storage error (disk full, read-only ...)
-        and the state file, and the rest goes on.
+    def commit_writes(
+        self,
+        batch: list[Input],
+        wall_now: float,
+        default_ttl_s: float | None,
+        mission: str,
+        order: Iterable[OrderRow] = (),
+    ) -> tuple[list[Input], str | None]:
+        """``commit_inputs``; the batch to apply, and why the store refused it (``None``: committed).
+
+        Nothing is applied that was not committed: if the store fails, each goal,
+        threat and zone change becomes an ``InputRejected`` naming the storage
+        error (disk full, read-only ...) and the state file, and the rest goes on.
         """
         try:
-            self.commit_inputs(batch, wall_now, default_ttl_s)
-            return batch
+            self.commit_inputs(batch, wall_now, default_ttl_s, order)
+            return batch, None
         except (OSError, sqlite3.Error) as exc:
             err = InputError("$", f"not stored: {describe(exc)}: {self.path}")
             self._complain("commit", err.reason)
@@ -319,7 +333,7 @@ class Store:
                     kept.append(InputRejected(keys.zone(mission, inp.zone), err))
                 else:
                     kept.append(inp)
-            return kept
+            return kept, err.reason
 
     def _complain(self, what: str, reason: str) -> None:
         # one warning line per distinct failure, not one per batch while the disk stays full
@@ -372,13 +386,13 @@ class Store:
         """
         try:
             try:
-                found = self._read(wall_now)
+                found = read_state(self._db, wall_now, self._transaction)
             except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:
                 if not _corrupt(exc):
                     raise
                 self._db.close()
                 self._db = self._recover(str(exc), wall_now)
-                found = self._read(wall_now)
+                found = read_state(self._db, wall_now, self._transaction)
         except (OSError, sqlite3.Error, UnicodeDecodeError) as exc:
             raise InputError(
                 "--state-dir", f"{self.path}: cannot read the state database: {describe(exc)}"
@@ -396,76 +410,6 @@ class Store:
         if corrupt:
             self._say(restored)
         return restored
-
-    def _read(self, wall_now: float) -> Restored:
-        db = self._db
-        inputs: list[Input] = []
-        bad: list[tuple[str, int, str, Any, str]] = []  # table, rowid, key, what was stored, why
-        expired = 0
-
-        def timed(table: str, kind: type[U], put: Callable[[str, U], Input]) -> int:
-            """The rows of a table of writes that expire (zones, threats), with the time each has left."""
-            nonlocal expired
-            n = 0
-            for rowid, key, body, expires_at in db.execute(f"SELECT rowid, * FROM {table} ORDER BY id"):
-                try:
-                    chunk = keys.check_chunk(key)
-                    update = decode(kind, body)
-                    if expires_at is not None:
-                        left = float(expires_at) - wall_now
-                        if left <= 0:
-                            expired += 1
-                            continue
-                        update = msgspec.structs.replace(update, ttl_s=left)
-                except _BAD_ROW as exc:
-                    bad.append((table, rowid, str(key), body, _why(exc)))
-                    continue
-                inputs.append(put(chunk, update))
-                n += 1
-            return n
-
-        n_zones = timed("zones", ZoneUpdate, ZonePut)
-        n_threats = timed("threats", ThreatUpdate, ThreatPut)
-        missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
-        for rowid, unit, _epoch, ox, oy, params in db.execute("SELECT rowid, * FROM missions"):
-            try:
-                missions[keys.check_chunk(unit)] = ((float(ox), float(oy)), Resolved(**json.loads(params)))
-            except _BAD_ROW as exc:
-                bad.append(("missions", rowid, str(unit), params, _why(exc)))
-        n_goals = n_missions = 0
-        for rowid, unit, body in db.execute("SELECT rowid, * FROM goals ORDER BY unit"):
-            try:
-                uid = keys.check_chunk(unit)
-                goal = decode(Goal, body)
-            except _BAD_ROW as exc:
-                bad.append(("goals", rowid, str(unit), body, _why(exc)))
-                continue
-            n_goals += 1
-            if uid in missions:
-                origin, params = missions[uid]
-                inputs.append(MissionRestored(uid, goal, origin, params))
-                n_missions += 1
-            else:
-                inputs.append(GoalSet(uid, goal))
-        if expired or bad:
-            with self._transaction() as tx:
-                for table in ("threats", "zones"):
-                    tx.execute(
-                        f"DELETE FROM {table} WHERE expires_at IS NOT NULL AND expires_at <= ?", (wall_now,)
-                    )
-                for (
-                    table,
-                    rowid,
-                    key,
-                    body,
-                    why,
-                ) in bad:  # kept, out of the way: a later start does not trip on it
-                    tx.execute(
-                        "INSERT INTO set_aside VALUES (?, ?, ?, ?, ?)", (table, key, body, why, wall_now)
-                    )
-                    tx.execute(f"DELETE FROM {table} WHERE rowid = ?", (rowid,))
-        skipped = tuple(f"{table}/{key}" for table, _r, key, _b, _w in bad)
-        return Restored(inputs, n_threats, n_goals, n_missions, expired, skipped=skipped, zones=n_zones)
 
     def _say(self, r: Restored) -> None:
         """The one warning line: what was set aside, where it went, and what was kept."""
@@ -497,7 +441,3 @@ class _Damaged(sqlite3.DatabaseError):
 
 def _pages(found: list[Any]) -> int:
     return len({m.group(1) for line in found for m in _PAGE.finditer(str(line))})
-
-
-def _why(exc: BaseException) -> str:
-    return str(exc) or type(exc).__name__

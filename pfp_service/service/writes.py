@@ -78,7 +78,7 @@ class Writes:
         self._wake = wake
         self._refused = refused
         self._waiting: collections.deque[Write] = collections.deque()
-        self._order = WriteOrder()
+        self.order = WriteOrder()  # the node settles it once the store has committed (or refused) a batch
 
     def declare(self, s: zenoh.Session, mission: str) -> list[Any]:
         """Subscribe to the goal, threat and zone keys, and serve them as acknowledged-write queryables."""
@@ -116,30 +116,37 @@ class Writes:
         superseded, never applied over the newer one.
         """
         acks: list[tuple[Write, str]] = []
+        self.order.settle(True)  # a batch of its own: nothing held from before
         for w in writes:
             if isinstance(w.input, InputRejected):
                 outcome = "rejected"  # never ordered: a bad write supersedes nothing
                 if w.query is None:
                     inbox.append(w.input)  # the rejected event comes from the put; the writer's ask hears why
             else:
-                outcome = self._order.admit(w.key, w.mark, w.received, asked=w.query is not None)
+                outcome = self.order.admit(w.key, w.mark, w.received, asked=w.query is not None)
                 if outcome == "applied":
                     inbox.append(w.input)
             if w.query is not None:
                 acks.append((w, outcome))
         return acks
 
-    def acknowledge(self, acks: list[tuple[Write, str]], applied: list[Input]) -> None:
-        """Answer each acknowledged-write query, once its write is committed and applied (or refused)."""
+    def acknowledge(self, acks: list[tuple[Write, str]], refused: str | None) -> None:
+        """Answer each acknowledged-write query, once its write is committed and applied (or refused).
+
+        ``refused``: why the store refused this batch.  Then only what the store already held is
+        acknowledged (a duplicate of a stored write, or one a stored write supersedes), against the
+        order as it was before the batch; every other write is ``rejected``, naming the cause.
+        """
         if not acks:
             return
-        kept = {id(inp) for inp in applied}
         for w, outcome in acks:
             reason = ""
             if isinstance(w.input, InputRejected):
                 reason = f"{w.input.error.path}: {w.input.error.reason}"
-            elif outcome == "applied" and id(w.input) not in kept:  # the store refused it
-                outcome, reason = "rejected", "not stored (see the planner's rejected event)"
+            elif refused is not None:
+                outcome = self.order.outcome(w.key, w.mark, w.received, asked=True)
+                if outcome == "applied":  # not stored: an explicit refusal, never "duplicate"
+                    outcome, reason = "rejected", refused
             ack = WriteAck(planner=self.cfg.planner_id, session=self.zid, outcome=outcome, reason=reason)  # type: ignore[arg-type]
             with contextlib.suppress(Exception):  # the writer gave up waiting: nothing to answer
                 w.query.reply(w.key, msgspec.json.encode(ack), encoding=_JSON)

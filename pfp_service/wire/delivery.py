@@ -36,7 +36,7 @@ import collections
 import contextlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -59,6 +59,7 @@ __all__ = [
 Outcome = Literal["applied", "duplicate", "superseded", "rejected"]
 MARK_MAX_BYTES = 256  # an attachment longer than this is no mark of ours
 ORDER_KEYS_MAX = 200_000  # keys whose last write a planner remembers; the oldest go first
+Order = tuple[float, str]  # a write's place: (the writer's Unix time, the writer)
 
 
 class WriteMark(msgspec.Struct, frozen=True, kw_only=True):
@@ -138,13 +139,15 @@ class WriteOrder:
 
     def __init__(self, max_keys: int = ORDER_KEYS_MAX) -> None:
         # key -> (the newest order seen, the order of the write last applied)
-        self._last: collections.OrderedDict[str, tuple[tuple[float, str], tuple[float, str]]] = (
-            collections.OrderedDict()
-        )
+        self._last: collections.OrderedDict[str, tuple[Order, Order]] = collections.OrderedDict()
         self._max = max_keys
+        self._undo: dict[str, tuple[Order, Order] | None] = {}  # each key's state before this batch
 
     def admit(self, key: str, mark: WriteMark | None, received_wall_s: float, asked: bool = False) -> Outcome:
         """Whether to apply a write: ``applied``, ``duplicate`` (already applied) or ``superseded``.
+
+        An ``applied`` write is held as this batch's until ``settle``: the store commits it, or the
+        order goes back to what it was, so it is never ahead of what is stored.
 
         Args:
             key: the goal or threat key.
@@ -152,22 +155,61 @@ class WriteOrder:
             received_wall_s: when it was received (Unix seconds): the order of a mark-less write.
             asked: it came as a query (asked again), not as a live put.
         """
-        order = mark.order() if mark is not None else (received_wall_s, "")
-        last = self._last.get(key)
-        if last is not None:
-            newest, applied = last
-            if order == applied:
-                return "duplicate"
-            if asked and order <= newest:
-                return "superseded"
-            newest = max(newest, order)
-        else:
-            newest = order
-        self._last[key] = (newest, order)
-        self._last.move_to_end(key)
-        if len(self._last) > self._max:
-            self._last.popitem(last=False)
-        return "applied"
+        outcome, state = _decide(self._last.get(key), _order_of(mark, received_wall_s), asked)
+        if state is not None:
+            if key not in self._undo:
+                self._undo[key] = self._last.get(key)
+            self._last[key] = state
+            self._last.move_to_end(key)
+            if len(self._last) > self._max:
+                self._last.popitem(last=False)
+        return outcome
+
+    def outcome(
+        self, key: str, mark: WriteMark | None, received_wall_s: float, asked: bool = True
+    ) -> Outcome:
+        """What ``admit`` would say now, changing nothing."""
+        return _decide(self._last.get(key), _order_of(mark, received_wall_s), asked)[0]
+
+    def batch_rows(self) -> list[tuple[str, float, str, float, str]]:
+        """The keys this batch changed, as the store keeps them: ``(key, newest t, writer, applied t, writer)``."""
+        return [(k, *self._last[k][0], *self._last[k][1]) for k in self._undo if k in self._last]
+
+    def settle(self, stored: bool) -> None:
+        """End the batch: its admissions stand if the store committed them, else they are undone."""
+        if not stored:
+            for key, before in self._undo.items():
+                if before is None:
+                    self._last.pop(key, None)
+                else:
+                    self._last[key] = before
+        self._undo.clear()
+
+    def load(self, rows: Iterable[tuple[str, float, str, float, str]]) -> None:
+        """The order a store kept (``batch_rows``' form), at a restart: an older write asked again
+        after it stays superseded, so it cannot undo an acknowledged delete."""
+        for key, nt, nw, at, aw in rows:
+            self._last[key] = ((float(nt), str(nw)), (float(at), str(aw)))
+            if len(self._last) > self._max:
+                self._last.popitem(last=False)
+
+
+def _order_of(mark: WriteMark | None, received_wall_s: float) -> Order:
+    return mark.order() if mark is not None else (received_wall_s, "")
+
+
+def _decide(
+    last: tuple[Order, Order] | None, order: Order, asked: bool
+) -> tuple[Outcome, tuple[Order, Order] | None]:
+    """The outcome of a write of ``order`` on a key whose state is ``last``, and the key's new state."""
+    if last is None:
+        return "applied", (order, order)
+    newest, applied = last
+    if order == applied:
+        return "duplicate", None
+    if asked and order <= newest:
+        return "superseded", None
+    return "applied", (max(newest, order), order)
 
 
 def describe_key(key: str) -> str:

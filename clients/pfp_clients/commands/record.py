@@ -109,12 +109,17 @@ def run_record(args: argparse.Namespace) -> int:
 def run_replay(args: argparse.Namespace) -> int:
     from pfp_clients.common import open_session_waiting
     from pfp_clients.record.mcapfile import read_record
-    from pfp_clients.record.replay import replay, result_lines
+    from pfp_clients.record.replay import replay, replay_inputs, result_lines
     from pfp_service.cli._common import session_config
+    from pfp_service.errors import InputError
     from pfp_service.signals import SignalStop
 
     rec = read_record(args.record)
     mission = args.mission or rec.mission
+    try:
+        replay_inputs(rec, mission)  # refused before a session is opened
+    except InputError as err:
+        raise (InputError(Path(args.record).name, err.reason) if err.path == "record" else err) from None
     conf = session_config(args)
     with SignalStop() as stopping:
         session = open_session_waiting(conf, print, stopping.event)

@@ -36,6 +36,13 @@ Every request, the WebSocket included, must name a host this server serves
 in its ``Host`` header (``host_allowed``), or it gets 421 and an empty body:
 a DNS-rebinding page (evil.example resolved to 127.0.0.1) reaches the port
 but names its own host, so it can neither read the mission nor edit it.
+
+A WebSocket is not bound by the same-origin policy: any page the operator has
+open may connect to ``ws://127.0.0.1:PORT/ws`` with the right ``Host`` and read
+the live picture.  So ``/ws`` also checks ``Origin`` (``origin_allowed``): a
+browser always sends it, and it must be this server's own origin (the ``Host``
+the request names); another origin gets 403 before the upgrade.  A client that
+is no browser sends no ``Origin`` and is let in, as ``/api/state`` lets it in.
 """
 
 from __future__ import annotations
@@ -62,7 +69,7 @@ from pfp_service.geo import Origin
 from pfp_service.wire import decode_goal, decode_threat, keys
 from pfp_service.wire.messages import decode_zone
 
-__all__ = ["STATIC_DIR", "MapOptions", "MapServer", "host_allowed", "serve"]
+__all__ = ["STATIC_DIR", "MapOptions", "MapServer", "host_allowed", "origin_allowed", "serve"]
 
 log = logging.getLogger("pfp.map")
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -87,6 +94,20 @@ def _ip(name: str) -> ipaddress.IPv4Address | ipaddress.IPv6Address | None:
         return ipaddress.ip_address(name)
     except ValueError:
         return None
+
+
+def origin_allowed(origin: str | None, host: str | None) -> bool:
+    """Whether a WebSocket's ``Origin`` is this server's own: none (no browser), or ``http(s)://{Host}``."""
+    if origin is None:
+        return True
+    scheme, sep, rest = origin.strip().partition("://")
+    if not sep or scheme.lower() not in ("http", "https") or host is None:
+        return False  # "null" (a sandboxed frame, a file:// page) or garbage: no origin of ours
+    return _host_port(rest) == _host_port(host)
+
+
+def _host_port(netloc: str) -> str:
+    return netloc.strip().lower().rstrip("/").replace(".:", ":").rstrip(".")
 
 
 def host_allowed(header: str | None, bind_host: str, extra: Iterable[str] = ()) -> bool:
@@ -176,6 +197,7 @@ class MapServer:
         self.tick_ms_max = 0.0
         self.tick_ms_total = 0.0
         self.refused_hosts = 0
+        self.refused_origins = 0
 
     # -- the pump --------------------------------------------------------------------
     def config_view(self) -> dict[str, Any]:
@@ -202,6 +224,7 @@ class MapServer:
             "tick_ms_max": self.tick_ms_max,
             "frames_sent": self.frames_sent,
             "refused_hosts": self.refused_hosts,
+            "refused_origins": self.refused_origins,
             "browsers": len(self._browsers),
             "units": len(self.model.units),
             "threats": len(self.model.threats),
@@ -309,7 +332,16 @@ class MapServer:
     async def _stats(self, request: web.Request) -> web.Response:
         return web.json_response(self.stats())
 
-    async def _ws(self, request: web.Request) -> web.WebSocketResponse:
+    async def _ws(self, request: web.Request) -> web.StreamResponse:
+        origin = request.headers.get("Origin")
+        if not origin_allowed(origin, request.headers.get("Host")):
+            self.refused_origins += 1
+            if self.refused_origins <= 10:
+                log.warning(
+                    "map: refused a WebSocket from origin %r (not this map's page)",
+                    origin[:80] if origin else "",
+                )
+            return web.Response(status=403, text="cross-origin WebSocket refused")
         ws = web.WebSocketResponse(heartbeat=20.0)
         await ws.prepare(request)
         browser = _Browser(ws)

@@ -20,11 +20,14 @@ Log times are the recorder's wall clock at receipt, in nanoseconds.
 from __future__ import annotations
 
 import json
+import os
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
+from pfp_service.bounds import limit
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
@@ -43,6 +46,7 @@ DELETED_TOPIC = "/pfp/deleted"
 ALIVE_TOPIC = "/pfp/alive"
 FIX_PREFIX = "/pfp/fix/"
 METADATA = "pfp"
+_CLOCK_SLACK_NS = 3600 * 10**9  # recorders' clocks may run an hour ahead of this machine's
 COVERAGE = "pfp.coverage"
 PROFILE = ""  # no ROS profile: plain JSON with JSON Schema, which Foxglove reads as it is
 
@@ -207,49 +211,92 @@ class Record:
     coverage: dict[str, object] | None = None  # None: a record made before pfp.coverage
 
 
-def read_record(path: str | Path) -> Record:
-    """Read a whole record, checking every chunk's CRC.
+def read_record(path: str | Path, now_ns: int | None = None) -> Record:
+    """Read a whole record, checking every chunk's CRC, within the bounds of ``mcapcheck``.
+
+    The chunks' headers are checked first (``mcapcheck.check_record``); the file is then read in
+    order, as checked, and its messages counted against ``mcap_messages``.
 
     Raises:
-        InputError: naming the file: unreadable, not MCAP, damaged, or not made by ``pfp record``.
+        InputError: naming the file: unreadable, not MCAP, damaged, past a bound, or not made by
+            ``pfp record``.
     """
     from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+    from mcap.records import Channel, Message, Metadata
+    from mcap.stream_reader import StreamReader
+
+    from pfp_clients.record.mcapcheck import check_record
 
     p = Path(path)
     mission, origin = "", None
     coverage: dict[str, object] | None = None
     entries: list[Entry] = []
     alive: list[tuple[int, str, bool]] = []
+    topics: dict[int, str] = {}
+    most = limit("mcap_messages")
     try:
         with p.open("rb") as f:
-            reader = make_reader(f, validate_crcs=True)
-            for meta in reader.iter_metadata():
-                if meta.name == METADATA:
-                    mission = meta.metadata.get("mission", "")
-                    if "origin" in meta.metadata:
-                        o = json.loads(meta.metadata["origin"])
-                        origin = Origin(lat=o["lat"], lon=o["lon"], alt=o.get("alt", 0.0))
-                elif meta.name == COVERAGE:
-                    coverage = {k: json.loads(v) for k, v in meta.metadata.items()}
-            for _schema, channel, msg in reader.iter_messages(log_time_order=True):
-                topic = channel.topic
-                if topic == DELETED_TOPIC:
-                    entries.append(Entry(msg.log_time, json.loads(msg.data)["key"], None))
-                elif topic == ALIVE_TOPIC:
-                    a = json.loads(msg.data)
-                    alive.append((msg.log_time, a["key"], bool(a["alive"])))
-                elif topic.startswith(FIX_PREFIX):
-                    continue
-                else:
-                    entries.append(Entry(msg.log_time, topic.lstrip("/"), bytes(msg.data)))
+            check_record(f, os.fstat(f.fileno()).st_size, p.name)
+            f.seek(0)
+            reader = StreamReader(f, validate_crcs=True, record_size_limit=limit("mcap_chunk_bytes") + 4096)
+            count = 0
+            for rec in reader.records:
+                if isinstance(rec, Channel):
+                    topics[rec.id] = rec.topic
+                elif isinstance(rec, Metadata):
+                    if rec.name == METADATA:
+                        mission = rec.metadata.get("mission", "")
+                        if "origin" in rec.metadata:
+                            o = json.loads(rec.metadata["origin"])
+                            origin = Origin(lat=o["lat"], lon=o["lon"], alt=o.get("alt", 0.0))
+                    elif rec.name == COVERAGE:
+                        coverage = {k: json.loads(v) for k, v in rec.metadata.items()}
+                elif isinstance(rec, Message):
+                    count += 1
+                    if count > most:
+                        raise InputError(p.name, f"holds more than {most:,} messages (mcap_messages)")
+                    _take(rec, topics[rec.channel_id], entries, alive)
     except OSError as exc:
         raise InputError(p.name, f"cannot read: {exc.strerror or exc}") from None
-    except (McapError, ValueError, KeyError, EOFError) as exc:
+    except (McapError, ValueError, KeyError, EOFError, TypeError) as exc:
         raise InputError(p.name, f"not a readable mission record: {exc}") from None
     if not mission:
         raise InputError(p.name, "not a mission record of pfp record (no 'pfp' metadata)")
+    entries.sort(key=lambda e: e.t_ns)  # log-time order, stable as the reader's was
+    alive.sort(key=lambda a: a[0])
+    _check_times(
+        p.name, [e.t_ns for e in entries[:1] + entries[-1:]] + [a[0] for a in alive[:1] + alive[-1:]], now_ns
+    )
     return Record(mission, origin, entries, alive, coverage)
+
+
+def _check_times(name: str, ends_ns: list[int], now_ns: int | None) -> None:
+    """Refuse log times after ``now_ns`` (plus a clock's slack) or spanning more than ``mcap_span_s``:
+    a replay waits out the recorded clock, so a far-future time would hold it until signalled."""
+    if not ends_ns:
+        return
+    now = time.time_ns() if now_ns is None else now_ns
+    latest, span_s = max(ends_ns), (max(ends_ns) - min(ends_ns)) / 1e9
+    if latest > now + _CLOCK_SLACK_NS:
+        when = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(min(latest / 1e9, 253402300799)))
+        raise InputError(
+            name, f"a message's log time ({when}) is in the future; a recorder logs its receipt time"
+        )
+    if span_s > limit("mcap_span_s"):
+        raise InputError(
+            name, f"log times span {span_s:,.0f} s; the limit is {limit('mcap_span_s'):,} s (mcap_span_s)"
+        )
+
+
+def _take(msg: Any, topic: str, entries: list[Entry], alive: list[tuple[int, str, bool]]) -> None:
+    """One message of the record, into the entries or the liveliness list (derived fixes left out)."""
+    if topic == DELETED_TOPIC:
+        entries.append(Entry(msg.log_time, json.loads(msg.data)["key"], None))
+    elif topic == ALIVE_TOPIC:
+        a = json.loads(msg.data)
+        alive.append((msg.log_time, a["key"], bool(a["alive"])))
+    elif not topic.startswith(FIX_PREFIX):
+        entries.append(Entry(msg.log_time, topic.lstrip("/"), bytes(msg.data)))
 
 
 def iter_kind(rec: Record, kind: keys.KeyKind) -> Iterator[tuple[Entry, keys.Key]]:

@@ -40,7 +40,7 @@ from pfp_clients.record.mcapfile import Entry, Record
 from pfp_service.errors import InputError
 from pfp_service.wire import keys
 
-__all__ = ["ANGLE_TOL_DEG", "Difference", "ReplayResult", "compare", "replay"]
+__all__ = ["ANGLE_TOL_DEG", "Difference", "ReplayResult", "compare", "replay", "replay_inputs"]
 
 ANGLE_TOL_DEG = 1e-3  # a direction's vector is the same when it turns less than this
 _WRITES = {keys.KeyKind.UNIT_GOAL, keys.KeyKind.THREAT} | {
@@ -202,9 +202,44 @@ def compare(
     return out
 
 
-def _retarget(key: str, old: str, new: str) -> str:
-    head = f"{keys.PREFIX}/{old}/"
-    return f"{keys.PREFIX}/{new}/" + key[len(head) :] if key.startswith(head) else key
+def replay_inputs(rec: Record, mission: str) -> list[tuple[Entry, keys.Key, str]]:
+    """The record's inputs, each with the key it is put on in ``mission``: only ever a key of ``mission``.
+
+    Raises:
+        InputError: at ``--mission``, a bad mission; naming the record's mission, when the record holds
+            an input or a liveliness token of another mission (a replay retargets only its own).
+    """
+    m = keys.check_chunk(mission, "--mission")
+    kinds = _input_kinds()
+    head = f"{keys.PREFIX}/{rec.mission}/"
+    out: list[tuple[Entry, keys.Key, str]] = []
+    foreign: list[str] = []
+    for e in rec.entries:
+        try:
+            k = keys.parse(e.key)
+        except InputError:
+            continue
+        if k.kind not in kinds:
+            continue
+        if k.mission != rec.mission or not e.key.startswith(head):
+            foreign.append(e.key)
+            continue
+        target = f"{keys.PREFIX}/{m}/" + e.key[len(head) :]
+        if keys.parse(target).mission != m:  # pragma: no cover - the prefix swap keeps the layout
+            foreign.append(e.key)
+            continue
+        out.append((e, k, target))
+    for _t, akey, _up in rec.alive:
+        with contextlib.suppress(InputError):
+            if keys.parse(akey).mission != rec.mission:
+                foreign.append(akey)
+    if foreign:
+        raise InputError(
+            "record",
+            f"{len(foreign)} inputs are on missions other than the record's own {rec.mission!r} "
+            f"(the first: {foreign[0]}); pfp replay writes only to its mission ({m!r}) and refuses them",
+        )
+    return out
 
 
 def replay(
@@ -225,15 +260,7 @@ def replay(
     from pfp_service.wire.delivery import Deliverer
 
     m = keys.check_chunk(mission, "--mission")
-    kinds = _input_kinds()
-    inputs: list[tuple[Entry, keys.Key]] = []
-    for e in rec.entries:
-        try:
-            k = keys.parse(e.key)
-        except InputError:
-            continue
-        if k.kind in kinds:
-            inputs.append((e, k))
+    inputs = replay_inputs(rec, m)
     answers: dict[tuple[str, int], Answer] = {}
     delib: dict[str, bool] = {}
     recorded = recorded_answers(rec)
@@ -271,7 +298,7 @@ def replay(
                 answered.add(got.get_nowait())
 
     try:
-        for e, k in inputs:
+        for e, k, key in inputs:
             if stop.is_set():
                 break
             due = wall0 + lag_s + (e.t_ns - t_first) / 1e9 / speed_up
@@ -281,13 +308,12 @@ def replay(
                 _t, akey, up = alive[ai]
                 ai += 1
                 ak = keys.parse(akey)
-                if ak.kind is not keys.KeyKind.ALIVE_UNIT:
+                if ak.kind is not keys.KeyKind.ALIVE_UNIT or ak.mission != rec.mission:
                     continue
                 if up and ak.id not in tokens:
                     tokens[ak.id] = session.liveliness().declare_token(keys.alive_unit(m, ak.id))
                 elif not up and ak.id in tokens:
                     tokens.pop(ak.id).undeclare()
-            key = _retarget(e.key, rec.mission, m)
             if k.kind in _WRITES:
                 if e.data is None:
                     writes.delete(key)

@@ -45,9 +45,11 @@ import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from xml.parsers import expat
 
 __all__ = [
     "MAX_EVENT_BYTES",
+    "MAX_UID_CHARS",
     "UID_PREFIX",
     "CotError",
     "CotEvent",
@@ -69,6 +71,7 @@ __all__ = [
 ]
 
 MAX_EVENT_BYTES = 64 * 1024
+MAX_UID_CHARS = 200  # TAK's uids are a UUID or a callsign and a UUID; a tombstone file stays bounded
 # Every uid this bridge sends starts so; inbound events with it are our own echo and are ignored.
 UID_PREFIX = "pfp."
 _ID_OK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -178,6 +181,36 @@ def _number(text: str | None, what: str, lo: float, hi: float) -> float:
     return v
 
 
+def _no_dtd(*_args: object) -> int:
+    raise CotError("DTDs and entities are not accepted")
+
+
+def _parse(data: bytes) -> ET.Element:
+    """The XML tree of ``data``, by expat with every DTD refused at its first declaration.
+
+    CoT has no DTD.  A byte filter for ``<!DOCTYPE`` misses the same words in UTF-16 (expat reads
+    its BOM); the parser sees them whatever the encoding, so no entity is ever declared and a
+    reference to one (``&u;``) is an error, never an expansion.
+    """
+    parser = expat.ParserCreate()
+    builder = ET.TreeBuilder()
+    parser.StartElementHandler = builder.start
+    parser.EndElementHandler = builder.end
+    parser.CharacterDataHandler = builder.data
+    parser.StartDoctypeDeclHandler = _no_dtd
+    parser.EntityDeclHandler = _no_dtd
+    parser.UnparsedEntityDeclHandler = _no_dtd
+    parser.ExternalEntityRefHandler = _no_dtd
+    try:
+        parser.Parse(data, True)
+        root = builder.close()
+    except expat.ExpatError as exc:
+        raise CotError(f"not XML: {exc}") from None
+    except (AssertionError, IndexError):  # TreeBuilder: a document with no root element
+        raise CotError("not XML: no element") from None
+    return root
+
+
 def read_event(data: bytes) -> CotEvent:
     """Parse one CoT ``<event>``.
 
@@ -186,17 +219,14 @@ def read_event(data: bytes) -> CotEvent:
     """
     if len(data) > MAX_EVENT_BYTES:
         raise CotError(f"event of {len(data)} bytes exceeds {MAX_EVENT_BYTES}")
-    if b"<!DOCTYPE" in data or b"<!ENTITY" in data:  # CoT has no DTD; refuse entity expansion outright
-        raise CotError("DTDs and entities are not accepted")
-    try:
-        root = ET.fromstring(data)
-    except ET.ParseError as exc:
-        raise CotError(f"not XML: {exc}") from None
+    root = _parse(data)
     if root.tag != "event":
         raise CotError(f"expected <event>, got <{root.tag[:40]}>")
     uid, typ = root.get("uid"), root.get("type")
     if not uid or not typ:
         raise CotError("event: uid and type are required")
+    if len(uid) > MAX_UID_CHARS:  # a bridge keeps uids (tombstones): each is bounded
+        raise CotError(f"event: uid of {len(uid):,} characters; the limit is {MAX_UID_CHARS}")
     point = root.find("point")
     if point is None:
         raise CotError("event: <point> is required")
@@ -214,6 +244,8 @@ def read_event(data: bytes) -> CotEvent:
         if track is not None and track.get("course") not in (None, ""):
             course = _number(track.get("course"), "track.course", -360.0, 360.0) % 360.0
         links = tuple(link.get("uid", "") for link in detail.findall("link"))
+        if any(len(u) > MAX_UID_CHARS for u in links):  # a delete's target becomes a tombstone's uid
+            raise CotError(f"link uid longer than {MAX_UID_CHARS} characters")
         contact = detail.find("contact")
         callsign = (contact.get("callsign") or "") if contact is not None else ""
         if typ in SHAPE_TYPES:

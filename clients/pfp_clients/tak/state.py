@@ -39,6 +39,7 @@ import msgspec
 import numpy as np
 
 from pfp_clients.tak import cot
+from pfp_clients.tak.tombs import Tombstone, Tombstones
 from pfp_service import geo
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
@@ -107,14 +108,6 @@ class Outputs:
 
 
 @dataclass(frozen=True, slots=True)
-class Tombstone:
-    """A deleted marker: versions sent at or before ``after`` are refused until ``until`` (Unix s)."""
-
-    after: float
-    until: float
-
-
-@dataclass(frozen=True, slots=True)
 class _Marker:
     """A hostile marker TAK gave us: its uid, and the send and stale times of its latest version."""
 
@@ -123,7 +116,6 @@ class _Marker:
     stale: float
 
 
-MAX_TOMBSTONES = 10_000  # a flood of deletes costs memory up to here; the oldest-ending go first
 MAX_DEVICES = 10_000
 
 
@@ -155,12 +147,11 @@ class BridgeState:
         self.log = log
         self.limiter = cot.RateLimiter(settings.rate_s)
         self.from_tak: dict[str, _Marker] = {}  # threat id -> its marker, for threats TAK gave us
-        self.tombstones: dict[str, Tombstone] = {}  # marker uid -> what a replay must not revive
+        self.tombs = Tombstones(log)  # marker uid -> what a replay must not revive (tombs.py)
         self.devices: dict[str, float] = {}  # TAK device uid -> when last heard
         self._announce_due: dict[str, float] = {}  # link -> when it gets the whole picture
         self._announced: dict[str, float] = {}  # link -> when it last got it
         self.refused_replays = 0
-        self.tombstones_version = 0  # bumped on every change: the driver saves them when it moves
         self._last_forget = -1e18
         self.threats: dict[str, m.ThreatUpdate] = {}  # threats we show in TAK
         self.zones: dict[str, m.ZoneUpdate] = {}  # the planner's zones we show in TAK (in metres)
@@ -210,25 +201,19 @@ class BridgeState:
         return out
 
     # -- tombstones ----------------------------------------------------------------
-    def _bury(self, uid: str, after: float, until: float, now: float) -> None:
-        if until <= now:
-            return
-        old = self.tombstones.get(uid)
-        if old is not None:
-            after, until = max(after, old.after), max(until, old.until)
-        self.tombstones[uid] = Tombstone(after, until)
-        self.tombstones_version += 1
-        if len(self.tombstones) > MAX_TOMBSTONES:
-            first = min(self.tombstones, key=lambda k: self.tombstones[k].until)
-            del self.tombstones[first]
+    @property
+    def tombstones(self) -> dict[str, Tombstone]:
+        return self.tombs.by_uid
+
+    @property
+    def tombstones_version(self) -> int:
+        return self.tombs.version
 
     def _forget(self, now: float) -> None:
         if now - self._last_forget < 1.0:
             return  # a scan a second is plenty for what lives minutes
         self._last_forget = now
-        for uid in [u for u, t in self.tombstones.items() if t.until <= now]:
-            del self.tombstones[uid]
-            self.tombstones_version += 1
+        self.tombs.expire(now)
         for uid in [u for u, t in self.devices.items() if now - t >= self.s.device_forget_s]:
             del self.devices[uid]
         for tid in [i for i, mk in self.from_tak.items() if mk.stale <= now]:
@@ -239,7 +224,7 @@ class BridgeState:
     def restore_tombstones(self, saved: dict[str, Tombstone], now: float) -> None:
         """Tombstones kept from an earlier run (the driver loads them); expired ones are dropped."""
         for uid, t in saved.items():
-            self._bury(uid, t.after, t.until, now)
+            self.tombs.bury(uid, t.after, t.until, now, t.source)
 
     # -- TAK -> planner --------------------------------------------------------
     def on_cot(self, data: bytes, now: float, source: str = "TAK") -> Outputs:
@@ -260,25 +245,23 @@ class BridgeState:
             drawn = self.zones_from_tak.pop(change.id, None)
             if drawn is not None:  # a shape deleted (or gone stale): its zone goes
                 out.zenoh.append(ZenohDelete(keys.zone(self.s.mission, change.id)))
-                self._bury(change.uid, max(ev.time, drawn.time), max(ev.stale, drawn.stale), now)
+                self.tombs.bury(change.uid, max(ev.time, drawn.time), max(ev.stale, drawn.stale), now, source)
             elif seen is not None:
                 out.zenoh.append(ZenohDelete(keys.threat(self.s.mission, change.id)))
-                self._bury(change.uid, max(ev.time, seen.time), max(ev.stale, seen.stale), now)
+                self.tombs.bury(change.uid, max(ev.time, seen.time), max(ev.stale, seen.stale), now, source)
             else:
-                self._bury(change.uid, ev.time, max(ev.stale, now + self.s.tombstone_s), now)
+                self.tombs.bury(change.uid, ev.time, max(ev.stale, now + self.s.tombstone_s), now, source)
             return out
         if change is None:
             return out
-        tomb = self.tombstones.get(change.uid)
+        tomb = self.tombs.get(change.uid)
         if tomb is not None:
             if ev.time <= tomb.after:
                 self.refused_replays += 1  # the server's copy of a deleted marker
                 if ev.stale > tomb.until:
-                    self.tombstones[change.uid] = Tombstone(tomb.after, ev.stale)
-                    self.tombstones_version += 1
+                    self.tombs.extend(change.uid, ev.stale)
                 return out
-            del self.tombstones[change.uid]  # sent after the delete: a new marker
-            self.tombstones_version += 1
+            self.tombs.lift(change.uid)  # sent after the delete: a new marker
         if isinstance(change, cot.ZonePut):
             return self._zone_from_tak(change, ev, now, source)
         body = dict(change.body)

@@ -3,9 +3,13 @@
 A TAK server keeps every marker until its stale time and replays it on each
 connection, deletes or not; the tombstones (``state.Tombstone``) are what
 refuses those replays.  In memory they survive a link's reconnect; in this
-file they survive the process.  One JSON object, ``{uid: [after, until]}``
-(Unix seconds), written whole to a temporary file and renamed over the old
-one, so a crash leaves the old file or the new one, never half of either.
+file they survive the process.  One JSON object, ``{uid: [after, until, source]}``
+(Unix seconds; ``source`` may be missing in an older file), written whole to a
+temporary file and renamed over the old one, so a crash leaves the old file or
+the new one, never half of either.  It stays within the size ``load`` reads by
+construction: at most ``MAX_TOMBSTONES`` entries, each uid at most
+``cot.MAX_UID_CHARS`` characters and each source at most ``MAX_SOURCE_CHARS``
+(``_MAX_BYTES`` is checked against that at import).
 
 A file that cannot be read (damaged, not ours) is moved aside as
 ``<name>.corrupt-<unix s>`` and the bridge starts without it; every failure
@@ -23,12 +27,19 @@ from pathlib import Path
 
 import msgspec
 
-from pfp_clients.tak.state import BridgeState, Tombstone
+from pfp_clients.tak.cot import MAX_UID_CHARS
+from pfp_clients.tak.state import BridgeState
+from pfp_clients.tak.tombs import MAX_TOMBSTONES, Tombstone
+from pfp_service.service.statefile import FILE_MODE, private_dir
 
 __all__ = ["FILE_NAME", "Keeper", "Loaded", "load", "save"]
 
 FILE_NAME = "tak-tombstones.json"
-_MAX_BYTES = 16 * 1024 * 1024  # far above MAX_TOMBSTONES entries; more is not our file
+_MAX_BYTES = 16 * 1024 * 1024  # the most a file of ours can be (below); more is not our file
+MAX_SOURCE_CHARS = 64  # a link's name as the bridge gives it; longer is cut in the file
+# every character JSON-escaped (6 bytes), two floats of up to 24 characters, and the punctuation
+_ENTRY_MAX_BYTES = 6 * (MAX_UID_CHARS + MAX_SOURCE_CHARS) + 2 * 24 + 16
+assert MAX_TOMBSTONES * _ENTRY_MAX_BYTES + 2 <= _MAX_BYTES, "a full tombstone file would be set aside"
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,12 +51,15 @@ class Loaded:
 
 
 def _decode(data: bytes) -> dict[str, Tombstone]:
-    raw = msgspec.json.decode(data, type=dict[str, tuple[float, float]])
+    raw = msgspec.json.decode(data, type=dict[str, list[float | str]])
     out = {}
-    for uid, (after, until) in raw.items():
-        if not (uid and math.isfinite(after) and math.isfinite(until)):
+    for uid, entry in raw.items():
+        if len(entry) not in (2, 3) or not all(isinstance(v, float | int) for v in entry[:2]):
+            raise ValueError(f"{uid!r}: not [after, until] or [after, until, source]")
+        after, until, source = float(entry[0]), float(entry[1]), entry[2] if len(entry) == 3 else ""
+        if not (uid and math.isfinite(after) and math.isfinite(until) and isinstance(source, str)):
             raise ValueError(f"{uid!r}: not a uid with two finite times")
-        out[uid] = Tombstone(after, until)
+        out[uid] = Tombstone(after, until, source)
     return out
 
 
@@ -78,11 +92,13 @@ def _set_aside(path: Path, now: float, reason: str) -> str:
 
 def save(path: Path, tombstones: dict[str, Tombstone]) -> str | None:
     """Write ``tombstones`` to ``path`` atomically; returns None, or one line saying why not."""
-    data = msgspec.json.encode({uid: (t.after, t.until) for uid, t in tombstones.items()})
+    data = msgspec.json.encode(
+        {uid: (t.after, t.until, t.source[:MAX_SOURCE_CHARS]) for uid, t in tombstones.items()}
+    )
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as f:
+        private_dir(path.parent)  # the mission's state: its owner's only (0700, the file 0600)
+        with open(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, FILE_MODE), "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from pfp_service.wire.messages.codec import (
     check_bounds,
+    check_extent,
     decode,
     decode_direction,
     decode_error_reply,
@@ -135,6 +136,7 @@ __all__ = [
     "ZoneSummary",
     "ZoneUpdate",
     "check_bounds",
+    "check_extent",
     "decode",
     "decode_direction",
     "decode_error_reply",

@@ -6,6 +6,7 @@ Every decoder checks the size, the types and every bound, and raises
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -13,7 +14,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import msgspec
 
 from pfp_service.errors import InputError, from_validation
-from pfp_service.geo import LatLon, localise
+from pfp_service.geo import MAX_RANGE_M, LatLon, localise
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
@@ -48,6 +49,7 @@ from pfp_service.wire.messages.structs import (
 
 __all__ = [
     "check_bounds",
+    "check_extent",
     "decode",
     "decode_direction",
     "decode_error_reply",
@@ -201,6 +203,8 @@ def decode(
         raise InputError("$", f"cannot decode: {type(exc).__name__}: {exc}"[:200]) from exc
     if bounds is not None:
         check_bounds(msg, bounds)
+    if origin is not None:
+        check_extent(msg, MAX_RANGE_M)
     return msg
 
 
@@ -273,6 +277,25 @@ def check_bounds(msg: object, bounds: Bounds) -> None:
         if not (x0 <= x <= x1 and y0 <= y <= y1):
             raise InputError(
                 path, f"[{x:g}, {y:g}] lies outside the mission bounds [[{x0:g}, {y0:g}], [{x1:g}, {y1:g}]]"
+            )
+
+
+def check_extent(msg: object, radius_m: float) -> None:
+    """Check that every position in ``msg`` lies within ``radius_m`` of the mission origin.
+
+    With an origin the mission is a patch of the earth, and the plane is a map of it only to
+    ``geo.MAX_RANGE_M`` (50 km): a goal 7,000 km away, given in metres, is no place on it.
+
+    Raises:
+        InputError: the first position beyond, with its path.
+    """
+    for path, (x, y) in _positions(msg):
+        d = math.hypot(x, y)
+        if d > radius_m:
+            raise InputError(
+                path,
+                f"[{x:g}, {y:g}] is {d / 1000:,.1f} km from the mission origin; "
+                f"the mission's plane reaches {radius_m / 1000:g} km",
             )
 
 
