@@ -207,6 +207,11 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         ([{"threat": "t1", "change": "moved"}], "[0].change", "matching regex"),
         ([{"change": "put"}], "[0].threat", "is required"),
     ],
+    "texts": [
+        ("p1", "", "expected array, got str"),
+        ([3], "[0]", "expected str"),
+        (["p"] * 65, "", "length must be <= 64"),
+    ],
     "ids": [
         ("u1", "", "expected array, got str"),
         (["ok", "a b"], "[1]", "matching regex"),
@@ -308,6 +313,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "origin": ("origin", OPT),
         "latency_p50_ms": ("nonneg", OPT),
         "latency_p99_ms": ("nonneg", OPT),
+        "twins": ("texts", DEF),
     },
     "event.rejected": {
         **EVENT_FIELDS,
