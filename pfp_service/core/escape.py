@@ -72,6 +72,7 @@ from pfp_service.core.escape_strategies import (
     global_corners,
     rollout,
 )
+from pfp_service.core.foresight import coarser
 from pfp_service.core.grid import polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
@@ -79,9 +80,10 @@ from pfp_service.core.route import NO_POINTS, EscapeRun, legs, path_length
 from pfp_service.core.threat import ThreatField
 from pfp_service.core.tracking import Route
 
-__all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "Escaper"]
+__all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "TRAP_BUDGET", "Escaper"]
 
 MAX_TRAPS = 12
+TRAP_BUDGET = 8000  # most steps a strategy walks from a trap
 AUTO_MARGIN = 0.05  # "clearly cheaper": a dearer way is taken only when it saves more than 5 % of J
 HANDOFF_STEPS = 4.0  # an escape ending this many steps from the goal steers on to it
 
@@ -305,20 +307,32 @@ class Escaper:
         near = math.hypot(gx - ex, gy - ey) <= HANDOFF_STEPS * tr.step
         to_goal = bool(near and not tr.cores.first_hit(np.array([(ex, ey), (gx, gy)])))
         tail = np.array([(ex, ey), (gx, gy)]) if to_goal and (ex, ey) != (gx, gy) else None
-        if corners is None:
+        step = self.params.step  # the unit's own: a trap searched coarser (``_trap``) is walked at it
+        if corners is None and tr.step == step:
             if tail is not None:
-                path = np.concatenate([path, resample(tail, tr.step)[1:]])
-            return EscapeRun(name, path, tr.step, to_goal)
-        segs = legs(corners, tr.step)
+                path = np.concatenate([path, resample(tail, step)[1:]])
+            return EscapeRun(name, path, step, to_goal)
+        segs = legs(path if corners is None else corners, step)
         if tail is not None:
-            more = legs(tail, tr.step)
+            more = legs(tail, step)
             more[:, 4] += segs[-1, 4]
             segs = np.concatenate([segs, more])
-        return EscapeRun(name, NO_POINTS, tr.step, to_goal, segs=segs)
+        return EscapeRun(name, NO_POINTS, step, to_goal, segs=segs)
 
     def _trap(self, field: ThreatField, x: float, y: float) -> Trap:
+        """The trap at ``(x, y)`` as the strategies search it.
+
+        Their walks are counted in steps (at most ``TRAP_BUDGET``): a step so
+        fine that six times the distance to the goal would not fit is searched
+        at the coarser step that fits, as the look-ahead is
+        (``foresight.resolution``), so an escape found at the default step is
+        found at a hundredth of it too; the committed run is walked at the
+        unit's own step (``_made``).
+        """
         p = self.params
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
+        if math.isfinite(dist) and 6.0 * dist > TRAP_BUDGET * p.step:
+            p = coarser(p, 6.0 * dist / TRAP_BUDGET)
         return Trap(
             field=field,
             cores=Cores.of(field),
@@ -332,7 +346,9 @@ class Escaper:
             trap_window=p.trap_window,
             dist=dist,
             margin=max(4.0 * p.step, 0.05 * dist),
-            budget=int(min(8000, max(10 * p.trap_window, math.ceil(min(6.0 * dist / p.step, 8000.0))))),
+            budget=int(
+                min(TRAP_BUDGET, max(10 * p.trap_window, math.ceil(min(6.0 * dist / p.step, TRAP_BUDGET))))
+            ),
             bounds=self.bounds,
             rng=np.random.default_rng([p.seed & 0xFFFFFFFF, self.unit_key & 0xFFFFFFFF, self.traps]),
             unit_key=self.unit_key,

@@ -37,7 +37,7 @@ from pfp_service.core import cull, kernels, steprule
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["FORESIGHT_MAX_STEPS", "Foresight", "Outcome", "resolution", "simulate"]
+__all__ = ["FORESIGHT_MAX_STEPS", "Foresight", "Outcome", "coarser", "resolution", "simulate"]
 
 FORESIGHT_MAX_STEPS = 20_000
 STEPS_PER_LENGTH = 4.0  # a descent's path is rarely more than this many straight lines long
@@ -156,13 +156,16 @@ def resolution(params: Resolved, dist: float, budget: int) -> Resolved:
     """
     if not (dist > 0.0 and math.isfinite(dist)) or params.step * budget >= STEPS_PER_LENGTH * dist:
         return params
-    step = STEPS_PER_LENGTH * dist / budget
+    return dataclasses.replace(coarser(params, STEPS_PER_LENGTH * dist / budget), max_iter=budget)
+
+
+def coarser(params: Resolved, step: float) -> Resolved:
+    """``params`` at the coarser ``step``: the tolerance grows with it up to its derived share, never finer."""
     scale = step / params.step
     return dataclasses.replace(
         params,
         step=step,
         tolerance=max(params.tolerance, min(params.tolerance * scale, TOLERANCE_SHARE * step)),
-        max_iter=budget,
     )
 
 
