@@ -218,3 +218,20 @@ def test_an_embedded_map_that_cannot_start_raises_in_the_caller():
         MapThread(
             client_zenoh_config([f"tcp/127.0.0.1:{free_port()}"]), MapOptions(port=0), ready_timeout_s=120
         ).start()
+
+
+@pytest.mark.multi
+def test_the_map_learns_the_planners_origin_as_the_fleet_does():
+    from tests.zenoh_util import planner_process
+
+    mission = "org" + uuid.uuid4().hex[:8]
+    with planner_process("--origin", "58.4105,15.6213", mission=mission) as (endpoint, _):
+        with client(endpoint) as s:  # the planner answers its status once it is up
+            deadline = time.monotonic() + 30
+            while not any(r.ok for r in s.get(keys.planner_statuses(mission), timeout=2.0)):
+                assert time.monotonic() < deadline, "no planner status"
+        with map_process(endpoint, mission) as url:
+            code, state = _http("GET", url + "api/state")
+    assert code == 200
+    assert state["config"]["origin"]["lat"] == pytest.approx(58.4105)
+    assert state["config"]["origin"]["lon"] == pytest.approx(15.6213)

@@ -98,6 +98,9 @@ def test_a_zone_drawn_on_the_map_with_allow_edit_reaches_the_planner(playwright,
         # a zone put by someone else is drawn; the GeoJSON export has it
         put_json(s, keys.zone(mission, "other"), {"circle": {"centre": [70, 50], "radius_m": 4}})
         page.wait("() => pfpMap.zones.has('other')", timeout_s=5)
+        # every zone is labelled on the map by its id, without hovering it
+        labels = page.js("() => [...document.querySelectorAll('.zone-label')].map((e) => e.textContent)")
+        assert "no-go other" in labels and "no-go pond" in labels, labels
 
         # select the wall by clicking inside it and delete it from the page
         page.click_at(43, 20)

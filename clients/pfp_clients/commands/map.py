@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import sys
 from typing import Any
 
@@ -91,7 +92,7 @@ def register(sub: Any) -> None:
         "--origin",
         type=origin,
         metavar="LAT,LON[,ALT]",
-        help="the mission origin (the planner's (0, 0)): draw in lat/lon (default: plain metres)",
+        help="the mission origin (the planner's (0, 0)): draw in lat/lon (default: the planner's, else plain metres)",
     )
     p.add_argument(
         "--tiles",
@@ -134,7 +135,23 @@ def run(args: argparse.Namespace) -> int:
     )
     conf = session_config(args)
     with SignalStop() as stopping, open_session(conf) as session:
-        if opts.origin is not None and not stopping.signalled:  # drawn with another origin, all would be off
+        if opts.origin is None and not stopping.signalled:  # as pfp fleet does: the planner's, if it has one
+            from pfp_clients.frames import planner_origin, shown
+
+            answered, learned = planner_origin(session, opts.mission)
+            if learned is not None:
+                opts = dataclasses.replace(opts, origin=learned)
+                print(f"pfp map: drawn in lat/lon from the planner's origin {shown(learned)}", flush=True)
+            elif not answered:
+                print(
+                    f"pfp map: no planner of mission {opts.mission!r} answered yet: drawn in plain metres "
+                    "(give --origin, or start the map after pfp serve)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        elif (
+            opts.origin is not None and not stopping.signalled
+        ):  # drawn with another origin, all would be off
             from pfp_clients.frames import check_origin
 
             note = check_origin(session, opts.mission, opts.origin)

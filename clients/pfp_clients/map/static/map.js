@@ -391,7 +391,8 @@ function upsertZone(d) {
   const layer = d.circle
     ? L.circle(toLatLng(d.circle.centre), Object.assign({ radius: d.circle.radius_m }, style))
     : L.polygon(d.polygon.map((ring) => ring.slice(0, -1).map(toLatLng)), style);
-  layer.bindTooltip(`no-go ${esc(d.id)}`, { direction: "center", className: "zone-label" });
+  // labelled always, not only on hover: an operator reads which zone a unit bends round at a glance
+  layer.bindTooltip(`no-go ${esc(d.id)}`, { permanent: true, direction: "center", className: "zone-label" });
   layer.on("click", (e) => {
     L.DomEvent.stopPropagation(e);
     selectZone(d.id);
