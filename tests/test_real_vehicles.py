@@ -185,3 +185,36 @@ def test_before_its_route_lands_a_unit_may_drive_along_its_predicted_descent_not
     step = w.view("v").stepper.params.step
     assert d.deliberating and d.route == "" and out.jobs
     assert d.reach_m is not None and d.reach_m > 4.0 * step  # the five predicted steps lie on its line
+
+
+@pytest.mark.unit
+def test_a_routes_length_left_goes_on_the_wire_and_the_handheld_eta_follows_it():
+    from pfp_clients.handheld_model import HandheldModel, Settings
+
+    from pfp_service.wire import Direction
+
+    w = World(WorldSettings(deliberation="deferred"))
+    out = w.apply(
+        [StateReported("v", UnitState(position=(0.0, 0.0))), GoalSet("v", Goal(position=(900.0, 1200.0)))],
+        0.0,
+    )
+    w.apply([job.run(0.0) for job in out.jobs], 0.0)
+    out = w.apply([StateReported("v", UnitState(position=(0.0, 0.0), seq=1))], 1.0)
+    (d,) = [d for d in out.directions if d.unit == "v"]
+    assert d.route == "descent" and d.route_left_m == pytest.approx(1500.0, rel=1e-3)  # open ground: straight
+    m = HandheldModel(Settings(unit="h", speed_mps=1.5, walk=False), (0.0, 0.0), 0.0)
+    m.on_direction(
+        Direction(
+            unit="h",
+            status=DirectionStatus.EN_ROUTE,
+            vector=(1.0, 0.0),
+            distance_to_goal=100.0,
+            route_left_m=300.0,
+        ),
+        0.0,
+    )
+    assert m.view(0.0).eta_s == pytest.approx(200.0)  # 300 m along the route at 1.5 m/s, not 100 m straight
+    m.on_direction(
+        Direction(unit="h", status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0), distance_to_goal=100.0), 0.0
+    )
+    assert m.view(0.0).eta_s == pytest.approx(100.0 / 1.5)  # no route yet: straight

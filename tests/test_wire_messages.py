@@ -284,6 +284,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "reach_m": ("nonneg", OPT),
         "route": ("route", DEF),
         "progress": ("progress", DEF),
+        "route_left_m": ("nonneg", OPT),
     },
     "error_reply": {"error": ("text", REQ), "field": ("text", DEF)},
     "planner_status": {

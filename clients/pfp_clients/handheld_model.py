@@ -455,15 +455,17 @@ class HandheldModel:
             else Severity.LOW
         )
         distance = d.distance_to_goal if d is not None else None
+        along = d.route_left_m if d is not None and d.route_left_m is not None else distance
         if distance is not None and d is not None and d.status in _MOVING:
             distance = max(distance - self._walked_m, 0.0)
+            along = None if along is None else max(along - self._walked_m, 0.0)
         return View(
             status_label=status,
             bearing_deg=bearing,
             bearing=bearing_text(bearing),
             arrow=arrow_art(bearing, *arrow_size, status=d.status.value if d is not None else ""),
             distance_m=distance,
-            eta_s=eta_s(distance, self.eta_speed_mps()),
+            eta_s=eta_s(along, self.eta_speed_mps()),  # along the route, once the planner has one
             threat_level=level,
             threat_fraction=fraction,
             severity=severity,

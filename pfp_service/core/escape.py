@@ -72,7 +72,7 @@ from pfp_service.core.escape_strategies import (
     global_corners,
     rollout,
 )
-from pfp_service.core.foresight import coarser
+from pfp_service.core.foresight import coarser, progress_floor
 from pfp_service.core.grid import polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
@@ -84,6 +84,7 @@ __all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "TRAP_BUDG
 
 MAX_TRAPS = 12
 TRAP_BUDGET = 8000  # most steps a strategy walks from a trap
+RUN_MAX_POINTS = 10_000_000  # a committed run walked at the unit's step, unless it would have more points
 AUTO_MARGIN = 0.05  # "clearly cheaper": a dearer way is taken only when it saves more than 5 % of J
 HANDOFF_STEPS = 4.0  # an escape ending this many steps from the goal steers on to it
 
@@ -307,7 +308,9 @@ class Escaper:
         near = math.hypot(gx - ex, gy - ey) <= HANDOFF_STEPS * tr.step
         to_goal = bool(near and not tr.cores.first_hit(np.array([(ex, ey), (gx, gy)])))
         tail = np.array([(ex, ey), (gx, gy)]) if to_goal and (ex, ey) != (gx, gy) else None
-        step = self.params.step  # the unit's own: a trap searched coarser (``_trap``) is walked at it
+        step = self.params.step  # the unit's own: a trap searched coarser (``_trap``) is walked at it ...
+        if path_length(path if corners is None else corners) > RUN_MAX_POINTS * step:
+            step = tr.step  # ... unless that would make a run of absurdly many points (a denormal step)
         if corners is None and tr.step == step:
             if tail is not None:
                 path = np.concatenate([path, resample(tail, step)[1:]])
@@ -332,7 +335,7 @@ class Escaper:
         p = self.params
         dist = math.hypot(self.goal[0] - x, self.goal[1] - y)
         if math.isfinite(dist) and 6.0 * dist > TRAP_BUDGET * p.step:
-            p = coarser(p, 6.0 * dist / TRAP_BUDGET)
+            p = coarser(p, max(6.0 * dist / TRAP_BUDGET, progress_floor(p)))
         return Trap(
             field=field,
             cores=Cores.of(field),

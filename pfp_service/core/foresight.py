@@ -37,7 +37,15 @@ from pfp_service.core import cull, kernels, steprule
 from pfp_service.core.params import Resolved
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["FORESIGHT_MAX_STEPS", "Foresight", "Outcome", "coarser", "resolution", "simulate"]
+__all__ = [
+    "FORESIGHT_MAX_STEPS",
+    "TOLERANCE_SHARE",
+    "Foresight",
+    "Outcome",
+    "coarser",
+    "resolution",
+    "simulate",
+]
 
 FORESIGHT_MAX_STEPS = 20_000
 STEPS_PER_LENGTH = 4.0  # a descent's path is rarely more than this many straight lines long
@@ -156,7 +164,18 @@ def resolution(params: Resolved, dist: float, budget: int) -> Resolved:
     """
     if not (dist > 0.0 and math.isfinite(dist)) or params.step * budget >= STEPS_PER_LENGTH * dist:
         return params
-    return dataclasses.replace(coarser(params, STEPS_PER_LENGTH * dist / budget), max_iter=budget)
+    step = max(STEPS_PER_LENGTH * dist / budget, progress_floor(params))
+    return dataclasses.replace(coarser(params, step), max_iter=budget)
+
+
+def progress_floor(params: Resolved) -> float:
+    """The finest step at which the no-progress rule can be met: ``progress_window`` steps cover two tolerances.
+
+    A mission whose tolerance dwarfs its step (one restored with a denormal
+    step) would otherwise be judged trapped for lack of progress at once.
+    """
+    window = max(params.progress_window, 1)
+    return 2.0 * params.tolerance / window
 
 
 def coarser(params: Resolved, step: float) -> Resolved:

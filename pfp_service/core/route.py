@@ -49,6 +49,7 @@ class EscapeRun:
     """
 
     __slots__ = (
+        "_after",
         "advisories",
         "ahead_m",
         "cursor",
@@ -96,11 +97,30 @@ class EscapeRun:
         self.lead = LEAD_STEPS  # the pursuit point is this many points past the nearest (``tracking``)
         self.off_m = 0.0  # at the last ``steer``: the unit's distance from the nearest point of the run
         self.ahead_m = 0.0  # ... and from the pursuit point
+        self._after: np.ndarray | None = None  # per leg (or point): the run's length after it (``left_m``)
 
     @classmethod
     def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
         """The run along ``corners`` resampled at ``step`` (``grid.resample``), kept as its legs."""
         return cls(name, NO_POINTS, step, to_goal, segs=legs(corners, step))
+
+    def left_m(self) -> float:
+        """The length of the run from its cursor to its end, metres (the route a unit has still to drive)."""
+        if self._after is None:
+            if len(self.segs):
+                lens = np.hypot(self.segs[:, 2], self.segs[:, 3])
+            else:
+                lens = np.hypot(*np.diff(self.path, axis=0).T) if self.n > 1 else np.zeros(0)
+            after = np.zeros(len(lens) + 1)
+            after[:-1] = np.cumsum(lens[::-1])[::-1]
+            self._after = after
+        if not len(self.segs):
+            return float(self._after[min(self.cursor, self.n - 1)])
+        leg = int(_leg(self.segs, self.cursor))
+        first = self.segs[leg - 1, 4] if leg > 0 else 0.0
+        share = (self.cursor - first) / max(self.segs[leg, 4] - first, 1.0)  # of the leg already passed
+        here = float(np.hypot(self.segs[leg, 2], self.segs[leg, 3]))
+        return float(max(float(self._after[leg]) - share * here, 0.0))
 
     def points(self) -> np.ndarray:
         """The path's points ``(K, 2)``, the same in either form."""

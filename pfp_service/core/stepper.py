@@ -537,6 +537,17 @@ class Stepper:
         """Following a committed route other than the foreseen descent (which a change far off leaves be)."""
         return self._run is not None and self._run.route is not Route.DESCENT
 
+    def route_left_m(self) -> float | None:
+        """Metres still to drive along the committed route to the goal (past its end, straight on); ``None`` off one."""
+        run = self._run
+        if run is None or self._terminal is not None:
+            return None
+        left = run.left_m()
+        if not run.to_goal:
+            ex, ey = run.end()
+            left += math.hypot(self.goal[0] - ex, self.goal[1] - ey)
+        return left
+
     @property
     def on_route(self) -> bool:
         """Following a committed route: an escape, or a tracked descent (``core.tracking``)."""

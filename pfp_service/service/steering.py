@@ -221,8 +221,15 @@ def direction(
         reach_m=reach_m,
         route=RouteKind(route.value),
         progress=rec.progress.verdict,
+        route_left_m=_left(rec, terminal),
     )
     return d, event
+
+
+def _left(rec: UnitRecord, terminal: bool) -> float | None:
+    """The metres of route the unit has still to drive (``Stepper.route_left_m``), on the wire's map."""
+    left = None if terminal or rec.stepper is None else rec.stepper.route_left_m()
+    return None if left is None or not math.isfinite(left) else min(left, FINITE_LIMIT)
 
 
 def _straight_reach(

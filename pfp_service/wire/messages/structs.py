@@ -394,6 +394,8 @@ class Direction(_Message, frozen=True, kw_only=True):
             ``around_trap``, ``escape``, ``leave``; empty before one is chosen).
         progress: what the unit's own reports show: ``moving``, ``holding`` (it said
             ``speed_mps`` 0), ``stalled`` (told to move, it has not); empty when unknown.
+        route_left_m: metres still to drive along the route to the goal (an ETA is this over the
+            unit's speed); null before a route is chosen, when ``distance_to_goal`` is the best known.
     """
 
     unit: Id
@@ -412,6 +414,7 @@ class Direction(_Message, frozen=True, kw_only=True):
     reach_m: NonNegative | None = None
     route: RouteKind = RouteKind.NONE
     progress: Progress = Progress.UNKNOWN
+    route_left_m: NonNegative | None = None
 
 
 class ErrorReply(_Message, frozen=True, kw_only=True):
