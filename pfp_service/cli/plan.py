@@ -145,6 +145,7 @@ def exit_code(status: str) -> int:
 def run(args: argparse.Namespace) -> int:
     import msgspec
 
+    from pfp_service import plausible
     from pfp_service.coords import Coords
     from pfp_service.core import plan
     from pfp_service.core.optimal import plan_optimal
@@ -170,6 +171,17 @@ def run(args: argparse.Namespace) -> int:
         check_geojson_path(args.geojson)
     read_text(args.scenario)  # a directory, binary, non-UTF-8 or huge file: one line naming it
     scenario = load_scenario(args.scenario)
+    for line in plausible.warnings(
+        scenario.start,
+        scenario.goal,
+        [
+            (t.id or f"t{i + 1}", t.sigma_range, t.sigma_lateral)
+            for i, t in enumerate(scenario.threats)
+            if t.sigma_range is not None and t.sigma_lateral is not None
+        ],
+        scenario.origin is not None,
+    ):
+        print(f"pfp plan: warning: {args.scenario}: {line}", file=sys.stderr)
     if args.coords in ("latlon", "mgrs") and scenario.origin is None:
         raise InputError(
             "--coords", f"{args.coords} needs an origin: add origin: {{lat: …, lon: …}} to {args.scenario}"
