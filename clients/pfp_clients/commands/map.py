@@ -146,7 +146,6 @@ def run(args: argparse.Namespace) -> int:
                 print(
                     f"pfp map: no planner of mission {opts.mission!r} answered yet: drawn in plain metres "
                     "(give --origin, or start the map after pfp serve)",
-                    file=sys.stderr,
                     flush=True,
                 )
         elif (
