@@ -12,12 +12,14 @@ bounds and keep-out zones are the same rule as descent's.
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numba
 import numpy as np
 
 from pfp_service.core import steprule, zones
+from pfp_service.core.advice import StepStatus
 from pfp_service.core.foresight import Foresight, Outcome
 from pfp_service.core.grid import pieces
 from pfp_service.core.tracking import LEAD_STEPS, PURSUIT_TOLERANCE_STEPS, SIMPLIFY_STEPS, Route, simplify
@@ -50,6 +52,7 @@ class EscapeRun:
 
     __slots__ = (
         "_after",
+        "_said",
         "advisories",
         "ahead_m",
         "cursor",
@@ -97,30 +100,61 @@ class EscapeRun:
         self.lead = LEAD_STEPS  # the pursuit point is this many points past the nearest (``tracking``)
         self.off_m = 0.0  # at the last ``steer``: the unit's distance from the nearest point of the run
         self.ahead_m = 0.0  # ... and from the pursuit point
-        self._after: np.ndarray | None = None  # per leg (or point): the run's length after it (``left_m``)
+        # per leg (or point): the run's length from it to the end, each length, each leg's last index; its end
+        self._after: tuple[list[float], list[float], list[float], tuple[float, float]] | None = None
+        self._said: tuple[StepStatus, str] | None = None  # the status and reason it gives (``said``)
 
     @classmethod
     def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
         """The run along ``corners`` resampled at ``step`` (``grid.resample``), kept as its legs."""
         return cls(name, NO_POINTS, step, to_goal, segs=legs(corners, step))
 
+    def said(self) -> tuple[StepStatus, str]:
+        """The status and the reason, in words, of a unit on this run (made once: ``route`` is set by then)."""
+        said = self._said
+        if said is None:
+            route = self.route
+            if route.escaping:
+                said = (StepStatus.ESCAPING, f"{route.words}: {self.name}")
+            else:
+                said = (StepStatus.EN_ROUTE, route.words)
+            self._said = said
+        return said
+
+    def end_to(self, goal: tuple[float, float]) -> float:
+        """The straight distance from the run's end to ``goal`` (per report on the live tick: the end kept once)."""
+        table = self._after
+        if table is None:
+            self.left_m()
+            table = self._after
+            assert table is not None
+        ex, ey = table[3]
+        return math.hypot(goal[0] - ex, goal[1] - ey)
+
     def left_m(self) -> float:
-        """The length of the run from its cursor to its end, metres (the route a unit has still to drive)."""
-        if self._after is None:
+        """The length of the run from its cursor to its end, metres (the route a unit has still to drive).
+
+        Per unit and report on the live tick: the run's lengths are tabled once (``_after``, shared by
+        copies), then each call is a bisection and a few float operations.
+        """
+        table = self._after
+        if table is None:
             if len(self.segs):
                 lens = np.hypot(self.segs[:, 2], self.segs[:, 3])
+                lasts = self.segs[:, 4].tolist()
             else:
                 lens = np.hypot(*np.diff(self.path, axis=0).T) if self.n > 1 else np.zeros(0)
+                lasts = []
             after = np.zeros(len(lens) + 1)
             after[:-1] = np.cumsum(lens[::-1])[::-1]
-            self._after = after
-        if not len(self.segs):
-            return float(self._after[min(self.cursor, self.n - 1)])
-        leg = int(_leg(self.segs, self.cursor))
-        first = self.segs[leg - 1, 4] if leg > 0 else 0.0
-        share = (self.cursor - first) / max(self.segs[leg, 4] - first, 1.0)  # of the leg already passed
-        here = float(np.hypot(self.segs[leg, 2], self.segs[leg, 3]))
-        return float(max(float(self._after[leg]) - share * here, 0.0))
+            table = self._after = (after.tolist(), lens.tolist(), lasts, self.end())
+        after_l, lens_l, lasts, _end = table
+        if not lasts:
+            return after_l[min(self.cursor, self.n - 1)]
+        leg = bisect.bisect_left(lasts, self.cursor)  # the first leg whose last index is at or past it
+        first = lasts[leg - 1] if leg > 0 else 0.0
+        share = (self.cursor - first) / max(lasts[leg] - first, 1.0)  # of the leg already passed
+        return max(after_l[leg] - share * lens_l[leg], 0.0)
 
     def points(self) -> np.ndarray:
         """The path's points ``(K, 2)``, the same in either form."""
@@ -155,11 +189,13 @@ class EscapeRun:
         if len(self.segs) and len(other.segs):  # other's first point is this one's last: dropped
             tail = other.segs.copy()
             tail[:, 4] += self.n - 1
-            return EscapeRun(
-                name, NO_POINTS, self.step, other.to_goal, segs=np.concatenate([self.segs, tail])
-            )
+            run = EscapeRun(name, NO_POINTS, self.step, other.to_goal, segs=np.concatenate([self.segs, tail]))
+            run.route = self.route  # a way out first: what the unit does now
+            return run
         pts = np.concatenate([self.points(), other.points()[1:]])
-        return EscapeRun(name, pts, self.step, other.to_goal)
+        run = EscapeRun(name, pts, self.step, other.to_goal)
+        run.route = self.route
+        return run
 
     def ahead(self, unit: np.ndarray, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
         """The next ``steps`` positions of ``unit`` (``steprule.unit``) at ``(x, y)`` steering along this run.

@@ -87,6 +87,7 @@ class Stepper:
     """
 
     __slots__ = (
+        "_corridor",
         "_ends",
         "_escaper",
         "_foresee",
@@ -150,6 +151,7 @@ class Stepper:
         self.tracking = False  # a live unit's: traps from the field, routes tracked (``track``)
         self.speed_mps = 0.0  # the unit's speed, as the driver last knew it (``pace``)
         self._lead = tracking.LEAD_STEPS  # its pursuit point's lead, in route points (``pace``)
+        self._corridor = tracking.corridor(params.step)  # off its route by more: chosen again
         self._ends = ""  # a tracked route that ends where descent is foreseen trapped: why
 
     def __deepcopy__(self, memo: dict[int, object]) -> Stepper:
@@ -178,6 +180,7 @@ class Stepper:
         new.tracking = False
         new.speed_mps = self.speed_mps
         new._lead = self._lead
+        new._corridor = self._corridor
         new._ends = ""
         new.defer = False
         new.pending = None
@@ -203,6 +206,8 @@ class Stepper:
         more than a point and a quarter, so a measured speed's jitter never
         moves the pursuit point between two reports.
         """
+        if speed_mps == self.speed_mps:  # the same speed, report after report: nothing to do
+            return
         self.speed_mps = speed_mps if math.isfinite(speed_mps) and speed_mps > 0.0 else 0.0
         lead = tracking.lead_points(self.params.step, self.speed_mps)
         if abs(lead - self._lead) > max(1.0, 0.25 * self._lead):
@@ -544,8 +549,7 @@ class Stepper:
             return None
         left = run.left_m()
         if not run.to_goal:
-            ex, ey = run.end()
-            left += math.hypot(self.goal[0] - ex, self.goal[1] - ey)
+            left += run.end_to(self.goal)
         return left
 
     @property
@@ -610,7 +614,7 @@ class Stepper:
             run.lead = tracking.LEAD_STEPS if field.zones else self._lead
             run.limit = NO_LIMIT  # a route is left by the corridor, never by counting reports
         stepped = run.steer(self._unit, x, y, field.zones)
-        if self.tracking and run.off_m > tracking.corridor(self.params.step):
+        if self.tracking and run.off_m > self._corridor:
             stepped = None  # reported off its route: chosen again from here
             self._ends = ""
         if stepped is None:  # at the exit (or abandoned): plain descent takes over, judged afresh
@@ -633,10 +637,7 @@ class Stepper:
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
         reach = self._reach(field, x, y, dx, dy, dist, move, run.ahead_m) if self.tracking else move
-        if route.escaping:
-            status, why = StepStatus.ESCAPING, f"{route.words}: {run.name}"
-        else:
-            status, why = StepStatus.EN_ROUTE, route.words
+        status, why = run.said()
         return Advice(status, dx, dy, level, dist, why, False, reach, tx, ty, route)
 
     def _along_descent(

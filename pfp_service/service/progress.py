@@ -62,14 +62,15 @@ class ProgressWatch:
             speed_mps: the unit's own speed, if it sent one.
             told_to_move: its last direction was to move (en route or escaping, with room to).
         """
-        at = self._time(t, now)
+        at = now if t is None else self._time(t, now)
         if at < self._last_t:  # a clock that ran back (a restarted unit): start afresh
             self._fixes.clear()
             self._anchor = None
         self._last_t = at
         self._fixes.append((at, x, y))
-        self.speed_mps = self._speed(speed_mps)
-        if speed_mps is not None and speed_mps == 0.0:
+        # per unit and report on the live tick: the unit's own speed taken as it comes, else measured
+        self.speed_mps = speed_mps if speed_mps is not None and speed_mps >= 0.0 else self._speed(speed_mps)
+        if speed_mps == 0.0:
             self._anchor = (at, x, y)
             self.verdict = Progress.HOLDING
             return self.verdict

@@ -66,6 +66,7 @@ STATUS = {
 }
 
 Steered = list[tuple[UnitRecord, Advice, Track]]
+_ROUTE_KIND = {r: RouteKind(r.value) for r in Route}  # the core's names on the wire, looked up once
 ZONE_REACH = 0.25  # a zone's box is widened by this share of its diagonal: its barrier's reach, generously
 Failed = list[tuple[UnitRecord, BaseException]]
 
@@ -219,7 +220,7 @@ def direction(
         deliberating=asking or deliberating,
         planner=planner,
         reach_m=reach_m,
-        route=RouteKind(route.value),
+        route=_ROUTE_KIND[route],
         progress=rec.progress.verdict,
         route_left_m=_left(rec, terminal),
     )
