@@ -610,7 +610,7 @@ class Stepper:
         assert run is not None
         if self.tracking:
             # among keep-out zones a route hugs their edges: the pursuit point stays two points on,
-            # where a chord never cuts a zone's corner (``route._zone_heading``'s own rule)
+            # where a chord never cuts a zone's corner (``route_kernels._zone_heading``'s own rule)
             run.lead = tracking.LEAD_STEPS if field.zones else self._lead
             run.limit = NO_LIMIT  # a route is left by the corridor, never by counting reports
         stepped = run.steer(self._unit, x, y, field.zones)

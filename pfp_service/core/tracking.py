@@ -17,7 +17,7 @@ the planner's ``step`` is its own resolution, not the vehicle's.
   one (pure pursuit), the lead growing with its speed (``LEAD_S`` seconds of
   driving, at least ``LEAD_STEPS`` steps), but never so far that the chord
   to it strays more than ``PURSUIT_TOLERANCE_STEPS`` steps from the route
-  (``route._pursuit``: a bend shortens it); ``reach_m`` is how far that
+  (``route_kernels._pursuit``: a bend shortens it); ``reach_m`` is how far that
   heading stays on the route: to the pursuit point.
 * **A route is re-chosen** when the world changes, when the unit reports
   more than ``corridor(step)`` metres off it (a person drove it elsewhere),
