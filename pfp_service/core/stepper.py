@@ -552,11 +552,6 @@ class Stepper:
             left += run.end_to(self.goal)
         return left
 
-    @property
-    def on_route(self) -> bool:
-        """Following a committed route: an escape, or a tracked descent (``core.tracking``)."""
-        return self._run is not None
-
     def route_ahead(self, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
         """A ghost's next ``steps`` positions from ``(x, y)`` on the committed route (``EscapeRun.ahead``).
 
