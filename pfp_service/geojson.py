@@ -37,14 +37,15 @@ import msgspec
 import numpy as np
 
 from pfp_service import bounds
-from pfp_service.core.cores import CORE_FRACTION, Cores
-from pfp_service.core.threat import Threat, ThreatField
-from pfp_service.core.zones import Zone
 from pfp_service.errors import InputError
 from pfp_service.geo import LatLon, Origin
 
 if TYPE_CHECKING:
+    # The core is imported where it is used: reading a zones file, and refusing a hostile one,
+    # must not compile it (issue 35: a refusal stays light).
     from pfp_service.core.plan import PlanResult
+    from pfp_service.core.threat import Threat
+    from pfp_service.core.zones import Zone
     from pfp_service.scenario import Scenario
 
 __all__ = [
@@ -94,6 +95,9 @@ def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndar
         raise ValueError(f"level: must be strictly between 0 and 1, got {level}")
     if not t.weight > 0.0:
         raise ValueError(f"threat {t.id!r}: a threat of weight 0 has no zone")
+    from pfp_service.core.cores import Cores
+    from pfp_service.core.threat import ThreatField
+
     cores = Cores(ThreatField([t]))
     mx, my = t.mode()
     theta = 2.0 * math.pi * np.arange(vertices) / vertices  # from east, counter-clockwise
@@ -198,6 +202,8 @@ def feature_collection(
         features.append(_point(origin, t.xi, tp))
         if t.weight <= 0.0:
             continue
+        from pfp_service.core.cores import CORE_FRACTION
+
         for kind, share in (("zone", level), ("core", CORE_FRACTION)):
             ring = _ring(origin, zone_ring(t, share))
             features.append(
@@ -253,6 +259,8 @@ def zones_from_geojson(doc: Any, origin: Origin, source: str = "") -> list[Zone]
 
     import shapely.geometry
     from shapely.validation import explain_validity
+
+    from pfp_service.core.zones import Zone
 
     def fail(where: str, reason: str) -> InputError:
         return InputError(f"{source}: {where}" if source and where else source or where, reason)

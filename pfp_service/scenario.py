@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import msgspec
 import yaml
@@ -37,13 +37,17 @@ from pfp_service.constraints import (
     Weight,
     check_spreads,
 )
-from pfp_service.core import PlannerParams, Scheduled, Threat
-from pfp_service.core.params import ESCAPES, Escape, reach
-from pfp_service.core.zones import ZoneSet
+from pfp_service.core.params import ESCAPES, Escape, PlannerParams, reach
 from pfp_service.errors import InputError, from_validation
 from pfp_service.files import read_text
 from pfp_service.geo import Origin, localise_document
 from pfp_service.wire.messages import ZoneUpdate, localise_zone
+
+if TYPE_CHECKING:
+    # Imported where used: a scenario is read (and a hostile one refused) without compiling the core.
+    from pfp_service.core.plan import Scheduled
+    from pfp_service.core.threat import Threat
+    from pfp_service.core.zones import ZoneSet
 
 __all__ = [
     "CHOICES",
@@ -102,6 +106,8 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
             raise ValueError("omega: must be positive definite and invertible in floating point") from None
 
     def to_threat(self, default_id: str) -> Threat:
+        from pfp_service.core.threat import Threat
+
         tid = self.id or default_id
         if self.omega is None:
             assert self.sigma_range is not None and self.sigma_lateral is not None
@@ -191,9 +197,13 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
 
     def zone_set(self) -> ZoneSet:
         """The file's keep-out zones, for the core."""
+        from pfp_service.core.zones import ZoneSet
+
         return ZoneSet(z.to_zone(z.id or f"z{i + 1}") for i, z in enumerate(self.zones))
 
     def schedule(self) -> list[Scheduled]:
+        from pfp_service.core.plan import Scheduled
+
         return [Scheduled(t.to_threat(f"t{i + 1}"), t.appear_step) for i, t in enumerate(self.threats)]
 
     def bounds_tuple(self) -> tuple[tuple[float, float], tuple[float, float]] | None:

@@ -1,10 +1,10 @@
-"""``bench.deliberation``: the storm's look-aheads and the wave, measured in process on a small fleet."""
+"""``bench._deliberation``: the storm's look-aheads and the wave, measured in process on a small fleet."""
 
 from __future__ import annotations
 
 import pytest
 
-from pfp_service.bench.deliberation import storm_and_wave
+from pfp_service.bench._deliberation import storm_and_wave
 
 pytestmark = pytest.mark.unit
 

@@ -203,6 +203,16 @@ def test_one_registry_gives_the_choices_the_order_and_the_tiers():
     assert all(s.name == n and s.summary for n, s in STRATEGIES.items())
 
 
+def test_the_light_list_of_escape_names_is_the_registry_name_for_name():
+    # options holds the names so the CLI and the validators need not compile the core; the registry
+    # implements them, in auto's order, and refuses to import when the two drift apart
+    from pfp_service.core import options
+    from pfp_service.core.escape_strategies import STRATEGIES
+
+    assert tuple(STRATEGIES) == options.ESCAPE_STRATEGIES
+    assert ("none", "auto", *STRATEGIES) == options.ESCAPES
+
+
 def test_a_strategy_without_a_way_out_says_why_as_a_value():
     from pfp_service.core.escape_strategies import STRATEGIES, NoCandidate, Trap
 
@@ -310,7 +320,7 @@ def test_an_escape_ending_at_the_goal_steers_on_to_it():
 
 
 def test_auto_goes_round_a_channel_that_descent_would_run_down():
-    from pfp_service.bench.cases import KINDS, generate
+    from pfp_service.bench._cases import KINDS, generate
     from pfp_service.core.optimal import plan_optimal
 
     for case in [c for c in generate(2 * len(KINDS), 4) if c.kind == "corridor"]:
@@ -363,7 +373,7 @@ def test_needles_in_a_wedge_are_resolved_and_gone_round():
 
 def test_routes_never_clip_a_sharply_skewed_core():
     """Pancakes with skew 10-50 have a rear far thinner than their sigmas: grid edges are re-checked densely."""
-    from pfp_service.bench.cases import KINDS, generate
+    from pfp_service.bench._cases import KINDS, generate
     from pfp_service.core.optimal import plan_optimal
 
     cases = [c for c in generate(4 * len(KINDS), 7) if c.kind == "anisotropic"]

@@ -4,7 +4,7 @@ The planning resolution (``step``) is the planner's business, so what the
 planner chooses must not depend on it.  For the paper's scenario
 (``examples/paper-simple.yaml``, at its own step of 0.1), the repository's
 other example scenarios without pop-up threats, and those of ``--count``
-seeded scenarios of the quality suite (``bench.cases``, escape ``auto``) that
+seeded scenarios of the quality suite (``bench._cases``, escape ``auto``) that
 have a way to the goal entering no threat core (``cases.reachability``, the
 planner-independent raster: a shut gap has no path to converge to), this plans
 at the default step and at ``FACTORS`` of it (``max_iter`` derived each time),
@@ -43,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _problems(count: int, seed: int) -> list[tuple[str, dict]]:
     """(name, plan() keyword arguments) of every scenario compared."""
-    from pfp_service.bench.cases import generate, reachability
+    from pfp_service.bench._cases import generate, reachability
     from pfp_service.core import PlannerParams, Scheduled
     from pfp_service.core.zones import ZoneSet
     from pfp_service.scenario import load_scenario

@@ -11,7 +11,7 @@ log-log grid of 100 to 10,000 units by 100 to 10,000 threats; and a
 platoon of 200 units with one objective, its route searches shared
 (``core.routes``) against one search per unit; and the goal storm's
 look-aheads and the contingency wave of ``pfp bench service``, in process
-(``bench.deliberation``).
+(``bench._deliberation``).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.bench.deliberation import (
+from pfp_service.bench._deliberation import (
     STORM_UNITS,
     TARGET_LOOKAHEAD_MS,
     TARGET_WAVE_MS,

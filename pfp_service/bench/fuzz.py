@@ -43,7 +43,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from pfp_service.bench.fuzz_bulkheads import (
+from pfp_service.bench._fuzz_bulkheads import (
     BOMB_GROWTH_MB,
     BOMB_PLAIN_S,
     BOMB_SETTLE_S,

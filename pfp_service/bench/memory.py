@@ -35,9 +35,9 @@ import time
 from typing import Any
 
 from pfp_service.bench._check import add_check_arg, exit_code
+from pfp_service.bench._layout import layout
 from pfp_service.bench._load import MISSION, LoadGen, start_server
 from pfp_service.bench._phases import STEP_M, Bar, register, steady
-from pfp_service.bench.layout import layout
 from pfp_service.bench.previews import tree_pss_by_process
 from pfp_service.cli._common import positive_float, positive_int
 

@@ -1,6 +1,6 @@
 """Path quality per escape mode on a seeded trap suite, against the core-avoiding optimum.
 
-For every generated scenario (``bench.cases``) and every escape mode this
+For every generated scenario (``bench._cases``) and every escape mode this
 plans once, then reports: the reach rate over the *reachable* scenarios, the
 honest-``trapped`` rate on the *enclosed* ones (no ``reached`` there is
 honest), paths entering a threat core, median and worst length and exposure
@@ -23,7 +23,7 @@ none beats it on both); the sweep ignores cores, so it is a lower bound.
 ``--write`` puts the tables in BENCHMARKS.md between markers, so the file can
 hold other benchmarks too.
 
-``--family zones`` runs the keep-out zone family instead (``bench.zone_cases``):
+``--family zones`` runs the keep-out zone family instead (``bench._zone_cases``):
 the same table, with every plan among the case's zones, ``J*`` from the
 zone-aware optimum (``--planner optimal --avoid-cores`` with the zones), the
 entries column counting paths that touch a zone or a core (zones checked
@@ -40,19 +40,18 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import msgspec
 import numpy as np
 
+from pfp_service.bench._cases import KINDS
 from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.bench.cases import KINDS, Case, generate, reachability
 from pfp_service.cli._common import grid_cells
-from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
-from pfp_service.core.cores import Cores
-from pfp_service.core.metrics import LAMBDA
-from pfp_service.core.optimal import OptimalSolver
-from pfp_service.core.params import ESCAPES
-from pfp_service.core.zones import ZoneSet
+from pfp_service.core.options import ESCAPES, LAMBDA
+
+if TYPE_CHECKING:
+    from pfp_service.bench._cases import Case
 
 __all__ = ["LAMBDAS", "add_arguments", "run"]
 
@@ -129,6 +128,9 @@ def _pareto(length: float, exposure: float, opts: list[tuple[float, float]]) -> 
 
 def _timed_plan(case: Case, mode: str, repeat: int) -> tuple[object, float, float]:
     """The plan, and the medians over ``repeat`` runs of its wall-clock and process CPU milliseconds."""
+    from pfp_service.core import PlannerParams, Scheduled, plan
+    from pfp_service.core.zones import ZoneSet
+
     sched = [Scheduled(t) for t in case.threats]
     zones = ZoneSet(case.zones) if case.zones else None
     times, cpu, result = [], [], None
@@ -152,7 +154,13 @@ def measure_suite(
     count: int, seed: int, modes: list[str], cells: int, log: bool = False, family: str = "traps"
 ) -> Report:
     """Run the whole benchmark and return its figures (no printing unless ``log``)."""
-    from pfp_service.bench.zone_cases import generate_zones, zone_reachability
+    # the compiled core here, not at the top: `pfp` imports this module to build its parser
+    from pfp_service.bench._cases import generate, reachability
+    from pfp_service.bench._zone_cases import generate_zones, zone_reachability
+    from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
+    from pfp_service.core.cores import Cores
+    from pfp_service.core.optimal import OptimalSolver
+    from pfp_service.core.zones import ZoneSet
 
     cases = generate_zones(count, seed) if family == "zones" else generate(count, seed)
     rep = Report(seed, count, [], [], [], family=family)

@@ -44,6 +44,7 @@ import time
 from typing import Any
 
 from pfp_service.bench._check import add_check_arg, exit_code
+from pfp_service.bench._layout import AREA_M, layout
 from pfp_service.bench._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
 from pfp_service.bench._phases import (
     MAX_P99_MS,
@@ -58,7 +59,6 @@ from pfp_service.bench._phases import (
     storm,
 )
 from pfp_service.bench._service_text import print_doc
-from pfp_service.bench.layout import AREA_M, layout
 from pfp_service.cli._common import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 

@@ -26,9 +26,7 @@ from pfp_service.cli._common import (
     positive_int,
 )
 from pfp_service.constraints import Delta, Step, Tolerance, flag_type
-from pfp_service.core.metrics import LAMBDA
-from pfp_service.core.optimal import DEFAULT_CELLS
-from pfp_service.core.params import ESCAPES
+from pfp_service.core.options import DEFAULT_CELLS, ESCAPES, LAMBDA
 
 # the help's example line (cli.build_parser puts it under the parser)
 EXAMPLES = {"plan": "pfp plan examples/geo-simple.yaml --plot geo.png --coords mgrs"}
@@ -147,12 +145,9 @@ def run(args: argparse.Namespace) -> int:
 
     from pfp_service import plausible
     from pfp_service.coords import Coords
-    from pfp_service.core import plan
-    from pfp_service.core.optimal import plan_optimal
     from pfp_service.core.params import reach
     from pfp_service.errors import InputError
     from pfp_service.files import read_text
-    from pfp_service.render import summary
     from pfp_service.scenario import load_scenario
     from pfp_service.signals import interruptible
 
@@ -199,12 +194,21 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.planner == "pfp" and (problem := reach(params, scenario.start, scenario.goal)) is not None:
         raise InputError("--step" if args.step is not None else f"{args.scenario}: planner.step", problem)
-    schedule = scenario.schedule()
-    zones = scenario.zone_set()
+    # Every file is read (and a hostile one refused) before the compiled core is imported: a refusal
+    # stays light (issue 35).
+    extra = []
     if args.zones:
         from pfp_service.geojson import load_zones
 
-        zones = zones.plus(load_zones(args.zones, scenario.origin))
+        extra = load_zones(args.zones, scenario.origin)
+    from pfp_service.core import plan
+    from pfp_service.core.optimal import plan_optimal
+    from pfp_service.render import summary
+
+    schedule = scenario.schedule()
+    zones = scenario.zone_set()
+    if args.zones:
+        zones = zones.plus(extra)
 
     def planned() -> list[Any]:
         """Every repeat's plan; on a worker thread, so Ctrl-C never lands inside a kernel (signals)."""

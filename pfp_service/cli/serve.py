@@ -16,7 +16,7 @@ from pfp_service.cli._common import (
     positive_int,
 )
 from pfp_service.constraints import Delta, Step, Tolerance, flag_type
-from pfp_service.core.params import ESCAPES
+from pfp_service.core.options import ESCAPES
 
 
 def _bounds(text: str) -> object:

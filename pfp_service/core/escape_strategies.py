@@ -9,8 +9,10 @@ first one that passes.  A strategy with no candidate at all yields
 ``NoCandidate(reason)`` and stops.
 
 Each entry is a ``Strategy(name, tier, propose)``.  Adding one is one entry
-here: the ``escape`` choices (``params.ESCAPES``), ``auto``'s order and its
-tiers are all read from this registry.  ``auto`` asks every strategy of the
+here and its name in ``options.ESCAPE_STRATEGIES``, the light list the
+``escape`` choices (``options.ESCAPES``: help, scenario and goal validation)
+are read from without compiling the core; importing this module fails when
+the two disagree.  ``auto``'s order and its tiers are read from this registry.  ``auto`` asks every strategy of the
 lowest tier, and only pays for a higher tier when that finds nothing
 acceptable (tier 0: cheap, reactive; tier 1: a search).
 
@@ -46,6 +48,7 @@ from pfp_service.core import kernels, steprule
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.grid import GridGraph, resample
 from pfp_service.core.metrics import LAMBDA
+from pfp_service.core.options import ESCAPE_STRATEGIES
 from pfp_service.core.routes import ROUTES, Ask, RouteCache
 from pfp_service.core.threat import ThreatField
 
@@ -459,3 +462,9 @@ STRATEGIES: MappingProxyType[str, Strategy] = MappingProxyType(
 """Every strategy by name, in ``auto``'s order (by tier, then as registered)."""
 
 AUTO_ORDER: tuple[str, ...] = tuple(STRATEGIES)
+
+if AUTO_ORDER != ESCAPE_STRATEGIES:  # the choices users are offered must be the strategies there are
+    raise ImportError(
+        f"escape_strategies registers {AUTO_ORDER} in auto's order, but options.ESCAPE_STRATEGIES"
+        f" names {ESCAPE_STRATEGIES}: make them agree"
+    )

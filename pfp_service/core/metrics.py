@@ -19,13 +19,12 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from pfp_service.core.options import LAMBDA
 from pfp_service.core.threat import ThreatField
 from pfp_service.errors import DeadlinePassed
 
 __all__ = ["LAMBDA", "Epoch", "PathMetrics", "exposure", "measure", "path_cost", "segment_clearance"]
 
-LAMBDA = 10.0
-"""Exposure weight of ``J = length + LAMBDA * exposure`` (metres per unit exposure)."""
 MEASURE_CHUNK = 2048  # segments measured between two looks at the deadline
 
 

@@ -24,7 +24,8 @@ The rule (also in docs/algorithm.md, "Scale-free defaults"):
 ``escape`` (default ``auto``) says what the stepper does when plain descent
 is trapped: ``none`` reports ``trapped``; ``auto`` escalates through the
 strategies (``core.escape``); any other value is one strategy's name, and the
-choices are read from the registry ``escape_strategies.STRATEGIES``.
+choices are the names in ``options.ESCAPES``, which the registry ``escape_strategies.STRATEGIES``
+implements name for name.
 ``auto`` also looks ahead for traps when a goal is set (``core.foresight``).
 ``seed`` seeds the ``random`` escape (with the stepper's ``unit_key``).
 
@@ -49,8 +50,10 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
 from pfp_service.constraints import DELTA_MAX, DELTA_MIN, reach_problem
-from pfp_service.core.escape_strategies import STRATEGIES
-from pfp_service.core.threat import Intensity, Threat
+from pfp_service.core.options import ESCAPES, Intensity
+
+if TYPE_CHECKING:  # at run time only its instances' methods: the compiled field stays unimported
+    from pfp_service.core.threat import Threat
 
 __all__ = [
     "ESCAPES",
@@ -67,8 +70,6 @@ __all__ = [
 
 MAX_ITER_DERIVED = 1_000_000
 SCALE_FLOOR = 1e-150  # the smallest start-goal distance derived from: its square is still a normal float
-
-ESCAPES: tuple[str, ...] = ("none", "auto", *STRATEGIES)
 
 # At run time a real Literal, so msgspec-decoded configs and scenarios refuse
 # an unknown escape and the JSON schemas list the choices; a type checker

@@ -18,18 +18,16 @@ import functools
 import math
 from collections.abc import Container, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ndtr
 
 from pfp_service.core import kernels
+from pfp_service.core.options import Intensity
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["LEVEL_FLOOR", "PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
-
-Intensity = Literal["peak", "density"]
 
 # One row of ``ThreatField.packed`` per threat, in the kernels' column order.
 PACKED_COLUMNS = kernels.PACKED_COLUMNS

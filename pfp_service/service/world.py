@@ -46,7 +46,7 @@ __all__ = ["World", *ev.__all__]
 K = keys.KeyKind
 # A contingency that re-directs more guided units than this sends their directions first and their
 # look-ahead points in the next ``apply`` (``World.owes``): the points were 40-45 % of a 1,000-unit
-# wave's ``apply`` (measured: bench.deliberation's wave row, docs/operations.md)
+# wave's ``apply`` (measured: bench._deliberation's wave row, docs/operations.md)
 WAVE_FIRST = 64
 # ... and those points (and the jobs asked with them) follow at most this many units an ``apply``,
 # the rest owed to the next: a 1,000-unit wave's follow-up was one 8-13 ms apply in process (83-121

@@ -134,9 +134,10 @@ def run_replay(args: argparse.Namespace) -> int:
 
 def run_report(args: argparse.Namespace) -> int:
     from pfp_clients.record.mcapfile import read_record
+
+    rec = read_record(args.record)  # a hostile record is refused before the compiled core is imported
     from pfp_clients.record.report import write_report
 
-    rec = read_record(args.record)
     src = Path(args.record)
     stem = Path(args.out) if args.out else src.with_name(src.stem + "-report")
     write_report(rec, stem, args.intensity)

@@ -1,6 +1,6 @@
 """Deliberation in process: the goal storm's look-aheads as a worker runs them, and the contingency wave's ``apply``.
 
-The same field and fleet as ``pfp bench service`` (``bench.layout``: units
+The same field and fleet as ``pfp bench service`` (``bench._layout``: units
 on the west edge, goals on the east edge, threats facing west between them),
 driven through ``World.apply`` with deliberation deferred, so nothing here
 starts a process or opens a session:
@@ -46,7 +46,7 @@ TARGET_WAVE_MS = 10.0  # issue 23: one threat ahead of 1,000 units, World.apply 
 
 def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) -> dict[str, Any]:
     """The storm's look-aheads and then the wave, on one world (see the module's docstring)."""
-    from pfp_service.bench.layout import layout
+    from pfp_service.bench._layout import layout
     from pfp_service.core.routes import ROUTES
     from pfp_service.service.world import (
         GoalSet,

@@ -45,13 +45,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import ndimage
 
-from pfp_service.core.cores import Cores
-from pfp_service.core.threat import Threat, ThreatField
-from pfp_service.core.zones import Zone
+if TYPE_CHECKING:  # the compiled core is imported where used: `pfp bench`'s parser imports this suite
+    from pfp_service.core.threat import Threat
+    from pfp_service.core.zones import Zone
 
 __all__ = ["KINDS", "Case", "Verdict", "generate", "reachability"]
 
@@ -94,7 +94,7 @@ class Case:
     threats: tuple[Threat, ...]
     scale_m: float
     bounds: Bounds | None = None
-    zones: tuple[Zone, ...] = ()  # keep-out zones (``bench.zone_cases``)
+    zones: tuple[Zone, ...] = ()  # keep-out zones (``bench._zone_cases``)
 
     @property
     def enclosed(self) -> bool:
@@ -245,6 +245,9 @@ def _distractors(rng: np.random.Generator, n: int, keep_clear: list[_Spec]) -> l
 
 def generate(count: int, seed: int) -> list[Case]:
     """``count`` scenarios from ``seed``; the same arguments always give the same suite."""
+    from pfp_service.core.cores import Cores
+    from pfp_service.core.threat import Threat, ThreatField
+
     rng = np.random.default_rng(seed)
     cases = []
     for i in range(count):
@@ -309,6 +312,11 @@ _MAX_NODES = 16_000_000
 
 def reachability(case: Case, fractions: tuple[float, ...] = FRACTIONS) -> Verdict:
     """Is there a way from start to goal that enters no core, by a raster of the cores (not the planner)?"""
+    from scipy import ndimage
+
+    from pfp_service.core.cores import Cores
+    from pfp_service.core.threat import ThreatField
+
     (sx, sy), (gx, gy) = case.start, case.goal
     d0 = math.hypot(gx - sx, gy - sy)
     if case.bounds is not None:

@@ -1,6 +1,6 @@
 """The keep-out zone family of ``pfp bench quality --family zones``, and its ground truth.
 
-Drawn like ``bench.cases`` in a unit frame (start at the origin, goal at
+Drawn like ``bench._cases`` in a unit frame (start at the origin, goal at
 ``(1, 0)``), then scaled to a start-goal distance log-uniform in 10-30,000 m,
 rotated and shifted.  Kinds, in rotation:
 
@@ -33,7 +33,7 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from pfp_service.bench.cases import Case, Verdict, _component
+from pfp_service.bench._cases import Case, Verdict, _component
 from pfp_service.core.cores import Cores
 from pfp_service.core.threat import Threat, ThreatField
 from pfp_service.core.zones import Zone

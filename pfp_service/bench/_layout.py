@@ -1,4 +1,4 @@
-"""The field and the fleet of ``pfp bench service`` (and of ``bench.deliberation``, in process).
+"""The field and the fleet of ``pfp bench service`` (and of ``bench._deliberation``, in process).
 
 Units on the west edge with goals on the east edge, threats in the middle
 facing west: traps for plain descent.
