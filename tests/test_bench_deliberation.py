@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from pfp_service.bench._deliberation import storm_and_wave
+from benchmarks._deliberation import storm_and_wave
 
 pytestmark = pytest.mark.unit
 

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from pfp_service.bench.memory import TARGETS, pss_by_mapping, targets
+from benchmarks.memory import TARGETS, pss_by_mapping, targets
 
 
 @pytest.mark.unit

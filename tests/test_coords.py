@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pfp_service.bench._check import exit_code
+from benchmarks._check import exit_code
 from pfp_service.coords import Coords, degrees, metres_offset
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin

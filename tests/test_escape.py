@@ -320,7 +320,7 @@ def test_an_escape_ending_at_the_goal_steers_on_to_it():
 
 
 def test_auto_goes_round_a_channel_that_descent_would_run_down():
-    from pfp_service.bench._cases import KINDS, generate
+    from benchmarks._cases import KINDS, generate
     from pfp_service.core.optimal import plan_optimal
 
     for case in [c for c in generate(2 * len(KINDS), 4) if c.kind == "corridor"]:
@@ -373,7 +373,7 @@ def test_needles_in_a_wedge_are_resolved_and_gone_round():
 
 def test_routes_never_clip_a_sharply_skewed_core():
     """Pancakes with skew 10-50 have a rear far thinner than their sigmas: grid edges are re-checked densely."""
-    from pfp_service.bench._cases import KINDS, generate
+    from benchmarks._cases import KINDS, generate
     from pfp_service.core.optimal import plan_optimal
 
     cases = [c for c in generate(4 * len(KINDS), 7) if c.kind == "anisotropic"]

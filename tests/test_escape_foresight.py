@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pfp_service.bench._cases import generate
+from benchmarks._cases import generate
 from pfp_service.core import PlannerParams, Scheduled, Threat, ThreatField, foresight, plan, resolve
 from pfp_service.core.batch import advise_many
 from pfp_service.core.cores import Cores

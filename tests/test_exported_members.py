@@ -62,7 +62,6 @@ EXPECTED = [
     "decode_zone",
     "encode",
     "keys",
-    "zenoh_encoding",
 ]
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pfp_service.bench._layout import layout
+from benchmarks._layout import layout
 from pfp_service.core import PlannerParams, ThreatField, cull, foresight, resolve
 
 pytestmark = pytest.mark.unit

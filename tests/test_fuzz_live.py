@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from pfp_service.bench.fuzz import fuzz
+from benchmarks.fuzz import fuzz
 
 pytestmark = pytest.mark.proc
 

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pfp_service.bench.fuzz import CATEGORIES, malformed
+from benchmarks.fuzz import CATEGORIES, malformed
 from pfp_service.errors import InputError
 from pfp_service.wire import RejectedEvent, decode_event, encode, keys
 from pfp_service.wire import messages as wm

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from pfp_service.bench._cases import KINDS, generate, reachability
-from pfp_service.bench.quality import _pareto, measure_suite, render
+from benchmarks._cases import KINDS, generate, reachability
+from benchmarks.quality import _pareto, measure_suite, render
 from pfp_service.core import ThreatField
 from pfp_service.core.cores import Cores
 

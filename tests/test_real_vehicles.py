@@ -16,7 +16,7 @@ import uuid
 import numpy as np
 import pytest
 
-from pfp_service.bench import vehicles
+from benchmarks import vehicles
 from pfp_service.core import tracking
 from pfp_service.service.events import GoalSet, StateReported
 from pfp_service.service.progress import ProgressWatch

@@ -234,7 +234,7 @@ def test_the_record_bench_counts_every_message_with_the_recording_planner_file(t
     cmd = [
         sys.executable,
         "-m",
-        "pfp_clients.record.bench",
+        "benchmarks.recorder",
         "--units",
         "40",
         "--rate",

@@ -156,7 +156,7 @@ def test_trapped_unit_walked_away_is_guided_again():
 
 def test_route_ahead_is_what_a_ghost_walks():
     """The compiled look-ahead along a committed route gives a ghost's own track, point for point."""
-    from pfp_service.bench.service import layout
+    from benchmarks.service import layout
     from pfp_service.core.plan import walk_many
     from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
     from pfp_service.wire import Goal, UnitState

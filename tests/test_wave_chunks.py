@@ -115,7 +115,7 @@ def test_a_second_wave_while_a_follow_up_is_owed_leaves_no_unit_without_its_poin
 
 
 def test_the_bench_times_every_follow_up_apply(monkeypatch):
-    from pfp_service.bench._deliberation import storm_and_wave
+    from benchmarks._deliberation import storm_and_wave
 
     monkeypatch.setattr(world_mod, "WAVE_FIRST", 4)
     monkeypatch.setattr(world_mod, "OWED_PER_TICK", 5)

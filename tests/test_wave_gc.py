@@ -1,4 +1,5 @@
-"""The collector held off for ``World.apply`` (``gcpause``): none runs inside, it runs once after, and its state is kept."""
+"""The collector held off round ``World.apply`` by its driver (``gcpause``, as the node's loop does): none runs
+inside, it runs once after, and its state is kept.  The world itself imports no collector."""
 
 from __future__ import annotations
 
@@ -49,7 +50,8 @@ def _wave(n: int = 80) -> tuple[World, ThreatPut]:
 def test_no_collection_runs_inside_apply_and_one_runs_at_the_first_allocation_after(collections):
     w, put = _wave()
     collections.clear()
-    out = w.apply([put], 1.0)
+    with gcpause.paused():
+        out = w.apply([put], 1.0)
     assert len(out.directions) == 80
     assert collections == [] and gc.isenabled()
     assert gc.get_count()[0] > 50  # what apply made is counted, and owed to the collector
@@ -61,7 +63,8 @@ def test_no_collection_runs_inside_apply_and_one_runs_at_the_first_allocation_af
 def test_a_collector_already_off_stays_off(collections):
     w, put = _wave(8)
     gc.disable()
-    w.apply([put], 1.0)
+    with gcpause.paused():
+        w.apply([put], 1.0)
     assert not gc.isenabled()
 
 

@@ -331,7 +331,8 @@ def test_client_puts_reach_the_planner_and_decode(sessions: tuple[zenoh.Session,
 def test_planner_puts_reach_the_client_and_satisfy_the_schema(
     sessions: tuple[zenoh.Session, zenoh.Session],
 ) -> None:
-    from pfp_service.wire import decode_direction, decode_event, encode, keys, zenoh_encoding
+    from pfp_service.wire import decode_direction, decode_event, encode, keys
+    from pfp_service.wire.encoding import zenoh_encoding
 
     router, client = sessions
     inbox: queue.Queue[tuple[str, bytes, str]] = queue.Queue()
@@ -376,8 +377,8 @@ def test_queries_preview_status_and_errors(sessions: tuple[zenoh.Session, zenoh.
         decode_preview_request,
         encode,
         keys,
-        zenoh_encoding,
     )
+    from pfp_service.wire.encoding import zenoh_encoding
 
     router, client = sessions
     reply_body = (SCHEMAS / INDEX["messages"]["preview_reply"]["examples"][0]).read_bytes()

@@ -55,9 +55,9 @@ from pfp_service.wire import (
     decode_direction,
     encode,
     keys,
-    zenoh_encoding,
 )
 from pfp_service.wire.delivery import Deliverer
+from pfp_service.wire.encoding import zenoh_encoding
 
 __all__ = ["FleetOptions", "FleetResult", "in_planner_frame", "run_fleet", "summary_lines"]
 

@@ -49,9 +49,9 @@ from pfp_service.wire import (
     decode_goal,
     encode,
     keys,
-    zenoh_encoding,
 )
 from pfp_service.wire.delivery import Deliverer
+from pfp_service.wire.encoding import zenoh_encoding
 
 __all__ = [
     "DirectionIn",

@@ -14,8 +14,8 @@ A zone is *closed*: a point on its boundary is in it, and so is one within
 miss.  ``track_enters`` and every check use that one rule.
 
 How the live side hands zones to the engine: build ``ZoneSet(zones)`` from
-the zones in force (``Zone.from_update`` turns a wire ``ZoneUpdate`` into a
-``Zone``) and give it to the field, ``field.with_zones(zone_set)``: a
+the zones in force (the wire's ``ZoneUpdate.to_zone`` turns one into a ``Zone``:
+the core never imports the wire) and give it to the field, ``field.with_zones(zone_set)``: a
 ``ThreatField`` carries its ``ZoneSet`` (``field.zones``), so everything that
 takes a field -- the stepper, previews, escapes, routes, metrics -- sees the
 zones with no other argument.  A field is immutable; a zone put, moved,
@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numba
 import numpy as np
@@ -36,9 +36,6 @@ import shapely
 from shapely.geometry import Point as _SPoint
 from shapely.geometry import Polygon as _SPolygon
 from shapely.validation import explain_validity
-
-if TYPE_CHECKING:
-    from pfp_service.wire.messages.structs import ZoneUpdate
 
 __all__ = [
     "KINDS",
@@ -150,14 +147,6 @@ class Zone:
             holes=tuple(tuple((float(p[0]), float(p[1])) for p in h) for h in holes),
             kind=kind,
         )
-
-    @classmethod
-    def from_update(cls, zone_id: str, update: ZoneUpdate) -> Zone:
-        """The core's ``Zone`` for a decoded wire ``ZoneUpdate`` (positions already in metres)."""
-        if update.circle is not None:
-            return cls.circle(zone_id, update.circle.centre, update.circle.radius_m, update.kind)
-        rings = update.polygon or []
-        return cls.polygon(zone_id, rings[0], rings[1:], update.kind)
 
     @property
     def is_circle(self) -> bool:

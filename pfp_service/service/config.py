@@ -57,7 +57,7 @@ CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_
 # The planner's transmit queue per link and priority, in batches, without a zenoh_config file (Zenoh's default
 # is 2): directions (interactive_high) and the rest (data) go out with DROP and a 1 ms wait, and 2 batches
 # dropped 0.04-0.6 % of 1,000 units x 10 Hz whenever Zenoh's send thread was late (every unit's link and a
-# recorder's alike, measured with `python -m pfp_clients.record.bench`); 16 dropped none. A batch is allocated
+# recorder's alike, measured with `python -m benchmarks.recorder`); 16 dropped none. A batch is allocated
 # only when a link falls behind: 150 links with traffic cost 3-5 MB more (within noise).
 TX_QUEUE_BATCHES = {"interactive_high": 16, "data": 16}
 # A router-mode session binds its listeners, then spends Zenoh's scouting delay (500 ms by default) in

@@ -196,14 +196,16 @@ class PlannerNode:
         if self.store is not None:
             restored = self.store.restore(time.time())
             self._writes.order.load(restored.order)  # an older write asked again stays superseded
-            self.world.apply(restored.inputs, self.clock())
+            with gcpause.paused():  # as every apply of the loop's (gcpause)
+                self.world.apply(restored.inputs, self.clock())
         if self.cfg.zones is not None:  # the --zones file: in force (and stored) before the first state
             from pfp_service.geojson import load_zones
 
             filed: list[Input] = [zone_put(z) for z in load_zones(self.cfg.zones, self._origin)]
             if self.store is not None:
                 filed = self.store.commit_batch(filed, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
-            self.world.apply(filed, self.clock())
+            with gcpause.paused():
+                self.world.apply(filed, self.clock())
         self._join(s)
         if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
             self._peers_known(s)
@@ -314,7 +316,8 @@ class PlannerNode:
 
         joined = fetch_world(ask, self.cfg.mission, self.cfg.planner_id)
         if joined.inputs:
-            self.world.apply(joined.inputs, self.clock())
+            with gcpause.paused():
+                self.world.apply(joined.inputs, self.clock())
         if joined.peers:
             level = log.info if joined.complete else log.warning
             level("joined the mission's planners", extra={"fields": joined.fields()})

@@ -13,7 +13,7 @@ timer heap (``timers``), staleness, forgetting and push re-sends
 (``liveness``), cluster ownership (``ownership``), the limits on rejections
 and fault lines (``limits``), a unit's mission (``missions``), the reactive
 step and its look-ahead (``steering``, ``lookahead``) and the snapshot's
-pages (``worldpages.page``).  Unbounded work (look-ahead, escape searches) is
+pages (``snapshot.page``).  Unbounded work (look-ahead, escape searches) is
 deliberation: a ``Job`` whose result is adopted only for the goal and world
 still in force.  Bulkheads: ``apply`` is total; a failure belongs to the
 input, timer or unit that caused it (rejected on its key, its goal dropped,
@@ -30,12 +30,13 @@ from pfp_service.core import Threat, ThreatField
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.service import events as ev
-from pfp_service.service import gcpause, missions, steering, worldpages
+from pfp_service.service import missions, steering
 from pfp_service.service.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.service.events import Input, Outputs, UnitView, WorldSettings
 from pfp_service.service.limits import Limits
 from pfp_service.service.liveness import UNIT_TIMERS, Liveness
 from pfp_service.service.ownership import Ownership
+from pfp_service.service.snapshot import page as snapshot_page
 from pfp_service.service.timers import Timers
 from pfp_service.service.world_records import Records, ThreatRecord, UnitRecord, ZoneRecord
 from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
@@ -118,9 +119,9 @@ class World:
         zones_from: str | None = None,
         zones_limit: int | None = None,
     ) -> WorldSnapshot:
-        """One page of what the planner holds, for the world queryable (``worldpages.page``)."""
+        """One page of what the planner holds, for the world queryable (``snapshot.page``)."""
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        return worldpages.page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
+        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
 
     def owes(self) -> bool:
         """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon.
@@ -145,13 +146,9 @@ class World:
     def apply(self, inputs: list[Input] | tuple[Input, ...], now: float) -> Outputs:
         """Apply a batch of inputs at ``now``; return what must go out.
 
-        The cyclic collector is held off for the call and runs once after it
-        (``gcpause``): a wave's ~10 collections inside cost 1-3 ms of it.
+        Its driver holds the cyclic collector off around the call (``gcpause``: the node's
+        loop until the directions are out), not the world, which imports no collector.
         """
-        with gcpause.paused():
-            return self._apply(inputs, now)
-
-    def _apply(self, inputs: list[Input] | tuple[Input, ...], now: float) -> Outputs:
         b = _Batch(now)
         for inp in inputs:
             try:

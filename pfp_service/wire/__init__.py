@@ -2,15 +2,13 @@
 
 Nothing here opens a session.  ``messages`` and ``keys`` never import zenoh;
 the one Zenoh-specific choice, the encoding every payload is put with, is
-``zenoh_encoding()`` below, which imports zenoh only when called.
+``encoding.zenoh_encoding()``, a module of its own that this package does not import.
 ``delivery`` is how every client writes goals and threats: acknowledged
 writes that reach a planner started later (its ``Deliverer`` is given an
 open session).
 """
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 from pfp_service.wire import keys
 from pfp_service.wire.messages import (
@@ -65,9 +63,6 @@ from pfp_service.wire.messages import (
     encode,
 )
 
-if TYPE_CHECKING:
-    import zenoh
-
 __all__ = [
     "CONTENT_TYPE",
     "MAX_PAYLOAD_BYTES",
@@ -119,15 +114,4 @@ __all__ = [
     "decode_zone",
     "encode",
     "keys",
-    "zenoh_encoding",
 ]
-
-
-def zenoh_encoding() -> zenoh.Encoding:
-    """The Zenoh encoding every payload is put and replied with: ``APPLICATION_JSON``.
-
-    Predefined encodings travel as a small integer; ``str()`` of it is ``CONTENT_TYPE``.
-    """
-    import zenoh
-
-    return zenoh.Encoding.APPLICATION_JSON

@@ -264,7 +264,7 @@ class Deliverer:
     ) -> None:
         import zenoh
 
-        from pfp_service.wire import zenoh_encoding
+        from pfp_service.wire.encoding import zenoh_encoding
 
         self._zenoh = zenoh
         self.session = session

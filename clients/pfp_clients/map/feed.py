@@ -46,8 +46,8 @@ from pfp_service.wire import (
     decode_world_snapshot,
     encode,
     keys,
-    zenoh_encoding,
 )
+from pfp_service.wire.encoding import zenoh_encoding
 from pfp_service.wire.messages import decode_zone
 
 __all__ = ["Feed", "PreviewError"]

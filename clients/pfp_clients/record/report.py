@@ -220,7 +220,6 @@ def popups(rows: list[UnitSummary], watch: Watch) -> dict[str, str]:
 
 def zones_at_end(rec: Record) -> list[Any]:
     """The keep-out zones in force when the record ends (each put and not since removed), as core ``Zone``s."""
-    from pfp_service.core.zones import Zone
     from pfp_service.wire.messages import decode_zone
 
     held: dict[str, Any] = {}
@@ -235,7 +234,7 @@ def zones_at_end(rec: Record) -> list[Any]:
             held.pop(k.id, None)
             continue
         try:
-            held[k.id] = Zone.from_update(k.id, decode_zone(e.data, None, rec.origin))
+            held[k.id] = decode_zone(e.data, None, rec.origin).to_zone(k.id)
         except (InputError, ValueError):  # refused by the planner too: not in force
             continue
     return list(held.values())

@@ -330,7 +330,7 @@ async def _main(
 
 
 def _encoding() -> Any:
-    from pfp_service.wire import zenoh_encoding
+    from pfp_service.wire.encoding import zenoh_encoding
 
     return zenoh_encoding()
 

@@ -85,7 +85,7 @@ __all__ = [
     "fit_text",
 ]
 
-# The MIME type of every payload; ``pfp_service.wire.zenoh_encoding()`` maps it to Zenoh's.
+# The MIME type of every payload; ``pfp_service.wire.encoding.zenoh_encoding()`` maps it to Zenoh's.
 CONTENT_TYPE = "application/json"
 # Largest payload a decoder reads.  The biggest legitimate message, a preview
 # request with MAX_WHATIF_THREATS threats, is about 60 KiB.
@@ -274,10 +274,13 @@ class ZoneUpdate(_Message, frozen=True, kw_only=True):
             _check_rings(self.polygon)
 
     def to_zone(self, zone_id: str) -> Zone:
-        """The core's ``Zone`` for this update, named ``zone_id``."""
+        """The core's ``Zone`` for this update, named ``zone_id`` (positions already in metres)."""
         from pfp_service.core.zones import Zone
 
-        return Zone.from_update(zone_id, self)
+        if self.circle is not None:
+            return Zone.circle(zone_id, self.circle.centre, self.circle.radius_m, self.kind)
+        rings = self.polygon or []
+        return Zone.polygon(zone_id, rings[0], rings[1:], self.kind)
 
 
 def _check_rings(rings: Sequence[Sequence[tuple[float, float]]]) -> None:

@@ -43,7 +43,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from pfp_service.bench._fuzz_bulkheads import (
+from benchmarks._fuzz_bulkheads import (
     BOMB_GROWTH_MB,
     BOMB_PLAIN_S,
     BOMB_SETTLE_S,
@@ -54,7 +54,7 @@ from pfp_service.bench._fuzz_bulkheads import (
     poison_goals,
     preview_bombs,
 )
-from pfp_service.cli._common import positive_float, positive_int
+from pfp_service.argtypes import positive_float, positive_int
 
 __all__ = ["CATEGORIES", "POISON_GOALS", "Input", "add_arguments", "fuzz", "malformed", "poison_goals", "run"]
 

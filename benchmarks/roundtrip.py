@@ -20,8 +20,8 @@ import tempfile
 import time
 from typing import Any
 
-from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.cli._common import positive_int
+from benchmarks._check import add_check_arg, exit_code
+from pfp_service.argtypes import positive_int
 
 TARGET_MEDIAN_MS = 1.0
 
@@ -58,8 +58,9 @@ def _client(endpoint: str) -> Any:
 def measure(count: int) -> dict[str, Any]:
     import msgspec
 
-    from pfp_service.bench.engine import table_threats
-    from pfp_service.wire import Goal, ThreatUpdate, UnitState, decode_direction, encode, keys, zenoh_encoding
+    from benchmarks.engine import table_threats
+    from pfp_service.wire import Goal, ThreatUpdate, UnitState, decode_direction, encode, keys
+    from pfp_service.wire.encoding import zenoh_encoding
 
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     mission = "bench"

@@ -43,10 +43,10 @@ import sys
 import time
 from typing import Any
 
-from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.bench._layout import AREA_M, layout
-from pfp_service.bench._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
-from pfp_service.bench._phases import (
+from benchmarks._check import add_check_arg, exit_code
+from benchmarks._layout import AREA_M, layout
+from benchmarks._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
+from benchmarks._phases import (
     MAX_P99_MS,
     STEP_M,
     Bar,
@@ -58,8 +58,8 @@ from pfp_service.bench._phases import (
     steady,
     storm,
 )
-from pfp_service.bench._service_text import print_doc
-from pfp_service.cli._common import positive_float, positive_int
+from benchmarks._service_text import print_doc
+from pfp_service.argtypes import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
 
 STATE_KEYS = ("shard", "plain", "both", "mixed")

@@ -34,12 +34,12 @@ import threading
 import time
 from typing import Any
 
-from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.bench._layout import layout
-from pfp_service.bench._load import MISSION, LoadGen, start_server
-from pfp_service.bench._phases import STEP_M, Bar, register, steady
-from pfp_service.bench.previews import tree_pss_by_process
-from pfp_service.cli._common import positive_float, positive_int
+from benchmarks._check import add_check_arg, exit_code
+from benchmarks._layout import layout
+from benchmarks._load import MISSION, LoadGen, start_server
+from benchmarks._phases import STEP_M, Bar, register, steady
+from benchmarks.previews import tree_pss_by_process
+from pfp_service.argtypes import positive_float, positive_int
 
 __all__ = ["TARGETS", "add_arguments", "run", "targets"]
 

@@ -46,8 +46,9 @@ TARGET_WAVE_MS = 10.0  # issue 23: one threat ahead of 1,000 units, World.apply 
 
 def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) -> dict[str, Any]:
     """The storm's look-aheads and then the wave, on one world (see the module's docstring)."""
-    from pfp_service.bench._layout import layout
+    from benchmarks._layout import layout
     from pfp_service.core.routes import ROUTES
+    from pfp_service.service import gcpause
     from pfp_service.service.world import (
         GoalSet,
         Input,
@@ -89,7 +90,8 @@ def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) 
         world = copy.deepcopy(w)
         gc.collect()  # the copy's own collection: a serving planner copies no world
         t0 = time.perf_counter()
-        wave = world.apply([ThreatPut("contingency", threat)], 5.0)
+        with gcpause.paused():  # as the node's loop holds the collector off round each apply
+            wave = world.apply([ThreatPut("contingency", threat)], 5.0)
         t1 = time.perf_counter()
         types.SimpleNamespace()  # the first allocation after: the collection apply held off runs here
         afters.append((time.perf_counter() - t1) * 1e3)
@@ -99,7 +101,8 @@ def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) 
         while world.owes() or not follow:  # a big wave's points and jobs follow, a bounded share a tick
             now += 0.002
             t0 = time.perf_counter()
-            follow.append(world.apply([Tick(now, 0)], now))
+            with gcpause.paused():
+                follow.append(world.apply([Tick(now, 0)], now))
             thens.append((time.perf_counter() - t0) * 1e3)
         then_max.append(max(thens[-len(follow) :]))
         ticks = len(follow)

@@ -36,10 +36,10 @@ from typing import Any
 
 import zenoh
 
-from pfp_service.bench._check import add_check_arg
-from pfp_service.bench._load import MISSION, start_server
-from pfp_service.bench.roundtrip import _client
-from pfp_service.cli._common import positive_float, positive_int
+from benchmarks._check import add_check_arg
+from benchmarks._load import MISSION, start_server
+from benchmarks.roundtrip import _client
+from pfp_service.argtypes import positive_float, positive_int
 from pfp_service.wire import keys
 
 __all__ = [

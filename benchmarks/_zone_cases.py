@@ -33,7 +33,7 @@ import numpy as np
 import shapely
 from scipy import ndimage
 
-from pfp_service.bench._cases import Case, Verdict, _component
+from benchmarks._cases import Case, Verdict, _component
 from pfp_service.core.cores import Cores
 from pfp_service.core.threat import Threat, ThreatField
 from pfp_service.core.zones import Zone

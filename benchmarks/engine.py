@@ -27,15 +27,15 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.bench._deliberation import (
+from benchmarks._check import add_check_arg, exit_code
+from benchmarks._deliberation import (
     STORM_UNITS,
     TARGET_LOOKAHEAD_MS,
     TARGET_WAVE_MS,
     print_storm_and_wave,
     storm_and_wave,
 )
-from pfp_service.cli._common import positive_int
+from pfp_service.argtypes import positive_int
 
 # Table 3 of the paper: (MAXITER, size, threats) -> seconds, with its delta and step per size.
 PAPER_SECONDS: dict[tuple[int, int, int], float] = {
@@ -127,7 +127,7 @@ def _median_ms(fn: Any, repeat: int) -> float:
 
 
 def run_rows(repeat: int, baseline_repeat: int, quick: bool) -> list[Row]:
-    from pfp_service.bench._baseline import baseline_path
+    from benchmarks._baseline import baseline_path
     from pfp_service.core import Scheduled, plan
 
     rows = []
@@ -392,6 +392,7 @@ def world_tick(units: int, threats: int, box: float, repeat: int, seed: int = 11
     its last direction.  Jobs are not run: this is the reactive loop's cost.
     """
     from pfp_service.core import PlannerParams
+    from pfp_service.service import gcpause
     from pfp_service.service.world import GoalSet, Input, StateReported, ThreatPut, World, WorldSettings
     from pfp_service.wire import Goal, UnitState
 
@@ -406,7 +407,8 @@ def world_tick(units: int, threats: int, box: float, repeat: int, seed: int = 11
     ]
     first += [GoalSet(u, Goal(position=(float(x), float(y)))) for u, (x, y) in zip(ids, goals)]
     t0 = time.perf_counter()
-    out = world.apply(first, 1.0)
+    with gcpause.paused():  # as the node's loop holds the collector off round each apply
+        out = world.apply(first, 1.0)
     goals_s = time.perf_counter() - t0
     jobs = len(out.jobs)
     vec = {d.unit: d.vector for d in out.directions}
@@ -422,7 +424,8 @@ def world_tick(units: int, threats: int, box: float, repeat: int, seed: int = 11
             for u, (x, y) in zip(ids, pos)
         ]
         t0 = time.perf_counter()
-        out = world.apply(batch, 2.0 + k)
+        with gcpause.paused():
+            out = world.apply(batch, 2.0 + k)
         times.append((time.perf_counter() - t0) * 1e3)
         vec = {d.unit: d.vector for d in out.directions}
     return {"goals_s": goals_s, "jobs_asked": jobs, "tick_ms": statistics.median(times)}

@@ -21,8 +21,8 @@ import threading
 import time
 from typing import Any
 
-from pfp_service.bench.roundtrip import _free_port
-from pfp_service.cli._common import positive_float, positive_int
+from benchmarks.roundtrip import _free_port
+from pfp_service.argtypes import positive_float, positive_int
 from pfp_service.wire import keys
 
 __all__ = ["add_arguments", "failover", "run"]

@@ -45,13 +45,13 @@ from typing import TYPE_CHECKING
 import msgspec
 import numpy as np
 
-from pfp_service.bench._cases import KINDS
-from pfp_service.bench._check import add_check_arg, exit_code
-from pfp_service.cli._common import grid_cells
+from benchmarks._cases import KINDS
+from benchmarks._check import add_check_arg, exit_code
+from pfp_service.argtypes import grid_cells
 from pfp_service.core.options import ESCAPES, LAMBDA
 
 if TYPE_CHECKING:
-    from pfp_service.bench._cases import Case
+    from benchmarks._cases import Case
 
 __all__ = ["LAMBDAS", "add_arguments", "run"]
 
@@ -155,8 +155,8 @@ def measure_suite(
 ) -> Report:
     """Run the whole benchmark and return its figures (no printing unless ``log``)."""
     # the compiled core here, not at the top: `pfp` imports this module to build its parser
-    from pfp_service.bench._cases import generate, reachability
-    from pfp_service.bench._zone_cases import generate_zones, zone_reachability
+    from benchmarks._cases import generate, reachability
+    from benchmarks._zone_cases import generate_zones, zone_reachability
     from pfp_service.core import PlannerParams, Scheduled, ThreatField, plan
     from pfp_service.core.cores import Cores
     from pfp_service.core.optimal import OptimalSolver

@@ -1,6 +1,6 @@
 """The recorder under load: N units at R Hz for D seconds through a real planner, every message counted.
 
-    python -m pfp_clients.record.bench --units 1000 --rate 10 --duration 60 [--out rec.mcap]
+    python -m benchmarks.recorder --units 1000 --rate 10 --duration 60 [--out rec.mcap]
 
 The planner (``pfp serve``) is the router, in its own process; ``pfp record``
 runs in its own process as a client; this process is the load generator of
@@ -85,8 +85,8 @@ def run(
     units: int, rate_hz: float, duration_s: float, out: Path, planner_zenoh: Path | None = None
 ) -> dict[str, Any]:
     """One run; ``planner_zenoh``: the planner's Zenoh JSON5 file (``PFP_ZENOH_CONFIG``), if any."""
-    from pfp_service.bench._load import MISSION, LoadGen, ProcMeter, start_server
-    from pfp_service.bench._phases import STEP_M
+    from benchmarks._load import MISSION, LoadGen, ProcMeter, start_server
+    from benchmarks._phases import STEP_M
     from pfp_service.wire import Goal, keys
 
     saved = os.environ.get("PFP_ZENOH_CONFIG")
@@ -182,7 +182,7 @@ def run(
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m pfp_clients.record.bench", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m benchmarks.recorder", description=__doc__)
     p.add_argument("--units", type=int, default=1000)
     p.add_argument("--rate", type=float, default=10.0, help="reports per unit per second")
     p.add_argument("--duration", type=float, default=60.0, help="seconds of load")

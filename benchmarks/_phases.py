@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.bench._load import MISSION, Cluster, LoadGen, ProcMeter, Received, Server
+from benchmarks._load import MISSION, Cluster, LoadGen, ProcMeter, Received, Server
 
 __all__ = ["Bar", "RateSearch", "fanout", "forget", "register", "steady", "storm"]
 

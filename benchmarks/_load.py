@@ -29,7 +29,7 @@ from typing import IO, Any
 
 import msgspec
 
-from pfp_service.bench.roundtrip import _client, _free_port
+from benchmarks.roundtrip import _client, _free_port
 
 __all__ = [
     "Cluster",
@@ -210,7 +210,7 @@ def start_server(
             cmd += ["--escape", escape]
     else:
         main = "echo_main" if kind == "echo" else "router_main"
-        code = f"import sys; from pfp_service.bench._load import {main}; {main}(sys.argv[1])"
+        code = f"import sys; from benchmarks._load import {main}; {main}(sys.argv[1])"
         cmd = [sys.executable, "-c", code, endpoint]
     log = tempfile.TemporaryFile()  # noqa: SIM115 -- the Server owns it and closes it in stop()
     proc = subprocess.Popen(
@@ -389,7 +389,8 @@ class LoadGen:
     ) -> None:
         import zenoh
 
-        from pfp_service.wire import encode, keys, zenoh_encoding
+        from pfp_service.wire import encode, keys
+        from pfp_service.wire.encoding import zenoh_encoding
 
         self._zenoh = zenoh
         self._encode = encode

@@ -43,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _problems(count: int, seed: int) -> list[tuple[str, dict]]:
     """(name, plan() keyword arguments) of every scenario compared."""
-    from pfp_service.bench._cases import generate, reachability
+    from benchmarks._cases import generate, reachability
     from pfp_service.core import PlannerParams, Scheduled
     from pfp_service.core.zones import ZoneSet
     from pfp_service.scenario import load_scenario
