@@ -19,27 +19,29 @@ from pfp_service.geo import MAX_RANGE_M, LatLon, localise
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
 
+from pfp_service.wire.messages.events import (
+    EVENT_KINDS,
+    AnyEvent,
+    ArrivedEvent,
+    Event,
+    TrappedEvent,
+)
 from pfp_service.wire.messages.structs import (
     CHOICES,
-    EVENT_KINDS,
     MAX_PAYLOAD_BYTES,
     MAX_WHATIF_THREATS,
     MAX_WORLD_QUERY_CHARS,
     MAX_ZONE_RINGS,
     MAX_ZONE_VERTICES,
-    AnyEvent,
-    ArrivedEvent,
     Bounds,
     Direction,
     ErrorReply,
-    Event,
     Goal,
     Mission,
     Origin,
     PlannerStatus,
     PreviewRequest,
     ThreatUpdate,
-    TrappedEvent,
     UnitState,
     WorldQuery,
     WorldSnapshot,

@@ -1,13 +1,14 @@
 """The message Structs: every payload's shape and bounds, frozen and keyword-only.
 
-Decoding and encoding are in ``codec``; ``pfp_service.wire.messages`` exports both.
+The planner's events are in ``events``; decoding and encoding are in ``codec``;
+``pfp_service.wire.messages`` exports them all.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from enum import StrEnum
-from typing import TYPE_CHECKING, Annotated, Union
+from typing import TYPE_CHECKING, Annotated
 
 import msgspec
 from msgspec import Meta
@@ -37,7 +38,6 @@ if TYPE_CHECKING:
 __all__ = [
     "CHOICES",
     "CONTENT_TYPE",
-    "EVENT_KINDS",
     "MAX_EVENT_ITEMS",
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",
@@ -49,15 +49,10 @@ __all__ = [
     "MAX_ZONE_VERTICES",
     "SNAPSHOT_PAGE_BYTES",
     "TEXT_MAX_CHARS",
-    "AnyEvent",
-    "ArrivedEvent",
     "Bounds",
-    "ConflictEvent",
     "Direction",
     "DirectionStatus",
     "ErrorReply",
-    "Event",
-    "ForgottenEvent",
     "Goal",
     "LatLon",
     "Mission",
@@ -65,14 +60,8 @@ __all__ = [
     "Origin",
     "PlannerStatus",
     "PreviewRequest",
-    "RejectedEvent",
-    "ReplanEvent",
-    "RestoredEvent",
-    "StaleEvent",
-    "ThreatChange",
     "ThreatSummary",
     "ThreatUpdate",
-    "TrappedEvent",
     "UnitKind",
     "UnitState",
     "UnitSummary",
@@ -458,127 +447,6 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     # twins: other planners this one sees answering the same units (another id while not --cluster, or a
     # second session under its own id), each "ID" or "ID-SESSION"; pfp status and pfp health warn of them
     twins: Annotated[tuple[Text, ...], Meta(max_length=64)] = ()
-
-
-# -- events on mumt/{m}/event/{kind}; "kind" repeats the key's last chunk -------
-class Event(_Message, frozen=True, kw_only=True, tag_field="kind"):
-    """Base of planner events.  ``t`` is the planner's Unix time in seconds."""
-
-    planner: Id | None = None
-    t: Time | None = None
-
-
-class RejectedEvent(Event, frozen=True, kw_only=True, tag="rejected"):
-    """An input the planner refused: the key it came on, the field path and why."""
-
-    key: Text
-    field: Text = "$"
-    reason: Text
-    suppressed: Count = 0  # rejections of the same kind of key not sent since the last one
-    truncated: bool = False  # key, field or reason was cut to TEXT_MAX_CHARS (it then ends in "…")
-
-    @classmethod
-    def of(
-        cls, key: str, exc: InputError, planner: str | None = None, t: float | None = None
-    ) -> RejectedEvent:
-        """The event for ``exc`` on ``key``, every text cut to fit the schema and marked ``truncated``."""
-        texts = (str(key), exc.path or "$", exc.reason)
-        k, f, r = (fit_text(s) for s in texts)
-        return cls(key=k, field=f, reason=r, truncated=(k, f, r) != texts, planner=planner, t=t)
-
-
-class ThreatChange(_Message, frozen=True, kw_only=True):
-    """One change to the threats in force: ``put``, ``removed`` or ``expired``."""
-
-    threat: Id
-    change: Annotated[str, Meta(pattern="^(put|removed|expired)$")]
-    position: Point | None = None
-
-
-class ReplanEvent(Event, frozen=True, kw_only=True, tag="replan"):
-    """The threats changed, and these units got fresh directions.
-
-    ``changes`` lists what changed (at most ``MAX_EVENT_ITEMS``; ``more`` counts
-    the rest), ``units`` the units re-directed (also capped, ``more_units``).
-    """
-
-    units: Annotated[list[Id], Meta(max_length=MAX_EVENT_ITEMS)]
-    reason: Text
-    changes: Annotated[list[ThreatChange], Meta(max_length=MAX_EVENT_ITEMS)] = []
-    more: Count = 0
-    more_units: Count = 0
-
-
-class StaleEvent(Event, frozen=True, kw_only=True, tag="stale"):
-    """A unit went silent (or its liveliness token went) and gets no directions until it reports."""
-
-    unit: Id
-    position: Point
-    reason: Text = ""
-
-
-class ForgottenEvent(Event, frozen=True, kw_only=True, tag="forgotten"):
-    """A unit stale for ``unit_forget_s`` was dropped, with its goal and memory."""
-
-    unit: Id
-    stale_s: NonNegative = 0.0
-
-
-class TrappedEvent(Event, frozen=True, kw_only=True, tag="trapped"):
-    """A unit is honestly stuck."""
-
-    unit: Id
-    position: Point
-    reason: Text = ""
-
-
-class ArrivedEvent(Event, frozen=True, kw_only=True, tag="arrived"):
-    """A unit is within tolerance of its goal."""
-
-    unit: Id
-    position: Point
-    distance_to_goal: NonNegative = 0.0
-
-
-class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
-    """A planner started from its durable state: how much it found."""
-
-    threats: Count = 0
-    goals: Count = 0
-    missions: Count = 0
-    expired: Count = 0  # threats and zones whose TTL ran out while the planner was down
-    zones: Count = 0  # keep-out zones restored
-    corrupt: Count = 0  # rows skipped as unreadable, plus the damaged pages of a state file set aside
-    set_aside: Text = ""  # where a damaged state file was moved (kept), if one was
-
-
-class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):
-    """Another planner serves the same mission, and scale-out is not configured: both answer every unit."""
-
-    other: Id
-    reason: Text = ""
-
-
-AnyEvent = Union[  # noqa: UP007
-    RejectedEvent,
-    ReplanEvent,
-    TrappedEvent,
-    ArrivedEvent,
-    StaleEvent,
-    ForgottenEvent,
-    RestoredEvent,
-    ConflictEvent,
-]
-EVENT_KINDS: tuple[str, ...] = (
-    "rejected",
-    "replan",
-    "trapped",
-    "arrived",
-    "stale",
-    "forgotten",
-    "restored",
-    "conflict",
-)
 
 
 # -- shared between planners -----------------------------------------------------
