@@ -115,7 +115,7 @@ def test_a_lone_units_route_comes_from_a_star_and_matches_the_whole_grids_cost()
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_compiled_shortcut_keeps_what_the_whole_window_evaluation_keeps(seed: int) -> None:
-    from pfp_service.core.grid import _shortcut_kept_numpy, shortcut_kept
+    from pfp_service.core.polylines import _shortcut_kept_numpy, shortcut_kept
 
     field = random_field(seed, 60)
     cores = Cores.of(field, SEARCH_FRACTION)
@@ -129,7 +129,7 @@ def test_the_compiled_shortcut_keeps_what_the_whole_window_evaluation_keeps(seed
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_compiled_core_checks_answer_what_the_cores_answer(seed: int) -> None:
-    from pfp_service.core.grid import polyline_clear, segment_hits
+    from pfp_service.core.polylines import polyline_clear, segment_hits
 
     field = random_field(seed, 60)
     rng = np.random.default_rng(seed + 100)

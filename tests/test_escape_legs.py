@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pfp_service.core import steprule
-from pfp_service.core.grid import resample
+from pfp_service.core.polylines import resample
 from pfp_service.core.route import EscapeRun, legs
 from pfp_service.core.zones import Zone, ZoneSet
 

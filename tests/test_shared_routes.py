@@ -12,8 +12,9 @@ from pfp_service.core import PlannerParams, Threat, ThreatField, resolve
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.escape import Escaper
 from pfp_service.core.escape_strategies import NoCandidate, Trap, global_route, route_cell
-from pfp_service.core.grid import GridGraph, resample, shortcut
+from pfp_service.core.grid import GridGraph
 from pfp_service.core.metrics import LAMBDA, path_cost
+from pfp_service.core.polylines import resample, shortcut
 from pfp_service.core.routes import ROUTES, RouteCache
 from pfp_service.core.stepper import Stepper, StepStatus
 

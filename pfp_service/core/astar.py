@@ -45,7 +45,7 @@ import numpy as np
 
 from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
-from pfp_service.core.grid import segment_hits
+from pfp_service.core.polylines import segment_hits
 from pfp_service.core.threat import LEVEL_FLOOR, ThreatField
 
 __all__ = ["LADDER", "LazyRoute", "cell_ladder", "clear_lattices", "lazy_route"]

@@ -73,9 +73,9 @@ from pfp_service.core.escape_strategies import (
     rollout,
 )
 from pfp_service.core.foresight import coarser, progress_floor
-from pfp_service.core.grid import polyline_clear, resample
 from pfp_service.core.metrics import LAMBDA, path_cost
 from pfp_service.core.params import Resolved
+from pfp_service.core.polylines import polyline_clear, resample
 from pfp_service.core.route import NO_POINTS, EscapeRun, legs, path_length
 from pfp_service.core.threat import ThreatField
 from pfp_service.core.tracking import Route

@@ -46,9 +46,10 @@ import numpy as np
 
 from pfp_service.core import kernels, steprule
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
-from pfp_service.core.grid import GridGraph, resample
+from pfp_service.core.grid import GridGraph
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.options import ESCAPE_STRATEGIES
+from pfp_service.core.polylines import resample
 from pfp_service.core.routes import ROUTES, Ask, RouteCache
 from pfp_service.core.threat import ThreatField
 

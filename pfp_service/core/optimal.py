@@ -30,10 +30,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
-from pfp_service.core.grid import GridGraph, resample, shortcut
+from pfp_service.core.grid import GridGraph
 from pfp_service.core.metrics import LAMBDA, Epoch, measure
 from pfp_service.core.options import DEFAULT_CELLS
 from pfp_service.core.plan import PlanResult, PlanStatus, Scheduled, UsedParams
+from pfp_service.core.polylines import resample, shortcut
 from pfp_service.core.stepper import Bounds
 from pfp_service.core.threat import Intensity, ThreatField
 from pfp_service.core.zones import ZoneSet

@@ -20,7 +20,7 @@ import numpy as np
 from pfp_service.core import steprule
 from pfp_service.core.advice import StepStatus
 from pfp_service.core.foresight import Foresight, Outcome
-from pfp_service.core.grid import pieces
+from pfp_service.core.polylines import pieces
 from pfp_service.core.route_kernels import ahead_walk, point_of, points_of, steer_step, steer_to
 from pfp_service.core.tracking import LEAD_STEPS, SIMPLIFY_STEPS, Route, simplify
 from pfp_service.core.zones import ZoneSet
@@ -44,7 +44,7 @@ class EscapeRun:
     ``path``, its points ``(K, 2)``; or, for a route made of long straight
     legs (``along``: a global route, a way out of a core), ``segs``, one row
     ``(ax, ay, dx, dy, last)`` a leg, whose points are exactly those
-    ``grid.resample`` makes (``a + (j / m) d``, ``j = 1..m``; ``last`` the
+    ``polylines.resample`` makes (``a + (j / m) d``, ``j = 1..m``; ``last`` the
     index of the leg's final point).  A 2 km route at a 1 m step is then a
     few hundred bytes instead of 30 KB, in the world's books and in every
     worker's answer.
@@ -106,7 +106,7 @@ class EscapeRun:
 
     @classmethod
     def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
-        """The run along ``corners`` resampled at ``step`` (``grid.resample``), kept as its legs."""
+        """The run along ``corners`` resampled at ``step`` (``polylines.resample``), kept as its legs."""
         return cls(name, NO_POINTS, step, to_goal, segs=legs(corners, step))
 
     def said(self) -> tuple[StepStatus, str]:
@@ -249,9 +249,9 @@ def path_length(corners: np.ndarray) -> float:
 
 
 def legs(corners: np.ndarray, step: float) -> np.ndarray:
-    """``EscapeRun.segs`` for ``grid.resample(corners, step)``: each leg's start, delta and last index.
+    """``EscapeRun.segs`` for ``polylines.resample(corners, step)``: each leg's start, delta and last index.
 
-    The leg counts are ``resample``'s own (``grid.pieces``), so ``point_of`` gives its points bit for bit.
+    The leg counts are ``resample``'s own (``polylines.pieces``), so ``point_of`` gives its points bit for bit.
     A single corner is one leg of no length (its one point, twice): callers
     pass routes of at least two.
     """

@@ -41,7 +41,7 @@ def _on_leg(segs: np.ndarray, leg: int, i: int) -> tuple[float, float]:
     if i == 0:
         return segs[0, 0], segs[0, 1]
     first = segs[leg - 1, 4] if leg > 0 else 0.0
-    t = (i - first) / (segs[leg, 4] - first)  # j / m, as grid.resample divides them
+    t = (i - first) / (segs[leg, 4] - first)  # j / m, as polylines.resample divides them
     return segs[leg, 0] + t * segs[leg, 2], segs[leg, 1] + t * segs[leg, 3]
 
 

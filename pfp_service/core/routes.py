@@ -33,7 +33,7 @@ the same for every unit under one field.  A platoon thus pays two searches the
 first time its goal is seen (the first unit's own, then the shared one) and
 one per world change after that.
 
-Shortcut tails.  ``grid.shortcut`` is greedy and forward-looking: what it keeps
+Shortcut tails.  ``polylines.shortcut`` is greedy and forward-looking: what it keeps
 from a node on depends only on the node path from there to the goal, which is
 the same for every unit whose walk passes that node.  Each kept grid remembers,
 per kept node, the shortcut polyline from it to the goal; a later walk stops at
@@ -67,7 +67,8 @@ import numpy as np
 
 from pfp_service.core.astar import lazy_route
 from pfp_service.core.cores import Cores
-from pfp_service.core.grid import GridGraph, Route, shortcut_kept
+from pfp_service.core.grid import GridGraph, Route
+from pfp_service.core.polylines import shortcut_kept
 from pfp_service.core.threat import ThreatField
 
 __all__ = ["CELL_SLACK", "ROOM", "ROUTES", "Ask", "Found", "RouteCache", "RouteStats"]
