@@ -466,7 +466,7 @@ def test_pfp_acl_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
 
 
 def test_no_unit_goals_leaves_goals_to_commanders():
-    from pfp_service.cli.acl import Mission, principals_for
+    from pfp_service.service.access import Mission, principals_for
 
     def goal_writers(own_goal: bool) -> set[str]:
         ps = principals_for(Mission("m", ("planner",), ("u1",), own_goal), {"commander": ("commander",)})
