@@ -215,7 +215,7 @@ def test_the_plot_axes_are_longitude_and_latitude_at_round_values(monkeypatch, t
         seen["box"] = (*ax.get_xlim(), *ax.get_ylim())
         seen["labels"] = (ax.get_xlabel(), ax.get_ylabel())
 
-    monkeypatch.setattr(plots, "_save", keep)
+    monkeypatch.setattr(plots, "save_png", keep)
     plots.plot_plan(scenario, result, tmp_path / "p.png", Coords.choose(None, scenario.origin))
     assert "longitude" in seen["labels"][0] and "latitude" in seen["labels"][1]
     x0, _x1, y0, _y1 = seen["box"]

@@ -1,6 +1,6 @@
 """Plots show everything that shaped the path: zones, lat/lon axes with an origin, pop-ups from when they appeared.
 
-Checked on the figure's own artists (``plots.plan_figure`` and ``tracks_figure``
+Checked on the figure's own artists (``plots.plan_figure`` and ``tracks.tracks_figure``
 return the figure before it is written): each keep-out zone is a patch whose gid
 is ``zone:ID``, labelled ``ID (no-go)``; the report's figure of a record with an
 origin has longitude and latitude axes, draws a threat put mid-run as a pop-up
@@ -29,7 +29,8 @@ from pfp_service.coords import Coords
 from pfp_service.core import plan
 from pfp_service.geo import Origin
 from pfp_service.geojson import load_zones
-from pfp_service.render.plots import plan_figure, tracks_figure
+from pfp_service.render.plots import plan_figure
+from pfp_service.render.tracks import tracks_figure
 from pfp_service.scenario import load_scenario
 from pfp_service.wire import keys
 

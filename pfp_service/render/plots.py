@@ -32,22 +32,29 @@ from pfp_service.scenario import Scenario
 
 __all__ = [
     "check_png_path",
+    "colourbar",
+    "contours",
+    "draw_zones",
     "extent",
     "facing",
+    "frame",
     "geo_ticks",
+    "legend",
     "peak",
     "plan_figure",
     "plan_title",
     "plot_plan",
-    "plot_tracks",
-    "tracks_figure",
+    "proxies",
+    "pyplot",
+    "save_png",
+    "threat_marks",
     "zone_corners",
 ]
 
 ZONE_STYLE: dict[str, Any] = dict(facecolor="0.55", edgecolor="black", alpha=0.45, hatch="xx", linewidth=1.0)
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
     try:
         import matplotlib
 
@@ -72,7 +79,7 @@ def check_png_path(path: str | Path, what: str) -> Path:
     return p
 
 
-def _save(fig: Any, out: str | Path, what: str) -> None:
+def save_png(fig: Any, out: str | Path, what: str) -> None:
     try:
         fig.savefig(out, bbox_inches="tight")  # the legend sits beside the axes
     except (OSError, ValueError) as exc:
@@ -103,7 +110,7 @@ def zone_corners(zones: Sequence[Zone]) -> list[tuple[float, float]]:
     return out
 
 
-def _zones(ax: Any, zones: Sequence[Zone]) -> int:
+def draw_zones(ax: Any, zones: Sequence[Zone]) -> int:
     """Each keep-out zone as a hatched patch (holes left open) labelled ``ID (no-go)``; returns how many."""
     from matplotlib.patches import Circle, PathPatch
     from matplotlib.path import Path as MPath
@@ -148,7 +155,7 @@ def facing(threat: Threat) -> tuple[float, float] | None:
     return None if norm == 0.0 else (ax / norm, ay / norm)
 
 
-def _contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float], n: int = 220) -> Any:
+def contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float], n: int = 220) -> Any:
     """Filled contours of the threat level; returns the mappable for a colour bar (None if flat)."""
     if not len(field):
         return None
@@ -163,7 +170,7 @@ def _contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float
     return filled
 
 
-def _threat_marks(
+def threat_marks(
     ax: Any,
     threats: Sequence[Threat],
     intensity: str,
@@ -193,7 +200,7 @@ def _threat_marks(
         ax.annotate(text, (px, py), textcoords="offset points", xytext=(6, 6), fontsize=8, alpha=alpha)
 
 
-def _legend(ax: Any, handles: list[Any], geo: bool = False) -> None:
+def legend(ax: Any, handles: list[Any], geo: bool = False) -> None:
     """The legend beside the axes, so it never covers a track, a goal or a threat (nor the metres axis)."""
     ax.legend(
         handles=handles, loc="upper left", bbox_to_anchor=(1.14 if geo else 1.02, 1.0), fontsize=8,
@@ -201,7 +208,7 @@ def _legend(ax: Any, handles: list[Any], geo: bool = False) -> None:
     )  # fmt: skip
 
 
-def _proxies(plt: Any, *kinds: str) -> list[Any]:
+def proxies(plt: Any, *kinds: str) -> list[Any]:
     """Legend entries for the markers (start, goal, threat ...), drawn in grey."""
     from matplotlib.lines import Line2D
 
@@ -228,7 +235,7 @@ def _proxies(plt: Any, *kinds: str) -> list[Any]:
     return out
 
 
-def _colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
+def colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
     if mappable is not None:
         fig.colorbar(
             mappable,
@@ -241,7 +248,7 @@ def _colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
         )
 
 
-def _frame(ax: Any, box: tuple[float, float, float, float], title: str, coords: Coords | None = None) -> bool:
+def frame(ax: Any, box: tuple[float, float, float, float], title: str, coords: Coords | None = None) -> bool:
     """Limits, aspect, title and axes; returns whether the axes are lat/lon (with a metres axis too)."""
     ax.set_xlim(box[0], box[1])
     ax.set_ylim(box[2], box[3])
@@ -349,10 +356,10 @@ def plot_plan(
     zones: Sequence[Zone] | None = None,
 ) -> None:
     """``plan_figure`` written to the PNG ``out``."""
-    plt = _pyplot()
+    plt = pyplot()
     fig = plan_figure(scenario, result, coords, zones)
     try:
-        _save(fig, out, "--plot")
+        save_png(fig, out, "--plot")
     finally:
         plt.close(fig)
 
@@ -369,7 +376,7 @@ def plan_figure(
     Returns:
         the matplotlib figure (the caller saves and closes it).
     """
-    plt = _pyplot()
+    plt = pyplot()
     intensity = result.params.intensity
     schedule = scenario.schedule()
     threats = [s.threat for s in schedule]
@@ -377,13 +384,13 @@ def plan_figure(
     field = ThreatField(threats, intensity)  # type: ignore[arg-type]
     box = extent([scenario.start, scenario.goal, *result.path, *zone_corners(kept_out)], threats)
     fig, ax = plt.subplots(figsize=(8.6, 7.4), dpi=110)
-    mappable = _contours(ax, field, box)
-    drawn = _zones(ax, kept_out)
+    mappable = contours(ax, field, box)
+    drawn = draw_zones(ax, kept_out)
     known = [s.threat for s in schedule if s.appear_step == 0]
-    _threat_marks(ax, known, intensity)
+    threat_marks(ax, known, intensity)
     for s in schedule:
         if s.appear_step:
-            _threat_marks(ax, [s.threat], intensity, label=f"(step {s.appear_step})", colour="orange")
+            threat_marks(ax, [s.threat], intensity, label=f"(step {s.appear_step})", colour="orange")
     path = np.asarray(result.path)
     (line,) = ax.plot(path[:, 0], path[:, 1], ".-", color="navy", markersize=2, linewidth=1, label="path")
     struck = _popup_marks(ax, result)
@@ -405,115 +412,11 @@ def plan_figure(
             bbox=dict(boxstyle="round", fc="white", ec="black", alpha=0.85),
         )  # fmt: skip
         kinds.append("stuck")
-    handles = [line, *_proxies(plt, *kinds)]
+    handles = [line, *proxies(plt, *kinds)]
     handles[1].set_color("green")
     handles[2].set_color("black")
-    geo = _frame(ax, box, plan_title(scenario.name, result), coords)
-    _legend(ax, handles, geo)
-    _colourbar(fig, ax, mappable, geo)
-    fig.tight_layout()
-    return fig
-
-
-def plot_tracks(
-    threats: Sequence[Threat],
-    intensity: str,
-    tracks: dict[str, Sequence[Sequence[float]]],
-    goals: dict[str, Sequence[float]],
-    out: str | Path,
-    **figure: Any,
-) -> None:
-    """``tracks_figure(threats, intensity, tracks, goals, **figure)`` written to the PNG ``out``."""
-    plt = _pyplot()
-    fig = tracks_figure(threats, intensity, tracks, goals, **figure)
-    try:
-        _save(fig, out, "--out")
-    finally:
-        plt.close(fig)
-
-
-def tracks_figure(
-    threats: Sequence[Threat],
-    intensity: str,
-    tracks: dict[str, Sequence[Sequence[float]]],
-    goals: dict[str, Sequence[float]],
-    title: str = "",
-    marks: Sequence[tuple[float, float, str]] = (),
-    old_threats: Sequence[tuple[Threat, Threat]] = (),
-    old_goals: dict[str, Sequence[float]] | None = None,
-    coords: Coords | None = None,
-    zones: Sequence[Zone] = (),
-    popups: dict[str, str] | None = None,
-) -> Any:
-    """Several units' tracks over one threat field, with labelled marks (e.g. contingencies).
-
-    Args:
-        threats: the threats in force at the end, drawn at their peaks.
-        intensity: the field's intensity scale.
-        tracks: each unit's positions, in order.
-        goals: each unit's final goal.
-        title: the plot's title.
-        marks: ``(x, y, label)`` stars, e.g. where a contingency struck.
-        old_threats: ``(before, after)`` for each threat that moved: ``before`` is drawn faded,
-            with a dotted line to where it went.
-        old_goals: goals a unit had before it was given a new one, drawn faded.
-        coords: with an origin (geodetic), lat/lon ticks on the axes.
-        zones: keep-out zones, hatched.
-        popups: threat id -> when it appeared (e.g. ``"from 312 s"``): those threats are drawn
-            orange with that label, not as if there from the start.
-
-    Returns:
-        the matplotlib figure (the caller saves and closes it).
-    """
-    plt = _pyplot()
-    old_goals = old_goals or {}
-    popups = popups or {}
-    field = ThreatField(threats, intensity)  # type: ignore[arg-type]
-    pts = [p for tr in tracks.values() for p in tr] + list(goals.values()) + list(old_goals.values())
-    pts += zone_corners(zones)
-    box = extent(pts or [(0.0, 0.0)], [*threats, *(b for b, _ in old_threats)])
-    fig, ax = plt.subplots(figsize=(9.4, 8.4), dpi=110)
-    mappable = _contours(ax, field, box)
-    drawn = _zones(ax, zones)
-    _threat_marks(ax, [t for t in threats if t.id not in popups], intensity)
-    for t in threats:
-        if t.id in popups:
-            _threat_marks(ax, [t], intensity, label=f"({popups[t.id]})", colour="orange")
-    for before, after in old_threats:
-        _threat_marks(ax, [before], intensity, label="(before it moved)", faded=True)
-        (bx, by), (ax_, ay) = peak(before, intensity), peak(after, intensity)
-        ax.plot([bx, ax_], [by, ay], ":", color="black", alpha=0.5, linewidth=1)
-    handles = []
-    for uid, tr in tracks.items():
-        arr = np.asarray(tr, dtype=float).reshape(-1, 2)
-        if len(arr):
-            (line,) = ax.plot(arr[:, 0], arr[:, 1], "-", linewidth=1.2, label=uid)
-            handles.append(line)
-            colour = line.get_color()
-            ax.plot(arr[0, 0], arr[0, 1], "o", color=colour, markersize=6)
-            if uid in goals:
-                ax.plot(*goals[uid], "s", color=colour, markeredgecolor="black", markersize=8)
-            if uid in old_goals:
-                ax.plot(*old_goals[uid], "s", color=colour, alpha=0.35, markersize=8)
-                if uid in goals:
-                    (gx, gy), (hx, hy) = old_goals[uid], goals[uid]
-                    ax.plot([gx, hx], [gy, hy], ":", color=colour, alpha=0.5, linewidth=1)
-    for x, y, label in marks:
-        ax.plot([x], [y], marker="*", color="orange", markersize=15, markeredgecolor="black", zorder=5)
-        ax.annotate(label, (x, y), textcoords="offset points", xytext=(8, -12), fontsize=8)
-    kinds = ["start", "goal", "threat"]
-    if popups:
-        kinds.append("popup")
-    if old_goals:
-        kinds.append("old goal")
-    if old_threats:
-        kinds.append("old threat")
-    if marks:
-        kinds.append("struck")
-    if drawn:
-        kinds.append("zone")
-    geo = _frame(ax, box, title, coords)
-    _legend(ax, handles + _proxies(plt, *kinds), geo)
-    _colourbar(fig, ax, mappable, geo)
+    geo = frame(ax, box, plan_title(scenario.name, result), coords)
+    legend(ax, handles, geo)
+    colourbar(fig, ax, mappable, geo)
     fig.tight_layout()
     return fig
