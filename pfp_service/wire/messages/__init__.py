@@ -68,23 +68,25 @@ from pfp_service.wire.messages.structs import (
     ErrorReply,
     Goal,
     LatLon,
-    Mission,
-    MissionParams,
     Origin,
     PlannerStatus,
     PreviewRequest,
-    ThreatSummary,
     ThreatUpdate,
     UnitKind,
     UnitState,
-    UnitSummary,
     WhatIfThreat,
-    WorldQuery,
-    WorldSnapshot,
     ZoneCircle,
-    ZoneSummary,
     ZoneUpdate,
     fit_text,
+)
+from pfp_service.wire.messages.world import (
+    Mission,
+    MissionParams,
+    ThreatSummary,
+    UnitSummary,
+    WorldQuery,
+    WorldSnapshot,
+    ZoneSummary,
 )
 
 __all__ = [

@@ -37,16 +37,18 @@ from pfp_service.wire.messages.structs import (
     Direction,
     ErrorReply,
     Goal,
-    Mission,
     Origin,
     PlannerStatus,
     PreviewRequest,
     ThreatUpdate,
     UnitState,
-    WorldQuery,
-    WorldSnapshot,
     ZoneUpdate,
     fit_text,
+)
+from pfp_service.wire.messages.world import (
+    Mission,
+    WorldQuery,
+    WorldSnapshot,
 )
 
 __all__ = [

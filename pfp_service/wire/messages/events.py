@@ -81,7 +81,7 @@ class ReplanEvent(Event, frozen=True, kw_only=True, tag="replan"):
 
     units: Annotated[list[Id], Meta(max_length=MAX_EVENT_ITEMS)]
     reason: Text
-    changes: Annotated[list[ThreatChange], Meta(max_length=MAX_EVENT_ITEMS)] = []  # noqa: RUF012 -- a msgspec Struct copies it per instance
+    changes: Annotated[list[ThreatChange], Meta(max_length=MAX_EVENT_ITEMS)] = []
     more: Count = 0
     more_units: Count = 0
 
