@@ -12,17 +12,19 @@ from hypothesis import strategies as st
 from pfp_clients.map.geometry import CORE_FRACTION, ZONE_FRACTION, outline, peak_point
 from pfp_clients.map.model import (
     MAX_REJECTED_GROUPS,
+    MapModel,
+    eta_s,
+    merge_deltas,
+)
+from pfp_clients.map.samples import (
     AliveSeen,
     DirectionSeen,
     EventSeen,
     GoalSeen,
-    MapModel,
     StateSeen,
     StatusSeen,
     ThreatSeen,
     WorldSeen,
-    eta_s,
-    merge_deltas,
 )
 from pfp_clients.map.server import STATIC_DIR
 

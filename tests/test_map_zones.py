@@ -10,7 +10,8 @@ import urllib.request
 import uuid
 
 import pytest
-from pfp_clients.map.model import MapModel, WorldSeen, ZoneSeen, merge_deltas
+from pfp_clients.map.model import MapModel, merge_deltas
+from pfp_clients.map.samples import WorldSeen, ZoneSeen
 
 from pfp_service.wire import WorldSnapshot, keys
 from pfp_service.wire.messages import ZoneCircle, ZoneSummary, ZoneUpdate

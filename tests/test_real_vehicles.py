@@ -153,7 +153,8 @@ def test_pfp_fleet_vehicles_of_their_own_rates_speeds_stops_and_noise_arrive_in_
 @pytest.mark.unit
 def test_the_handheld_and_the_map_say_why_in_words():
     from pfp_clients.handheld_model import why_text
-    from pfp_clients.map.model import DirectionSeen, MapModel
+    from pfp_clients.map.model import MapModel
+    from pfp_clients.map.samples import DirectionSeen
 
     from pfp_service.wire import Direction, RouteKind
 

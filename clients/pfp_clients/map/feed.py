@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from pfp_clients.map.model import (
+from pfp_clients.map.samples import (
     AliveSeen,
     DirectionSeen,
     EventSeen,

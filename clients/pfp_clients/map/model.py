@@ -1,7 +1,7 @@
 """What the operator's map knows about a mission, and what changed since the browser last heard.
 
 Sans-I/O, as the planner's world is: the Zenoh callbacks decode each sample
-into one of the ``Seen`` inputs below, the server applies them in batches with
+into one of the ``Seen`` inputs (``samples``), the server applies them in batches with
 ``MapModel.apply(inputs, now)``, and ``take_delta(now)`` returns the JSON-ready
 changes since the previous call (or ``None``).  ``snapshot(now)`` is the whole
 picture for a browser that has just connected.  ``now`` is wall-clock Unix
@@ -23,17 +23,25 @@ from typing import Any
 import msgspec
 
 from pfp_clients.map.geometry import CORE_FRACTION, ZONE_FRACTION, outline, peak_point
+from pfp_clients.map.samples import (
+    AliveSeen,
+    DirectionSeen,
+    EventSeen,
+    GoalSeen,
+    Input,
+    StateSeen,
+    StatusSeen,
+    ThreatSeen,
+    WorldSeen,
+    ZoneSeen,
+)
 from pfp_service.errors import InputError
 from pfp_service.wire import (
-    Direction,
     Event,
     ForgottenEvent,
-    Goal,
-    PlannerStatus,
     RejectedEvent,
     StaleEvent,
     ThreatUpdate,
-    UnitState,
     WorldSnapshot,
     keys,
 )
@@ -41,93 +49,10 @@ from pfp_service.wire.messages import ZoneUpdate
 
 __all__ = [
     "MAX_REJECTED_GROUPS",
-    "AliveSeen",
-    "DirectionSeen",
-    "EventSeen",
-    "GoalSeen",
-    "Input",
     "MapModel",
-    "StateSeen",
-    "StatusSeen",
-    "ThreatSeen",
-    "WorldSeen",
-    "ZoneSeen",
     "eta_s",
     "merge_deltas",
 ]
-
-
-# -- inputs: one frozen record per kind of sample --------------------------------
-@dataclass(frozen=True, slots=True)
-class StateSeen:
-    unit: str
-    state: UnitState
-
-
-@dataclass(frozen=True, slots=True)
-class DirectionSeen:
-    unit: str
-    direction: Direction
-
-
-@dataclass(frozen=True, slots=True)
-class GoalSeen:
-    """A goal put, or cancelled (``goal`` is None)."""
-
-    unit: str
-    goal: Goal | None
-
-
-@dataclass(frozen=True, slots=True)
-class ThreatSeen:
-    """A threat put, or removed (``update`` is None)."""
-
-    threat: str
-    update: ThreatUpdate | None
-
-
-@dataclass(frozen=True, slots=True)
-class ZoneSeen:
-    """A keep-out zone put, or removed (``update`` is None)."""
-
-    zone: str
-    update: ZoneUpdate | None
-
-
-@dataclass(frozen=True, slots=True)
-class AliveSeen:
-    unit: str
-    alive: bool
-
-
-@dataclass(frozen=True, slots=True)
-class EventSeen:
-    event: Event
-
-
-@dataclass(frozen=True, slots=True)
-class StatusSeen:
-    status: PlannerStatus
-
-
-@dataclass(frozen=True, slots=True)
-class WorldSeen:
-    """A planner's reply to the world query: what it held before the map started listening."""
-
-    world: WorldSnapshot
-
-
-Input = (
-    StateSeen
-    | DirectionSeen
-    | GoalSeen
-    | ThreatSeen
-    | ZoneSeen
-    | AliveSeen
-    | EventSeen
-    | StatusSeen
-    | WorldSeen
-)
 
 
 # -- what is kept -----------------------------------------------------------------
