@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from pfp_clients.handheld import HandheldApp
-from pfp_clients.handheld_link import NmeaReader, open_link, open_nmea
+from pfp_clients.handheld_link import open_link
 from pfp_clients.handheld_model import (
     CARDINALS,
     HandheldModel,
@@ -24,6 +24,7 @@ from pfp_clients.handheld_model import (
     format_duration,
 )
 from pfp_clients.nmea import LocalFrame
+from pfp_clients.nmea_feed import NmeaReader, open_nmea
 
 from pfp_service.wire import Direction, DirectionStatus, keys
 from tests.conftest import run_pfp

@@ -34,7 +34,6 @@ from pfp_clients.handheld_link import (
     LinkDown,
     LinkUp,
     NmeaEnded,
-    NmeaReader,
     NmeaRejected,
     NoFixIn,
     OriginChecked,
@@ -44,6 +43,7 @@ from pfp_clients.handheld_link import (
     WireRejected,
 )
 from pfp_clients.handheld_model import HandheldModel, Severity, View, format_duration, threat_bar
+from pfp_clients.nmea_feed import NmeaReader
 from pfp_service.coords import Coords, parse_point
 from pfp_service.geo import Origin
 from pfp_service.signals import EXIT_CODES, SIGNALS, SignalStop

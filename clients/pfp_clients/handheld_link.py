@@ -24,20 +24,16 @@ of rejected sentences that ends, never a spinning core.
 
 from __future__ import annotations
 
-import os
 import queue
-import stat
-import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
-from typing import IO, Any
+from typing import Any
 
 import zenoh
 
 from pfp_clients.frames import judge_origin, learn_planner_origin
-from pfp_clients.nmea import IGNORED, Fix, LocalFrame, read_sentence
 from pfp_service.errors import InputError, ZenohError, map_zenoh_errors
 from pfp_service.geo import Origin
 from pfp_service.service.config import client_zenoh_config
@@ -62,7 +58,6 @@ __all__ = [
     "LinkDown",
     "LinkUp",
     "NmeaEnded",
-    "NmeaReader",
     "NmeaRejected",
     "NoFixIn",
     "OriginChecked",
@@ -71,8 +66,8 @@ __all__ = [
     "RetryingLink",
     "WireRejected",
     "client_config",
+    "offer",
     "open_link",
-    "open_nmea",
 ]
 
 INBOX_DEPTH = 1024
@@ -166,7 +161,7 @@ def _quiet(_line: str) -> None:
     """Positions go out while no planner has answered: nothing to say of the wait."""
 
 
-def _offer(inbox: queue.Queue[Inbound], item: Inbound) -> None:
+def offer(inbox: queue.Queue[Inbound], item: Inbound) -> None:
     """Enqueue without ever blocking; when the UI has fallen this far behind, drop."""
     with suppress(queue.Full):
         inbox.put_nowait(item)
@@ -215,17 +210,17 @@ class Link:
 
     def _on_goal(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
-            _offer(self.inbox, GoalIn(None))
+            offer(self.inbox, GoalIn(None))
             return
         try:
             goal = decode_goal(sample.payload.to_bytes())
         except InputError:
             return  # the planner rejects it and says so on event/rejected
-        _offer(self.inbox, GoalIn((float(goal.position[0]), float(goal.position[1]))))
+        offer(self.inbox, GoalIn((float(goal.position[0]), float(goal.position[1]))))
 
     def _on_planner(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
-            _offer(self.inbox, PlannerUp(str(sample.key_expr).rsplit("/", 1)[-1]))
+            offer(self.inbox, PlannerUp(str(sample.key_expr).rsplit("/", 1)[-1]))
             if self._planner_up is not None:
                 self._planner_up()
 
@@ -234,15 +229,15 @@ class Link:
         try:
             d = decode_direction(sample.payload.to_bytes())
         except InputError as exc:
-            _offer(self.inbox, WireRejected(str(exc)))
+            offer(self.inbox, WireRejected(str(exc)))
             return
         except Exception as exc:  # never let a surprise kill the subscriber silently
-            _offer(self.inbox, WireRejected(f"{type(exc).__name__}: {exc}"))
+            offer(self.inbox, WireRejected(f"{type(exc).__name__}: {exc}"))
             return
         if d.unit != self.unit:
-            _offer(self.inbox, WireRejected(f"$.unit: direction for {d.unit!r}, not {self.unit!r}"))
+            offer(self.inbox, WireRejected(f"$.unit: direction for {d.unit!r}, not {self.unit!r}"))
             return
-        _offer(self.inbox, DirectionIn(d))
+        offer(self.inbox, DirectionIn(d))
 
     def publish_state(self, state: UnitState) -> None:
         """Put ``unit/{u}/state`` (drops rather than waits under congestion)."""
@@ -328,7 +323,7 @@ class RetryingLink:
             except ZenohError as exc:
                 if exc.reason != last:
                     last = exc.reason
-                    _offer(self.inbox, LinkDown(f"{exc.reason}; retrying every {self.retry_s:g} s"))
+                    offer(self.inbox, LinkDown(f"{exc.reason}; retrying every {self.retry_s:g} s"))
                 self._stop.wait(self.retry_s)
                 continue
             with self._lock:
@@ -336,7 +331,7 @@ class RetryingLink:
                     session.close()
                     return
                 self._link = Link(session, self.mission, self.unit, self.inbox, self._recheck.set)
-            _offer(self.inbox, LinkUp(self.where))
+            offer(self.inbox, LinkUp(self.where))
             self._watch_origin(session, self.origin)
             return
 
@@ -361,17 +356,17 @@ class RetryingLink:
                 return
             if not answered:  # closed meanwhile
                 return
-            _offer(self.inbox, OriginLearnt(planner))
+            offer(self.inbox, OriginLearnt(planner))
             if mine is None:
                 continue
             try:
                 note = judge_origin(planner, self.mission, mine)
             except InputError as err:
                 self.origin_refused = True
-                _offer(self.inbox, OriginChecked(False, f"positions not sent: {err.reason}"))
+                offer(self.inbox, OriginChecked(False, f"positions not sent: {err.reason}"))
                 continue
             self.origin_refused = False
-            _offer(self.inbox, OriginChecked(True, note or ""))
+            offer(self.inbox, OriginChecked(True, note or ""))
 
     def publish_state(self, state: UnitState) -> None:
         if self._link is not None and not self.origin_refused:
@@ -390,159 +385,3 @@ class RetryingLink:
             if self._link is not None:
                 self._link.close()
                 self._link = None
-
-
-MAX_LINE_BYTES = 256  # NMEA caps a sentence at 82 characters; anything past this is not one
-MAX_BAD_RUN = 1000  # this many lines in a row that are not sentences: not a GPS receiver at all
-MAX_GAP_S = 10.0  # a longer jump between two fixes' UTC times is a gap in the log, not a pause to replay
-
-
-def is_regular_file(stream: IO[bytes]) -> bool:
-    """True for a file on disk (a log to replay), False for a device, pipe or terminal (live)."""
-    try:
-        return stat.S_ISREG(os.fstat(stream.fileno()).st_mode)
-    except (OSError, ValueError):
-        return False
-
-
-class NmeaReader(threading.Thread):
-    """Reads NMEA lines from a byte stream, converts GGA fixes to local metres, enqueues them.
-
-    Args:
-        stream: the byte stream (a file, a serial device, a pipe).
-        frame: the local frame fixes are converted to.
-        inbox: where items go.
-        rate_hz: replay GGA sentences at this rate.
-        paced: replay by the fixes' UTC times (default: when ``stream`` is a regular file,
-            which would otherwise be read in one burst).
-    """
-
-    def __init__(
-        self,
-        stream: IO[bytes],
-        frame: LocalFrame,
-        inbox: queue.Queue[Inbound],
-        rate_hz: float | None = None,
-        paced: bool | None = None,
-    ) -> None:
-        super().__init__(name="nmea-reader", daemon=True)  # a blocked read must not hold up exit
-        self.stream = stream
-        self.frame = frame
-        self.inbox = inbox
-        self.rate_hz = rate_hz
-        self.paced = is_regular_file(stream) if paced is None else paced
-        self.bad_run = 0
-        self._stop_event = threading.Event()
-        self._last_utc_s: float | None = None
-
-    def stop(self) -> None:
-        """End the replay at the next line (a blocked device read still ends with the process)."""
-        self._stop_event.set()
-
-    def _lines(self) -> Iterator[bytes | None]:
-        """Lines of at most ``MAX_LINE_BYTES``; ``None`` for a longer one (the rest is skipped)."""
-        while not self._stop_event.is_set():
-            raw = self.stream.readline(MAX_LINE_BYTES + 1)
-            if not raw:
-                return
-            if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
-                while (rest := self.stream.readline(64 * 1024)) and not rest.endswith(b"\n"):
-                    pass
-                yield None
-                continue
-            yield raw
-
-    def run(self) -> None:
-        try:
-            for raw in self._lines():
-                if raw is None:
-                    self._rejected(f"line longer than {MAX_LINE_BYTES} bytes")
-                else:
-                    self.feed(raw.decode("ascii", "replace"))
-                if self.bad_run >= MAX_BAD_RUN:
-                    _offer(self.inbox, NmeaEnded(f"not NMEA: {self.bad_run} lines in a row were no sentence"))
-                    return
-        except OSError as exc:  # a serial device unplugged, say
-            _offer(self.inbox, NmeaEnded(f"read failed: {exc.strerror or exc}"))
-            return
-        _offer(self.inbox, NmeaEnded("stream ended"))
-
-    def _rejected(self, reason: str) -> None:
-        self.bad_run += 1
-        _offer(self.inbox, NmeaRejected(reason))
-
-    def _pace(self, fix: Fix | None) -> None:
-        """Wait as long as the recording did between this GGA sentence and the last."""
-        if self.rate_hz is not None:
-            self._stop_event.wait(1.0 / self.rate_hz)
-            return
-        if not self.paced or fix is None or fix.utc_s is None:
-            return
-        last, self._last_utc_s = self._last_utc_s, fix.utc_s
-        if last is not None:
-            gap = (fix.utc_s - last) % 86_400.0  # across midnight
-            if 0.0 < gap <= MAX_GAP_S:
-                self._stop_event.wait(gap)
-
-    def feed(self, line: str) -> None:
-        """Handle one line (public so it can be fed without a thread)."""
-        try:
-            result = read_sentence(line)
-        except InputError as exc:
-            self._rejected(str(exc))
-            return
-        if result == IGNORED:
-            return
-        self.bad_run = 0
-        fix = result if isinstance(result, Fix) else None
-        self._pace(fix)
-        if fix is None:
-            _offer(self.inbox, NoFixIn())
-        else:
-            x, y = self.frame.to_local_m(fix.lat_deg, fix.lon_deg)
-            _offer(self.inbox, FixIn(x, y))
-
-
-def _set_baud(fd: int, baud: int) -> None:
-    import termios
-    import tty
-
-    speed = getattr(termios, f"B{baud}", None)
-    if speed is None:
-        raise InputError("--nmea-baud", f"{baud} is not a baud rate this system knows")
-    tty.setraw(fd)
-    attrs: list[Any] = termios.tcgetattr(fd)
-    attrs[4] = attrs[5] = speed
-    termios.tcsetattr(fd, termios.TCSANOW, attrs)
-
-
-def open_nmea(path: str, baud: int | None = None) -> IO[bytes]:
-    """Open the NMEA source: a file or serial device, or ``-`` for stdin.
-
-    With ``-`` and a pipe on stdin, the pipe is moved to a new descriptor and the
-    terminal (``/dev/tty``) takes its place as fd 0, where Textual reads keys.
-
-    Raises:
-        InputError: ``--nmea``, when it cannot be opened (or stdin has no terminal behind it).
-    """
-    if path == "-":
-        if sys.stdin is None or os.isatty(0):
-            raise InputError("--nmea", "'-' needs the sentences piped into stdin")
-        try:
-            tty_fd = os.open("/dev/tty", os.O_RDWR)
-        except OSError as exc:
-            raise InputError("--nmea", f"'-' needs a terminal for the keyboard: {exc}") from exc
-        pipe_fd = os.dup(0)
-        os.dup2(tty_fd, 0)
-        os.close(tty_fd)
-        return os.fdopen(pipe_fd, "rb")  # buffered: readline() then costs one read per chunk, not per byte
-    try:
-        stream = open(path, "rb")  # noqa: SIM115 - the reader thread owns it
-    except OSError as exc:
-        raise InputError("--nmea", f"cannot open {path!r}: {exc.strerror}") from exc
-    if baud is not None:
-        if not os.isatty(stream.fileno()):
-            stream.close()
-            raise InputError("--nmea-baud", f"{path!r} is not a serial device")
-        _set_baud(stream.fileno(), baud)
-    return stream

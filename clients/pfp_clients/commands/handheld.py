@@ -153,9 +153,10 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from pfp_clients.handheld import HandheldApp
-    from pfp_clients.handheld_link import NmeaReader, RetryingLink, open_nmea
+    from pfp_clients.handheld_link import RetryingLink
     from pfp_clients.handheld_model import HandheldModel, Settings
     from pfp_clients.nmea import LocalFrame
+    from pfp_clients.nmea_feed import NmeaReader, open_nmea
     from pfp_service.service.config import DEFAULT_CONNECT
     from pfp_service.signals import SignalStop
 
