@@ -141,7 +141,7 @@ def test_a_scenario_zone_goes_live_with_an_expectation_to_keep_out(tmp_path):
 
 @pytest.mark.unit
 def test_never_enters_sees_a_track_that_crosses_a_zone_and_one_that_does_not():
-    from pfp_clients.inject import ZoneVersion, judge
+    from pfp_clients.expectations import ZoneVersion, judge
     from pfp_clients.script import AddZone, Expect
     from pfp_clients.watch import Watch
 

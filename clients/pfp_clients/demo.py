@@ -30,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from pfp_clients.expectations import InjectReport
 from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
-from pfp_clients.inject import InjectReport, report_lines, run_inject
+from pfp_clients.inject import report_lines, run_inject
 from pfp_clients.script import AddThreat, SetGoal, load_script
 from pfp_clients.sim import SimUnit
 from pfp_service.core.metrics import measure

@@ -18,17 +18,16 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import msgspec
 
+from pfp_clients.expectations import Fired, InjectReport, ZoneVersion, judge
 from pfp_clients.frames import learn_planner_origin, planner_origin, reframe
 from pfp_clients.script import (
     AddThreat,
     AddZone,
     CancelGoal,
-    Expect,
     MoveThreat,
     RemoveThreat,
     RemoveZone,
@@ -52,112 +51,11 @@ from pfp_service.wire import (
 )
 
 __all__ = [
-    "Fired",
-    "InjectReport",
-    "Verdict",
-    "judge",
     "main",
     "report_lines",
     "run_inject",
     "script_in_planner_frame",
 ]
-
-
-@dataclass(frozen=True)
-class Fired:
-    """A timeline entry that fired: when (script seconds and wall clock), what, and where its trigger unit was."""
-
-    index: int
-    t_s: float
-    wall_s: float
-    step: Step
-    where: tuple[float, float] | None = None
-
-
-@dataclass(frozen=True)
-class Verdict:
-    expect: Expect
-    held: bool
-    detail: str
-
-
-@dataclass
-class InjectReport:
-    """What happened: actions fired, entries that never fired, verdicts, and the watch itself."""
-
-    script: Script
-    fired: list[Fired]
-    unfired: list[int]
-    verdicts: list[Verdict]
-    watch: Watch
-    t_s: float
-    t0_wall_s: float
-    speed_up: float
-    reason: str = ""
-    lines: list[str] = field(default_factory=list)
-    coords: Coords = field(default_factory=Coords)  # how its lines show positions
-
-    @property
-    def ok(self) -> bool:
-        return not self.unfired and all(v.held for v in self.verdicts)
-
-
-@dataclass(frozen=True)
-class ZoneVersion:
-    """One shape of a zone the script put, in force over ``[start_s, end_s)``."""
-
-    zone_id: str
-    zone: Any  # core.zones.Zone
-    start_s: float
-    end_s: float = math.inf
-
-
-def _never_enters(e: Expect, watch: Watch, zones: list[ZoneVersion]) -> Verdict:
-    """Every segment of the unit's track begun while a version of the zone was in force, checked exactly."""
-    from pfp_service.core.zones import track_enters
-
-    versions = [v for v in zones if v.zone_id == e.never_enters]
-    track = watch.tracks.get(e.unit, [])
-    if not versions:
-        return Verdict(e, False, f"zone {e.never_enters} was never put")
-    if len(track) < 2:
-        return Verdict(e, False, "too few states of the unit were seen to judge")
-    checked = 0
-    for v in versions:
-        idx = [i for i, (t, _x, _y) in enumerate(track) if v.start_s <= t < v.end_s]
-        if not idx:
-            continue
-        first, last = max(idx[0] - 1, 0), min(idx[-1] + 1, len(track) - 1)  # the segments into and out of it
-        pts = [(x, y) for _t, x, y in track[first : last + 1]]
-        checked += len(pts) - 1
-        if len(pts) > 1 and track_enters([v.zone], pts) is not None:
-            for t, x, y in track[first : last + 1]:
-                if v.zone.contains(x, y):
-                    return Verdict(e, False, f"entered zone {v.zone_id} at ({x:.2f}, {y:.2f}), t={t:.1f} s")
-            return Verdict(e, False, f"a segment of the track crossed zone {v.zone_id}")
-    if checked == 0:
-        return Verdict(e, False, f"{e.unit} was not seen while zone {e.never_enters} was in force")
-    return Verdict(e, True, f"{checked} track segments checked, none touches it")
-
-
-def judge(e: Expect, watch: Watch, zones: list[ZoneVersion] | None = None) -> Verdict:
-    """Whether one expectation held, from what ``watch`` saw (and the zones the script put)."""
-    if e.never_enters is not None:
-        return _never_enters(e, watch, zones or [])
-    if e.arrives_within_s is not None:
-        t = watch.arrived_at_s.get(e.unit)
-        if t is None:
-            last = watch.statuses.get(e.unit, "never heard of")
-            return Verdict(e, False, f"not arrived (last status: {last})")
-        return Verdict(e, t <= e.arrives_within_s, f"arrived at {t:.1f} s")
-    assert e.min_clearance_m is not None
-    if not watch.tracks.get(e.unit):
-        return Verdict(e, False, "no state of the unit was seen")
-    c = watch.clearance(e.unit, e.to)
-    if math.isinf(c):
-        what = e.to or "any threat"
-        return Verdict(e, False, f"{what} was never in force while {e.unit} was seen")
-    return Verdict(e, c >= e.min_clearance_m, f"min clearance {c:.2f} m")
 
 
 def _settled(script: Script, watch: Watch, t_s: float) -> bool:
