@@ -6,7 +6,7 @@ import json
 import xml.etree.ElementTree as ET
 
 import pytest
-from pfp_clients.tak import cot
+from pfp_clients.tak import cot, cot_out
 from pfp_clients.tak.state import BridgeSettings, BridgeState, ZenohDelete, ZenohPut
 
 from pfp_service.geo import Origin
@@ -97,36 +97,36 @@ def test_deletes_stale_markers_and_other_types():
 
 def test_outbound_points_keep_full_precision():
     lat, lon = 58.41234567891234, 15.62345678912345
-    ev = ET.fromstring(cot.threat_event("pfp.threat.m.a", lat, lon, T0, 60, 225.0, "r", "threat a"))
+    ev = ET.fromstring(cot_out.threat_event("pfp.threat.m.a", lat, lon, T0, 60, 225.0, "r", "threat a"))
     p = ev.find("point")
     assert p is not None and float(p.get("lat")) == lat and float(p.get("lon")) == lon
     assert ev.get("type") == "a-h-G" and ev.find("detail/track").get("course") == "225.0"
-    back = cot.read_event(cot.threat_event("pfp.threat.m.a", lat, lon, T0, 60, 0.0, "r", "c"))
+    back = cot.read_event(cot_out.threat_event("pfp.threat.m.a", lat, lon, T0, 60, 0.0, "r", "c"))
     assert back.stale - back.time == pytest.approx(60.0)
 
 
 def test_route_links_are_ordered_waypoints_and_control_points():
     pts = [(58.41, 15.62), (58.411, 15.621), (58.412, 15.6225), (58.413, 15.624)]
-    ev = ET.fromstring(cot.route_event("pfp.route.m.u1", pts, T0, 90, "route u1", "x"))
+    ev = ET.fromstring(cot_out.route_event("pfp.route.m.u1", pts, T0, 90, "route u1", "x"))
     assert ev.get("type") == "b-m-r"
     links = ev.findall("detail/link")
     assert [lk.get("type") for lk in links] == ["b-m-p-w", "b-m-p-c", "b-m-p-c", "b-m-p-w"]
     got = [tuple(float(v) for v in lk.get("point").split(",")[:2]) for lk in links]
     assert got == pts
     with pytest.raises(ValueError):
-        cot.route_event("r", pts[:1], T0, 90, "", "")
+        cot_out.route_event("r", pts[:1], T0, 90, "", "")
 
 
 def test_unit_markers_by_kind():
-    manned = ET.fromstring(cot.unit_event("u", True, 1.0, 2.0, T0, 30, 45.5, 1.5, "pfp en_route", "m1"))
-    robot = ET.fromstring(cot.unit_event("u", False, 1.0, 2.0, T0, 30, None, 0.0, "pfp arrived", "r1"))
+    manned = ET.fromstring(cot_out.unit_event("u", True, 1.0, 2.0, T0, 30, 45.5, 1.5, "pfp en_route", "m1"))
+    robot = ET.fromstring(cot_out.unit_event("u", False, 1.0, 2.0, T0, 30, None, 0.0, "pfp arrived", "r1"))
     assert manned.get("type") == "a-f-G-U-C" and robot.get("type") == "a-f-G-E-V"
     assert manned.find("detail/track").get("course") == "45.5" and robot.find("detail/track") is None
     assert manned.find("detail/remarks").text == "pfp en_route"
 
 
 def test_rate_limiter_holds_back_and_sends_the_latest():
-    rl = cot.RateLimiter(1.0)
+    rl = cot_out.RateLimiter(1.0)
     assert rl.offer("a", b"1", 0.0) == [b"1"]
     assert rl.offer("a", b"2", 0.3) == [] and rl.offer("a", b"3", 0.6) == []
     assert rl.offer("b", b"x", 0.6) == [b"x"]  # per uid

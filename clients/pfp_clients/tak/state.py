@@ -10,7 +10,7 @@ Nothing here opens a socket, reads the clock or logs anything but through the
 Rules:
 - a threat or zone that came from TAK is not sent back to TAK (it is already there);
 - a drawn shape (freehand polygon, rectangle, circle) is put as a keep-out
-  zone; the planner's own zones are shown as no-go shapes (``cot.zone_event``:
+  zone; the planner's own zones are shown as no-go shapes (``cot_out.zone_event``:
   red, remarks ``pfp:keep_out``); a shape deleted in TAK deletes its zone;
   every uid we send starts with ``cot.UID_PREFIX`` and an echo of it is ignored;
 - markers are sent again every ``refresh_s`` so TAK clients do not grey them out;
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import msgspec
 import numpy as np
 
-from pfp_clients.tak import cot
+from pfp_clients.tak import cot, cot_out
 from pfp_clients.tak.tombs import Tombstone, Tombstones
 from pfp_service import geo
 from pfp_service.errors import InputError
@@ -145,7 +145,7 @@ class BridgeState:
     def __init__(self, settings: BridgeSettings, log: Callable[[str], None] = lambda _m: None) -> None:
         self.s = settings
         self.log = log
-        self.limiter = cot.RateLimiter(settings.rate_s)
+        self.limiter = cot_out.RateLimiter(settings.rate_s)
         self.from_tak: dict[str, _Marker] = {}  # threat id -> its marker, for threats TAK gave us
         self.tombs = Tombstones(log)  # marker uid -> what a replay must not revive (tombs.py)
         self.devices: dict[str, float] = {}  # TAK device uid -> when last heard
@@ -296,7 +296,7 @@ class BridgeState:
         uid = self._uid("zone", zid)
         if z.circle is not None:
             centre = self.s.origin.to_geodetic(*z.circle.centre)
-            return cot.zone_event(
+            return cot_out.zone_event(
                 uid, None, centre, z.circle.radius_m, now, stale, f"no-go {zid}", remarks, self._hae
             )
         rings = z.polygon or [[(0.0, 0.0)]]
@@ -305,7 +305,7 @@ class BridgeState:
         if len(rings) > 1:  # TAK's shapes have no holes: the outline alone, and say so
             remarks += f" (its {len(rings) - 1} hole(s) are not drawn: they are open ground)"
         centre = (sum(p[0] for p in ll) / len(ll), sum(p[1] for p in ll) / len(ll))
-        return cot.zone_event(uid, ll, centre, None, now, stale, f"no-go {zid}", remarks, self._hae)
+        return cot_out.zone_event(uid, ll, centre, None, now, stale, f"no-go {zid}", remarks, self._hae)
 
     def on_zone(self, key: str, payload: bytes | None, now: float) -> Outputs:
         """A zone put (``payload``) or deleted (``None``) on Zenoh: shown in TAK as a no-go shape."""
@@ -323,7 +323,7 @@ class BridgeState:
                     *(z.circle.centre if z.circle else (z.polygon or [[(0, 0)]])[0][0])
                 )
                 out.cot += self._send(
-                    uid, cot.delete_event(f"{uid}.delete", uid, typ, lat, lon, now, self._hae), now
+                    uid, cot_out.delete_event(f"{uid}.delete", uid, typ, lat, lon, now, self._hae), now
                 )
             return out
         try:
@@ -342,7 +342,7 @@ class BridgeState:
             f"pfp threat {tid}: sigma_range {t.sigma_range:g} m, sigma_lateral {t.sigma_lateral:g} m, "
             f"skew {t.skew:g}, weight {t.weight:g}"
         )
-        return cot.threat_event(
+        return cot_out.threat_event(
             self._uid("threat", tid), lat, lon, now, stale, t.facing_deg, remarks, f"threat {tid}", self._hae
         )
 
@@ -358,7 +358,7 @@ class BridgeState:
                 lat, lon = self.s.origin.to_geodetic(*t.position)
                 uid = self._uid("threat", tid)
                 out.cot += self._send(
-                    uid, cot.delete_event(f"{uid}.delete", uid, "a-h-G", lat, lon, now, self._hae), now
+                    uid, cot_out.delete_event(f"{uid}.delete", uid, "a-h-G", lat, lon, now, self._hae), now
                 )
             return out
         try:
@@ -409,7 +409,7 @@ class BridgeState:
         parts.append(f"threat level {d.threat_level:.3g}")
         if d.reason:
             parts.append(d.reason)
-        return cot.unit_event(
+        return cot_out.unit_event(
             self._uid("unit", unit),
             u.manned,
             lat,
@@ -482,7 +482,9 @@ class BridgeState:
 
     def _route_cot(self, unit: str, u: _Unit, now: float) -> bytes:
         uid = self._uid("route", unit)
-        return cot.route_event(uid, u.route, now, self.s.stale_s, f"route {unit}", u.route_remarks, self._hae)
+        return cot_out.route_event(
+            uid, u.route, now, self.s.stale_s, f"route {unit}", u.route_remarks, self._hae
+        )
 
     def tick(self, now: float) -> Outputs:
         """Held-back events whose turn came, pictures due, the periodic refresh, routes asked for too soon."""
