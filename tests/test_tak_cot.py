@@ -7,7 +7,8 @@ import xml.etree.ElementTree as ET
 
 import pytest
 from pfp_clients.tak import cot, cot_out
-from pfp_clients.tak.state import BridgeSettings, BridgeState, ZenohDelete, ZenohPut
+from pfp_clients.tak.outputs import ZenohDelete, ZenohPut
+from pfp_clients.tak.state import BridgeSettings, BridgeState
 
 from pfp_service.geo import Origin
 from pfp_service.wire import keys

@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pfp_clients.tak import cot
 from pfp_clients.tak.framing import EventFramer
-from pfp_clients.tak.state import BridgeSettings, BridgeState, Tombstone, ZenohDelete, ZenohPut
+from pfp_clients.tak.outputs import ZenohDelete, ZenohPut
+from pfp_clients.tak.state import BridgeSettings, BridgeState, Tombstone
 
 from pfp_service.geo import Origin
 from pfp_service.wire import keys

@@ -7,7 +7,8 @@ import time
 
 import pytest
 from pfp_clients.tak import cot, tombfile
-from pfp_clients.tak.state import BridgeSettings, BridgeState, ZenohPut
+from pfp_clients.tak.outputs import ZenohPut
+from pfp_clients.tak.state import BridgeSettings, BridgeState
 from pfp_clients.tak.tombs import MAX_TOMBSTONES, MAX_TOMBSTONES_PER_SOURCE
 
 from pfp_service.geo import Origin

@@ -39,7 +39,8 @@ from typing import Any
 
 from pfp_clients.tak import cot, tombfile
 from pfp_clients.tak.framing import EventFramer
-from pfp_clients.tak.state import BridgeSettings, BridgeState, Outputs, ZenohDelete, ZenohPut
+from pfp_clients.tak.outputs import Outputs, ZenohDelete, ZenohPut
+from pfp_clients.tak.state import BridgeSettings, BridgeState
 from pfp_service.errors import InputError
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m

@@ -39,6 +39,7 @@ import msgspec
 import numpy as np
 
 from pfp_clients.tak import cot, cot_out
+from pfp_clients.tak.outputs import Outputs, ZenohDelete, ZenohPut
 from pfp_clients.tak.tombs import Tombstone, Tombstones
 from pfp_service import geo
 from pfp_service.errors import InputError
@@ -46,7 +47,7 @@ from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 
-__all__ = ["BridgeSettings", "BridgeState", "Outputs", "Tombstone", "ZenohDelete", "ZenohPut"]
+__all__ = ["BridgeSettings", "BridgeState", "Tombstone"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,33 +79,6 @@ class BridgeSettings:
     announce_min_s: float = 1.0
     device_forget_s: float = 60.0
     tombstone_s: float = 86_400.0
-
-
-@dataclass(frozen=True, slots=True)
-class ZenohPut:
-    key: str
-    payload: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class ZenohDelete:
-    key: str
-
-
-@dataclass
-class Outputs:
-    """What one input produced: CoT for every link, CoT for one link (``(link, bytes)``), Zenoh actions, routes to fetch."""
-
-    cot: list[bytes] = field(default_factory=list)
-    zenoh: list[ZenohPut | ZenohDelete] = field(default_factory=list)
-    routes: list[str] = field(default_factory=list)
-    to_link: list[tuple[str, bytes]] = field(default_factory=list)
-
-    def extend(self, other: Outputs) -> None:
-        self.cot += other.cot
-        self.zenoh += other.zenoh
-        self.routes += other.routes
-        self.to_link += other.to_link
 
 
 @dataclass(frozen=True, slots=True)
