@@ -25,6 +25,7 @@ from pfp_service.wire import (
     Goal,
     Mission,
     MissionParams,
+    ThreatChange,
     ThreatUpdate,
     UnitState,
     WorldSnapshot,
@@ -323,6 +324,22 @@ class Outputs:
         return bool(
             self.directions or self.events or self.jobs or self.missions or self.faults or self.cancelled
         )
+
+
+@dataclass(slots=True)
+class Batch:
+    """One ``World.apply`` as it runs: its clock, what goes out, the units to direct, and the threats changed."""
+
+    now: float
+    out: Outputs = field(default_factory=Outputs)
+    dirty: set[str] = field(default_factory=set)  # units to get a fresh direction
+    changes: list[ThreatChange] = field(default_factory=list)
+    touched: list[Threat] = field(default_factory=list)  # threats put, moved or gone (old and new)
+    zones: list[tuple[str, str, tuple[float, float, float, float]]] = field(default_factory=list)
+    # ^ zones put, moved or gone: (id, change, box), the old box and the new for a zone moved
+    wave: set[str] = field(
+        default_factory=set
+    )  # units sent their direction first, the rest in the next apply
 
 
 @dataclass(frozen=True, slots=True)

@@ -24,15 +24,14 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
-from pfp_service.core import Threat, ThreatField
+from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.service import events as ev
 from pfp_service.service import missions, steering
 from pfp_service.service.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
-from pfp_service.service.events import Input, Outputs, UnitView, WorldSettings
+from pfp_service.service.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.service.limits import Limits
 from pfp_service.service.liveness import UNIT_TIMERS, Liveness
 from pfp_service.service.ownership import Ownership
@@ -45,31 +44,11 @@ from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
 __all__ = ["World", *ev.__all__]
 
 K = keys.KeyKind
-# A contingency that re-directs more guided units than this sends their directions first and their
-# look-ahead points in the next ``apply`` (``World.owes``): the points were 40-45 % of a 1,000-unit
-# wave's ``apply`` (measured: bench._deliberation's wave row, docs/operations.md)
+# A contingency that re-directs more guided units than this sends their directions first, and their
+# look-ahead points in the next ``apply`` (``World.owes``; figures: docs/operations.md, "The wave first")
 WAVE_FIRST = 64
-# ... and those points (and the jobs asked with them) follow at most this many units an ``apply``,
-# the rest owed to the next: a 1,000-unit wave's follow-up was one 8-13 ms apply in process (83-121
-# ms in ``pfp bench service``'s fan-out), every other unit's direction waiting on it; in chunks of
-# 128 the largest is 2.1-2.5 ms, 9.1 ms in all against 8.8 in one (same run, load 1.0)
+# ... and those points (and their jobs) follow at most this many units an ``apply``, the rest owed on
 OWED_PER_TICK = 128
-
-
-@dataclass(slots=True)
-class _Batch:
-    """One ``apply``: its clock, what goes out, the units to direct, and the threats changed."""
-
-    now: float
-    out: Outputs = field(default_factory=Outputs)
-    dirty: set[str] = field(default_factory=set)  # units to get a fresh direction
-    changes: list[ThreatChange] = field(default_factory=list)
-    touched: list[Threat] = field(default_factory=list)  # threats put, moved or gone (old and new)
-    zones: list[tuple[str, str, tuple[float, float, float, float]]] = field(default_factory=list)
-    # ^ zones put, moved or gone: (id, change, box), the old box and the new for a zone moved
-    wave: set[str] = field(
-        default_factory=set
-    )  # units sent their direction first, the rest in the next apply
 
 
 class World:
@@ -149,7 +128,7 @@ class World:
         Its driver holds the cyclic collector off around the call (``gcpause``: the node's
         loop until the directions are out), not the world, which imports no collector.
         """
-        b = _Batch(now)
+        b = Batch(now)
         for inp in inputs:
             try:
                 self._apply_one(inp, b)
@@ -169,7 +148,7 @@ class World:
         b.out.cancelled, self._rec.superseded = self._rec.superseded, []
         return b.out
 
-    def _apply_one(self, inp: Input, b: _Batch) -> None:
+    def _apply_one(self, inp: Input, b: Batch) -> None:
         match inp:
             case ev.StateReported(unit, state):
                 self._state(unit, state, b)
@@ -217,7 +196,7 @@ class World:
 
     def _fault(
         self,
-        b: _Batch,
+        b: Batch,
         key: str,
         unit: str | None,
         exc: BaseException,
@@ -245,10 +224,10 @@ class World:
         if logged is not None:
             b.out.faults.append(ev.Fault(logged[0], name, detail, at, logged[1]))
 
-    def _unit_fault(self, b: _Batch, rec: UnitRecord, exc: BaseException) -> None:
+    def _unit_fault(self, b: Batch, rec: UnitRecord, exc: BaseException) -> None:
         self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, exc)
 
-    def _reject(self, key: str, err: InputError, b: _Batch) -> None:
+    def _reject(self, key: str, err: InputError, b: Batch) -> None:
         """Count every rejection; send at most ``REJECTS_PER_S`` events a second per kind of key."""
         held = self.limits.reject(key, b.now)
         if held is not None:
@@ -256,7 +235,7 @@ class World:
 
     # -- inputs ---------------------------------------------------------------------
     def _unit(
-        self, unit_id: str, b: _Batch, key: Callable[[str, str], str], reported: bool = False
+        self, unit_id: str, b: Batch, key: Callable[[str, str], str], reported: bool = False
     ) -> UnitRecord | None:
         """The unit's record, made at its first input (stale then, unless ``reported``)."""
         rec = self._units.get(unit_id)
@@ -271,12 +250,12 @@ class World:
             self._live.made(rec, b.now)
         return rec
 
-    def _tell(self, rec: UnitRecord, b: _Batch) -> None:
+    def _tell(self, rec: UnitRecord, b: Batch) -> None:
         """The unit is to get a fresh direction in this batch, if it has reported and is not stale."""
         if rec.position is not None and not rec.stale:
             b.dirty.add(rec.id)
 
-    def _state(self, unit_id: str, state: UnitState, b: _Batch) -> None:
+    def _state(self, unit_id: str, state: UnitState, b: Batch) -> None:
         rec = self._unit(unit_id, b, keys.unit_state, reported=True)
         if rec is None:
             return
@@ -287,7 +266,7 @@ class World:
             b.dirty.add(unit_id)
 
     def _adopt(
-        self, unit_id: str, goal: Goal, shared: missions.Shared | None, b: _Batch, restored: bool = False
+        self, unit_id: str, goal: Goal, shared: missions.Shared | None, b: Batch, restored: bool = False
     ) -> None:
         """A goal set (keeping ``shared`` if given), or a mission restored: a new epoch, started if owned."""
         rec = self._unit(unit_id, b, keys.unit_goal)
@@ -301,7 +280,7 @@ class World:
             self._start(rec, b)
             self._tell(rec, b)
 
-    def _peer(self, planner: str, alive: bool, b: _Batch) -> None:
+    def _peer(self, planner: str, alive: bool, b: Batch) -> None:
         s = self.settings
         if not alive:  # acted on only if still gone after the debounce (a router restart flaps every token)
             if self._own.left(planner, b.now):
@@ -314,7 +293,7 @@ class World:
             why = f"planner {planner!r} also serves mission {s.mission!r}; both answer every unit"
             b.out.events.append(ConflictEvent(planner=s.planner_id, other=planner, reason=why))
 
-    def _rebalance(self, b: _Batch) -> None:
+    def _rebalance(self, b: Batch) -> None:
         """The live planners changed: a unit taken over is guided from its last mission at once."""
         for rec in self._units.values():
             owned = self.owns(rec.id)
@@ -330,7 +309,7 @@ class World:
                 self._start(rec, b)
             self._tell(rec, b)
 
-    def _threat_put(self, tid: str, msg: ThreatUpdate, b: _Batch) -> None:
+    def _threat_put(self, tid: str, msg: ThreatUpdate, b: Batch) -> None:
         s = self.settings
         if tid not in self._threats and len(self._threats) >= s.max_threats:
             self.limits.overload += 1
@@ -345,7 +324,7 @@ class World:
             self._timers.set(new.expires_at, "expire", tid)
         b.changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
 
-    def _zone_put(self, zid: str, msg: ZoneUpdate, b: _Batch) -> None:
+    def _zone_put(self, zid: str, msg: ZoneUpdate, b: Batch) -> None:
         s = self.settings
         if zid not in self._rec.zones and len(self._rec.zones) >= s.max_zones:
             self.limits.overload += 1
@@ -366,16 +345,16 @@ class World:
         if new.expires_at is not None:
             self._timers.set(new.expires_at, "zone_expire", zid)
 
-    def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: _Batch) -> None:
+    def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: Batch) -> None:
         if z is not None:
             b.zones.append((zid, change, z.zone.bounds()))
 
-    def _threat_gone(self, t: ThreatRecord | None, tid: str, change: str, b: _Batch) -> None:
+    def _threat_gone(self, t: ThreatRecord | None, tid: str, change: str, b: Batch) -> None:
         if t is not None:
             b.touched.append(t.threat)
             b.changes.append(ThreatChange(threat=tid, change=change, position=t.update.position))
 
-    def _deliberated(self, done: ev.Deliberated, b: _Batch) -> None:
+    def _deliberated(self, done: ev.Deliberated, b: Batch) -> None:
         rec = self._units.get(done.unit)
         if rec is None or rec.job is None or rec.job.token != done.token:
             return  # superseded: a newer goal or world is in force
@@ -392,7 +371,7 @@ class World:
             self._tell(rec, b)  # a route or a verdict: told at once, not at its next report
 
     # -- timers ---------------------------------------------------------------------
-    def _run_timers(self, now: float, b: _Batch) -> None:
+    def _run_timers(self, now: float, b: Batch) -> None:
         s = self.settings
         for kind, ident in self._timers.due(now):
             try:
@@ -412,7 +391,7 @@ class World:
                 self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, exc)
 
     # -- planning -------------------------------------------------------------------
-    def _start(self, rec: UnitRecord, b: _Batch, record: bool = True) -> None:
+    def _start(self, rec: UnitRecord, b: Batch, record: bool = True) -> None:
         """Fix the unit's mission and give it a stepper (``missions.start``); a mission refused drops the goal."""
         fld = self.field  # builds the stats with it
         mission = missions.start(rec, self.settings, fld, self._rec.stats)
@@ -422,7 +401,7 @@ class World:
         elif record:
             b.out.missions.append(mission)
 
-    def _world_changed(self, b: _Batch) -> None:
+    def _world_changed(self, b: Batch) -> None:
         """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
 
         A unit out of reach, neither escaping nor deliberating, keeps its
@@ -445,7 +424,7 @@ class World:
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
 
-    def _directions(self, b: _Batch) -> None:
+    def _directions(self, b: Batch) -> None:
         """A fresh direction for each live unit of the batch (``steering.steer``); one whose step fails loses its goal."""
         p, out = self.settings.planner_id, b.out
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
@@ -493,7 +472,7 @@ class World:
         # a unit whose step failed lost its goal: told so, once the rest are out
         out.directions += [steering.no_goal(r, p) for r, _ in failed if r.id in self._units and r.live()]
 
-    def _later(self, b: _Batch) -> list[tuple[UnitRecord, Advice]]:
+    def _later(self, b: Batch) -> list[tuple[UnitRecord, Advice]]:
         """The next ``OWED_PER_TICK`` of a wave's units still owed their points, untouched since; the rest stay owed.
 
         A unit heard, re-advised or gone since its direction went out is
@@ -513,7 +492,7 @@ class World:
             later.append((r, a))
         return later
 
-    def _ask(self, rec: UnitRecord, fld: ThreatField, b: _Batch) -> None:
+    def _ask(self, rec: UnitRecord, fld: ThreatField, b: Batch) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
         kind, deadline = rec.stepper.pending.kind, b.now + self.settings.deliberation_budget_s
         job = ev.Job(rec.id, rec.token(), kind, rec.stepper, fld, deadline, live=True)  # Job.detach copies
