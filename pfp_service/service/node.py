@@ -63,6 +63,7 @@ from pfp_service.service.events import (
 from pfp_service.service.intake import Intake
 from pfp_service.service.log import get_logger, log_changes
 from pfp_service.service.loopstats import Latency, LoopTrace, Trim, demote_native_threads
+from pfp_service.service.rings import StateRings
 from pfp_service.service.store import Store
 from pfp_service.service.twins import watch_twins
 from pfp_service.service.world import World
@@ -91,11 +92,6 @@ SWITCH_INTERVAL_S = 0.0005  # the GIL is handed over this often, so pool threads
 QUERIES_MAX = 4096  # status, world and preview queries waiting for the loop; more are shed
 EVENT_LOG_LINES = 20  # log lines per kind of event per tick; the rest are counted in one line
 INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
-# unit states Zenoh holds for the loop, per ring (0.4 s of 10,000/s); past it the oldest go first. Each
-# sample held keeps its receive buffer alive. 10,000 units at 1 Hz, alternating runs (load 1.4-2.6): peak
-# PSS 331/323 MB and p99 83/98 ms against 348/338 MB and 200/239 ms at 16,384, every state answered in all:
-# under a flood the loop answers fresher states, and a unit reports again anyway
-STATE_RING = 4_096
 MIN_TICK_S = 0.002  # ticks at most this often while states come (measured: docs/operations.md)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
@@ -154,17 +150,15 @@ class PlannerNode:
         self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
+        self._stop = threading.Event()
         # goals, threats and zones: puts and acknowledged-write queries, waiting for the loop (writes.py)
         self._writes = Writes(cfg, self.zid, self._lock, self._wake.set, self._intake.refused)
-        self._stop = threading.Event()
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
         self._trim = Trim()
         self._trace = LoopTrace(cfg.loop_trace, clock)  # off unless configured
         self._state_keys = keys.KeyOf(keys.KeyKind.UNIT_STATE, cfg.mission)
-        # "plain", "all" or a shard number: (subscriber, its ring, the waiter's arming event)
-        self._rings: dict[str, tuple[Any, Any, threading.Event]] = {}
-        self._early: list[Any] = []  # states a waiter took while the loop idled, before the rings' rest
+        self._rings = StateRings(session, self._lock, self._wake, self._stop)
         self._shards: frozenset[int] = frozenset()
         self._direction_keys = keys.KeyOf(keys.KeyKind.UNIT_DIRECTION, cfg.mission)
         # a unit's keys parsed or built once (a shard's state key took the full parse, ~5 us a state)
@@ -240,7 +234,7 @@ class PlannerNode:
         self._declared += self._writes.declare(s, m)
         # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
         # drains them: the latest STATE_RING states, older ones dropped first under a flood
-        self._ring("plain", keys.unit_states(m))
+        self._rings.add("plain", keys.unit_states(m))
         self._sync_shards()
         self._declared += [
             s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
@@ -258,8 +252,8 @@ class PlannerNode:
         self._wake.set()
         if self._loop_thread is not None:
             self._loop_thread.join(timeout=2.0)
-        for name in list(self._rings):
-            self._unring(name)
+        for name in self._rings.names():
+            self._states(self._rings.remove(name), self.clock())
         twins = getattr(self, "_twins_thread", None)
         if twins is not None:
             twins.join(timeout=2.0)
@@ -391,40 +385,6 @@ class PlannerNode:
         self._wake.set()
 
     # -- state rings: the plain key and this planner's shards ------------------------------
-    def _ring(self, name: str, key: str) -> None:
-        """Subscribe a ring on ``key``, with its waiter thread (it ends when the ring is undeclared)."""
-        sub = self.session.declare_subscriber(key, zenoh.handlers.RingChannel(STATE_RING))
-        ring, armed = sub.handler, threading.Event()  # the handler: recv on the subscriber blocks undeclare
-        self._rings[name] = (sub, ring, armed)
-        threading.Thread(
-            target=self._wait_on, args=(ring, armed), name=f"pfp-ring-{name}", daemon=True
-        ).start()
-
-    def _unring(self, name: str) -> None:
-        sub, ring, armed = self._rings.pop(name)
-        left = []
-        while (sample := ring.try_recv()) is not None:  # what it holds still counts
-            left.append(sample)
-        self._states(left, self.clock())
-        with contextlib.suppress(Exception):  # already gone with the session
-            sub.undeclare()
-        armed.set()  # its waiter, if parked, finds the ring closed and ends
-
-    def _wait_on(self, ring: Any, armed: threading.Event) -> None:
-        """While the loop idles, block for the ring's next state and wake the loop with it (once per idling)."""
-        while not self._stop.is_set():
-            armed.wait()
-            armed.clear()
-            if self._stop.is_set():
-                return
-            try:
-                sample = ring.recv()  # blocks with the GIL released; raises once the ring is undeclared
-            except Exception:
-                return
-            with self._lock:
-                self._early.append(sample)
-            self._wake.set()
-
     def _sync_shards(self) -> None:
         """Subscribe to the shards the world says this planner owns; new rings first, then the old go."""
         shards = self.world.shards()
@@ -434,10 +394,10 @@ class PlannerNode:
         want = {"all": keys.sharded_states(m)} if len(shards) == keys.SHARDS else {}
         want = want or {str(n): keys.shard_states(m, n) for n in sorted(shards)}
         for name, key in want.items():
-            if name not in self._rings:
-                self._ring(name, key)
-        for name in [n for n in self._rings if n != "plain" and n not in want]:
-            self._unring(name)
+            if name not in self._rings.names():
+                self._rings.add(name, key)
+        for name in [n for n in self._rings.names() if n != "plain" and n not in want]:
+            self._states(self._rings.remove(name), self.clock())  # what it held still counts
         log.info("state shards", extra={"fields": {"shards": sorted(shards)}})
         self._shards = shards
 
@@ -445,16 +405,7 @@ class PlannerNode:
     def _drain_states(self) -> int:
         """Decode what the rings hold (at most ``STATE_RING`` each), latest-wins per unit."""
         now = self.clock()
-        with self._lock:
-            samples, self._early = self._early, []  # taken by a waiter before the rest of its ring: first
-        for _sub, ring, _armed in self._rings.values():
-            n = 0
-            while n < STATE_RING:
-                sample = ring.try_recv()
-                if sample is None:
-                    break
-                n += 1
-                samples.append(sample)
+        samples = self._rings.drain()
         if samples:
             self._states(samples, now)
         return len(samples)
@@ -469,8 +420,7 @@ class PlannerNode:
                 demote_native_threads()  # Zenoh's threads (new ones too) no longer preempt a tick
                 demoted = self.clock()
             if idle:  # nothing came: the waiters watch the rings, the wake event the rest
-                for _sub, _ring, armed in self._rings.values():
-                    armed.set()
+                self._rings.arm()
                 self._wake.wait(max(last + self.cfg.tick_s - self.clock(), 0.0))
             pause = last + MIN_TICK_S - self.clock()
             if pause > 0:  # amortise: the states and inputs of the next MIN_TICK_S share one tick
