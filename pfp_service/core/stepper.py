@@ -46,7 +46,7 @@ import math
 
 from pfp_service.core import foresight, steprule, tracking, zones
 from pfp_service.core.advice import Advice, Need, StepStatus
-from pfp_service.core.descent_stepper import Bounds, DescentStepper
+from pfp_service.core.descent_stepper import Bounds, DescentStepper, _tuple
 from pfp_service.core.escape import Escaper
 from pfp_service.core.metrics import LAMBDA
 from pfp_service.core.route import NO_LIMIT, descent_route
@@ -308,10 +308,7 @@ class Stepper(DescentStepper):
         run = self._run
         if run is None or self._terminal is not None:
             return None
-        left = run.left_m()
-        if not run.to_goal:
-            left += run.end_to(self.goal)
-        return left
+        return run.left_to(self.goal)
 
     def route_ahead(self, x: float, y: float, steps: int) -> list[tuple[float, float]] | None:
         """A ghost's next ``steps`` positions from ``(x, y)`` on the committed route (``EscapeRun.ahead``).
@@ -372,8 +369,10 @@ class Stepper(DescentStepper):
         if level is None:  # a ghost only predicts positions: the level it would report is never read
             level = 0.0 if self._ghost else field.level_grad_at(x, y)[0]
         reach = self._reach(field, x, y, dx, dy, dist, move, run.ahead_m) if self.tracking else move
-        status, why = run.said()
-        return Advice(status, dx, dy, level, dist, why, False, reach, tx, ty, route)
+        status, why = run._said or run.said()
+        # per unit on a route, each report of the live tick (bench row: `pfp bench service`): a
+        # NamedTuple made from its fields in order, without its Python-level __new__
+        return _tuple(Advice, (status, dx, dy, level, dist, why, False, reach, tx, ty, route))
 
     def _along_descent(
         self, field: ThreatField, x: float, y: float, grad: tuple[float, float, float, float] | None
@@ -402,8 +401,10 @@ class Stepper(DescentStepper):
         """
         if not move >= min(self.params.step, dist) * 0.999:
             return move
-        reach = max(move, min(ahead, dist))
-        if reach > move and field.zones:  # the way to the pursuit point may cut a zone's corner
+        reach = ahead if ahead < dist else dist
+        if reach <= move:
+            return move
+        if field.zones:  # the way to the pursuit point may cut a zone's corner
             hit, zone = zones.segment_hit(*field.zones.packed(), x, y, x + dx * reach, y + dy * reach)
             if zone >= 0:
                 reach = max(move, hit * reach - steprule.CLEAR_STEPS * self.params.step)
