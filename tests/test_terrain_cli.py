@@ -139,8 +139,9 @@ def _gdal_viewshed() -> str:
 
 
 def test_viewshed_agrees_with_gdal_viewshed_and_exact_rays_on_ridge_slope_and_valley(dems, tmp_path):
-    # On UTM (square metric cells, what gdal_viewshed assumes).  Debian's GDAL 3.6 misses cells along the
-    # 45-degree lines (OSGeo/gdal#10205), so GDAL is the reference only where an exact ray confirms it.
+    # On UTM (square metric cells, what gdal_viewshed assumes).  Debian's GDAL 3.6 gets the 45-degree lines
+    # wrong and the error spreads beyond them (OSGeo/gdal#10205), so GDAL counts only where an exact ray
+    # confirms it.
     gdal = _gdal_viewshed()
     path = dems["utm"]
     dem = read_dem(str(path))
@@ -216,3 +217,15 @@ def test_bad_input_is_one_line_and_exit_2(dems, tmp_path):
     with rasterio.open(nocrs, "w", driver="GTiff", width=8, height=8, count=1, dtype="int16") as f:
         f.write(np.zeros((8, 8), np.int16), 1)
     _one_line_exit_2(run_pfp("terrain", "info", str(nocrs)), str(nocrs), "cannot be placed")
+
+
+def test_bench_terrain_reports_the_sweep_beside_gdal(dems):
+    _gdal_viewshed()
+    r = run_pfp("bench", "terrain", "--cell", "40", "--repeat", "2", "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["grid"] == [251, 251] and doc["cells_within_radius"] > 0.7 * 251 * 251
+    assert doc["agree_with_exact_ray"] >= 0.97
+    assert doc["agree_with_gdal_where_exact_ray_confirms"] >= 0.97
+    assert doc["sweep_ms_median"] > 0 and doc["gdal_viewshed_ms_median"] > 0
+    assert len(doc["load_average"]["before"]) == 3
