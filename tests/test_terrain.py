@@ -12,7 +12,7 @@ import pytest
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.terrain.dem import info, read_dem
-from pfp_service.terrain.grid import TerrainGrid, place
+from pfp_service.terrain.grid import TerrainGrid, load
 from pfp_service.terrain.viewshed import (
     EARTH_RADIUS_M,
     exact_lowest_visible_height,
@@ -184,8 +184,7 @@ def test_placing_the_three_files_gives_the_same_ground(dems):
     z, west, north, step = terrain_data.jacksboro()
     origin = Origin(lat=north - z.shape[0] * step / 2, lon=west + z.shape[1] * step / 2)
     bounds = (-9_000.0, -9_000.0, 9_000.0, 9_000.0)
-    area = _area(origin, bounds)
-    grids = {k: place(read_dem(str(p), area), origin, bounds, 50.0) for k, p in dems.items()}
+    grids = {k: load(str(p), origin, bounds, 50.0) for k, p in dems.items()}
     g, d, u = grids["geographic"].z, grids["dted"].z, grids["utm"].z
     assert np.isfinite(g).all()
     np.testing.assert_allclose(d, g, atol=1e-6)  # the same posts: the same grid
@@ -204,15 +203,13 @@ def test_placing_the_three_files_gives_the_same_ground(dems):
     assert corners.min() - 1e-9 <= g[j, i] <= corners.max() + 1e-9
 
 
-def _area(origin: Origin, bounds):
-    xmin, ymin, xmax, ymax = bounds
-    ll = origin.to_geodetic_many(np.array([[x, y] for x in (xmin, xmax) for y in (ymin, ymax)]))
-    return float(ll[:, 0].min()), float(ll[:, 1].min()), float(ll[:, 0].max()), float(ll[:, 1].max())
-
-
 def test_an_area_outside_the_dem_is_refused(dems):
     with pytest.raises(InputError, match="does not cover the area"):
         read_dem(str(dems["geographic"]), (36.0, -84.3, 36.2, -84.2))
+    origin = Origin(lat=36.6, lon=-84.2)
+    with pytest.raises(InputError, match="does not cover the area") as caught:
+        load(str(dems["utm"]), origin, (-5_000.0, -5_000.0, 30_000.0, 5_000.0), 50.0)  # 30 km east: past it
+    assert caught.value.path == str(dems["utm"])
 
 
 def _write(path: Path, **kw) -> Path:
@@ -228,6 +225,7 @@ def _write(path: Path, **kw) -> Path:
 
 
 def test_hostile_and_foreign_rasters_are_refused(tmp_path):
+    from rasterio.crs import CRS
     from rasterio.transform import from_origin
 
     geo = {"crs": "EPSG:4326", "transform": from_origin(-84.0, 36.0, 0.001, 0.001)}
@@ -243,6 +241,16 @@ def test_hostile_and_foreign_rasters_are_refused(tmp_path):
         "no coordinate reference system": _write(
             tmp_path / "nocrs.tif", width=10, height=10, data=np.zeros((10, 10), np.int16)
         ),
+        "CRS cannot be placed": _write(
+            tmp_path / "local.tif",
+            width=10,
+            height=10,
+            data=np.zeros((10, 10), np.int16),
+            crs=CRS.from_wkt(
+                'LOCAL_CS["site grid",LOCAL_DATUM["site",0],UNIT["metre",1],AXIS["E",EAST],AXIS["N",NORTH]]'
+            ),
+            transform=from_origin(0.0, 100.0, 10.0, 10.0),
+        ),
         "is a directory": tmp_path,
         "cannot read": tmp_path / "missing.tif",
     }
@@ -250,3 +258,26 @@ def test_hostile_and_foreign_rasters_are_refused(tmp_path):
         with pytest.raises(InputError, match=reason) as caught:
             info(str(path))
         assert caught.value.path == str(path)
+
+
+def test_info_on_more_cells_than_dem_cells_reads_an_overview_or_nothing(tmp_path):
+    import rasterio
+    from rasterio.enums import Resampling
+    from rasterio.transform import from_origin
+    from rasterio.windows import Window
+
+    from pfp_service.bounds import LIMITS
+
+    side = math.isqrt(LIMITS["dem_cells"].value) + 256  # just past the budget
+    path = tmp_path / "big.tif"
+    with rasterio.open(
+        path, "w", driver="GTiff", width=side, height=side, count=1, dtype="int16", nodata=-32768,
+        crs="EPSG:4326", transform=from_origin(-84.0, 36.0, 1e-5, 1e-5), tiled=True, sparse_ok=True,
+    ) as out:  # fmt: skip
+        out.write(np.full((256, 256), 123, np.int16), 1, window=Window(512, 512, 256, 256))
+    blind = info(str(path))
+    assert blind.elevation_min_m is None and blind.elevation_sampled
+    with rasterio.open(path, "r+") as f:
+        f.build_overviews([4], Resampling.nearest)
+    seen = info(str(path))
+    assert seen.elevation_min_m == seen.elevation_max_m == 123.0 and seen.elevation_sampled

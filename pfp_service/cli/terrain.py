@@ -104,13 +104,17 @@ def run_info(args: argparse.Namespace) -> int:
         print(json.dumps(doc))
         return 0
     s, w, n, e = d.bounds_latlon
-    lo = "unknown" if d.elevation_min_m is None else f"{d.elevation_min_m:g}"
-    hi = "unknown" if d.elevation_max_m is None else f"{d.elevation_max_m:g} m"
+    if d.elevation_min_m is None or d.elevation_max_m is None:
+        span = "not read: more cells than dem_cells and no overview" if d.elevation_sampled else "no ground"
+    else:
+        span = f"{d.elevation_min_m:g}..{d.elevation_max_m:g} m" + (
+            " (from an overview)" if d.elevation_sampled else ""
+        )
     print(f"{d.path}: {d.driver}, {d.crs}")
     print(f"  size        {d.width} x {d.height} cells")
     print(f"  resolution  {d.resolution_m[0]:.1f} x {d.resolution_m[1]:.1f} m at the centre")
     print(f"  bounds      lat {s:.5f}..{n:.5f}, lon {w:.5f}..{e:.5f}")
-    print(f"  elevation   {lo}..{hi}" + (" (sampled)" if d.elevation_sampled else ""))
+    print(f"  elevation   {span}")
     if d.nodata_cells:
         print(f"  no-data     {d.nodata_cells:,} cells")
     return 0

@@ -75,7 +75,7 @@ class DemInfo:
     resolution_m: tuple[float, float]  # a cell's width and height at the centre
     elevation_min_m: float | None
     elevation_max_m: float | None
-    elevation_sampled: bool  # read at a coarser step to stay within dem_cells
+    elevation_sampled: bool  # read from an overview, or not read (min and max None), to stay within dem_cells
     nodata_cells: int
 
 
@@ -132,8 +132,10 @@ def _check(path: str, ds: Any) -> None:
         raise InputError(path, "has no coordinate reference system: it cannot be placed")
     try:
         s, w, n, e = _latlon_bounds(ds)
-    except Exception as exc:  # PROJ refuses: an engineering CRS, a local one, a broken definition
-        raise InputError(path, f"its CRS cannot be placed on WGS-84 ({exc})") from None
+    except Exception:  # PROJ refuses: an engineering CRS, a local one, a broken definition
+        raise InputError(
+            path, "its CRS cannot be placed: PROJ knows no way from it to latitude and longitude"
+        ) from None
     if not all(map(math.isfinite, (s, w, n, e))) or not (-90 <= s <= n <= 90):
         raise InputError(path, "its CRS cannot be placed on WGS-84 (its corners fall off the earth)")
 
@@ -170,17 +172,29 @@ def _resolution_m(ds: Any) -> tuple[float, float]:
 
 
 def info(path: str) -> DemInfo:
-    """The DEM's description, its elevation range read within ``dem_cells`` (coarser when larger).
+    """The DEM's description, its elevation range read within ``dem_cells``.
+
+    A DEM of more cells is read through its smallest overview that fits, if it has one;
+    without one its range is left unknown (``None``), since a decimated read of it would
+    still decompress every block: bounded memory, unbounded time.
 
     Raises:
         InputError: the file is not a DEM this module reads, or breaks a bound.
     """
     with _open(path) as ds:
         budget = LIMITS["dem_cells"].value
-        step = max(1, math.ceil(math.sqrt(ds.width * ds.height / budget)))
-        shape = (max(1, ds.height // step), max(1, ds.width // step))
-        z = _masked(path, ds, None, shape)
-        known = z[np.isfinite(z)]
+        step = 1
+        if ds.width * ds.height > budget:
+            fits = [f for f in ds.overviews(1) if (ds.width // f) * (ds.height // f) <= budget]
+            step = min(fits) if fits else 0
+        lo = hi = None
+        nodata = 0
+        if step:
+            z = _masked(path, ds, None, (max(1, ds.height // step), max(1, ds.width // step)))
+            known = z[np.isfinite(z)]
+            if known.size:
+                lo, hi = float(known.min()), float(known.max())
+            nodata = int(z.size - known.size) * step * step
         return DemInfo(
             path=path,
             driver=ds.driver,
@@ -189,10 +203,10 @@ def info(path: str) -> DemInfo:
             height=ds.height,
             bounds_latlon=_latlon_bounds(ds),
             resolution_m=_resolution_m(ds),
-            elevation_min_m=float(known.min()) if known.size else None,
-            elevation_max_m=float(known.max()) if known.size else None,
-            elevation_sampled=step > 1,
-            nodata_cells=int(z.size - known.size) * step * step,
+            elevation_min_m=lo,
+            elevation_max_m=hi,
+            elevation_sampled=step != 1,
+            nodata_cells=nodata,
         )
 
 

@@ -27,9 +27,9 @@ import numpy as np
 from pfp_service.bounds import LIMITS
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.terrain.dem import Dem, to_dem_crs
+from pfp_service.terrain.dem import Dem, read_dem, to_dem_crs
 
-__all__ = ["TerrainGrid", "bilinear", "place"]
+__all__ = ["TerrainGrid", "bilinear", "latlon_box", "load", "place"]
 
 
 @dataclass(frozen=True)
@@ -132,3 +132,27 @@ def place(
             gx.shape
         )
     return TerrainGrid(float(xmin), float(ymin), float(cell_m), z)
+
+
+def latlon_box(
+    origin: Origin, bounds_m: tuple[float, float, float, float]
+) -> tuple[float, float, float, float]:
+    """(south, west, north, east) degrees enclosing ``bounds_m`` (xmin, ymin, xmax, ymax) of the plane.
+
+    Corners and edge midpoints are taken: the plane's straight edges are slightly curved in degrees.
+    """
+    xmin, ymin, xmax, ymax = bounds_m
+    xs, ys = (xmin, (xmin + xmax) / 2, xmax), (ymin, (ymin + ymax) / 2, ymax)
+    ll = origin.to_geodetic_many(np.array([[x, y] for x in xs for y in ys]))
+    return float(ll[:, 0].min()), float(ll[:, 1].min()), float(ll[:, 0].max()), float(ll[:, 1].max())
+
+
+def load(
+    path: str, origin: Origin, bounds_m: tuple[float, float, float, float], cell_m: float
+) -> TerrainGrid:
+    """Read the DEM's window under ``bounds_m`` (planner metres) and place it there (``read_dem`` + ``place``).
+
+    Raises:
+        InputError: as ``read_dem`` (not a DEM, not covering the area, past a bound) and ``place``.
+    """
+    return place(read_dem(path, latlon_box(origin, bounds_m)), origin, bounds_m, cell_m)
