@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
@@ -281,3 +283,57 @@ def test_info_on_more_cells_than_dem_cells_reads_an_overview_or_nothing(tmp_path
         f.build_overviews([4], Resampling.nearest)
     seen = info(str(path))
     assert seen.elevation_min_m == seen.elevation_max_m == 123.0 and seen.elevation_sampled
+
+
+def _rough(seed: int, shape: tuple[int, int], sigma: float) -> np.ndarray:
+    from scipy.ndimage import gaussian_filter
+
+    return gaussian_filter(np.random.default_rng(seed).normal(size=shape), sigma) * 3_000.0
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    rows=st.integers(3, 40),
+    cols=st.integers(3, 40),
+    fr=st.floats(0, 1),
+    fc=st.floats(0, 1),
+    dx=st.floats(1.0, 100.0),
+    dy=st.floats(1.0, 100.0),
+)
+def test_mirroring_and_transposing_the_ground_mirror_and_transpose_the_viewshed(
+    seed, rows, cols, fr, fc, dx, dy
+):
+    z = _rough(seed, (rows, cols), 2.0)
+    obs = (min(rows - 1, int(fr * rows)), min(cols - 1, int(fc * cols)))
+    for method in ("sweep", "exact"):
+
+        def run(zz, o, a, b):
+            if method == "sweep":
+                return lowest_visible_height(zz, o, 2.0, math.inf, a, b)
+            return exact_lowest_visible_height(zz, o, 2.0, _all_cells(zz.shape), a, b).reshape(zz.shape)
+
+        base = run(z, obs, dx, dy)
+        np.testing.assert_allclose(
+            run(z.T, obs[::-1], dy, dx), base.T, atol=1e-9, err_msg=f"{method} seed {seed}"
+        )
+        np.testing.assert_allclose(
+            run(z[::-1, ::-1], (rows - 1 - obs[0], cols - 1 - obs[1]), dx, dy),
+            base[::-1, ::-1],
+            atol=1e-9,
+            err_msg=f"{method} seed {seed}",
+        )
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), eye=st.floats(0.0, 50.0), more=st.floats(0.0, 200.0))
+def test_a_higher_eye_never_hides_what_a_lower_one_saw(seed, eye, more):
+    # the sight line from a higher eye to the same target point lies above the lower one's all the way
+    z = _rough(seed, (41, 41), 3.0)
+    cells = _all_cells(z.shape)
+    low = exact_lowest_visible_height(z, (20, 20), eye, cells, 10.0)
+    high = exact_lowest_visible_height(z, (20, 20), eye + more, cells, 10.0)
+    assert np.all(high <= low + 1e-9), f"seed {seed}"
+    fast = lowest_visible_height(z, (20, 20), eye, math.inf, 10.0).ravel()
+    agree = (visible(fast, 0.0) == visible(low, 0.0)).mean()
+    assert agree >= 0.95, f"seed {seed}: sweep and rays agree on {agree:.2%}"
