@@ -133,8 +133,10 @@ def run_viewshed(args: argparse.Namespace) -> int:
     write_mask(args.out, np.where(seen, 255, 0).astype(np.uint8), sight.dem)
     inside = np.isfinite(sight.lowest_m)
     share = float(seen.sum()) / max(1, int(inside.sum()))
+    unknown = int((inside & ~np.isfinite(sight.dem.elevation)).sum())
     print(
         f"{args.out}: {int(seen.sum()):,} of {int(inside.sum()):,} cells seen ({share:.0%}), "
         f"cells {sight.dx_m:.1f} x {sight.dy_m:.1f} m"
+        + (f"; {unknown:,} of them no-data, written as seen (docs/terrain.md)" if unknown else "")
     )
     return 0
