@@ -200,12 +200,10 @@ def _waypoint(tr: Trap) -> Iterator[Candidate]:
 def _settle(tr: Trap) -> tuple[float, float]:
     """Where the trap's descent comes to rest, found at finer and finer steps, within a step of the trap.
 
-    Descent is judged trapped where it oscillates, within about a step of
-    the potential's minimum, so the point (and the threat level there) moves
-    with the step.  The contour is traced at the level of the minimum itself,
-    which does not: the plan at one step is the plan at a hundredth of it
-    (``pfp bench convergence``).  Bounded: at most ``_SETTLE_HALVINGS`` x
-    ``_SETTLE_STEPS`` evaluations, each step taken only if it lowers the potential.
+    Descent is judged trapped where it oscillates, about a step from the
+    potential's minimum, so that point's level moves with the step; the
+    minimum's does not (``pfp bench convergence``).  Bounded: at most
+    ``_SETTLE_HALVINGS`` x ``_SETTLE_STEPS`` evaluations, each lowering the potential.
     """
     f, gain, (gx0, gy0) = tr.field, tr.gain, tr.goal
 
