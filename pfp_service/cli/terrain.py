@@ -19,6 +19,7 @@ import json
 import math
 from typing import Any
 
+from pfp_service.cli import example_epilog
 from pfp_service.cli._common import positive_float
 
 EXAMPLES = {"terrain": "pfp terrain info n36_w085.dt1"}
@@ -32,6 +33,7 @@ def register(sub: Any) -> None:
     info.add_argument("dem", metavar="DEM", help="a GeoTIFF, DTED (.dt0/.dt1/.dt2) or SRTM .hgt file")
     info.add_argument("--json", action="store_true", help="print one JSON object")
     info.set_defaults(func=run_info)
+    info.epilog = example_epilog("pfp terrain info n36_w085.dt1 --json")
     vs = inner.add_parser("viewshed", help="write where an observer sees, as a GeoTIFF on the DEM's grid")
     vs.add_argument("dem", metavar="DEM", help="a GeoTIFF, DTED (.dt0/.dt1/.dt2) or SRTM .hgt file")
     vs.add_argument("--observer", type=latlon, required=True, metavar="LAT,LON", help="the observer, degrees")
@@ -51,6 +53,9 @@ def register(sub: Any) -> None:
     )
     vs.add_argument("--out", required=True, metavar="OUT.tif", help="the GeoTIFF to write")
     vs.set_defaults(func=run_viewshed)
+    vs.epilog = example_epilog(
+        "pfp terrain viewshed n36_w085.dt1 --observer 36.55,-84.3 --height 10 --radius 5000 --out seen.tif"
+    )
 
 
 def latlon(text: str) -> tuple[float, float]:
