@@ -19,6 +19,7 @@ install: $(STAMP)
 # Every tier (tests/conftest.py names them): what CI runs, after `make check`.
 test: $(STAMP)
 	@sh .ci/ensure-chromium
+	@sh .ci/ensure-gdal
 	$(BIN)/python -m pytest -q
 
 # The in-process tiers (unit and net): under a minute on 2 cores; run it on every change.
@@ -27,6 +28,7 @@ test-fast: $(STAMP)
 
 # The tiers that start processes but no browser: run before a commit that touches the service or a client.
 test-proc: $(STAMP)
+	@sh .ci/ensure-gdal
 	$(BIN)/python -m pytest -q -m "proc or multi"
 
 check: $(STAMP)

@@ -108,6 +108,24 @@ LIMITS: dict[str, Limit] = {
         "MCAP",
         "an hour of 50 units reporting at 10 Hz is 1,800,000",
     ),
+    "dem_side_cells": Limit(
+        1_048_576,
+        "cells along one side of a DEM, as its header declares them",
+        "DEM (`pfp terrain`)",
+        "half the world's longitudes at 1 arc-second are 648,000; a larger header is a lie",
+    ),
+    "dem_block_cells": Limit(
+        4 * MiB,
+        "cells of one stored block (tile or strip) of a DEM",
+        "DEM",
+        "GDAL decompresses a block whole; real DEMs store 256 x 256 to 1,024 x 1,024 tiles or strips of a few rows",
+    ),
+    "dem_cells": Limit(
+        16 * MiB,
+        "cells read from a DEM after cropping to the area asked for (8 bytes each)",
+        "DEM",
+        "128 MiB of elevations: 40 km x 40 km at 10 m, 16 times a 1,000 x 1,000 viewshed grid",
+    ),
 }
 
 

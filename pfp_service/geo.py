@@ -110,6 +110,18 @@ class Origin(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=Tr
         e, n, _u = pymap3d.geodetic2enu(lat, lon, self.alt, self.lat, self.lon, self.alt, _Wgs84.get())
         return float(e), float(n)
 
+    def to_local_many(self, latlon: np.ndarray) -> np.ndarray:
+        """``(n, 2)`` of ``[x_east_m, y_north_m]`` for ``(n, 2)`` of ``[lat, lon]`` degrees: ``to_local``
+        over an array (a terrain's cells are placed with it)."""
+        import numpy as np
+        import pymap3d
+
+        ll = np.asarray(latlon, dtype=float)
+        e, n, _u = pymap3d.geodetic2enu(
+            ll[:, 0], ll[:, 1], self.alt, self.lat, self.lon, self.alt, _Wgs84.get()
+        )
+        return np.column_stack([np.asarray(e, dtype=float), np.asarray(n, dtype=float)])
+
     def to_geodetic(self, x_east_m: float, y_north_m: float) -> tuple[float, float]:
         """``(lat, lon)`` in degrees: the exact inverse of ``to_local``."""
         import numpy as np

@@ -72,6 +72,7 @@ SESSION = {"health", "status", "fleet", "inject", "map", "tak", "handheld"}
 SHRINK: dict[str, tuple[set[str], list[str]]] = {
     "engine": (set(), ["--quick", "--no-scale", "--repeat", "1", "--baseline-repeat", "1"]),
     "roundtrip": (set(), ["--count", "50"]),
+    "terrain": ({"--check"}, ["--repeat", "2"]),
     "fuzz": (set(), ["--count", "20"]),
     "service": (
         {"--find-max", "--echo"},

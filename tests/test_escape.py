@@ -392,3 +392,32 @@ def test_a_plan_that_starts_inside_a_core_says_so_in_its_events():
     assert r.events[0] == "start inside the core of threat e1: left it by the shortest way out"
     clear = plan((60.0, 60.0), (100.0, 100.0), [Scheduled(t)], PlannerParams())
     assert not any("core" in e for e in clear.events)
+
+
+@pytest.mark.parametrize("factor", [1.0, 0.5, 0.2, 0.05])
+def test_the_contour_starts_where_the_trapped_descent_comes_to_rest_whatever_the_step(factor):
+    """Descent is judged trapped about a step from the potential's minimum; the contour's level is the minimum's."""
+    from scipy.optimize import minimize
+
+    from pfp_service.core.escape_strategies import Trap, _settle
+
+    threats = horseshoe()
+    field = ThreatField(threats)
+    base = resolve(PlannerParams(escape="none"), START, GOAL, threats)
+    r = _plan(threats, "none", step=base.step * factor)
+    assert r.status.value == "trapped"
+    x, y = r.path[-1]
+    gain = base.delta / math.dist(START, GOAL) ** 2
+
+    def potential(v):
+        return field.level_grad_at(v[0], v[1])[0] + gain * ((v[0] - GOAL[0]) ** 2 + (v[1] - GOAL[1]) ** 2)
+
+    best = minimize(potential, [x, y], method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-12}).x
+    step = base.step * factor
+    tr = Trap(
+        field, Cores(field), x, y, GOAL, base.delta, gain, step, base.tolerance, base.trap_window,
+        math.dist((x, y), GOAL), 4 * step, 2000, None, np.random.default_rng(0),
+    )  # fmt: skip
+    sx, sy = _settle(tr)
+    assert math.dist((sx, sy), best) <= step / 50, (factor, (x, y), (sx, sy), best)
+    assert math.dist((sx, sy), best) < math.dist((x, y), best) or math.dist((x, y), best) <= step / 50

@@ -683,3 +683,22 @@ def test_the_real_command_in_a_terminal_starts_with_the_router_down_and_quits_on
             proc.kill()
             proc.wait()
         os.close(master)
+
+
+@pytest.mark.net
+def test_a_redraw_while_the_app_closes_ends_quietly(planner):
+    """The handheld's tick can fire while Textual removes its widgets: that draw stops, no NoMatches escapes."""
+    endpoint, mission, _ = planner
+
+    async def scenario():
+        with open_link([endpoint], mission, "closing") as link:
+            app = _app(link, mission, Settings(unit="closing", walk=False), start=(3.0, 4.0))
+            async with app.run_test(size=SIZE) as pilot:
+                await pilot.pause()
+                await app.query_one("#arrow").remove()  # as the app's shutdown does, widget by widget
+                app.redraw()  # the tick that lands meanwhile
+                app.tick()
+                app.exit()
+            assert app.return_code == 0
+
+    asyncio.run(scenario())

@@ -23,6 +23,7 @@ from typing import ClassVar
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
+from textual.css.query import NoMatches
 from textual.screen import ModalScreen
 from textual.widgets import Input, Label, Static
 
@@ -312,6 +313,12 @@ class HandheldApp(App[int]):
         return cols, rows
 
     def redraw(self) -> None:
+        """Draw the view.  A draw that lands while the app closes (its tick, a key) finds its widgets
+        being removed: it stops there, rather than end a soldier's session with a traceback."""
+        with contextlib.suppress(NoMatches):
+            self._draw()
+
+    def _draw(self) -> None:
         v = self.model.view(self.clock(), self._arrow_size())
         self.last_view = v
         m = self.model

@@ -201,9 +201,48 @@ def _waypoint(tr: Trap) -> Iterator[Candidate]:
             yield rollout(tr.field, (tr.x, tr.y), wp, tr.delta / (r * r), tr.step, tr.tolerance, n)
 
 
+def _settle(tr: Trap) -> tuple[float, float]:
+    """Where the trap's descent comes to rest, found at finer and finer steps, within a step of the trap.
+
+    Descent is judged trapped where it oscillates, about a step from the
+    potential's minimum, so that point's level moves with the step; the
+    minimum's does not (``pfp bench convergence``).  Bounded: at most
+    ``_SETTLE_HALVINGS`` x ``_SETTLE_STEPS`` evaluations, each lowering the potential.
+    """
+    f, gain, (gx0, gy0) = tr.field, tr.gain, tr.goal
+
+    def potential(x: float, y: float) -> tuple[float, float, float]:
+        lv, hx, hy = f.level_grad_at(x, y)
+        dx, dy = x - gx0, y - gy0
+        return lv + gain * (dx * dx + dy * dy), hx + 2.0 * gain * dx, hy + 2.0 * gain * dy
+
+    x, y = tr.x, tr.y
+    here, fx, fy = potential(x, y)
+    s = 0.5 * tr.step
+    for _ in range(_SETTLE_HALVINGS):
+        for _ in range(_SETTLE_STEPS):
+            norm = math.hypot(fx, fy)
+            if not norm > 0.0:
+                return x, y
+            nx, ny = x - s * fx / norm, y - s * fy / norm
+            if math.hypot(nx - tr.x, ny - tr.y) > tr.step:
+                break  # not the oscillation's own minimum: a creep, which goes on past it
+            there, gx, gy = potential(nx, ny)
+            if not there < here:
+                break
+            x, y, here, fx, fy = nx, ny, there, gx, gy
+        s *= 0.5
+    return x, y
+
+
+_SETTLE_HALVINGS = 6  # to a 128th of the step
+_SETTLE_STEPS = 8
+
+
 def _contour(tr: Trap) -> Iterator[Candidate]:
     f = tr.field
-    level, gx, gy = f.level_grad_at(tr.x, tr.y)
+    sx, sy = _settle(tr)
+    level, gx, gy = f.level_grad_at(sx, sy)
     g = math.hypot(gx, gy)
     if not (level > 0.0 and g * tr.step > 1e-9 * level):
         yield NoCandidate("no threat slope at the trap to follow")
@@ -212,13 +251,13 @@ def _contour(tr: Trap) -> Iterator[Candidate]:
     ahead = []
     for sign in (1.0, -1.0):
         tx, ty = -sign * gy / g, sign * gx / g
-        probe = f.level_grad_at(tr.x + 3 * step * tx, tr.y + 3 * step * ty)[0]
-        toward = tx * (tr.goal[0] - tr.x) + ty * (tr.goal[1] - tr.y)
+        probe = f.level_grad_at(sx + 3 * step * tx, sy + 3 * step * ty)[0]
+        toward = tx * (tr.goal[0] - sx) + ty * (tr.goal[1] - sy)
         ahead.append((probe, -toward, sign))
     sign = min(ahead)[2]
     tx, ty = -sign * gy / g, sign * gx / g
-    x, y, c = tr.x, tr.y, level
-    pts = [(x, y)]
+    x, y, c = sx, sy, level
+    pts = [(tr.x, tr.y), (x, y)] if (x, y) != (tr.x, tr.y) else [(x, y)]
     lx, ly, away, raises, exits, closer = x, y, False, 0, 0, False
     while len(pts) < tr.budget:
         qx, qy = x + step * tx, y + step * ty

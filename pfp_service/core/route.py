@@ -52,6 +52,7 @@ class EscapeRun:
 
     __slots__ = (
         "_after",
+        "_left",
         "_said",
         "advisories",
         "ahead_m",
@@ -103,6 +104,8 @@ class EscapeRun:
         # per leg (or point): the run's length from it to the end, each length, each leg's last index; its end
         self._after: tuple[list[float], list[float], list[float], tuple[float, float]] | None = None
         self._said: tuple[StepStatus, str] | None = None  # the status and reason it gives (``said``)
+        # ``left_to``'s answer at a cursor for a goal: it changes only when the cursor moves
+        self._left: tuple[int, tuple[float, float] | None, float] = (-1, None, 0.0)
 
     @classmethod
     def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
@@ -130,6 +133,22 @@ class EscapeRun:
             assert table is not None
         ex, ey = table[3]
         return math.hypot(goal[0] - ex, goal[1] - ey)
+
+    def left_to(self, goal: tuple[float, float]) -> float:
+        """Metres still to drive to ``goal``: the run from its cursor, then straight on from its end if it stops short.
+
+        Per unit and report on the live tick, though the cursor moves only
+        every few reports: kept for the cursor it was made at (and the goal,
+        the same object report after report: its stepper's).
+        """
+        at, to, left = self._left
+        if at == self.cursor and to is goal:
+            return left
+        left = self.left_m()
+        if not self.to_goal:
+            left += self.end_to(goal)
+        self._left = (self.cursor, goal, left)
+        return left
 
     def left_m(self) -> float:
         """The length of the run from its cursor to its end, metres (the route a unit has still to drive).

@@ -62,25 +62,40 @@ class ProgressWatch:
             speed_mps: the unit's own speed, if it sent one.
             told_to_move: its last direction was to move (en route or escaping, with room to).
         """
-        at = now if t is None else self._time(t, now)
+        # per unit and report on the live tick (bench row: `pfp bench service`): the common cases
+        # spelt inline, each verdict kept and returned in one step
+        if t is None:
+            at = now
+        else:
+            offset = self._offset
+            at = (
+                t - offset
+                if offset is not None and abs((t - now) - offset) <= WINDOW_S
+                else self._time(t, now)
+            )
         if at < self._last_t:  # a clock that ran back (a restarted unit): start afresh
             self._fixes.clear()
             self._anchor = None
         self._last_t = at
-        self._fixes.append((at, x, y))
-        # per unit and report on the live tick: the unit's own speed taken as it comes, else measured
-        self.speed_mps = speed_mps if speed_mps is not None and speed_mps >= 0.0 else self._speed(speed_mps)
-        if speed_mps == 0.0:
-            self._anchor = (at, x, y)
-            self.verdict = Progress.HOLDING
-            return self.verdict
+        fix = (at, x, y)
+        self._fixes.append(fix)
+        # the unit's own speed taken as it comes, else measured
+        if speed_mps is not None and speed_mps >= 0.0:
+            self.speed_mps = speed_mps
+            if speed_mps == 0.0:
+                self._anchor = fix
+                verdict = self.verdict = Progress.HOLDING
+                return verdict
+        else:
+            self.speed_mps = self._speed(speed_mps)
         anchor = self._anchor
-        if not told_to_move or anchor is None or math.hypot(x - anchor[1], y - anchor[2]) > RADIUS_M:
-            self._anchor = (at, x, y)
-            self.verdict = Progress.MOVING if told_to_move and anchor is not None else Progress.UNKNOWN
-            return self.verdict
-        self.verdict = Progress.STALLED if at - anchor[0] >= WINDOW_S else Progress.MOVING
-        return self.verdict
+        if not told_to_move or anchor is None or (x - anchor[1]) ** 2 + (y - anchor[2]) ** 2 > RADIUS_M**2:
+            self._anchor = fix
+            verdict = Progress.MOVING if told_to_move and anchor is not None else Progress.UNKNOWN
+        else:
+            verdict = Progress.STALLED if at - anchor[0] >= WINDOW_S else Progress.MOVING
+        self.verdict = verdict
+        return verdict
 
     def _time(self, t: float | None, now: float) -> float:
         """The fix's time: the unit's, when it sends one and it runs on; else the time of receipt."""

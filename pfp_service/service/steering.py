@@ -207,6 +207,10 @@ def direction(
         reach_m: float | None = FINITE_LIMIT if far > FINITE_LIMIT else far
     else:
         reach_m = None
+    # the metres of route the unit has still to drive, on the wire's map (not finite: none)
+    left_m = None if terminal or rec.stepper is None else rec.stepper.route_left_m()
+    if left_m is not None and not left_m <= FINITE_LIMIT:
+        left_m = FINITE_LIMIT if left_m < math.inf else None
     d = Direction(
         unit=rec.id,
         seq=rec.seq,
@@ -222,15 +226,9 @@ def direction(
         reach_m=reach_m,
         route=_ROUTE_KIND[route],
         progress=rec.progress.verdict,
-        route_left_m=_left(rec, terminal),
+        route_left_m=left_m,
     )
     return d, event
-
-
-def _left(rec: UnitRecord, terminal: bool) -> float | None:
-    """The metres of route the unit has still to drive (``Stepper.route_left_m``), on the wire's map."""
-    left = None if terminal or rec.stepper is None else rec.stepper.route_left_m()
-    return None if left is None or not math.isfinite(left) else min(left, FINITE_LIMIT)
 
 
 def _straight_reach(

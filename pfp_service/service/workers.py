@@ -283,6 +283,16 @@ class _Slot:
     thread: threading.Thread | None = None
     started: int = field(default=0)  # workers started in this slot
     ready: bool = False  # a warm worker is in it
+    # taking ``proc``/``conn`` out is atomic under it: the starter (failing) and a shutdown (stopping)
+    # may race for the same handles, and a connection closed twice could close a reused descriptor
+    handles: threading.Lock = field(default_factory=threading.Lock)
+
+    def take(self) -> tuple[Any, Connection | None]:
+        """The slot's process and connection, now the caller's alone to stop and close."""
+        with self.handles:
+            proc, conn = self.proc, self.conn
+            self.proc, self.conn, self.version, self.ready = None, None, -1, False
+        return proc, conn
 
 
 class WorkerPool:
@@ -531,8 +541,7 @@ class WorkerPool:
                 self._on_replaced(why)
 
     def _stop_worker(self, slot: _Slot) -> None:
-        proc, conn = slot.proc, slot.conn
-        slot.proc, slot.conn, slot.version, slot.ready = None, None, -1, False
+        proc, conn = slot.take()
         if proc is not None:
             with contextlib.suppress(Exception):
                 proc.kill()
@@ -557,7 +566,8 @@ class WorkerPool:
             if got is None:
                 time.sleep(0.5)  # a worker that cannot start: not in a tight loop
                 continue
-            slot.proc, slot.conn, slot.version = got
+            with slot.handles:
+                slot.proc, slot.conn, slot.version = got
             slot.started += 1
             if self._closed:
                 self._stop_worker(slot)
@@ -597,18 +607,25 @@ class WorkerPool:
                 return None
         os.close(theirs)
         if slot is not None:
-            slot.proc, slot.conn = proc, ours
+            with slot.handles:
+                slot.proc, slot.conn = proc, ours
         try:
             ok = ours.poll(READY_TIMEOUT_S) and ours.recv() == "ready"
-        except (EOFError, OSError):
+        except (EOFError, OSError):  # a shutdown may have closed it under us (it then owns both)
             ok = False
         if not ok or self._closed:
-            with contextlib.suppress(Exception):
-                proc.kill()
-                proc.wait(timeout=2.0)
-            ours.close()
-            if slot is not None:
-                slot.proc, slot.conn = None, None
+            if slot is None:
+                mine = True
+            else:  # a shutdown that took the handles first stops and closes them itself
+                with slot.handles:
+                    mine = slot.conn is ours
+                    if mine:
+                        slot.proc, slot.conn = None, None
+            if mine:
+                with contextlib.suppress(Exception):
+                    proc.kill()
+                    proc.wait(timeout=2.0)
+                ours.close()
             return None
         return proc, ours, -1
 
