@@ -205,7 +205,7 @@ def test_one_registry_gives_the_choices_the_order_and_the_tiers():
 
 def test_the_light_list_of_escape_names_is_the_registry_name_for_name():
     # options holds the names so the CLI and the validators need not compile the core; the registry
-    # implements them, in auto's order, and refuses to import when the two drift apart
+    # implements them, in auto's order; core.escape refuses to import when the two drift apart
     from pfp_service.core import options
     from pfp_service.core.escape_strategies import STRATEGIES
 

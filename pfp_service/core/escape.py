@@ -74,6 +74,7 @@ from pfp_service.core.escape_strategies import (
 )
 from pfp_service.core.foresight import coarser, progress_floor
 from pfp_service.core.metrics import LAMBDA, path_cost
+from pfp_service.core.options import ESCAPE_STRATEGIES
 from pfp_service.core.params import Resolved
 from pfp_service.core.polylines import polyline_clear, resample
 from pfp_service.core.route import NO_POINTS, EscapeRun, legs, path_length
@@ -81,6 +82,13 @@ from pfp_service.core.threat import ThreatField
 from pfp_service.core.tracking import Route
 
 __all__ = ["AUTO_MARGIN", "AUTO_ORDER", "HANDOFF_STEPS", "MAX_TRAPS", "TRAP_BUDGET", "Escaper"]
+
+# The ``escape`` choices users are offered (options, read without compiling the core) must be the
+# strategies there are, in auto's order: a strategy registered without its name, or the reverse, fails here.
+if AUTO_ORDER != ESCAPE_STRATEGIES:
+    raise ImportError(
+        f"escape_strategies registers {AUTO_ORDER}; options.ESCAPE_STRATEGIES names {ESCAPE_STRATEGIES}"
+    )
 
 MAX_TRAPS = 12
 TRAP_BUDGET = 8000  # most steps a strategy walks from a trap

@@ -8,11 +8,9 @@ descent from the exit must get clearly closer to the goal) and commits to the
 first one that passes.  A strategy with no candidate at all yields
 ``NoCandidate(reason)`` and stops.
 
-Each entry is a ``Strategy(name, tier, propose)``.  Adding one is one entry
-here and its name in ``options.ESCAPE_STRATEGIES``, the light list the
-``escape`` choices (``options.ESCAPES``: help, scenario and goal validation)
-are read from without compiling the core; importing this module fails when
-the two disagree.  ``auto``'s order and its tiers are read from this registry.  ``auto`` asks every strategy of the
+Each entry is a ``Strategy(name, tier, propose)``, its name also in the light
+``options.ESCAPE_STRATEGIES`` (``escape`` checks they agree); ``auto``'s order
+and its tiers are read from this registry.  ``auto`` asks every strategy of the
 lowest tier, and only pays for a higher tier when that finds nothing
 acceptable (tier 0: cheap, reactive; tier 1: a search).
 
@@ -44,12 +42,10 @@ from types import MappingProxyType
 import numba
 import numpy as np
 
-from pfp_service.core import kernels, steprule
+from pfp_service.core import kernels, polylines, steprule
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.grid import GridGraph
 from pfp_service.core.metrics import LAMBDA
-from pfp_service.core.options import ESCAPE_STRATEGIES
-from pfp_service.core.polylines import resample
 from pfp_service.core.routes import ROUTES, Ask, RouteCache
 from pfp_service.core.threat import ThreatField
 
@@ -330,7 +326,7 @@ _WIDEST: weakref.WeakKeyDictionary[ThreatField, float] = weakref.WeakKeyDictiona
 def global_route(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoCandidate:
     """``global_corners`` resampled at ``step``: the points the stepper follows."""
     corners = global_corners(tr, routes)
-    return corners if isinstance(corners, NoCandidate) else resample(corners, tr.step)
+    return corners if isinstance(corners, NoCandidate) else polylines.resample(corners, tr.step)
 
 
 def global_corners(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | NoCandidate:
@@ -502,9 +498,3 @@ STRATEGIES: MappingProxyType[str, Strategy] = MappingProxyType(
 """Every strategy by name, in ``auto``'s order (by tier, then as registered)."""
 
 AUTO_ORDER: tuple[str, ...] = tuple(STRATEGIES)
-
-if AUTO_ORDER != ESCAPE_STRATEGIES:  # the choices users are offered must be the strategies there are
-    raise ImportError(
-        f"escape_strategies registers {AUTO_ORDER} in auto's order, but options.ESCAPE_STRATEGIES"
-        f" names {ESCAPE_STRATEGIES}: make them agree"
-    )

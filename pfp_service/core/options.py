@@ -4,8 +4,8 @@
 file need these names and defaults, but not numba, numpy or scipy: importing the core's
 kernels costs about 100 MB of a command's peak memory (issue 35: a refusal stays within
 200 MB).  So the names live here, and the modules that implement them import this one:
-``escape_strategies`` registers one ``Strategy`` per name in ``ESCAPE_STRATEGIES`` and
-checks at import that its registry and this list agree, name for name and in order.
+``escape_strategies`` registers one ``Strategy`` per name in ``ESCAPE_STRATEGIES``, and
+``escape``, which runs them, checks at import that the two agree, name for name and in order.
 """
 
 from __future__ import annotations
