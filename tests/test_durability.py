@@ -301,7 +301,9 @@ def test_a_planner_killed_takes_its_worker_processes_with_it():
         deadline = time.monotonic() + 60
         workers: set[int] = set()
         while time.monotonic() < deadline and len(workers) < 4:  # the zygote, 2 preview workers, the spare
-            workers = set()  # the workers are the zygote's children (workers.ForkServer), not the planner's
+            workers = (
+                set()
+            )  # the workers are the zygote's children (forkserver.ForkServer), not the planner's
             todo = [proc.pid]
             while todo:
                 todo += (kids := _children(todo.pop()))

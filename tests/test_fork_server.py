@@ -1,4 +1,4 @@
-"""Workers forked from a zygote (``workers.ForkServer``): cheap in memory, quick to start, still contained."""
+"""Workers forked from a zygote (``forkserver.ForkServer``): cheap in memory, quick to start, still contained."""
 
 from __future__ import annotations
 
@@ -20,7 +20,9 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 # a planner stand-in: it forks the zygote, runs a pool on it, reports, then waits to be killed
 _SCRIPT = r"""
 import gc, json, math, queue, sys, time
-from pfp_service.service.workers import ForkServer, Task, WorkerPool, install_fork_server
+from pfp_service.service.forkserver import ForkServer, install_fork_server
+from pfp_service.service.tasks import Task
+from pfp_service.service.workers import WorkerPool
 
 gc.freeze()
 server = ForkServer.start()

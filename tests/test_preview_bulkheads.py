@@ -31,7 +31,8 @@ from pfp_service.core.metrics import MEASURE_CHUNK, Epoch, measure
 from pfp_service.errors import DeadlinePassed, InputError
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, WorldSettings
 from pfp_service.service.preview import MAX_PREVIEW_WHATIFS, admit, preview
-from pfp_service.service.workers import Outcome, Task, WorkerPool
+from pfp_service.service.tasks import Outcome, Task
+from pfp_service.service.workers import WorkerPool
 from pfp_service.service.world import World
 from pfp_service.wire import Goal, ThreatUpdate, UnitState, decode_preview_request, keys
 from tests.conftest import ROOT

@@ -31,7 +31,7 @@ shares only the machine's cores.  The processes are a ``WorkerPool``
 asked again later), and each worker's memory is bounded.
 
 The workers start with the first job, not with the planner: they are
-forked from the planner's fork server (``workers.ForkServer``), warm and
+forked from the planner's fork server (``forkserver.ForkServer``), warm and
 sharing its pages, in milliseconds (a fresh interpreter, where no fork
 server runs, takes seconds); a job still waiting at its deadline is
 answered unrun and asked again, as under any backlog.  One worker by default
@@ -51,8 +51,9 @@ from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Stepper
 from pfp_service.service.events import Deliberated, Job
 from pfp_service.service.log import get_logger
+from pfp_service.service.tasks import Blobs, Outcome, Task
 from pfp_service.service.workerproc import world_field
-from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool
+from pfp_service.service.workers import WorkerPool
 
 __all__ = ["AHEAD", "CHUNK", "CHUNK_RUN_S", "Deliberators"]
 

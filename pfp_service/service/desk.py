@@ -37,7 +37,7 @@ workers and one their warm spare.  One warm worker still answers the first
 preview within its budget (warmed on the world's field, as ever); the
 second and the spare start when the first preview arrives.  Under
 ``pfp serve`` every worker is forked from the warm zygote
-(``workers.ForkServer``): it starts in 10-90 ms instead of 3-7 s (load
+(``forkserver.ForkServer``): it starts in 10-90 ms instead of 3-7 s (load
 average 8) and costs about 2 MB of its own while idle, so the eager one
 costs little and the first preview waits for no start at all.
 """
@@ -64,8 +64,9 @@ from pfp_service.service.config import ServeConfig
 from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings, ZonePut
 from pfp_service.service.log import get_logger
 from pfp_service.service.preview import Cost, admit, fit_reply, preview
+from pfp_service.service.tasks import Blobs, Outcome, Task
 from pfp_service.service.workerproc import forget_fields, retire, world_field, world_threats
-from pfp_service.service.workers import Blobs, Outcome, Task, WorkerPool
+from pfp_service.service.workers import WorkerPool
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds, ZoneUpdate
 

@@ -179,7 +179,7 @@ def _fork_server(cfg: ServeConfig) -> Iterator[None]:
     import gc
 
     from pfp_service.service.desk import warm_up
-    from pfp_service.service.workers import ForkServer, install_fork_server
+    from pfp_service.service.forkserver import ForkServer, install_fork_server
 
     warm_up(None)
     warm_up(cfg.world_settings())

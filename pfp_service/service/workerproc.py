@@ -3,7 +3,7 @@
 ``workers.WorkerPool`` starts ``python -c "...; boot(ARG)"``, so this module is
 what a worker imports first; nothing in the planner's process imports it but
 the tasks that run in workers (``world_field``, ``retire``).  Where the planner
-forked a zygote (``workers.ForkServer``), ``zygote`` is its loop, and each
+forked a zygote (``forkserver.ForkServer``), ``zygote`` is its loop, and each
 worker it forks enters ``_worker_main`` from there, already warm.
 """
 
@@ -77,7 +77,7 @@ def boot(arg: str) -> None:
 
 
 def zygote(sock: socket.socket, lifeline: int) -> None:
-    """The fork server's loop (``workers.ForkServer``): fork one worker per request, until the planner goes.
+    """The fork server's loop (``forkserver.ForkServer``): fork one worker per request, until the planner goes.
 
     A request is ``[memory_mb, nice]`` with the worker's socket end; the reply is its process id.
     The planner's end of ``sock`` and of ``lifeline`` close when it dies: either ends the loop.

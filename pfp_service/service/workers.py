@@ -1,7 +1,7 @@
 """Worker processes for the planner's off-loop work (previews, deliberation): one small pool both use.
 
 A ``WorkerPool`` runs each worker as a fork of the zygote ``pfp serve``
-forked before its Zenoh session opened (``ForkServer``; a fork of a process
+forked before its Zenoh session opened (``forkserver.ForkServer``; a fork of a process
 holding a Zenoh session is unsafe), or where there is none as its own fresh
 interpreter, with its own socket pipe, driven by one parent thread per slot.  The slot thread takes the next task, sends it,
 waits for the result until the task's hard stop (its budget plus
@@ -40,10 +40,8 @@ import contextlib
 import heapq
 import itertools
 import json
-import math
 import os
 import pickle
-import select
 import signal
 import socket
 import subprocess
@@ -53,224 +51,22 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
-from typing import Any, Literal
+from typing import Any
 
+from pfp_service.service.forkserver import installed_fork_server
 from pfp_service.service.log import get_logger
-from pfp_service.service.workerproc import ORPHAN_POLL_S, zygote
+from pfp_service.service.tasks import Outcome, OutcomeKind, Task
+from pfp_service.service.workerproc import ORPHAN_POLL_S
 
 __all__ = [
     "KILL_GRACE_S",
     "ORPHAN_POLL_S",
-    "Blobs",
-    "FieldBlob",
-    "ForkServer",
-    "Outcome",
-    "Task",
     "WorkerPool",
 ]
 
 log = get_logger("workers")
 KILL_GRACE_S = 0.25  # a task this long past its budget is killed with its worker
 READY_TIMEOUT_S = 180.0  # a worker not warm by then is started again
-OutcomeKind = Literal["done", "error", "memory", "killed", "died", "late", "closed"]
-
-
-@dataclass(frozen=True, slots=True)
-class FieldBlob:
-    """The threats in force, pickled once: ``version`` names them in the workers' cache."""
-
-    version: int
-    data: bytes
-
-
-class Blobs:
-    """The parent's side of the field cache: one blob per threats tuple (by identity), the latest kept."""
-
-    def __init__(self) -> None:
-        self._threats: Any = None
-        self._blob: FieldBlob | None = None
-        self._version = 0
-
-    def of(self, threats: tuple[Any, ...]) -> FieldBlob:
-        if self._blob is None or self._threats is not threats:
-            self._version += 1
-            self._threats = threats
-            self._blob = FieldBlob(self._version, pickle.dumps(threats, protocol=pickle.HIGHEST_PROTOCOL))
-        return self._blob
-
-
-class ForkServer:
-    """A zygote: a copy of the warm planner, forked before any thread or Zenoh session, that forks workers.
-
-    ``start`` forks it from the planner once the heavy libraries are imported
-    and the numba kernels loaded (``desk.warm_up``), and only while the process
-    has no other Python thread (forking a process with Zenoh's threads is
-    unsafe; OpenBLAS stops its own pool around a fork).  Each worker is then a
-    fork of the zygote: it shares the loaded libraries, the compiled kernels
-    and the interpreter's heap copy-on-write with the zygote, its siblings and
-    the planner, so it costs only the pages it writes, and starts in
-    milliseconds instead of seconds.  The caller should ``gc.freeze()`` first,
-    so the collector's passes in any of them do not write (and so copy) every
-    object's header.
-
-    A worker's socket end comes to the zygote by ``send_fds``; its process id
-    comes back.  A worker is not the planner's child: the pool watches and
-    kills it through a pidfd (``Forked``).  Every worker and the zygote hold the
-    read end of a lifeline pipe whose only write end is the planner's, so the
-    moment the planner dies, even by ``SIGKILL``, each of them reads its end
-    of file and exits.
-    """
-
-    def __init__(self, pid: int, sock: socket.socket, lifeline: int) -> None:
-        self.pid = pid
-        self._sock = sock
-        self._lifeline = lifeline
-        self._lock = threading.Lock()
-        self._dead = False
-
-    @classmethod
-    def start(cls) -> ForkServer | None:
-        """Fork the zygote from this process; ``None`` where it would be unsafe (other threads) or unsupported."""
-        if threading.active_count() > 1 or not hasattr(os, "pidfd_open") or not hasattr(socket, "send_fds"):
-            return None
-        ours, theirs = socket.socketpair()
-        life_r, life_w = os.pipe()
-        try:
-            pid = os.fork()
-        except OSError:
-            for fd in (life_r, life_w):
-                os.close(fd)
-            ours.close()
-            theirs.close()
-            return None
-        if pid == 0:  # the zygote: it never returns into the planner's code
-            code = 1
-            try:
-                ours.close()
-                os.close(life_w)
-                zygote(theirs, life_r)
-                code = 0
-            finally:
-                os._exit(code)
-        theirs.close()
-        os.close(life_r)
-        return cls(pid, ours, life_w)
-
-    def spawn(self, fd: int, memory_mb: float | None, nice: int) -> Forked | None:
-        """A worker forked by the zygote on the socket end ``fd``; ``None`` if the zygote is gone."""
-        with self._lock:
-            if self._dead:
-                return None
-            try:
-                socket.send_fds(self._sock, [json.dumps([memory_mb, nice]).encode()], [fd])
-                reply = self._sock.recv(32)
-            except OSError:
-                reply = b""
-            if not reply:  # the zygote died (the OOM killer, say): the pool starts fresh interpreters
-                self._dead = True
-                log.warning("the worker fork server is gone; workers start as new interpreters")
-                return None
-        try:
-            return Forked(int(reply))
-        except (ValueError, OSError):  # the worker is already gone: its start failed
-            return None
-
-    def close(self) -> None:
-        """Stop the zygote (its workers stop with their pools, or with the planner)."""
-        with self._lock:
-            self._dead = True
-            with contextlib.suppress(OSError):
-                self._sock.close()
-            with contextlib.suppress(OSError):
-                os.close(self._lifeline)
-            with contextlib.suppress(OSError):
-                os.kill(self.pid, signal.SIGKILL)
-            with contextlib.suppress(OSError):
-                os.waitpid(self.pid, 0)
-
-
-_FORK_SERVER: list[ForkServer | None] = [None]
-
-
-def install_fork_server(server: ForkServer | None) -> None:
-    """Pools made from now on fork their workers from ``server`` (``None``: fresh interpreters again)."""
-    _FORK_SERVER[0] = server
-
-
-class Forked:
-    """A worker the zygote forked (not our child): ``subprocess.Popen``'s ``poll``/``kill``/``wait``, on a pidfd."""
-
-    def __init__(self, pid: int) -> None:
-        self.pid = pid
-        self._fd: int | None = os.pidfd_open(pid)
-        self._lock = threading.Lock()
-        self.returncode: int | None = None
-
-    def poll(self) -> int | None:
-        return self._wait(0.0)
-
-    def wait(self, timeout: float | None = None) -> int:
-        code = self._wait(timeout)
-        if code is None:
-            raise subprocess.TimeoutExpired(f"worker {self.pid}", timeout or 0.0)
-        return code
-
-    def _wait(self, timeout: float | None) -> int | None:
-        with self._lock:
-            fd = self._fd
-        if fd is None:
-            return self.returncode
-        with contextlib.suppress(OSError, ValueError):
-            if not select.select([fd], [], [], timeout)[0]:
-                return None
-        with self._lock:
-            if self._fd is not None:
-                os.close(self._fd)
-                self._fd = None
-                self.returncode = -1  # gone; its status went to the zygote, which reaps it
-        return self.returncode
-
-    def kill(self) -> None:
-        with self._lock:
-            if self._fd is not None:
-                with contextlib.suppress(OSError):
-                    signal.pidfd_send_signal(self._fd, signal.SIGKILL)
-
-
-@dataclass(frozen=True, slots=True)
-class Outcome:
-    """How a task ended: ``done`` with its ``value``, or why not (``detail``); ``run_s`` in the worker."""
-
-    kind: OutcomeKind
-    value: Any = None
-    detail: str = ""
-    run_s: float = 0.0
-
-
-@dataclass(eq=False)
-class Task:
-    """One call of ``fn(*args)`` in a worker.
-
-    Args:
-        fn: a module-level function (it is pickled by name).
-        done: called once with the ``Outcome``, from a pool thread.
-        budget_s: run time allowed once started; the worker is killed ``KILL_GRACE_S`` past it.
-        start_by: on ``time.monotonic``; not started by then, it is answered ``late`` unrun.
-        field: the threats the task runs under (``world_threats`` in the worker).
-        lane, priority: lower first.
-        skip: asked before it starts; true drops it unanswered (it was superseded).
-    """
-
-    fn: Callable[..., Any]
-    args: tuple[Any, ...]
-    done: Callable[[Outcome], None]
-    budget_s: float
-    start_by: float = math.inf
-    field: FieldBlob | None = None
-    lane: int = 0
-    priority: float = 0.0
-    skip: Callable[[], bool] | None = None
-    answered: bool = False  # set once ``done`` was called (``_finish``)
 
 
 @dataclass
@@ -330,7 +126,7 @@ class WorkerPool:
         self._nice = nice
         self._caps = dict(lane_caps or {})
         self._warm = warm
-        self._forker = _FORK_SERVER[0]
+        self._forker = installed_fork_server()
         self._on_replaced = on_replaced
         self._cond = threading.Condition()
         self._lanes: dict[int, list[tuple[float, int, Task]]] = {}
