@@ -53,7 +53,6 @@ from pfp_service.service.events import (
     Input,
     InputRejected,
     MissionShared,
-    PeerPlanner,
     StateReported,
     Tick,
     TokenChanged,
@@ -65,7 +64,7 @@ from pfp_service.service.log import get_logger, log_changes
 from pfp_service.service.loopstats import Latency, LoopTrace, Trim, demote_native_threads
 from pfp_service.service.rings import StateRings
 from pfp_service.service.store import Store
-from pfp_service.service.twins import watch_twins
+from pfp_service.service.twins import Peers, watch_twins
 from pfp_service.service.world import World
 from pfp_service.service.worldpages import answer_world, fetch_world
 from pfp_service.service.writes import Writes
@@ -95,7 +94,6 @@ INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positi
 MIN_TICK_S = 0.002  # ticks at most this often while states come (measured: docs/operations.md)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
 TICK_INPUTS = 256  # goals, threats and the rest applied per tick at most
-PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
 DEMOTE_EVERY_S = 5.0  # Zenoh's threads are put under SCHED_BATCH this often (threads it starts later too)
 KEY_CACHE = 16_384  # state key -> unit id, unit id -> direction key, remembered; past it, forgotten at once
 _V = TypeVar("_V")
@@ -146,13 +144,13 @@ class PlannerNode:
         self._lock = threading.Lock()
         self._intake = Intake(INBOX_MAX, TICK_INPUTS, TICK_UNITS)  # inputs and states, for the loop
         self.zid = str(session.info.zid())
-        self._inbox_events: list[Event] = []  # events raised off the loop (a twin under --cluster)
-        self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
         self._queries: collections.deque[tuple[str, zenoh.Query, float]] = collections.deque()
         self._wake = threading.Event()
         self._stop = threading.Event()
         # goals, threats and zones: puts and acknowledged-write queries, waiting for the loop (writes.py)
         self._writes = Writes(cfg, self.zid, self._lock, self._wake.set, self._intake.refused)
+        # the mission's other planners: peers' tokens for the world, twins for the status and their conflict
+        self._peers = Peers(cfg.mission, cfg.planner_id, cfg.cluster, self._lock, self._push, self._wake.set)
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
         self._trim = Trim()
@@ -202,7 +200,7 @@ class PlannerNode:
                 self.world.apply(filed, self.clock())
         self._join(s)
         if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
-            self._peers_known(s)
+            self._peers.ask(s)
         self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
             ev = RestoredEvent(
@@ -220,7 +218,14 @@ class PlannerNode:
         self._loop_thread.start()
         self._twins_thread = threading.Thread(
             target=watch_twins,
-            args=(self.session, self.cfg.mission, self.cfg.planner_id, self.zid, self._stop, self._twin),
+            args=(
+                self.session,
+                self.cfg.mission,
+                self.cfg.planner_id,
+                self.zid,
+                self._stop,
+                self._peers.on_twin,
+            ),
             name="pfp-twins",
             daemon=True,
         )
@@ -241,7 +246,7 @@ class PlannerNode:
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
             s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
-            s.liveliness().declare_subscriber(keys.alive_planners(m), self._on_planner, history=True),
+            s.liveliness().declare_subscriber(keys.alive_planners(m), self._peers.on_token, history=True),
         ]
         if self.cfg.cluster:
             self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
@@ -323,57 +328,6 @@ class PlannerNode:
                 self._push(MissionShared(uid, decode_mission(sample.payload.to_bytes())))
         except InputError as err:
             self._push(InputRejected(str(sample.key_expr), err))
-
-    def _on_planner(self, sample: zenoh.Sample) -> None:
-        try:
-            pid = keys.parse(str(sample.key_expr)).id
-        except InputError:
-            return
-        alive = sample.kind == zenoh.SampleKind.PUT
-        if (
-            not self.cfg.cluster and pid != self.cfg.planner_id
-        ):  # not a peer but a twin: both guide every unit
-            self._twinned(pid, alive)
-        self._push(PeerPlanner(pid, alive))
-
-    def _twinned(self, name: str, alive: bool) -> None:
-        with self._lock:
-            if alive:
-                self._twins.add(name)
-            else:
-                self._twins.discard(name)
-
-    def _peers_known(self, s: zenoh.Session) -> None:
-        """Enqueue a ``PeerPlanner`` for each live planner of the mission, once its token has answered.
-
-        A liveliness query ends when every live token has answered (or at
-        ``PEERS_KNOWN_S``): start-up waits on that, not on a guess of how long
-        the subscriber's history takes.  The subscriber says the same again;
-        the world counts a peer once.
-        """
-        try:
-            for reply in s.liveliness().get(keys.alive_planners(self.cfg.mission), timeout=PEERS_KNOWN_S):
-                if reply.ok is not None:
-                    self._on_planner(reply.ok)
-        except Exception as exc:  # the session is closing under us: the subscriber names them in time
-            log.warning("peers not asked", extra={"fields": {"reason": str(exc)[:200]}})
-
-    def _twin(self, zid: str, alive: bool) -> None:
-        name = f"{self.cfg.planner_id[:50]}-{zid[:12]}"
-        self._twinned(name, alive)
-        if not self.cfg.cluster:
-            self._push(PeerPlanner(name, alive))
-            return
-        if alive:  # the world shares units by planner id: twins under --cluster cannot share, only collide
-            reason = (
-                f"another planner (session {zid}) also serves mission {self.cfg.mission!r} as "
-                f"{self.cfg.planner_id!r}; --cluster shares units by planner id: give each its own --planner-id"
-            )
-            with self._lock:  # events are published from the loop's thread only
-                self._inbox_events.append(
-                    ConflictEvent(planner=self.cfg.planner_id, other=name, reason=reason)
-                )
-            self._wake.set()
 
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
@@ -488,8 +442,7 @@ class PlannerNode:
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
-        with self._lock:
-            raised, self._inbox_events = self._inbox_events, []
+        raised = self._peers.take_events()
         for ev in [*raised, *out.events]:
             self._event(ev, logged)
         for fault in out.faults:  # the world's bulkheads: once a minute per key, never a traceback
@@ -579,8 +532,6 @@ class PlannerNode:
 
     def _status(self) -> PlannerStatus:
         p50, p99 = self.latency.quantiles_ms()
-        with self._lock:  # the callbacks' threads change it
-            twins = tuple(sorted(self._twins))[:64]
         c = self.world.counts()
         return PlannerStatus(
             planner=self.cfg.planner_id,
@@ -604,5 +555,5 @@ class PlannerNode:
             session=self.zid,
             origin=self.cfg.origin,
             faults=c["faults"],
-            twins=twins,
+            twins=self._peers.twins(),
         )

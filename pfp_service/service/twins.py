@@ -16,13 +16,16 @@ from collections.abc import Callable
 import zenoh
 
 from pfp_service.errors import InputError
-from pfp_service.wire import keys
+from pfp_service.service.events import Input, PeerPlanner
+from pfp_service.service.log import get_logger
+from pfp_service.wire import ConflictEvent, Event, keys
 from pfp_service.wire.messages import decode_planner_status
 
-__all__ = ["PEERS_EVERY_S", "PEER_MISSES", "watch_twins"]
+__all__ = ["PEERS_EVERY_S", "PEERS_KNOWN_S", "PEER_MISSES", "Peers", "watch_twins"]
 
 PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
 PEER_MISSES = 5  # a same-id peer that missed this many asks in a row is gone (a busy loop answers late)
+PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
 
 
 def watch_twins(
@@ -59,3 +62,96 @@ def watch_twins(
             if missed[other] >= PEER_MISSES:
                 del missed[other]
                 twin(other, False)
+
+
+log = get_logger("node")  # what the node said about its peers before they had a module
+
+
+class Peers:
+    """The mission's other planners as this one sees them, for the node.
+
+    Their liveliness tokens become ``PeerPlanner`` inputs (the world shares units by them under
+    ``--cluster``).  A twin, a planner answering this one's units too (another id without
+    ``--cluster``, or this id from another session: ``watch_twins``), is listed in the status
+    (``twins``); under ``--cluster`` a same-id twin cannot share, only collide, and raises a
+    ``ConflictEvent`` the loop publishes (``take_events``).  Called from Zenoh's threads and the
+    twins' watcher; the node's ``lock`` guards what they share with the loop.
+    """
+
+    def __init__(
+        self,
+        mission: str,
+        planner_id: str,
+        cluster: bool,
+        lock: threading.Lock,
+        push: Callable[[Input], None],
+        wake: Callable[[], None],
+    ) -> None:
+        self._mission = mission
+        self._planner_id = planner_id
+        self._cluster = cluster
+        self._lock = lock
+        self._push = push
+        self._wake = wake
+        self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
+        self._events: list[Event] = []  # events raised off the loop (a twin under --cluster)
+
+    def on_token(self, sample: zenoh.Sample) -> None:
+        """A planner's liveliness token came or went."""
+        try:
+            pid = keys.parse(str(sample.key_expr)).id
+        except InputError:
+            return
+        alive = sample.kind == zenoh.SampleKind.PUT
+        if not self._cluster and pid != self._planner_id:  # not a peer but a twin: both guide every unit
+            self._twinned(pid, alive)
+        self._push(PeerPlanner(pid, alive))
+
+    def ask(self, session: zenoh.Session) -> None:
+        """Enqueue a ``PeerPlanner`` for each live planner of the mission, once its token has answered.
+
+        A liveliness query ends when every live token has answered (or at
+        ``PEERS_KNOWN_S``): start-up waits on that, not on a guess of how long
+        the subscriber's history takes.  The subscriber says the same again;
+        the world counts a peer once.
+        """
+        try:
+            for reply in session.liveliness().get(keys.alive_planners(self._mission), timeout=PEERS_KNOWN_S):
+                if reply.ok is not None:
+                    self.on_token(reply.ok)
+        except Exception as exc:  # the session is closing under us: the subscriber names them in time
+            log.warning("peers not asked", extra={"fields": {"reason": str(exc)[:200]}})
+
+    def on_twin(self, zid: str, alive: bool) -> None:
+        """``watch_twins``: a session serving this planner's id appeared or went."""
+        name = f"{self._planner_id[:50]}-{zid[:12]}"
+        self._twinned(name, alive)
+        if not self._cluster:
+            self._push(PeerPlanner(name, alive))
+            return
+        if alive:  # the world shares units by planner id: twins under --cluster cannot share, only collide
+            reason = (
+                f"another planner (session {zid}) also serves mission {self._mission!r} as "
+                f"{self._planner_id!r}; --cluster shares units by planner id: give each its own --planner-id"
+            )
+            with self._lock:  # events are published from the loop's thread only
+                self._events.append(ConflictEvent(planner=self._planner_id, other=name, reason=reason))
+            self._wake()
+
+    def twins(self) -> tuple[str, ...]:
+        """The twins now, sorted, at most 64 (``PlannerStatus.twins``)."""
+        with self._lock:  # the callbacks' threads change them
+            return tuple(sorted(self._twins))[:64]
+
+    def take_events(self) -> list[Event]:
+        """The events raised since the last call, for the loop to publish."""
+        with self._lock:
+            events, self._events = self._events, []
+        return events
+
+    def _twinned(self, name: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self._twins.add(name)
+            else:
+                self._twins.discard(name)
