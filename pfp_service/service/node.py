@@ -1,15 +1,11 @@
 """The Zenoh wiring of the planner: decode, enqueue, ``world.apply``, publish.
 
 * Unit states, the flood, wake no Python thread per state: Zenoh keeps them in
-  rings (``STATE_RING``), one on the plain key and one per shard this planner
-  owns (all shards on one ring while it owns them all); the loop drains them
-  and decodes, latest-wins per unit.  A callback per state took the GIL 10,000
-  times a second from the loop (measured: 52-55 % of the states answered at
-  10,000/s with callbacks, 74 % with the ring).
+  rings the loop drains (``rings.StateRings``: one on the plain key, one per
+  shard this planner owns, all on one while it owns them all), latest-wins per unit.
 * Ticks amortise: the loop ticks at most every ``MIN_TICK_S`` while states keep
-  coming, so the per-tick cost is shared; it does not poll: once a drain finds
-  nothing, a waiter thread per ring blocks in ``recv`` (the GIL released) for
-  the next state and wakes the loop, once.
+  coming, so the per-tick cost is shared; idle, it sleeps until a ring's waiter
+  or an input wakes it (no polling).
 * Under ``--cluster`` the planner subscribes to the states of its own shards
   only (``World.shards``, rendezvous hashing); as they change, the new rings
   are declared before the old go.
@@ -40,10 +36,8 @@ import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-import msgspec
 import zenoh
 
-from pfp_service import __version__
 from pfp_service.errors import InputError
 from pfp_service.service import gcpause
 from pfp_service.service.config import ServeConfig
@@ -62,19 +56,18 @@ from pfp_service.service.events import (
 from pfp_service.service.intake import Intake
 from pfp_service.service.log import get_logger, log_changes
 from pfp_service.service.loopstats import Latency, LoopTrace, Trim, demote_native_threads
+from pfp_service.service.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.service.rings import StateRings
+from pfp_service.service.status import planner_status
 from pfp_service.service.store import Store
 from pfp_service.service.twins import Peers, watch_twins
 from pfp_service.service.world import World
 from pfp_service.service.worldpages import answer_world, fetch_world
 from pfp_service.service.writes import Writes
 from pfp_service.wire import (
-    ConflictEvent,
     ErrorReply,
-    Event,
     ForgottenEvent,
     PlannerStatus,
-    RejectedEvent,
     RestoredEvent,
     UnitState,
     decode_mission,
@@ -89,7 +82,6 @@ log = get_logger("node")
 _JSON = zenoh.Encoding.APPLICATION_JSON
 SWITCH_INTERVAL_S = 0.0005  # the GIL is handed over this often, so pool threads cannot hold up the loop
 QUERIES_MAX = 4096  # status, world and preview queries waiting for the loop; more are shed
-EVENT_LOG_LINES = 20  # log lines per kind of event per tick; the rest are counted in one line
 INBOX_MAX = 100_000  # queued inputs beyond this are refused and counted (positions are latest-wins anyway)
 MIN_TICK_S = 0.002  # ticks at most this often while states come (measured: docs/operations.md)
 TICK_UNITS = 256  # unit reports applied per tick at most (about 5 ms of world and publishing); the rest wait
@@ -140,6 +132,7 @@ class PlannerNode:
         self.world = World(cfg.world_settings())
         self.started = clock()
         self.counters = {"msgs_in": 0, "msgs_out": 0}
+        self._out = Publisher(session, cfg.mission, self.counters)  # directions, events and other puts
         self.latency = Latency()
         self._lock = threading.Lock()
         self._intake = Intake(INBOX_MAX, TICK_INPUTS, TICK_UNITS)  # inputs and states, for the loop
@@ -213,7 +206,7 @@ class PlannerNode:
                 corrupt=restored.corrupt,
                 set_aside=restored.set_aside,
             )
-            self._event(ev, collections.Counter())
+            self._out.event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
         self._twins_thread = threading.Thread(
@@ -433,18 +426,18 @@ class PlannerNode:
                 for d in out.directions:
                     key, body = self._direction_key(d.unit), encode(d)
                     t = self.clock()
-                    self._put(key, body, direction=True)
+                    self._out.put(key, body, direction=True)
                     tr.put(self.clock() - t)
             else:
                 for d in out.directions:
-                    self._put(self._direction_key(d.unit), encode(d), direction=True)
+                    self._out.put(self._direction_key(d.unit), encode(d), direction=True)
         t_put = self.clock()
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
         raised = self._peers.take_events()
         for ev in [*raised, *out.events]:
-            self._event(ev, logged)
+            self._out.event(ev, logged)
         for fault in out.faults:  # the world's bulkheads: once a minute per key, never a traceback
             log.error("input failed inside the planner", extra={"fields": fault.fields()})
         for kind, n in logged.items():
@@ -452,7 +445,7 @@ class PlannerNode:
                 log.warning("more events", extra={"fields": {"kind": kind, "count": n - EVENT_LOG_LINES}})
         if self.cfg.cluster:
             for rec in out.missions:
-                self._put(
+                self._out.put(
                     keys.unit_mission(self.cfg.mission, rec.unit),
                     encode(mission_message(rec, self.cfg.planner_id)),
                 )
@@ -474,39 +467,6 @@ class PlannerNode:
             tr.part("queries", end - done)
             oldest = max((done - t for _m, t in states.values()), default=0.0)
             tr.tick(end - now, len(states), oldest, end)
-
-    # -- output -----------------------------------------------------------------------
-    def _put(self, key: str | zenoh.KeyExpr, payload: bytes, direction: bool = False) -> None:
-        if direction:
-            # not express: Zenoh batches a tick's directions. Measured on loopback, an express put
-            # costs the loop 20-26 us and a batched one 4.5-5.5 us; and express bursts overflowed
-            # the transmit queue under DROP (0.2-0.4 % of directions lost at 1,500-10,000/s, none
-            # batched, with a lower p50: 0.88 against 0.99 ms at 1,500/s)
-            self.session.put(
-                key,
-                payload,
-                encoding=_JSON,
-                congestion_control=zenoh.CongestionControl.DROP,
-                priority=zenoh.Priority.INTERACTIVE_HIGH,
-            )
-        else:
-            self.session.put(key, payload, encoding=_JSON)
-        self.counters["msgs_out"] += 1
-
-    def _event(self, ev: Event, logged: collections.Counter[str]) -> None:
-        ev = msgspec.structs.replace(ev, t=time.time())  # wall-clock time; planning never reads it
-        kind = ev.__struct_config__.tag
-        self._put(keys.event(self.cfg.mission, str(kind)), encode(ev))
-        logged[str(kind)] += 1
-        if logged[str(kind)] > EVENT_LOG_LINES:
-            return
-        fields = {k: v for k, v in msgspec.structs.asdict(ev).items() if k not in ("t", "planner")}
-        if isinstance(ev, RejectedEvent):
-            log.warning("rejected input", extra={"fields": fields})
-        elif isinstance(ev, ConflictEvent):  # two planners guiding one unit: a vehicle overshot its goal
-            log.warning("conflict: a twin planner", extra={"fields": fields})
-        else:
-            log.info(str(kind), extra={"fields": fields})
 
     # -- queries ------------------------------------------------------------------------
     def _answer(self, kind: str, query: zenoh.Query, t_recv: float) -> None:
@@ -531,29 +491,6 @@ class PlannerNode:
             self._desk.submit(query, key, view, t_recv)
 
     def _status(self) -> PlannerStatus:
-        p50, p99 = self.latency.quantiles_ms()
-        c = self.world.counts()
-        return PlannerStatus(
-            planner=self.cfg.planner_id,
-            mission=self.cfg.mission,
-            version=__version__,
-            uptime_s=max(self.clock() - self.started, 0.0),
-            units=c["units"],
-            units_stale=c["units_stale"],
-            threats=c["threats"],
-            zones=c["zones"],
-            msgs_in=self.counters["msgs_in"],
-            msgs_out=self.counters["msgs_out"],
-            rejected=c["rejected"],
-            latency_p50_ms=p50,
-            latency_p99_ms=p99,
-            deliberating=c["deliberating"],
-            units_owned=c["units_owned"],
-            overload=c["overload"],
-            pushes=c["pushes"],
-            pushes_resent=c["pushes_resent"],
-            session=self.zid,
-            origin=self.cfg.origin,
-            faults=c["faults"],
-            twins=self._peers.twins(),
-        )
+        uptime_s = max(self.clock() - self.started, 0.0)
+        counts, twins = self.world.counts(), self._peers.twins()
+        return planner_status(self.cfg, counts, self.latency, self.counters, uptime_s, self.zid, twins)
