@@ -178,3 +178,46 @@ def test_a_stepper_driven_one_step_at_a_time_walks_the_plan_over_terrain() -> No
     # the batch kernels (descent_many) walk the same ghost
     ghost = walk_many([Stepper(start, goal, params)], field, np.array([start]), 40)[0]
     assert np.allclose(ghost, preview.path[: len(ghost)], rtol=0.0, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def jacksboro(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    from tests import terrain_data
+
+    return str(terrain_data.write_geographic(tmp_path_factory.mktemp("dem") / "jacksboro.tif"))
+
+
+def _reachable(grid: TerrainGrid, limit_deg: float, a: tuple[float, float], b: tuple[float, float]) -> bool:
+    """Whether ``a`` and ``b`` lie in one 4-connected region of crossable cells (the DEM's own judgement)."""
+    from scipy import ndimage
+
+    steep, unknown = barrier_cells(grid, limit_deg)
+    labels, _ = ndimage.label(~(steep | unknown))
+
+    def cell(p: tuple[float, float]) -> int:
+        i = min(int((p[0] - grid.x0_m) // grid.cell_m), labels.shape[1] - 1)
+        k = min(int((p[1] - grid.y0_m) // grid.cell_m), labels.shape[0] - 1)
+        return int(labels[k, i])
+
+    return cell(a) != 0 and cell(a) == cell(b)
+
+
+def test_on_the_jacksboro_dem_every_reachable_goal_is_reached_over_crossable_ground(jacksboro: str) -> None:
+    from pfp_service.terrain.planning import prepare
+    from tests.terrain_scenarios import scenario
+
+    base = prepare(jacksboro, None, [(-5000.0, -5000.0), (5000.0, 5000.0)], None, FOOT)
+    blind_exposure, masked_exposure = [], []
+    for seed in range(8):
+        start, goal, sched = scenario(base.grid, seed)
+        g = prepare(jacksboro, None, [start, goal, *(s.threat.xi for s in sched)], None, FOOT)
+        over = plan(start, goal, sched, PlannerParams(), g.bounds, zones=ZoneSet(g.zones), sight=g.sight)
+        blind = plan(start, goal, sched, PlannerParams(), g.bounds)
+        if _reachable(g.grid, FOOT.max_slope_deg, start, goal):
+            assert over.status.value == "reached", (seed, over.status, over.reason)
+        assert _steepest_along(g.grid, over.path) <= FOOT.max_slope_deg + 1e-6, seed
+        blind_exposure.append(blind.exposure)
+        masked_exposure.append(over.exposure)
+    reduction = 1.0 - np.median(np.array(masked_exposure) / np.array(blind_exposure))
+    print(f"median exposure reduction over the terrain-blind plans: {reduction:.0%}")
+    assert reduction >= 0.30
