@@ -221,3 +221,43 @@ def test_on_the_jacksboro_dem_every_reachable_goal_is_reached_over_crossable_gro
     reduction = 1.0 - np.median(np.array(masked_exposure) / np.array(blind_exposure))
     print(f"median exposure reduction over the terrain-blind plans: {reduction:.0%}")
     assert reduction >= 0.30
+
+
+def test_the_optimal_planner_prices_the_same_masked_field() -> None:
+    from pfp_service.core.optimal import plan_optimal
+
+    start, goal = (600.0, -2500.0), (600.0, 2500.0)
+    sight = TerrainSight(RIDGE, FOOT.height_m)
+    zones = ZoneSet(barrier_zones(RIDGE, FOOT.max_slope_deg))
+    sched = [Scheduled(BEHIND, 0)]
+    blind = plan_optimal(start, goal, sched, zones=zones)
+    over = plan_optimal(start, goal, sched, zones=zones, sight=sight)
+    assert over.status.value == "reached" and over.exposure < 1e-6
+    assert over.length < blind.length - 100.0  # blind, it detours round a threat that cannot see
+    pfp = _plan(RIDGE, [BEHIND], start, goal)
+    j, j_star = pfp.length + 10.0 * pfp.exposure, over.length + 10.0 * over.exposure
+    assert j <= 1.02 * j_star
+
+
+def test_the_profile_says_how_long_each_threat_sees_the_path() -> None:
+    from pfp_service.terrain.planning import PlanTerrain, profile
+
+    ground = PlanTerrain(
+        "ridge",
+        None,
+        RIDGE,
+        FOOT,
+        TerrainSight(RIDGE, FOOT.height_m),
+        [],
+        ((-3000.0, -3000.0), (3000.0, 3000.0)),
+    )  # type: ignore[arg-type]
+    sched = [Scheduled(BEHIND, 0)]
+    lee = _plan(RIDGE, [BEHIND], (600.0, -2500.0), (600.0, 2500.0))
+    front = _plan(RIDGE, [BEHIND], (-400.0, -2500.0), (-400.0, 2500.0))
+    p_lee, p_front = profile(lee, ground, sched, "peak"), profile(front, ground, sched, "peak")
+    assert p_lee["in_view"][0].metres == 0.0  # type: ignore[index]
+    assert p_front["in_view"][0].metres > 500.0  # type: ignore[index]  # it starts in view, then climbs to the lee
+    # flat valley floor: no climb, Tobler's flat speed; over the ridge's flank: a climb
+    assert p_lee["climb_m"] == pytest.approx(0.0, abs=1e-9)
+    assert p_lee["eta_s"] == pytest.approx(lee.length / 1.4, rel=1e-9)
+    assert p_front["climb_m"] > 0.0 and p_front["exposure_unmasked"] >= front.exposure
