@@ -61,6 +61,8 @@ def test_plan_over_the_scenarios_terrain_reports_the_ground(ground: Path) -> Non
         ).stdout
     )
     assert flag["path"] == r["path"]
+    text = run_pfp("plan", str(ground / "with.yaml")).stdout
+    assert "terrain: climb" in text and "in view: t1" in text, text
 
 
 def test_a_bad_dem_is_one_line_and_exit_2(ground: Path) -> None:
