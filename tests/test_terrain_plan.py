@@ -261,3 +261,29 @@ def test_the_profile_says_how_long_each_threat_sees_the_path() -> None:
     assert p_lee["climb_m"] == pytest.approx(0.0, abs=1e-9)
     assert p_lee["eta_s"] == pytest.approx(lee.length / 1.4, rel=1e-9)
     assert p_front["climb_m"] > 0.0 and p_front["exposure_unmasked"] >= front.exposure
+
+
+def test_a_scenarios_unit_block_picks_a_class_and_overrides_its_fields() -> None:
+    from pfp_service.errors import InputError
+    from pfp_service.scenario import decode_scenario
+
+    head = b"start: [0, 0]\ngoal: [1000, 0]\n"
+    s = decode_scenario(head + b"unit: {class: wheeled, max_slope_deg: 20}\n", "yaml")
+    assert s.unit.mobility() == CLASSES["wheeled"].merged(max_slope_deg=20.0)
+    assert decode_scenario(head, "yaml").unit.mobility() == FOOT
+    t = decode_scenario(
+        head + b"threats: [{position: [5, 5], sigma_range: 100, sigma_lateral: 50, observer_height_m: 6}]\n",
+        "yaml",
+    )
+    assert t.schedule()[0].threat.observer_height_m == 6.0
+    for bad, where in (
+        (b"unit: {class: hovercraft}\n", "class"),
+        (b"unit: {max_slope_deg: 95}\n", "max_slope_deg"),
+        (
+            b"threats: [{position: [5, 5], sigma_range: 100, sigma_lateral: 50, observer_height_m: -1}]\n",
+            "observer_height_m",
+        ),
+    ):
+        with pytest.raises(InputError) as err:
+            decode_scenario(head + bad, "yaml")
+        assert where in str(err.value), err.value
