@@ -17,10 +17,11 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import msgspec
 import yaml
+from msgspec import Meta
 
 from pfp_service import bounds, yamlio
 from pfp_service.constraints import (
@@ -37,6 +38,7 @@ from pfp_service.constraints import (
     Weight,
     check_spreads,
 )
+from pfp_service.core.mobility import CLASSES, Mobility
 from pfp_service.core.params import ESCAPES, Escape, PlannerParams, reach
 from pfp_service.errors import InputError, from_validation
 from pfp_service.files import read_text
@@ -54,13 +56,22 @@ __all__ = [
     "PlannerSpec",
     "Scenario",
     "ThreatSpec",
+    "UnitSpec",
     "ZoneSpec",
     "decode_scenario",
     "load_scenario",
 ]
 
 Matrix = tuple[tuple[Finite, Finite], tuple[Finite, Finite]]
-CHOICES: dict[str, tuple[str, ...]] = {"intensity": ("peak", "density"), "escape": ESCAPES}
+CHOICES: dict[str, tuple[str, ...]] = {
+    "intensity": ("peak", "density"),
+    "escape": ESCAPES,
+    "class": tuple(CLASSES),
+}
+# an eye or a unit's height above its ground, metres: a mast, not an aircraft
+Height = Annotated[float, Meta(ge=0.0, le=1000.0)]
+SlopeLimit = Annotated[float, Meta(gt=0.0, lt=90.0)]
+Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
 
 
 class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
@@ -81,6 +92,7 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
     appear_step: StepIndex = 0
     omega: Matrix | None = None
     alpha: Point | None = None
+    observer_height_m: Height = 2.0
 
     def __post_init__(self) -> None:
         if self.omega is None:
@@ -119,6 +131,7 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
                 self.skew,
                 self.weight,
                 tid,
+                self.observer_height_m,
             )
         alpha = self.alpha if self.alpha is not None else (0.0, 0.0)
         return Threat(
@@ -127,6 +140,7 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
             alpha=(alpha[0], alpha[1]),
             weight=self.weight,
             id=tid,
+            observer_height_m=self.observer_height_m,
         )
 
 
@@ -153,6 +167,18 @@ class PlannerSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
         )
 
 
+class UnitSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """The unit's mobility class (``core.mobility.CLASSES``) and any of its fields overridden."""
+
+    kind: Literal["foot", "wheeled", "tracked"] = msgspec.field(default="foot", name="class")
+    max_slope_deg: SlopeLimit | None = None
+    height_m: Height | None = None
+    speed_mps: Speed | None = None
+
+    def mobility(self) -> Mobility:
+        return CLASSES[self.kind].merged(self.max_slope_deg, self.height_m, self.speed_mps)
+
+
 class ZoneSpec(ZoneUpdate, kw_only=True, frozen=True, forbid_unknown_fields=True):
     """A keep-out zone in a file: the wire's ``ZoneUpdate`` with its ``id`` (default ``zN``)."""
 
@@ -170,6 +196,8 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     planner: PlannerSpec = PlannerSpec()
     threats: list[ThreatSpec] = []
     zones: list[ZoneSpec] = []
+    terrain: str | None = None  # a DEM's path, relative to the scenario file
+    unit: UnitSpec = UnitSpec()
 
     def __post_init__(self) -> None:
         if self.bounds is not None:
@@ -282,9 +310,12 @@ def load_scenario(path: str | Path) -> Scenario:
     root = None
     try:
         obj, root = _document(data, fmt, p.name)
-        return _convert(obj, fmt, data)
+        scenario = _convert(obj, fmt, data)
     except InputError as err:
         raise _in_file(p, data, fmt, root, err) from None
+    if scenario.terrain is not None and not Path(scenario.terrain).is_absolute():
+        scenario = msgspec.structs.replace(scenario, terrain=str(p.parent / scenario.terrain))
+    return scenario
 
 
 def _in_file(

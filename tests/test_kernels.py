@@ -22,7 +22,7 @@ def _terms(packed, x, y, grad):
 
 
 def test_packed_columns_are_named_once_and_fill_the_rows():
-    assert len(kernels.PACKED_COLUMNS) == len(set(kernels.PACKED_COLUMNS)) == 9
+    assert len(kernels.PACKED_COLUMNS) == len(set(kernels.PACKED_COLUMNS)) == kernels.VIS_DATA == 17
     for name in kernels.PACKED_COLUMNS:
         assert getattr(kernels, name.upper()) == kernels.PACKED_COLUMNS.index(name)
     t = Threat.from_facing(*SHAPES[1])

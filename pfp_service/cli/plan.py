@@ -93,6 +93,12 @@ def register(sub: Any) -> None:
         "(needs the scenario's origin), added to the file's zones:",
     )
     p.add_argument(
+        "--terrain",
+        metavar="DEM",
+        help="plan over this DEM (GeoTIFF, DTED, SRTM .hgt): threats masked by line of sight, slopes "
+        "past the unit's class a barrier; overrides the file's terrain:",
+    )
+    p.add_argument(
         "--avoid-cores",
         action="store_const",
         const=True,
@@ -209,6 +215,16 @@ def run(args: argparse.Namespace) -> int:
     zones = scenario.zone_set()
     if args.zones:
         zones = zones.plus(extra)
+    bounds = scenario.bounds_tuple()
+    ground = None
+    dem = args.terrain if args.terrain is not None else scenario.terrain
+    if dem is not None:
+        from pfp_service.terrain.planning import prepare
+
+        points = [scenario.start, scenario.goal, *(s.threat.xi for s in schedule)]
+        ground = prepare(dem, scenario.origin, points, bounds, scenario.unit.mobility())
+        zones, bounds = zones.plus(ground.zones), ground.bounds
+    sight = ground.sight if ground is not None else None
 
     def planned() -> list[Any]:
         """Every repeat's plan; on a worker thread, so Ctrl-C never lands inside a kernel (signals)."""
@@ -221,11 +237,12 @@ def run(args: argparse.Namespace) -> int:
                     schedule,
                     lam,
                     params.intensity,
-                    scenario.bounds_tuple(),
+                    bounds,
                     cells,
                     time.perf_counter,
                     avoid_cores=bool(args.avoid_cores),
                     zones=zones,
+                    sight=sight,
                 )
             else:
                 result = plan(
@@ -233,9 +250,10 @@ def run(args: argparse.Namespace) -> int:
                     scenario.goal,
                     schedule,
                     params,
-                    scenario.bounds_tuple(),
+                    bounds,
                     time.perf_counter,
                     zones=zones,
+                    sight=sight,
                 )
             results.append(result)
         return results
@@ -244,6 +262,10 @@ def run(args: argparse.Namespace) -> int:
     result = results[-1]
     times = [r.compute_ms for r in results]
     result = msgspec.structs.replace(result, compute_ms=statistics.median(times))
+    if ground is not None:
+        from pfp_service.terrain.planning import profile
+
+        result = msgspec.structs.replace(result, **profile(result, ground, schedule, params.intensity))
     if args.plot:
         from pfp_service.render import plot_plan
 

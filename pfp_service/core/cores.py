@@ -46,6 +46,7 @@ import numpy as np
 
 from pfp_service.core import kernels
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.visibility import unmasked
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["CORE_FRACTION", "SEARCH_FRACTION", "ZONE_PREFIX", "ZONE_RASTER_SPACINGS", "Cores"]
@@ -129,7 +130,8 @@ class Cores:
     def __init__(self, field: ThreatField, fraction: float = CORE_FRACTION) -> None:
         self.fraction = fraction
         keep = [j for j, t in enumerate(field.threats) if t.weight > 0]
-        packed = field.packed[keep].copy() if keep else np.zeros((0, len(kernels.PACKED_COLUMNS)))
+        # a core is nearness to the enemy, not its sight: over terrain it stays unmasked (the safe side)
+        packed = unmasked(field.packed[keep]) if keep else np.zeros((0, len(kernels.PACKED_COLUMNS)))
         for row, j in enumerate(keep):
             t = field.threats[j]
             packed[row, kernels.SCALE] = t.density_scale() / t.peak_density()  # level 1 at the mode

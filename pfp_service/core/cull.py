@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from pfp_service.core import kernels, steprule
-from pfp_service.core.kernels import A_X, A_Y, ACTIVE, P00, P01, P11, SCALE, XI_X, XI_Y
+from pfp_service.core.kernels import A_X, A_Y, ACTIVE, P00, P01, P11, SCALE, VIS_DV, XI_X, XI_Y
 from pfp_service.core.zones import ZoneSet
 
 __all__ = [
@@ -72,7 +72,12 @@ class CullIndex:
         lmax = half + np.sqrt(np.maximum(half * half - det, 0.0))
         a = np.hypot(packed[:, A_X], packed[:, A_Y])
         decay = math.exp(-0.5 * q_cut)
-        g = packed[:, SCALE] * decay * (a / math.sqrt(2.0 * math.pi) + np.sqrt(lmax * q_cut))
+        # a threat that sees adds t |grad v| <= scale decay |grad v|_max to its gradient (d(t v) = v dt + t dv)
+        g = (
+            packed[:, SCALE]
+            * decay
+            * (a / math.sqrt(2.0 * math.pi) + np.sqrt(lmax * q_cut) + packed[:, VIS_DV])
+        )
         g = np.where(act, g, 0.0)
         self.bound = float(np.sum(g))  # B: every threat's bound; a cell's own B leaves out those it lists
         self._g = g

@@ -1,10 +1,17 @@
 """Compiled inner loops: the threat field's value and closed-form gradient, written once.
 
 Everything here is a pure function of arrays and floats, compiled with numba.
-A threat set travels as one packed ``(M, 9)`` float64 array, one row per
-threat with the columns of ``PACKED_COLUMNS``, so a call unboxes one array
-instead of nine.  The column indices below are the only place those numbers
-appear.
+A threat set travels as one packed ``(M, C)`` float64 array, one row per
+threat with the columns of ``PACKED_COLUMNS`` (``C >= 17``), so a call unboxes
+one array instead of seventeen.  The column indices below are the only place
+those numbers appear.
+
+A threat that sees over terrain carries its visibility in its own row: from
+column ``VIS_DATA`` on, its window of lowest visible heights (``core.visibility``
+packs it), so every kernel that evaluates a threat masks it by line of sight
+without a second argument, and a row subset or a concatenation keeps each
+window with its threat.  A row with ``VIS_NX == 0`` sees everywhere, and its
+term is bit for bit the unmasked one.
 
 ``threat_term`` is the one per-threat formula: every kernel here and in
 ``cores`` sums or compares it.  Its gradient is exact:  with ``z = x - xi``,
@@ -32,6 +39,15 @@ __all__ = [
     "PACKED_COLUMNS",
     "Q_CUTOFF",
     "SCALE",
+    "VIS_CELL",
+    "VIS_DATA",
+    "VIS_DV",
+    "VIS_HEIGHT",
+    "VIS_NX",
+    "VIS_NY",
+    "VIS_SOFT",
+    "VIS_X0",
+    "VIS_Y0",
     "XI_X",
     "XI_Y",
     "batch_descent",
@@ -42,6 +58,7 @@ __all__ = [
     "point_level",
     "point_level_grad",
     "raster_level",
+    "sight",
     "threat_term",
 ]
 
@@ -49,8 +66,33 @@ __all__ = [
 # a = omega^-1 alpha; the leading constant (``ThreatField`` folds in the weight
 # and, under ``peak``, divides by the peak density; ``Cores`` sets it so the
 # mode is 1); 1.0 for a threat in force, 0.0 for one every kernel skips.
-PACKED_COLUMNS = ("xi_x", "xi_y", "p00", "p01", "p11", "a_x", "a_y", "scale", "active")
-XI_X, XI_Y, P00, P01, P11, A_X, A_Y, SCALE, ACTIVE = range(len(PACKED_COLUMNS))
+# Then its visibility window (``core.visibility``): columns and rows of lowest
+# visible heights (0 columns: no window, it sees everywhere), the window's
+# south-west point and cell in metres, the unit's height and the sigmoid's
+# softness in metres, and a bound on |grad v| (``cull`` widens its bounds by
+# it); the heights themselves, row by row, from ``VIS_DATA`` on.
+PACKED_COLUMNS = (
+    "xi_x",
+    "xi_y",
+    "p00",
+    "p01",
+    "p11",
+    "a_x",
+    "a_y",
+    "scale",
+    "active",
+    "vis_nx",
+    "vis_ny",
+    "vis_x0",
+    "vis_y0",
+    "vis_cell",
+    "vis_height",
+    "vis_soft",
+    "vis_dv",
+)
+(XI_X, XI_Y, P00, P01, P11, A_X, A_Y, SCALE, ACTIVE) = range(9)
+(VIS_NX, VIS_NY, VIS_X0, VIS_Y0, VIS_CELL, VIS_HEIGHT, VIS_SOFT, VIS_DV) = range(9, 17)
+VIS_DATA = len(PACKED_COLUMNS)
 
 # exp(-x) == 0.0 in float64 for x > 745.14; 2 * 746 leaves a margin.
 Q_CUTOFF = 1492.0
@@ -66,8 +108,76 @@ def pack_row(
     shape: tuple[float, float],
     scale: float,
 ) -> tuple[float, ...]:
-    """One packed row, in ``PACKED_COLUMNS`` order (an active threat)."""
-    return (xi[0], xi[1], precision[0], precision[1], precision[2], shape[0], shape[1], scale, 1.0)
+    """One packed row, in ``PACKED_COLUMNS`` order (an active threat that sees everywhere)."""
+    return (
+        xi[0],
+        xi[1],
+        precision[0],
+        precision[1],
+        precision[2],
+        shape[0],
+        shape[1],
+        scale,
+        1.0,
+    ) + _NO_SIGHT
+
+
+_NO_SIGHT = (0.0,) * (len(PACKED_COLUMNS) - 9)
+
+
+@numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
+def sight(packed: np.ndarray, j: int, x: float, y: float, grad: bool) -> tuple[float, float, float]:
+    """Threat ``j``'s visibility ``v`` at ``(x, y)`` in [0, 1] and, if ``grad``, its gradient.
+
+    ``v = sigmoid((height - L(x)) / soft)``, ``L`` the lowest visible height
+    interpolated bilinearly in the row's window; its gradient is the exact
+    derivative of that surface (a cell edge takes the cell to the east or
+    north, as ``TerrainGrid`` does).  Outside the window the point is clamped
+    to its edge, so ``v`` stays continuous; there the threat's own term is
+    below its floor anyway (the window is its reach).
+    """
+    nx = int(packed[j, VIS_NX])
+    ny = int(packed[j, VIS_NY])
+    cell = packed[j, VIS_CELL]
+    fx = (x - packed[j, VIS_X0]) / cell
+    fy = (y - packed[j, VIS_Y0]) / cell
+    in_x = True
+    in_y = True
+    if not fx > 0.0:  # NaN lands here too, on the edge
+        fx = 0.0
+        in_x = False
+    elif fx > nx - 1:
+        fx = nx - 1.0
+        in_x = False
+    if not fy > 0.0:
+        fy = 0.0
+        in_y = False
+    elif fy > ny - 1:
+        fy = ny - 1.0
+        in_y = False
+    i = min(int(fx), nx - 2)
+    k = min(int(fy), ny - 2)
+    tx = fx - i
+    ty = fy - k
+    base = VIS_DATA + k * nx + i
+    l00 = packed[j, base]
+    l10 = packed[j, base + 1]
+    l01 = packed[j, base + nx]
+    l11 = packed[j, base + nx + 1]
+    low = (1.0 - ty) * ((1.0 - tx) * l00 + tx * l10) + ty * ((1.0 - tx) * l01 + tx * l11)
+    soft = packed[j, VIS_SOFT]
+    arg = (packed[j, VIS_HEIGHT] - low) / soft
+    if arg >= 0.0:  # the two forms of the logistic that never overflow
+        v = 1.0 / (1.0 + math.exp(-arg))
+    else:
+        ez = math.exp(arg)
+        v = ez / (1.0 + ez)
+    if not grad:
+        return v, 0.0, 0.0
+    dv = -v * (1.0 - v) / (soft * cell)  # dv/dL, per cell of L's run
+    gx = dv * ((1.0 - ty) * (l10 - l00) + ty * (l11 - l01)) if in_x else 0.0
+    gy = dv * ((1.0 - tx) * (l01 - l00) + tx * (l11 - l10)) if in_y else 0.0
+    return v, gx, gy
 
 
 @numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
@@ -97,9 +207,18 @@ def threat_term(
     u = ax * zx + ay * zy
     cdf = 0.5 * math.erfc(-u * _INV_SQRT2)
     if not grad:
-        return e * cdf, 0.0, 0.0
+        if packed[j, VIS_NX] == 0.0:
+            return e * cdf, 0.0, 0.0
+        return e * cdf * sight(packed, j, x, y, False)[0], 0.0, 0.0
     pdf = _INV_SQRT2PI * math.exp(-0.5 * u * u)
-    return e * cdf, e * (pdf * ax - cdf * pzx), e * (pdf * ay - cdf * pzy)
+    gx = e * (pdf * ax - cdf * pzx)
+    gy = e * (pdf * ay - cdf * pzy)
+    if packed[j, VIS_NX] == 0.0:
+        return e * cdf, gx, gy
+    # d(t v) = v dt + t dv: masked by line of sight, the gradient still exact
+    t = e * cdf
+    v, vx, vy = sight(packed, j, x, y, True)
+    return t * v, gx * v + t * vx, gy * v + t * vy
 
 
 @_jit

@@ -37,6 +37,7 @@ from pfp_service.core.plan import PlanResult, PlanStatus, Scheduled, UsedParams
 from pfp_service.core.polylines import resample, shortcut
 from pfp_service.core.stepper import Bounds
 from pfp_service.core.threat import Intensity, ThreatField
+from pfp_service.core.visibility import Sight
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["DEFAULT_CELLS", "OptimalPath", "OptimalSolver", "plan_optimal"]
@@ -137,12 +138,14 @@ def plan_optimal(
     clock: Callable[[], float] | None = None,
     avoid_cores: bool = False,
     zones: ZoneSet | None = None,
+    sight: Sight | None = None,
 ) -> PlanResult:
     """``pfp plan --planner optimal``: the path minimising ``length + lam * exposure``.
 
     Args:
         avoid_cores: never enter a threat core (``--avoid-cores``).
         zones: keep-out zones; the path never enters one (with or without ``avoid_cores``).
+        sight: threats masked by line of sight (``core.visibility``), as ``plan``'s.
 
     Returns:
         A ``PlanResult`` (``planner="optimal"``): ``reached`` with the path;
@@ -150,7 +153,7 @@ def plan_optimal(
         ``invalid`` with the reason when the grid holds no route.
     """
     t0 = clock() if clock else 0.0
-    field = ThreatField([s.threat for s in schedule], intensity, zones)
+    field = ThreatField([s.threat for s in schedule], intensity, zones, sight)
     why = ""
     if field.zones:
         for what, (x, y) in (("goal", goal), ("start", start)):

@@ -28,6 +28,7 @@ from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.params import PlannerParams, Resolved, resolve
 from pfp_service.core.stepper import Advice, Bounds, Stepper, StepStatus
 from pfp_service.core.threat import Threat, ThreatField
+from pfp_service.core.visibility import Sight
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["PlanResult", "PlanStatus", "Scheduled", "plan", "predict_many", "walk", "walk_many"]
@@ -68,6 +69,14 @@ class UsedParams(msgspec.Struct, frozen=True):
     escape: str
 
 
+class ThreatView(msgspec.Struct, frozen=True):
+    """How much of a path one threat sees: metres of it, and seconds at the unit's speed over the ground."""
+
+    id: str
+    metres: float
+    seconds: float
+
+
 class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     """The outcome of one plan; ``pfp plan --json`` prints exactly this.
 
@@ -102,6 +111,13 @@ class PlanResult(msgspec.Struct, frozen=True, omit_defaults=False):
     lam: float | None = msgspec.field(default=None, name="lambda")
     path_decimated: bool = False
     min_zone_clearance: float | None = None
+    # over terrain (``terrain.profile``), absent without it; ``exposure`` is then masked by line of sight
+    path_elevation_m: list[float] | None = None
+    climb_m: float | None = None
+    max_slope_deg: float | None = None
+    eta_s: float | None = None
+    in_view: list[ThreatView] | None = None
+    exposure_unmasked: float | None = None
 
 
 def _field_at(
@@ -110,11 +126,12 @@ def _field_at(
     intensity: str,
     cache: dict[int, ThreatField],
     zones: ZoneSet | None = None,
+    sight: Sight | None = None,
 ) -> ThreatField:
     active = tuple(s.threat for s in schedule if s.appear_step <= step)
     key = len(active)
     if key not in cache:
-        cache[key] = ThreatField(active, intensity, zones)  # type: ignore[arg-type]
+        cache[key] = ThreatField(active, intensity, zones, sight)  # type: ignore[arg-type]
     return cache[key]
 
 
@@ -239,6 +256,7 @@ def plan(
     first_move: tuple[float, float] | None = None,
     field: ThreatField | None = None,
     zones: ZoneSet | None = None,
+    sight: Sight | None = None,
 ) -> PlanResult:
     """Plan a path from ``start`` to ``goal`` among scheduled threats.
 
@@ -264,6 +282,8 @@ def plan(
             when it does not match them or the intensity.
         zones: the keep-out zones in force throughout (default: ``field``'s,
             if given); no step enters one (``steprule.judge_zoned``).
+        sight: threats masked by line of sight over terrain (``core.visibility``;
+            default: ``field``'s, if given); the plan's exposure is then the masked one.
 
     Returns:
         A ``PlanResult``; failure is a status, never an exception.
@@ -283,12 +303,19 @@ def plan(
     cache: dict[int, ThreatField] = {}
     if zones is None and field is not None:
         zones = field.zones
-    if field is not None and field.intensity == params.intensity and len(field) == len(schedule):
+    if sight is None and field is not None:
+        sight = field.sight
+    if (
+        field is not None
+        and field.intensity == params.intensity
+        and len(field) == len(schedule)
+        and field.sight is sight
+    ):
         if zones is not None and field.zones is not zones:
             field = field.with_zones(zones)
         cache[len(schedule)] = field  # _field_at's key: the threats active
     appear_steps = sorted({s.appear_step for s in schedule if s.appear_step > 0})
-    field = _field_at(schedule, 0, params.intensity, cache, zones)
+    field = _field_at(schedule, 0, params.intensity, cache, zones, sight)
     epochs: list[Epoch] = []
     epoch_start = 0
     events: list[str] = []
@@ -325,7 +352,7 @@ def plan(
             x, y = track[-1]
             epochs.append(Epoch(epoch_start, k, field))
             epoch_start = k
-            field = _field_at(schedule, k, params.intensity, cache, zones)
+            field = _field_at(schedule, k, params.intensity, cache, zones, sight)
             new = [s.threat.id for s in schedule if s.appear_step == k]
             events.append(f"step {k}: threat {', '.join(new)} appeared; unit at ({x:.6g}, {y:.6g})")
             stepper.world_changed()

@@ -25,6 +25,7 @@ from scipy.special import ndtr
 
 from pfp_service.core import kernels
 from pfp_service.core.options import Intensity
+from pfp_service.core.visibility import Sight, concat, reach_box, stack_rows, widen
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["LEVEL_FLOOR", "PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
@@ -64,6 +65,8 @@ class Threat:
         alpha: Azzalini's shape vector (dimensionless).
         weight: multiplier ``w_j >= 0``; its meaning depends on the intensity scale.
         id: the threat's name, for reports.
+        observer_height_m: its eye above the ground, for line of sight over terrain
+            (``core.visibility``); without terrain it changes nothing.
     """
 
     xi: tuple[float, float]
@@ -71,6 +74,7 @@ class Threat:
     alpha: tuple[float, float]
     weight: float = 1.0
     id: str = ""
+    observer_height_m: float = 2.0
 
     def __post_init__(self) -> None:
         """Refuse a threat the field could not evaluate, here rather than as a ZeroDivisionError later.
@@ -81,9 +85,11 @@ class Threat:
                 (e.g. a spread so small its square underflows).
         """
         (o00, o01), (o10, o11) = self.omega
-        numbers = (*self.xi, o00, o01, o10, o11, *self.alpha, self.weight)
+        numbers = (*self.xi, o00, o01, o10, o11, *self.alpha, self.weight, self.observer_height_m)
         if not all(math.isfinite(v) for v in numbers):
-            raise ValueError(f"threat {self.id!r}: position, omega, alpha and weight must be finite")
+            raise ValueError(
+                f"threat {self.id!r}: position, omega, alpha, weight and observer height must be finite"
+            )
         if not self.weight >= 0.0:
             raise ValueError(f"threat {self.id!r}: weight must be >= 0, got {self.weight!r}")
         if abs(o01 - o10) > 1e-9 * math.sqrt(abs(o00 * o11)):  # rounding of R D R^T is allowed
@@ -104,6 +110,7 @@ class Threat:
         skew: float,
         weight: float = 1.0,
         id: str = "",
+        observer_height_m: float = 2.0,
     ) -> Threat:
         """Build a threat from the user-facing parameters (see module docstring)."""
         b = math.radians(facing_deg)
@@ -121,6 +128,7 @@ class Threat:
             alpha=alpha,
             weight=float(weight),
             id=id,
+            observer_height_m=float(observer_height_m),
         )
 
     # -- derived quantities -------------------------------------------------
@@ -185,7 +193,14 @@ class Threat:
         return math.sqrt(lam_min)
 
     def translated(self, dx: float, dy: float) -> Threat:
-        return Threat((self.xi[0] + dx, self.xi[1] + dy), self.omega, self.alpha, self.weight, self.id)
+        return Threat(
+            (self.xi[0] + dx, self.xi[1] + dy),
+            self.omega,
+            self.alpha,
+            self.weight,
+            self.id,
+            self.observer_height_m,
+        )
 
 
 class ThreatField:
@@ -195,12 +210,19 @@ class ThreatField:
     The field also carries the keep-out zones in force (``zones``, a
     ``core.zones.ZoneSet``; empty by default), so everything that takes a
     field sees them: ``with_zones`` gives the same threats with other zones.
+    With a ``sight`` (``core.visibility``), each threat's row carries its
+    window of lowest visible heights and every kernel masks it by line of
+    sight; the fields derived from this one keep the same sight.
     """
 
-    __slots__ = ("__weakref__", "_reach", "intensity", "packed", "positions", "threats", "zones")
+    __slots__ = ("__weakref__", "_reach", "intensity", "packed", "positions", "sight", "threats", "zones")
 
     def __init__(
-        self, threats: Iterable[Threat] = (), intensity: Intensity = "peak", zones: ZoneSet | None = None
+        self,
+        threats: Iterable[Threat] = (),
+        intensity: Intensity = "peak",
+        zones: ZoneSet | None = None,
+        sight: Sight | None = None,
     ) -> None:
         if intensity not in ("peak", "density"):
             raise ValueError(f"intensity: must be 'peak' or 'density', got {intensity!r}")
@@ -214,6 +236,9 @@ class ThreatField:
             else:
                 scale = scale * t.weight
             packed[j] = kernels.pack_row(t.xi, t.precision(), t.shape(), scale)
+        if sight is not None and len(self.threats):
+            packed = widen(packed, [sight(t, reach_box(packed[j])) for j, t in enumerate(self.threats)])
+        self.sight = sight
         self.packed = packed
         self.positions = packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
         self._reach: np.ndarray | None = None
@@ -231,17 +256,18 @@ class ThreatField:
         out = cls.__new__(cls)
         out.threats = tuple(threats)
         out.intensity = intensity
-        out.packed = np.array(rows, dtype=np.float64).reshape(len(out.threats), len(PACKED_COLUMNS))
+        out.packed = stack_rows([np.asarray(r, dtype=np.float64) for r in rows])
         out.positions = out.packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
         out._reach = None
         out.zones = _NO_ZONES
+        out.sight = None
         return out
 
     def __len__(self) -> int:
         return len(self.threats)
 
     def with_threats(self, threats: Iterable[Threat]) -> ThreatField:
-        return ThreatField(threats, self.intensity, self.zones)
+        return ThreatField(threats, self.intensity, self.zones, self.sight)
 
     def with_zones(self, zones: ZoneSet) -> ThreatField:
         """These threats (their packed rows reused) with ``zones`` in force instead."""
@@ -252,6 +278,7 @@ class ThreatField:
         out.positions = self.positions
         out._reach = self._reach
         out.zones = zones
+        out.sight = self.sight
         return out
 
     def plus(self, extra: Iterable[Threat], replacing: Container[str] = ()) -> ThreatField:
@@ -260,15 +287,16 @@ class ThreatField:
         The rows already packed are reused, not packed again: a what-if on a
         field of thousands of threats costs its own threats only.
         """
-        added = ThreatField(extra, self.intensity)
+        added = ThreatField(extra, self.intensity, sight=self.sight)
         keep = [j for j, t in enumerate(self.threats) if t.id not in replacing]
         out = ThreatField.__new__(ThreatField)
         out.threats = tuple(self.threats[j] for j in keep) + added.threats
         out.intensity = self.intensity
-        out.packed = np.concatenate([self.packed[keep], added.packed])
+        out.packed = concat(self.packed[keep], added.packed)
         out.positions = out.packed[:, [kernels.XI_X, kernels.XI_Y]].copy()
         out._reach = None
         out.zones = self.zones
+        out.sight = self.sight
         return out
 
     # -- evaluation ---------------------------------------------------------

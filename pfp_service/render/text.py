@@ -65,6 +65,18 @@ def summary(
         ),
         f"  compute {r.compute_ms:.3f} ms",
     ]
+    if r.climb_m is not None:  # planned over terrain
+        eta = f"{r.eta_s / 60:.1f} min" if r.eta_s is not None else "unknown"
+        steepest = f"{r.max_slope_deg:.1f} deg" if r.max_slope_deg is not None else "unknown"
+        blind = f"{r.exposure_unmasked:.4g}" if r.exposure_unmasked is not None else "unknown"
+        lines.append(
+            f"  terrain: climb {_m(r.climb_m)}, steepest ground {steepest}, eta {eta}, "
+            f"exposure {blind} if the threats saw through the ground"
+        )
+        if r.in_view:
+            lines.append(
+                "  in view: " + ", ".join(f"{v.id} {_m(v.metres)} ({v.seconds:.0f} s)" for v in r.in_view)
+            )
 
     if r.traps:
         lines.append(

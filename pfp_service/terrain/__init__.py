@@ -4,6 +4,9 @@
     grid.py      the DEM resampled onto the planner's local plane; bilinear elevation, exact gradient, slope
     viewshed.py  the lowest visible height per cell: a compiled sweep (Wang 2000) and an exact ray (R3)
     sight.py     a viewshed on a DEM's own grid for an observer in latitude and longitude
+    threat_sight.py  per threat, its window of lowest visible heights within its reach (core.visibility)
+    barriers.py  cells steeper than a unit's limit, or unknown, as keep-out zones
+    planning.py  a DEM placed under a scenario for pfp plan, and a path measured over it
 
 ``viewshed`` and ``grid.TerrainGrid`` do no I/O: arrays in, arrays out.
 docs/terrain.md says what no-data and the DEM's edges mean.

@@ -1,0 +1,130 @@
+"""Threats that see: each threat's window of lowest visible heights, packed into its own row.
+
+A threat over terrain contributes ``w t(x) v(x)``, where ``v`` is how well it
+sees a unit at ``x``: ``v = sigmoid((height_m - L(x)) / softness_m)``, ``L`` the
+lowest height above the ground at which it sees a target there (what
+``gdal_viewshed -om GROUND`` writes), interpolated bilinearly, and
+``height_m`` the unit's.  ``L`` comes from the terrain (``terrain.threat_sight``
+computes it); the core only carries it: a ``Window`` per threat, appended to
+the threat's packed row (``kernels.VIS_DATA``), so every kernel masks the
+same way (``kernels.sight``).
+
+A ``Sight`` is what a field asks for a threat's window: a callable, given the
+threat and the box of its reach, that returns its ``Window`` or ``None``
+(no terrain under it: it sees everywhere).  Rows of different widths are
+padded with zeros to the widest: a window's own size is in its row.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pfp_service.core import kernels
+
+__all__ = ["REACH_FLOOR", "Sight", "Window", "concat", "reach_box", "stack_rows", "unmasked", "widen"]
+
+# A threat's window covers where its own term is at least this share of its
+# peak: beyond, the mask multiplies almost nothing, and the window is clamped.
+REACH_FLOOR = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Window:
+    """Lowest visible heights ``low_m[k, i]`` at ``(x0_m + i cell_m, y0_m + k cell_m)``, at least 2 x 2.
+
+    ``height_m`` is the unit's height (the target's), ``softness_m`` the
+    sigmoid's width: ``v`` goes from 0.27 to 0.73 over two of it.
+    """
+
+    x0_m: float
+    y0_m: float
+    cell_m: float
+    low_m: np.ndarray
+    height_m: float
+    softness_m: float
+
+    def __post_init__(self) -> None:
+        if self.low_m.ndim != 2 or min(self.low_m.shape) < 2:
+            raise ValueError("a visibility window needs at least 2 x 2 heights")
+        if not (self.cell_m > 0 and self.softness_m > 0):
+            raise ValueError("a visibility window's cell and softness must be positive")
+
+    def max_dv(self) -> float:
+        """A bound on ``|grad v|`` (1/m): ``max |grad L| / (4 softness)``, the logistic's slope at most 1/4."""
+        low = self.low_m
+        gx = np.abs(np.diff(low, axis=1)).max() if low.shape[1] > 1 else 0.0
+        gy = np.abs(np.diff(low, axis=0)).max() if low.shape[0] > 1 else 0.0
+        return float(math.hypot(gx, gy) / self.cell_m / (4.0 * self.softness_m))
+
+
+Sight = Callable[[object, tuple[float, float, float, float]], "Window | None"]
+
+
+def reach_box(row: np.ndarray, floor: float = REACH_FLOOR) -> tuple[float, float, float, float]:
+    """``(x0, y0, x1, y1)``: the box outside which threat ``row``'s term is below ``floor`` of its peak.
+
+    The threat's own, whatever else is in the field, so a window computed once
+    serves every field the threat is in.
+    """
+    qmax = min(2.0 * math.log(1.0 / floor), kernels.Q_CUTOFF)
+    p00, p01, p11 = row[kernels.P00], row[kernels.P01], row[kernels.P11]
+    det = p00 * p11 - p01 * p01
+    ex = math.sqrt(qmax * p11 / det)
+    ey = math.sqrt(qmax * p00 / det)
+    cx, cy = float(row[kernels.XI_X]), float(row[kernels.XI_Y])
+    return cx - ex, cy - ey, cx + ex, cy + ey
+
+
+def widen(packed: np.ndarray, windows: Sequence[Window | None]) -> np.ndarray:
+    """``packed`` (one row a threat) with each threat's window written into its row; the rows padded."""
+    width = kernels.VIS_DATA + max((w.low_m.size for w in windows if w is not None), default=0)
+    out = np.zeros((packed.shape[0], width))
+    out[:, : kernels.VIS_DATA] = packed[:, : kernels.VIS_DATA]
+    for j, w in enumerate(windows):
+        if w is None:
+            continue
+        ny, nx = w.low_m.shape
+        out[j, kernels.VIS_NX] = nx
+        out[j, kernels.VIS_NY] = ny
+        out[j, kernels.VIS_X0] = w.x0_m
+        out[j, kernels.VIS_Y0] = w.y0_m
+        out[j, kernels.VIS_CELL] = w.cell_m
+        out[j, kernels.VIS_HEIGHT] = w.height_m
+        out[j, kernels.VIS_SOFT] = w.softness_m
+        out[j, kernels.VIS_DV] = w.max_dv()
+        # unknown ground hides nothing (docs/terrain.md): a NaN height is seen from the ground up
+        out[j, kernels.VIS_DATA : kernels.VIS_DATA + ny * nx] = np.nan_to_num(w.low_m, nan=0.0).ravel()
+    return out
+
+
+def stack_rows(rows: Sequence[np.ndarray]) -> np.ndarray:
+    """Packed rows of any widths as one array, padded with zeros to the widest."""
+    if rows and all(len(r) == len(rows[0]) for r in rows):
+        return np.array(rows, dtype=np.float64)
+    width = max((len(r) for r in rows), default=len(kernels.PACKED_COLUMNS))
+    out = np.zeros((len(rows), width))
+    for j, r in enumerate(rows):
+        out[j, : len(r)] = r
+    return out
+
+
+def concat(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Two packed arrays, one after the other, the narrower padded with zeros."""
+    if a.shape[1] == b.shape[1]:
+        return np.concatenate([a, b])
+    width = max(a.shape[1], b.shape[1])
+    out = np.zeros((a.shape[0] + b.shape[0], width))
+    out[: a.shape[0], : a.shape[1]] = a
+    out[a.shape[0] :, : b.shape[1]] = b
+    return out
+
+
+def unmasked(packed: np.ndarray) -> np.ndarray:
+    """A copy of ``packed`` without the windows: the threats as if they saw everywhere."""
+    out = packed[:, : kernels.VIS_DATA].copy()
+    out[:, kernels.VIS_NX] = 0.0
+    return out

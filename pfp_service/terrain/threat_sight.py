@@ -1,0 +1,83 @@
+"""What each threat sees over a ``TerrainGrid``: its window of lowest visible heights, for ``ThreatField``.
+
+``TerrainSight(grid, height_m)`` is a ``core.visibility.Sight``: asked for a
+threat and the box of its reach, it runs the viewshed sweep
+(``viewshed.lowest_visible_height``, Wang 2000) over the grid's cells in that
+box, from the grid point nearest the threat, at the threat's
+``observer_height_m`` above the ground, and returns the window.  The sweep
+sees only cells in the box: a sight line from inside a convex box to a point
+inside it stays inside it.  A window is computed once per threat position,
+eye and reach, and kept (``cache_size`` of them, least recently used out).
+
+A threat off the grid, or standing on unknown ground, gets no window: it sees
+everywhere (the safe side, as unknown ground hides nothing in a viewshed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from typing import Any
+
+from pfp_service.core.visibility import Window
+from pfp_service.terrain.grid import TerrainGrid
+from pfp_service.terrain.viewshed import lowest_visible_height
+
+__all__ = ["TerrainSight", "softness_for"]
+
+
+def softness_for(height_m: float) -> float:
+    """The sigmoid's width for a unit ``height_m`` tall: a sixth of it.
+
+    A unit in the open (lowest visible height 0) is then seen at
+    ``sigmoid(6) = 99.75 %``, one whose ground hides it to half its height at
+    50 %, and one hidden by its full height at 0.25 %.
+    """
+    return height_m / 6.0
+
+
+class TerrainSight:
+    """Per threat, the lowest visible heights over ``grid`` within its reach (a ``core.visibility.Sight``)."""
+
+    def __init__(
+        self, grid: TerrainGrid, height_m: float, curvature: float = 0.0, cache_size: int = 256
+    ) -> None:
+        if not (height_m >= 0 and math.isfinite(height_m)):
+            raise ValueError(f"a unit's height must be metres >= 0, not {height_m}")
+        self.grid = grid
+        self.height_m = float(height_m)
+        self.softness_m = softness_for(max(self.height_m, 0.06))
+        self.curvature = float(curvature)
+        self._cache: OrderedDict[tuple[float, ...], Window | None] = OrderedDict()
+        self._cache_size = cache_size
+
+    def __call__(self, threat: Any, box: tuple[float, float, float, float]) -> Window | None:
+        key = (float(threat.xi[0]), float(threat.xi[1]), float(threat.observer_height_m), *box)
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        got = self._window(threat, box)
+        self._cache[key] = got
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return got
+
+    def _window(self, threat: Any, box: tuple[float, float, float, float]) -> Window | None:
+        g = self.grid
+        ny, nx = g.shape
+        c = g.cell_m
+        i0 = max(0, math.floor((box[0] - g.x0_m) / c))
+        i1 = min(nx - 1, math.ceil((box[2] - g.x0_m) / c))
+        k0 = max(0, math.floor((box[1] - g.y0_m) / c))
+        k1 = min(ny - 1, math.ceil((box[3] - g.y0_m) / c))
+        oi = round((threat.xi[0] - g.x0_m) / c)
+        ok = round((threat.xi[1] - g.y0_m) / c)
+        if not (i0 <= oi <= i1 and k0 <= ok <= k1) or i1 - i0 < 1 or k1 - k0 < 1:
+            return None  # off the grid: it sees everywhere
+        z = g.z[k0 : k1 + 1, i0 : i1 + 1]
+        if not math.isfinite(z[ok - k0, oi - i0]):
+            return None  # on unknown ground
+        low = lowest_visible_height(
+            z, (ok - k0, oi - i0), float(threat.observer_height_m), math.inf, c, c, self.curvature
+        )
+        return Window(g.x0_m + i0 * c, g.y0_m + k0 * c, c, low, self.height_m, self.softness_m)
