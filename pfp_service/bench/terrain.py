@@ -1,7 +1,9 @@
-"""Terrain: one observer's viewshed on 1,000 x 1,000 cells within 5 km, against gdal_viewshed in the same run.
+"""Terrain: a viewshed on 1,000 x 1,000 cells against gdal_viewshed, the PSS 100 threats' sight adds, a plan's cost.
 
-The grid is matplotlib's Jacksboro fault DEM (ridge-and-valley ground in
-Tennessee, 3 arc-seconds) placed on the planner's plane around its centre at
+One observer's viewshed on 1,000 x 1,000 cells within 5 km, against
+gdal_viewshed in the same run.  The grid is matplotlib's Jacksboro fault DEM
+(ridge-and-valley ground in Tennessee, 3 arc-seconds) placed on the planner's
+plane around its centre at
 ``--cell`` metres (10 by default, so 1,001 x 1,001 points over 10 km), with
 the observer ``--height`` above the centre.  The sweep
 (``terrain.viewshed.lowest_visible_height``) is timed after a warm-up, in
