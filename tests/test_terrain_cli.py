@@ -229,3 +229,9 @@ def test_bench_terrain_reports_the_sweep_beside_gdal(dems):
     assert doc["agree_with_gdal_where_exact_ray_confirms"] >= 0.97
     assert doc["sweep_ms_median"] > 0 and doc["gdal_viewshed_ms_median"] > 0
     assert len(doc["load_average"]["before"]) == 3
+    mem = doc["memory"]  # a fresh process's PSS with 100 threats that see: windows bounded
+    assert mem["grid_points"] == 251 * 251 and mem["threats"] == 100
+    assert 0 < mem["window_side_max"] <= 200 and mem["window_cell_m_max"] == 80.0
+    assert 0 < mem["terrain_added_mb"] < 150
+    cost = doc["cost"]  # the 20 seeded Jacksboro plans, blind and over terrain
+    assert cost["reached"] == 20 and cost["blind_ms_median"] > 0 and cost["terrain_ms_median"] > 0

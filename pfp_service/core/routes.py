@@ -18,9 +18,9 @@ would use (``route_cell``).  A lone unit's miss (its goal not known to be
 shared) builds no grid: A* (``astar.lazy_route``) searches from the unit to
 the goal on the field's lattice at the cell at or just under the asked one
 (``astar.cell_ladder``), filling levels and cores only where it looks and
-keeping them for the next lone search under the field; it falls back to the
-tight grid (used for that ask and not kept) where A* does not apply (zones,
-a unit or goal in a core, no path).  Once a goal is known to be shared (a second unit, by
+keeping them for the next lone search under the field (keep-out zones are
+rastered per search); it falls back to the tight grid (used for that ask and
+not kept) where A* does not apply (a unit or goal in a core or a zone, no path).  Once a goal is known to be shared (a second unit, by
 ``Ask.unit``, asked for it under this field or an earlier one) a miss builds a
 grid for everyone: ``ROOM`` of the box's span to spare on every side, so the
 rest of the group lands inside it, at ``1 / REFINE`` of the asked cell, since

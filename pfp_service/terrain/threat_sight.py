@@ -11,6 +11,17 @@ eye and reach, and kept (``cache_size`` of them, least recently used out).
 
 A threat off the grid, or standing on unknown ground, gets no window: it sees
 everywhere (the safe side, as unknown ground hides nothing in a viewshed).
+
+Bounded windows.  A window travels in its threat's packed row, and the rows
+are as wide as the widest, so a window of the grid's own cells would cost
+8 bytes a cell a threat: 8 MB for a threat reaching 5 km on 10 m cells.  The
+sweep runs on the grid's cells, then the window keeps at most
+``WINDOW_SIDE`` heights a side: its cell is the smallest whole multiple
+``f`` of the grid's that fits, and each of its heights is the *least* of
+the grid's within half a window cell (``f // 2`` cells) of it, so a coarse
+window never hides a unit that a fine one would show near there (the safe
+side).  The kernels interpolate it bilinearly and differentiate exactly
+that surface, as for any window.
 """
 
 from __future__ import annotations
@@ -19,11 +30,16 @@ import math
 from collections import OrderedDict
 from typing import Any
 
+import numpy as np
+from scipy.ndimage import minimum_filter
+
 from pfp_service.core.visibility import Window
 from pfp_service.terrain.grid import TerrainGrid
 from pfp_service.terrain.viewshed import lowest_visible_height
 
-__all__ = ["TerrainSight", "softness_for"]
+__all__ = ["WINDOW_SIDE", "TerrainSight", "coarsen", "softness_for"]
+
+WINDOW_SIDE = 200  # a window's heights a side at most: 100 threats' rows are then 32 MB (docs/terrain.md)
 
 
 def softness_for(height_m: float) -> float:
@@ -80,4 +96,24 @@ class TerrainSight:
         low = lowest_visible_height(
             z, (ok - k0, oi - i0), float(threat.observer_height_m), math.inf, c, c, self.curvature
         )
-        return Window(g.x0_m + i0 * c, g.y0_m + k0 * c, c, low, self.height_m, self.softness_m)
+        f = max(1, math.ceil((max(low.shape) - 1) / (WINDOW_SIDE - 1)))
+        return Window(
+            g.x0_m + i0 * c, g.y0_m + k0 * c, f * c, coarsen(low, f), self.height_m, self.softness_m
+        )
+
+
+def coarsen(low: np.ndarray, f: int) -> np.ndarray:
+    """Every ``f``-th height of ``low`` a side, each the least within ``f // 2`` cells of it (unknown as 0).
+
+    The last row and column reach the window's end or just past it (the
+    edge's heights carried on), so the coarse window covers the fine one.
+    """
+    if f == 1:
+        return low
+    ny, nx = low.shape
+    my, mx = -(-(ny - 1) // f) + 1, -(-(nx - 1) // f) + 1
+    padded = np.pad(
+        np.nan_to_num(low, nan=0.0), ((0, (my - 1) * f + 1 - ny), (0, (mx - 1) * f + 1 - nx)), "edge"
+    )
+    out: np.ndarray = minimum_filter(padded, size=2 * (f // 2) + 1, mode="nearest")[::f, ::f]
+    return np.ascontiguousarray(out)
