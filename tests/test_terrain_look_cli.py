@@ -1,0 +1,112 @@
+"""``pfp plan --terrain`` where people look, run as a user runs it: the plot's ground and GeoJSON heights."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests import terrain_data
+from tests.conftest import run_pfp
+
+pytestmark = pytest.mark.proc
+
+SCENARIO = """\
+name: jacksboro
+{head}
+unit: {{class: foot}}
+start: [-3000, -3000]
+goal: [3000, 3000]
+threats:
+  - {{id: t1, position: [0, 500], facing_deg: 200, sigma_range: 800, sigma_lateral: 600, skew: 1}}
+  - {{id: t2, position: [1500, -1000], facing_deg: 300, sigma_range: 700, sigma_lateral: 500, skew: 1}}
+"""
+
+
+@pytest.fixture(scope="module")
+def ground(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("look")
+    terrain_data.write_geographic(d / "jacksboro.tif")
+    (d / "with.yaml").write_text(SCENARIO.format(head="terrain: jacksboro.tif"))
+    (d / "blind.yaml").write_text(SCENARIO.format(head=""))
+    return d
+
+
+def _grey_share(png: Path) -> float:
+    """The share of the image's pixels in mid-tone greys (r = g = b, neither white nor black): hillshade."""
+    from matplotlib import image
+
+    rgb = image.imread(png)[..., :3]
+    grey = (np.ptp(rgb, axis=-1) < 0.03) & (rgb.mean(axis=-1) > 0.15) & (rgb.mean(axis=-1) < 0.85)
+    return float(grey.mean())
+
+
+def test_the_plot_draws_the_ground_and_the_blind_plot_does_not(ground: Path) -> None:
+    got = run_pfp("plan", str(ground / "with.yaml"), "--plot", str(ground / "with.png"))
+    assert got.returncode == 0, got.stderr
+    assert "Traceback" not in got.stderr and f"plot written to {ground / 'with.png'}" in got.stdout
+    blind = run_pfp("plan", str(ground / "blind.yaml"), "--plot", str(ground / "blind.png"))
+    assert blind.returncode == 0, blind.stderr
+    with_ground, without = _grey_share(ground / "with.png"), _grey_share(ground / "blind.png")
+    # the hillshade fills most of the axes; the blind plot's greys are text and ticks
+    assert with_ground > 0.25 and without < 0.05, (with_ground, without)
+
+
+def test_geojson_over_terrain_carries_the_ground_height(ground: Path) -> None:
+    from pfp_service.scenario import load_scenario
+    from pfp_service.terrain.planning import prepare
+
+    out = ground / "with.geojson"
+    got = run_pfp("plan", str(ground / "with.yaml"), "--geojson", str(out), "--json")
+    assert got.returncode == 0, got.stderr
+    result = json.loads(got.stdout)
+    features = json.loads(out.read_text())["features"]
+    (line,) = [f for f in features if f["properties"]["kind"] == "path"]
+    coords = np.array(line["geometry"]["coordinates"])
+    assert coords.shape == (len(result["path"]), 3)
+    # the heights are the ones the plan reports, sampled on the plane the plan was made on
+    assert np.allclose(coords[:, 2], result["path_elevation_m"], atol=0.005)
+    sc = load_scenario(ground / "with.yaml")
+    g = prepare(
+        str(ground / "jacksboro.tif"), None, [sc.start, sc.goal, *(s.threat.xi for s in sc.schedule())], None,
+        sc.unit.mobility(),
+    )  # fmt: skip
+    path = np.array(result["path"])
+    assert np.allclose(coords[:, 2], g.grid.elevation(path[:, 0], path[:, 1]), atol=0.005)
+    # and against the DEM itself, bilinear at each point's lon/lat, read here with no pfp code
+    z, west, north, step = terrain_data.jacksboro()
+    col = (coords[:, 0] - west) / step - 0.5
+    row = (north - coords[:, 1]) / step - 0.5
+    i, k = np.floor(col).astype(int), np.floor(row).astype(int)
+    tc, tr = col - i, row - k
+    zf = z.astype(float)
+    direct = (1 - tr) * ((1 - tc) * zf[k, i] + tc * zf[k, i + 1]) + tr * (
+        (1 - tc) * zf[k + 1, i] + tc * zf[k + 1, i + 1]
+    )
+    # the plane is the DEM resampled once at its own resolution, so a point is interpolated twice:
+    # close to the direct sample, and never outside the heights of the DEM's posts a cell around it
+    diff = np.abs(coords[:, 2] - direct)
+    assert np.median(diff) < 1.0, np.median(diff)
+    around = np.stack([zf[k + a, i + b] for a in (-1, 0, 1, 2) for b in (-1, 0, 1, 2)])
+    assert np.all((coords[:, 2] >= around.min(axis=0) - 0.01) & (coords[:, 2] <= around.max(axis=0) + 0.01))
+    for kind in ("start", "goal", "threat"):
+        for f in features:
+            if f["properties"]["kind"] == kind:
+                assert len(f["geometry"]["coordinates"]) == 3, f
+
+
+def test_geojson_without_terrain_is_unchanged(ground: Path) -> None:
+    # the same scenario, placed where the terrain run places it, without the ground
+    centre = "origin: {lat: 36.5895, lon: -84.246}"
+    (ground / "blind-geo.yaml").write_text(SCENARIO.format(head=centre))
+    out = ground / "blind.geojson"
+    got = run_pfp("plan", str(ground / "blind-geo.yaml"), "--geojson", str(out))
+    assert got.returncode == 0, got.stderr
+    for f in json.loads(out.read_text())["features"]:
+        g = f["geometry"]
+        flat = [g["coordinates"]] if g["type"] == "Point" else g["coordinates"]
+        if g["type"] == "Polygon":
+            flat = [p for ring in flat for p in ring]
+        assert all(len(p) == 2 for p in flat), f
