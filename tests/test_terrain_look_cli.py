@@ -110,3 +110,45 @@ def test_geojson_without_terrain_is_unchanged(ground: Path) -> None:
         if g["type"] == "Polygon":
             flat = [p for ring in flat for p in ring]
         assert all(len(p) == 2 for p in flat), f
+
+
+DOC = Path(__file__).resolve().parent.parent / "docs" / "terrain.md"
+
+
+def _fenced(lang: str, first: str) -> str:
+    """The docs' ```lang block whose first line starts with ``first``."""
+    import re
+
+    for m in re.finditer(rf"^```{lang}\n(.*?)^```$", DOC.read_text(), re.M | re.S):
+        if m[1].startswith(first):
+            return m[1]
+    raise AssertionError(f"docs/terrain.md has no ```{lang} block starting {first!r}")
+
+
+def test_the_docs_example_writes_the_fixture_dem_and_prints_what_the_docs_show(tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+    import sys
+
+    import rasterio
+
+    (tmp_path / "jacksboro_dem.py").write_text(_fenced("python", "# jacksboro_dem.py"))
+    subprocess.run(
+        [sys.executable, "jacksboro_dem.py", "jacksboro.tif"], cwd=tmp_path, check=True, timeout=120
+    )
+    fixture = terrain_data.write_geographic(tmp_path / "fixture.tif")
+    with rasterio.open(tmp_path / "jacksboro.tif") as a, rasterio.open(fixture) as b:
+        assert a.crs == b.crs and a.transform == b.transform and a.nodata == b.nodata
+        assert np.array_equal(a.read(1), b.read(1))
+    (tmp_path / "examples").mkdir()
+    root = DOC.parent.parent
+    shutil.copy(root / "examples" / "terrain-jacksboro.yaml", tmp_path / "examples")
+    got = run_pfp(
+        "plan", "examples/terrain-jacksboro.yaml", "--terrain", "jacksboro.tif", "--plot", "jacksboro.png",
+        "--geojson", "jacksboro.geojson", cwd=tmp_path,
+    )  # fmt: skip
+    assert got.returncode == 0, got.stderr
+    shown = _fenced("text", "terrain-jacksboro:").splitlines()
+    printed = got.stdout.splitlines()
+    # the compute time is the machine's; every other figure is the plan's
+    assert [ln for ln in printed if "compute" not in ln] == [ln for ln in shown if "compute" not in ln]
