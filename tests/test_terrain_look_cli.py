@@ -152,3 +152,52 @@ def test_the_docs_example_writes_the_fixture_dem_and_prints_what_the_docs_show(t
     printed = got.stdout.splitlines()
     # the compute time is the machine's; every other figure is the plan's
     assert [ln for ln in printed if "compute" not in ln] == [ln for ln in shown if "compute" not in ln]
+
+
+def test_the_hillshade_agrees_with_gdaldem_on_the_jacksboro_ground(ground: Path) -> None:
+    """``gdaldem hillshade`` (Horn's 3 x 3 gradient, sun at 315 / 45) on the plane the plot draws."""
+    import os
+    import shutil
+    import subprocess
+
+    import rasterio
+    from rasterio.transform import from_origin
+
+    from pfp_service.render.terrain_layers import hillshade
+    from pfp_service.scenario import load_scenario
+    from pfp_service.terrain.planning import prepare
+
+    gdaldem = shutil.which("gdaldem")
+    if gdaldem is None:
+        what = "no gdaldem: apt-get install gdal-bin (.ci/ensure-gdal)"
+        if os.environ.get("CI"):
+            pytest.fail(f"{what} (CI is set: the comparison with GDAL must run)")
+        pytest.skip(what)
+    sc = load_scenario(ground / "with.yaml")
+    g = prepare(
+        str(ground / "jacksboro.tif"), None, [sc.start, sc.goal, *(s.threat.xi for s in sc.schedule())], None,
+        sc.unit.mobility(),
+    ).grid  # fmt: skip
+    assert np.isfinite(g.z).all()
+    # the plane as a raster whose rows run south (GDAL's order) and whose cells are metres: any
+    # projected CRS serves, gdaldem uses only the cell size
+    src, out = ground / "plane.tif", ground / "shade.tif"
+    with rasterio.open(
+        src, "w", driver="GTiff", width=g.shape[1], height=g.shape[0], count=1, dtype="float64",
+        crs="EPSG:32616", transform=from_origin(0.0, g.cell_m * g.shape[0], g.cell_m, g.cell_m),
+    ) as f:  # fmt: skip
+        f.write(g.z[::-1], 1)
+    subprocess.run([gdaldem, "hillshade", "-q", str(src), str(out)], check=True, timeout=120)
+    with rasterio.open(out) as f:
+        theirs = f.read(1)[::-1].astype(float)  # bytes: 0 no data (the edge), 1 + 254 cos
+    ours = 1.0 + 254.0 * hillshade(g.z, g.cell_m)
+    inner = theirs > 0
+    diff = np.abs(ours - theirs)[inner]
+    # the same light and the same cosine; the gradients differ (central differences here, Horn's
+    # weighted 3 x 3 there), which on ridge-and-valley ground moves a cell by a few levels of 255
+    assert inner.mean() > 0.95
+    assert np.median(diff) <= 2.0 and np.quantile(diff, 0.99) <= 12.0, (
+        np.median(diff),
+        np.quantile(diff, 0.99),
+    )
+    assert np.corrcoef(ours[inner], theirs[inner])[0, 1] > 0.99

@@ -202,3 +202,27 @@ def test_without_terrain_the_plot_has_no_ground(planned) -> None:  # type: ignor
         assert fig.axes[1].get_xlabel() == "threat level"
     finally:
         plt.close(fig)
+
+
+def test_the_shading_stops_at_a_ridge_and_a_threat_off_the_ground_gets_none() -> None:
+    from types import SimpleNamespace
+
+    from pfp_service.core import Threat
+    from pfp_service.render.terrain_layers import sight_masks
+    from pfp_service.terrain.grid import TerrainGrid
+    from pfp_service.terrain.threat_sight import TerrainSight
+
+    # flat ground with a 60 m wall running north-south at x = 0
+    xs = np.arange(-2000.0, 2001.0, 20.0)
+    gx, _ = np.meshgrid(xs, xs)
+    grid = TerrainGrid(-2000.0, -2000.0, 20.0, np.where(np.abs(gx) <= 40.0, 60.0, 0.0))
+    terrain = SimpleNamespace(sight=TerrainSight(grid, 1.8))
+    west = Threat.from_facing((-600.0, 0.0), 90.0, 300.0, 300.0, 0.0, 1.0, "west")
+    off = Threat.from_facing((9000.0, 0.0), 90.0, 300.0, 300.0, 0.0, 1.0, "off")
+    (mask,) = sight_masks([west, off], "peak", terrain)  # type: ignore[arg-type]
+    assert mask.id == "west"
+    ny, nx = mask.seen.shape
+    x = mask.x0_m + mask.cell_m * np.arange(nx)
+    row = mask.seen[ny // 2]
+    assert row[(x > -500) & (x < -100)].all()  # its own side of the wall, in the open
+    assert not row[(x > 200) & (x < 600)].any()  # in the wall's lee, close behind it
