@@ -13,8 +13,9 @@ With a mission origin (``coords.Coords`` geodetic), the bottom and left axes
 carry longitude and latitude ticks at round values along those edges, with a
 faint graticule, and the top and right axes keep the metres from the origin
 (``geo_axes``).  A plan over terrain is drawn on its ground: hillshade,
-elevation contours and the ground each threat sees (``terrain_layers``), and
-its threat level is the one masked by line of sight.
+elevation contours and the ground each threat sees (``terrain_layers``), its
+threat level is the one masked by line of sight, and the terrain's slope
+barriers are hatched lightly with one legend entry instead of a label each.
 """
 
 from __future__ import annotations
