@@ -2,7 +2,9 @@
 
 Coordinates are ``[lon, lat]`` WGS-84 degrees rounded to ``DECIMALS`` (1e-7
 degrees, about a centimetre), from planner metres through the mission
-``Origin``.  The collection holds:
+``Origin``.  Over terrain (an ``elevation`` sampler, ``pfp plan --terrain``),
+the path, start, goal and threat points are ``[lon, lat, elevation]``: metres
+on the DEM's vertical datum, rounded to ``Z_DECIMALS``; zones stay flat.  The collection holds:
 
 - the path as a LineString (``kind: path``) with the plan's metrics;
 - the start and the goal as Points (``kind: start`` / ``goal``);
@@ -29,7 +31,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -64,6 +66,8 @@ __all__ = [
 ]
 
 DECIMALS = 7
+Z_DECIMALS = 2  # centimetres: finer than any DEM's heights are known
+Elevation = Callable[[np.ndarray, np.ndarray], np.ndarray]
 ZONE_LEVEL = 0.1
 ZONE_VERTICES = 96
 CIRCLE_VERTICES = 72
@@ -118,13 +122,18 @@ def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndar
     return np.asarray(np.array([mx, my]) + r[:, None] * d)
 
 
-def _lonlat(origin: Origin, xy: np.ndarray) -> list[list[float]]:
-    ll = origin.to_geodetic_many(np.asarray(xy, dtype=float).reshape(-1, 2))
+def _lonlat(origin: Origin, xy: np.ndarray, elevation: Elevation | None = None) -> list[list[float]]:
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    ll = origin.to_geodetic_many(xy)
+    z = elevation(xy[:, 0], xy[:, 1]) if elevation is not None else None
     out: list[list[float]] = []
-    for lat, lon in ll:
+    for k, (lat, lon) in enumerate(ll):
         p = [round(float(lon), DECIMALS), round(float(lat), DECIMALS)]
-        if not out or p != out[-1]:  # rounding may merge neighbours; a ring repeats only its first
-            out.append(p)
+        if out and p == out[-1][:2]:  # rounding may merge neighbours; a ring repeats only its first
+            continue
+        if z is not None and math.isfinite(z[k]):  # unknown ground: no height rather than a made-up one
+            p.append(round(float(z[k]), Z_DECIMALS))
+        out.append(p)
     return out
 
 
@@ -139,8 +148,10 @@ def _feature(geometry: dict[str, Any], properties: dict[str, Any]) -> dict[str, 
     return {"type": "Feature", "geometry": geometry, "properties": properties}
 
 
-def _point(origin: Origin, xy: Sequence[float], properties: dict[str, Any]) -> dict[str, Any]:
-    (coords,) = _lonlat(origin, np.array([xy]))
+def _point(
+    origin: Origin, xy: Sequence[float], properties: dict[str, Any], elevation: Elevation | None = None
+) -> dict[str, Any]:
+    (coords,) = _lonlat(origin, np.array([xy]), elevation)
     return _feature({"type": "Point", "coordinates": coords}, properties)
 
 
@@ -155,6 +166,7 @@ def feature_collection(
     threat_properties: Mapping[str, Mapping[str, Any]] | None = None,
     name: str = "",
     zones: Sequence[Zone] = (),
+    elevation: Elevation | None = None,
 ) -> dict[str, Any]:
     """The RFC 7946 FeatureCollection of a plan (as a dict for ``json.dumps``).
 
@@ -168,6 +180,8 @@ def feature_collection(
         threat_properties: extra properties by threat id (e.g. the file's facing and sigmas).
         name: the collection's name (a foreign member, as RFC 7946 section 6.1 allows).
         zones: keep-out zones, drawn as Polygons (``kind: keep_out``).
+        elevation: ground height in metres at planner ``(x, y)`` arrays (``TerrainGrid.elevation``):
+            the path and the points get it as a third coordinate, where it is known.
 
     Raises:
         ValueError: ``level`` outside (0, 1).
@@ -181,14 +195,14 @@ def feature_collection(
             v = getattr(result, k)
             props[k] = v.value if hasattr(v, "value") else v
         props["compute_ms"] = result.compute_ms
-        line = _lonlat(origin, np.asarray(result.path))
+        line = _lonlat(origin, np.asarray(result.path), elevation)
         if len(line) < 2:  # a path shorter than the rounding: still a valid LineString
             line = [line[0], line[0]]
         features.append(_feature({"type": "LineString", "coordinates": line}, props))
     if start is not None:
-        features.append(_point(origin, start, {"kind": "start"}))
+        features.append(_point(origin, start, {"kind": "start"}, elevation))
     if goal is not None:
-        features.append(_point(origin, goal, {"kind": "goal"}))
+        features.append(_point(origin, goal, {"kind": "goal"}, elevation))
     extra = threat_properties or {}
     for t in threats:
         tp: dict[str, Any] = {
@@ -199,7 +213,7 @@ def feature_collection(
             "alpha": list(t.alpha),
             **extra.get(t.id, {}),
         }
-        features.append(_point(origin, t.xi, tp))
+        features.append(_point(origin, t.xi, tp, elevation))
         if t.weight <= 0.0:
             continue
         from pfp_service.core.cores import CORE_FRACTION
@@ -401,15 +415,20 @@ def scenario_collection(
     result: PlanResult | None,
     level: float = ZONE_LEVEL,
     zones: Iterable[Zone] | None = None,
+    origin: Origin | None = None,
+    elevation: Elevation | None = None,
 ) -> dict[str, Any]:
     """``feature_collection`` of a scenario file's plan, its threats carrying the file's parameters.
 
-    ``zones``: the keep-out zones planned with (default: the file's own).
+    ``zones``: the keep-out zones planned with (default: the file's own). ``origin``: where the
+    plane was placed (default: the file's; over terrain without one, the DEM's centre).
+    ``elevation``: the terrain's sampler, for ``[lon, lat, elevation]``.
 
     Raises:
-        InputError: at ``origin``, when the scenario has none (GeoJSON is WGS-84 only).
+        InputError: at ``origin``, when there is none (GeoJSON is WGS-84 only).
     """
-    if scenario.origin is None:
+    origin = origin if origin is not None else scenario.origin
+    if origin is None:
         raise InputError("origin", "GeoJSON needs the scenario's origin: add origin: {lat: …, lon: …}")
     props: dict[str, dict[str, Any]] = {}
     for i, spec in enumerate(scenario.threats):
@@ -421,7 +440,7 @@ def scenario_collection(
         props[spec.id or f"t{i + 1}"] = user
     threats = [s.threat for s in scenario.schedule()]
     return feature_collection(
-        scenario.origin,
+        origin,
         threats,
         result,
         start=scenario.start,
@@ -430,6 +449,7 @@ def scenario_collection(
         threat_properties=props,
         name=scenario.name,
         zones=list(scenario.zone_set() if zones is None else zones),
+        elevation=elevation,
     )
 
 

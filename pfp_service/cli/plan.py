@@ -36,11 +36,17 @@ def register(sub: Any) -> None:
     p = sub.add_parser("plan", help="plan a scenario file (YAML or JSON)", description=__doc__)
     p.add_argument("scenario", help="scenario file (.yaml, .yml or .json)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a summary")
-    p.add_argument("--plot", metavar="PNG", help="write threat contours, start, goal and path to PNG")
+    p.add_argument(
+        "--plot",
+        metavar="PNG",
+        help="write threat contours, start, goal and path to PNG (over terrain: hillshade, "
+        "elevation contours and where each threat sees)",
+    )
     p.add_argument(
         "--geojson",
         metavar="FILE",
-        help="write path, threats and their zones as RFC 7946 GeoJSON (needs the scenario's origin)",
+        help="write path, threats and their zones as RFC 7946 GeoJSON (needs the scenario's origin or "
+        "terrain; over terrain, points are [lon, lat, elevation])",
     )
     p.add_argument(
         "--zone-level",
@@ -188,7 +194,8 @@ def run(args: argparse.Namespace) -> int:
             "--coords", f"{args.coords} needs an origin: add origin: {{lat: …, lon: …}} to {args.scenario}"
         )
     coords = Coords.choose(args.coords, scenario.origin)
-    if args.geojson and scenario.origin is None:
+    if args.geojson and scenario.origin is None and args.terrain is None and scenario.terrain is None:
+        # over terrain the plane is placed at the DEM's centre, so the GeoJSON has an origin
         raise InputError("--geojson", f"{args.scenario} has no origin: add origin: {{lat: …, lon: …}}")
     params = scenario.planner.to_params().merged(
         delta=args.delta,
@@ -269,11 +276,14 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from pfp_service.render import plot_plan
 
-        plot_plan(scenario, result, args.plot, coords, zones=list(zones))
+        plot_plan(scenario, result, args.plot, coords, zones=list(zones), terrain=ground)
     if args.geojson:
         from pfp_service import geojson
 
-        geojson.write(args.geojson, geojson.scenario_collection(scenario, result, args.zone_level, zones))
+        elevation = ground.grid.elevation if ground is not None else None
+        origin = ground.origin if ground is not None else scenario.origin
+        collection = geojson.scenario_collection(scenario, result, args.zone_level, zones, origin, elevation)
+        geojson.write(args.geojson, collection)
     if args.json:
         sys.stdout.write(msgspec.json.encode(result).decode() + "\n")
     else:

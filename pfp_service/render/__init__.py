@@ -1,5 +1,8 @@
 """Rendering results for people: text summaries (``text``) and PNG plots (``plots`` of a plan, ``tracks`` of several units; matplotlib).
 
+``plots`` draws fields, zones and paths; ``geo_axes`` its lat/lon axes; ``terrain_layers``
+the ground under a plan over terrain (hillshade, contours, where each threat sees).
+
 Nothing here plans or talks to the network: it takes plan results, threats
 and tracks and returns text or writes one image.  matplotlib is imported
 only when a plot is drawn, so ``summary`` works on a plain install.

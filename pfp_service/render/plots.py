@@ -11,16 +11,19 @@ that popped up mid-run is orange, labelled with when it appeared.
 
 With a mission origin (``coords.Coords`` geodetic), the bottom and left axes
 carry longitude and latitude ticks at round values along those edges, with a
-faint graticule, and the top and right axes keep the metres from the origin.
+faint graticule, and the top and right axes keep the metres from the origin
+(``geo_axes``).  A plan over terrain is drawn on its ground: hillshade,
+elevation contours and the ground each threat sees (``terrain_layers``), its
+threat level is the one masked by line of sight, and the terrain's slope
+barriers are hatched lightly with one legend entry instead of a label each.
 """
 
 from __future__ import annotations
 
-import itertools
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,7 +31,11 @@ from pfp_service.coords import Coords
 from pfp_service.core import PlanResult, Threat, ThreatField
 from pfp_service.core.zones import Zone
 from pfp_service.errors import InputError
+from pfp_service.render.geo_axes import frame
 from pfp_service.scenario import Scenario
+
+if TYPE_CHECKING:
+    from pfp_service.terrain.planning import PlanTerrain
 
 __all__ = [
     "check_png_path",
@@ -37,8 +44,6 @@ __all__ = [
     "draw_zones",
     "extent",
     "facing",
-    "frame",
-    "geo_ticks",
     "legend",
     "peak",
     "plan_figure",
@@ -52,6 +57,10 @@ __all__ = [
 ]
 
 ZONE_STYLE: dict[str, Any] = dict(facecolor="0.55", edgecolor="black", alpha=0.45, hatch="xx", linewidth=1.0)
+# a terrain's barriers (too steep, or unknown ground): hatched lightly, so the ground shows through
+BARRIER_STYLE: dict[str, Any] = dict(
+    facecolor="none", edgecolor="black", alpha=0.5, hatch="////", linewidth=0.3
+)
 
 
 def pyplot() -> Any:
@@ -110,14 +119,20 @@ def zone_corners(zones: Sequence[Zone]) -> list[tuple[float, float]]:
     return out
 
 
-def draw_zones(ax: Any, zones: Sequence[Zone]) -> int:
-    """Each keep-out zone as a hatched patch (holes left open) labelled ``ID (no-go)``; returns how many."""
+def draw_zones(
+    ax: Any, zones: Sequence[Zone], style: dict[str, Any] = ZONE_STYLE, labelled: bool = True
+) -> int:
+    """Each keep-out zone as a hatched patch (holes left open) labelled ``ID (no-go)``; returns how many.
+
+    ``labelled=False`` draws them unnamed: a terrain's slope barriers are dozens of small
+    polygons, and one legend entry says what they all are.
+    """
     from matplotlib.patches import Circle, PathPatch
     from matplotlib.path import Path as MPath
 
     for z in zones:
         if z.centre is not None:
-            patch: Any = Circle(z.centre, z.radius_m, **ZONE_STYLE)
+            patch: Any = Circle(z.centre, z.radius_m, **style)
             at = z.centre
         else:
             verts: list[tuple[float, float]] = []
@@ -125,12 +140,14 @@ def draw_zones(ax: Any, zones: Sequence[Zone]) -> int:
             for ring in z.rings():
                 verts += [*ring, ring[0]]
                 codes += [int(MPath.MOVETO)] + [int(MPath.LINETO)] * (len(ring) - 1) + [int(MPath.CLOSEPOLY)]
-            patch = PathPatch(MPath(verts, codes), **ZONE_STYLE)
+            patch = PathPatch(MPath(verts, codes), **style)
             c = z.geometry.representative_point()
             at = (float(c.x), float(c.y))
         patch.set_gid(f"zone:{z.id}")
         patch.set_zorder(3)
         ax.add_patch(patch)
+        if not labelled:
+            continue
         ax.annotate(
             f"{z.id} (no-go)", at, fontsize=8, ha="center", va="center", zorder=4,
             bbox=dict(boxstyle="round", fc="white", ec="none", alpha=0.7),
@@ -155,7 +172,9 @@ def facing(threat: Threat) -> tuple[float, float] | None:
     return None if norm == 0.0 else (ax / norm, ay / norm)
 
 
-def contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float], n: int = 220) -> Any:
+def contours(
+    ax: Any, field: ThreatField, box: tuple[float, float, float, float], n: int = 220, alpha: float = 0.55
+) -> Any:
     """Filled contours of the threat level; returns the mappable for a colour bar (None if flat)."""
     if not len(field):
         return None
@@ -165,7 +184,7 @@ def contours(ax: Any, field: ThreatField, box: tuple[float, float, float, float]
     top = float(level.max())
     if top <= 0:
         return None
-    filled = ax.contourf(gx, gy, level, levels=np.linspace(top * 0.02, top, 12), cmap="Reds", alpha=0.55)
+    filled = ax.contourf(gx, gy, level, levels=np.linspace(top * 0.02, top, 12), cmap="Reds", alpha=alpha)
     ax.contour(gx, gy, level, levels=np.linspace(top * 0.05, top, 8), colors="darkred", linewidths=0.5)
     return filled
 
@@ -235,7 +254,7 @@ def proxies(plt: Any, *kinds: str) -> list[Any]:
     return out
 
 
-def colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
+def colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False, label: str = "threat level") -> None:
     if mappable is not None:
         fig.colorbar(
             mappable,
@@ -243,88 +262,9 @@ def colourbar(fig: Any, ax: Any, mappable: Any, geo: bool = False) -> None:
             orientation="horizontal",
             fraction=0.04,
             pad=0.11 if geo else 0.08,
-            label="threat level",
+            label=label,
             format="%.2g",
         )
-
-
-def frame(ax: Any, box: tuple[float, float, float, float], title: str, coords: Coords | None = None) -> bool:
-    """Limits, aspect, title and axes; returns whether the axes are lat/lon (with a metres axis too)."""
-    ax.set_xlim(box[0], box[1])
-    ax.set_ylim(box[2], box[3])
-    ax.set_aspect("equal")
-    ax.set_title(title, fontsize=10)
-    if coords is not None and coords.origin is not None and coords.geodetic:
-        _geo_ticks(ax, box, coords)
-        return True
-    ax.set_xlabel("x east (m)")
-    ax.set_ylabel("y north (m)")
-    return False
-
-
-def geo_ticks(
-    box: tuple[float, float, float, float], coords: Coords, n: int = 8
-) -> tuple[list[tuple[float, str]], list[tuple[float, str]]]:
-    """Longitude ticks along the bottom edge and latitude ticks along the left one, at round values.
-
-    Returns:
-        ``([(x_m, "15.630°E"), ...], [(y_m, "58.415°N"), ...])``: where each round
-        degree value crosses that edge, in local metres, and its label.
-    """
-    from matplotlib.ticker import MaxNLocator
-
-    origin = coords.origin
-    assert origin is not None
-    x0, x1, y0, y1 = box
-    lon_a, lon_b = origin.to_geodetic(x0, y0)[1], origin.to_geodetic(x1, y0)[1]
-    (lat_c, _), (lat_d, _) = origin.to_geodetic(x0, y0), origin.to_geodetic(x0, y1)
-
-    def rounded(lo: float, hi: float) -> list[float]:
-        return [
-            float(v) for v in MaxNLocator(n, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi) if lo <= v <= hi
-        ]
-
-    def decimals(values: list[float]) -> int:
-        step = min((b - a for a, b in itertools.pairwise(values)), default=1.0)
-        return max(0, min(6, -int(np.floor(np.log10(step))) if step > 0 else 6))
-
-    xs: list[tuple[float, str]] = []
-    lons = rounded(min(lon_a, lon_b), max(lon_a, lon_b))
-    d = decimals(lons)
-    for lon in lons:  # the x where the bottom edge (y = y0) meets this meridian: two fixed-point steps
-        x = x0 + (x1 - x0) * (lon - lon_a) / ((lon_b - lon_a) or 1.0)
-        for _ in range(3):
-            lat, _lon = origin.to_geodetic(x, y0)
-            x = origin.to_local(lat, lon)[0]
-        xs.append((x, f"{abs(lon):.{d}f}°{'E' if lon >= 0 else 'W'}"))
-    ys: list[tuple[float, str]] = []
-    lats = rounded(min(lat_c, lat_d), max(lat_c, lat_d))
-    d = decimals(lats)
-    for lat in lats:  # the y where the left edge (x = x0) meets this parallel
-        y = y0 + (y1 - y0) * (lat - lat_c) / ((lat_d - lat_c) or 1.0)
-        for _ in range(3):
-            _lat, lon = origin.to_geodetic(x0, y)
-            y = origin.to_local(lat, lon)[1]
-        ys.append((y, f"{abs(lat):.{d}f}°{'N' if lat >= 0 else 'S'}"))
-    return xs, ys
-
-
-def _geo_ticks(ax: Any, box: tuple[float, float, float, float], coords: Coords) -> None:
-    """Longitude and latitude on the bottom and left axes, metres from the origin on the top and right."""
-    xs, ys = geo_ticks(box, coords)
-    ax.set_xticks([x for x, _ in xs], [t for _, t in xs])
-    ax.set_yticks([y for y, _ in ys], [t for _, t in ys])
-    ax.tick_params(axis="x", labelsize=7)
-    ax.tick_params(axis="y", labelsize=7)
-    ax.set_xlabel("longitude (WGS-84)")
-    ax.set_ylabel("latitude (WGS-84)")
-    ax.grid(True, color="grey", alpha=0.25, linewidth=0.5)
-    top = ax.secondary_xaxis("top")
-    top.set_xlabel("metres east of the origin", fontsize=8)
-    top.tick_params(labelsize=7)
-    right = ax.secondary_yaxis("right")
-    right.set_ylabel("metres north of the origin", fontsize=8)
-    right.tick_params(labelsize=7)
 
 
 def _popup_marks(ax: Any, result: PlanResult) -> int:
@@ -354,10 +294,11 @@ def plot_plan(
     out: str | Path,
     coords: Coords | None = None,
     zones: Sequence[Zone] | None = None,
+    terrain: PlanTerrain | None = None,
 ) -> None:
     """``plan_figure`` written to the PNG ``out``."""
     plt = pyplot()
-    fig = plan_figure(scenario, result, coords, zones)
+    fig = plan_figure(scenario, result, coords, zones, terrain)
     try:
         save_png(fig, out, "--plot")
     finally:
@@ -365,13 +306,19 @@ def plot_plan(
 
 
 def plan_figure(
-    scenario: Scenario, result: PlanResult, coords: Coords | None = None, zones: Sequence[Zone] | None = None
+    scenario: Scenario,
+    result: PlanResult,
+    coords: Coords | None = None,
+    zones: Sequence[Zone] | None = None,
+    terrain: PlanTerrain | None = None,
 ) -> Any:
     """Threat contours (all threats, pop-ups included), keep-out zones, start, goal, the path, and where it stopped.
 
     Args:
-        zones: the zones the plan kept out of (the scenario's and ``--zones``); the scenario's when ``None``.
+        zones: the zones the plan kept out of (the scenario's, ``--zones`` and the terrain's barriers);
+            the scenario's and the terrain's when ``None``.
         coords: geodetic: the axes carry lat/lon ticks (and the metres on the top and right).
+        terrain: the ground it was planned over: drawn under it, and the threat level masked by sight.
 
     Returns:
         the matplotlib figure (the caller saves and closes it).
@@ -381,11 +328,30 @@ def plan_figure(
     schedule = scenario.schedule()
     threats = [s.threat for s in schedule]
     kept_out = list(scenario.zone_set() if zones is None else zones)
-    field = ThreatField(threats, intensity)  # type: ignore[arg-type]
+    if zones is None and terrain is not None:
+        kept_out += terrain.zones
+    barrier_ids = {z.id for z in terrain.zones} if terrain is not None else set()
+    barriers = [z for z in kept_out if z.id in barrier_ids]
+    kept_out = [z for z in kept_out if z.id not in barrier_ids]
+    sight = terrain.sight if terrain is not None else None
+    field = ThreatField(threats, intensity, sight=sight)  # type: ignore[arg-type]
     box = extent([scenario.start, scenario.goal, *result.path, *zone_corners(kept_out)], threats)
     fig, ax = plt.subplots(figsize=(8.6, 7.4), dpi=110)
-    mappable = contours(ax, field, box)
+    ground: list[Any] = []
+    if terrain is not None:
+        from pfp_service.render.terrain_layers import draw_terrain
+
+        ground = draw_terrain(ax, terrain, threats, intensity, box)
+    # over terrain, lighter, so the ground shows through the threat level
+    mappable = contours(ax, field, box, alpha=0.55 if terrain is None else 0.4)
     drawn = draw_zones(ax, kept_out)
+    if barriers and terrain is not None:
+        from matplotlib.patches import Patch
+
+        draw_zones(ax, barriers, BARRIER_STYLE, labelled=False)
+        unknown = " or unknown" if any(z.id.startswith("unknown-ground") for z in barriers) else ""
+        what = f"ground steeper than {terrain.unit.max_slope_deg:g}°{unknown} (no-go, {terrain.unit.kind})"
+        ground.append(Patch(**BARRIER_STYLE, label=what))
     known = [s.threat for s in schedule if s.appear_step == 0]
     threat_marks(ax, known, intensity)
     for s in schedule:
@@ -416,7 +382,8 @@ def plan_figure(
     handles[1].set_color("green")
     handles[2].set_color("black")
     geo = frame(ax, box, plan_title(scenario.name, result), coords)
-    legend(ax, handles, geo)
-    colourbar(fig, ax, mappable, geo)
+    legend(ax, handles + ground, geo)
+    level = "threat level" if terrain is None else "threat level, masked by line of sight"
+    colourbar(fig, ax, mappable, geo, label=level)
     fig.tight_layout()
     return fig

@@ -15,12 +15,12 @@ import numpy as np
 
 from pfp_service.coords import Coords
 from pfp_service.core.threat import ThreatField
+from pfp_service.render.geo_axes import frame
 from pfp_service.render.plots import (
     colourbar,
     contours,
     draw_zones,
     extent,
-    frame,
     legend,
     peak,
     proxies,
