@@ -98,3 +98,26 @@ def test_building_the_parser_imports_no_compiled_core():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip() == "", f"pfp's parser imports {r.stdout.strip()}"
+
+
+@pytest.mark.parametrize("raster", ["bomb.tif", "huge.tif"])
+@pytest.mark.parametrize(
+    "command", [["terrain", "info"], ["plan", "examples/terrain-jacksboro.yaml", "--terrain"]]
+)
+def test_a_hostile_raster_is_refused_within_200_mb(tmp_path: Path, raster, command):
+    """A decompression bomb (one deflated block of 8 M cells) or a raster 2 M cells a side: refused from
+    its header, before a cell is decoded, by `pfp terrain` and by a plan over it."""
+    from rasterio.transform import from_origin
+
+    from tests.test_terrain import _write
+
+    geo = {"crs": "EPSG:4326", "transform": from_origin(-84.0, 36.0, 0.001, 0.001)}
+    if raster == "bomb.tif":
+        p = _write(tmp_path / raster, width=8_000, height=1_000, blockysize=1_000, compress="deflate", **geo)
+    else:
+        p = _write(tmp_path / raster, width=2_000_000, height=2, tiled=True, sparse_ok=True, **geo)
+    mb, code, err = _peak(*command, str(p))
+    print(f"pfp {' '.join(command)} {raster}: exit {code}, {mb:.0f} MB")
+    assert code == 2, err[-2000:]
+    assert raster in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err[-2000:]
+    assert mb <= LIMIT_MB, f"{raster}: {mb:.0f} MB peak"
