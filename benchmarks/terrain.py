@@ -250,6 +250,9 @@ COST_REPEAT = 3  # a scenario's figure is the median of this many plans
 
 def _cost() -> dict[str, Any]:
     """Median compute of the seeded Jacksboro scenarios, blind and over terrain (``plan`` timed, warm)."""
+    root = str(Path(__file__).resolve().parents[1])  # the checkout these benchmarks came from
+    if sys.path[:1] != [root]:  # pfp may run from anywhere, and a dependency ships a `tests` package
+        sys.path.insert(0, root)
     try:  # by name: the tests are a checkout's, not the package's, and not type-checked with it
         terrain_data: Any = importlib.import_module("tests.terrain_data")
         scenario = importlib.import_module("tests.terrain_scenarios").scenario
@@ -304,7 +307,12 @@ MEMORY_SIGMA_M = 780.0  # a threat's reach (its term above 1e-9 of its peak) is 
 
 def _memory(cell_m: float) -> dict[str, float]:
     """``memory_child`` run in a fresh interpreter (the same one, the same path)."""
-    code = f"import json; from pfp_service.bench.terrain import memory_child; print(json.dumps(memory_child({cell_m!r})))"
+    # this module by its own name, from the checkout it was loaded from (wherever pfp ran)
+    root = str(Path(__file__).resolve().parents[1])
+    code = (
+        f"import json, sys; sys.path.insert(0, {root!r}); from {__name__} import memory_child; "
+        f"print(json.dumps(memory_child({cell_m!r})))"
+    )
     done = subprocess.run(
         [sys.executable, "-c", code], check=True, capture_output=True, text=True, timeout=600
     )
