@@ -119,11 +119,6 @@ def record(
             break
         if not answered:
             stop.wait(0.2)
-    say(
-        f"pfp record: mission {m!r} into {out}"
-        + (f", origin {origin.lat:g},{origin.lon:g}" if origin is not None else "")
-        + ("" if answered else " (no planner answered yet: no origin in the record)")
-    )
     stats = RecordStats()
     cpu0 = time.process_time()  # the whole process: zenoh's threads and the callbacks too
     with contextlib.closing(stream):
@@ -139,6 +134,13 @@ def record(
         ]
         coverage = Coverage()
         coverage.begin(_counted(session, m))  # nothing drained yet: every sample is counted after it
+        # said once the subscribers are declared and a query has gone to the router and back after
+        # them (``_counted``): whatever a member puts after reading this line is in the record
+        say(
+            f"pfp record: mission {m!r} into {out}"
+            + (f", origin {origin.lat:g},{origin.lon:g}" if origin is not None else "")
+            + ("" if answered else " (no planner answered yet: no origin in the record)")
+        )
 
         def drain() -> int:
             n = 0
