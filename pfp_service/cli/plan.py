@@ -177,6 +177,10 @@ def run(args: argparse.Namespace) -> int:
 
         check_geojson_path(args.geojson)
     read_text(args.scenario)  # a directory, binary, non-UTF-8 or huge file: one line naming it
+    if args.terrain is not None:  # its header first: the scenario's threats load the compiled core
+        from pfp_service.terrain.dem import check
+
+        check(args.terrain)
     scenario = load_scenario(args.scenario)
     for line in plausible.warnings(
         scenario.start,

@@ -12,18 +12,30 @@
 docs/terrain.md says what no-data and the DEM's edges mean.
 """
 
-from pfp_service.terrain.dem import Dem, DemInfo, info, read_dem
-from pfp_service.terrain.grid import TerrainGrid, place
-from pfp_service.terrain.viewshed import exact_lowest_visible_height, lowest_visible_height, visible
+from __future__ import annotations
 
-__all__ = [
-    "Dem",
-    "DemInfo",
-    "TerrainGrid",
-    "exact_lowest_visible_height",
-    "info",
-    "lowest_visible_height",
-    "place",
-    "read_dem",
-    "visible",
-]
+import importlib
+from typing import Any
+
+# loaded on first use: a command that reads (or refuses) a raster never imports the compiled
+# viewshed (numba, about 100 MB, and a compile on a fresh checkout), so a hostile file is refused
+# within the bounds table's memory (tests/test_light_commands.py)
+_WHERE = {
+    "Dem": "dem",
+    "DemInfo": "dem",
+    "info": "dem",
+    "read_dem": "dem",
+    "TerrainGrid": "grid",
+    "place": "grid",
+    "exact_lowest_visible_height": "viewshed",
+    "lowest_visible_height": "viewshed",
+    "visible": "viewshed",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)

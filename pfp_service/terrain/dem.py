@@ -35,7 +35,7 @@ import numpy as np
 from pfp_service.bounds import LIMITS
 from pfp_service.errors import InputError
 
-__all__ = ["DRIVERS", "FILL_CELLS", "Dem", "DemInfo", "info", "read_dem", "to_dem_crs", "write_mask"]
+__all__ = ["DRIVERS", "FILL_CELLS", "Dem", "DemInfo", "check", "info", "read_dem", "to_dem_crs", "write_mask"]
 
 DRIVERS = frozenset({"GTiff", "DTED", "SRTMHGT"})
 FILL_CELLS = 8  # a hole this far from known ground is interpolated; a wider one stays unknown
@@ -169,6 +169,16 @@ def _resolution_m(ds: Any) -> tuple[float, float]:
     o = Origin(lat=lat[0], lon=lon[0])
     xy = o.to_local_many(np.column_stack([lat, lon]))
     return float(np.hypot(*(xy[1] - xy[0]))), float(np.hypot(*(xy[2] - xy[0])))
+
+
+def check(path: str) -> None:
+    """Refuse ``path`` now if its header breaks a bound or it is no DEM (what ``read_dem`` would say), reading no cell.
+
+    Raises:
+        InputError: the file is not a DEM this module reads, or breaks a bound.
+    """
+    with _open(path):
+        pass
 
 
 def info(path: str) -> DemInfo:
