@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from typing import Any
 
 import numpy as np
 
@@ -106,6 +107,18 @@ class EscapeRun:
         self._said: tuple[StepStatus, str] | None = None  # the status and reason it gives (``said``)
         # ``left_to``'s answer at a cursor for a goal: it changes only when the cursor moves
         self._left: tuple[int, tuple[float, float] | None, float] = (-1, None, 0.0)
+
+    def __setstate__(self, state: tuple[dict[str, Any] | None, dict[str, Any]]) -> None:
+        """Unpickled (a route a deliberation worker found): its arrays read-only again, as made here.
+
+        numba compiles a kernel per argument type, and a writable array is another type than a
+        read-only one: a route from a worker would otherwise compile ``steer_step`` and
+        ``ahead_walk`` afresh, in the live loop, the first time one is steered.
+        """
+        for name, value in state[1].items():
+            object.__setattr__(self, name, value)
+        self.path.flags.writeable = False
+        self.segs.flags.writeable = False
 
     @classmethod
     def along(cls, name: str, corners: np.ndarray, step: float, to_goal: bool = False) -> EscapeRun:
