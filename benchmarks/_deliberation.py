@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from pfp_service.service.world import Outputs
+    from pfp_service.world.world import Outputs
 
 __all__ = ["STORM_UNITS", "TARGET_LOOKAHEAD_MS", "TARGET_WAVE_MS", "print_storm_and_wave", "storm_and_wave"]
 
@@ -48,8 +48,9 @@ def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) 
     """The storm's look-aheads and then the wave, on one world (see the module's docstring)."""
     from benchmarks._layout import layout
     from pfp_service.core.routes import ROUTES
-    from pfp_service.service import gcpause
-    from pfp_service.service.world import (
+    from pfp_service.node import gcpause
+    from pfp_service.wire import Goal, ThreatUpdate, UnitState
+    from pfp_service.world.world import (
         GoalSet,
         Input,
         StateReported,
@@ -58,7 +59,6 @@ def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) 
         World,
         WorldSettings,
     )
-    from pfp_service.wire import Goal, ThreatUpdate, UnitState
 
     lay = layout(units, STORM_THREATS, seed)
     w = World(WorldSettings(deliberation="deferred", unit_forget_s=None, unit_stale_s=1e9))

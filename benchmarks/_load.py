@@ -342,7 +342,7 @@ def echo_main(endpoint: str) -> None:
                 return
             counters["in"] += 1
             d = Direction(unit=uid, seq=msg.seq, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0))
-            session.put(  # the planner's QoS for directions (service/node.py)
+            session.put(  # the planner's QoS for directions (node/node.py)
                 keys.unit_direction(MISSION, uid),
                 encode(d),
                 encoding=jenc,

@@ -392,9 +392,9 @@ def world_tick(units: int, threats: int, box: float, repeat: int, seed: int = 11
     its last direction.  Jobs are not run: this is the reactive loop's cost.
     """
     from pfp_service.core import PlannerParams
-    from pfp_service.service import gcpause
-    from pfp_service.service.world import GoalSet, Input, StateReported, ThreatPut, World, WorldSettings
+    from pfp_service.node import gcpause
     from pfp_service.wire import Goal, UnitState
+    from pfp_service.world.world import GoalSet, Input, StateReported, ThreatPut, World, WorldSettings
 
     rng = np.random.default_rng(seed)
     world = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_forget_s=None))

@@ -125,10 +125,10 @@ def _drive_one(
 ) -> Outcome:
     from pfp_service.core import PlannerParams
     from pfp_service.core.metrics import exposure
-    from pfp_service.service.events import GoalSet, StateReported, ThreatPut
-    from pfp_service.service.preview import preview
-    from pfp_service.service.world import World, WorldSettings
     from pfp_service.wire import Goal, ThreatUpdate, UnitState
+    from pfp_service.world.events import GoalSet, StateReported, ThreatPut
+    from pfp_service.world.preview import preview
+    from pfp_service.world.world import World, WorldSettings
 
     w = World(WorldSettings(deliberation="deferred", planner=PlannerParams()))
     if family == "open":

@@ -19,7 +19,7 @@ import msgspec
 import pytest
 import zenoh
 
-from pfp_service.service.store import Store
+from pfp_service.node.store import Store
 from pfp_service.wire import keys
 from pfp_service.wire.delivery import Deliverer, WriteMark, decode_ack
 from tests.zenoh_util import client, planner_process

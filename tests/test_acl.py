@@ -347,8 +347,8 @@ def test_oversized_payloads_are_dropped_by_zenoh(router):
 
 # -- allowed: the real flows under the same config ------------------------------------------
 def test_a_real_planner_answers_a_unit_through_the_acl(router):
-    from pfp_service.service.config import ServeConfig
-    from pfp_service.service.node import PlannerNode
+    from pfp_service.node.config import ServeConfig
+    from pfp_service.node.node import PlannerNode
 
     with router.as_("planner") as ps:
         node = PlannerNode(ps, ServeConfig(mission=M, planner_id="planner", mode="client"))
@@ -396,8 +396,8 @@ def test_health_and_fleet_commands_connect_with_a_certificate_endpoint(router):
         pytest.skip(
             "usrpwd identities are tested in test_client_zenoh_config.py; here mutual TLS goes in the endpoint"
         )
-    from pfp_service.service.config import ServeConfig
-    from pfp_service.service.node import PlannerNode
+    from pfp_service.node.config import ServeConfig
+    from pfp_service.node.node import PlannerNode
 
     endpoints = dict(
         line.split(" ", 1) for line in (router.out / "endpoints.txt").read_text().splitlines() if line
@@ -466,7 +466,7 @@ def test_pfp_acl_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
 
 
 def test_no_unit_goals_leaves_goals_to_commanders():
-    from pfp_service.service.access import Mission, principals_for
+    from pfp_service.node.access import Mission, principals_for
 
     def goal_writers(own_goal: bool) -> set[str]:
         ps = principals_for(Mission("m", ("planner",), ("u1",), own_goal), {"commander": ("commander",)})

@@ -13,7 +13,7 @@ import pytest
 import zenoh
 
 from pfp_service.cli import main as pfp_main
-from pfp_service.service.config import TX_QUEUE_BATCHES, ServeConfig, zenoh_config
+from pfp_service.node.config import TX_QUEUE_BATCHES, ServeConfig, zenoh_config
 
 pytestmark = pytest.mark.unit
 

@@ -101,7 +101,7 @@ def _zones(p):
 
 
 def _toml(p):
-    from pfp_service.service.config import load_config
+    from pfp_service.node.config import load_config
 
     return load_config(p, {}, {})
 

@@ -100,9 +100,9 @@ def test_natural_sort_counts_numbers():
 def test_the_human_log_prints_values_in_lat_lon_and_json_keeps_numbers():
     import msgspec
 
-    from pfp_service.service.events import GoalSet, ThreatPut
-    from pfp_service.service.log import get_logger, log_changes, setup_logging
+    from pfp_service.node.log import get_logger, log_changes, setup_logging
     from pfp_service.wire.messages import ArrivedEvent, Goal, ReplanEvent, ThreatChange, ThreatUpdate
+    from pfp_service.world.events import GoalSet, ThreatPut
 
     changes = [
         ThreatPut("e1", ThreatUpdate(position=(300.0, 260.0), sigma_range=10.0, sigma_lateral=8.0)),

@@ -6,9 +6,9 @@ import heapq
 
 import pytest
 
-from pfp_service.service import deliberation
-from pfp_service.service.deliberation import SWEEP_MIN, Deliberators
-from pfp_service.service.events import Job
+from pfp_service.node import deliberation
+from pfp_service.node.deliberation import SWEEP_MIN, Deliberators
+from pfp_service.world.events import Job
 
 pytestmark = pytest.mark.unit
 

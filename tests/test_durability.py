@@ -18,8 +18,9 @@ import pytest
 import zenoh
 
 from pfp_service.core import PlannerParams
-from pfp_service.service.store import Store
-from pfp_service.service.world import (
+from pfp_service.node.store import Store
+from pfp_service.wire import Goal, ThreatUpdate, UnitState
+from pfp_service.world.world import (
     GoalCancelled,
     GoalSet,
     MissionRestored,
@@ -29,7 +30,6 @@ from pfp_service.service.world import (
     World,
     WorldSettings,
 )
-from pfp_service.wire import Goal, ThreatUpdate, UnitState
 from tests.zenoh_util import ROOT, Inbox, client, free_port, put_json, wait_for_planner
 
 pytestmark = pytest.mark.proc

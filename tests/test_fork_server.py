@@ -20,9 +20,9 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 # a planner stand-in: it forks the zygote, runs a pool on it, reports, then waits to be killed
 _SCRIPT = r"""
 import gc, json, math, queue, sys, time
-from pfp_service.service.forkserver import ForkServer, install_fork_server
-from pfp_service.service.tasks import Task
-from pfp_service.service.workers import WorkerPool
+from pfp_service.node.forkserver import ForkServer, install_fork_server
+from pfp_service.node.tasks import Task
+from pfp_service.node.workers import WorkerPool
 
 gc.freeze()
 server = ForkServer.start()

@@ -344,7 +344,7 @@ def test_team_and_inject_files_take_lat_lon(tmp_path):
 
 @pytest.mark.unit
 def test_serve_config_takes_an_origin_from_file_env_and_flag(tmp_path):
-    from pfp_service.service.config import load_config
+    from pfp_service.node.config import load_config
 
     toml = tmp_path / "serve.toml"
     toml.write_text("origin = { lat = 58.41, lon = 15.62, alt = 90 }\n")
@@ -381,7 +381,7 @@ def test_with_geodetic_without_a_position_uses_the_first_lookahead_point():
 @pytest.mark.unit
 def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres():
     """Through the wire decoders and the world (the node passes ``cfg.origin`` to the decoders)."""
-    from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+    from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
 
     o = ORIGINS[0]
 
@@ -417,7 +417,7 @@ def test_a_live_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metr
 
 @pytest.mark.unit
 def test_serve_config_bounds_may_be_lat_lon_corners(tmp_path):
-    from pfp_service.service.config import load_config
+    from pfp_service.node.config import load_config
 
     o = Origin(lat=58.41, lon=15.62)
     (a, b), (c, d) = o.to_geodetic(-500.0, -400.0), o.to_geodetic(800.0, 900.0)

@@ -505,7 +505,7 @@ def _stop(proc) -> None:
 def test_starts_with_the_router_down_and_resends_its_goal_to_a_restarted_planner(tmp_path: Path):
     from pfp_clients.handheld_link import RetryingLink
 
-    from pfp_service.service.config import client_zenoh_config
+    from pfp_service.node.config import client_zenoh_config
 
     mission, uid = "r" + uuid.uuid4().hex[:10], "late"
     endpoint = f"tcp/127.0.0.1:{free_port()}"

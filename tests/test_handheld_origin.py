@@ -19,7 +19,7 @@ from pfp_clients.handheld_link import OriginChecked, RetryingLink
 from pfp_clients.handheld_model import HandheldModel, Settings
 from pfp_clients.nmea import LocalFrame
 
-from pfp_service.service.config import client_zenoh_config
+from pfp_service.node.config import client_zenoh_config
 from pfp_service.wire import UnitState, keys
 from tests.zenoh_util import Inbox, client, planner_process
 

@@ -1,12 +1,12 @@
-"""The node's intake (service/intake.py): inputs in order, states latest-wins, bounded, sliced per tick."""
+"""The node's intake (world/intake.py): inputs in order, states latest-wins, bounded, sliced per tick."""
 
 from __future__ import annotations
 
 import pytest
 
-from pfp_service.service.events import Deliberated, GoalCancelled, Tick
-from pfp_service.service.intake import Intake
 from pfp_service.wire import UnitState
+from pfp_service.world.events import Deliberated, GoalCancelled, Tick
+from pfp_service.world.intake import Intake
 
 pytestmark = pytest.mark.unit
 

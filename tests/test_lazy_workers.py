@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from pfp_service.service.tasks import Outcome, Task
-from pfp_service.service.workers import WorkerPool
+from pfp_service.node.tasks import Outcome, Task
+from pfp_service.node.workers import WorkerPool
 
 
 def _wait_for(cond, timeout_s: float = 60.0) -> None:  # type: ignore[no-untyped-def]

@@ -10,7 +10,7 @@ import os
 import pytest
 import zenoh
 
-from pfp_service.service.loopstats import LoopTrace, demote_native_threads
+from pfp_service.node.loopstats import LoopTrace, demote_native_threads
 
 
 class _Clock:

@@ -48,8 +48,8 @@ def _state(url: str) -> dict:
 
 @pytest.mark.proc
 def test_the_map_as_injector_sees_the_unit_and_edits_through_the_acl(acl):
-    from pfp_service.service.config import ServeConfig
-    from pfp_service.service.node import PlannerNode
+    from pfp_service.node.config import ServeConfig
+    from pfp_service.node.node import PlannerNode
 
     planner = _as(acl, "planner")
     unit = _as(acl, "unit-u1")

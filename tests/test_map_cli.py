@@ -189,7 +189,7 @@ def test_the_map_embeds_in_another_program_on_its_own_thread(router):
     from pfp_clients.map.embed import MapThread
     from pfp_clients.map.server import MapOptions
 
-    from pfp_service.service.config import client_zenoh_config
+    from pfp_service.node.config import client_zenoh_config
 
     mission = "emb" + uuid.uuid4().hex[:8]
     with (
@@ -211,7 +211,7 @@ def test_an_embedded_map_that_cannot_start_raises_in_the_caller():
     from pfp_clients.map.embed import MapThread
     from pfp_clients.map.server import MapOptions
 
-    from pfp_service.service.config import client_zenoh_config
+    from pfp_service.node.config import client_zenoh_config
 
     with pytest.raises(Exception, match=r"(?i)connect|unable"):
         # a generous wait: on a loaded machine the failure to connect, not a timeout, must be what comes back

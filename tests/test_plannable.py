@@ -18,8 +18,8 @@ from pfp_service.constraints import Delta, Step, Tolerance, flag_type, reach_pro
 from pfp_service.core import PlannerParams, resolve
 from pfp_service.core.params import MAX_ITER_DERIVED, reach
 from pfp_service.errors import InputError
+from pfp_service.node.config import load_config
 from pfp_service.scenario import decode_scenario
-from pfp_service.service.config import load_config
 from pfp_service.wire import decode_goal, decode_preview_request
 from tests.conftest import run_pfp
 

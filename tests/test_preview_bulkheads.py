@@ -29,12 +29,12 @@ import pytest
 from pfp_service.core import ThreatField
 from pfp_service.core.metrics import MEASURE_CHUNK, Epoch, measure
 from pfp_service.errors import DeadlinePassed, InputError
-from pfp_service.service.events import GoalSet, StateReported, ThreatPut, WorldSettings
-from pfp_service.service.preview import MAX_PREVIEW_WHATIFS, admit, preview
-from pfp_service.service.tasks import Outcome, Task
-from pfp_service.service.workers import WorkerPool
-from pfp_service.service.world import World
+from pfp_service.node.tasks import Outcome, Task
+from pfp_service.node.workers import WorkerPool
 from pfp_service.wire import Goal, ThreatUpdate, UnitState, decode_preview_request, keys
+from pfp_service.world.events import GoalSet, StateReported, ThreatPut, WorldSettings
+from pfp_service.world.preview import MAX_PREVIEW_WHATIFS, admit, preview
+from pfp_service.world.world import World
 from tests.conftest import ROOT
 from tests.zenoh_util import client, free_port, planner_process, wait_for_planner
 

@@ -11,9 +11,9 @@ import pytest
 
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.service.events import GoalSet
-from pfp_service.service.store import Store
+from pfp_service.node.store import Store
 from pfp_service.wire import Goal, decode_goal, decode_threat, decode_unit_state
+from pfp_service.world.events import GoalSet
 
 pytestmark = pytest.mark.unit
 ORIGIN = Origin(lat=58.4105, lon=15.6213)

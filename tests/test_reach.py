@@ -14,10 +14,10 @@ from pfp_clients.sim import SimUnit
 from shapely.geometry import LineString, Point, Polygon
 
 from pfp_service.core import PlannerParams
-from pfp_service.service.world import GoalSet, StateReported, Tick, World, WorldSettings, ZonePut
 from pfp_service.team import UnitSpec
 from pfp_service.wire import Goal, UnitState
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world.world import GoalSet, StateReported, Tick, World, WorldSettings, ZonePut
 
 pytestmark = pytest.mark.unit
 

@@ -18,10 +18,10 @@ import pytest
 
 from benchmarks import vehicles
 from pfp_service.core import tracking
-from pfp_service.service.events import GoalSet, StateReported
-from pfp_service.service.progress import ProgressWatch
-from pfp_service.service.world import World, WorldSettings
 from pfp_service.wire import DirectionStatus, Goal, Progress, UnitState
+from pfp_service.world.events import GoalSet, StateReported
+from pfp_service.world.progress import ProgressWatch
+from pfp_service.world.world import World, WorldSettings
 from tests.conftest import run_pfp
 from tests.zenoh_util import planner_process
 

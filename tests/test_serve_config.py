@@ -13,7 +13,7 @@ import pytest
 import zenoh
 
 from pfp_service.errors import InputError
-from pfp_service.service.config import DEFAULT_LISTEN, load_config, zenoh_config
+from pfp_service.node.config import DEFAULT_LISTEN, load_config, zenoh_config
 from tests.conftest import ROOT, run_pfp
 from tests.test_serve import Unit
 from tests.zenoh_util import client, free_port, put_json, wait_for_planner

@@ -27,9 +27,9 @@ import shapely
 from pfp_service.core.zones import Zone
 from pfp_service.geo import Origin
 from pfp_service.geojson import zones_from_geojson
-from pfp_service.service.events import zone_put
 from pfp_service.wire import encode, keys
 from pfp_service.wire.messages import decode_zone
+from pfp_service.world.events import zone_put
 from tests.zenoh_util import ROOT, Inbox, client, planner_process, put_in_force
 
 ORIGIN = Origin(lat=58.4105, lon=15.6213, alt=87.5)

@@ -217,8 +217,8 @@ def test_nearest_open_node_is_the_nearest_of_all_open_nodes():
 
 
 def test_a_platoons_deliberation_jobs_in_the_world_share_one_route_search():
-    from pfp_service.service.world import GoalSet, Input, StateReported, ThreatPut, World, WorldSettings
     from pfp_service.wire import Goal, ThreatUpdate, UnitState
+    from pfp_service.world.world import GoalSet, Input, StateReported, ThreatPut, World, WorldSettings
 
     world = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_forget_s=None))
     puts: list[Input] = [

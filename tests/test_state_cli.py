@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from pfp_service.service.store import Store
-from pfp_service.service.world import GoalSet, ThreatPut
+from pfp_service.node.store import Store
 from pfp_service.wire import Goal, ThreatUpdate
+from pfp_service.world.world import GoalSet, ThreatPut
 from tests.zenoh_util import ROOT, free_port, wait_for_planner
 
 pytestmark = pytest.mark.proc

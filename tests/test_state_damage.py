@@ -20,10 +20,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from pfp_service.service.statefile import state_files
-from pfp_service.service.store import Store
-from pfp_service.service.world import GoalSet, InputRejected, MissionRestored, ThreatPut
+from pfp_service.node.statefile import state_files
+from pfp_service.node.store import Store
 from pfp_service.wire import Goal, ThreatUpdate
+from pfp_service.world.world import GoalSet, InputRejected, MissionRestored, ThreatPut
 from tests.zenoh_util import ROOT, Inbox, client, free_port, wait_for_planner
 
 T = dict(facing_deg=225.0, sigma_range=1.0, sigma_lateral=0.7, skew=2.0)

@@ -8,9 +8,9 @@ import pytest
 
 from pfp_service.core.stepper import Advice, StepStatus
 from pfp_service.errors import FINITE_LIMIT
-from pfp_service.service import steering
-from pfp_service.service.world_records import UnitRecord
 from pfp_service.wire import DirectionStatus
+from pfp_service.world import steering
+from pfp_service.world.world_records import UnitRecord
 
 pytestmark = pytest.mark.unit
 

@@ -158,8 +158,8 @@ def test_route_ahead_is_what_a_ghost_walks():
     """The compiled look-ahead along a committed route gives a ghost's own track, point for point."""
     from benchmarks.service import layout
     from pfp_service.core.plan import walk_many
-    from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
     from pfp_service.wire import Goal, UnitState
+    from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
 
     n = 40
     lay = layout(n, 100, 7)

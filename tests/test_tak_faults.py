@@ -267,6 +267,6 @@ def test_pfp_state_clear_knows_the_tombstone_file_by_the_bridges_own_name():
     """``pfp state clear`` removes the bridge's tombstones with the mission's state (pfp_service names the file)."""
     from pfp_clients.tak.tombfile import FILE_NAME
 
-    from pfp_service.service.statefile import COMPANION_NAMES
+    from pfp_service.node.statefile import COMPANION_NAMES
 
     assert FILE_NAME in COMPANION_NAMES

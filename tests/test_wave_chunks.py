@@ -7,8 +7,9 @@ import copy
 import pytest
 
 from pfp_service.core import PlannerParams
-from pfp_service.service import world as world_mod
-from pfp_service.service.world import (
+from pfp_service.wire import Goal, ThreatUpdate, UnitState
+from pfp_service.world import world as world_mod
+from pfp_service.world.world import (
     GoalSet,
     Outputs,
     StateReported,
@@ -18,7 +19,6 @@ from pfp_service.service.world import (
     World,
     WorldSettings,
 )
-from pfp_service.wire import Goal, ThreatUpdate, UnitState
 
 pytestmark = pytest.mark.unit
 

@@ -7,8 +7,8 @@ import pytest
 
 from pfp_service.core import ThreatField
 from pfp_service.core.cull import MIN_THREATS
-from pfp_service.service.world_records import Records, ThreatRecord
 from pfp_service.wire import ThreatUpdate
+from pfp_service.world.world_records import Records, ThreatRecord
 
 pytestmark = pytest.mark.unit
 

@@ -7,9 +7,9 @@ import copy
 import pytest
 
 from pfp_service.core import PlannerParams
-from pfp_service.service import world as world_mod
-from pfp_service.service.world import GoalSet, StateReported, ThreatPut, Tick, World, WorldSettings
 from pfp_service.wire import Goal, ThreatUpdate, UnitState
+from pfp_service.world import world as world_mod
+from pfp_service.world.world import GoalSet, StateReported, ThreatPut, Tick, World, WorldSettings
 
 pytestmark = pytest.mark.unit
 

@@ -10,9 +10,9 @@ import weakref
 import pytest
 
 from pfp_service.core import PlannerParams
-from pfp_service.service import gcpause
-from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+from pfp_service.node import gcpause
 from pfp_service.wire import Goal, ThreatUpdate, UnitState
+from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
 
 pytestmark = pytest.mark.unit
 

@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from pfp_service.service.world import WAVE_FIRST
 from pfp_service.wire import keys
+from pfp_service.world.world import WAVE_FIRST
 from tests.zenoh_util import Inbox, client, planner_process, put_in_force, put_json
 
 pytestmark = pytest.mark.proc

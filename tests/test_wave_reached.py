@@ -10,9 +10,9 @@ import pytest
 from pfp_service.core import PlannerParams, Stepper, resolve
 from pfp_service.core.cull import corridors_meet, influence_boxes
 from pfp_service.core.threat import ThreatField
-from pfp_service.service import steering
-from pfp_service.service.world_records import Records
 from pfp_service.wire import ThreatUpdate
+from pfp_service.world import steering
+from pfp_service.world.world_records import Records
 
 pytestmark = pytest.mark.unit
 

@@ -9,21 +9,6 @@ import pytest
 
 from pfp_service.core import PlannerParams
 from pfp_service.errors import InputError
-from pfp_service.service.preview import fit_reply, preview
-from pfp_service.service.world import (
-    Deliberated,
-    GoalCancelled,
-    GoalSet,
-    InputRejected,
-    PeerPlanner,
-    StateReported,
-    ThreatPut,
-    ThreatRemoved,
-    Tick,
-    TokenChanged,
-    World,
-    WorldSettings,
-)
 from pfp_service.wire import (
     ArrivedEvent,
     DirectionStatus,
@@ -43,6 +28,21 @@ from pfp_service.wire import (
     decode_world_snapshot,
     encode,
     keys,
+)
+from pfp_service.world.preview import fit_reply, preview
+from pfp_service.world.world import (
+    Deliberated,
+    GoalCancelled,
+    GoalSet,
+    InputRejected,
+    PeerPlanner,
+    StateReported,
+    ThreatPut,
+    ThreatRemoved,
+    Tick,
+    TokenChanged,
+    World,
+    WorldSettings,
 )
 
 pytestmark = pytest.mark.unit

@@ -14,17 +14,6 @@ import pytest
 
 from pfp_service.core import PlannerParams, Resolved
 from pfp_service.errors import InputError
-from pfp_service.service.world import (
-    Deliberated,
-    GoalSet,
-    InputRejected,
-    MissionRestored,
-    StateReported,
-    ThreatPut,
-    Tick,
-    World,
-    WorldSettings,
-)
 from pfp_service.wire import (
     ArrivedEvent,
     DirectionStatus,
@@ -38,6 +27,17 @@ from pfp_service.wire import (
     decode_goal,
     encode,
     keys,
+)
+from pfp_service.world.world import (
+    Deliberated,
+    GoalSet,
+    InputRejected,
+    MissionRestored,
+    StateReported,
+    ThreatPut,
+    Tick,
+    World,
+    WorldSettings,
 )
 
 pytestmark = pytest.mark.unit

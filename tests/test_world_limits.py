@@ -1,11 +1,11 @@
-"""The world's limits (service/limits.py): rejections paced per kind of key, faults logged once a minute per key."""
+"""The world's limits (world/limits.py): rejections paced per kind of key, faults logged once a minute per key."""
 
 from __future__ import annotations
 
 import pytest
 
-from pfp_service.service.limits import ANY_KEY, FAULT_KEYS_MAX, FAULT_LOG_S, REJECTS_PER_S, Limits
 from pfp_service.wire import keys
+from pfp_service.world.limits import ANY_KEY, FAULT_KEYS_MAX, FAULT_LOG_S, REJECTS_PER_S, Limits
 
 pytestmark = pytest.mark.unit
 
@@ -55,8 +55,8 @@ def test_counts_name_the_figures_of_the_status_reply():
 
 
 def test_the_node_shed_and_the_world_refused_are_one_overload_count():
-    from pfp_service.service.world import GoalSet, Tick, World, WorldSettings
     from pfp_service.wire import Goal
+    from pfp_service.world.world import GoalSet, Tick, World, WorldSettings
 
     w = World(WorldSettings(max_units=1))
     w.apply([GoalSet("a", Goal(position=(1.0, 1.0))), GoalSet("b", Goal(position=(1.0, 1.0)))], 0.0)

@@ -1,15 +1,15 @@
-"""Liveness (service/liveness.py): silence and a token gone make a unit stale, stale long enough it is forgotten,
+"""Liveness (world/liveness.py): silence and a token gone make a unit stale, stale long enough it is forgotten,
 and a push is sent again until the unit's next report."""
 
 from __future__ import annotations
 
 import pytest
 
-from pfp_service.service.events import Outputs, WorldSettings
-from pfp_service.service.liveness import Liveness
-from pfp_service.service.timers import Timers
-from pfp_service.service.world_records import Records
 from pfp_service.wire import Direction, DirectionStatus, ForgottenEvent, StaleEvent, UnitState
+from pfp_service.world.events import Outputs, WorldSettings
+from pfp_service.world.liveness import Liveness
+from pfp_service.world.timers import Timers
+from pfp_service.world.world_records import Records
 
 pytestmark = pytest.mark.unit
 

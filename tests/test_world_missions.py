@@ -1,4 +1,4 @@
-"""A unit's mission (service/missions.py): fixed where the unit is, kept when shared for the same goal, refused as a value."""
+"""A unit's mission (world/missions.py): fixed where the unit is, kept when shared for the same goal, refused as a value."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import pytest
 
 from pfp_service.core import PlannerParams, ThreatField, resolve
 from pfp_service.errors import InputError
-from pfp_service.service import missions
-from pfp_service.service.events import MissionRecord, WorldSettings
-from pfp_service.service.world_records import Records
 from pfp_service.wire import Goal
+from pfp_service.world import missions
+from pfp_service.world.events import MissionRecord, WorldSettings
+from pfp_service.world.world_records import Records
 
 pytestmark = pytest.mark.unit
 

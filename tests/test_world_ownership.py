@@ -1,11 +1,11 @@
-"""Cluster ownership (service/ownership.py): rendezvous hashing over the live planners, and the peers' debounce."""
+"""Cluster ownership (world/ownership.py): rendezvous hashing over the live planners, and the peers' debounce."""
 
 from __future__ import annotations
 
 import pytest
 
-from pfp_service.service.ownership import Ownership, rendezvous_weight, shard_owners
 from pfp_service.wire import keys
+from pfp_service.world.ownership import Ownership, rendezvous_weight, shard_owners
 
 pytestmark = pytest.mark.unit
 
@@ -92,7 +92,7 @@ def test_an_unknown_planner_going_starts_no_debounce():
 
 
 def test_a_preview_is_answered_by_the_units_owner_alone():
-    from pfp_service.service.world import PeerPlanner, World, WorldSettings
+    from pfp_service.world.world import PeerPlanner, World, WorldSettings
 
     worlds = {p: World(WorldSettings(planner_id=p, cluster=True)) for p in ("p0", "p1")}
     for me, w in worlds.items():

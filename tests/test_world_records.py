@@ -1,13 +1,13 @@
-"""The world's records (service/world_records.py): units and threats, the counts kept with them, the field."""
+"""The world's records (world/world_records.py): units and threats, the counts kept with them, the field."""
 
 from __future__ import annotations
 
 import pytest
 
 from pfp_service.core import Stepper
-from pfp_service.service.events import Job
-from pfp_service.service.world_records import Records, ThreatRecord
 from pfp_service.wire import DirectionStatus, Goal, ThreatUpdate
+from pfp_service.world.events import Job
+from pfp_service.world.world_records import Records, ThreatRecord
 
 pytestmark = pytest.mark.unit
 

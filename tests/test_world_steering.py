@@ -1,4 +1,4 @@
-"""The reactive step (service/steering.py) and its look-ahead (service/lookahead.py): one batch, bulkheads per unit."""
+"""The reactive step (world/steering.py) and its look-ahead (world/lookahead.py): one batch, bulkheads per unit."""
 
 from __future__ import annotations
 
@@ -11,9 +11,6 @@ from pfp_service.core.stepper import Advice
 from pfp_service.core.tracking import Route
 from pfp_service.errors import FINITE_LIMIT
 from pfp_service.geo import Origin
-from pfp_service.service import steering
-from pfp_service.service.lookahead import lookahead, within_map
-from pfp_service.service.world_records import Records, UnitRecord
 from pfp_service.wire import (
     ArrivedEvent,
     Direction,
@@ -22,6 +19,9 @@ from pfp_service.wire import (
     ThreatUpdate,
     TrappedEvent,
 )
+from pfp_service.world import steering
+from pfp_service.world.lookahead import lookahead, within_map
+from pfp_service.world.world_records import Records, UnitRecord
 
 pytestmark = pytest.mark.unit
 

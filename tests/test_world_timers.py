@@ -1,4 +1,4 @@
-"""The world's timer heap (service/timers.py): due in time order, stable for ties, set while draining."""
+"""The world's timer heap (world/timers.py): due in time order, stable for ties, set while draining."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pfp_service.service.timers import Timers
+from pfp_service.world.timers import Timers
 
 pytestmark = pytest.mark.unit
 

@@ -28,8 +28,21 @@ from hypothesis import strategies as st
 from pfp_service.core import PlannerParams, Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.service.events import mission_message
-from pfp_service.service.world import (
+from pfp_service.wire import (
+    Goal,
+    Mission,
+    MissionParams,
+    ThreatUpdate,
+    UnitKind,
+    UnitState,
+    decode_direction,
+    decode_event,
+    decode_mission,
+    encode,
+)
+from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+from pfp_service.world.events import mission_message
+from pfp_service.world.world import (
     Deliberated,
     GoalCancelled,
     GoalSet,
@@ -47,19 +60,6 @@ from pfp_service.service.world import (
     ZonePut,
     ZoneRemoved,
 )
-from pfp_service.wire import (
-    Goal,
-    Mission,
-    MissionParams,
-    ThreatUpdate,
-    UnitKind,
-    UnitState,
-    decode_direction,
-    decode_event,
-    decode_mission,
-    encode,
-)
-from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
 from tests.hypothesis_profiles import profiled
 
 pytestmark = pytest.mark.unit

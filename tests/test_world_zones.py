@@ -7,18 +7,7 @@ import numpy as np
 import pytest
 
 from pfp_service.core import PlannerParams
-from pfp_service.service.events import inputs_from_snapshot
-from pfp_service.service.preview import preview
-from pfp_service.service.store import Store
-from pfp_service.service.world import (
-    GoalSet,
-    StateReported,
-    Tick,
-    World,
-    WorldSettings,
-    ZonePut,
-    ZoneRemoved,
-)
+from pfp_service.node.store import Store
 from pfp_service.wire import (
     Goal,
     RejectedEvent,
@@ -29,6 +18,17 @@ from pfp_service.wire import (
     encode,
 )
 from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+from pfp_service.world.events import inputs_from_snapshot
+from pfp_service.world.preview import preview
+from pfp_service.world.world import (
+    GoalSet,
+    StateReported,
+    Tick,
+    World,
+    WorldSettings,
+    ZonePut,
+    ZoneRemoved,
+)
 
 pytestmark = pytest.mark.unit
 
@@ -144,7 +144,7 @@ def test_the_log_says_each_zone_put_and_removed_in_one_line():
     import io
     import logging
 
-    from pfp_service.service.log import get_logger, log_changes, setup_logging
+    from pfp_service.node.log import get_logger, log_changes, setup_logging
 
     setup_logging("human", "info")
     out = io.StringIO()
@@ -168,7 +168,7 @@ def test_a_zone_change_keeps_the_threats_field_and_a_threat_change_keeps_the_zon
     w.apply(
         [StateReported("a", UnitState(position=(0.0, 0.0))), GoalSet("a", Goal(position=(100.0, 0.0)))], 0.0
     )
-    from pfp_service.service.world import ThreatPut
+    from pfp_service.world.world import ThreatPut
 
     w.apply([ThreatPut("t", threat)], 0.0)
     before = w.field

@@ -6,8 +6,7 @@ import pytest
 
 from pfp_service.core import PlannerParams
 from pfp_service.errors import InputError
-from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
-from pfp_service.service.worldpages import answer_world, fetch_world, whole_world
+from pfp_service.node.worldpages import answer_world, fetch_world, whole_world
 from pfp_service.wire import (
     MAX_PAYLOAD_BYTES,
     Goal,
@@ -20,6 +19,7 @@ from pfp_service.wire import (
     encode,
     keys,
 )
+from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
 
 pytestmark = pytest.mark.unit
 

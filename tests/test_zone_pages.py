@@ -13,9 +13,7 @@ import pytest
 
 from pfp_service.core import PlannerParams
 from pfp_service.errors import InputError
-from pfp_service.service.events import ZonePut, ZoneRemoved
-from pfp_service.service.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
-from pfp_service.service.worldpages import fetch_world, whole_world
+from pfp_service.node.worldpages import fetch_world, whole_world
 from pfp_service.wire import (
     MAX_PAYLOAD_BYTES,
     Goal,
@@ -28,6 +26,8 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import SNAPSHOT_PAGE_BYTES, ZoneCircle, ZoneUpdate
+from pfp_service.world.events import ZonePut, ZoneRemoved
+from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
 
 pytestmark = pytest.mark.unit
 

@@ -19,7 +19,7 @@ import uuid
 import pytest
 import zenoh
 
-from pfp_service.service.worldpages import whole_world
+from pfp_service.node.worldpages import whole_world
 from pfp_service.wire import decode_event, decode_planner_status, decode_world_snapshot, keys
 from tests.test_zones_durable import _planner, _router, _stop
 from tests.zenoh_util import client, free_port, put_in_force

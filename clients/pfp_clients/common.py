@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from pfp_service.errors import Unreachable, map_zenoh_errors
-from pfp_service.service.config import DEFAULT_CONNECT, client_zenoh_config
+from pfp_service.node.config import DEFAULT_CONNECT, client_zenoh_config
 
 __all__ = [
     "DEFAULT_CONNECT",

@@ -163,9 +163,9 @@ def run_demo(opts: DemoOptions, say_line: Any = print, stop: threading.Event | N
             say_line(text)
 
     from pfp_clients.common import client_config, open_session
-    from pfp_service.service.config import ServeConfig, zenoh_config
-    from pfp_service.service.log import setup_logging
-    from pfp_service.service.node import PlannerNode
+    from pfp_service.node.config import ServeConfig, zenoh_config
+    from pfp_service.node.log import setup_logging
+    from pfp_service.node.node import PlannerNode
 
     wall0 = time.monotonic()
     team = load_team(opts.team)

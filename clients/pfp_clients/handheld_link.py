@@ -36,7 +36,7 @@ import zenoh
 from pfp_clients.frames import judge_origin, learn_planner_origin
 from pfp_service.errors import InputError, ZenohError, map_zenoh_errors
 from pfp_service.geo import Origin
-from pfp_service.service.config import client_zenoh_config
+from pfp_service.node.config import client_zenoh_config
 from pfp_service.wire import (
     Direction,
     Goal,

@@ -21,7 +21,7 @@ from pfp_service.argtypes import (  # the commands take their flag types from he
     positive_float,
     positive_int,
 )
-from pfp_service.service.config import DEFAULT_CONNECT, DEFAULT_LISTEN
+from pfp_service.node.config import DEFAULT_CONNECT, DEFAULT_LISTEN
 
 __all__ = [
     "MAX_CELLS",
@@ -123,7 +123,7 @@ def session_config(args: argparse.Namespace) -> Any:
     Raises:
         ZenohError: naming ``--zenoh-config`` (unreadable or invalid), ``--connect`` or ``--listen``.
     """
-    from pfp_service.service.config import client_zenoh_config
+    from pfp_service.node.config import client_zenoh_config
 
     return client_zenoh_config(
         args.connect, mode=args.mode, listen=args.listen, file=getattr(args, "zenoh_config", None)

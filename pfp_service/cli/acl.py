@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from pfp_service.errors import InputError
-from pfp_service.service.access import (  # the rules; this command writes them out
+from pfp_service.node.access import (  # the rules; this command writes them out
     DEFAULT_PRINCIPALS,
     ROLES,
     Mission,

@@ -214,8 +214,8 @@ _FLAG_KEYS = [
 
 
 def run(args: argparse.Namespace) -> int:
-    from pfp_service.service.config import load_config
-    from pfp_service.service.run import serve
+    from pfp_service.node.config import load_config
+    from pfp_service.node.run import serve
 
     flags = {k: getattr(args, k) for k in _FLAG_KEYS}
     cfg = load_config(args.config, os.environ, flags)

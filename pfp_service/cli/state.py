@@ -54,7 +54,7 @@ def register(sub: Any) -> None:
 def _where(args: argparse.Namespace, mission: str | None) -> tuple[Path, bool]:
     """The state directory serve would use, and whether it was named (flag, env, file) or derived."""
     from pfp_service.errors import InputError
-    from pfp_service.service.config import load_config
+    from pfp_service.node.config import load_config
 
     flags = {"mission": mission, "state_dir": args.state_dir}
     cfg = load_config(args.config, os.environ, flags)
@@ -71,7 +71,7 @@ def _where(args: argparse.Namespace, mission: str | None) -> tuple[Path, bool]:
 
 
 def _row(mission: str, directory: Path) -> dict[str, Any]:
-    from pfp_service.service.statefile import in_use, state_files
+    from pfp_service.node.statefile import in_use, state_files
 
     sf = state_files(directory)
     return {
@@ -89,8 +89,8 @@ def _row(mission: str, directory: Path) -> dict[str, Any]:
 
 
 def run_list(args: argparse.Namespace) -> int:
-    from pfp_service.service.config import default_state_dir
-    from pfp_service.service.statefile import DB_NAME
+    from pfp_service.node.config import default_state_dir
+    from pfp_service.node.statefile import DB_NAME
 
     if args.mission is not None or args.state_dir is not None:
         directory, _named = _where(args, args.mission)
@@ -127,7 +127,7 @@ def run_list(args: argparse.Namespace) -> int:
 
 def run_clear(args: argparse.Namespace) -> int:
     from pfp_service.errors import InputError
-    from pfp_service.service.statefile import clear
+    from pfp_service.node.statefile import clear
 
     mission = args.mission or "default"
     directory, _named = _where(args, args.mission)

@@ -173,7 +173,7 @@ def _whole(session: Any, args: argparse.Namespace, first: Any) -> Any:
     """Every page of one planner's world after ``first``; a line on stderr if it stopped short."""
     import sys
 
-    from pfp_service.service.worldpages import whole_world
+    from pfp_service.node.worldpages import whole_world
 
     def ask(selector: str, timeout_s: float) -> list[bytes]:
         return [r.ok.payload.to_bytes() for r in session.get(selector, timeout=timeout_s) if r.ok is not None]

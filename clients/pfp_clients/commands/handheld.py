@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.handheld_model import HandheldModel, Settings
     from pfp_clients.nmea import LocalFrame
     from pfp_clients.nmea_feed import NmeaReader, open_nmea
-    from pfp_service.service.config import DEFAULT_CONNECT
+    from pfp_service.node.config import DEFAULT_CONNECT
     from pfp_service.signals import SignalStop
 
     gps = args.nmea is not None

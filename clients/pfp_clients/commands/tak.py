@@ -157,7 +157,7 @@ def _tombstone_file(args: argparse.Namespace) -> Any:
 
     from pfp_clients.tak.tombfile import FILE_NAME
     from pfp_service.errors import InputError
-    from pfp_service.service.config import default_state_dir
+    from pfp_service.node.config import default_state_dir
 
     if args.state_dir == "none":
         return None

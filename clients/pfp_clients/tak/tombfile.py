@@ -30,7 +30,7 @@ import msgspec
 from pfp_clients.tak.cot import MAX_UID_CHARS
 from pfp_clients.tak.state import BridgeState
 from pfp_clients.tak.tombs import MAX_TOMBSTONES, Tombstone
-from pfp_service.service.statefile import FILE_MODE, private_dir
+from pfp_service.node.statefile import FILE_MODE, private_dir
 
 __all__ = ["FILE_NAME", "Keeper", "Loaded", "load", "save"]
 

@@ -185,7 +185,7 @@ def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 2
     shown in the mission's coordinates by the human formatter.
     """
     # here, not at the top: every process logs, and only the planner holds the world's inputs
-    from pfp_service.service.events import (
+    from pfp_service.world.events import (
         GoalCancelled,
         GoalSet,
         ThreatPut,

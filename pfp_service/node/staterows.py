@@ -18,9 +18,9 @@ import msgspec
 
 from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
-from pfp_service.service.events import GoalSet, Input, MissionRestored, ThreatPut, ZonePut
 from pfp_service.wire import Goal, ThreatUpdate, decode, keys
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world.events import GoalSet, Input, MissionRestored, ThreatPut, ZonePut
 
 __all__ = ["OrderRow", "Restored", "read_state"]
 

@@ -16,10 +16,10 @@ from collections.abc import Callable
 import zenoh
 
 from pfp_service.errors import InputError
-from pfp_service.service.events import Input, PeerPlanner
-from pfp_service.service.log import get_logger
+from pfp_service.node.log import get_logger
 from pfp_service.wire import ConflictEvent, Event, keys
 from pfp_service.wire.messages import decode_planner_status
+from pfp_service.world.events import Input, PeerPlanner
 
 __all__ = ["PEERS_EVERY_S", "PEERS_KNOWN_S", "PEER_MISSES", "Peers", "watch_twins"]
 

@@ -53,10 +53,10 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
 
-from pfp_service.service.forkserver import installed_fork_server
-from pfp_service.service.log import get_logger
-from pfp_service.service.tasks import Outcome, OutcomeKind, Task
-from pfp_service.service.workerproc import ORPHAN_POLL_S
+from pfp_service.node.forkserver import installed_fork_server
+from pfp_service.node.log import get_logger
+from pfp_service.node.tasks import Outcome, OutcomeKind, Task
+from pfp_service.node.workerproc import ORPHAN_POLL_S
 
 __all__ = [
     "KILL_GRACE_S",
@@ -388,7 +388,7 @@ class WorkerPool:
             proc = self._forker.spawn(theirs, self._memory_mb, self._nice)
         if proc is None:
             boot = [os.getpid(), theirs, self._memory_mb, self._nice, self._warm]
-            code = "import sys; from pfp_service.service.workerproc import boot; boot(sys.argv[1])"
+            code = "import sys; from pfp_service.node.workerproc import boot; boot(sys.argv[1])"
             try:
                 # a fresh interpreter, not multiprocessing's spawn: it keeps the SIGINT blocked in this
                 # thread (``_block_sigint``) until it ignores it, and it imports no __main__ of ours

@@ -8,8 +8,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from pfp_service import __version__
-from pfp_service.service.config import ServeConfig
-from pfp_service.service.loopstats import Latency
+from pfp_service.node.config import ServeConfig
+from pfp_service.node.loopstats import Latency
 from pfp_service.wire import PlannerStatus
 
 __all__ = ["planner_status"]

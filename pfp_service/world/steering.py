@@ -26,8 +26,6 @@ from pfp_service.core.cull import CullIndex, corridors_meet, influence_boxes
 from pfp_service.core.tracking import PURSUIT_TOLERANCE_STEPS, Route
 from pfp_service.errors import FINITE_LIMIT, InputError
 from pfp_service.geo import Origin
-from pfp_service.service.lookahead import Track, lookahead, within_map
-from pfp_service.service.world_records import UnitRecord
 from pfp_service.wire import (
     ArrivedEvent,
     Direction,
@@ -41,6 +39,8 @@ from pfp_service.wire import (
 )
 from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.wire.messages import MAX_EVENT_ITEMS
+from pfp_service.world.lookahead import Track, lookahead, within_map
+from pfp_service.world.world_records import UnitRecord
 
 __all__ = [
     "STATUS",

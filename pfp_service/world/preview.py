@@ -32,8 +32,8 @@ import msgspec
 from pfp_service.core import PlanResult, Scheduled, Stepper, ThreatField, plan, resolve
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import InputError
-from pfp_service.service.world import UnitView, unit_key
 from pfp_service.wire import MAX_PAYLOAD_BYTES, Goal, PreviewRequest, encode
+from pfp_service.world.world import UnitView, unit_key
 
 __all__ = ["HEAVY_STEPS", "MAX_PREVIEW_WHATIFS", "Cost", "admit", "fit_reply", "preview"]
 

@@ -49,11 +49,11 @@ from typing import Any
 
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Stepper
-from pfp_service.service.events import Deliberated, Job
-from pfp_service.service.log import get_logger
-from pfp_service.service.tasks import Blobs, Outcome, Task
-from pfp_service.service.workerproc import world_field
-from pfp_service.service.workers import WorkerPool
+from pfp_service.node.log import get_logger
+from pfp_service.node.tasks import Blobs, Outcome, Task
+from pfp_service.node.workerproc import world_field
+from pfp_service.node.workers import WorkerPool
+from pfp_service.world.events import Deliberated, Job
 
 __all__ = ["AHEAD", "CHUNK", "CHUNK_RUN_S", "Deliberators"]
 
@@ -96,7 +96,7 @@ class Deliberators:
             workers,
             memory_mb=WORKER_MEMORY_MB,
             nice=WORKER_NICE,
-            warm="pfp_service.service.deliberation:_warm_worker",
+            warm="pfp_service.node.deliberation:_warm_worker",
             on_replaced=lambda why: log.warning(
                 "deliberation worker replaced", extra={"fields": {"why": why}}
             ),
@@ -215,6 +215,6 @@ def _run_chunk(
 
 
 def _warm_worker() -> None:
-    from pfp_service.service.desk import warm_up
+    from pfp_service.node.desk import warm_up
 
     warm_up(None)

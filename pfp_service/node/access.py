@@ -43,7 +43,7 @@ INGRESS, EGRESS = "ingress", "egress"
 def _tx() -> dict[str, Any]:
     """The transmit queues ``pfp serve`` sets without a Zenoh file (``config.TX_QUEUE_BATCHES``), for every config:
     under Zenoh's 2 batches, directions were dropped whenever a send thread was late (docs/operations.md)."""
-    from pfp_service.service.config import tx_queue_sizes
+    from pfp_service.node.config import tx_queue_sizes
 
     return {"queue": {"size": tx_queue_sizes()}}
 

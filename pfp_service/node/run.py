@@ -15,8 +15,8 @@ from collections.abc import Iterator
 from typing import Any
 
 from pfp_service.errors import map_zenoh_errors
-from pfp_service.service.config import DEFAULT_LISTEN, ServeConfig, zenoh_config
-from pfp_service.service.log import setup_logging
+from pfp_service.node.config import DEFAULT_LISTEN, ServeConfig, zenoh_config
+from pfp_service.node.log import setup_logging
 from pfp_service.signals import SignalStop
 
 __all__ = ["serve"]
@@ -50,9 +50,9 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
 def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Event, log: Any) -> int:
     import zenoh
 
-    from pfp_service.service.desk import preview_desk
-    from pfp_service.service.node import PlannerNode  # noqa: F401 -- imported before the router listens: the
-    from pfp_service.service.store import Store  # node subscribes the moment the session opens (issue 34)
+    from pfp_service.node.desk import preview_desk
+    from pfp_service.node.node import PlannerNode  # noqa: F401 -- imported before the router listens: the
+    from pfp_service.node.store import Store  # node subscribes the moment the session opens (issue 34)
 
     zygote: Any = contextlib.nullcontext()
     if threading.current_thread() is threading.main_thread():
@@ -104,7 +104,7 @@ def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: A
             log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
             next_log = time.monotonic() + WAITING_LOG_S
         if not warmed:  # the kernels load while the router is away, not once it has come
-            from pfp_service.service.desk import warm_up
+            from pfp_service.node.desk import warm_up
 
             warm_up(cfg.world_settings())
             warmed = True
@@ -127,7 +127,7 @@ def _run(
     stop: threading.Event,
     log: Any,
 ) -> None:
-    from pfp_service.service.node import PlannerNode
+    from pfp_service.node.node import PlannerNode
 
     node = PlannerNode(session, cfg, store=store, desk=desk)
     node.start()
@@ -178,8 +178,8 @@ def _fork_server(cfg: ServeConfig) -> Iterator[None]:
     """
     import gc
 
-    from pfp_service.service.desk import warm_up
-    from pfp_service.service.forkserver import ForkServer, install_fork_server
+    from pfp_service.node.desk import warm_up
+    from pfp_service.node.forkserver import ForkServer, install_fork_server
 
     warm_up(None)
     warm_up(cfg.world_settings())

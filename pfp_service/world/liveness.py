@@ -12,10 +12,10 @@ heap, looked at again when due.  Pure values: ``now`` is a parameter.
 
 from __future__ import annotations
 
-from pfp_service.service.events import Outputs, WorldSettings
-from pfp_service.service.timers import Timers
-from pfp_service.service.world_records import Records, UnitRecord
 from pfp_service.wire import Direction, DirectionStatus, ForgottenEvent, StaleEvent, UnitState
+from pfp_service.world.events import Outputs, WorldSettings
+from pfp_service.world.timers import Timers
+from pfp_service.world.world_records import Records, UnitRecord
 
 __all__ = ["UNIT_TIMERS", "Liveness"]
 

@@ -17,8 +17,8 @@ import socket
 import subprocess
 import threading
 
-from pfp_service.service.log import get_logger
-from pfp_service.service.workerproc import zygote
+from pfp_service.node.log import get_logger
+from pfp_service.node.workerproc import zygote
 
 __all__ = ["ForkServer", "Forked", "install_fork_server", "installed_fork_server"]
 

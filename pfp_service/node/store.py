@@ -45,19 +45,8 @@ from pathlib import Path
 from typing import Any
 
 from pfp_service.errors import InputError
-from pfp_service.service.events import (
-    GoalCancelled,
-    GoalSet,
-    Input,
-    InputRejected,
-    MissionRecord,
-    ThreatPut,
-    ThreatRemoved,
-    ZonePut,
-    ZoneRemoved,
-)
-from pfp_service.service.log import get_logger
-from pfp_service.service.statefile import (
+from pfp_service.node.log import get_logger
+from pfp_service.node.statefile import (
     CORRUPT_CODES,
     DB_NAME,
     FILE_MODE,
@@ -70,9 +59,20 @@ from pfp_service.service.statefile import (
     private_files,
     salvage,
 )
-from pfp_service.service.staterows import OrderRow, Restored, read_state
+from pfp_service.node.staterows import OrderRow, Restored, read_state
 from pfp_service.wire import encode, keys
 from pfp_service.wire.delivery import ORDER_KEYS_MAX
+from pfp_service.world.events import (
+    GoalCancelled,
+    GoalSet,
+    Input,
+    InputRejected,
+    MissionRecord,
+    ThreatPut,
+    ThreatRemoved,
+    ZonePut,
+    ZoneRemoved,
+)
 
 __all__ = ["Restored", "Store"]
 

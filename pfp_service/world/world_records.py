@@ -23,10 +23,10 @@ from pfp_service.core import Resolved, Stepper, Threat, ThreatField
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.zones import Zone, ZoneSet
-from pfp_service.service.events import Job, unit_key
-from pfp_service.service.progress import ProgressWatch
 from pfp_service.wire import Direction, DirectionStatus, Goal, Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world.events import Job, unit_key
+from pfp_service.world.progress import ProgressWatch
 
 __all__ = ["Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
 

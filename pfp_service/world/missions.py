@@ -15,9 +15,9 @@ from pfp_service.constraints import LENGTH_MIN_M, reach_problem
 from pfp_service.core import Resolved, Stepper, ThreatField, resolve
 from pfp_service.core.params import FieldStats
 from pfp_service.errors import InputError
-from pfp_service.service.events import MissionRecord, WorldSettings
-from pfp_service.service.world_records import UnitRecord
 from pfp_service.wire import Goal
+from pfp_service.world.events import MissionRecord, WorldSettings
+from pfp_service.world.world_records import UnitRecord
 
 __all__ = ["Shared", "fix", "start"]
 

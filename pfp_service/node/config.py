@@ -31,7 +31,7 @@ from pfp_service.geo import Origin, localise_document, parse_origin
 from pfp_service.scenario import CHOICES
 
 if TYPE_CHECKING:
-    from pfp_service.service.events import WorldSettings
+    from pfp_service.world.events import WorldSettings
 
 __all__ = [
     "CONNECT_RETRY",
@@ -134,7 +134,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
 
     def world_settings(self) -> WorldSettings:
         """What the live world needs of this configuration (deliberation is always deferred in the daemon)."""
-        from pfp_service.service.events import WorldSettings
+        from pfp_service.world.events import WorldSettings
 
         return WorldSettings(
             planner=self.planner_params(),

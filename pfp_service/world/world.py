@@ -28,18 +28,18 @@ from collections.abc import Callable
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
-from pfp_service.service import events as ev
-from pfp_service.service import missions, steering
-from pfp_service.service.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
-from pfp_service.service.events import Batch, Input, Outputs, UnitView, WorldSettings
-from pfp_service.service.limits import Limits
-from pfp_service.service.liveness import UNIT_TIMERS, Liveness
-from pfp_service.service.ownership import Ownership
-from pfp_service.service.snapshot import page as snapshot_page
-from pfp_service.service.timers import Timers
-from pfp_service.service.world_records import Records, ThreatRecord, UnitRecord, ZoneRecord
 from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
+from pfp_service.world import events as ev
+from pfp_service.world import missions, steering
+from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
+from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
+from pfp_service.world.limits import Limits
+from pfp_service.world.liveness import UNIT_TIMERS, Liveness
+from pfp_service.world.ownership import Ownership
+from pfp_service.world.snapshot import page as snapshot_page
+from pfp_service.world.timers import Timers
+from pfp_service.world.world_records import Records, ThreatRecord, UnitRecord, ZoneRecord
 
 __all__ = ["World", *ev.__all__]
 

@@ -60,15 +60,15 @@ from pfp_service import geojson
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import DeadlinePassed, InputError
 from pfp_service.geo import Origin
-from pfp_service.service.config import ServeConfig
-from pfp_service.service.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings, ZonePut
-from pfp_service.service.log import get_logger
-from pfp_service.service.preview import Cost, admit, fit_reply, preview
-from pfp_service.service.tasks import Blobs, Outcome, Task
-from pfp_service.service.workerproc import forget_fields, retire, world_field, world_threats
-from pfp_service.service.workers import WorkerPool
+from pfp_service.node.config import ServeConfig
+from pfp_service.node.log import get_logger
+from pfp_service.node.tasks import Blobs, Outcome, Task
+from pfp_service.node.workerproc import forget_fields, retire, world_field, world_threats
+from pfp_service.node.workers import WorkerPool
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds, ZoneUpdate
+from pfp_service.world.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings, ZonePut
+from pfp_service.world.preview import Cost, admit, fit_reply, preview
 
 __all__ = ["EXPIRY_GRACE_S", "WORKER_MEMORY_MB", "WORKER_NICE", "PreviewDesk", "warm_up"]
 
@@ -159,7 +159,7 @@ class PreviewDesk:
             memory_mb=memory_mb,
             nice=WORKER_NICE,
             lane_caps={HEAVY: max(1, workers - 1)},
-            warm="pfp_service.service.desk:_warm_worker",
+            warm="pfp_service.node.desk:_warm_worker",
             on_replaced=self._replaced,
             spare=True,
             eager=1,  # one worker waits warm; the others and the spare start with the first preview
@@ -376,7 +376,7 @@ def _warm_worker() -> None:
 
 def warm_up(settings: WorldSettings | None) -> None:
     """Load (or compile) the numba kernels before serving, so no first direction or preview pays for it."""
-    from pfp_service.service.world import World
+    from pfp_service.world.world import World
 
     base = settings if settings is not None else WorldSettings()
     w = World(dataclasses.replace(base, deliberation="inline", bounds=None))

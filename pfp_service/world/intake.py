@@ -18,8 +18,8 @@ import collections
 import itertools
 from dataclasses import dataclass, field
 
-from pfp_service.service.events import Deliberated, Input
 from pfp_service.wire import UnitState
+from pfp_service.world.events import Deliberated, Input
 
 __all__ = ["Intake", "Slice"]
 

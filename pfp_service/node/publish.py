@@ -12,7 +12,7 @@ import time
 import msgspec
 import zenoh
 
-from pfp_service.service.log import get_logger
+from pfp_service.node.log import get_logger
 from pfp_service.wire import ConflictEvent, Event, RejectedEvent, encode, keys
 
 __all__ = ["EVENT_LOG_LINES", "Publisher"]

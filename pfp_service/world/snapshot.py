@@ -15,10 +15,10 @@ from typing import TypeVar
 
 import msgspec
 
-from pfp_service.service.events import mission_of
-from pfp_service.service.world_records import Records, UnitRecord
 from pfp_service.wire import ThreatSummary, UnitKind, UnitSummary, WorldSnapshot
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES, ZoneSummary
+from pfp_service.world.events import mission_of
+from pfp_service.world.world_records import Records, UnitRecord
 
 __all__ = ["page"]
 

@@ -30,7 +30,6 @@ from typing import TYPE_CHECKING, Any
 import msgspec
 
 from pfp_service.errors import InputError
-from pfp_service.service.events import Input, inputs_from_snapshot
 from pfp_service.wire import (
     ErrorReply,
     WorldQuery,
@@ -40,9 +39,10 @@ from pfp_service.wire import (
     encode,
     keys,
 )
+from pfp_service.world.events import Input, inputs_from_snapshot
 
 if TYPE_CHECKING:
-    from pfp_service.service.world import World
+    from pfp_service.world.world import World
 
 __all__ = [
     "JOIN_DEADLINE_S",

@@ -39,31 +39,19 @@ from typing import Any, TypeVar
 import zenoh
 
 from pfp_service.errors import InputError
-from pfp_service.service import gcpause
-from pfp_service.service.config import ServeConfig
-from pfp_service.service.deliberation import Deliberators
-from pfp_service.service.desk import PreviewDesk, preview_desk, warm_up
-from pfp_service.service.events import (
-    Input,
-    InputRejected,
-    MissionShared,
-    StateReported,
-    Tick,
-    TokenChanged,
-    mission_message,
-    zone_put,
-)
-from pfp_service.service.intake import Intake
-from pfp_service.service.log import get_logger, log_changes
-from pfp_service.service.loopstats import Latency, LoopTrace, Trim, demote_native_threads
-from pfp_service.service.publish import EVENT_LOG_LINES, Publisher
-from pfp_service.service.rings import StateRings
-from pfp_service.service.status import planner_status
-from pfp_service.service.store import Store
-from pfp_service.service.twins import Peers, watch_twins
-from pfp_service.service.world import World
-from pfp_service.service.worldpages import answer_world, fetch_world
-from pfp_service.service.writes import Writes
+from pfp_service.node import gcpause
+from pfp_service.node.config import ServeConfig
+from pfp_service.node.deliberation import Deliberators
+from pfp_service.node.desk import PreviewDesk, preview_desk, warm_up
+from pfp_service.node.log import get_logger, log_changes
+from pfp_service.node.loopstats import Latency, LoopTrace, Trim, demote_native_threads
+from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
+from pfp_service.node.rings import StateRings
+from pfp_service.node.status import planner_status
+from pfp_service.node.store import Store
+from pfp_service.node.twins import Peers, watch_twins
+from pfp_service.node.worldpages import answer_world, fetch_world
+from pfp_service.node.writes import Writes
 from pfp_service.wire import (
     ErrorReply,
     ForgottenEvent,
@@ -75,6 +63,18 @@ from pfp_service.wire import (
     encode,
     keys,
 )
+from pfp_service.world.events import (
+    Input,
+    InputRejected,
+    MissionShared,
+    StateReported,
+    Tick,
+    TokenChanged,
+    mission_message,
+    zone_put,
+)
+from pfp_service.world.intake import Intake
+from pfp_service.world.world import World
 
 __all__ = ["PlannerNode"]
 

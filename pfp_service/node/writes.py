@@ -23,8 +23,11 @@ import msgspec
 import zenoh
 
 from pfp_service.errors import InputError
-from pfp_service.service.config import ServeConfig
-from pfp_service.service.events import (
+from pfp_service.node.config import ServeConfig
+from pfp_service.wire import decode_goal, decode_threat, keys
+from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
+from pfp_service.wire.messages import decode_zone
+from pfp_service.world.events import (
     GoalCancelled,
     GoalSet,
     Input,
@@ -34,9 +37,6 @@ from pfp_service.service.events import (
     ZonePut,
     ZoneRemoved,
 )
-from pfp_service.wire import decode_goal, decode_threat, keys
-from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
-from pfp_service.wire.messages import decode_zone
 
 __all__ = ["WRITES_MAX", "Write", "Writes"]
 

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-from pfp_service.service.log import get_logger
+from pfp_service.node.log import get_logger
 
 __all__ = ["ORPHAN_POLL_S", "boot", "forget_fields", "retire", "world_field", "world_threats", "zygote"]
 
