@@ -172,8 +172,9 @@ def run(args: argparse.Namespace) -> int:
             elif ground is not None:
                 from pfp_clients.frames import shown
 
-                opts = dataclasses.replace(opts, origin=ground.centre())
-                print(f"pfp map: drawn in lat/lon from the DEM's centre {shown(opts.origin)}", flush=True)
+                centre = ground.centre()
+                opts = dataclasses.replace(opts, origin=centre)
+                print(f"pfp map: drawn in lat/lon from the DEM's centre {shown(centre)}", flush=True)
             elif not answered:
                 print(
                     f"pfp map: no planner of mission {opts.mission!r} answered yet: drawn in plain metres "

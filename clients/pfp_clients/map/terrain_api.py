@@ -16,6 +16,7 @@ with ``error`` (a 200: news for the operator, as a preview's refusal is).
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -74,7 +75,7 @@ class TerrainApi:
             if fut is None:
                 fut = asyncio.get_running_loop().run_in_executor(self._pool, self.viewsheds.compute, key)
                 self._pending[key] = fut
-                fut.add_done_callback(lambda f, k=key: self._done(k, f))
+                fut.add_done_callback(functools.partial(self._done, key))
             try:
                 got = await asyncio.wait_for(asyncio.shield(fut), WAIT_S)
             except TimeoutError:
