@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import io
 import math
+import time
 
 import numpy as np
 import pytest
@@ -140,3 +141,43 @@ def test_the_map_shades_the_ground_and_shows_a_clicked_threats_viewshed(playwrig
             "() => pfpTerrain.viewshed === null && document.querySelector('img.threat-viewshed') === null"
         )
         assert page.errors == []
+
+
+@pytest.mark.proc
+def test_the_terrain_api_answers_a_threat_off_the_dem_and_draws_from_the_dems_centre(router, tmp_path):  # noqa: F811
+    import json
+    import urllib.error
+    import urllib.request
+
+    dem = write_geographic(tmp_path / "jacksboro.tif")
+    _z, west, north, step = jacksboro()
+    mission = "terrain" + str(free_port())
+
+    def get(url: str) -> tuple[int, dict]:
+        try:
+            with urllib.request.urlopen(url, timeout=30) as r:
+                return r.status, json.loads(r.read())
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read())
+
+    with client(router) as s, map_process(router, mission, "--terrain", str(dem)) as url:
+        # no --origin and no planner: the DEM's centre
+        _, state = get(url + "api/state")
+        o = state["config"]["origin"]
+        assert o["lat"] == pytest.approx(north - 172 * step, abs=1e-9)
+        assert o["lon"] == pytest.approx(west + 201.5 * step, abs=1e-9)
+        assert state["config"]["terrain"] == {"path": "jacksboro.tif"}
+        assert get(url + "api/viewshed/nobody")[0] == 404
+        put_json(
+            s,
+            keys.threat(mission, "far"),
+            {"position": [90_000.0, 0.0], "sigma_range": 500, "sigma_lateral": 400},
+        )
+        for _ in range(100):
+            code, body = get(url + "api/viewshed/far")
+            if code == 200:
+                break
+            time.sleep(0.1)  # the map has not heard of it yet
+        assert code == 200 and "outside the DEM" in body["error"], body
+        code, shade = get(url + "api/terrain")
+        assert code == 200 and shade["image"].startswith("data:image/png;base64,")

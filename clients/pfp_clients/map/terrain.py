@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import base64
 import math
+import os
 import struct
 import zlib
 from collections import OrderedDict
@@ -38,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from pfp_clients.ground import Ground
+from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 
 __all__ = [
@@ -161,6 +163,10 @@ def viewshed_overlay(
     from pfp_service.terrain.sight import observe
     from pfp_service.terrain.viewshed import visible
 
+    row, col = ground.cells(np.array([lat]), np.array([lon]))
+    rows, cols = ground.dem.elevation.shape
+    if not (0 <= math.floor(row[0] + 0.5) < rows and 0 <= math.floor(col[0] + 0.5) < cols):
+        raise InputError("threat", f"{lat:.6f},{lon:.6f} is outside the DEM {os.path.basename(ground.path)}")
     sight = observe(ground.path, lat, lon, observer_height_m, radius_m, 0.0, flag="threat")
     seen = visible(sight.lowest_m, target_height_m)
     o = Origin(lat=lat, lon=lon)
