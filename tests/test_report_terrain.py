@@ -135,3 +135,15 @@ def test_a_record_without_origin_or_a_dem_not_under_it_is_one_line_exit_2(tmp_pa
     far = _record(tmp_path / "far.mcap", Origin(lat=58.41, lon=15.62, alt=0.0))
     line = _one_line_exit_2(run_pfp("report", str(far), "--terrain", str(dem), timeout=60))
     assert str(dem) in line and "does not cover" in line, line
+    # a decompression bomb is refused from its header (test_light_commands measures the others' peak)
+    from rasterio.transform import from_origin
+
+    from tests.test_terrain import _write
+
+    bomb = _write(
+        tmp_path / "bomb.tif", width=8_000, height=1_000, blockysize=1_000, compress="deflate",
+        crs="EPSG:4326", transform=from_origin(-84.5, 36.8, 0.001, 0.001),
+    )  # fmt: skip
+    near = _record(tmp_path / "near.mcap", ORIGIN)
+    line = _one_line_exit_2(run_pfp("report", str(near), "--terrain", str(bomb), timeout=60))
+    assert str(bomb) in line and "dem_block_cells" in line, line
