@@ -33,7 +33,9 @@ def test_the_summary_flags_a_plan_more_exposed_than_the_blind_one():
     row = {"seed": 0, "reachable": True, "status": "reached", "steepest_ground_deg": 31.0, "exposure": 5.0}
     doc = {
         "limit_deg": 30.0,
-        "rows": [{**row, "blind_reported": 4.0, "blind_masked": 1.0, "optimal_exposure": 2.0, "j_ratio": 1.2}],
+        "rows": [
+            {**row, "blind_reported": 4.0, "blind_masked": 1.0, "optimal_exposure": 2.0, "j_ratio": 1.2}
+        ],
     }
     s = _summary(doc)
     assert s["over_limit"] == [0] and s["worse_than_reported"] == [0] and s["worse_than_masked"] == [0]
