@@ -59,9 +59,12 @@ def kernel_tick(units: int, threats: int, box: float, repeat: int, seed: int = 1
     """The raw descent kernel for ``units`` x ``threats``: every pair, and culled where culling exists."""
     from pfp_service.core import ThreatField
     from pfp_service.core.kernels import descent_many
+    from pfp_service.world import translate
 
     rng = np.random.default_rng(seed)
-    field = ThreatField([u.to_threat(f"t{j}") for j, u in enumerate(_scale_field(threats, box, seed))])
+    field = ThreatField(
+        [translate.threat(u, f"t{j}") for j, u in enumerate(_scale_field(threats, box, seed))]
+    )
     pts = rng.uniform(0, box, (units, 2))
     goals = rng.uniform(0, box, (units, 2))
     gains = np.full(units, 1e-3)

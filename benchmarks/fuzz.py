@@ -30,6 +30,7 @@ It passes when afterwards the planner
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import random
@@ -373,11 +374,11 @@ def _odd_key(target: str, odd: str) -> str:
     return keys.TEMPLATES[kind].format(mission=MISSION, id=odd)
 
 
-# The queryables fuzzed, and the decoder of each one's replies.
-_REPLY_DECODERS: dict[str, str] = {
-    "preview": "decode_plan_result",
-    "status": "decode_planner_status",
-    "world": "decode_world_snapshot",
+# The queryables fuzzed, and the decoder of each one's replies: its module and its name.
+_REPLY_DECODERS: dict[str, tuple[str, str]] = {
+    "preview": ("pfp_service.world.translate", "decode_plan_result"),
+    "status": ("pfp_service.wire", "decode_planner_status"),
+    "world": ("pfp_service.wire", "decode_world_snapshot"),
 }
 
 
@@ -394,7 +395,8 @@ def _collect(handler: Any, target: str, queries: dict[str, int]) -> None:
     for rep in good:
         try:
             if rep.ok is not None:
-                getattr(wire, _REPLY_DECODERS[target])(rep.ok.payload.to_bytes())
+                module, name = _REPLY_DECODERS[target]
+                getattr(importlib.import_module(module), name)(rep.ok.payload.to_bytes())
                 queries[f"{target}_replies"] += 1
             else:
                 wire.decode_error_reply(rep.err.payload.to_bytes())
