@@ -122,8 +122,9 @@ def test_the_report_measures_each_track_over_the_ground(tmp_path):
 
 def _threat():
     from pfp_service.wire import ThreatUpdate
+    from pfp_service.world import translate
 
-    return ThreatUpdate(**THREAT).to_threat("e1")  # type: ignore[arg-type]
+    return translate.threat(ThreatUpdate(**THREAT), "e1")  # type: ignore[arg-type]
 
 
 @pytest.mark.proc

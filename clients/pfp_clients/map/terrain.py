@@ -41,6 +41,7 @@ import numpy as np
 from pfp_clients.ground import Ground
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
+from pfp_service.wire import ThreatUpdate
 
 __all__ = [
     "MAX_RADIUS_M",
@@ -215,12 +216,13 @@ def _dem_xy(dem: Any, lat: np.ndarray, lon: np.ndarray) -> tuple[np.ndarray, np.
     return to_dem_crs(dem.crs, lat, lon)
 
 
-def threat_reach_m(update: Any, threat_id: str) -> float:
+def threat_reach_m(update: ThreatUpdate, threat_id: str) -> float:
     """How far the threat's term reaches (``core.visibility.reach_box``), within ``MIN``/``MAX_RADIUS_M``."""
     from pfp_service.core.threat import ThreatField
     from pfp_service.core.visibility import reach_box
+    from pfp_service.world import translate
 
-    row = ThreatField([update.to_threat(threat_id)], "peak").packed[0]
+    row = ThreatField([translate.threat(update, threat_id)], "peak").packed[0]
     x0, y0, x1, y1 = reach_box(row)
     return float(min(MAX_RADIUS_M, max(MIN_RADIUS_M, 0.5 * (x1 - x0), 0.5 * (y1 - y0))))
 

@@ -27,6 +27,8 @@ from pfp_clients.ground import Ground
 from pfp_clients.map.terrain import Overlay, Viewsheds, hillshade_overlay, threat_reach_m
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
+from pfp_service.wire import ThreatUpdate
+from pfp_service.world import translate
 
 __all__ = ["WAIT_S", "TerrainApi"]
 
@@ -65,9 +67,9 @@ class TerrainApi:
         held = self.threats().get(tid)
         if held is None:
             return web.json_response({"threat": tid, "error": f"no threat {tid!r} on the map"}, status=404)
-        update = held.update
+        update: ThreatUpdate = held.update
         lat, lon = self.origin.to_geodetic(*update.position)
-        eye = float(update.to_threat(tid).observer_height_m)
+        eye = float(translate.threat(update, tid).observer_height_m)
         key = self.viewsheds.key(lat, lon, eye, threat_reach_m(update, tid))
         got = self.viewsheds.get(key)
         if got is None:
