@@ -19,7 +19,7 @@ import pytest
 from pfp_service.wire import keys
 from tests.conftest import run_pfp
 from tests.terrain_data import jacksboro, observers, write_geographic
-from tests.test_map_browser import map_process, page_at, playwright  # noqa: F401 - a fixture
+from tests.test_map_browser import _screenshot, map_process, page_at, playwright  # noqa: F401 - a fixture
 from tests.test_map_cli import _one_line_exit_2, router  # noqa: F401 - a fixture
 from tests.zenoh_util import client, free_port, put_json
 
@@ -134,6 +134,8 @@ def test_the_map_shades_the_ground_and_shows_a_clicked_threats_viewshed(playwrig
         assert 0.05 < exact.mean() < 0.95  # a viewshed that can fail either way
         assert agree >= 0.97
         assert not (img[..., 3] > 0)[(r < 0) | (r >= rows) | (dist > radius + max(dx, dy))].any()
+
+        _screenshot(page, tmp_path, "map-terrain.png")  # docs/map-terrain.png is one
 
         # another click on the map closes the threat, and its viewshed with it
         page.click_at(tx + 3000, ty + 3000)
