@@ -59,7 +59,10 @@ class TerrainApi:
         if self._hillshade is None:
             loop = asyncio.get_running_loop()
             self._hillshade = loop.run_in_executor(self._pool, hillshade_overlay, self.ground, self.origin)
-        shade = await asyncio.shield(self._hillshade)
+        try:
+            shade = await asyncio.shield(self._hillshade)
+        except InputError as exc:  # the DEM placed on this origin's plane breaks a bound
+            return web.json_response({"error": exc.reason})
         return web.json_response(shade.view())
 
     async def _get_viewshed(self, request: web.Request) -> web.Response:

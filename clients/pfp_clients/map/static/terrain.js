@@ -18,6 +18,7 @@ const pfpTerrain = {
     fetch("/api/terrain")
       .then((r) => r.json())
       .then((data) => {
+        if (data.error) throw new Error(data.error);
         const layer = L.imageOverlay(data.image, data.bounds, { pane: "terrain", opacity: 0.55, interactive: false, className: "terrain-shade" });
         layer.addTo(map);
         this.shade = { data, layer };
