@@ -68,11 +68,11 @@ def test_status_lists_units_and_threats_as_tables(world):
         r"^planner\s+owns\s+units\s+stale\s+threats\s+zones\s+p50\s+p99\s+deliberating\s+overload$", out, re.M
     )
     assert re.search(r"^planner\s+2\s+2\s+0\s+2\s+2\s", out, re.M), out
-    assert re.search(r"^unit\s+kind\s+status\s+last seen\s+to goal\s+position$", out, re.M)
-    assert re.search(r"^idle\s+-\s+no_goal\s+[\d.]+ s ago\s+-\s+\(1\.0, 1\.0\)$", out, re.M), out
+    assert re.search(r"^unit\s+kind\s+phase\s+status\s+last seen\s+to goal\s+position$", out, re.M)
+    assert re.search(r"^idle\s+-\s+no_goal\s+no_goal\s+[\d.]+ s ago\s+-\s+\(1\.0, 1\.0\)$", out, re.M), out
     assert re.search(
         # with keep-out zones in force a unit's route may be in a worker (deliberating) when status asks
-        r"^scout\s+-\s+(en_route|escaping)( \(deliberating\))?\s+[\d.]+ s ago\s+14\.1 m\s+\(0\.0, 0\.0\)$",
+        r"^scout\s+-\s+(guided|deliberating)\s+(en_route|escaping)( \(deliberating\))?\s+[\d.]+ s ago\s+14\.1 m\s+\(0\.0, 0\.0\)$",
         out,
         re.M,
     ), out

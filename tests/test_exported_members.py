@@ -40,6 +40,7 @@ EXPECTED = [
     "ThreatUpdate",
     "TrappedEvent",
     "UnitKind",
+    "UnitPhase",
     "UnitState",
     "UnitSummary",
     "WhatIfThreat",

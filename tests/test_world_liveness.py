@@ -9,27 +9,27 @@ from pfp_service.wire import Direction, DirectionStatus, ForgottenEvent, StaleEv
 from pfp_service.world.events import Outputs, WorldSettings
 from pfp_service.world.liveness import Liveness
 from pfp_service.world.timers import Timers
-from pfp_service.world.world_records import Records
+from pfp_service.world.units import Units
 
 pytestmark = pytest.mark.unit
 
 
-def _live(**kw) -> tuple[Liveness, Records, Timers]:
-    recs, timers = Records(), Timers()
+def _live(**kw) -> tuple[Liveness, Units, Timers]:
+    recs, timers = Units(), Timers()
     return Liveness(WorldSettings(**kw), recs, timers), recs, timers
 
 
-def _run(live: Liveness, timers: Timers, recs: Records, now: float) -> Outputs:
+def _run(live: Liveness, timers: Timers, recs: Units, now: float) -> Outputs:
     """What the unit timers due by ``now`` put out (what the world's tick does for them)."""
     out = Outputs()
     for kind, ident in timers.due(now):
-        if ident in recs.units:
-            live.due(kind, recs.units[ident], now, out)
+        if ident in recs.records:
+            live.due(kind, recs.records[ident], now, out)
     return out
 
 
-def _report(live: Liveness, recs: Records, uid: str, now: float) -> None:
-    rec = recs.units.get(uid) or recs.add(uid, True, now, reported=True)
+def _report(live: Liveness, recs: Units, uid: str, now: float) -> None:
+    rec = recs.records.get(uid) or recs.add(uid, True, now, reported=True)
     live.heard(rec, UnitState(position=(1.0, 2.0), seq=1), now)
 
 
@@ -52,9 +52,9 @@ def test_a_token_gone_makes_a_unit_stale_only_after_the_debounce_unless_it_comes
     live, recs, timers = _live(liveliness_debounce_s=2.0, unit_forget_s=None)
     _report(live, recs, "a", 0.0)
     _report(live, recs, "b", 0.0)
-    live.token(recs.units["a"], False, 1.0)
-    live.token(recs.units["b"], False, 1.0)
-    live.token(recs.units["b"], True, 2.0)  # back within the debounce
+    live.token(recs.records["a"], False, 1.0)
+    live.token(recs.records["b"], False, 1.0)
+    live.token(recs.records["b"], True, 2.0)  # back within the debounce
     stale = [e for e in _run(live, timers, recs, 3.0).events if isinstance(e, StaleEvent)]
     assert [e.unit for e in stale] == ["a"] and "token" in stale[0].reason
 
@@ -68,14 +68,14 @@ def test_stale_long_enough_is_forgotten_unless_it_reports():
     out = _run(live, timers, recs, 6.5)
     forgotten = [e for e in out.events if isinstance(e, ForgottenEvent)]
     assert [e.unit for e in forgotten] == ["gone"] and forgotten[0].stale_s == pytest.approx(5.0)
-    assert set(recs.units) == {"back"}
+    assert set(recs.records) == {"back"}
 
 
 def test_a_unit_never_heard_from_is_forgotten_in_time():
     live, recs, timers = _live(unit_forget_s=5.0)
     live.made(recs.add("told", True, 0.0, reported=False), 0.0)
     gone = [e for e in _run(live, timers, recs, 5.0).events if isinstance(e, ForgottenEvent)]
-    assert [e.unit for e in gone] == ["told"] and recs.units == {}
+    assert [e.unit for e in gone] == ["told"] and recs.records == {}
 
 
 def test_a_push_is_sent_again_until_the_next_report_and_no_more_than_its_retries():

@@ -6,10 +6,10 @@ import pytest
 
 from pfp_service.core import PlannerParams, ThreatField, resolve
 from pfp_service.errors import InputError
-from pfp_service.wire import Goal
+from pfp_service.wire import Goal, UnitPhase
 from pfp_service.world import missions
 from pfp_service.world.events import MissionRecord, WorldSettings
-from pfp_service.world.world_records import Records
+from pfp_service.world.units import Units
 
 pytestmark = pytest.mark.unit
 
@@ -45,12 +45,18 @@ def test_a_goal_closer_than_the_planner_resolves_is_planned_as_arrived():
 
 
 def test_start_gives_the_unit_a_stepper_and_names_what_durable_state_keeps():
-    recs = Records()
-    rec = recs.add("u", True, 0.0, reported=True)
-    rec.position, rec.goal, rec.epoch = (0.0, 0.0), Goal(position=(100.0, 0.0)), 3
-    rec_out = missions.start(rec, S, EMPTY, None)
-    assert isinstance(rec_out, MissionRecord) and rec_out.epoch == 3 and rec_out.origin == (0.0, 0.0)
+    book = Units()
+    rec = book.add("u", True, 0.0, reported=True)
+    book.heard(rec, (0.0, 0.0), 1, None, 0.0, 0.0)
+    book.set_goal(rec, Goal(position=(100.0, 0.0)), None)
+    out = missions.start(rec, S, EMPTY, None)
+    assert not isinstance(out, InputError)
+    started, rec_out = out
+    assert rec.stepper is None  # pure: the record is the owner's to write
+    assert isinstance(rec_out, MissionRecord) and rec_out.epoch == 1 and rec_out.origin == (0.0, 0.0)
+    book.started(rec, started)
     assert rec.stepper is not None and rec.stepper.goal == (100.0, 0.0) and rec.origin == (0.0, 0.0)
-    assert rec.shared is not None and rec.shared[0] == rec.goal
-    assert not rec.stepper.defer and missions.start(rec, WorldSettings(deliberation="deferred"), EMPTY, None)
-    assert rec.stepper.defer
+    assert rec.shared is not None and rec.shared[0] == rec.goal and rec.phase is UnitPhase.GUIDED
+    assert not rec.stepper.defer
+    deferred = missions.start(rec, WorldSettings(deliberation="deferred"), EMPTY, None)
+    assert not isinstance(deferred, InputError) and deferred[0].stepper.defer

@@ -15,13 +15,16 @@ from pfp_service.wire import (
     ArrivedEvent,
     Direction,
     DirectionStatus,
+    Goal,
     ThreatChange,
     ThreatUpdate,
     TrappedEvent,
+    UnitPhase,
 )
 from pfp_service.world import steering, translate
 from pfp_service.world.lookahead import lookahead, within_map
-from pfp_service.world.world_records import Records, UnitRecord
+from pfp_service.world.units import Started, UnitRecord
+from pfp_service.world.world_records import Records
 
 pytestmark = pytest.mark.unit
 
@@ -33,9 +36,11 @@ FIELD = ThreatField(
 
 
 def _unit(recs: Records, uid: str, at: tuple[float, float], goal: tuple[float, float]) -> UnitRecord:
-    rec = recs.add(uid, True, 0.0, reported=True)
-    recs.heard(rec, at, 1, None, 0.0)
-    rec.stepper = Stepper(at, goal, resolve(P, at, goal, FIELD.threats))
+    rec = recs.book.add(uid, True, 0.0, reported=True)
+    recs.book.heard(rec, at, 1, None, 0.0, 0.0)
+    recs.book.set_goal(rec, Goal(position=goal), None)
+    stepper = Stepper(at, goal, resolve(P, at, goal, FIELD.threats))
+    recs.book.started(rec, Started((Goal(position=goal), at, stepper.params), stepper))
     return rec
 
 
@@ -81,14 +86,21 @@ def test_a_direction_fires_its_event_once_on_a_change_of_status():
     recs = Records()
     rec = _unit(recs, "u", (0.0, 0.0), (100.0, 0.0))
     en_route = Advice(*_fields(StepStatus.EN_ROUTE))
-    d, event = steering.direction(rec, en_route, [(0.0, 1.0)], "p", deliberating=False)
+    d, event, verdict = steering.direction(rec, en_route, [(0.0, 1.0)], "p", deliberating=False)
     assert event is None and d.status is DirectionStatus.EN_ROUTE and d.heading_deg == pytest.approx(0.0)
+    assert rec.last_status is None  # pure: the verdict is the owner's to keep
+    recs.book.steered(rec, verdict)
+    assert rec.last_status is DirectionStatus.EN_ROUTE and rec.last_vector == (0.0, 1.0)
     arrived = Advice(*_fields(StepStatus.ARRIVED))
-    d, event = steering.direction(rec, arrived, [], "p", deliberating=False)
+    d, event, verdict = steering.direction(rec, arrived, [], "p", deliberating=False)
     assert isinstance(event, ArrivedEvent) and d.status is DirectionStatus.ARRIVED and d.heading_deg is None
+    recs.book.steered(rec, verdict)
+    assert rec.phase is UnitPhase.ARRIVED and rec.last_vector is None and rec.last_distance == 10.0
     assert steering.direction(rec, arrived, [], "p", deliberating=False)[1] is None  # said once
-    _, event = steering.direction(rec, Advice(*_fields(StepStatus.TRAPPED)), [], "p", deliberating=True)
-    assert isinstance(event, TrappedEvent) and rec.last_status is DirectionStatus.TRAPPED
+    _, event, verdict = steering.direction(
+        rec, Advice(*_fields(StepStatus.TRAPPED)), [], "p", deliberating=True
+    )
+    assert isinstance(event, TrappedEvent) and verdict.status is DirectionStatus.TRAPPED
 
 
 def _fields(status: StepStatus) -> tuple:
@@ -109,16 +121,12 @@ def _fields(status: StepStatus) -> tuple:
     return tuple(values[f] for f in Advice._fields)
 
 
-def test_no_goal_stands_still_and_resets_the_status():
+def test_no_goal_stands_still():
     recs = Records()
     rec = _unit(recs, "u", (0.0, 0.0), (100.0, 0.0))
-    rec.last_status = DirectionStatus.EN_ROUTE
     d = steering.no_goal(rec, "p")
-    assert (
-        d.status is DirectionStatus.NO_GOAL
-        and d.vector == (0.0, 0.0)
-        and rec.last_status is DirectionStatus.NO_GOAL
-    )
+    assert d.status is DirectionStatus.NO_GOAL and d.vector == (0.0, 0.0) and rec.last_status is None
+    assert steering.NO_GOAL.status is DirectionStatus.NO_GOAL  # the verdict the world keeps with it
 
 
 def test_lat_lon_are_added_where_they_mean_something_and_left_off_far_away():

@@ -4,7 +4,7 @@ Asks the world queryable (``mumt/{m}/planner/*/world``) and the status of
 every planner.  Without ``--json``, a table of the live planners first (units
 owned, threats and zones in force, latency, deliberations, overload: several
 share a mission under ``--cluster``), then up to three tables per planner:
-units (id, kind, status, last seen, distance to goal, position), threats (id,
+units (id, kind, phase, status, last seen, distance to goal, position), threats (id,
 position, TTL left) and keep-out zones (id, kind, shape, centroid, TTL left),
 ids in natural order (m2 before m10).  Positions are lat/lon with the metres
 from the origin when the planner has one (``--coords`` chooses: latlon,
@@ -117,7 +117,9 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
         f"{snap.threats_total} threats, {snap.zones_total} zones"
     ]
     if snap.units:
-        rows: list[tuple[str, ...]] = [("unit", "kind", "status", "last seen", "to goal", "position")]
+        rows: list[tuple[str, ...]] = [
+            ("unit", "kind", "phase", "status", "last seen", "to goal", "position")
+        ]
         units = sorted(snap.units, key=lambda u: natural_key(u.id))
         placed = iter(coords.points([u.position for u in units if u.position is not None]))
         for u in units:
@@ -129,6 +131,7 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
                 (
                     u.id,
                     u.kind.value if u.kind is not None else "-",
+                    u.phase.value if u.phase is not None else "-",  # an older planner says none
                     status,
                     _num(u.last_seen_s, " s ago"),
                     _num(u.distance_to_goal, " m"),

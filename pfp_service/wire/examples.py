@@ -147,6 +147,7 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                             goal=(10.0, 10.0),
                             last_seen_s=0.4,
                             distance_to_goal=7.4,
+                            phase=m.UnitPhase.GUIDED,
                         )
                     ],
                     threats=[

@@ -191,10 +191,15 @@ class MissionShared:
 
 @dataclass(frozen=True, slots=True)
 class PeerPlanner:
-    """Another planner's liveliness token on this mission appeared (``alive``) or went."""
+    """Another planner's liveliness token on this mission appeared (``alive``) or went.
+
+    ``session`` names a twin: a planner serving this one's own id from
+    another Zenoh session (``planner`` is then ``{id}-{session}``).
+    """
 
     planner: str
     alive: bool
+    session: str | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -7,7 +7,9 @@ is forgotten (a ``forgotten`` event).  A direction no report asked for (a
 push) is sent again every ``push_retry_s``, up to ``push_retries`` times,
 until the unit's next report is answered: directions go out with congestion
 control DROP, so a burst may lose some.  Each rule is a timer on the world's
-heap, looked at again when due.  Pure values: ``now`` is a parameter.
+heap, looked at again when due.  Liveness decides; the units' owner
+(``units.Units``) writes what its verdicts change (fresh, stale, forgotten).
+Pure values: ``now`` is a parameter.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 from pfp_service.wire import Direction, DirectionStatus, ForgottenEvent, StaleEvent, UnitState
 from pfp_service.world.events import Outputs, WorldSettings
 from pfp_service.world.timers import Timers
-from pfp_service.world.world_records import Records, UnitRecord
+from pfp_service.world.units import UnitRecord, Units
 
 __all__ = ["UNIT_TIMERS", "Liveness"]
 
@@ -24,11 +26,11 @@ _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 
 
 class Liveness:
-    """The liveness rules of the units in ``records``, on the world's ``timers``."""
+    """The liveness rules of the units in ``book``, on the world's ``timers``."""
 
-    def __init__(self, settings: WorldSettings, records: Records, timers: Timers) -> None:
+    def __init__(self, settings: WorldSettings, book: Units, timers: Timers) -> None:
         self.settings = settings
-        self.records = records
+        self.book = book
         self.timers = timers
         self.pushes = 0  # directions sent without a report asking
         self.pushes_resent = 0
@@ -47,9 +49,7 @@ class Liveness:
         told_to_move = rec.last_vector is not None and rec.last_status in _MOVING
         x, y = state.position[0], state.position[1]
         rec.progress.report(x, y, state.t, now, state.speed_mps, told_to_move)
-        self.records.heard(rec, (x, y), state.seq, kind, now)
-        if rec.stepper is not None:
-            rec.stepper.pace(rec.progress.speed_mps)
+        self.book.heard(rec, (x, y), state.seq, kind, now, rec.progress.speed_mps)
         if not rec.silence_timer:
             rec.silence_timer = True
             self.timers.set(now + self.settings.unit_stale_s, "silence", rec.id)
@@ -80,9 +80,9 @@ class Liveness:
             out.directions.append(rec.push)
             if rec.push_tries:
                 self.timers.set(now + s.push_retry_s, "push", rec.id)
-        elif kind == "forget" and self.records.forgettable(rec, now, s.unit_forget_s):
+        elif kind == "forget" and _forgettable(rec, now, s.unit_forget_s):
             stale_s = now - rec.stale_since if rec.stale_since is not None else 0.0
-            self.records.forget(rec)
+            self.book.forget(rec)
             if rec.owned:  # another shard's unit, unheard here since its shard went: its owner speaks for it
                 out.events.append(ForgottenEvent(planner=s.planner_id, unit=rec.id, stale_s=stale_s))
 
@@ -90,7 +90,7 @@ class Liveness:
         """Directions that went out in a batch: those no report of the batch asked for are pushes."""
         s = self.settings
         for d in fresh:
-            rec = self.records.units.get(d.unit)
+            rec = self.book.records.get(d.unit)
             if rec is None or rec.last_seen >= now:  # answering a report of this batch
                 continue
             if (rec.push is None or rec.push_tries == 0) and s.push_retries > 0:
@@ -99,7 +99,7 @@ class Liveness:
             self.pushes += 1
 
     def _go_stale(self, rec: UnitRecord, now: float, reason: str, out: Outputs) -> None:
-        if self.records.go_stale(rec, now):
+        if self.book.go_stale(rec, now):
             assert rec.position is not None
             p = self.settings.planner_id
             if (
@@ -108,3 +108,10 @@ class Liveness:
                 out.events.append(StaleEvent(planner=p, unit=rec.id, position=rec.position, reason=reason))
             if self.settings.unit_forget_s is not None:
                 self.timers.set(now + self.settings.unit_forget_s, "forget", rec.id)
+
+
+def _forgettable(rec: UnitRecord, now: float, limit_s: float | None) -> bool:
+    """Whether a unit has been stale for ``limit_s`` (``None``: never forgotten)."""
+    return (
+        rec.stale and rec.stale_since is not None and limit_s is not None and now - rec.stale_since >= limit_s
+    )

@@ -17,7 +17,7 @@ from pfp_service.core.params import FieldStats
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal
 from pfp_service.world.events import MissionRecord, WorldSettings
-from pfp_service.world.world_records import UnitRecord
+from pfp_service.world.units import Started, UnitRecord
 
 __all__ = ["Shared", "fix", "start"]
 
@@ -55,21 +55,20 @@ def fix(
 
 def start(
     rec: UnitRecord, settings: WorldSettings, fld: ThreatField, stats: FieldStats | None
-) -> MissionRecord | InputError:
-    """Fix the mission of ``rec``'s goal and give the unit a stepper.
+) -> tuple[Started, MissionRecord] | InputError:
+    """The mission of ``rec``'s goal and the stepper that guides the unit on it (the record is not touched).
 
     Returns:
-        What durable state must keep of the mission, or why it is refused
-        (the record is left as it was).
+        What the unit's owner keeps (``Units.started``) and what durable
+        state must keep of the mission, or why it is refused.
     """
     assert rec.goal is not None
     mission = fix(rec.goal, rec.position, rec.shared, settings, fld, stats)
     if isinstance(mission, InputError):
         return mission
-    goal, origin, resolved = rec.shared = mission
-    rec.origin = origin
-    rec.stepper = Stepper(origin, (goal.position[0], goal.position[1]), resolved, settings.bounds, rec.key)
-    rec.stepper.defer = settings.deliberation == "deferred"
-    rec.stepper.track()  # a live unit: guided whatever it does between two reports (core.tracking)
-    rec.stepper.pace(rec.progress.speed_mps)
-    return MissionRecord(rec.id, rec.epoch, origin, goal, resolved)
+    goal, origin, resolved = mission
+    stepper = Stepper(origin, (goal.position[0], goal.position[1]), resolved, settings.bounds, rec.key)
+    stepper.defer = settings.deliberation == "deferred"
+    stepper.track()  # a live unit: guided whatever it does between two reports (core.tracking)
+    stepper.pace(rec.progress.speed_mps)
+    return Started(mission, stepper), MissionRecord(rec.id, rec.epoch, origin, goal, resolved)

@@ -107,6 +107,7 @@ def page(
             deliberating=r.job is not None,
             reason=r.last_reason[:1024],
             mission=mission_of(r.shared, planner if r.owned else None),
+            phase=r.phase,
         )
 
     next_zone = listing(

@@ -6,7 +6,8 @@ break a batch, it is run again one unit at a time, and a unit that fails
 alone, or whose direction is not finite, is handed back as a failure; every
 other unit is steered.  ``direction`` turns one unit's advice into its
 ``Direction`` and, on a change of status, its ``arrived`` or ``trapped``
-event.  Pure values in and out (a unit's last verdict is kept on its record).
+event, with the verdict the unit's owner keeps on its record
+(``units.Units.steered``).  Pure values in and out: nothing here writes a record.
 """
 
 from __future__ import annotations
@@ -40,9 +41,10 @@ from pfp_service.wire import (
 from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.wire.messages import MAX_EVENT_ITEMS
 from pfp_service.world.lookahead import Track, lookahead, within_map
-from pfp_service.world.world_records import UnitRecord
+from pfp_service.world.units import NO_GOAL, UnitRecord, Verdict
 
 __all__ = [
+    "NO_GOAL",
     "STATUS",
     "advise",
     "ahead",
@@ -175,8 +177,8 @@ def _finite(a: Advice) -> bool:
 
 def direction(
     rec: UnitRecord, adv: Advice, points: Track, planner: str, deliberating: bool
-) -> tuple[Direction, Event | None]:
-    """The unit's direction for its advice, and the event its change of status fires (if any)."""
+) -> tuple[Direction, Event | None, Verdict]:
+    """The unit's direction for its advice, the event its change of status fires (if any), and its verdict."""
     assert rec.position is not None
     # called per unit of a wave: the advice unpacked once, and min/max spelt as the comparisons they make
     step_status, dx, dy, level, distance, why, asking, reach, _tx, _ty, route = adv
@@ -191,11 +193,8 @@ def direction(
         elif status is DirectionStatus.TRAPPED:
             event = TrappedEvent(planner=planner, unit=rec.id, position=rec.position, reason=reason)
     terminal = step_status.terminal
-    rec.last_status = status
-    rec.last_reason = why
     # min(distance, FINITE_LIMIT): the wire's bound, a diagonal of the map is more
-    rec.last_distance = FINITE_LIMIT if distance > FINITE_LIMIT else distance
-    rec.last_vector = None if terminal else (dx, dy)
+    to_goal = FINITE_LIMIT if distance > FINITE_LIMIT else distance
     heading = None
     if not terminal and (dx or dy):
         heading = math.degrees(math.atan2(dx, dy)) % 360.0
@@ -217,7 +216,7 @@ def direction(
         status=status,
         vector=(dx, dy),
         heading_deg=heading,
-        distance_to_goal=rec.last_distance,
+        distance_to_goal=to_goal,
         threat_level=FINITE_LIMIT if low > FINITE_LIMIT else low,
         lookahead=points,
         reason=reason,
@@ -228,7 +227,7 @@ def direction(
         progress=rec.progress.verdict,
         route_left_m=left_m,
     )
-    return d, event
+    return d, event, Verdict(status, why, to_goal, None if terminal else (dx, dy))
 
 
 def _straight_reach(
@@ -255,8 +254,7 @@ def _straight_reach(
 
 
 def no_goal(rec: UnitRecord, planner: str) -> Direction:
-    """The direction of a unit with no goal: stand still."""
-    rec.last_status = DirectionStatus.NO_GOAL
+    """The direction of a unit with no goal: stand still (its verdict: ``NO_GOAL``)."""
     return Direction(
         unit=rec.id, seq=rec.seq, status=DirectionStatus.NO_GOAL, vector=(0.0, 0.0), planner=planner
     )

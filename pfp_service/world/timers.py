@@ -28,6 +28,10 @@ class Timers:
         self._seq += 1
         heapq.heappush(self._heap, (when, self._seq, kind, ident))
 
+    def next_due(self) -> float | None:
+        """When the earliest timer falls due (``None``: none is set)."""
+        return self._heap[0][0] if self._heap else None
+
     def due(self, now: float) -> Iterator[tuple[str, str]]:
         """Pop each timer due at ``now`` (``(kind, id)``), timers set while iterating included."""
         while self._heap and self._heap[0][0] <= now:

@@ -27,18 +27,27 @@ import copy
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
-from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
+from pfp_service.wire import (
+    Direction,
+    Goal,
+    ThreatChange,
+    ThreatUpdate,
+    UnitState,
+    WorldSnapshot,
+    keys,
+)
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
 from pfp_service.world import events as ev
 from pfp_service.world import kinds, missions, steering, translate
+from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.world.limits import Limits
 from pfp_service.world.liveness import UNIT_TIMERS, Liveness
-from pfp_service.world.ownership import Ownership
 from pfp_service.world.snapshot import page as snapshot_page
 from pfp_service.world.timers import Timers
-from pfp_service.world.world_records import Records, ThreatRecord, UnitRecord, ZoneRecord
+from pfp_service.world.units import Answer, UnitRecord
+from pfp_service.world.world_records import Records, ThreatRecord, ZoneRecord
 
 __all__ = ["World", *ev.__all__]
 
@@ -56,14 +65,16 @@ class World:
     def __init__(self, settings: WorldSettings | None = None) -> None:
         self.settings = s = settings or WorldSettings()
         self._rec = Records(s.planner.intensity)
+        self._book = self._rec.book  # the units' one writer (``units.Units``): every step of a unit's phase
         self._units = self._rec.units
         self._threats = self._rec.threats
         self._timers = Timers()
-        self._live = Liveness(s, self._rec, self._timers)
-        self._own = Ownership(s.planner_id, s.cluster)
+        self._live = Liveness(s, self._book, self._timers)
+        self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
         self.limits = Limits()
         # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
         self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
+        self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once
 
     # -- queries (read-only) ------------------------------------------------------
     @property
@@ -101,6 +112,20 @@ class World:
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
         return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
 
+    def next_deadline(self) -> float | None:
+        """When the world next needs an ``apply`` (a ``Tick`` will do), on the clock ``apply`` is given.
+
+        In the manner of aioquic's ``get_timer()``: the earliest of its timers
+        (staleness, token debounce, push re-sends, forgetting, expiry, a peer
+        gone), or at once -- the ``now`` of the last ``apply`` -- while it
+        ``owes`` a wave's points.  ``None``: nothing is due until an input
+        comes.  A timer may find nothing left to do when due (a unit heard
+        since): it is a reminder, not a verdict (``timers``).
+        """
+        if self._owed:
+            return self._now
+        return self._timers.next_due()
+
     def owes(self) -> bool:
         """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon.
 
@@ -110,11 +135,11 @@ class World:
 
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
-        return self._own.owns(unit_id)
+        return self._cluster.own.owns(unit_id)
 
     def shards(self) -> frozenset[int]:
         """The state shards this planner owns (``Ownership.shards``): the node subscribes to these."""
-        return self._own.shards()
+        return self._cluster.own.shards()
 
     def preview(self, unit_id: str) -> UnitView | None:
         """What a preview of ``unit_id`` runs on; ``None``: another planner answers it (its owner, once)."""
@@ -128,6 +153,7 @@ class World:
         loop until the directions are out), not the world, which imports no collector.
         """
         b = Batch(now)
+        self._now = now
         for inp in inputs:
             try:
                 self._apply_one(inp, b)
@@ -144,7 +170,7 @@ class World:
         if b.changes or b.zones:
             zones = [(z, c) for z, c, _ in b.zones if c]
             b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions, zones))
-        b.out.cancelled, self._rec.superseded = self._rec.superseded, []
+        b.out.cancelled, self._book.superseded = self._book.superseded, []
         return b.out
 
     def _apply_one(self, inp: Input, b: Batch) -> None:
@@ -182,8 +208,8 @@ class World:
                 rec = self._unit(unit, b, K.UNIT_MISSION)
                 if rec is not None and not rec.owned:  # our own missions come back to us too: ours stands
                     self._rec.share(rec, mission)
-            case ev.PeerPlanner(planner, alive):
-                self._peer(planner, alive, b)
+            case ev.PeerPlanner():
+                self._cluster.peer(inp, b)
             case ev.Tick(t, shed):
                 self.limits.overload += shed
                 self._run_timers(t, b)
@@ -212,11 +238,11 @@ class World:
         if rec is not None:
             try:
                 said = "; the unit's goal was dropped" if rec.goal is not None else ""
-                self._rec.drop_mission(rec)
+                if rec.goal is not None or rec.shared is not None:
+                    self._book.drop_mission(rec)
                 self._tell(rec, b)
             except Exception:  # a record too broken to reset: forget it (a report makes it afresh)
-                self._units.pop(rec.id, None)
-                self._rec.stale -= rec.stale
+                self._book.discard(rec)
         name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], ev.where(exc))
         reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
         self._reject(key, InputError("$", reason), b, kind)
@@ -246,7 +272,7 @@ class World:
                 err = InputError("$", f"planner at max_units ({s.max_units})")
                 self._reject(keys.KeyOf(kind, s.mission).key(unit_id), err, b, kind)
                 return None
-            rec = self._rec.add(unit_id, self.owns(unit_id), b.now, reported)
+            rec = self._book.add(unit_id, self.owns(unit_id), b.now, reported)
             self._live.made(rec, b.now)
         return rec
 
@@ -272,41 +298,11 @@ class World:
         rec = self._unit(unit_id, b, K.UNIT_GOAL)
         if rec is None:
             return
-        self._rec.drop_mission(rec)
-        rec.goal, rec.shared = goal, shared
+        self._book.set_goal(rec, goal, shared)
         if restored and rec.owned:
             self._start(rec, b, record=False)
         elif rec.position is not None and rec.owned:
             self._start(rec, b)
-            self._tell(rec, b)
-
-    def _peer(self, planner: str, alive: bool, b: Batch) -> None:
-        s = self.settings
-        if not alive:  # acted on only if still gone after the debounce (a router restart flaps every token)
-            if self._own.left(planner, b.now):
-                self._timers.set(b.now + s.liveliness_debounce_s, "peer", planner)
-        elif not self._own.joined(planner):
-            return  # this planner, a known peer, or one back within the debounce: nothing moves
-        elif s.cluster:
-            self._rebalance(b)
-        else:
-            why = f"planner {planner!r} also serves mission {s.mission!r}; both answer every unit"
-            b.out.events.append(ConflictEvent(planner=s.planner_id, other=planner, reason=why))
-
-    def _rebalance(self, b: Batch) -> None:
-        """The live planners changed: a unit taken over is guided from its last mission at once."""
-        for rec in self._units.values():
-            owned = self.owns(rec.id)
-            if owned == rec.owned:
-                continue
-            if not owned:
-                self._rec.hand_over(rec)
-                continue
-            rec.owned = True
-            if (
-                rec.goal is not None and rec.position is not None and not rec.stale
-            ):  # stale: at its next report
-                self._start(rec, b)
             self._tell(rec, b)
 
     def _threat_put(self, tid: str, msg: ThreatUpdate, b: Batch) -> None:
@@ -356,28 +352,18 @@ class World:
 
     def _deliberated(self, done: ev.Deliberated, b: Batch) -> None:
         rec = self._units.get(done.unit)
-        if rec is None or rec.job is None or rec.job.token != done.token:
-            return  # superseded: a newer goal or world is in force
-        kind = self._rec.answered(rec)
-        if rec.stepper is None or rec.token() != done.token:
-            return
-        if done.error is not None:  # it failed where it ran: this unit's goal goes, as a fault here would
+        answer = self._book.deliberated(rec, done) if rec is not None else Answer.IGNORED
+        if answer is Answer.FAILED and rec is not None and done.error is not None:  # as a fault here would
             self._unit_fault(b, rec, RuntimeError(done.error[1]), done.error)
-        elif done.stepper is None and kind == "foresee":  # past its deadline: descend, and ask again
-            rec.stepper.look_ahead_again()  # at its next report, behind the queue
-        elif done.stepper is None:
-            rec.stepper.pending = None  # a trap is asked again by the trap watch itself
-        elif rec.stepper.adopt(done.stepper):
+        elif answer is Answer.TELL and rec is not None:
             self._tell(rec, b)  # a route or a verdict: told at once, not at its next report
 
     # -- timers ---------------------------------------------------------------------
     def _run_timers(self, now: float, b: Batch) -> None:
-        s = self.settings
         for kind, ident in self._timers.due(now):
             try:
                 if kind == "peer":  # a peer's token gone for the whole debounce: its units move
-                    if self._own.settle(ident, now, s.liveliness_debounce_s) and s.cluster:
-                        self._rebalance(b)
+                    self._cluster.settle(ident, now, b)
                 elif kind == "expire":
                     self._threat_gone(self._rec.expire(ident, now), ident, "expired", b)
                 elif kind == "zone_expire":
@@ -394,12 +380,14 @@ class World:
     def _start(self, rec: UnitRecord, b: Batch, record: bool = True) -> None:
         """Fix the unit's mission and give it a stepper (``missions.start``); a mission refused drops the goal."""
         fld = self.field  # builds the stats with it
-        mission = missions.start(rec, self.settings, fld, self._rec.stats)
-        if isinstance(mission, InputError):
-            self._reject(self._key(K.UNIT_GOAL, rec.id), mission, b, K.UNIT_GOAL)
-            self._rec.drop_mission(rec)
-        elif record:
-            b.out.missions.append(mission)
+        started = missions.start(rec, self.settings, fld, self._rec.stats)
+        if isinstance(started, InputError):
+            self._reject(self._key(K.UNIT_GOAL, rec.id), started, b, K.UNIT_GOAL)
+            self._book.drop_mission(rec)
+            return
+        self._book.started(rec, started[0])
+        if record:
+            b.out.missions.append(started[1])
 
     def _world_changed(self, b: Batch) -> None:
         """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
@@ -411,15 +399,13 @@ class World:
         reached = steering.reached(
             guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones]
         )
-        supersede, tell = self._rec.supersede, self._tell  # per unit of a wave: looked up once
+        rejudge, tell = self._book.rejudge, self._tell  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
                 st = rec.stepper
                 assert st is not None
                 if hit or st.escaping or rec.job is not None or st.pending is not None:
-                    st.world_changed()
-                    if rec.job is not None:
-                        supersede(rec)
+                    rejudge(rec)
                     tell(rec, b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
@@ -428,7 +414,7 @@ class World:
         """A fresh direction for each live unit of the batch (``steering.steer``); one whose step fails loses its goal."""
         p, out = self.settings.planner_id, b.out
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
-        out.directions += [steering.no_goal(r, p) for r in live if r.stepper is None]
+        out.directions += [self._no_goal(r) for r in live if r.stepper is None]
         guided = [r for r in live if r.stepper is not None]
         later = self._later(b)  # a wave's units owed their points: the next share of them
         if not guided and not later:
@@ -451,10 +437,12 @@ class World:
             self._unit_fault(b, rec, exc)
         first, sent = len(out.directions), []
         direction, wave, events, directions = steering.direction, b.wave, out.events, out.directions
+        keep = self._book.steered
         for rec, adv, points in steered:  # per unit of a wave: names looked up once, above
             try:
                 job = rec.job
-                d, event = direction(rec, adv, points, p, job is not None)
+                d, event, verdict = direction(rec, adv, points, p, job is not None)
+                keep(rec, verdict)
                 if job is None and rec.id not in wave:  # a wave's jobs are asked with its points
                     st = rec.stepper
                     if st is not None and st.pending is not None:
@@ -470,7 +458,11 @@ class World:
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         # a unit whose step failed lost its goal: told so, once the rest are out
-        out.directions += [steering.no_goal(r, p) for r, _ in failed if r.id in self._units and r.live()]
+        out.directions += [self._no_goal(r) for r, _ in failed if r.id in self._units and r.live()]
+
+    def _no_goal(self, rec: UnitRecord) -> Direction:
+        self._book.steered(rec, steering.NO_GOAL)
+        return steering.no_goal(rec, self.settings.planner_id)
 
     def _later(self, b: Batch) -> list[tuple[UnitRecord, Advice]]:
         """The next ``OWED_PER_TICK`` of a wave's units still owed their points, untouched since; the rest stay owed.
@@ -496,5 +488,5 @@ class World:
         assert rec.stepper is not None and rec.stepper.pending is not None
         kind, deadline = rec.stepper.pending.kind, b.now + self.settings.deliberation_budget_s
         job = ev.Job(rec.id, rec.token(), kind, rec.stepper, fld, deadline, live=True)  # Job.detach copies
-        self._rec.asked(rec, job)
+        self._book.asked(rec, job)
         b.out.jobs.append(job)

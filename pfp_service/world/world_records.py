@@ -1,70 +1,29 @@
 """The world's records: one per unit, threat and keep-out zone, and the counts kept with them.
 
-A unit's record holds what it reported, its goal and mission, its stepper,
-its staleness, its last direction and push, and the deliberation job asked
-for it.  The methods here are the record-keeping rules the world's decisions
-are made of: a report makes a unit fresh, a unit goes stale or is forgotten,
-a mission is dropped (its job superseded), a threat or a zone is put,
-removed or expires.  The field in force carries the zones in force
-(``ThreatField.with_zones``, as ``core.zones`` says): whatever takes the
-field -- the stepper, deliberation jobs, previews -- sees them.  They return what changed; the world decides what goes out.  Pure
-values: ``now`` is a parameter.
+A unit's record and its one writer are ``units`` (``Records.book``: its
+phase, and every write that decides it); the records here are the threats'
+and zones': a threat or a zone is put, removed or expires.  The field in
+force carries the zones in force (``ThreatField.with_zones``, as
+``core.zones`` says): whatever takes the field -- the stepper, deliberation
+jobs, previews -- sees them.  They return what changed; the world decides
+what goes out.  Pure values: ``now`` is a parameter.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-import msgspec
 import numpy as np
 
-from pfp_service.core import Resolved, Stepper, Threat, ThreatField
+from pfp_service.core import Threat, ThreatField
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.zones import Zone, ZoneSet
-from pfp_service.wire import Direction, DirectionStatus, Goal, Mission, ThreatUpdate
+from pfp_service.wire import Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
-from pfp_service.world.events import Job, unit_key
-from pfp_service.world.progress import ProgressWatch
+from pfp_service.world.units import UnitRecord, Units
 
 __all__ = ["Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
-
-
-@dataclass(slots=True)
-class UnitRecord:
-    id: str
-    key: int
-    position: tuple[float, float] | None = None
-    seq: int | None = None
-    kind: str | None = None
-    last_seen: float = -math.inf
-    goal: Goal | None = None
-    origin: tuple[float, float] | None = None  # x0: where the unit was when its goal was set
-    stepper: Stepper | None = None
-    epoch: int = 0  # bumped by every goal set or cancelled
-    stale: bool = False
-    stale_since: float | None = None
-    token_gone_since: float | None = None
-    silence_timer: bool = False
-    last_status: DirectionStatus | None = None
-    last_reason: str = ""
-    last_distance: float | None = None
-    last_vector: tuple[float, float] | None = None
-    job: Job | None = None
-    push: Direction | None = None  # the last push, until a report is answered
-    push_tries: int = 0
-    owned: bool = True  # this planner guides it (scale-out: rendezvous over the live planners)
-    shared: tuple[Goal, tuple[float, float], Resolved] | None = None  # a mission another planner fixed
-    progress: ProgressWatch = field(default_factory=ProgressWatch)  # what its reports show of its motion
-
-    def token(self) -> tuple[int, int]:
-        """What a deliberation result must match to be adopted: the goal's epoch and the world's version."""
-        return (self.epoch, self.stepper.version if self.stepper is not None else -1)
-
-    def live(self) -> bool:
-        """Whether the unit is told directions: it has reported, is not stale, and this planner guides it."""
-        return self.position is not None and not self.stale and self.owned
 
 
 @dataclass(slots=True)
@@ -86,12 +45,10 @@ class Records:
     """Every unit and threat the world holds, the counts kept as they change, and the field of the threats."""
 
     def __init__(self, intensity: str = "peak") -> None:
-        self.units: dict[str, UnitRecord] = {}
+        self.book = Units()  # the units' records and their one writer (``units.Units``)
+        self.units: dict[str, UnitRecord] = self.book.records
         self.threats: dict[str, ThreatRecord] = {}
         self.zones: dict[str, ZoneRecord] = {}
-        self.stale = 0  # units stale
-        self.deliberating = 0  # units with a job asked and not answered
-        self.superseded: list[Job] = []  # jobs asked and no longer wanted, until the world says so
         self.intensity = intensity
         self._bare: ThreatField | None = None  # the threats' field, built when asked, until they change
         self._field: ThreatField | None = None  # ... and with the zones: until the threats or zones change
@@ -129,114 +86,21 @@ class Records:
             self._zone_set = ZoneSet(self.zones[k].zone for k in sorted(self.zones))
         return self._zone_set
 
-    # -- units ------------------------------------------------------------------------
-    def add(self, unit_id: str, owned: bool, now: float, reported: bool) -> UnitRecord:
-        """A new unit's record; one made by anything but a report is stale from the start."""
-        rec = self.units[unit_id] = UnitRecord(unit_id, unit_key(unit_id), owned=owned)
-        if not reported:
-            rec.stale = True
-            rec.stale_since = now
-            self.stale += 1
-        return rec
-
-    def heard(
-        self, rec: UnitRecord, position: tuple[float, float], seq: int | None, kind: str | None, now: float
-    ) -> None:
-        """A report: where the unit is, and proof of life whatever its token says; its push is answered."""
-        rec.position = position
-        rec.seq = seq
-        rec.kind = kind if kind is not None else rec.kind
-        rec.last_seen = now
-        if rec.stale:
-            rec.stale = False
-            rec.stale_since = None
-            self.stale -= 1
-        rec.token_gone_since = None
-        rec.push = None
-
-    def go_stale(self, rec: UnitRecord, now: float) -> bool:
-        """Mark a unit that has reported stale; whether it was fresh until now."""
-        if rec.stale or rec.position is None:
-            return False
-        rec.stale = True
-        rec.stale_since = now
-        self.stale += 1
-        return True
-
-    def forgettable(self, rec: UnitRecord, now: float, limit_s: float | None) -> bool:
-        """Whether a unit has been stale for ``limit_s`` (``None``: never forgotten)."""
-        return (
-            rec.stale
-            and rec.stale_since is not None
-            and limit_s is not None
-            and now - rec.stale_since >= limit_s
-        )
-
-    def forget(self, rec: UnitRecord) -> None:
-        """Drop a unit's record, and its job with it."""
-        self.supersede(rec)
-        if self.units.pop(rec.id, None) is not None and rec.stale:
-            self.stale -= 1
-
-    def supersede(self, rec: UnitRecord) -> Job | None:
-        """The unit's job (if any) no longer counts: a newer goal or world is in force.  Returns that job.
-
-        The job is noted in ``superseded``: whoever runs it may drop it (``Outputs.cancelled``).
-        """
-        job = rec.job
-        if job is not None:
-            self.superseded.append(job)
-            rec.job = None
-            self.deliberating -= 1
-        return job
-
-    def asked(self, rec: UnitRecord, job: Job) -> None:
-        """A deliberation job was asked for the unit."""
-        rec.job = job
-        self.deliberating += 1
-
-    def answered(self, rec: UnitRecord) -> str:
-        """The unit's job came back; returns its kind."""
-        assert rec.job is not None
-        kind = rec.job.kind
-        rec.job = None
-        self.deliberating -= 1
-        return kind
-
+    # the world's input handlers name these two here; the writes are the units' owner's
     def drop_mission(self, rec: UnitRecord) -> None:
-        """The unit's goal, mission, stepper and last verdict go; a new epoch starts, and its job is superseded."""
-        rec.goal = None
-        rec.stepper = None
-        rec.origin = None
-        rec.last_status = None
-        rec.last_reason = ""
-        rec.last_distance = None
-        rec.last_vector = None
-        rec.shared = None
-        rec.epoch += 1
-        self.supersede(rec)
+        self.book.drop_mission(rec)
 
     def share(self, rec: UnitRecord, mission: Mission) -> None:
-        """Another planner fixed the unit's mission: kept for when this one takes the unit over."""
-        params = Resolved(**msgspec.structs.asdict(mission.params))
-        rec.shared = (mission.goal, (mission.origin[0], mission.origin[1]), params)
-
-    def hand_over(self, rec: UnitRecord) -> None:
-        """Another planner guides the unit now: this one keeps its mission, not its stepper."""
-        rec.owned = False
-        self.supersede(rec)
-        rec.stepper = None
-        rec.push = None
-        rec.last_status = None
+        self.book.share(rec, mission)
 
     def counts(self) -> dict[str, int]:
         """The figures of the status reply these records keep (O(1) but ``units_owned``)."""
         return {
             "units": len(self.units),
-            "units_stale": self.stale,
+            "units_stale": self.book.stale,
             "threats": len(self.threats),
             "zones": len(self.zones),
-            "deliberating": self.deliberating,
+            "deliberating": self.book.deliberating,
             "units_owned": sum(1 for r in self.units.values() if r.owned),
         }
 

@@ -5,6 +5,7 @@ Apart from the messages between a unit and its planner (``structs``), which thes
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Annotated
 
 import msgspec
@@ -27,6 +28,7 @@ __all__ = [
     "Mission",
     "MissionParams",
     "ThreatSummary",
+    "UnitPhase",
     "UnitSummary",
     "WorldQuery",
     "WorldSnapshot",
@@ -71,6 +73,19 @@ class Mission(_Message, frozen=True, kw_only=True):
 
 
 # -- the world queryable ---------------------------------------------------------
+class UnitPhase(StrEnum):
+    """Where a unit is in its life, as its planner holds it (``UnitSummary.phase``; ``world.units``)."""
+
+    UNKNOWN = "unknown"  # named (by a goal, a mission, a peer) but never heard from
+    STALE = "stale"  # heard from, then silent or its liveliness token gone: told nothing
+    PEER = "peer"  # another planner of the cluster guides it
+    NO_GOAL = "no_goal"
+    GUIDED = "guided"  # en route or escaping
+    DELIBERATING = "deliberating"  # guided, with a look-ahead or an escape search asked
+    ARRIVED = "arrived"
+    TRAPPED = "trapped"
+
+
 class UnitSummary(_Message, frozen=True, kw_only=True):
     """One unit as the planner holds it (``WorldSnapshot.units``)."""
 
@@ -85,6 +100,7 @@ class UnitSummary(_Message, frozen=True, kw_only=True):
     deliberating: bool = False
     reason: Text = ""
     mission: Mission | None = None  # its full goal, x0 and parameters, once fixed
+    phase: UnitPhase | None = None  # added with unit phases; null from an older planner
 
 
 class ThreatSummary(_Message, frozen=True, kw_only=True):
