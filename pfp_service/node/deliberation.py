@@ -125,6 +125,10 @@ class Deliberators:
             heapq.heapify(self._waiting)  # (priority, seq) keys are unique: the same order as before
             self._cancelled = 0
 
+    def waiting(self) -> bool:
+        """Whether jobs wait for a worker: the loop comes back to ``feed`` them (or answer the late ones)."""
+        return bool(self._waiting)
+
     def feed(self) -> None:
         """Send waiting jobs to the pool while it has room; drop superseded ones, answer late ones."""
         while self._finished:

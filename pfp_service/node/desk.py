@@ -278,6 +278,11 @@ class PreviewDesk:
     def _replaced(self, why: str) -> None:
         log.warning("preview worker replaced", extra={"fields": {"why": why}})
 
+    def waiting(self) -> bool:
+        """Whether a preview is still unanswered: the loop comes back for ``expire`` though nothing else is due."""
+        with self._lock:
+            return bool(self._deadlines)
+
     def expire(self, now: float) -> None:
         """Answer ``busy`` the previews still queued past their start, and (a backstop) ``expired`` any
         still unanswered well past its last moment."""

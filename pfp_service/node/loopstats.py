@@ -60,6 +60,10 @@ class Trim:
         self._pending += units
         self._last_forget = now
 
+    def waiting(self) -> bool:
+        """Whether a trim waits for the forgetting to pause: the loop comes back for ``due``."""
+        return self._fn is not None and self._pending >= TRIM_AFTER
+
     def due(self, now: float) -> None:
         """Called every tick: trim if enough was forgotten and the forgetting paused."""
         if self._fn is None or self._pending < TRIM_AFTER:

@@ -5,7 +5,8 @@
   shard this planner owns, all on one while it owns them all), latest-wins per unit.
 * Ticks amortise: the loop ticks at most every ``MIN_TICK_S`` while states keep
   coming, so the per-tick cost is shared; idle, it sleeps until a ring's waiter
-  or an input wakes it (no polling).
+  or an input wakes it, or the world's next deadline (``World.next_deadline``)
+  comes: no polling, and no period.
 * Under ``--cluster`` the planner subscribes to the states of its own shards
   only (``World.shards``, rendezvous hashing); as they change, the new rings
   are declared before the old go.
@@ -143,7 +144,7 @@ class PlannerNode:
         # goals, threats and zones: puts and acknowledged-write queries, waiting for the loop (writes.py)
         self._writes = Writes(cfg, self.zid, self._lock, self._wake.set, self._intake.refused)
         # the mission's other planners: peers' tokens for the world, twins for the status and their conflict
-        self._peers = Peers(cfg.mission, cfg.planner_id, cfg.cluster, self._lock, self._push, self._wake.set)
+        self._peers = Peers(cfg.mission, cfg.planner_id, cfg.cluster, self._lock, self._push)
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
         self._trim = Trim()
@@ -209,19 +210,15 @@ class PlannerNode:
             self._out.event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
-        self._twins_thread = threading.Thread(
-            target=watch_twins,
-            args=(
-                self.session,
-                self.cfg.mission,
-                self.cfg.planner_id,
-                self.zid,
-                self._stop,
-                self._peers.on_twin,
-            ),
-            name="pfp-twins",
-            daemon=True,
+        twins = (
+            self.session,
+            self.cfg.mission,
+            self.cfg.planner_id,
+            self.zid,
+            self._stop,
+            self._peers.on_twin,
         )
+        self._twins_thread = threading.Thread(target=watch_twins, args=twins, name="pfp-twins", daemon=True)
         self._twins_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
 
@@ -360,7 +357,7 @@ class PlannerNode:
         return len(samples)
 
     def _loop(self) -> None:
-        """Tick at most every ``MIN_TICK_S`` while states come; idle, sleep until woken (no polling)."""
+        """Tick at most every ``MIN_TICK_S`` while states come; idle, sleep until woken or due (no polling)."""
         last = -math.inf
         idle = False
         demoted = -math.inf
@@ -368,9 +365,10 @@ class PlannerNode:
             if self.clock() - demoted >= DEMOTE_EVERY_S:
                 demote_native_threads()  # Zenoh's threads (new ones too) no longer preempt a tick
                 demoted = self.clock()
+            due = self._due(last)
             if idle:  # nothing came: the waiters watch the rings, the wake event the rest
                 self._rings.arm()
-                self._wake.wait(max(last + self.cfg.tick_s - self.clock(), 0.0))
+                self._wake.wait(None if due is None else max(due - self.clock(), 0.0))
             pause = last + MIN_TICK_S - self.clock()
             if pause > 0:  # amortise: the states and inputs of the next MIN_TICK_S share one tick
                 time.sleep(pause)
@@ -382,7 +380,7 @@ class PlannerNode:
             now = self.clock()
             if self._trace.on:
                 self._trace.part("drain", now - t0)
-            if not (woke or got or now - last >= self.cfg.tick_s):
+            if not (woke or got or (due is not None and now >= due)):
                 continue
             last = now
             try:
@@ -390,6 +388,15 @@ class PlannerNode:
                 self._sync_shards()
             except Exception:  # never let one bad batch kill the planner; say so loudly
                 log.exception("planning loop error")
+
+    def _due(self, last: float) -> float | None:
+        """When the loop must tick though nothing comes: the world's next deadline, or ``tick_s`` after the
+        last tick while the node's own work waits on the clock (a preview's expiry, jobs queued for a
+        worker, a memory trim)."""
+        due = self.world.next_deadline()
+        if self._desk.waiting() or self._deliberators.waiting() or self._trim.waiting():
+            due = last + self.cfg.tick_s if due is None else min(due, last + self.cfg.tick_s)
+        return due
 
     def _tick(self) -> None:
         with self._lock:  # a bounded slice: a storm is spread over ticks, so no tick holds up the rest
@@ -437,8 +444,7 @@ class PlannerNode:
         if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
-        raised = self._peers.take_events()
-        for ev in [*raised, *out.events]:
+        for ev in out.events:
             self._out.event(ev, logged)
         for fault in out.faults:  # the world's bulkheads: once a minute per key, never a traceback
             log.error("input failed inside the planner", extra={"fields": fault.fields()})

@@ -17,7 +17,7 @@ import zenoh
 
 from pfp_service.errors import InputError
 from pfp_service.node.log import get_logger
-from pfp_service.wire import ConflictEvent, Event, keys
+from pfp_service.wire import keys
 from pfp_service.wire.messages import decode_planner_status
 from pfp_service.world.events import Input, PeerPlanner
 
@@ -71,11 +71,11 @@ class Peers:
     """The mission's other planners as this one sees them, for the node.
 
     Their liveliness tokens become ``PeerPlanner`` inputs (the world shares units by them under
-    ``--cluster``).  A twin, a planner answering this one's units too (another id without
-    ``--cluster``, or this id from another session: ``watch_twins``), is listed in the status
-    (``twins``); under ``--cluster`` a same-id twin cannot share, only collide, and raises a
-    ``ConflictEvent`` the loop publishes (``take_events``).  Called from Zenoh's threads and the
-    twins' watcher; the node's ``lock`` guards what they share with the loop.
+    ``--cluster``), and so do twins: a planner answering this one's units too (another id without
+    ``--cluster``, or this id from another session: ``watch_twins``, its ``PeerPlanner`` naming
+    the session).  Twins are listed in the status (``twins``); whether one is a conflict is the
+    world's to decide (``world.cluster``).  Called from Zenoh's threads and the twins' watcher;
+    the node's ``lock`` guards what they share with the loop.
     """
 
     def __init__(
@@ -85,16 +85,13 @@ class Peers:
         cluster: bool,
         lock: threading.Lock,
         push: Callable[[Input], None],
-        wake: Callable[[], None],
     ) -> None:
         self._mission = mission
         self._planner_id = planner_id
         self._cluster = cluster
         self._lock = lock
         self._push = push
-        self._wake = wake
         self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
-        self._events: list[Event] = []  # events raised off the loop (a twin under --cluster)
 
     def on_token(self, sample: zenoh.Sample) -> None:
         """A planner's liveliness token came or went."""
@@ -126,28 +123,12 @@ class Peers:
         """``watch_twins``: a session serving this planner's id appeared or went."""
         name = f"{self._planner_id[:50]}-{zid[:12]}"
         self._twinned(name, alive)
-        if not self._cluster:
-            self._push(PeerPlanner(name, alive))
-            return
-        if alive:  # the world shares units by planner id: twins under --cluster cannot share, only collide
-            reason = (
-                f"another planner (session {zid}) also serves mission {self._mission!r} as "
-                f"{self._planner_id!r}; --cluster shares units by planner id: give each its own --planner-id"
-            )
-            with self._lock:  # events are published from the loop's thread only
-                self._events.append(ConflictEvent(planner=self._planner_id, other=name, reason=reason))
-            self._wake()
+        self._push(PeerPlanner(name, alive, session=zid))
 
     def twins(self) -> tuple[str, ...]:
         """The twins now, sorted, at most 64 (``PlannerStatus.twins``)."""
         with self._lock:  # the callbacks' threads change them
             return tuple(sorted(self._twins))[:64]
-
-    def take_events(self) -> list[Event]:
-        """The events raised since the last call, for the loop to publish."""
-        with self._lock:
-            events, self._events = self._events, []
-        return events
 
     def _twinned(self, name: str, alive: bool) -> None:
         with self._lock:
