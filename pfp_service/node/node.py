@@ -4,9 +4,8 @@
   rings the loop drains (``rings.StateRings``: one on the plain key, one per
   shard this planner owns, all on one while it owns them all), latest-wins per unit.
 * Ticks amortise: the loop ticks at most every ``MIN_TICK_S`` while states keep
-  coming, so the per-tick cost is shared; idle, it sleeps until a ring's waiter
-  or an input wakes it, or the world's next deadline (``World.next_deadline``)
-  comes: no polling, and no period.
+  coming, so the per-tick cost is shared; idle, it sleeps until a ring's waiter or an
+  input wakes it or the world's next deadline comes: no polling, no period.
 * Under ``--cluster`` the planner subscribes to the states of its own shards
   only (``World.shards``, rendezvous hashing); as they change, the new rings
   are declared before the old go.
@@ -390,12 +389,11 @@ class PlannerNode:
                 log.exception("planning loop error")
 
     def _due(self, last: float) -> float | None:
-        """When the loop must tick though nothing comes: the world's next deadline, or ``tick_s`` after the
-        last tick while the node's own work waits on the clock (a preview's expiry, jobs queued for a
-        worker, a memory trim)."""
-        due = self.world.next_deadline()
+        """When to tick if nothing comes: the world's deadline, or ``tick_s`` on while the node's own work
+        waits (a preview's expiry, jobs queued for a worker, a trim)."""
+        due, mine = self.world.next_deadline(), last + self.cfg.tick_s
         if self._desk.waiting() or self._deliberators.waiting() or self._trim.waiting():
-            due = last + self.cfg.tick_s if due is None else min(due, last + self.cfg.tick_s)
+            return mine if due is None else min(due, mine)
         return due
 
     def _tick(self) -> None:
