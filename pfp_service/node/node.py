@@ -209,14 +209,7 @@ class PlannerNode:
             self._out.event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
-        twins = (
-            self.session,
-            self.cfg.mission,
-            self.cfg.planner_id,
-            self.zid,
-            self._stop,
-            self._peers.on_twin,
-        )
+        twins = (s, m, p, self.zid, self._stop, self._peers.on_twin)
         self._twins_thread = threading.Thread(target=watch_twins, args=twins, name="pfp-twins", daemon=True)
         self._twins_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
@@ -389,11 +382,10 @@ class PlannerNode:
                 log.exception("planning loop error")
 
     def _due(self, last: float) -> float | None:
-        """When to tick if nothing comes: the world's deadline, or ``tick_s`` on while the node's own work
-        waits (a preview's expiry, jobs queued for a worker, a trim)."""
-        due, mine = self.world.next_deadline(), last + self.cfg.tick_s
+        """When to tick if nothing comes: the world's deadline, or ``tick_s`` on while the node's work waits."""
+        due = self.world.next_deadline()
         if self._desk.waiting() or self._deliberators.waiting() or self._trim.waiting():
-            return mine if due is None else min(due, mine)
+            return last + self.cfg.tick_s if due is None else min(due, last + self.cfg.tick_s)
         return due
 
     def _tick(self) -> None:
