@@ -25,6 +25,7 @@ from pfp_service.wire.messages.codec import (
     decode_plan_result,
     decode_planner_status,
     decode_preview_request,
+    decode_team,
     decode_threat,
     decode_unit_state,
     decode_world_query,
@@ -79,6 +80,13 @@ from pfp_service.wire.messages.structs import (
     ZoneUpdate,
     fit_text,
 )
+from pfp_service.wire.messages.teams import (
+    MAX_TEAM_MEMBERS,
+    RADIO_RANGE_MAX_M,
+    TeamProblem,
+    TeamUpdate,
+    team_problems,
+)
 from pfp_service.wire.messages.world import (
     Mission,
     MissionParams,
@@ -97,6 +105,7 @@ __all__ = [
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",
     "MAX_SNAPSHOT_ITEMS",
+    "MAX_TEAM_MEMBERS",
     "MAX_WHATIF_THREATS",
     "MAX_WORLD_QUERY_CHARS",
     "MAX_ZONE_EXTENT_M",
@@ -121,11 +130,14 @@ __all__ = [
     "PlannerStatus",
     "PreviewRequest",
     "Progress",
+    "RADIO_RANGE_MAX_M",
     "RejectedEvent",
     "ReplanEvent",
     "RestoredEvent",
     "RouteKind",
     "StaleEvent",
+    "TeamProblem",
+    "TeamUpdate",
     "ThreatChange",
     "ThreatSummary",
     "ThreatUpdate",
@@ -150,6 +162,7 @@ __all__ = [
     "decode_plan_result",
     "decode_planner_status",
     "decode_preview_request",
+    "decode_team",
     "decode_threat",
     "decode_unit_state",
     "decode_world_query",
@@ -158,4 +171,5 @@ __all__ = [
     "encode",
     "fit_text",
     "localise_zone",
+    "team_problems",
 ]
