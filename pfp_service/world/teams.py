@@ -1,0 +1,233 @@
+"""The roles of a team as verdicts on one unit's step: ``lead``, ``follow`` and the controller ``link``.
+
+Each role takes where the unit is, where its planned step would take it
+(``to``: the end of the direction's reach) and what the role needs to know of
+the others, and returns a ``Verdict``: go (the step as planned), hold (with
+the reason), or a modified step (a nearer end on the same line, or another
+point to make for, with the reason).  Pure functions of numbers: the world's
+team book (``team_book``) gathers the positions and tracks and applies what
+they say.  A verdict is never an exception: a step too short to judge goes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+__all__ = [
+    "GO",
+    "STANDOFF_TOLERANCE",
+    "Sight",
+    "Verdict",
+    "follow",
+    "lead",
+    "link",
+    "point_at",
+    "project",
+]
+
+Point = tuple[float, float]
+# Whether two points see each other over the ground (a mast at each end); ``None`` where there is no terrain.
+Sight = Callable[[Point, Point], bool]
+# The lead waits once it is this share of its standoff further ahead than asked (the issue's ±25 %).
+STANDOFF_TOLERANCE = 0.25
+# A step is judged at points this far apart at most (a fraction of the distance kept, so a corridor or a
+# radio range is never stepped over), and at no more than this many points.
+_SAMPLES_MAX = 64
+_CLOSE_M = 1.0  # a point this close to where the unit is: it is there
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """What a role says of a unit's step: ``go``, ``hold`` (``reason``) or ``to`` another end (``reason``)."""
+
+    kind: Literal["go", "hold", "to"]
+    to: Point | None = None
+    reason: str = ""
+
+
+GO = Verdict("go")
+
+
+def _hold(reason: str) -> Verdict:
+    return Verdict("hold", None, reason)
+
+
+def _dist(a: Point, b: Point) -> float:
+    return math.hypot(b[0] - a[0], b[1] - a[1])
+
+
+def project(at: Point, line: Sequence[Point]) -> tuple[float, float]:
+    """``(s, d)``: how far along ``line`` (a polyline, metres from its start) ``at``'s nearest point lies, and how far off it is.
+
+    One point is a line of no length; no point puts ``at`` infinitely far off.
+    """
+    if not line:
+        return 0.0, math.inf
+    pts = np.asarray(line, dtype=float).reshape(-1, 2)
+    p = np.asarray(at, dtype=float)
+    if len(pts) == 1:
+        return 0.0, float(np.hypot(*(p - pts[0])))
+    a, b = pts[:-1], pts[1:]
+    ab = b - a
+    length = np.hypot(ab[:, 0], ab[:, 1])
+    sq = np.where(length > 0.0, length * length, 1.0)
+    t = np.clip(((p - a) * ab).sum(axis=1) / sq, 0.0, 1.0)
+    near = a + ab * t[:, None]
+    off = np.hypot(near[:, 0] - p[0], near[:, 1] - p[1])
+    i = int(np.argmin(off))
+    return float(length[:i].sum() + t[i] * length[i]), float(off[i])
+
+
+def point_at(line: Sequence[Point], s: float) -> Point:
+    """The point ``s`` metres along ``line`` from its start (its ends beyond them)."""
+    if not line:
+        raise ValueError("point_at: an empty line")
+    if s <= 0.0:
+        return line[0]
+    for a, b in zip(line, line[1:]):
+        seg = _dist(a, b)
+        if s <= seg and seg > 0.0:
+            f = s / seg
+            return (a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f)
+        s -= seg
+    return line[-1]
+
+
+def _kept(at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float) -> float:
+    """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``."""
+    length = _dist(at, to)
+    n = min(_SAMPLES_MAX, max(1, math.ceil(length / spacing_m))) if spacing_m > 0.0 else 1
+    good = 0.0
+    for k in range(1, n + 1):
+        f = k / n
+        if not ok((at[0] + (to[0] - at[0]) * f, at[1] + (to[1] - at[1]) * f)):
+            return good
+        good = f
+    return good
+
+
+def _shortened(at: Point, to: Point, kept: float, reason: str) -> Verdict:
+    """The step cut to the part kept: go when all of it is, hold when too little is."""
+    if kept >= 1.0:
+        return GO
+    end = (at[0] + (to[0] - at[0]) * kept, at[1] + (to[1] - at[1]) * kept)
+    if _dist(at, end) < _CLOSE_M:
+        return _hold(reason)
+    return Verdict("to", end, reason)
+
+
+def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Verdict:
+    """The scout's step: make for the point ``standoff_m`` ahead of the main element along its route.
+
+    Args:
+        at: where the lead is.
+        route: the main element's route from where it is (its first point) onward.
+        standoff_m: how far ahead the lead keeps, metres along the route.
+        main: the main element's id, for the reason.
+
+    Returns:
+        hold while the lead is at or past its place (saying it waits for the main element once it is
+        more than ``STANDOFF_TOLERANCE`` further ahead than asked); else ``to`` its place on the route.
+    """
+    if not route:
+        return _hold(f"no route of {main} to lead along")
+    s, _off = project(at, route)
+    if s > standoff_m * (1.0 + STANDOFF_TOLERANCE):
+        return _hold(f"waiting for {main}: {s:,.0f} m ahead along its route, standoff {standoff_m:,.0f} m")
+    place = point_at(route, standoff_m)
+    if s >= standoff_m - _CLOSE_M or _dist(at, place) < _CLOSE_M:  # at or past its place: never back
+        return _hold(f"at its standoff {standoff_m:,.0f} m ahead of {main}")
+    return Verdict("to", place, f"leading {main} by {standoff_m:,.0f} m along its route")
+
+
+def follow(at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead_id: str, lost: str) -> Verdict:
+    """A follower's step: only onto ground the lead has crossed (its ``track`` buffered by ``corridor_m / 2``).
+
+    Args:
+        at: where the follower is.
+        to: where its planned step ends.
+        track: the lead's track, oldest first.
+        corridor_m: the cleared corridor's width.
+        lead_id: the lead's id, for the reasons.
+        lost: why the lead cannot be followed (lost, stopped), or ``""`` when it can.
+
+    Returns:
+        hold when the lead is lost or stopped, or at the end of the cleared ground; the step cut short
+        where it would leave the corridor; ``to`` a point of the track when the planned step leaves the
+        corridor at once (along the track) or the follower is outside it (back onto it).
+    """
+    if lost:
+        return _hold(f"holding: lead {lead_id} {lost}")
+    if not track:
+        return _hold(f"holding: lead {lead_id} has cleared no ground yet")
+    half = corridor_m / 2.0
+    inside: Callable[[Point], bool] = lambda p: project(p, track)[1] <= half
+    s_at, off_at = project(at, track)
+    if off_at > half:
+        nearest = point_at(track, s_at)
+        return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
+    kept = _kept(at, to, inside, half / 2.0)
+    if kept >= 1.0:
+        return GO
+    if _dist(at, to) * kept >= _CLOSE_M:
+        return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
+    cleared = sum(_dist(a, b) for a, b in zip(track, track[1:]))
+    along = point_at(track, s_at + max(_dist(at, to), _CLOSE_M))
+    if s_at >= cleared - _CLOSE_M or _dist(at, along) < _CLOSE_M:  # never back along it
+        return _hold(f"at the end of the ground {lead_id} has cleared")
+    return Verdict("to", along, f"along the corridor {lead_id} cleared")
+
+
+def link(
+    at: Point,
+    to: Point,
+    controller_at: Point | None,
+    radio_range_m: float,
+    controller: str,
+    lost: str,
+    sight: Sight | None = None,
+) -> Verdict:
+    """A robot's step: within ``radio_range_m`` of its controller, and in its sight where there is terrain.
+
+    Args:
+        at: where the robot is.
+        to: where its planned step ends.
+        controller_at: where the controller is (``None``: unknown).
+        radio_range_m: the controller's radio reach.
+        controller: the controller's id, for the reasons.
+        lost: why the controller cannot be kept to (lost, stopped), or ``""``.
+        sight: whether two points see each other over the ground; ``None`` without terrain.
+
+    Returns:
+        hold when the controller is lost or stopped, or the step would break the link at once; the step
+        cut short where it would; ``to`` the controller (turning back) when the link is already broken.
+    """
+    if lost or controller_at is None:
+        return _hold(f"lost link: controller {controller} {lost or 'has no position'}")
+    c = controller_at
+
+    def linked(p: Point) -> bool:
+        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p))
+
+    if not linked(at):
+        far = _dist(at, c)
+        why = (
+            f"{far:,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
+            if far > radio_range_m
+            else f"out of {controller}'s line of sight"
+        )
+        return Verdict("to", c, f"lost link ({why}): turning back")
+    # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow
+    spacing = max(radio_range_m / 16.0, _CLOSE_M) if sight is None else _dist(at, to) / _SAMPLES_MAX
+    kept = _kept(at, to, linked, spacing)
+    beyond = (
+        f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
+        if _dist(to, c) > radio_range_m
+        else f"out of {controller}'s line of sight"
+    )
+    return _shortened(at, to, kept, f"the step would break the link to {controller} ({beyond})")
