@@ -222,7 +222,9 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     zones: list[ZoneSpec] = []
     terrain: str | None = None  # a DEM's path, relative to the scenario file
     unit: UnitSpec = UnitSpec()
-    teams: Annotated[list[TeamSpec], Meta(max_length=1_000)] = []  # checked as a team file's are; one unit plans alone
+    teams: Annotated[
+        list[TeamSpec], Meta(max_length=1_000)
+    ] = []  # checked as a team file's are; one unit plans alone
 
     def __post_init__(self) -> None:
         if self.bounds is not None:

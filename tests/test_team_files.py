@@ -57,7 +57,11 @@ def test_the_issue_s_team_file_is_read_with_its_roles(tmp_path):
             "line 9, teams[1].lead",
             "a cycle of leads",
         ),
-        ("  - {id: a, controller: m1, robots: [m1]}\n", "line 8, teams[0].robots[0]", "cannot control itself"),
+        (
+            "  - {id: a, controller: m1, robots: [m1]}\n",
+            "line 8, teams[0].robots[0]",
+            "cannot control itself",
+        ),
         ("  - {id: a, lead: r1, follow: [m1, r1]}\n", "line 8, teams[0].follow[1]", "cannot follow itself"),
         ("  - {id: a, members: [m1]}\n  - {id: a, members: [m2]}\n", "line 9, teams[1].id", "duplicate id"),
         ("  - {id: a, lead: r1, standoff_m: -3}\n", "line 8, teams[0].standoff_m", "> 0"),

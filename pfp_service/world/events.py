@@ -31,7 +31,7 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
-from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+from pfp_service.wire.messages import TeamUpdate, ZoneCircle, ZoneUpdate
 
 __all__ = [
     "Deliberated",
@@ -47,6 +47,8 @@ __all__ = [
     "Outputs",
     "PeerPlanner",
     "StateReported",
+    "TeamPut",
+    "TeamRemoved",
     "ThreatPut",
     "ThreatRemoved",
     "Tick",
@@ -123,6 +125,19 @@ class ZonePut:
 @dataclass(frozen=True, slots=True)
 class ZoneRemoved:
     zone: str
+
+
+@dataclass(frozen=True, slots=True)
+class TeamPut:
+    """A team put (``team/{t}``): new, or its members and roles changed if the id is known."""
+
+    team: str
+    update: TeamUpdate
+
+
+@dataclass(frozen=True, slots=True)
+class TeamRemoved:
+    team: str
 
 
 def zone_put(zone: Zone) -> ZonePut:
@@ -211,6 +226,8 @@ Input = Union[  # noqa: UP007
     ThreatRemoved,
     ZonePut,
     ZoneRemoved,
+    TeamPut,
+    TeamRemoved,
     TokenChanged,
     InputRejected,
     Deliberated,
@@ -408,6 +425,8 @@ def blame(inp: Input, mission: str) -> tuple[str, str | None]:
             kind, goal = k.THREAT, False
         case ZonePut(ident) | ZoneRemoved(ident):
             kind, goal = k.ZONE, False
+        case TeamPut(ident) | TeamRemoved(ident):
+            kind, goal = k.TEAM, False
         case TokenChanged(ident):
             kind, goal = k.ALIVE_UNIT, False
         case PeerPlanner(ident):

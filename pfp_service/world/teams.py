@@ -11,12 +11,14 @@ they say.  A verdict is never an exception: a step too short to judge goes.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+import shapely
 
 __all__ = [
     "GO",
@@ -89,7 +91,7 @@ def point_at(line: Sequence[Point], s: float) -> Point:
         raise ValueError("point_at: an empty line")
     if s <= 0.0:
         return line[0]
-    for a, b in zip(line, line[1:]):
+    for a, b in itertools.pairwise(line):
         seg = _dist(a, b)
         if s <= seg and seg > 0.0:
             f = s / seg
@@ -145,7 +147,9 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
     return Verdict("to", place, f"leading {main} by {standoff_m:,.0f} m along its route")
 
 
-def follow(at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead_id: str, lost: str) -> Verdict:
+def follow(
+    at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead_id: str, lost: str
+) -> Verdict:
     """A follower's step: only onto ground the lead has crossed (its ``track`` buffered by ``corridor_m / 2``).
 
     Args:
@@ -166,21 +170,66 @@ def follow(at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead
     if not track:
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
     half = corridor_m / 2.0
-    inside: Callable[[Point], bool] = lambda p: project(p, track)[1] <= half
     s_at, off_at = project(at, track)
     if off_at > half:
         nearest = point_at(track, s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
-    kept = _kept(at, to, inside, half / 2.0)
+    room = _corridor_near(track, half, at, max(_dist(at, to), _CLOSE_M))
+    kept = _kept_in(room, at, to)
     if kept >= 1.0:
         return GO
     if _dist(at, to) * kept >= _CLOSE_M:
         return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
-    cleared = sum(_dist(a, b) for a, b in zip(track, track[1:]))
-    along = point_at(track, s_at + max(_dist(at, to), _CLOSE_M))
-    if s_at >= cleared - _CLOSE_M or _dist(at, along) < _CLOSE_M:  # never back along it
+    cleared = sum(_dist(a, b) for a, b in itertools.pairwise(track))
+    if s_at >= cleared - _CLOSE_M:  # never back along it
         return _hold(f"at the end of the ground {lead_id} has cleared")
-    return Verdict("to", along, f"along the corridor {lead_id} cleared")
+    ahead = max(_dist(at, to), _CLOSE_M)
+    while (
+        ahead >= _CLOSE_M
+    ):  # a point of the track ahead, the straight way to it inside (a bend's chord is not)
+        along = point_at(track, s_at + ahead)
+        if _dist(at, along) >= _CLOSE_M and _kept_in(room, at, along) >= 1.0:
+            return Verdict("to", along, f"along the corridor {lead_id} cleared")
+        ahead /= 2.0
+    return _hold(f"at the end of the ground {lead_id} has cleared")
+
+
+def _corridor_near(track: Sequence[Point], half: float, at: Point, reach: float) -> shapely.Geometry:
+    """The corridor (``track`` buffered by ``half``) where a step of ``reach`` from ``at`` can go.
+
+    Only the track's segments within that reach are buffered, so the cost is the step's, not the
+    track's.  GEOS's buffer is inscribed in the true one (its arcs are chords): what it contains is cleared.
+    """
+    pts = np.asarray(track, dtype=float).reshape(-1, 2)
+    if len(pts) == 1:
+        return shapely.Point(pts[0]).buffer(half)
+    a, b = pts[:-1], pts[1:]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    r = reach + half
+    near = np.flatnonzero(
+        (lo[:, 0] <= at[0] + r) & (hi[:, 0] >= at[0] - r) & (lo[:, 1] <= at[1] + r) & (hi[:, 1] >= at[1] - r)
+    )
+    if len(near) == 0:
+        return shapely.Polygon()
+    lines = shapely.MultiLineString([[tuple(a[i]), tuple(b[i])] for i in near])
+    return shapely.buffer(lines, half)
+
+
+def _kept_in(room: shapely.Geometry, at: Point, to: Point) -> float:
+    """How much (0 to 1) of the straight step from ``at`` to ``to`` stays in ``room`` from its start: exact."""
+    length = _dist(at, to)
+    if length <= 0.0:
+        return 1.0 if room.covers(shapely.Point(at)) else 0.0
+    step = shapely.LineString([at, to])
+    if room.covers(step):
+        return 1.0
+    start = shapely.Point(at)
+    parts = shapely.get_parts(step.intersection(room))
+    for part in parts:
+        if isinstance(part, shapely.LineString) and part.distance(start) < 1e-9:
+            far = max(_dist(at, (float(c[0]), float(c[1]))) for c in part.coords)
+            return min(1.0, far / length)
+    return 0.0
 
 
 def link(

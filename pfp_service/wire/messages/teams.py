@@ -73,7 +73,9 @@ class TeamUpdate(_Message, frozen=True, kw_only=True):
         if self.follow and self.lead is None:
             raise ValueError("follow: followers need a lead whose ground they enter")
         if self.lead is not None and self.lead in self.follow:
-            raise ValueError(f"follow[{self.follow.index(self.lead)}]: the lead {self.lead!r} cannot follow itself")
+            raise ValueError(
+                f"follow[{self.follow.index(self.lead)}]: the lead {self.lead!r} cannot follow itself"
+            )
         if self.robots and self.controller is None:
             raise ValueError("robots: robots need a controller")
         if self.controller is not None and self.controller in self.robots:
