@@ -124,3 +124,7 @@ def test_link_over_terrain_stops_short_of_the_ridge_shadow() -> None:
     assert "out of m1's line of sight" in v.reason
     v = roles.link((80.0, 0.0), (90.0, 0.0), (10.0, 0.0), 500.0, "m1", "", sight)
     assert v.kind == "to" and v.to == (10.0, 0.0) and "out of m1's line of sight" in v.reason
+
+
+def test_lead_goes_its_own_way_once_the_main_element_s_route_left_is_within_its_standoff() -> None:
+    assert roles.lead((20.0, 0.0), [(0.0, 0.0), (60.0, 0.0)], 100.0, "m1") == roles.GO

@@ -134,13 +134,16 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
 
     Returns:
         hold while the lead is at or past its place (saying it waits for the main element once it is
-        more than ``STANDOFF_TOLERANCE`` further ahead than asked); else ``to`` its place on the route.
+        more than ``STANDOFF_TOLERANCE`` further ahead than asked); else ``to`` its place on the route;
+        go (its own way) once the main element's route left is no longer than the standoff.
     """
     if not route:
         return _hold(f"no route of {main} to lead along")
     s, _off = project(at, route)
     if s > standoff_m * (1.0 + STANDOFF_TOLERANCE):
         return _hold(f"waiting for {main}: {s:,.0f} m ahead along its route, standoff {standoff_m:,.0f} m")
+    if sum(_dist(a, b) for a, b in itertools.pairwise(route)) <= standoff_m:  # the lead has cleared it all
+        return GO  # ... so it goes its own way, not onto the main element's goal
     place = point_at(route, standoff_m)
     if s >= standoff_m - _CLOSE_M or _dist(at, place) < _CLOSE_M:  # at or past its place: never back
         return _hold(f"at its standoff {standoff_m:,.0f} m ahead of {main}")
