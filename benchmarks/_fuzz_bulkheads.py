@@ -7,7 +7,6 @@ one: what these find is not a decoder's gap but one input costing others.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import random
@@ -15,8 +14,9 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
+
+from benchmarks._procs import tree_pss_mb
 
 __all__ = [
     "BOMB_GROWTH_MB",
@@ -201,20 +201,6 @@ BOMB_GROWTH_MB = 400.0
 BOMB_PLAIN_S = 3.0  # then a plain preview gets a plan within this
 
 
-def _tree_pss_mb(pid: int) -> float:
-    """PSS of ``pid`` and every descendant (its workers), from ``/proc/*/smaps_rollup``."""
-    total_kb, todo = 0, [pid]
-    while todo:
-        p = todo.pop()
-        for children in Path(f"/proc/{p}/task").glob("*/children"):
-            with contextlib.suppress(OSError, ValueError):
-                todo += [int(c) for c in children.read_text().split()]
-        with contextlib.suppress(OSError, ValueError, IndexError):
-            rollup = Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()
-            total_kb += next(int(ln.split()[1]) for ln in rollup if ln.startswith("Pss:"))
-    return total_kb / 1024
-
-
 def preview_bombs(session: Any, pid: int, say: Callable[[str], None] = print) -> dict[str, Any]:
     """Each of ``PREVIEW_BOMBS``, ``BOMB_COPIES`` at once: answers, the tree's memory after, a plain preview."""
     from pfp_service.wire import keys
@@ -231,7 +217,7 @@ def preview_bombs(session: Any, pid: int, say: Callable[[str], None] = print) ->
             errors[replies[0].err.payload.to_bytes().decode(errors="replace")[:100]] += 1
         return took, "plan" if replies[0].ok is not None else "error"
 
-    before = _tree_pss_mb(pid)
+    before = tree_pss_mb(pid)
     per: dict[str, Any] = {}
     for name, make in PREVIEW_BOMBS.items():
         body = json.dumps(make()).encode()
@@ -244,7 +230,7 @@ def preview_bombs(session: Any, pid: int, say: Callable[[str], None] = print) ->
         per[name] = {"answers": sorted(k for _, k in out), "slowest_s": round(max(s for s, _ in out), 3)}
         say(f"  preview bomb {name}: {per[name]['answers']} in at most {per[name]['slowest_s']} s")
     time.sleep(BOMB_SETTLE_S)
-    after = _tree_pss_mb(pid)
+    after = tree_pss_mb(pid)
     plain = ask(json.dumps({"start": [0, 0], "goal": [10, 10]}).encode())
     say(
         f"  preview bombs: tree PSS {before:.0f} -> {after:.0f} MB; a plain preview then: {plain[1]} in {plain[0]:.2f} s"

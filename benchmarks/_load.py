@@ -6,7 +6,7 @@
   direction, the transport's own ceiling).  ``start_cluster`` runs a plain
   router (``router_main``) and ``--cluster`` planners as its clients, for
   ``--planners``.
-* ``ProcMeter`` reads a process's CPU time and resident memory from ``/proc``.
+* ``ProcMeter`` (``_procs``) reads a process's CPU time and resident memory from ``/proc``.
 * ``LoadGen`` is the load generator's client session: it paces unit states,
   moves each unit along the last vector it was given, and timestamps every
   direction that comes back.  Nothing is analysed while load runs; the
@@ -21,7 +21,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from typing import IO, Any
 
 import msgspec
 
+from benchmarks._procs import ProcMeter
 from benchmarks.roundtrip import _client, _free_port
 
 __all__ = [
@@ -37,8 +37,6 @@ __all__ = [
     "ProcMeter",
     "Received",
     "Server",
-    "echo_main",
-    "router_main",
     "start_cluster",
     "start_server",
 ]
@@ -73,81 +71,6 @@ class Received:
     status: str
     deliberating: bool
     planner: str | None = None  # which planner sent it (several share a mission under --planners)
-
-
-# -- meters -----------------------------------------------------------------------------
-def _stat(pid: int) -> list[str] | None:
-    """The fields of ``/proc/{pid}/stat`` after the command name (state first), ``None``: gone."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-
-
-def descendants(pid: int) -> list[int]:
-    """Every live process below ``pid`` (its workers, a fork server's children), from ``/proc``."""
-    children: dict[int, list[int]] = {}
-    for name in os.listdir("/proc"):
-        if name.isdigit() and (st := _stat(int(name))) is not None:
-            children.setdefault(int(st[1]), []).append(int(name))
-    out, todo = [], [pid]
-    while todo:
-        kids = children.get(todo.pop(), [])
-        out += kids
-        todo += kids
-    return out
-
-
-class ProcMeter:
-    """CPU seconds and memory of one process from ``/proc`` (``None`` figures where there is none).
-
-    ``cpu_s`` counts the whole tree: the process, every live descendant (the
-    planner's deliberation and preview workers) and the children already
-    reaped (``cutime``/``cstime``), so a responder's CPU is all it costs.
-    """
-
-    def __init__(self, pid: int, tree: bool = True) -> None:
-        self.pid = pid
-        self.tree = tree
-        self._tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-
-    def cpu_s(self) -> float | None:
-        return self._cpu(self.cpu_by_process())
-
-    def _cpu(self, each: dict[int, float] | None) -> float | None:
-        return None if each is None else sum(each.values())
-
-    def cpu_by_process(self) -> dict[int, float] | None:
-        """CPU seconds of the process and (with ``tree``) of each descendant, reaped children in their parent's."""
-        own = _stat(self.pid)
-        if own is None:
-            return None
-        pids = descendants(self.pid) if self.tree else []
-        out: dict[int, float] = {}
-        for pid, st in [(self.pid, own), *((p, _stat(p)) for p in pids)]:
-            if st is not None:  # utime + stime of every thread (+ cutime + cstime with the tree)
-                ticks = int(st[11]) + int(st[12]) + (int(st[13]) + int(st[14]) if self.tree else 0)
-                out[pid] = ticks / self._tick
-        return out
-
-    def processes(self) -> int:
-        """How many processes the tree holds now (1 without ``tree``)."""
-        return 1 + len(descendants(self.pid)) if self.tree else 1
-
-    def memory_mb(self) -> dict[str, float | None]:
-        """``rss_mb`` now and ``peak_rss_mb`` (VmHWM) since the process started."""
-        out: dict[str, float | None] = {"rss_mb": None, "peak_rss_mb": None}
-        try:
-            with open(f"/proc/{self.pid}/status") as f:
-                for line in f:
-                    if line.startswith("VmRSS:"):
-                        out["rss_mb"] = int(line.split()[1]) / 1024
-                    elif line.startswith("VmHWM:"):
-                        out["peak_rss_mb"] = int(line.split()[1]) / 1024
-        except OSError:
-            pass
-        return out
 
 
 # -- servers ----------------------------------------------------------------------------
@@ -210,7 +133,7 @@ def start_server(
             cmd += ["--escape", escape]
     else:
         main = "echo_main" if kind == "echo" else "router_main"
-        code = f"import sys; from benchmarks._load import {main}; {main}(sys.argv[1])"
+        code = f"import sys; from benchmarks._responders import {main}; {main}(sys.argv[1])"
         cmd = [sys.executable, "-c", code, endpoint]
     log = tempfile.TemporaryFile()  # noqa: SIM115 -- the Server owns it and closes it in stop()
     proc = subprocess.Popen(
@@ -289,88 +212,6 @@ def start_cluster(k: int, escape: str | None = None, stale_s: float = 60.0) -> C
     return Cluster(router, planners)
 
 
-def _router_until_signal(endpoint: str) -> tuple[threading.Event, Any]:
-    """A router's Zenoh config on ``endpoint`` (multicast off), and an event SIGTERM or SIGINT sets."""
-    import signal
-
-    import zenoh
-
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"router"')
-    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return stop, conf
-
-
-def router_main(endpoint: str) -> None:
-    """A plain Zenoh router on ``endpoint`` until SIGTERM: the hub of a cluster's planners and the load."""
-    import zenoh
-
-    stop, conf = _router_until_signal(endpoint)
-    with zenoh.open(conf):
-        stop.wait()
-
-
-def echo_main(endpoint: str) -> None:
-    """The echo responder: a router that answers each unit state with a fixed direction.
-
-    It decodes the state and parses its key exactly as the planner does and
-    publishes with the planner's QoS, but plans nothing, so its latency and
-    throughput are the transport's own on this machine.  It answers from the
-    callback (no hand-off to another thread): the least any responder can do.
-    """
-
-    import zenoh
-
-    from pfp_service.wire import Direction, DirectionStatus, PlannerStatus, decode_unit_state, encode, keys
-
-    stop, conf = _router_until_signal(endpoint)
-    counters = {"in": 0, "out": 0}
-    started = time.monotonic()
-    jenc = zenoh.Encoding.APPLICATION_JSON
-
-    with zenoh.open(conf) as session:
-
-        def on_state(sample: zenoh.Sample) -> None:
-            try:
-                uid = keys.parse(str(sample.key_expr)).id
-                msg = decode_unit_state(sample.payload.to_bytes(), None)
-            except Exception:
-                return
-            counters["in"] += 1
-            d = Direction(unit=uid, seq=msg.seq, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0))
-            session.put(  # the planner's QoS for directions (node/node.py)
-                keys.unit_direction(MISSION, uid),
-                encode(d),
-                encoding=jenc,
-                congestion_control=zenoh.CongestionControl.DROP,
-                priority=zenoh.Priority.INTERACTIVE_HIGH,
-            )
-            counters["out"] += 1
-
-        def on_status(query: zenoh.Query) -> None:
-            st = PlannerStatus(
-                planner="echo",
-                mission=MISSION,
-                uptime_s=time.monotonic() - started,
-                msgs_in=counters["in"],
-                msgs_out=counters["out"],
-            )
-            query.reply(keys.planner_status(MISSION, PLANNER_ID), encode(st), encoding=jenc)
-
-        sub = session.declare_subscriber(keys.unit_states_any(MISSION), on_state)
-        qbl = session.declare_queryable(keys.planner_status(MISSION, PLANNER_ID), on_status)
-        try:
-            stop.wait()
-        finally:
-            qbl.undeclare()
-            sub.undeclare()
-
-
-# -- the load generator -----------------------------------------------------------------------
 class LoadGen:
     """A client session acting as ``n`` units (``u0`` ...), plus anything else the bench puts.
 

@@ -38,7 +38,7 @@ from benchmarks._check import add_check_arg, exit_code
 from benchmarks._layout import layout
 from benchmarks._load import MISSION, LoadGen, start_server
 from benchmarks._phases import STEP_M, Bar, register, steady
-from benchmarks.previews import tree_pss_by_process
+from benchmarks._procs import tree_pss_by_process
 from pfp_service.argtypes import positive_float, positive_int
 
 __all__ = ["TARGETS", "add_arguments", "run", "targets"]

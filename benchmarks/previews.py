@@ -31,13 +31,13 @@ import random
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import zenoh
 
 from benchmarks._check import add_check_arg
 from benchmarks._load import MISSION, start_server
+from benchmarks._procs import tree_pss_mb
 from benchmarks.roundtrip import _client
 from pfp_service.argtypes import positive_float, positive_int
 from pfp_service.wire import keys
@@ -48,8 +48,6 @@ __all__ = [
     "bombs",
     "run",
     "storm",
-    "tree_pss_by_process",
-    "tree_pss_mb",
     "whatifs",
 ]
 
@@ -102,39 +100,6 @@ def _quantiles(xs: list[float]) -> dict[str, float | None]:
         "p99_ms": 1e3 * s[min(len(s) - 1, int(0.99 * len(s)))],
         "max_ms": 1e3 * s[-1],
     }
-
-
-def _tree(pid: int) -> list[int]:
-    """``pid`` and every descendant (its preview and deliberation workers), from ``/proc``."""
-    out, todo = [], [pid]
-    while todo:
-        p = todo.pop()
-        out.append(p)
-        for task in Path(f"/proc/{p}/task").glob("*/children"):
-            try:
-                todo += [int(c) for c in task.read_text().split()]
-            except OSError:
-                continue
-    return out
-
-
-def tree_pss_mb(pid: int) -> float:
-    """The PSS of ``pid`` and all its descendants, in MB (``/proc/*/smaps_rollup``)."""
-    return sum(tree_pss_by_process(pid).values())
-
-
-def tree_pss_by_process(pid: int) -> dict[int, float]:
-    """The PSS of ``pid`` and of each of its descendants, in MB, by process id."""
-    out: dict[int, float] = {}
-    for p in _tree(pid):
-        try:
-            for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines():
-                if line.startswith("Pss:"):
-                    out[p] = int(line.split()[1]) / 1024
-                    break
-        except OSError:
-            continue
-    return out
 
 
 class _Probe:

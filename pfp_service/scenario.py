@@ -254,8 +254,9 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     def zone_set(self) -> ZoneSet:
         """The file's keep-out zones, for the core."""
         from pfp_service.core.zones import ZoneSet
+        from pfp_service.world import translate
 
-        return ZoneSet(z.to_zone(z.id or f"z{i + 1}") for i, z in enumerate(self.zones))
+        return ZoneSet(translate.zone(z, z.id or f"z{i + 1}") for i, z in enumerate(self.zones))
 
     def schedule(self) -> list[Scheduled]:
         from pfp_service.core.plan import Scheduled

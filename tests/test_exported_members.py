@@ -53,7 +53,6 @@ EXPECTED = [
     "decode_event",
     "decode_goal",
     "decode_mission",
-    "decode_plan_result",
     "decode_planner_status",
     "decode_preview_request",
     "decode_team",

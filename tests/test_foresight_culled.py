@@ -7,13 +7,14 @@ import pytest
 
 from benchmarks._layout import layout
 from pfp_service.core import PlannerParams, ThreatField, cull, foresight, resolve
+from pfp_service.world import translate
 
 pytestmark = pytest.mark.unit
 
 
 def test_culled_simulation_ends_as_the_full_one_among_many_threats(monkeypatch):
     lay = layout(40, 100, 7)
-    field = ThreatField([u.to_threat(t) for t, u in lay["threats"]])
+    field = ThreatField([translate.threat(u, t) for t, u in lay["threats"]])
     assert len(field) >= cull.MIN_THREATS and cull.index_of(field) is not None
     got, want = [], []
     for s, g in zip(lay["starts"][:40], lay["goals"][:40]):
@@ -34,5 +35,5 @@ def test_culled_simulation_ends_as_the_full_one_among_many_threats(monkeypatch):
 
 def test_a_few_threats_are_simulated_without_an_index():
     lay = layout(1, 5, 7)
-    field = ThreatField([u.to_threat(t) for t, u in lay["threats"]])
+    field = ThreatField([translate.threat(u, t) for t, u in lay["threats"]])
     assert cull.index_of(field) is None

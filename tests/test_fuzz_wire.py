@@ -17,6 +17,7 @@ from benchmarks.fuzz import CATEGORIES, malformed
 from pfp_service.errors import InputError
 from pfp_service.wire import RejectedEvent, decode_event, encode, keys
 from pfp_service.wire import messages as wm
+from pfp_service.world.translate import decode_plan_result
 
 pytestmark = pytest.mark.unit
 
@@ -29,7 +30,7 @@ DECODERS = [
     wm.decode_planner_status,
     wm.decode_error_reply,
     wm.decode_event,
-    wm.decode_plan_result,
+    decode_plan_result,
 ]
 
 

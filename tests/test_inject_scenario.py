@@ -11,6 +11,7 @@ from pfp_clients.live_scenario import deviation_m, is_scenario_file, live_scenar
 from pfp_clients.script import AddThreat, SetGoal
 
 from pfp_service.errors import InputError
+from pfp_service.world import translate
 from tests.conftest import EXAMPLES, run_pfp
 from tests.zenoh_util import planner_process
 
@@ -130,7 +131,7 @@ def test_a_scenario_zone_goes_live_with_an_expectation_to_keep_out(tmp_path):
     # the plan itself goes round the wall
     from pfp_service.core.zones import track_enters
 
-    wall = [zones[0].update().to_zone("wall")]
+    wall = [translate.zone(zones[0].update(), "wall")]
     assert track_enters(wall, ls.plan_path) is None
     from pfp_service.core import plan
 
@@ -147,7 +148,7 @@ def test_never_enters_sees_a_track_that_crosses_a_zone_and_one_that_does_not():
 
     from pfp_service.wire.messages.structs import ZoneCircle
 
-    zone = AddZone(zone="z", circle=ZoneCircle(centre=(5.0, 0.0), radius_m=1.0)).update().to_zone("z")
+    zone = translate.zone(AddZone(zone="z", circle=ZoneCircle(centre=(5.0, 0.0), radius_m=1.0)).update(), "z")
     e = Expect(unit="u", never_enters="z")
     through, past = Watch(), Watch()
     for i in range(11):

@@ -43,6 +43,7 @@ from pfp_service.wire import (
     UnitSummary,
     WorldSnapshot,
 )
+from pfp_service.world import translate
 from tests.conftest import ROOT
 
 pytestmark = pytest.mark.unit
@@ -54,7 +55,7 @@ def ratio(update: ThreatUpdate, pts: np.ndarray) -> np.ndarray:
     """A threat's own level over its peak, straight from the core's field (weight-free)."""
     from pfp_service.core.threat import ThreatField
 
-    threat = update.to_threat("t")
+    threat = translate.threat(update, "t")
     field = ThreatField([threat], "density")
     return np.asarray(field.level(pts) / (threat.peak_density() * threat.weight))
 
@@ -84,14 +85,14 @@ def test_every_outline_vertex_is_at_its_fraction_of_the_peak(facing, sr, aspect,
     pts = np.array(outline(u, fraction))
     # vertices are rounded to the millimetre: the level moves by its slope, ~(2 + skew) / sigma, times that
     assert ratio(u, pts) == pytest.approx(fraction, abs=1e-3 * (2 + skew) / min(sr, sr * aspect, 1.0))
-    peak = np.array([peak_point(u.to_threat("t"))])
+    peak = np.array([peak_point(translate.threat(u, "t"))])
     assert ratio(u, peak)[0] == pytest.approx(1.0, abs=1e-9)
 
 
 def test_the_zone_contains_the_core():
     u = ThreatUpdate(position=(0.0, 0.0), facing_deg=225.0, sigma_range=5.0, sigma_lateral=3.5, skew=2.0)
     core, zone = np.array(outline(u, CORE_FRACTION)), np.array(outline(u, ZONE_FRACTION))
-    c = np.array(peak_point(u.to_threat("t")))
+    c = np.array(peak_point(translate.threat(u, "t")))
     assert np.all(np.hypot(*(zone - c).T) > np.hypot(*(core - c).T))
 
 

@@ -32,6 +32,7 @@ from pfp_service.errors import DeadlinePassed, InputError
 from pfp_service.node.tasks import Outcome, Task
 from pfp_service.node.workers import WorkerPool
 from pfp_service.wire import Goal, ThreatUpdate, UnitState, decode_preview_request, keys
+from pfp_service.world import translate
 from pfp_service.world.events import GoalSet, StateReported, ThreatPut, WorldSettings
 from pfp_service.world.preview import MAX_PREVIEW_WHATIFS, admit, preview
 from pfp_service.world.world import World
@@ -103,7 +104,9 @@ def test_ordinary_previews_are_admitted_light_and_a_long_walk_heavy():
 def test_measuring_a_long_path_checks_its_deadline():
     field = ThreatField(
         tuple(
-            ThreatUpdate(position=(float(i), 1.0), sigma_range=1.0, sigma_lateral=1.0).to_threat(f"t{i}")
+            translate.threat(
+                ThreatUpdate(position=(float(i), 1.0), sigma_range=1.0, sigma_lateral=1.0), f"t{i}"
+            )
             for i in range(50)
         ),
         "peak",
@@ -270,8 +273,8 @@ def test_a_what_if_reuses_the_worlds_packed_field_and_plans_the_same():
     w = _world()
     view = w.view("u")
     base = ThreatField(view.threats, "peak")
-    extra = ThreatUpdate(position=(60.0, 50.0), sigma_range=8.0, sigma_lateral=5.0).to_threat("w1")
-    replaced = ThreatUpdate(position=(30.0, 30.0), sigma_range=4.0, sigma_lateral=4.0).to_threat("t1")
+    extra = translate.threat(ThreatUpdate(position=(60.0, 50.0), sigma_range=8.0, sigma_lateral=5.0), "w1")
+    replaced = translate.threat(ThreatUpdate(position=(30.0, 30.0), sigma_range=4.0, sigma_lateral=4.0), "t1")
     got = base.plus([extra, replaced], {"t1"})
     fresh = ThreatField((extra, replaced), "peak")
     assert got.threats == fresh.threats and np.array_equal(got.packed, fresh.packed)

@@ -15,6 +15,7 @@ import pytest
 from pfp_service.cli import main
 from pfp_service.wire import messages as m
 from pfp_service.wire import schema
+from pfp_service.world import translate
 
 ROOT = Path(__file__).resolve().parent.parent
 SCHEMAS = ROOT / "schemas"
@@ -67,8 +68,18 @@ def test_regenerating_into_an_empty_directory_writes_everything(tmp_path: Path) 
     assert main(["schemas", "--check", "--dir", str(target)]) == 1
     assert main(["schemas", "--dir", str(target)]) == 0
     written = sorted(p.relative_to(target).as_posix() for p in target.rglob("*") if p.is_file())
-    assert written == sorted(schema.render())
+    assert written == sorted(schema.render(translate.supplied()))
     assert all((target / rel).read_text() == (SCHEMAS / rel).read_text() for rel in written)
+
+
+@pytest.mark.unit
+def test_render_needs_the_types_the_wire_cannot_name() -> None:
+    # the wire imports no core: without translate's PlanResult there is no preview reply to publish
+    with pytest.raises(ValueError, match="preview_reply"):
+        schema.render({})
+    extra = {**translate.supplied(), "goal": schema.Supplied(m.Goal, ())}
+    with pytest.raises(ValueError, match="goal"):
+        schema.render(extra)
 
 
 @pytest.mark.proc
@@ -97,7 +108,7 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
     "threat": m.decode_threat,
     "direction": m.decode_direction,
     "preview_request": m.decode_preview_request,
-    "preview_reply": m.decode_plan_result,
+    "preview_reply": translate.decode_plan_result,
     "error_reply": m.decode_error_reply,
     "planner_status": m.decode_planner_status,
     "world_snapshot": m.decode_world_snapshot,

@@ -29,6 +29,7 @@ from pfp_service.geo import Origin
 from pfp_service.geojson import zones_from_geojson
 from pfp_service.wire import encode, keys
 from pfp_service.wire.messages import decode_zone
+from pfp_service.world import translate
 from pfp_service.world.events import zone_put
 from tests.zenoh_util import ROOT, Inbox, client, planner_process, put_in_force
 
@@ -60,7 +61,7 @@ def test_a_file_zone_is_the_input_a_wire_put_of_it_makes():
     (zone,) = zones_from_geojson(doc, ORIGIN)
     put = zone_put(zone)
     assert put.zone == "mines" and put.update.polygon is not None and len(put.update.polygon) == 2
-    again = decode_zone(encode(put.update)).to_zone("mines")  # what the planner's node decodes
+    again = translate.zone(decode_zone(encode(put.update)), "mines")  # what the planner's node decodes
     assert again.area_m2() == pytest.approx(zone.area_m2(), rel=1e-9)
     circle = zone_put(Zone.circle("round", (10.0, 20.0), 5.0))
     assert circle.update.circle is not None and circle.update.circle.radius_m == 5.0

@@ -22,6 +22,7 @@ from pfp_clients.tak import cot
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
+from pfp_service.world.translate import decode_plan_result
 from tests.zenoh_util import ROOT, Inbox, client, free_port, planner_process, put_json
 
 pytestmark = pytest.mark.proc
@@ -210,7 +211,7 @@ def test_tcp_marker_in_threat_out_route_out(planner):
             )  # waypoints in order to the goal
             # the same path as the live preview, thinned
             (reply,) = [r for r in s.get(keys.preview(MISSION, "u1"), timeout=5.0) if r.ok is not None]
-            path = m.decode_plan_result(reply.ok.payload.to_bytes()).path
+            path = decode_plan_result(reply.ok.payload.to_bytes()).path
             assert xy[-1] == pytest.approx(path[-1], abs=1e-3)
             s.delete(keys.threat(MISSION, "ambush"))
             rm = wait_cot(server.events, lambda e: e.get("type") == "t-x-d-d")

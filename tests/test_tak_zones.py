@@ -20,6 +20,7 @@ from pfp_clients.tak.state import BridgeSettings, BridgeState
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
+from pfp_service.world import translate
 
 ORIGIN = Origin(lat=58.4105, lon=15.6213, alt=87.5)
 T0 = 1_700_000_000.0
@@ -74,7 +75,7 @@ def test_a_drawn_polygon_or_rectangle_becomes_a_keep_out_zone(typ, closed, point
     z = m.decode_zone(put.payload)
     assert z.kind == "keep_out" and z.ttl_s == pytest.approx(600.0)
     assert z.polygon is not None and len(z.polygon[0]) == 5 and z.polygon[0][0] == z.polygon[0][-1]
-    zone = z.to_zone("z")
+    zone = translate.zone(z, "z")
     north, east = ORIGIN.localise_point(m.LatLon(lat=58.4155, lon=15.62095), "$")
     assert zone.contains(north, east) and not zone.contains(0.0, 0.0)
 

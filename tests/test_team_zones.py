@@ -12,6 +12,7 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.team import load_team, zone_updates
 from pfp_service.wire import decode_world_snapshot, keys
+from pfp_service.world import translate
 from tests.conftest import run_pfp
 from tests.zenoh_util import client, planner_process
 
@@ -33,7 +34,7 @@ def test_a_team_files_zones_are_read_with_their_ids(tmp_path):
     got = dict(zone_updates(team))
     assert list(got) == ["wall", "z2"]  # an id left out is zN, as in scenario files
     assert got["z2"].circle is not None and got["z2"].ttl_s == 600
-    assert got["wall"].to_zone("wall").contains(43.0, 20.0)
+    assert translate.zone(got["wall"], "wall").contains(43.0, 20.0)
 
 
 @pytest.mark.unit

@@ -8,6 +8,7 @@ import pytest
 from pfp_service.core import ThreatField
 from pfp_service.core.cull import MIN_THREATS
 from pfp_service.wire import ThreatUpdate
+from pfp_service.world import translate
 from pfp_service.world.world_records import Records, ThreatRecord
 
 pytestmark = pytest.mark.unit
@@ -15,7 +16,7 @@ pytestmark = pytest.mark.unit
 
 def _threat(tid: str, x: float, y: float = 0.0, skew: float = 2.0) -> ThreatRecord:
     u = ThreatUpdate(position=(x, y), facing_deg=40.0, sigma_range=3.0, sigma_lateral=1.5, skew=skew)
-    return ThreatRecord(u, u.to_threat(tid), None)
+    return ThreatRecord(u, translate.threat(u, tid), None)
 
 
 def _fresh(r: Records) -> ThreatField:

@@ -11,7 +11,7 @@ from pfp_service.core import PlannerParams, Stepper, resolve
 from pfp_service.core.cull import corridors_meet, influence_boxes
 from pfp_service.core.threat import ThreatField
 from pfp_service.wire import ThreatUpdate
-from pfp_service.world import steering
+from pfp_service.world import steering, translate
 from pfp_service.world.world_records import Records
 
 pytestmark = pytest.mark.unit
@@ -32,7 +32,7 @@ def _fleet(seed: int, n: int) -> list:
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_each_unit_is_reached_as_its_own_corridor_says(seed):
     guided = _fleet(seed, 200)
-    touched = [ThreatUpdate(position=(0.0, 0.0), sigma_range=30.0, sigma_lateral=20.0).to_threat("t")]
+    touched = [translate.threat(ThreatUpdate(position=(0.0, 0.0), sigma_range=30.0, sigma_lateral=20.0), "t")]
     zones = [(100.0, 100.0, 140.0, 180.0)]
     got = steering.reached(guided, touched, "peak", zones)
     boxes = influence_boxes(ThreatField(touched, "peak").packed)
@@ -49,5 +49,7 @@ def test_each_unit_is_reached_as_its_own_corridor_says(seed):
 def test_a_unit_that_cannot_be_read_makes_every_unit_reached():
     guided = _fleet(4, 20)
     guided[7].position = (float("nan"),)  # type: ignore[assignment]
-    touched = [ThreatUpdate(position=(5000.0, 5000.0), sigma_range=1.0, sigma_lateral=1.0).to_threat("t")]
+    touched = [
+        translate.threat(ThreatUpdate(position=(5000.0, 5000.0), sigma_range=1.0, sigma_lateral=1.0), "t")
+    ]
     assert steering.reached(guided, touched, "peak") == [True] * 20

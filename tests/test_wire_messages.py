@@ -16,6 +16,7 @@ import pytest
 from pfp_service.errors import InputError
 from pfp_service.wire import messages as m
 from pfp_service.wire.examples import examples
+from pfp_service.world import translate
 
 BIG = 7.77e77  # written as 1e999 on the wire: parses to infinity
 MISSING = object()
@@ -615,7 +616,7 @@ def test_threat_update_converts_to_the_core_threat() -> None:
     from pfp_service.core.threat import Threat
 
     upd = m.decode_threat(json.dumps(BASES["threat"]).encode())
-    assert upd.to_threat("t9") == Threat.from_facing((4.0, 5.0), 180.0, 2.0, 1.0, 3.0, 1.0, "t9")
+    assert translate.threat(upd, "t9") == Threat.from_facing((4.0, 5.0), 180.0, 2.0, 1.0, 3.0, 1.0, "t9")
 
 
 @pytest.mark.unit
@@ -660,7 +661,7 @@ def test_the_preview_reply_is_what_pfp_plan_json_prints(capsys: pytest.CaptureFi
     scenario = Path(__file__).resolve().parent.parent / "examples" / "paper-simple.yaml"
     assert main(["plan", str(scenario), "--json"]) == 0
     out = capsys.readouterr().out
-    result = m.decode_plan_result(out.encode())
+    result = translate.decode_plan_result(out.encode())
     assert isinstance(result, PlanResult)
     assert m.encode(result).decode() == out.strip()
 

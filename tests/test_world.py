@@ -24,12 +24,12 @@ from pfp_service.wire import (
     WhatIfThreat,
     decode_direction,
     decode_event,
-    decode_plan_result,
     decode_world_snapshot,
     encode,
     keys,
 )
-from pfp_service.world.preview import fit_reply, preview
+from pfp_service.world.preview import preview
+from pfp_service.world.translate import decode_plan_result, fit_reply
 from pfp_service.world.world import (
     Deliberated,
     GoalCancelled,

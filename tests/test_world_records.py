@@ -6,6 +6,7 @@ import pytest
 
 from pfp_service.core import Stepper
 from pfp_service.wire import DirectionStatus, Goal, ThreatUpdate
+from pfp_service.world import translate
 from pfp_service.world.events import Job
 from pfp_service.world.world_records import Records, ThreatRecord
 
@@ -14,7 +15,7 @@ pytestmark = pytest.mark.unit
 
 def _threat(tid: str, x: float, expires: float | None = None) -> ThreatRecord:
     u = ThreatUpdate(position=(x, 0.0), sigma_range=1.0, sigma_lateral=0.7)
-    return ThreatRecord(u, u.to_threat(tid), expires)
+    return ThreatRecord(u, translate.threat(u, tid), expires)
 
 
 def _job(recs: Records, unit: str) -> Job:

@@ -19,7 +19,7 @@ from pfp_service.wire import (
     ThreatUpdate,
     TrappedEvent,
 )
-from pfp_service.world import steering
+from pfp_service.world import steering, translate
 from pfp_service.world.lookahead import lookahead, within_map
 from pfp_service.world.world_records import Records, UnitRecord
 
@@ -27,7 +27,8 @@ pytestmark = pytest.mark.unit
 
 P = PlannerParams(intensity="density", delta=0.08)
 FIELD = ThreatField(
-    [ThreatUpdate(position=(50.0, 5.0), sigma_range=10.0, sigma_lateral=7.0).to_threat("t")], "density"
+    [translate.threat(ThreatUpdate(position=(50.0, 5.0), sigma_range=10.0, sigma_lateral=7.0), "t")],
+    "density",
 )
 
 
@@ -132,7 +133,7 @@ def test_a_change_is_seen_by_the_units_whose_corridor_it_meets():
     recs = Records()
     crossing = _unit(recs, "x", (0.0, 0.0), (100.0, 0.0))
     far = _unit(recs, "far", (0.0, 5000.0), (100.0, 5000.0))
-    touched = [ThreatUpdate(position=(50.0, 0.0), sigma_range=5.0, sigma_lateral=5.0).to_threat("n")]
+    touched = [translate.threat(ThreatUpdate(position=(50.0, 0.0), sigma_range=5.0, sigma_lateral=5.0), "n")]
     assert steering.reached([crossing, far], touched, "density") == [True, False]
     assert steering.reached([], touched, "density") == []
 

@@ -17,6 +17,7 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
+from pfp_service.world import translate
 
 pytestmark = pytest.mark.unit
 
@@ -146,9 +147,9 @@ def test_a_zone_update_round_trips_and_becomes_the_core_zone() -> None:
     body = {"polygon": [[[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]]], "ttl_s": 60}
     z = m.decode_zone(json.dumps(body).encode())
     assert z.ttl_s == 60 and z.kind == "keep_out"
-    core = z.to_zone("pond")
+    core = translate.zone(z, "pond")
     assert core.id == "pond" and core.shell == ((0, 0), (10, 0), (10, 10), (0, 10))
-    c = m.decode_zone(b'{"circle": {"centre": [5, 5], "radius_m": 2}}').to_zone("c")
+    c = translate.zone(m.decode_zone(b'{"circle": {"centre": [5, 5], "radius_m": 2}}'), "c")
     assert c.centre == (5, 5) and c.radius_m == 2
     assert json.loads(m.encode(z)) == {**body, "kind": "keep_out", "circle": None}
 

@@ -49,6 +49,7 @@ from pfp_service.wire import (
     encode,
     keys,
 )
+from pfp_service.world import translate
 
 __all__ = [
     "main",
@@ -97,7 +98,9 @@ class _Runner:
         self.zone_removed(step.zone, t_s)
         ttl = step.ttl_s
         self.zones.append(
-            ZoneVersion(step.zone, step.update().to_zone(step.zone), t_s, t_s + ttl if ttl else math.inf)
+            ZoneVersion(
+                step.zone, translate.zone(step.update(), step.zone), t_s, t_s + ttl if ttl else math.inf
+            )
         )
 
     def zone_removed(self, zone_id: str, t_s: float) -> None:

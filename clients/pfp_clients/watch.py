@@ -16,6 +16,7 @@ import numpy as np
 from pfp_service.core.metrics import Epoch, segment_clearance
 from pfp_service.core.threat import Threat, ThreatField
 from pfp_service.wire import ThreatUpdate
+from pfp_service.world import translate
 
 __all__ = ["ThreatVersion", "Watch"]
 
@@ -30,7 +31,7 @@ class ThreatVersion:
     end_s: float = math.inf
 
     def threat(self) -> Threat:
-        return self.update.to_threat(self.threat_id)
+        return translate.threat(self.update, self.threat_id)
 
 
 @dataclass

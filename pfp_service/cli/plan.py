@@ -182,6 +182,10 @@ def run(args: argparse.Namespace) -> int:
 
         check(args.terrain)
     scenario = load_scenario(args.scenario)
+    if args.terrain is None and scenario.terrain is not None:  # the file's own DEM, as light as --terrain's
+        from pfp_service.terrain.dem import check
+
+        check(scenario.terrain)
     for line in plausible.warnings(
         scenario.start,
         scenario.goal,

@@ -27,13 +27,15 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from pfp_service.errors import InputError
     from pfp_service.wire import schema
+    from pfp_service.world import translate
 
     directory = Path(args.dir)
     if directory.exists() and not directory.is_dir():
         raise InputError(str(directory), "is not a directory")
+    files = schema.render(translate.supplied())
     if args.check:
         try:
-            stale = schema.diff(directory)
+            stale = schema.diff(directory, files)
         except OSError as exc:
             raise InputError(str(directory), f"cannot read: {exc.strerror or exc}") from exc
         for line in stale:
@@ -44,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{directory}: up to date")
         return 0
     try:
-        changes = schema.write(directory, log=lambda line: print(f"{directory}: {line}"))
+        changes = schema.write(directory, files, log=lambda line: print(f"{directory}: {line}"))
     except OSError as exc:
         raise InputError(str(directory), f"cannot write: {exc.strerror or exc}") from exc
     if not changes:

@@ -14,7 +14,7 @@ A zone is *closed*: a point on its boundary is in it, and so is one within
 miss.  ``track_enters`` and every check use that one rule.
 
 How the live side hands zones to the engine: build ``ZoneSet(zones)`` from
-the zones in force (the wire's ``ZoneUpdate.to_zone`` turns one into a ``Zone``:
+the zones in force (``world.translate.zone`` turns a wire ``ZoneUpdate`` into a ``Zone``:
 the core never imports the wire) and give it to the field, ``field.with_zones(zone_set)``: a
 ``ThreatField`` carries its ``ZoneSet`` (``field.zones``), so everything that
 takes a field -- the stepper, previews, escapes, routes, metrics -- sees the

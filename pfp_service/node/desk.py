@@ -68,7 +68,8 @@ from pfp_service.node.workers import WorkerPool
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
 from pfp_service.wire.messages import Bounds, ZoneUpdate
 from pfp_service.world.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings, ZonePut
-from pfp_service.world.preview import Cost, admit, fit_reply, preview
+from pfp_service.world.preview import Cost, admit, preview
+from pfp_service.world.translate import fit_reply
 
 __all__ = ["EXPIRY_GRACE_S", "WORKER_MEMORY_MB", "WORKER_NICE", "PreviewDesk", "warm_up"]
 

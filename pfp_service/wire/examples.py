@@ -2,7 +2,8 @@
 
 ``schema.render()`` writes them into the published contract, and the tests decode each one
 back, so an example is always a valid message.  Apart from ``schema`` because they are data,
-not the rules that turn Structs into schemas.
+not the rules that turn Structs into schemas.  The preview reply's example is the core's
+``PlanResult``, which the wire cannot name: ``world.translate.supplied()`` gives it.
 """
 
 from __future__ import annotations
@@ -16,9 +17,7 @@ __all__ = ["examples"]
 
 
 def examples() -> dict[str, list[tuple[str, Any]]]:
-    """Example instances by message name, as ``(example name, struct)`` pairs."""
-    from pfp_service.core.plan import PlanResult, PlanStatus, UsedParams
-
+    """Example instances by message name, as ``(example name, struct)`` pairs (but the preview reply's)."""
     hit = m.WhatIfThreat(
         id="ambush",
         position=(5.0, 6.0),
@@ -105,26 +104,6 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             (
                 "preview_request",
                 m.PreviewRequest(start=(0.0, 0.0), goal=(10.0, 10.0), threats=[hit], max_iter=2000),
-            )
-        ],
-        "preview_reply": [
-            (
-                "preview_reply",
-                PlanResult(
-                    status=PlanStatus.REACHED,
-                    reason="within tolerance of the goal",
-                    steps=2,
-                    length=0.2,
-                    exposure=0.0015,
-                    peak_threat=0.0081,
-                    min_clearance=6.3,
-                    final_distance=0.05,
-                    path=[(9.85, 9.85), (9.92, 9.92), (9.99, 9.99)],
-                    compute_ms=0.4,
-                    params=UsedParams(
-                        delta=1.0, step=0.1, max_iter=300, tolerance=0.1, intensity="peak", escape="none"
-                    ),
-                ),
             )
         ],
         "error_reply": [("error_reply", m.ErrorReply(error="must be > 0", field="$.threats[0].sigma_range"))],

@@ -1,8 +1,10 @@
 """The published contract: JSON Schema, an example and the key of every wire message.
 
-``render()`` returns the whole ``schemas/`` directory as ``{relative path: text}``
-from the Structs themselves (the preview reply from ``core.plan.PlanResult``),
-so it cannot drift from the code.  ``diff()`` says what on disk is stale and
+``render(supplied)`` returns the whole ``schemas/`` directory as ``{relative path: text}``
+from the Structs themselves, so it cannot drift from the code.  The wire imports no
+core, so a message whose type is the core's (the preview reply, ``PlanResult``) has
+no type in ``MESSAGES``: a higher layer supplies it and its examples
+(``world.translate.supplied()``).  ``diff()`` says what on disk is stale and
 ``write()`` brings it up to date; ``pfp schemas [--check]`` calls them.  Only
 ``diff`` and ``write`` touch the file system.
 """
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 import inspect
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,7 +26,7 @@ from pfp_service.wire import messages as m
 from pfp_service.wire.examples import examples
 from pfp_service.wire.keys import KeyKind
 
-__all__ = ["CONTRACT_VERSION", "MESSAGES", "MessageSpec", "diff", "render", "write"]
+__all__ = ["CONTRACT_VERSION", "MESSAGES", "MessageSpec", "Supplied", "diff", "render", "write"]
 
 # Bumped only for a change an older client cannot read; adding a defaulted field is not one.
 CONTRACT_VERSION = 1
@@ -44,10 +46,13 @@ class MessageSpec:
     note: str = ""
 
 
-def _plan_result() -> Any:
-    from pfp_service.core.plan import PlanResult
+@dataclass(frozen=True)
+class Supplied:
+    """A message of the contract whose type the wire cannot name (its ``MessageSpec.type`` is None):
+    the type and its ``(example name, instance)`` pairs, given to ``render`` by a higher layer."""
 
-    return PlanResult
+    type: Any
+    examples: tuple[tuple[str, Any], ...]
 
 
 MESSAGES: tuple[MessageSpec, ...] = (
@@ -103,7 +108,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
     ),
     MessageSpec(
         "preview_reply",
-        None,
+        None,  # the core's PlanResult, which the wire cannot name: supplied to render()
         KeyKind.PREVIEW,
         "reply",
         "planner",
@@ -140,10 +145,6 @@ MESSAGES: tuple[MessageSpec, ...] = (
 )
 
 LIVELINESS: tuple[KeyKind, ...] = (KeyKind.ALIVE_UNIT, KeyKind.ALIVE_PLANNER)
-
-
-def _type_of(spec: MessageSpec) -> Any:
-    return _plan_result() if spec.type is None else spec.type
 
 
 def _dump(obj: Any) -> str:
@@ -219,8 +220,8 @@ def _geodetic_zone(defs: dict[str, Any]) -> None:
         defs["ZoneCircle"]["description"] += "\n\n" + GEODETIC_NOTE
 
 
-def _schema(spec: MessageSpec) -> dict[str, Any]:
-    body = msgspec.json.schema(_type_of(spec))
+def _schema(spec: MessageSpec, supplied: Mapping[str, Supplied]) -> dict[str, Any]:
+    body = msgspec.json.schema(supplied[spec.name].type if spec.type is None else spec.type)
     _describe(body.get("$defs", {}))
     _geodetic_positions(spec, body)
     head: dict[str, Any] = {
@@ -299,12 +300,23 @@ def _readme(index: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def render() -> dict[str, str]:
-    """Every file of ``schemas/`` as ``{relative posix path: text}``."""
-    ex = examples()
+def render(supplied: Mapping[str, Supplied]) -> dict[str, str]:
+    """Every file of ``schemas/`` as ``{relative posix path: text}``.
+
+    Args:
+        supplied: by message name, the type and examples of each message whose type the wire
+            cannot name (``world.translate.supplied()``).
+
+    Raises:
+        ValueError: ``supplied`` does not name exactly those messages.
+    """
+    wanted = {spec.name for spec in MESSAGES if spec.type is None}
+    if supplied.keys() != wanted:
+        raise ValueError(f"supplied: expected the messages {sorted(wanted)}, got {sorted(supplied)}")
+    ex = examples() | {name: list(s.examples) for name, s in supplied.items()}
     files: dict[str, str] = {}
     for spec in MESSAGES:
-        files[f"{spec.name}.schema.json"] = _dump(_schema(spec))
+        files[f"{spec.name}.schema.json"] = _dump(_schema(spec, supplied))
         for name, obj in ex[spec.name]:
             files[f"examples/{name}.json"] = _dump(msgspec.to_builtins(obj))
     index = _index(ex)
@@ -323,9 +335,8 @@ def _on_disk(directory: Path) -> set[str]:
     }
 
 
-def diff(directory: Path, files: dict[str, str] | None = None) -> list[str]:
-    """What is stale in ``directory``: ``missing X``, ``changed X`` and ``extra X`` lines."""
-    files = render() if files is None else files
+def diff(directory: Path, files: dict[str, str]) -> list[str]:
+    """What is stale in ``directory`` against ``files`` (``render``'s): ``missing X``, ``changed X`` and ``extra X`` lines."""
     out: list[str] = []
     present = _on_disk(directory)
     for rel, text in sorted(files.items()):
@@ -337,9 +348,8 @@ def diff(directory: Path, files: dict[str, str] | None = None) -> list[str]:
     return out
 
 
-def write(directory: Path, log: Callable[[str], None] | None = None) -> list[str]:
-    """Bring ``directory`` up to date and return what changed (as ``diff`` names it)."""
-    files = render()
+def write(directory: Path, files: dict[str, str], log: Callable[[str], None] | None = None) -> list[str]:
+    """Bring ``directory`` up to ``files`` (``render``'s) and return what changed (as ``diff`` names it)."""
     changes = diff(directory, files)
     for line in changes:
         what, rel = line.split(" ", 1)

@@ -32,10 +32,11 @@ import msgspec
 from pfp_service.core import PlanResult, Scheduled, Stepper, ThreatField, plan, resolve
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import InputError
-from pfp_service.wire import MAX_PAYLOAD_BYTES, Goal, PreviewRequest, encode
+from pfp_service.wire import Goal, PreviewRequest
+from pfp_service.world import translate
 from pfp_service.world.world import UnitView, unit_key
 
-__all__ = ["HEAVY_STEPS", "MAX_PREVIEW_WHATIFS", "Cost", "admit", "fit_reply", "preview"]
+__all__ = ["HEAVY_STEPS", "MAX_PREVIEW_WHATIFS", "Cost", "admit", "preview"]
 
 MAX_PREVIEW_WHATIFS = 64  # what-if threats one preview may add (the wire takes 256: a planner refuses more)
 HEAVY_STEPS = 20_000  # a preview bounded above this many steps (or a route this long) is heavy
@@ -89,7 +90,7 @@ def admit(
         path = "$.step" if req.step is not None else "$.goal"
         if given is None:  # derived (``resolve``): a few thousand steps at most, whatever the distance
             base = stats if stats is not None else field_stats(view.threats)
-            narrowest = min((t.to_threat(t.id).min_sigma() for t in req.threats), default=math.inf)
+            narrowest = min((translate.threat(t, t.id).min_sigma() for t in req.threats), default=math.inf)
             merged = FieldStats(min(base.min_sigma, narrowest), base.median_ratio)
             given = resolve(view.params_for(goal_msg), start, goal_msg.position, stats=merged).step
             path = ""
@@ -126,19 +127,6 @@ def _sigma(t: Any) -> float:
     return float(max(t.sigma_range, t.sigma_lateral))
 
 
-def fit_reply(result: PlanResult, limit: int = MAX_PAYLOAD_BYTES) -> bytes:
-    """The reply bytes, within ``limit``: the path is thinned (ends kept) and marked if it must be."""
-    data = encode(result)
-    path = result.path
-    keep = len(path)
-    while len(data) > limit and keep > 2:
-        keep = max(2, int(keep * 0.9 * limit / len(data)))
-        stride = (len(path) - 1) / (keep - 1)
-        thinned = [path[round(i * stride)] for i in range(keep - 1)] + [path[-1]]
-        data = encode(msgspec.structs.replace(result, path=thinned, path_decimated=True))
-    return data
-
-
 def preview(
     view: UnitView,
     request: PreviewRequest | None,
@@ -171,7 +159,7 @@ def preview(
         raise InputError("$.goal", f"unit {view.unit!r} has no goal; give a goal")
     goal = (goal_msg.position[0], goal_msg.position[1])
     start = (start[0], start[1])
-    extra = [t.to_threat(t.id) for t in req.threats]
+    extra = [translate.threat(t, t.id) for t in req.threats]
     replaced = {e.id for e in extra}  # a what-if threat with a live id stands in for it
     threats = [t for t in view.threats if t.id not in replaced] + extra
     schedule = [Scheduled(t) for t in threats]

@@ -31,7 +31,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
 from pfp_service.world import events as ev
-from pfp_service.world import missions, steering
+from pfp_service.world import missions, steering, translate
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.world.limits import Limits
@@ -322,7 +322,7 @@ class World:
             self._reject(keys.threat(s.mission, tid), err, b)
             return
         ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
-        new = ThreatRecord(msg, msg.to_threat(tid), None if ttl is None else b.now + ttl)
+        new = ThreatRecord(msg, translate.threat(msg, tid), None if ttl is None else b.now + ttl)
         old = self._rec.put_threat(tid, new)
         b.touched += [new.threat] if old is None else [old.threat, new.threat]
         if new.expires_at is not None:
@@ -338,7 +338,7 @@ class World:
             )
             return
         try:
-            zone = msg.to_zone(zid)
+            zone = translate.zone(msg, zid)
         except ValueError as exc:  # decoded, yet not a zone the engine takes: refused on its key
             self._reject(keys.zone(s.mission, zid), InputError("$", str(exc)), b)
             return

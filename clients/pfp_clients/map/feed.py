@@ -39,7 +39,6 @@ from pfp_service.wire import (
     decode_error_reply,
     decode_event,
     decode_goal,
-    decode_plan_result,
     decode_planner_status,
     decode_threat,
     decode_unit_state,
@@ -49,6 +48,7 @@ from pfp_service.wire import (
 )
 from pfp_service.wire.encoding import zenoh_encoding
 from pfp_service.wire.messages import decode_zone
+from pfp_service.world.translate import decode_plan_result
 
 __all__ = ["Feed", "PreviewError"]
 

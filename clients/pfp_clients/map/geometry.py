@@ -17,6 +17,7 @@ from pfp_service.core.cores import CORE_FRACTION
 from pfp_service.core.threat import Threat
 from pfp_service.geojson import zone_ring
 from pfp_service.wire import ThreatUpdate
+from pfp_service.world import translate
 
 __all__ = ["CORE_FRACTION", "ZONE_FRACTION", "outline", "peak_point"]
 
@@ -46,6 +47,6 @@ def outline(update: ThreatUpdate, fraction: float, rays: int = _RAYS) -> list[tu
     if not 0.0 < fraction < 1.0:
         raise ValueError(f"fraction must be in (0, 1), got {fraction!r}")
     # the ratio to the peak is per threat, so weight 1 stands for any weight (even 0, which has no core)
-    threat = dataclasses.replace(update.to_threat(""), weight=1.0)
+    threat = dataclasses.replace(translate.threat(update, ""), weight=1.0)
     ring = zone_ring(threat, fraction, rays)
     return [(round(float(x), 3), round(float(y), 3)) for x, y in ring]

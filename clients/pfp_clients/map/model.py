@@ -46,6 +46,7 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world import translate
 
 __all__ = [
     "MAX_REJECTED_GROUPS",
@@ -148,7 +149,7 @@ def _threat_of(threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: flo
         None if ttl_left_s is None else now + ttl_left_s,
         outline(update, ZONE_FRACTION),
         outline(update, CORE_FRACTION) if update.weight > 0 else [],
-        peak_point(update.to_threat(threat_id)),
+        peak_point(translate.threat(update, threat_id)),
     )
 
 

@@ -419,6 +419,7 @@ class MapServer:
     async def _geojson(self, request: web.Request) -> web.Response:
         """The threats and keep-out zones the map shows, as one RFC 7946 FeatureCollection."""
         from pfp_service.geojson import feature_collection
+        from pfp_service.world import translate
 
         origin = self.opts.origin
         if origin is None:
@@ -426,8 +427,8 @@ class MapServer:
                 {"error": "GeoJSON is in lon/lat: start pfp map with --origin"}, status=409
             )
         model = self.model
-        threats = [t.update.to_threat(tid) for tid, t in model.threats.items()]
-        zones = [z.to_zone(zid) for zid, z in model.zone_updates.items()]
+        threats = [translate.threat(t.update, tid) for tid, t in model.threats.items()]
+        zones = [translate.zone(z, zid) for zid, z in model.zone_updates.items()]
         fc = feature_collection(origin, threats, zones=zones, name=f"pfp map {self.opts.mission}")
         return web.json_response(fc, content_type="application/geo+json")
 

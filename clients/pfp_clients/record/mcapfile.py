@@ -86,8 +86,9 @@ _FIX_SCHEMA = {
 def _contract_schemas() -> dict[keys.KeyKind, tuple[str, bytes]]:
     """Each published key kind's message name and JSON Schema text, from the contract itself."""
     from pfp_service.wire import schema
+    from pfp_service.world import translate
 
-    files = schema.render()
+    files = schema.render(translate.supplied())
     out: dict[keys.KeyKind, tuple[str, bytes]] = {}
     for spec in schema.MESSAGES:
         if spec.key is not None and spec.op == "put":

@@ -221,6 +221,7 @@ def popups(rows: list[UnitSummary], watch: Watch) -> dict[str, str]:
 def zones_at_end(rec: Record) -> list[Any]:
     """The keep-out zones in force when the record ends (each put and not since removed), as core ``Zone``s."""
     from pfp_service.wire.messages import decode_zone
+    from pfp_service.world import translate
 
     held: dict[str, Any] = {}
     for e in rec.entries:
@@ -234,7 +235,7 @@ def zones_at_end(rec: Record) -> list[Any]:
             held.pop(k.id, None)
             continue
         try:
-            held[k.id] = decode_zone(e.data, None, rec.origin).to_zone(k.id)
+            held[k.id] = translate.zone(decode_zone(e.data, None, rec.origin), k.id)
         except (InputError, ValueError):  # refused by the planner too: not in force
             continue
     return list(held.values())

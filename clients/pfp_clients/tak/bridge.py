@@ -45,6 +45,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
 from pfp_service.wire.delivery import Deliverer
+from pfp_service.world.translate import decode_plan_result
 
 __all__ = ["RECONNECT_S", "TICK_S", "TlsFiles", "link_config", "run"]
 
@@ -255,7 +256,7 @@ async def _main(
         def ask() -> Any:
             for reply in session.get(keys.preview(mission, unit), timeout=PREVIEW_TIMEOUT_S):
                 if reply.ok is not None:
-                    return m.decode_plan_result(reply.ok.payload.to_bytes())
+                    return decode_plan_result(reply.ok.payload.to_bytes())
             return None
 
         try:

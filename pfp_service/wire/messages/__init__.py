@@ -7,8 +7,8 @@ at ``$`` (``$.position[1]: expected a finite number within ±1e+09``).
 
 Evolution: schemas only grow.  A new field always has a default, and decoders
 ignore fields they do not know, so an older reader accepts a newer message.
-The preview reply is ``core.plan.PlanResult`` itself (what ``pfp plan --json``
-prints); it is imported lazily so this module stays light and zenoh-free.
+The preview reply is the core's ``PlanResult`` itself (what ``pfp plan --json``
+prints); the wire imports no core, so its decoder is ``world.translate.decode_plan_result``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from pfp_service.wire.messages.codec import (
     decode_event,
     decode_goal,
     decode_mission,
-    decode_plan_result,
     decode_planner_status,
     decode_preview_request,
     decode_team,
@@ -159,7 +158,6 @@ __all__ = [
     "decode_event",
     "decode_goal",
     "decode_mission",
-    "decode_plan_result",
     "decode_planner_status",
     "decode_preview_request",
     "decode_team",

@@ -9,16 +9,12 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import msgspec
 
 from pfp_service.errors import InputError, from_validation
 from pfp_service.geo import MAX_RANGE_M, LatLon, localise
-
-if TYPE_CHECKING:
-    from pfp_service.core.plan import PlanResult
-
 from pfp_service.wire.messages.events import (
     EVENT_KINDS,
     AnyEvent,
@@ -61,7 +57,6 @@ __all__ = [
     "decode_event",
     "decode_goal",
     "decode_mission",
-    "decode_plan_result",
     "decode_planner_status",
     "decode_preview_request",
     "decode_team",
@@ -98,7 +93,7 @@ M = TypeVar("M")
 
 
 def encode(msg: msgspec.Struct) -> bytes:
-    """JSON bytes of any wire message (or of a ``PlanResult``)."""
+    """JSON bytes of any wire message (or of any other msgspec Struct: the core's ``PlanResult``)."""
     return _ENCODER.encode(msg)
 
 
@@ -174,7 +169,8 @@ def decode(
     comes out is always in metres.
 
     Args:
-        cls: a message Struct of this module, ``AnyEvent``, or ``PlanResult``.
+        cls: a message Struct of this module, ``AnyEvent``, or another Struct (the core's
+            ``PlanResult``: ``world.translate.decode_plan_result``).
         data: the payload as received.
         bounds: the mission bounds, if any; every position must lie within them.
         origin: the mission origin, if any; without one a lat/lon is refused.
@@ -421,10 +417,3 @@ def decode_event(
         if exc.path == "$.kind" and exc.reason.startswith("invalid value"):
             raise InputError(exc.path, f"{exc.reason} (expected one of: {', '.join(EVENT_KINDS)})") from exc
         raise
-
-
-def decode_plan_result(data: bytes | bytearray | memoryview | None) -> PlanResult:
-    """A preview reply: ``core.plan.PlanResult``, exactly what ``pfp plan --json`` prints."""
-    from pfp_service.core.plan import PlanResult
-
-    return decode(PlanResult, data)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from enum import StrEnum
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import msgspec
 from msgspec import Meta
@@ -30,10 +30,6 @@ from pfp_service.constraints import (
 from pfp_service.errors import InputError
 from pfp_service.geo import LatLon, Origin
 from pfp_service.wire.messages.guidance import Progress, RouteKind
-
-if TYPE_CHECKING:
-    from pfp_service.core.threat import Threat
-    from pfp_service.core.zones import Zone
 
 __all__ = [
     "CHOICES",
@@ -196,20 +192,6 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
     def __post_init__(self) -> None:
         check_spreads(self.sigma_range, self.sigma_lateral)
 
-    def to_threat(self, threat_id: str) -> Threat:
-        """The core's ``Threat`` for this update, named ``threat_id``."""
-        from pfp_service.core.threat import Threat
-
-        return Threat.from_facing(
-            self.position,
-            self.facing_deg,
-            self.sigma_range,
-            self.sigma_lateral,
-            self.skew,
-            self.weight,
-            threat_id,
-        )
-
 
 # -- keep-out zones ------------------------------------------------------------------
 MAX_ZONE_VERTICES = 4096  # over all of a zone's rings (``core.zones.MAX_VERTICES``)
@@ -254,15 +236,6 @@ class ZoneUpdate(_Message, frozen=True, kw_only=True):
             raise ValueError("polygon: give exactly one of polygon and circle")
         if self.polygon is not None:
             _check_rings(self.polygon)
-
-    def to_zone(self, zone_id: str) -> Zone:
-        """The core's ``Zone`` for this update, named ``zone_id`` (positions already in metres)."""
-        from pfp_service.core.zones import Zone
-
-        if self.circle is not None:
-            return Zone.circle(zone_id, self.circle.centre, self.circle.radius_m, self.kind)
-        rings = self.polygon or []
-        return Zone.polygon(zone_id, rings[0], rings[1:], self.kind)
 
 
 def _check_rings(rings: Sequence[Sequence[tuple[float, float]]]) -> None:

@@ -1,0 +1,105 @@
+"""The one place the wire and the core meet: a message becomes a core value, a core value a reply.
+
+The wire imports no core and the core no wire (import-linter's contracts hold
+both without exceptions), so whatever turns one into the other lives here:
+a ``ThreatUpdate`` into a core ``Threat`` (``threat``), a ``ZoneUpdate`` into a
+core ``Zone`` (``zone``), and the preview reply, which is the core's
+``PlanResult`` itself, into bytes (``fit_reply``) and back
+(``decode_plan_result``).  ``supplied()`` gives the wire's contract generator
+(``wire.schema.render``) the preview reply's type and example, which the wire
+cannot name.
+
+The core is imported where it is used, as the wire did before: a client or a
+command that reads a hostile file imports this module without compiling the
+core's kernels (tests/test_light_commands.py).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import msgspec
+
+from pfp_service.wire import MAX_PAYLOAD_BYTES, ThreatUpdate, decode, encode
+from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.wire.schema import Supplied
+
+if TYPE_CHECKING:
+    from pfp_service.core.plan import PlanResult
+    from pfp_service.core.threat import Threat
+    from pfp_service.core.zones import Zone
+
+__all__ = ["decode_plan_result", "fit_reply", "supplied", "threat", "zone"]
+
+
+def threat(update: ThreatUpdate, threat_id: str) -> Threat:
+    """The core's ``Threat`` for ``update``, named ``threat_id``."""
+    from pfp_service.core.threat import Threat
+
+    return Threat.from_facing(
+        update.position,
+        update.facing_deg,
+        update.sigma_range,
+        update.sigma_lateral,
+        update.skew,
+        update.weight,
+        threat_id,
+    )
+
+
+def zone(update: ZoneUpdate, zone_id: str) -> Zone:
+    """The core's ``Zone`` for ``update``, named ``zone_id`` (its positions already in metres).
+
+    Raises:
+        ValueError: a zone the decoder passed that the core still refuses.
+    """
+    from pfp_service.core.zones import Zone
+
+    if update.circle is not None:
+        return Zone.circle(zone_id, update.circle.centre, update.circle.radius_m, update.kind)
+    rings = update.polygon or []
+    return Zone.polygon(zone_id, rings[0], rings[1:], update.kind)
+
+
+def decode_plan_result(data: bytes | bytearray | memoryview | None) -> PlanResult:
+    """A preview reply: the core's ``PlanResult``, exactly what ``pfp plan --json`` prints.
+
+    Raises:
+        InputError: ``path`` rooted at ``$`` and the reason (as every wire decoder).
+    """
+    from pfp_service.core.plan import PlanResult
+
+    return decode(PlanResult, data)
+
+
+def fit_reply(result: PlanResult, limit: int = MAX_PAYLOAD_BYTES) -> bytes:
+    """The reply bytes, within ``limit``: the path is thinned (ends kept) and marked if it must be."""
+    data = encode(result)
+    path = result.path
+    keep = len(path)
+    while len(data) > limit and keep > 2:
+        keep = max(2, int(keep * 0.9 * limit / len(data)))
+        stride = (len(path) - 1) / (keep - 1)
+        thinned = [path[round(i * stride)] for i in range(keep - 1)] + [path[-1]]
+        data = encode(msgspec.structs.replace(result, path=thinned, path_decimated=True))
+    return data
+
+
+def supplied() -> dict[str, Supplied]:
+    """The contract's messages whose type is the core's, for ``wire.schema.render``: the preview reply."""
+    from pfp_service.core.plan import PlanResult, PlanStatus, UsedParams
+
+    example = PlanResult(
+        status=PlanStatus.REACHED,
+        reason="within tolerance of the goal",
+        steps=2,
+        length=0.2,
+        exposure=0.0015,
+        peak_threat=0.0081,
+        min_clearance=6.3,
+        final_distance=0.05,
+        path=[(9.85, 9.85), (9.92, 9.92), (9.99, 9.99)],
+        compute_ms=0.4,
+        params=UsedParams(delta=1.0, step=0.1, max_iter=300, tolerance=0.1, intensity="peak", escape="none"),
+    )
+    return {"preview_reply": Supplied(PlanResult, (("preview_reply", example),))}
