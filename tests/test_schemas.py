@@ -198,6 +198,7 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "ZoneCircle": ({"centre", "radius_m"}, set()),
     "ZoneSummary": ({"id", "zone"}, {"ttl_s"}),
     # added with teams
+    "TeamSummary": ({"id", "team"}, {"notes"}),
     "TeamUpdate": (
         set(),
         {"members", "separation_m", "lead", "follow", "standoff_m", "corridor_m", "controller", "robots"}

@@ -155,3 +155,26 @@ def test_a_robot_whose_controller_stops_holds_at_once_and_says_why() -> None:
     out = w.apply([_report("m1", (1.0, 0.0), 1.0), _report("r1", (11.0, 0.0), 0.0)], 2.0)
     (d,) = [d for d in out.directions if d.unit == "r1"]
     assert d.vector != (0.0, 0.0)  # it moves again
+
+
+def test_the_world_snapshot_lists_teams_with_their_notes_and_a_peer_takes_them() -> None:
+    from pfp_service.cli.status import snapshot_lines
+    from pfp_service.wire import decode_world_snapshot, encode
+    from pfp_service.world.events import inputs_from_snapshot
+
+    w = _world()
+    w.apply([TeamPut("alpha", TeamUpdate(controller="m1", robots=["r1"], members=["x"]))], 0.0)
+    w.apply([_report("m1", (0.0, 0.0), 0.0), _report("r1", (10.0, 0.0), 1.0)], 0.0)
+    w.apply([GoalSet("r1", Goal(position=(200.0, 0.0)))], 0.0)
+    snap = decode_world_snapshot(encode(w.snapshot(1.0)))
+    (t,) = snap.teams
+    assert snap.teams_total == 1 and t.id == "alpha" and t.team.robots == ["r1"]
+    assert t.notes == ["r1: team alpha: lost link: controller m1 has stopped"]
+    text = "\n".join(snapshot_lines(snap))
+    assert "1 teams" in text.splitlines()[0]
+    assert any(line.split()[:6] == ["alpha", "-", "-", "m1", "r1", "x"] for line in text.splitlines()), text
+    assert "  alpha: r1: team alpha: lost link: controller m1 has stopped" in text
+    assert not w.snapshot(1.0, units_from="m1").teams  # on the first page only
+    peer = _world()
+    peer.apply(inputs_from_snapshot(snap, "other"), 2.0)
+    assert peer.teams.teams == {"alpha": t.team}

@@ -457,14 +457,14 @@ def mission_message(record: MissionRecord, planner: str) -> Mission:
 
 
 def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
-    """What a peer planner's world reply says, as inputs: its zones and threats (with the TTL left), goals and missions.
+    """What a peer planner's world reply says, as inputs: its teams, zones and threats (with the TTL left), goals and missions.
 
     A planner started after threats and goals were published applies these
     and guides correctly from its first direction.  Its own reply is skipped.
     """
     if snap.planner == me:
         return []
-    inputs: list[Input] = []
+    inputs: list[Input] = [TeamPut(t.id, t.team) for t in snap.teams]
     for z in snap.zones:
         zone = z.zone if z.ttl_s is None else msgspec.structs.replace(z.zone, ttl_s=max(z.ttl_s, 1e-3))
         inputs.append(ZonePut(z.id, zone))

@@ -23,7 +23,7 @@ import msgspec
 
 from pfp_service.errors import InputError
 from pfp_service.wire import Direction, DirectionStatus, Progress
-from pfp_service.wire.messages import TeamUpdate, team_problems
+from pfp_service.wire.messages import TeamSummary, TeamUpdate, team_problems
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
 from pfp_service.world.teams import Point, Sight, Verdict
@@ -43,6 +43,7 @@ class TeamBook:
         self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
         self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
+        self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -73,6 +74,7 @@ class TeamBook:
             return False
         self.tracks.pop(tid, None)
         self._index()
+        self.said = {u: why for u, why in self.said.items() if u in self._of}
         return True
 
     def _index(self) -> None:
@@ -85,6 +87,17 @@ class TeamBook:
     def roles(self, unit: str) -> list[tuple[str, tuple[str, ...]]]:
         """``(team, roles)`` of each team ``unit`` is in."""
         return [(tid, self.teams[tid].roles(unit)) for tid in self._of.get(unit, ())]
+
+    def summaries(self) -> list[TeamSummary]:
+        """The teams in force by id, each with what its roles last said of its members (``pfp status``)."""
+        return [
+            TeamSummary(
+                id=tid,
+                team=team,
+                notes=[f"{u}: {self.said[u]}"[:1024] for u in team.units() if u in self.said],
+            )
+            for tid, team in sorted(self.teams.items())
+        ]
 
     def separation(self, unit: str) -> float | None:
         """The least distance ``unit``'s team asks its members to keep (``None``: by class): dispersion's seam."""
@@ -182,9 +195,14 @@ class TeamBook:
                 reasons.append(f"team {tid}: {verdict.reason}")
                 if verdict.kind == "hold" or verdict.to is None:
                     self.held.add(rec.id)
-                    return _held(d, "; ".join(reasons))
+                    self.said[rec.id] = "; ".join(reasons)
+                    return _held(d, self.said[rec.id])
                 to = verdict.to
-        return d if not reasons else _towards(d, at, to, "; ".join(reasons))
+        if not reasons:
+            self.said.pop(rec.id, None)
+            return d
+        self.said[rec.id] = "; ".join(reasons)
+        return _towards(d, at, to, self.said[rec.id])
 
     def _verdicts(
         self,

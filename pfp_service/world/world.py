@@ -103,7 +103,8 @@ class World:
     ) -> WorldSnapshot:
         """One page of what the planner holds, for the world queryable (``snapshot.page``)."""
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
+        teams = self.teams.summaries()
+        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit, teams)
 
     def owes(self) -> bool:
         """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon.

@@ -89,6 +89,7 @@ from pfp_service.wire.messages.teams import (
 from pfp_service.wire.messages.world import (
     Mission,
     MissionParams,
+    TeamSummary,
     ThreatSummary,
     UnitSummary,
     WorldQuery,
@@ -136,6 +137,7 @@ __all__ = [
     "RouteKind",
     "StaleEvent",
     "TeamProblem",
+    "TeamSummary",
     "TeamUpdate",
     "ThreatChange",
     "ThreatSummary",
