@@ -46,10 +46,20 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin, localise_document
 from pfp_service.scenario import TeamSpec, ZoneSpec, check_teams
 from pfp_service.wire import UnitKind
-from pfp_service.wire.messages import ZoneUpdate, localise_zone
+from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone
 from pfp_service.yamlio import load_yaml
 
-__all__ = ["CHOICES", "SPEEDS_MPS", "Stop", "Team", "UnitSpec", "generate_team", "load_team", "zone_updates"]
+__all__ = [
+    "CHOICES",
+    "SPEEDS_MPS",
+    "Stop",
+    "Team",
+    "UnitSpec",
+    "generate_team",
+    "load_team",
+    "team_updates",
+    "zone_updates",
+]
 
 Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
 RateHz = Annotated[float, Meta(gt=0.0, le=50.0)]
@@ -118,6 +128,12 @@ def zone_updates(team: Team) -> list[tuple[str, ZoneUpdate]]:
         (z.id or f"z{i + 1}", ZoneUpdate(**{f: getattr(z, f) for f in fields}))
         for i, z in enumerate(team.zones)
     ]
+
+
+def team_updates(team: Team) -> list[tuple[str, TeamUpdate]]:
+    """The file's teams as the wire puts them: ``(id, update)``."""
+    fields = TeamUpdate.__struct_fields__
+    return [(t.id, TeamUpdate(**{f: getattr(t, f) for f in fields})) for t in team.teams]
 
 
 def _localise_zones(doc: dict[str, object]) -> dict[str, object]:

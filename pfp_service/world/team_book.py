@@ -1,7 +1,7 @@
 """The world's teams: the teams in force, their leads' tracks, and the roles' verdicts applied to directions.
 
 ``TeamBook.put`` takes a team only when it agrees with the teams in force
-(``team_problems``: a unit in two teams, a cycle of leads); ``judge`` runs
+(``TeamIndex``: a unit in two teams, a cycle of leads); ``judge`` runs
 after the planner's directions are computed and rewrites a member's
 direction by its roles (``teams.lead``, ``teams.follow``, ``teams.link``):
 held (a zero vector, ``reach_m`` 0) or sent another way, the reason saying
@@ -23,7 +23,7 @@ import msgspec
 
 from pfp_service.errors import InputError
 from pfp_service.wire import Direction, DirectionStatus, Progress
-from pfp_service.wire.messages import TeamSummary, TeamUpdate, team_problems
+from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
 from pfp_service.world.teams import Point, Sight, Verdict
@@ -32,7 +32,7 @@ from pfp_service.world.world_records import UnitRecord
 __all__ = ["MAX_TRACK_POINTS", "TeamBook"]
 
 MAX_TRACK_POINTS = 4096  # a lead's track kept at most: the part behind every follower goes first
-_ROUTE_STEPS = 64  # the main element's route ahead, in planner steps, before straight on to its goal
+_ROUTE_STEPS = 16  # the main element's route ahead, in planner steps, before straight on to its goal
 
 
 class TeamBook:
@@ -42,6 +42,7 @@ class TeamBook:
         self.teams: dict[str, TeamUpdate] = {}
         self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
         self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
+        self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
 
@@ -56,16 +57,26 @@ class TeamBook:
         return (err, set()) if err is not None else (None, units | set(inp.update.units()))
 
     def put(self, tid: str, team: TeamUpdate) -> InputError | None:
-        """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is."""
-        others = {k: v for k, v in self.teams.items() if k != tid}
-        for p in team_problems({**others, tid: team}):
-            if p.team == tid:
-                return InputError("$." + p.error.path, p.error.reason)
+        """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is.
+
+        A new team is checked against the teams in force in time of its own size (``TeamIndex``);
+        one replaced or removed rebuilds the index.
+        """
         old = self.teams.get(tid)
-        self.teams = {**others, tid: team}
+        index = self._checks if old is None else _index_of({k: v for k, v in self.teams.items() if k != tid})
+        err = index.problem(team)
+        if err is not None:
+            return InputError("$." + err.path, err.reason)
+        index.add(tid, team)
+        self._checks = index
+        self.teams[tid] = team
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
-        self._index()
+        if old is None:
+            for u in team.units():
+                self._of.setdefault(u, []).append(tid)
+        else:
+            self._index()
         return None
 
     def remove(self, tid: str) -> bool:
@@ -73,6 +84,7 @@ class TeamBook:
         if self.teams.pop(tid, None) is None:
             return False
         self.tracks.pop(tid, None)
+        self._checks = _index_of(self.teams)
         self._index()
         self.said = {u: why for u, why in self.said.items() if u in self._of}
         return True
@@ -238,6 +250,13 @@ class TeamBook:
             c_at = ctl.position if ctl is not None else None
             out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
         return out
+
+
+def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:
+    index = TeamIndex()
+    for tid, team in teams.items():
+        index.add(tid, team)
+    return index
 
 
 def _moving(verdicts: list[Verdict]) -> bool:

@@ -11,7 +11,6 @@ they say.  A verdict is never an exception: a step too short to judge goes.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ __all__ = [
     "Verdict",
     "follow",
     "lead",
+    "length",
     "link",
     "point_at",
     "project",
@@ -63,47 +63,82 @@ def _dist(a: Point, b: Point) -> float:
     return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
+class _Line:
+    """A polyline as arrays, its segments' lengths and cumulated length: made once, walked many times."""
+
+    __slots__ = ("cum", "pts", "seg")
+
+    def __init__(self, line: Sequence[Point]) -> None:
+        self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
+        self.seg = np.hypot(*np.diff(self.pts, axis=0).T) if len(self.pts) > 1 else np.zeros(0)
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg)])
+
+    @property
+    def length(self) -> float:
+        return float(self.cum[-1])
+
+    def offs(self, at: Point) -> np.ndarray:
+        """How far ``at`` is from each segment (from the one point, for a line of one)."""
+        pts = self.pts
+        if len(pts) == 1:
+            return np.array([_dist(at, (float(pts[0, 0]), float(pts[0, 1])))])
+        a, ab = pts[:-1], np.diff(pts, axis=0)
+        px, py = at
+        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        return np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
+
+    def project(self, at: Point) -> tuple[float, float]:
+        pts = self.pts
+        if len(pts) == 0:
+            return 0.0, math.inf
+        if len(pts) == 1:
+            return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
+        a, ab = pts[:-1], np.diff(pts, axis=0)
+        px, py = at
+        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        off = np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
+        i = int(np.argmin(off))
+        return float(self.cum[i] + t[i] * self.seg[i]), float(off[i])
+
+    def point_at(self, s: float) -> Point:
+        pts, cum = self.pts, self.cum
+        if len(pts) == 0:
+            raise ValueError("point_at: an empty line")
+        if s <= 0.0 or len(pts) == 1:
+            return float(pts[0, 0]), float(pts[0, 1])
+        if s >= cum[-1]:
+            return float(pts[-1, 0]), float(pts[-1, 1])
+        i = int(np.searchsorted(cum, s, side="right")) - 1  # the segment s ends on: cum[i] <= s < cum[i + 1]
+        f = (s - cum[i]) / (cum[i + 1] - cum[i])
+        return float(pts[i, 0] + (pts[i + 1, 0] - pts[i, 0]) * f), float(
+            pts[i, 1] + (pts[i + 1, 1] - pts[i, 1]) * f
+        )
+
+
 def project(at: Point, line: Sequence[Point]) -> tuple[float, float]:
     """``(s, d)``: how far along ``line`` (a polyline, metres from its start) ``at``'s nearest point lies, and how far off it is.
 
     One point is a line of no length; no point puts ``at`` infinitely far off.
     """
-    if not line:
-        return 0.0, math.inf
-    pts = np.asarray(line, dtype=float).reshape(-1, 2)
-    p = np.asarray(at, dtype=float)
-    if len(pts) == 1:
-        return 0.0, float(np.hypot(*(p - pts[0])))
-    a, b = pts[:-1], pts[1:]
-    ab = b - a
-    length = np.hypot(ab[:, 0], ab[:, 1])
-    sq = np.where(length > 0.0, length * length, 1.0)
-    t = np.clip(((p - a) * ab).sum(axis=1) / sq, 0.0, 1.0)
-    near = a + ab * t[:, None]
-    off = np.hypot(near[:, 0] - p[0], near[:, 1] - p[1])
-    i = int(np.argmin(off))
-    return float(length[:i].sum() + t[i] * length[i]), float(off[i])
+    return _Line(line).project(at)
 
 
 def point_at(line: Sequence[Point], s: float) -> Point:
     """The point ``s`` metres along ``line`` from its start (its ends beyond them)."""
-    if not line:
-        raise ValueError("point_at: an empty line")
-    if s <= 0.0:
-        return line[0]
-    for a, b in itertools.pairwise(line):
-        seg = _dist(a, b)
-        if s <= seg and seg > 0.0:
-            f = s / seg
-            return (a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f)
-        s -= seg
-    return line[-1]
+    return _Line(line).point_at(s)
+
+
+def length(line: Sequence[Point]) -> float:
+    """The length of a polyline, metres."""
+    return _Line(line).length
 
 
 def _kept(at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float) -> float:
     """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``."""
-    length = _dist(at, to)
-    n = min(_SAMPLES_MAX, max(1, math.ceil(length / spacing_m))) if spacing_m > 0.0 else 1
+    far = _dist(at, to)
+    n = min(_SAMPLES_MAX, max(1, math.ceil(far / spacing_m))) if spacing_m > 0.0 else 1
     good = 0.0
     for k in range(1, n + 1):
         f = k / n
@@ -139,12 +174,13 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
     """
     if not route:
         return _hold(f"no route of {main} to lead along")
-    s, _off = project(at, route)
+    line = _Line(route)
+    if line.length <= standoff_m:  # the lead has cleared it all
+        return GO  # ... so it goes its own way, not onto the main element's goal
+    s, _off = line.project(at)
     if s > standoff_m * (1.0 + STANDOFF_TOLERANCE):
         return _hold(f"waiting for {main}: {s:,.0f} m ahead along its route, standoff {standoff_m:,.0f} m")
-    if sum(_dist(a, b) for a, b in itertools.pairwise(route)) <= standoff_m:  # the lead has cleared it all
-        return GO  # ... so it goes its own way, not onto the main element's goal
-    place = point_at(route, standoff_m)
+    place = line.point_at(standoff_m)
     if s >= standoff_m - _CLOSE_M or _dist(at, place) < _CLOSE_M:  # at or past its place: never back
         return _hold(f"at its standoff {standoff_m:,.0f} m ahead of {main}")
     return Verdict("to", place, f"leading {main} by {standoff_m:,.0f} m along its route")
@@ -173,24 +209,27 @@ def follow(
     if not track:
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
     half = corridor_m / 2.0
-    s_at, off_at = project(at, track)
+    line = _Line(track)
+    s_at, off_at = line.project(at)
     if off_at > half:
-        nearest = point_at(track, s_at)
+        nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
+    if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
+        return GO  # both ends within one segment's stadium, which is convex: the whole step is
     room = _corridor_near(track, half, at, max(_dist(at, to), _CLOSE_M))
     kept = _kept_in(room, at, to)
     if kept >= 1.0:
         return GO
     if _dist(at, to) * kept >= _CLOSE_M:
         return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
-    cleared = sum(_dist(a, b) for a, b in itertools.pairwise(track))
+    cleared = line.length
     if s_at >= cleared - _CLOSE_M:  # never back along it
         return _hold(f"at the end of the ground {lead_id} has cleared")
     ahead = max(_dist(at, to), _CLOSE_M)
     while (
         ahead >= _CLOSE_M
     ):  # a point of the track ahead, the straight way to it inside (a bend's chord is not)
-        along = point_at(track, s_at + ahead)
+        along = line.point_at(s_at + ahead)
         if _dist(at, along) >= _CLOSE_M and _kept_in(room, at, along) >= 1.0:
             return Verdict("to", along, f"along the corridor {lead_id} cleared")
         ahead /= 2.0
@@ -220,8 +259,8 @@ def _corridor_near(track: Sequence[Point], half: float, at: Point, reach: float)
 
 def _kept_in(room: shapely.Geometry, at: Point, to: Point) -> float:
     """How much (0 to 1) of the straight step from ``at`` to ``to`` stays in ``room`` from its start: exact."""
-    length = _dist(at, to)
-    if length <= 0.0:
+    far = _dist(at, to)
+    if far <= 0.0:
         return 1.0 if room.covers(shapely.Point(at)) else 0.0
     step = shapely.LineString([at, to])
     if room.covers(step):
@@ -230,8 +269,8 @@ def _kept_in(room: shapely.Geometry, at: Point, to: Point) -> float:
     parts = shapely.get_parts(step.intersection(room))
     for part in parts:
         if isinstance(part, shapely.LineString) and part.distance(start) < 1e-9:
-            far = max(_dist(at, (float(c[0]), float(c[1]))) for c in part.coords)
-            return min(1.0, far / length)
+            reached = max(_dist(at, (float(c[0]), float(c[1]))) for c in part.coords)
+            return min(1.0, reached / far)
     return 0.0
 
 

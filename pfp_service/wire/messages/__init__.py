@@ -82,6 +82,7 @@ from pfp_service.wire.messages.structs import (
 from pfp_service.wire.messages.teams import (
     MAX_TEAM_MEMBERS,
     RADIO_RANGE_MAX_M,
+    TeamIndex,
     TeamProblem,
     TeamUpdate,
     team_problems,
@@ -136,6 +137,7 @@ __all__ = [
     "RestoredEvent",
     "RouteKind",
     "StaleEvent",
+    "TeamIndex",
     "TeamProblem",
     "TeamSummary",
     "TeamUpdate",

@@ -23,6 +23,7 @@ from pfp_service.wire.messages.structs import _Message
 __all__ = [
     "MAX_TEAM_MEMBERS",
     "RADIO_RANGE_MAX_M",
+    "TeamIndex",
     "TeamProblem",
     "TeamUpdate",
     "team_problems",
@@ -121,6 +122,48 @@ def _paths(team: TeamUpdate) -> Iterator[tuple[str, str]]:
             yield u, name
 
 
+class TeamIndex:
+    """The teams taken so far, as the checks across teams need them: each unit's team and roles, and who follows whom.
+
+    ``problem`` checks one more team against them in time of its own size, so taking ``n`` teams
+    one by one costs ``n`` checks, not ``n**2``.
+    """
+
+    def __init__(self) -> None:
+        self.where: dict[str, tuple[str, str]] = {}  # unit -> (team, its roles there) of the teams taken
+        self.leads: dict[str, set[str]] = {}  # follower -> the leads it follows, over the teams taken
+
+    def problem(self, team: TeamUpdate, known: Collection[str] | None = None) -> InputError | None:
+        """Why ``team`` cannot join the teams taken (its field path within the team), or ``None``."""
+        for u, path in _paths(team):
+            if known is not None and u not in known:
+                return InputError(path, f"unknown unit {u!r}")
+            held = self.where.get(u)
+            if held is None:
+                continue
+            other, roles = held
+            chained = (roles == "lead" and team.roles(u) == ("follow",)) or (
+                roles == "follow" and team.roles(u) == ("lead",)
+            )
+            if not chained:
+                return InputError(
+                    path, f"{u!r} is already in team {other!r} (as {roles}); a unit is in one team"
+                )
+        if team.lead is not None:
+            for f in team.follow:  # a new edge f -> lead closes a cycle when lead already reaches f
+                if _reaches(team.lead, f, self.leads):
+                    return InputError("lead", f"a cycle of leads: {team.lead!r} already follows {f!r}")
+        return None
+
+    def add(self, tid: str, team: TeamUpdate) -> None:
+        """Take ``team`` (checked by ``problem``)."""
+        for u in team.units():
+            self.where.setdefault(u, (tid, ",".join(team.roles(u))))
+        if team.lead is not None:
+            for f in team.follow:
+                self.leads.setdefault(f, set()).add(team.lead)
+
+
 def team_problems(teams: Mapping[str, TeamUpdate], known: Collection[str] | None = None) -> list[TeamProblem]:
     """What is wrong across ``teams`` (in their order): one problem per team at most; never raises.
 
@@ -130,44 +173,14 @@ def team_problems(teams: Mapping[str, TeamUpdate], known: Collection[str] | None
     the first of two clashing teams stands.
     """
     problems: list[TeamProblem] = []
-    where: dict[str, tuple[str, str]] = {}  # unit -> (team, roles) of the teams accepted so far
-    leads: dict[str, set[str]] = {}  # follower -> the leads it follows, over the teams accepted
+    index = TeamIndex()
     for tid, team in teams.items():
-        problem = _problem(team, known, where, leads)
+        problem = index.problem(team, known)
         if problem is not None:
             problems.append(TeamProblem(tid, problem))
-            continue
-        for u in team.units():
-            where.setdefault(u, (tid, ",".join(team.roles(u))))
-        for f in team.follow:
-            assert team.lead is not None  # TeamUpdate checks it
-            leads.setdefault(f, set()).add(team.lead)
+        else:
+            index.add(tid, team)
     return problems
-
-
-def _problem(
-    team: TeamUpdate,
-    known: Collection[str] | None,
-    where: Mapping[str, tuple[str, str]],
-    leads: Mapping[str, set[str]],
-) -> InputError | None:
-    for u, path in _paths(team):
-        if known is not None and u not in known:
-            return InputError(path, f"unknown unit {u!r}")
-        held = where.get(u)
-        if held is None:
-            continue
-        other, roles = held
-        chained = (roles == "lead" and team.roles(u) == ("follow",)) or (
-            roles == "follow" and team.roles(u) == ("lead",)
-        )
-        if not chained:
-            return InputError(path, f"{u!r} is already in team {other!r} (as {roles}); a unit is in one team")
-    if team.lead is not None:
-        for f in team.follow:  # a new edge f -> lead closes a cycle when lead already reaches f
-            if _reaches(team.lead, f, leads):
-                return InputError("lead", f"a cycle of leads: {team.lead!r} already follows {f!r}")
-    return None
 
 
 def _reaches(start: str, goal: str, leads: Mapping[str, set[str]]) -> bool:
