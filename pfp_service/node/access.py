@@ -129,7 +129,7 @@ def fleet_grants(mission: str, units: Sequence[str], own_goal: bool = True) -> l
 def planner_grants(mission: str, planner: str) -> list[Grant]:
     own = (keys.planner_status(mission, planner), keys.world(mission, planner))
     every = (keys.planner_statuses(mission), keys.worlds(mission))
-    writes = (keys.goals(mission), keys.threats(mission), keys.zones(mission))
+    writes = (keys.goals(mission), keys.threats(mission), keys.zones(mission), keys.teams(mission))
     return [
         *_subscribe(keys.unit_states(mission), keys.sharded_states(mission), *writes),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
@@ -154,7 +154,8 @@ def reporter_grants(mission: str) -> list[Grant]:
 
 
 def commander_grants(mission: str) -> list[Grant]:
-    return [*_acked_write(mission, keys.goals(mission)), *_ask(keys.previews(mission))]
+    # a commander sets goals and forms teams
+    return [*_acked_write(mission, keys.goals(mission), keys.teams(mission)), *_ask(keys.previews(mission))]
 
 
 def observer_grants(mission: str) -> list[Grant]:

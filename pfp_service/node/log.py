@@ -188,6 +188,8 @@ def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 2
     from pfp_service.world.events import (
         GoalCancelled,
         GoalSet,
+        TeamPut,
+        TeamRemoved,
         ThreatPut,
         ThreatRemoved,
         ZonePut,
@@ -222,6 +224,12 @@ def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 2
         elif isinstance(inp, ZoneRemoved):
             what, msg, args = "zone removed", "keep-out zone %s removed", (inp.zone,)
             fields = {"zone": inp.zone}
+        elif isinstance(inp, TeamPut):
+            what, msg, args = "team put", "team %s put: %s", (inp.team, ", ".join(inp.update.units()))
+            fields = {"team": inp.team, "units": list(inp.update.units())}
+        elif isinstance(inp, TeamRemoved):
+            what, msg, args = "team removed", "team %s dissolved", (inp.team,)
+            fields = {"team": inp.team}
         else:
             continue
         shown += 1

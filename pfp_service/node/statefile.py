@@ -53,6 +53,7 @@ SCAN_QUERIES = 10_000  # a salvage scan of one table gives up after this many qu
 TABLES: dict[str, tuple[str, int]] = {
     "threats": ("id", 3),
     "zones": ("id", 3),
+    "teams": ("id", 3),
     "goals": ("unit", 2),
     "missions": ("unit", 5),
     "write_order": ("key", 5),

@@ -19,12 +19,12 @@ import msgspec
 from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, ThreatUpdate, decode, keys
-from pfp_service.wire.messages import ZoneUpdate
-from pfp_service.world.events import GoalSet, Input, MissionRestored, ThreatPut, ZonePut
+from pfp_service.wire.messages import TeamUpdate, ZoneUpdate
+from pfp_service.world.events import GoalSet, Input, MissionRestored, TeamPut, ThreatPut, ZonePut
 
 __all__ = ["OrderRow", "Restored", "read_state"]
 
-U = TypeVar("U", ThreatUpdate, ZoneUpdate)  # a write that expires
+U = TypeVar("U", ThreatUpdate, ZoneUpdate, TeamUpdate)  # a write kept by id (a team never expires)
 OrderRow = tuple[str, float, str, float, str]  # wire.delivery.WriteOrder.batch_rows
 _BAD_ROW = (InputError, ValueError, TypeError, KeyError, msgspec.MsgspecError)
 
@@ -47,7 +47,8 @@ class Restored:
     set_aside: str = ""
     skipped: tuple[str, ...] = ()
     zones: int = 0
-    order: tuple[OrderRow, ...] = ()  # the write order kept (WriteOrder.load)
+    order: tuple[OrderRow, ...] = ()
+    teams: int = 0  # the write order kept (WriteOrder.load)
 
 
 def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[], Any]) -> Restored:
@@ -65,7 +66,7 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
             try:
                 chunk = keys.check_chunk(key)
                 update = decode(kind, body)
-                if expires_at is not None:
+                if expires_at is not None and not isinstance(update, TeamUpdate):
                     left = float(expires_at) - wall_now
                     if left <= 0:
                         expired += 1
@@ -78,6 +79,7 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
             n += 1
         return n
 
+    n_teams = timed("teams", TeamUpdate, TeamPut)
     n_zones = timed("zones", ZoneUpdate, ZonePut)
     n_threats = timed("threats", ThreatUpdate, ThreatPut)
     missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
@@ -132,6 +134,7 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
         skipped=skipped,
         zones=n_zones,
         order=tuple(order),
+        teams=n_teams,
     )
 
 

@@ -68,6 +68,8 @@ from pfp_service.world.events import (
     Input,
     InputRejected,
     MissionRecord,
+    TeamPut,
+    TeamRemoved,
     ThreatPut,
     ThreatRemoved,
     ZonePut,
@@ -83,6 +85,7 @@ log = get_logger("store")
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS threats (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
 CREATE TABLE IF NOT EXISTS zones (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
+CREATE TABLE IF NOT EXISTS teams (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
 CREATE TABLE IF NOT EXISTS goals (unit TEXT PRIMARY KEY, body BLOB NOT NULL);
 CREATE TABLE IF NOT EXISTS missions (
     unit TEXT PRIMARY KEY, epoch INTEGER NOT NULL, origin_x REAL NOT NULL, origin_y REAL NOT NULL, params TEXT NOT NULL
@@ -243,6 +246,8 @@ class Store:
         gone_z: list[tuple[str]] = []
         rows_g: list[tuple[str, bytes]] = []
         gone_g: list[tuple[str]] = []
+        rows_m = [(i.team, encode(i.update), None) for i in inputs if isinstance(i, TeamPut)]
+        gone_m = [(i.team,) for i in inputs if isinstance(i, TeamRemoved)]
         for inp in inputs:
             if isinstance(inp, ThreatPut):
                 ttl = inp.update.ttl_s if inp.update.ttl_s is not None else default_ttl_s
@@ -258,7 +263,7 @@ class Store:
                 rows_z.append((inp.zone, encode(inp.update), None if zttl is None else wall_now + zttl))
             elif isinstance(inp, ZoneRemoved):
                 gone_z.append((inp.zone,))
-        if not (rows_t or gone_t or rows_g or gone_g or rows_z or gone_z or order_rows):
+        if not (rows_t or gone_t or rows_g or gone_g or rows_z or gone_z or rows_m or gone_m or order_rows):
             return
         with self._transaction() as db:
             db.executemany("INSERT OR REPLACE INTO write_order VALUES (?, ?, ?, ?, ?)", order_rows)
@@ -277,6 +282,8 @@ class Store:
             db.executemany("DELETE FROM goals WHERE unit = ?", gone_g)
             db.executemany("INSERT OR REPLACE INTO zones VALUES (?, ?, ?)", rows_z)
             db.executemany("DELETE FROM zones WHERE id = ?", gone_z)
+            db.executemany("INSERT OR REPLACE INTO teams VALUES (?, ?, ?)", rows_m)
+            db.executemany("DELETE FROM teams WHERE id = ?", gone_m)
 
     @contextlib.contextmanager
     def _transaction(self) -> Any:
@@ -331,6 +338,8 @@ class Store:
                     kept.append(InputRejected(keys.threat(mission, inp.threat), err))
                 elif isinstance(inp, ZonePut | ZoneRemoved):
                     kept.append(InputRejected(keys.zone(mission, inp.zone), err))
+                elif isinstance(inp, TeamPut | TeamRemoved):
+                    kept.append(InputRejected(keys.team(mission, inp.team), err))
                 else:
                     kept.append(inp)
             return kept, err.reason

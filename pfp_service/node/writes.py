@@ -1,4 +1,4 @@
-"""Goal, threat and zone writes on their way to the world: plain puts and acknowledged-write queries.
+"""Goal, threat, zone and team writes on their way to the world: plain puts and acknowledged-write queries.
 
 Callbacks decode a write into its ``Input`` (or an ``InputRejected`` naming
 why) and queue it, bounded (``WRITES_MAX``; past it a put is counted lost and
@@ -26,12 +26,14 @@ from pfp_service.errors import InputError
 from pfp_service.node.config import ServeConfig
 from pfp_service.wire import decode_goal, decode_threat, keys
 from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
-from pfp_service.wire.messages import decode_zone
+from pfp_service.wire.messages import decode_team, decode_zone
 from pfp_service.world.events import (
     GoalCancelled,
     GoalSet,
     Input,
     InputRejected,
+    TeamPut,
+    TeamRemoved,
     ThreatPut,
     ThreatRemoved,
     ZonePut,
@@ -81,7 +83,7 @@ class Writes:
         self.order = WriteOrder()  # the node settles it once the store has committed (or refused) a batch
 
     def declare(self, s: zenoh.Session, mission: str) -> list[Any]:
-        """Subscribe to the goal, threat and zone keys, and serve them as acknowledged-write queryables."""
+        """Subscribe to the goal, threat, zone and team keys, and serve them as acknowledged-write queryables."""
         return [
             s.declare_subscriber(keys.goals(mission), lambda sm: self._on_sample(sm, self._goal)),
             s.declare_subscriber(keys.threats(mission), lambda sm: self._on_sample(sm, self._threat)),
@@ -91,6 +93,9 @@ class Writes:
             # keep-out zones: written as threats are
             s.declare_subscriber(keys.zones(mission), lambda sm: self._on_sample(sm, self._zone)),
             s.declare_queryable(keys.zones(mission), lambda q: self._on_query(q, self._zone)),
+            # teams: written as zones are
+            s.declare_subscriber(keys.teams(mission), lambda sm: self._on_sample(sm, self._team)),
+            s.declare_queryable(keys.teams(mission), lambda q: self._on_query(q, self._team)),
         ]
 
     # -- the loop's side (under the lock for take and waiting) ------------------------------
@@ -196,6 +201,15 @@ class Writes:
             if delete:
                 return ThreatRemoved(tid)
             return ThreatPut(tid, decode_threat(payload, self.cfg.bounds, self.cfg.origin))
+        except InputError as err:
+            return InputRejected(key, err)
+
+    def _team(self, key: str, delete: bool, payload: bytes) -> Input:
+        try:
+            tid = keys.parse(key).id
+            if delete:
+                return TeamRemoved(tid)
+            return TeamPut(tid, decode_team(payload))
         except InputError as err:
             return InputRejected(key, err)
 
