@@ -12,10 +12,10 @@ pytestmark = pytest.mark.unit
 
 def test_rejections_go_out_at_most_five_a_second_per_kind_and_the_held_are_counted_in_the_next():
     lim = Limits()
-    key = keys.unit_state("m", "u1")
+    key = keys.KeyKind.UNIT_STATE  # the kind the caller knows: no key is parsed to learn it
     said = [lim.reject(key, 0.0) for _ in range(REJECTS_PER_S + 3)]
     assert said == [0] * REJECTS_PER_S + [None] * 3
-    assert lim.reject(keys.threat("m", "t1"), 0.1) == 0  # another kind of key has its own window
+    assert lim.reject(keys.KeyKind.THREAT, 0.1) == 0  # another kind of key has its own window
     assert lim.reject(key, 1.0) == 3  # a new second: the three held are said with the first
     assert lim.reject(key, 1.1) == 0
     assert lim.rejected == REJECTS_PER_S + 3 + 3
@@ -23,8 +23,9 @@ def test_rejections_go_out_at_most_five_a_second_per_kind_and_the_held_are_count
 
 def test_a_key_outside_the_layout_is_paced_as_unknown():
     lim = Limits()
-    assert [lim.reject("not/a/key", 0.0) for _ in range(REJECTS_PER_S)] == [0] * REJECTS_PER_S
-    assert lim.reject("other/junk", 0.0) is None
+    assert [lim.reject(None, 0.0) for _ in range(REJECTS_PER_S)] == [0] * REJECTS_PER_S
+    assert lim.reject(None, 0.0) is None
+    assert lim.reject(keys.KeyKind.UNIT_GOAL, 0.0) == 0  # a kind's own window, apart from the unknown
 
 
 def test_a_fault_is_logged_once_a_minute_per_key_with_the_count_held_since():
@@ -49,7 +50,7 @@ def test_the_fault_windows_are_bounded_and_the_rest_share_one_line():
 def test_counts_name_the_figures_of_the_status_reply():
     lim = Limits()
     lim.overload += 2
-    lim.reject("x", 0.0)
+    lim.reject(None, 0.0)
     lim.fault("x", 0.0)
     assert lim.counts() == {"overload": 2, "rejected": 1, "faults": 1}
 

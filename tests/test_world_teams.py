@@ -178,3 +178,18 @@ def test_the_world_snapshot_lists_teams_with_their_notes_and_a_peer_takes_them()
     peer = _world()
     peer.apply(inputs_from_snapshot(snap, "other"), 2.0)
     assert peer.teams.teams == {"alpha": t.team}
+
+
+def test_a_team_is_stored_restored_and_counted_in_the_restored_event(tmp_path) -> None:
+    from pfp_service.node.store import Store
+
+    store = Store(tmp_path)
+    try:
+        store.commit_inputs(
+            [TeamPut("alpha", TEAM), TeamPut("bravo", TeamUpdate(members=["x"]))], 1000.0, None
+        )
+        store.commit_inputs([TeamRemoved("bravo")], 1001.0, None)
+        back = store.restore(2000.0)
+        assert back.inputs == [TeamPut("alpha", TEAM)] and back.teams == 1
+    finally:
+        store.close()

@@ -15,6 +15,7 @@ from typing import Any
 
 from pfp_service.errors import InputError
 from pfp_service.wire import MAX_PAYLOAD_BYTES, keys
+from pfp_service.world.kinds import WRITES
 
 __all__ = [
     "DEFAULT_PRINCIPALS",
@@ -105,6 +106,11 @@ def _watch_tokens(*key_exprs: str) -> list[Grant]:
     ]
 
 
+def _written_by(role: str, mission: str) -> tuple[str, ...]:
+    """The write kinds' keys (``world.kinds.WRITES``) a role may put and delete, as wildcards."""
+    return tuple(k.wildcard(mission) for k in WRITES if role in k.writers)
+
+
 def unit_grants(mission: str, unit: str, own_goal: bool = True) -> list[Grant]:
     """What unit ``unit`` may do: its own state, token, direction, preview (and goal)."""
     out = [
@@ -113,8 +119,8 @@ def unit_grants(mission: str, unit: str, own_goal: bool = True) -> list[Grant]:
         *_subscribe(keys.unit_direction(mission, unit)),
         *_ask(keys.preview(mission, unit)),
     ]
-    if own_goal:
-        out += _acked_write(mission, keys.unit_goal(mission, unit))
+    if own_goal:  # the write kinds a unit may write on its own key (its goal)
+        out += _acked_write(mission, *(k.key_of(mission, unit) for k in WRITES if k.own_unit))
     return out
 
 
@@ -129,7 +135,7 @@ def fleet_grants(mission: str, units: Sequence[str], own_goal: bool = True) -> l
 def planner_grants(mission: str, planner: str) -> list[Grant]:
     own = (keys.planner_status(mission, planner), keys.world(mission, planner))
     every = (keys.planner_statuses(mission), keys.worlds(mission))
-    writes = (keys.goals(mission), keys.threats(mission), keys.zones(mission), keys.teams(mission))
+    writes = tuple(k.wildcard(mission) for k in WRITES)  # every write kind: read and acknowledged
     return [
         *_subscribe(keys.unit_states(mission), keys.sharded_states(mission), *writes),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
@@ -150,12 +156,11 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
 
 
 def reporter_grants(mission: str) -> list[Grant]:
-    return _acked_write(mission, keys.threats(mission), keys.zones(mission))
+    return _acked_write(mission, *_written_by("reporter", mission))
 
 
 def commander_grants(mission: str) -> list[Grant]:
-    # a commander sets goals and forms teams
-    return [*_acked_write(mission, keys.goals(mission), keys.teams(mission)), *_ask(keys.previews(mission))]
+    return [*_acked_write(mission, *_written_by("commander", mission)), *_ask(keys.previews(mission))]
 
 
 def observer_grants(mission: str) -> list[Grant]:

@@ -179,61 +179,24 @@ def get_logger(name: str) -> logging.Logger:
 
 
 def log_changes(logger: logging.Logger, inputs: Iterable[object], limit: int = 20) -> None:
-    """One line per goal, threat or zone change among ``inputs``, at most ``limit`` and a count of the rest.
+    """One line per write (a goal, threat or zone change) among ``inputs``, at most ``limit`` and a count of the rest.
 
     ``threat e1 put at 58.41050N 15.62130E (300 m E, 260 m N)``: the position is an ``At``,
     shown in the mission's coordinates by the human formatter.
     """
     # here, not at the top: every process logs, and only the planner holds the world's inputs
-    from pfp_service.world.events import (
-        GoalCancelled,
-        GoalSet,
-        TeamPut,
-        TeamRemoved,
-        ThreatPut,
-        ThreatRemoved,
-        ZonePut,
-        ZoneRemoved,
-    )
+    from pfp_service.world.kinds import WRITES, log_line
 
     shown = 0
     for inp in inputs:
-        args: tuple[object, ...]
-        if isinstance(inp, GoalSet):
-            what, msg, args = "goal set", "goal of %s set to %s", (inp.unit, At(*inp.goal.position))
-            fields: dict[str, object] = {"unit": inp.unit, "goal": list(inp.goal.position)}
-        elif isinstance(inp, GoalCancelled):
-            what, msg, args = "goal cancelled", "goal of %s cancelled", (inp.unit,)
-            fields = {"unit": inp.unit}
-        elif isinstance(inp, ThreatPut):
-            what, msg, args = "threat put", "threat %s put at %s", (inp.threat, At(*inp.update.position))
-            fields = {"threat": inp.threat, "position": list(inp.update.position)}
-        elif isinstance(inp, ThreatRemoved):
-            what, msg, args = "threat removed", "threat %s removed", (inp.threat,)
-            fields = {"threat": inp.threat}
-        elif isinstance(inp, ZonePut):
-            z = inp.update
-            shape = (
-                f"circle of {z.circle.radius_m:g} m at"
-                if z.circle is not None
-                else f"polygon of {len((z.polygon or [[]])[0]) - 1} corners from"
-            )
-            first = z.circle.centre if z.circle is not None else (z.polygon or [[(0.0, 0.0)]])[0][0]
-            what, msg, args = "zone put", "keep-out zone %s put: %s %s", (inp.zone, shape, At(*first))
-            fields = {"zone": inp.zone, "kind": z.kind}
-        elif isinstance(inp, ZoneRemoved):
-            what, msg, args = "zone removed", "keep-out zone %s removed", (inp.zone,)
-            fields = {"zone": inp.zone}
-        elif isinstance(inp, TeamPut):
-            what, msg, args = "team put", "team %s put: %s", (inp.team, ", ".join(inp.update.units()))
-            fields = {"team": inp.team, "units": list(inp.update.units())}
-        elif isinstance(inp, TeamRemoved):
-            what, msg, args = "team removed", "team %s dissolved", (inp.team,)
-            fields = {"team": inp.team}
-        else:
+        line = log_line(inp)  # the write kinds' table says each change's line (world.kinds)
+        if line is None:
             continue
         shown += 1
         if shown <= limit:
-            logger.info(msg, *args, extra={"fields": _json_only(fields), "json_msg": what})
+            args = line.args if line.at is None else (*line.args, At(*line.at))
+            logger.info(line.msg, *args, extra={"fields": _json_only(line.fields), "json_msg": line.what})
     if shown > limit:
-        logger.info("more goal, threat and zone changes", extra={"fields": {"count": shown - limit}})
+        names = [k.name for k in WRITES]
+        said = ", ".join(names[:-1]) + f" and {names[-1]}" if len(names) > 1 else names[0]
+        logger.info(f"more {said} changes", extra={"fields": {"count": shown - limit}})

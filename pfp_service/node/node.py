@@ -203,6 +203,7 @@ class PlannerNode:
                 missions=restored.missions,
                 expired=restored.expired,
                 zones=restored.zones,
+                teams=restored.teams,
                 corrupt=restored.corrupt,
                 set_aside=restored.set_aside,
             )
@@ -272,12 +273,13 @@ class PlannerNode:
 
     def _state(self, sample: zenoh.Sample) -> tuple[str, UnitState] | None:
         """One state from a ring (the loop thread), decoded; ``None``: rejected (an event says why)."""
-        key = str(sample.key_expr)
+        key, kind = str(sample.key_expr), None  # the key's kind, once the key itself parsed
         try:
             uid = _remembered(self._uid_of, key, self._state_keys.id)
+            kind = keys.KeyKind.UNIT_STATE
             return uid, decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
         except InputError as err:
-            self._push(InputRejected(key, err))
+            self._push(InputRejected(key, err, kind))
             return None
 
     def _states(self, samples: list[Any], received: float) -> None:
@@ -315,12 +317,13 @@ class PlannerNode:
             level("joined the mission's planners", extra={"fields": joined.fields()})
 
     def _on_mission(self, sample: zenoh.Sample) -> None:
+        key, kind = str(sample.key_expr), None  # the key's kind, once the key itself parsed
         try:
-            uid = keys.parse(str(sample.key_expr)).id
+            uid, kind = keys.parse(key).id, keys.KeyKind.UNIT_MISSION
             if sample.kind == zenoh.SampleKind.PUT:
                 self._push(MissionShared(uid, decode_mission(sample.payload.to_bytes())))
         except InputError as err:
-            self._push(InputRejected(str(sample.key_expr), err))
+            self._push(InputRejected(key, err, kind))
 
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:

@@ -13,8 +13,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import re
 import sqlite3
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,6 @@ __all__ = [
     "DIR_MODE",
     "FILE_MODE",
     "LOCK_NAME",
-    "TABLES",
     "StateFiles",
     "clear",
     "describe",
@@ -49,15 +49,9 @@ LOCK_NAME = "state.lock"
 COMPANION_NAMES = ("tak-tombstones.json",)
 CORRUPT_CODES = (11, 26)  # SQLITE_CORRUPT, SQLITE_NOTADB
 SCAN_QUERIES = 10_000  # a salvage scan of one table gives up after this many queries
-# table -> (key column, column count): what salvage copies and how a lost row is named
-TABLES: dict[str, tuple[str, int]] = {
-    "threats": ("id", 3),
-    "zones": ("id", 3),
-    "teams": ("id", 3),
-    "goals": ("unit", 2),
-    "missions": ("unit", 5),
-    "write_order": ("key", 5),
-}
+_TABLE_NAME = re.compile(
+    r"^[a-z_]{1,64}$"
+)  # a table ``state_files`` counts (our names; a hostile file's others are not)
 
 
 def describe(exc: BaseException) -> str:
@@ -88,15 +82,20 @@ def lenient_text(raw: bytes) -> str:
 
 
 # -- salvage -------------------------------------------------------------------------------
-def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[str]]:
+def salvage(
+    path: str | Path, tables: Mapping[str, tuple[str, int]]
+) -> tuple[dict[str, list[tuple[Any, ...]]], list[str]]:
     """The rows still readable from a damaged database, per table, and ``table/key`` of rows known lost.
+
+    ``tables``: table -> (key column, column count), what is copied and how a lost row is named
+    (``store.TABLES``, from the write kinds' table, ``world.kinds``).
 
     Each table is scanned in rowid order; where a page cannot be read the scan
     starts again past it (at rowid steps doubling until one reads).  A key
     found in the table's primary-key index whose row was not read is known
     lost.  Opened read-only (``mode=ro``): the file set aside stays as found.
     """
-    rows: dict[str, list[tuple[Any, ...]]] = {t: [] for t in TABLES}
+    rows: dict[str, list[tuple[Any, ...]]] = {t: [] for t in tables}
     lost: list[str] = []
     try:
         db = sqlite3.connect(f"file:{Path(path).as_posix()}?mode=ro", uri=True)
@@ -104,7 +103,7 @@ def salvage(path: str | Path) -> tuple[dict[str, list[tuple[Any, ...]]], list[st
     except sqlite3.Error:
         return rows, lost
     try:
-        for table, (key, _width) in TABLES.items():
+        for table, (key, _width) in tables.items():
             if not _has_table(db, table):  # an older file, made before the table was
                 continue
             got = _scan(db, table)
@@ -250,8 +249,10 @@ def state_files(directory: str | Path) -> StateFiles:
             db = sqlite3.connect(f"file:{db_path.as_posix()}?mode=ro", uri=True)
             db.text_factory = lenient_text
             try:
-                for table in (*TABLES, "set_aside"):
-                    with contextlib.suppress(sqlite3.OperationalError):  # no such table: an older file
+                # every table the file has: this light module knows no kind's table (world.kinds)
+                named = db.execute("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY rowid")
+                for table in [str(r[0]) for r in named if _TABLE_NAME.match(str(r[0]))]:
+                    with contextlib.suppress(sqlite3.OperationalError):
                         counts[table] = int(db.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
             finally:
                 db.close()

@@ -1,7 +1,8 @@
 """The rows of the durable state read back as inputs: what a restarted planner applies, and what it sets aside.
 
-``read_state`` decodes each table of ``state.sqlite3`` (``store.Store`` owns the file): zones and
-threats with the time each has left, goals with their missions, and the write order kept with
+``read_state`` decodes each table of ``state.sqlite3`` (``store.Store`` owns the file): each write
+kind's (``world.kinds``: threats and zones with the time each has left, goals with their
+missions), and the write order kept with
 the writes (``wire.delivery.WriteOrder.load``).  A row that does not decode is moved to the
 ``set_aside`` table and named; the rest loads.  No zenoh, no clock: the time is passed in.
 """
@@ -12,19 +13,18 @@ import dataclasses
 import json
 import sqlite3
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import msgspec
 
 from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
-from pfp_service.wire import Goal, ThreatUpdate, decode, keys
-from pfp_service.wire.messages import TeamUpdate, ZoneUpdate
-from pfp_service.world.events import GoalSet, Input, MissionRestored, TeamPut, ThreatPut, ZonePut
+from pfp_service.wire import keys
+from pfp_service.world.events import Input, MissionRestored
+from pfp_service.world.kinds import STORED, Kind, Stored
 
 __all__ = ["OrderRow", "Restored", "read_state"]
 
-U = TypeVar("U", ThreatUpdate, ZoneUpdate, TeamUpdate)  # a write kept by id (a team never expires)
 OrderRow = tuple[str, float, str, float, str]  # wire.delivery.WriteOrder.batch_rows
 _BAD_ROW = (InputError, ValueError, TypeError, KeyError, msgspec.MsgspecError)
 
@@ -47,62 +47,67 @@ class Restored:
     set_aside: str = ""
     skipped: tuple[str, ...] = ()
     zones: int = 0
-    order: tuple[OrderRow, ...] = ()
-    teams: int = 0  # the write order kept (WriteOrder.load)
+    teams: int = 0
+    order: tuple[OrderRow, ...] = ()  # the write order kept (WriteOrder.load)
 
 
 def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[], Any]) -> Restored:
     """The inputs that rebuild the world from ``db``; a row that does not decode is moved to ``set_aside``
-    in a ``transaction()`` and named in ``Restored.skipped``."""
+    in a ``transaction()`` and named in ``Restored.skipped``.
+
+    Each write kind's table (``world.kinds.Stored``) is read as its puts, the time left on one
+    that expires; a unit's (goals) after the rest, since its mission is planned among them, and
+    as its mission where one was recorded.
+    """
     inputs: list[Input] = []
     bad: list[tuple[str, int, str, Any, str]] = []  # table, rowid, key, what was stored, why
     expired = 0
+    missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
+    kept: dict[str, int] = {}  # rows restored, per kind
+    n_missions, n_missions_read = 0, False
 
-    def timed(table: str, kind: type[U], put: Callable[[str, U], Input]) -> int:
-        """The rows of a table of writes that expire (zones, threats), with the time each has left."""
-        nonlocal expired
+    def puts(kind: Kind, st: Stored) -> int:
+        """The rows of one write kind's table, as its puts."""
+        nonlocal expired, n_missions
         n = 0
-        for rowid, key, body, expires_at in db.execute(f"SELECT rowid, * FROM {table} ORDER BY id"):
+        for rowid, key, body, *expires in db.execute(
+            f"SELECT rowid, * FROM {st.table} ORDER BY {st.key_column}"
+        ):
             try:
                 chunk = keys.check_chunk(key)
-                update = decode(kind, body)
-                if expires_at is not None and not isinstance(update, TeamUpdate):
-                    left = float(expires_at) - wall_now
+                assert kind.decode is not None
+                msg = kind.decode(body, None, None)
+                if expires and expires[0] is not None:
+                    left = float(expires[0]) - wall_now
                     if left <= 0:
                         expired += 1
                         continue
-                    update = msgspec.structs.replace(update, ttl_s=left)
+                    msg = msgspec.structs.replace(msg, ttl_s=left)
             except _BAD_ROW as exc:
-                bad.append((table, rowid, str(key), body, _why(exc)))
+                bad.append((st.table, rowid, str(key), body, _why(exc)))
                 continue
-            inputs.append(put(chunk, update))
             n += 1
+            if st.per_unit and chunk in missions:
+                origin, params = missions[chunk]
+                inputs.append(MissionRestored(chunk, msg, origin, params))
+                n_missions += 1
+            else:
+                inputs.append(kind.put(chunk, msg))
         return n
 
-    n_teams = timed("teams", TeamUpdate, TeamPut)
-    n_zones = timed("zones", ZoneUpdate, ZonePut)
-    n_threats = timed("threats", ThreatUpdate, ThreatPut)
-    missions: dict[str, tuple[tuple[float, float], Resolved]] = {}
-    for rowid, unit, _epoch, ox, oy, params in db.execute("SELECT rowid, * FROM missions"):
-        try:
-            missions[keys.check_chunk(unit)] = ((float(ox), float(oy)), Resolved(**json.loads(params)))
-        except _BAD_ROW as exc:
-            bad.append(("missions", rowid, str(unit), params, _why(exc)))
-    n_goals = n_missions = 0
-    for rowid, unit, body in db.execute("SELECT rowid, * FROM goals ORDER BY unit"):
-        try:
-            uid = keys.check_chunk(unit)
-            goal = decode(Goal, body)
-        except _BAD_ROW as exc:
-            bad.append(("goals", rowid, str(unit), body, _why(exc)))
-            continue
-        n_goals += 1
-        if uid in missions:
-            origin, params = missions[uid]
-            inputs.append(MissionRestored(uid, goal, origin, params))
-            n_missions += 1
-        else:
-            inputs.append(GoalSet(uid, goal))
+    stored = [(k, k.store) for k in STORED if k.store is not None]
+    for kind, st in stored:  # a unit's after the rest (its mission is planned among them)
+        if st.per_unit and not n_missions_read:
+            n_missions_read = True
+            for rowid, unit, _epoch, ox, oy, params in db.execute("SELECT rowid, * FROM missions"):
+                try:
+                    missions[keys.check_chunk(unit)] = (
+                        (float(ox), float(oy)),
+                        Resolved(**json.loads(params)),
+                    )
+                except _BAD_ROW as exc:
+                    bad.append(("missions", rowid, str(unit), params, _why(exc)))
+        kept[kind.name] = puts(kind, st)
     order: list[OrderRow] = []  # the write order kept: read as it is (a bad time is set aside)
     for rowid, key, nt, nw, at, aw in db.execute("SELECT rowid, * FROM write_order"):
         try:
@@ -111,10 +116,12 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
             bad.append(("write_order", rowid, str(key), None, _why(exc)))
     if expired or bad:
         with transaction() as tx:
-            for table in ("threats", "zones"):
-                tx.execute(
-                    f"DELETE FROM {table} WHERE expires_at IS NOT NULL AND expires_at <= ?", (wall_now,)
-                )
+            for _kind, st in stored:
+                if st.expiry != "never":
+                    tx.execute(
+                        f"DELETE FROM {st.table} WHERE expires_at IS NOT NULL AND expires_at <= ?",
+                        (wall_now,),
+                    )
             for (
                 table,
                 rowid,
@@ -127,14 +134,14 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
     skipped = tuple(f"{table}/{key}" for table, _r, key, _b, _w in bad)
     return Restored(
         inputs,
-        n_threats,
-        n_goals,
+        kept.get("threat", 0),
+        kept.get("goal", 0),
         n_missions,
         expired,
         skipped=skipped,
-        zones=n_zones,
+        zones=kept.get("zone", 0),
         order=tuple(order),
-        teams=n_teams,
+        teams=kept.get("team", 0),
     )
 
 

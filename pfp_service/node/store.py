@@ -51,7 +51,6 @@ from pfp_service.node.statefile import (
     DB_NAME,
     FILE_MODE,
     LOCK_NAME,
-    TABLES,
     describe,
     hold_shared,
     lenient_text,
@@ -60,33 +59,28 @@ from pfp_service.node.statefile import (
     salvage,
 )
 from pfp_service.node.staterows import OrderRow, Restored, read_state
-from pfp_service.wire import encode, keys
+from pfp_service.wire import encode
 from pfp_service.wire.delivery import ORDER_KEYS_MAX
-from pfp_service.world.events import (
-    GoalCancelled,
-    GoalSet,
-    Input,
-    InputRejected,
-    MissionRecord,
-    TeamPut,
-    TeamRemoved,
-    ThreatPut,
-    ThreatRemoved,
-    ZonePut,
-    ZoneRemoved,
-)
+from pfp_service.world import kinds
+from pfp_service.world.events import Input, MissionRecord
+from pfp_service.world.kinds import WRITE_OF, Stored
 
-__all__ = ["Restored", "Store"]
+__all__ = ["TABLES", "Restored", "Store"]
 
 NAMED_MAX = 20  # rows named in the warning line at most; the count has them all
 
 log = get_logger("store")
 
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS threats (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
-CREATE TABLE IF NOT EXISTS zones (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
-CREATE TABLE IF NOT EXISTS teams (id TEXT PRIMARY KEY, body BLOB NOT NULL, expires_at REAL);
-CREATE TABLE IF NOT EXISTS goals (unit TEXT PRIMARY KEY, body BLOB NOT NULL);
+
+def _table_sql(st: Stored) -> str:
+    """A write kind's table (``world.kinds.Stored``), as every state file since the first has it."""
+    expires = ", expires_at REAL" if st.expiry != "never" else ""
+    return f"CREATE TABLE IF NOT EXISTS {st.table} ({st.key_column} TEXT PRIMARY KEY, body BLOB NOT NULL{expires});"
+
+
+_SCHEMA = (
+    "\n".join(_table_sql(k.store) for k in kinds.STORED if k.store is not None)
+    + """
 CREATE TABLE IF NOT EXISTS missions (
     unit TEXT PRIMARY KEY, epoch INTEGER NOT NULL, origin_x REAL NOT NULL, origin_y REAL NOT NULL, params TEXT NOT NULL
 );
@@ -95,7 +89,16 @@ CREATE TABLE IF NOT EXISTS write_order (
     key TEXT PRIMARY KEY, newest_t REAL NOT NULL, newest_w TEXT NOT NULL, applied_t REAL NOT NULL, applied_w TEXT NOT NULL
 );
 """
+)
 _PAGE = re.compile(r"\bPage (\d+)")
+# table -> (key column, column count): what a salvage copies and how a lost row is named
+TABLES: dict[str, tuple[str, int]] = {
+    **{
+        k.store.table: (k.store.key_column, len(k.store.columns)) for k in kinds.STORED if k.store is not None
+    },
+    "missions": ("unit", 5),
+    "write_order": ("key", 5),
+}
 
 
 @dataclasses.dataclass
@@ -191,7 +194,7 @@ class Store:
             src = Path(f"{self.path}{suffix}")
             if src.exists():
                 os.replace(src, f"{aside}{suffix}")
-        rows, lost = salvage(aside)
+        rows, lost = salvage(aside, TABLES)
         db = self._connect()
         try:
             db.execute("PRAGMA journal_mode=WAL")
@@ -240,30 +243,25 @@ class Store:
         the same transaction, so a restarted planner knows which write each key saw last.
         """
         order_rows = list(order)
-        rows_t: list[tuple[str, bytes, float | None]] = []
-        gone_t: list[tuple[str]] = []
-        rows_z: list[tuple[str, bytes, float | None]] = []
-        gone_z: list[tuple[str]] = []
-        rows_g: list[tuple[str, bytes]] = []
-        gone_g: list[tuple[str]] = []
-        rows_m = [(i.team, encode(i.update), None) for i in inputs if isinstance(i, TeamPut)]
-        gone_m = [(i.team,) for i in inputs if isinstance(i, TeamRemoved)]
+        rows: dict[Stored, list[tuple[Any, ...]]] = {}  # per write kind's table: the rows put
+        gone: dict[Stored, list[tuple[str]]] = {}  # ... and the ids removed
         for inp in inputs:
-            if isinstance(inp, ThreatPut):
-                ttl = inp.update.ttl_s if inp.update.ttl_s is not None else default_ttl_s
-                rows_t.append((inp.threat, encode(inp.update), None if ttl is None else wall_now + ttl))
-            elif isinstance(inp, ThreatRemoved):
-                gone_t.append((inp.threat,))
-            elif isinstance(inp, GoalSet):
-                rows_g.append((inp.unit, encode(inp.goal)))
-            elif isinstance(inp, GoalCancelled):
-                gone_g.append((inp.unit,))
-            elif isinstance(inp, ZonePut):
-                zttl = inp.update.ttl_s
-                rows_z.append((inp.zone, encode(inp.update), None if zttl is None else wall_now + zttl))
-            elif isinstance(inp, ZoneRemoved):
-                gone_z.append((inp.zone,))
-        if not (rows_t or gone_t or rows_g or gone_g or rows_z or gone_z or rows_m or gone_m or order_rows):
+            got = WRITE_OF.get(type(inp))
+            if got is None or got[0].store is None:
+                continue
+            st, ident = got[0].store, kinds.ident(inp)
+            if not got[1]:
+                gone.setdefault(st, []).append((ident,))
+                continue
+            msg = kinds.message(inp)
+            row: tuple[Any, ...] = (ident, encode(msg))
+            if st.expiry != "never":  # kept as absolute Unix time: a restart honours the time that passed
+                ttl = msg.ttl_s
+                if ttl is None and st.expiry == "ttl_or_default":
+                    ttl = default_ttl_s
+                row += (None if ttl is None else wall_now + ttl,)
+            rows.setdefault(st, []).append(row)
+        if not (rows or gone or order_rows):
             return
         with self._transaction() as db:
             db.executemany("INSERT OR REPLACE INTO write_order VALUES (?, ?, ?, ?, ?)", order_rows)
@@ -274,16 +272,15 @@ class Store:
                     "(SELECT key FROM write_order ORDER BY newest_t DESC LIMIT ?)",
                     (ORDER_KEYS_MAX,),
                 )
-            # a new goal or a cancel ends the old mission: its x0 and parameters no longer hold
-            db.executemany("DELETE FROM missions WHERE unit = ?", [(u,) for u, _ in rows_g] + gone_g)
-            db.executemany("INSERT OR REPLACE INTO threats VALUES (?, ?, ?)", rows_t)
-            db.executemany("DELETE FROM threats WHERE id = ?", gone_t)
-            db.executemany("INSERT OR REPLACE INTO goals VALUES (?, ?)", rows_g)
-            db.executemany("DELETE FROM goals WHERE unit = ?", gone_g)
-            db.executemany("INSERT OR REPLACE INTO zones VALUES (?, ?, ?)", rows_z)
-            db.executemany("DELETE FROM zones WHERE id = ?", gone_z)
-            db.executemany("INSERT OR REPLACE INTO teams VALUES (?, ?, ?)", rows_m)
-            db.executemany("DELETE FROM teams WHERE id = ?", gone_m)
+            for st in {**rows, **gone}:
+                put, removed = rows.get(st, []), gone.get(st, [])
+                if (
+                    st.per_unit
+                ):  # a new goal or a cancel ends the old mission: its x0 and parameters no longer hold
+                    db.executemany("DELETE FROM missions WHERE unit = ?", [r[:1] for r in put] + removed)
+                marks = ", ".join("?" * len(st.columns))
+                db.executemany(f"INSERT OR REPLACE INTO {st.table} VALUES ({marks})", put)
+                db.executemany(f"DELETE FROM {st.table} WHERE {st.key_column} = ?", removed)
 
     @contextlib.contextmanager
     def _transaction(self) -> Any:
@@ -330,19 +327,7 @@ class Store:
         except (OSError, sqlite3.Error) as exc:
             err = InputError("$", f"not stored: {describe(exc)}: {self.path}")
             self._complain("commit", err.reason)
-            kept: list[Input] = []
-            for inp in batch:
-                if isinstance(inp, GoalSet | GoalCancelled):
-                    kept.append(InputRejected(keys.unit_goal(mission, inp.unit), err))
-                elif isinstance(inp, ThreatPut | ThreatRemoved):
-                    kept.append(InputRejected(keys.threat(mission, inp.threat), err))
-                elif isinstance(inp, ZonePut | ZoneRemoved):
-                    kept.append(InputRejected(keys.zone(mission, inp.zone), err))
-                elif isinstance(inp, TeamPut | TeamRemoved):
-                    kept.append(InputRejected(keys.team(mission, inp.team), err))
-                else:
-                    kept.append(inp)
-            return kept, err.reason
+            return [kinds.rejected(inp, mission, err) for inp in batch], err.reason
 
     def _complain(self, what: str, reason: str) -> None:
         # one warning line per distinct failure, not one per batch while the disk stays full

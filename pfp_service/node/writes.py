@@ -1,6 +1,8 @@
-"""Goal, threat, zone and team writes on their way to the world: plain puts and acknowledged-write queries.
+"""The world's write kinds (goals, threats, zones: ``world.kinds.WRITES``) on their way to it: plain puts
+and acknowledged-write queries.
 
-Callbacks decode a write into its ``Input`` (or an ``InputRejected`` naming
+Each write kind is one subscriber and one queryable (``subscriptions``), both handled by the one
+generic handler (``_make``: the key's id, then the kind's put or remove).  Callbacks decode a write into its ``Input`` (or an ``InputRejected`` naming
 why) and queue it, bounded (``WRITES_MAX``; past it a put is counted lost and
 a query dropped, its writer asks again).  The planning loop takes a slice per
 tick (``take``), orders it (``admit``: ``wire.delivery.WriteOrder`` says
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import functools
 import threading
 import time
 from collections.abc import Callable
@@ -24,26 +27,20 @@ import zenoh
 
 from pfp_service.errors import InputError
 from pfp_service.node.config import ServeConfig
-from pfp_service.wire import decode_goal, decode_threat, keys
+from pfp_service.wire import keys
 from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
-from pfp_service.wire.messages import decode_team, decode_zone
-from pfp_service.world.events import (
-    GoalCancelled,
-    GoalSet,
-    Input,
-    InputRejected,
-    TeamPut,
-    TeamRemoved,
-    ThreatPut,
-    ThreatRemoved,
-    ZonePut,
-    ZoneRemoved,
-)
+from pfp_service.world.events import Input, InputRejected
+from pfp_service.world.kinds import WRITES, Kind
 
-__all__ = ["WRITES_MAX", "Write", "Writes"]
+__all__ = ["WRITES_MAX", "Write", "Writes", "subscriptions"]
 
 WRITES_MAX = 100_000  # goal, threat and zone writes waiting (puts and queries); more are shed
 _JSON = zenoh.Encoding.APPLICATION_JSON
+
+
+def subscriptions(mission: str) -> list[tuple[Kind, str]]:
+    """Each write kind and the key expression the planner subscribes to and serves acknowledged writes on."""
+    return [(kind, kind.wildcard(mission)) for kind in WRITES]
 
 
 class Write:
@@ -83,20 +80,14 @@ class Writes:
         self.order = WriteOrder()  # the node settles it once the store has committed (or refused) a batch
 
     def declare(self, s: zenoh.Session, mission: str) -> list[Any]:
-        """Subscribe to the goal, threat, zone and team keys, and serve them as acknowledged-write queryables."""
-        return [
-            s.declare_subscriber(keys.goals(mission), lambda sm: self._on_sample(sm, self._goal)),
-            s.declare_subscriber(keys.threats(mission), lambda sm: self._on_sample(sm, self._threat)),
-            # acknowledged writes (wire.delivery): the same goals and threats, asked until a planner answers
-            s.declare_queryable(keys.goals(mission), lambda q: self._on_query(q, self._goal)),
-            s.declare_queryable(keys.threats(mission), lambda q: self._on_query(q, self._threat)),
-            # keep-out zones: written as threats are
-            s.declare_subscriber(keys.zones(mission), lambda sm: self._on_sample(sm, self._zone)),
-            s.declare_queryable(keys.zones(mission), lambda q: self._on_query(q, self._zone)),
-            # teams: written as zones are
-            s.declare_subscriber(keys.teams(mission), lambda sm: self._on_sample(sm, self._team)),
-            s.declare_queryable(keys.teams(mission), lambda q: self._on_query(q, self._team)),
-        ]
+        """Subscribe to each write kind's keys, and serve them as acknowledged-write queryables (wire.delivery:
+        the same writes, asked until a planner answers)."""
+        declared: list[Any] = []
+        for kind, key_expr in subscriptions(mission):
+            make = self._maker(kind, mission)
+            declared.append(s.declare_subscriber(key_expr, functools.partial(self._on_sample, make=make)))
+            declared.append(s.declare_queryable(key_expr, functools.partial(self._on_query, make=make)))
+        return declared
 
     # -- the loop's side (under the lock for take and waiting) ------------------------------
     def take(self, most: int) -> collections.deque[Write]:
@@ -186,38 +177,19 @@ class Writes:
         inp = make(key, mark.delete, body.to_bytes() if body is not None else b"")
         self._push(Write(key, mark, inp, time.time(), query))
 
-    def _goal(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            uid = keys.parse(key).id
-            if delete:
-                return GoalCancelled(uid)
-            return GoalSet(uid, decode_goal(payload, self.cfg.bounds, self.cfg.origin))
-        except InputError as err:
-            return InputRejected(key, err)
+    def _maker(self, kind: Kind, mission: str) -> Callable[[str, bool, bytes], Input]:
+        ids = keys.KeyOf(kind.key, mission)
+        bounds, origin = self.cfg.bounds, self.cfg.origin
 
-    def _threat(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            tid = keys.parse(key).id
-            if delete:
-                return ThreatRemoved(tid)
-            return ThreatPut(tid, decode_threat(payload, self.cfg.bounds, self.cfg.origin))
-        except InputError as err:
-            return InputRejected(key, err)
+        def make(key: str, delete: bool, payload: bytes) -> Input:
+            """The write's input, or its refusal: the key's kind named once the key itself parsed."""
+            try:
+                ident = ids.id(key)
+            except InputError as err:
+                return InputRejected(key, err)
+            try:
+                return kind.make(ident, delete, payload, bounds, origin)
+            except InputError as err:
+                return InputRejected(key, err, kind.key)
 
-    def _team(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            tid = keys.parse(key).id
-            if delete:
-                return TeamRemoved(tid)
-            return TeamPut(tid, decode_team(payload))
-        except InputError as err:
-            return InputRejected(key, err)
-
-    def _zone(self, key: str, delete: bool, payload: bytes) -> Input:
-        try:
-            zid = keys.parse(key).id
-            if delete:
-                return ZoneRemoved(zid)
-            return ZonePut(zid, decode_zone(payload, self.cfg.bounds, self.cfg.origin))
-        except InputError as err:
-            return InputRejected(key, err)
+        return make

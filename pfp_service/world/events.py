@@ -11,12 +11,11 @@ import copy
 import traceback
 import zlib
 from dataclasses import dataclass, field
-from typing import Literal, Union
+from typing import TYPE_CHECKING, Literal, Union
 
 import msgspec
 
-from pfp_service.core import PlannerParams, Resolved, Stepper, Threat, ThreatField
-from pfp_service.core.zones import Zone, ZoneSet
+from pfp_service.core.params import PlannerParams, Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import (
@@ -32,6 +31,10 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import TeamUpdate, ZoneCircle, ZoneUpdate
+
+if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
+    from pfp_service.core import Stepper, Threat, ThreatField
+    from pfp_service.core.zones import Zone, ZoneSet
 
 __all__ = [
     "Deliberated",
@@ -57,7 +60,6 @@ __all__ = [
     "WorldSettings",
     "ZonePut",
     "ZoneRemoved",
-    "blame",
     "inputs_from_snapshot",
     "mission_message",
     "mission_of",
@@ -159,10 +161,15 @@ class TokenChanged:
 
 @dataclass(frozen=True, slots=True)
 class InputRejected:
-    """A message that failed to decode: the world counts it and says so, rate-limited."""
+    """A message that failed to decode: the world counts it and says so, rate-limited.
+
+    ``kind``: its key's kind, known wherever the key itself parsed (``None``: the key is not of
+    the layout); its rejections are paced with that kind's (``Limits.reject``).
+    """
 
     key: str
     error: InputError
+    kind: keys.KeyKind | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -359,6 +366,12 @@ class Batch:
     )  # units sent their direction first, the rest in the next apply
 
 
+def _no_zones() -> ZoneSet:
+    from pfp_service.core.zones import ZoneSet
+
+    return ZoneSet()
+
+
 @dataclass(frozen=True, slots=True)
 class UnitView:
     """A detached copy of one unit and the threats in force, for a preview off the loop."""
@@ -371,7 +384,9 @@ class UnitView:
     threats: tuple[Threat, ...]
     settings: WorldSettings
     last_vector: tuple[float, float] | None = None  # the direction given at ``position``, if moving
-    zones: ZoneSet = field(default_factory=ZoneSet)  # the keep-out zones in force: a preview never enters one
+    zones: ZoneSet = field(
+        default_factory=_no_zones
+    )  # the keep-out zones in force: a preview never enters one
 
     def params_for(self, goal: Goal) -> PlannerParams:
         return self.settings.params_for(goal)
@@ -405,37 +420,6 @@ class WorldSettings:
         if goal.delta is None and goal.tolerance is None and goal.step is None:
             return self.planner  # the common case, and a storm of 10,000 goals pays no copies
         return self.planner.merged(delta=goal.delta, tolerance=goal.tolerance, step=goal.step)
-
-
-def blame(inp: Input, mission: str) -> tuple[str, str | None]:
-    """The key an input came on (where a failure to apply it is rejected), and the unit whose goal goes with it.
-
-    The key is spelled from the layout even for an id ``keys`` would refuse; a
-    ``Tick`` is blamed on the mission's event key.
-    """
-    k = keys.KeyKind
-    match inp:
-        case StateReported(unit):
-            kind, ident, goal = k.UNIT_STATE, unit, True
-        case GoalSet(unit) | GoalCancelled(unit) | MissionRestored(unit) | Deliberated(unit):
-            kind, ident, goal = k.UNIT_GOAL, unit, True
-        case MissionShared(unit):
-            kind, ident, goal = k.UNIT_MISSION, unit, True
-        case ThreatPut(ident) | ThreatRemoved(ident):
-            kind, goal = k.THREAT, False
-        case ZonePut(ident) | ZoneRemoved(ident):
-            kind, goal = k.ZONE, False
-        case TeamPut(ident) | TeamRemoved(ident):
-            kind, goal = k.TEAM, False
-        case TokenChanged(ident):
-            kind, goal = k.ALIVE_UNIT, False
-        case PeerPlanner(ident):
-            kind, goal = k.ALIVE_PLANNER, False
-        case InputRejected(key):
-            return key, None
-        case _:
-            kind, ident, goal = k.EVENT, "tick", False
-    return keys.TEMPLATES[kind].format(mission=mission, id=ident), ident if goal else None
 
 
 def mission_of(

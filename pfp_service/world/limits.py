@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-from pfp_service.errors import InputError
 from pfp_service.wire import keys
 
 __all__ = ["ANY_KEY", "FAULT_KEYS_MAX", "FAULT_LOG_S", "REJECTS_PER_S", "Limits"]
@@ -35,25 +34,23 @@ class Limits:
     def counts(self) -> dict[str, int]:
         return {"overload": self.overload, "rejected": self.rejected, "faults": self.faults}
 
-    def reject(self, key: str, now: float) -> int | None:
-        """Count a rejection on ``key``: its window is its kind's (``unit_state``, ``threat``, ...; or ``unknown``).
+    def reject(self, kind: keys.KeyKind | None, now: float) -> int | None:
+        """Count a rejection on a key of ``kind``: its window is its kind's (``unit_state``, ``threat``, ...;
+        ``None``, a key outside the layout: ``unknown``).  The caller knows the kind: no key is parsed here.
 
         Returns:
             ``None`` if its event is held back (``REJECTS_PER_S`` already went
             out this second), else how many were held back before it.
         """
         self.rejected += 1
-        try:
-            kind = keys.parse(key).kind.value
-        except InputError:
-            kind = "unknown"
-        start, sent, held = self._reject_window.get(kind, (now, 0, 0))
+        window = "unknown" if kind is None else kind.value
+        start, sent, held = self._reject_window.get(window, (now, 0, 0))
         if now - start >= 1.0:
             start, sent = now, 0
         if sent >= REJECTS_PER_S:
-            self._reject_window[kind] = (start, sent, held + 1)
+            self._reject_window[window] = (start, sent, held + 1)
             return None
-        self._reject_window[kind] = (start, sent + 1, 0)
+        self._reject_window[window] = (start, sent + 1, 0)
         return held
 
     def fault(self, key: str, now: float) -> tuple[str, int] | None:

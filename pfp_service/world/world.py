@@ -23,7 +23,6 @@ a ``Fault`` logged at most once a minute per key); the rest goes out.
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
 
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Advice, Stepper
@@ -31,7 +30,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
 from pfp_service.world import events as ev
-from pfp_service.world import missions, steering, translate
+from pfp_service.world import kinds, missions, steering, translate
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.world.limits import Limits
@@ -137,7 +136,7 @@ class World:
             try:
                 self._apply_one(inp, b)
             except Exception as exc:  # the bulkhead: this input alone fails
-                self._fault(b, *ev.blame(inp, self.settings.mission), exc)
+                self._fault(b, *kinds.blame(inp, self.settings.mission), exc)
         if b.changes or b.zones:
             self._world_changed(b)
         first = len(b.out.directions)  # before: pushes sent again by the timers
@@ -179,14 +178,14 @@ class World:
                 rec = self._units.get(unit)
                 if rec is not None:  # a token alone makes no unit: only a report does
                     self._live.token(rec, alive, b.now)
-            case ev.InputRejected(key, error):
-                self._reject(key, error, b)
+            case ev.InputRejected(key, error, kind):
+                self._reject(key, error, b, kind)
             case ev.Deliberated():
                 self._deliberated(inp, b)
             case ev.MissionRestored(unit, goal, origin, params):
                 self._adopt(unit, goal, (goal, origin, params), b, restored=True)
             case ev.MissionShared(unit, mission):
-                rec = self._unit(unit, b, keys.unit_mission)
+                rec = self._unit(unit, b, K.UNIT_MISSION)
                 if rec is not None and not rec.owned:  # our own missions come back to us too: ours stands
                     self._rec.share(rec, mission)
             case ev.PeerPlanner(planner, alive):
@@ -205,6 +204,7 @@ class World:
         b: Batch,
         key: str,
         unit: str | None,
+        kind: keys.KeyKind | None,
         exc: BaseException,
         error: tuple[str, str, str] | None = None,
     ) -> None:
@@ -225,24 +225,24 @@ class World:
                 self._rec.stale -= rec.stale
         name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], ev.where(exc))
         reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
-        self._reject(key, InputError("$", reason), b)
+        self._reject(key, InputError("$", reason), b, kind)
         logged = self.limits.fault(key, b.now)  # the operator's log: once a minute per key, never a traceback
         if logged is not None:
             b.out.faults.append(ev.Fault(logged[0], name, detail, at, logged[1]))
 
-    def _unit_fault(self, b: Batch, rec: UnitRecord, exc: BaseException) -> None:
-        self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, exc)
+    def _unit_fault(
+        self, b: Batch, rec: UnitRecord, exc: BaseException, error: tuple[str, str, str] | None = None
+    ) -> None:
+        self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, K.UNIT_GOAL, exc, error)
 
-    def _reject(self, key: str, err: InputError, b: Batch) -> None:
-        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per kind of key."""
-        held = self.limits.reject(key, b.now)
+    def _reject(self, key: str, err: InputError, b: Batch, kind: keys.KeyKind | None) -> None:
+        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per ``kind`` of key."""
+        held = self.limits.reject(kind, b.now)
         if held is not None:
             b.out.events.append(steering.rejected(key, err, self.settings.planner_id, held))
 
     # -- inputs ---------------------------------------------------------------------
-    def _unit(
-        self, unit_id: str, b: Batch, key: Callable[[str, str], str], reported: bool = False
-    ) -> UnitRecord | None:
+    def _unit(self, unit_id: str, b: Batch, kind: keys.KeyKind, reported: bool = False) -> UnitRecord | None:
         """The unit's record, made at its first input (stale then, unless ``reported``)."""
         rec = self._units.get(unit_id)
         if rec is None:
@@ -250,7 +250,7 @@ class World:
             if len(self._units) >= s.max_units:
                 self.limits.overload += 1
                 err = InputError("$", f"planner at max_units ({s.max_units})")
-                self._reject(key(s.mission, unit_id), err, b)
+                self._reject(keys.KeyOf(kind, s.mission).key(unit_id), err, b, kind)
                 return None
             rec = self._rec.add(unit_id, self.owns(unit_id), b.now, reported)
             self._live.made(rec, b.now)
@@ -262,7 +262,7 @@ class World:
             b.dirty.add(rec.id)
 
     def _state(self, unit_id: str, state: UnitState, b: Batch) -> None:
-        rec = self._unit(unit_id, b, keys.unit_state, reported=True)
+        rec = self._unit(unit_id, b, K.UNIT_STATE, reported=True)
         if rec is None:
             return
         self._live.heard(rec, state, b.now)
@@ -275,7 +275,7 @@ class World:
         self, unit_id: str, goal: Goal, shared: missions.Shared | None, b: Batch, restored: bool = False
     ) -> None:
         """A goal set (keeping ``shared`` if given), or a mission restored: a new epoch, started if owned."""
-        rec = self._unit(unit_id, b, keys.unit_goal)
+        rec = self._unit(unit_id, b, K.UNIT_GOAL)
         if rec is None:
             return
         self._rec.drop_mission(rec)
@@ -320,7 +320,7 @@ class World:
         if tid not in self._threats and len(self._threats) >= s.max_threats:
             self.limits.overload += 1
             err = InputError("$", f"planner at max_threats ({s.max_threats})")
-            self._reject(keys.threat(s.mission, tid), err, b)
+            self._reject(keys.threat(s.mission, tid), err, b, K.THREAT)
             return
         ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
         new = ThreatRecord(msg, translate.threat(msg, tid), None if ttl is None else b.now + ttl)
@@ -335,13 +335,13 @@ class World:
         if zid not in self._rec.zones and len(self._rec.zones) >= s.max_zones:
             self.limits.overload += 1
             self._reject(
-                keys.zone(s.mission, zid), InputError("$", f"planner at max_zones ({s.max_zones})"), b
+                keys.zone(s.mission, zid), InputError("$", f"planner at max_zones ({s.max_zones})"), b, K.ZONE
             )
             return
         try:
             zone = translate.zone(msg, zid)
         except ValueError as exc:  # decoded, yet not a zone the engine takes: refused on its key
-            self._reject(keys.zone(s.mission, zid), InputError("$", str(exc)), b)
+            self._reject(keys.zone(s.mission, zid), InputError("$", str(exc)), b, K.ZONE)
             return
         new = ZoneRecord(msg, zone, None if msg.ttl_s is None else b.now + msg.ttl_s)
         old = self._rec.put_zone(zid, new)
@@ -355,7 +355,7 @@ class World:
         """A team put (refused on its key when it clashes with the teams in force) or dissolved: its units re-told."""
         err, units = self.teams.apply(inp)
         if err is not None:
-            self._reject(self._key(K.TEAM, inp.team), err, b)
+            self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
         for rec in filter(None, map(self._units.get, units)):
             self._tell(rec, b)
 
@@ -376,7 +376,7 @@ class World:
         if rec.stepper is None or rec.token() != done.token:
             return
         if done.error is not None:  # it failed where it ran: this unit's goal goes, as a fault here would
-            self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, RuntimeError(done.error[1]), done.error)
+            self._unit_fault(b, rec, RuntimeError(done.error[1]), done.error)
         elif done.stepper is None and kind == "foresee":  # past its deadline: descend, and ask again
             rec.stepper.look_ahead_again()  # at its next report, behind the queue
         elif done.stepper is None:
@@ -402,7 +402,7 @@ class World:
                 on = {"expire": K.THREAT, "zone_expire": K.ZONE, "peer": K.ALIVE_PLANNER}.get(
                     kind, K.UNIT_GOAL
                 )
-                self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, exc)
+                self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, on, exc)
 
     # -- planning -------------------------------------------------------------------
     def _start(self, rec: UnitRecord, b: Batch, record: bool = True) -> None:
@@ -410,7 +410,7 @@ class World:
         fld = self.field  # builds the stats with it
         mission = missions.start(rec, self.settings, fld, self._rec.stats)
         if isinstance(mission, InputError):
-            self._reject(self._key(K.UNIT_GOAL, rec.id), mission, b)
+            self._reject(self._key(K.UNIT_GOAL, rec.id), mission, b, K.UNIT_GOAL)
             self._rec.drop_mission(rec)
         elif record:
             b.out.missions.append(mission)
