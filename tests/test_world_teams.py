@@ -193,3 +193,42 @@ def test_a_team_is_stored_restored_and_counted_in_the_restored_event(tmp_path) -
         assert back.inputs == [TeamPut("alpha", TEAM)] and back.teams == 1
     finally:
         store.close()
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_seeded_threats_mid_route_never_take_the_follower_off_cleared_ground(seed: int) -> None:
+    """A threat of seeded place, weight and time appears on the way: corridor, link and standoff still hold."""
+    import random
+
+    rng = random.Random(seed)
+    w = _world()
+    w.apply([TeamPut("alpha", TEAM)], 0.0)
+    where = (rng.uniform(80, 160), rng.uniform(-6, 6))
+    bad = ThreatUpdate(
+        position=where,
+        facing_deg=270.0,
+        sigma_range=10.0,
+        sigma_lateral=6.0,
+        skew=2.0,
+        weight=rng.uniform(10, 30),
+    )
+    tracks, _said = _drive(
+        w,
+        start={"r1": (6.0, 0.0), "m1": (0.0, 0.0)},
+        goal={"r1": (260.0, 0.0), "m1": (240.0, 0.0)},
+        speed={"r1": 3.0, "m1": 2.0},
+        seconds=220.0,
+        events=[(rng.uniform(30, 60), ThreatPut("t1", bad))],
+    )
+    lead, main = tracks["r1"], tracks["m1"]
+    assert math.dist(main[-1], (240.0, 0.0)) < 1.0, f"seed {seed}: {main[-1]}"
+    cleared = shapely.LineString(lead).buffer(3.0 + 0.05)
+    first = next(i for i, p in enumerate(main) if cleared.contains(shapely.Point(p)))
+    assert [p for p in main[first:] if not cleared.contains(shapely.Point(p))] == [], f"seed {seed}"
+    assert max(math.dist(a, b) for a, b in zip(lead, main)) <= 60.0, f"seed {seed}"
+    gaps = [
+        abs(lead[i][0] - main[i][0])
+        for i in range(40, len(main) - 1)
+        if main[i] != main[i + 1] and math.dist(main[i], (240.0, 0.0)) > 40.0
+    ]
+    assert sum(22.5 <= g <= 37.5 for g in gaps) >= 0.9 * len(gaps), f"seed {seed}"
