@@ -103,7 +103,14 @@ def test_building_the_parser_imports_no_compiled_core():
 
 @pytest.mark.parametrize("raster", ["bomb.tif", "huge.tif"])
 @pytest.mark.parametrize(
-    "command", [["terrain", "info"], ["plan", "examples/terrain-jacksboro.yaml", "--terrain"], ["plan"]]
+    "command",
+    [
+        ["terrain", "info"],
+        ["plan", "examples/terrain-jacksboro.yaml", "--terrain"],
+        ["plan"],
+        ["map", "--connect", "tcp/127.0.0.1:9", "--terrain"],
+        ["tak", "--origin", "36.5,-84", "--connect", "tcp/127.0.0.1:9", "--terrain"],
+    ],
 )
 def test_a_hostile_raster_is_refused_within_200_mb(tmp_path: Path, raster, command):
     """A decompression bomb (one deflated block of 8 M cells) or a raster 2 M cells a side: refused from

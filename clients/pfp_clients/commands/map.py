@@ -58,6 +58,12 @@ def allowed_host(text: str) -> str:
     return name
 
 
+def height_m(text: str) -> float:
+    from pfp_service.cli.terrain import height_m as metres
+
+    return metres(text)
+
+
 def push_rate(text: str) -> float:
     value = positive_float(text)
     if value > MAX_PUSH_HZ:
@@ -100,6 +106,19 @@ def register(sub: Any) -> None:
         help="tile URL template of an offline tile server, e.g. http://tiles/{z}/{x}/{y}.png",
     )
     p.add_argument(
+        "--terrain",
+        metavar="DEM",
+        help="a DEM (GeoTIFF, DTED, SRTM .hgt) to shade under the map, and to show a clicked threat's "
+        "viewshed over (without an origin, the DEM's centre is the origin)",
+    )
+    p.add_argument(
+        "--target-height",
+        type=height_m,
+        default=1.8,
+        metavar="M",
+        help="a threat's viewshed shows where a target this tall is seen (default 1.8: a soldier standing)",
+    )
+    p.add_argument(
         "--push-hz",
         type=push_rate,
         default=5.0,
@@ -119,6 +138,12 @@ def run(args: argparse.Namespace) -> int:
     if args.tiles is not None and args.origin is None:
         raise InputError("--tiles", "tiles need --origin: without one the map is drawn in plain metres")
     require_extra("map", "aiohttp")
+    ground = None
+    if args.terrain is not None:  # refused (one line, exit 2) before any session opens
+        require_extra("terrain", "rasterio")
+        from pfp_clients.ground import load_ground
+
+        ground = load_ground(args.terrain)
     from pfp_clients.map.server import MapOptions
 
     host, port = args.http
@@ -132,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
         origin=args.origin,
         tiles=args.tiles,
         allowed_hosts=tuple(args.allowed_host or ()),
+        terrain=ground,
+        target_height_m=args.target_height,
     )
     conf = session_config(args)
     with SignalStop() as stopping, open_session(conf) as session:
@@ -142,6 +169,12 @@ def run(args: argparse.Namespace) -> int:
             if learned is not None:
                 opts = dataclasses.replace(opts, origin=learned)
                 print(f"pfp map: drawn in lat/lon from the planner's origin {shown(learned)}", flush=True)
+            elif ground is not None:
+                from pfp_clients.frames import shown
+
+                centre = ground.centre()
+                opts = dataclasses.replace(opts, origin=centre)
+                print(f"pfp map: drawn in lat/lon from the DEM's centre {shown(centre)}", flush=True)
             elif not answered:
                 print(
                     f"pfp map: no planner of mission {opts.mission!r} answered yet: drawn in plain metres "

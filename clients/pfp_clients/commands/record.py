@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from pfp_service.cli._common import add_session_args, positive_float
+from pfp_service.core.mobility import CLASSES
 
 COMMANDS = ("record", "replay", "report")
 
@@ -62,6 +63,18 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--intensity", choices=("peak", "density"), default="peak", help="the field's scale for exposure"
+    )
+    p.add_argument(
+        "--terrain",
+        metavar="DEM",
+        help="a DEM (GeoTIFF, DTED, SRTM .hgt) under the record: adds each unit's climb, max slope and "
+        "time in view of each threat (needs the record's origin)",
+    )
+    p.add_argument(
+        "--unit-class",
+        choices=sorted(CLASSES),
+        default="foot",
+        help="the units' mobility class over --terrain: its height is what a threat must see (default foot)",
     )
     p.set_defaults(func=run_report)
 
@@ -136,9 +149,20 @@ def run_report(args: argparse.Namespace) -> int:
     from pfp_clients.record.mcapfile import read_record
 
     rec = read_record(args.record)  # a hostile record is refused before the compiled core is imported
+    ground = None
+    if args.terrain is not None:
+        from pfp_service.cli._common import require_extra
+        from pfp_service.errors import InputError
+        from pfp_service.terrain.dem import check
+
+        require_extra("terrain", "rasterio")
+        check(args.terrain)
+        if rec.origin is None:
+            raise InputError("--terrain", "the record has no origin: its metres cannot be placed on a DEM")
+        ground = (args.terrain, CLASSES[args.unit_class])
     from pfp_clients.record.report import write_report
 
     src = Path(args.record)
     stem = Path(args.out) if args.out else src.with_name(src.stem + "-report")
-    write_report(rec, stem, args.intensity)
+    write_report(rec, stem, args.intensity, ground=ground)
     return 0

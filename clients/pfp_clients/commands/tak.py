@@ -87,6 +87,12 @@ def register(sub: Any) -> None:
         "--route-points", type=positive_int, default=50, metavar="N", help="waypoints per route, at most"
     )
     p.add_argument(
+        "--terrain",
+        metavar="DEM",
+        help="a DEM (GeoTIFF, DTED, SRTM .hgt): routes' waypoints carry its ground height as hae, "
+        "as the DEM gives it (no geoid applied; default: the origin's altitude)",
+    )
+    p.add_argument(
         "--state-dir",
         metavar="DIR",
         help="where deleted markers' tombstones outlive a restart; 'none' keeps them in memory only "
@@ -123,6 +129,12 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--sigma-lateral", str(exc).split(": ", 1)[-1]) from None
     if args.route_points < 2:
         raise InputError("--route-points", "must be at least 2")
+    ground = None
+    if args.terrain is not None:
+        require_extra("terrain", "rasterio")
+        from pfp_clients.ground import load_ground
+
+        ground = load_ground(args.terrain)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     for name in ("pytak", "pytak.classes"):  # pytak logs every worker start at INFO
         logging.getLogger(name).setLevel(logging.WARNING)
@@ -140,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
         refresh_s=args.refresh_s,
         stale_s=args.stale_s,
         route_points=args.route_points,
+        ground=None if ground is None else ground.elevation,
     )
     tombstones = _tombstone_file(args)
     tls = TlsFiles(args.tls_cert, args.tls_key, args.tls_ca, args.tls_dont_verify)

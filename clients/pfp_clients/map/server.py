@@ -28,6 +28,7 @@ HTTP API (JSON):
     PUT    /api/zone/{id}         a ZoneUpdate        (--allow-edit only): a keep-out zone
     DELETE /api/zone/{id}
     GET    /api/geojson           threats and keep-out zones as RFC 7946 GeoJSON (needs --origin)
+    GET    /api/terrain, /api/viewshed/{threat}   with --terrain: terrain_api.py
 Edits need the header ``X-PFP-Edit: 1``: a custom header cannot be sent
 cross-origin without a CORS preflight, which this server never grants, so
 another web page open in the operator's browser cannot edit the mission.
@@ -49,12 +50,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import logging
 import signal
-import socket
 import time
-from collections.abc import Awaitable, Callable, Iterable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -62,8 +61,11 @@ from typing import Any
 import msgspec
 from aiohttp import WSMsgType, web
 
+from pfp_clients.ground import Ground
 from pfp_clients.map.feed import Feed, PreviewError
+from pfp_clients.map.hosts import host_allowed, origin_allowed
 from pfp_clients.map.model import MapModel, eta_s, merge_deltas
+from pfp_clients.map.terrain_api import TerrainApi
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_goal, decode_threat, keys
@@ -75,65 +77,6 @@ log = logging.getLogger("pfp.map")
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 _EDIT_HEADER = "X-PFP-Edit"
 _SEND_TIMEOUT_S = 2.0  # a browser that takes longer to accept one frame is dropped
-_LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
-_WILDCARDS = ("", "0.0.0.0", "::")
-
-
-def _host_name(header: str) -> str:
-    """The name in a ``Host`` header (``name``, ``name:port``, ``[v6]:port``), lower-case, no final dot."""
-    text = header.strip().lower()
-    if text.startswith("["):
-        name = text[1 : text.find("]")] if "]" in text else ""
-    else:
-        name = text.rsplit(":", 1)[0] if text.count(":") == 1 else text
-    return name.rstrip(".")
-
-
-def _ip(name: str) -> ipaddress.IPv4Address | ipaddress.IPv6Address | None:
-    try:
-        return ipaddress.ip_address(name)
-    except ValueError:
-        return None
-
-
-def origin_allowed(origin: str | None, host: str | None) -> bool:
-    """Whether a WebSocket's ``Origin`` is this server's own: none (no browser), or ``http(s)://{Host}``."""
-    if origin is None:
-        return True
-    scheme, sep, rest = origin.strip().partition("://")
-    if not sep or scheme.lower() not in ("http", "https") or host is None:
-        return False  # "null" (a sandboxed frame, a file:// page) or garbage: no origin of ours
-    return _host_port(rest) == _host_port(host)
-
-
-def _host_port(netloc: str) -> str:
-    return netloc.strip().lower().rstrip("/").replace(".:", ":").rstrip(".")
-
-
-def host_allowed(header: str | None, bind_host: str, extra: Iterable[str] = ()) -> bool:
-    """Whether a request's ``Host`` header names a host this server serves.
-
-    Allowed: the address it is bound to; for a loopback bind also ``localhost``,
-    ``127.0.0.1`` and ``::1``; for a wildcard bind (``0.0.0.0``, ``::``) any IP
-    address and this machine's name (an address is no DNS name, so it cannot be
-    rebound); and every name in ``extra`` (``--allowed-host``).  A missing
-    header is refused.
-    """
-    if not header:
-        return False
-    name = _host_name(header)
-    if not name:
-        return False
-    bind = bind_host.strip("[]").lower()
-    allowed = {bind, *(_host_name(h) for h in extra)}
-    bind_ip = _ip(bind)
-    if bind == "localhost" or (bind_ip is not None and bind_ip.is_loopback):
-        allowed.update(_LOOPBACK_NAMES)
-    if bind in _WILDCARDS:
-        if _ip(name) is not None:
-            return True
-        allowed.update((*_LOOPBACK_NAMES, socket.gethostname().lower()))
-    return name in allowed
 
 
 @dataclass(frozen=True)
@@ -151,6 +94,7 @@ class MapOptions:
         origin: the mission origin (the planner's (0, 0)); None draws plain metres.
         tiles: a tile URL template for an offline tile server (lat/lon only).
         allowed_hosts: names a browser may use for this server besides ``host`` (``--allowed-host``).
+        terrain: the DEM (``--terrain``; needs ``origin``), and the target height its viewsheds are for.
     """
 
     mission: str = keys.DEFAULT_MISSION
@@ -164,6 +108,8 @@ class MapOptions:
     origin: Origin | None = None
     tiles: str | None = None
     allowed_hosts: tuple[str, ...] = ()
+    terrain: Ground | None = None
+    target_height_m: float = 1.8
 
 
 class _Browser:
@@ -198,6 +144,11 @@ class MapServer:
         self.tick_ms_total = 0.0
         self.refused_hosts = 0
         self.refused_origins = 0
+        self.terrain = None
+        if opts.terrain is not None and opts.origin is not None:
+            self.terrain = TerrainApi(
+                opts.terrain, opts.origin, opts.target_height_m, lambda: self.model.threats
+            )
 
     # -- the pump --------------------------------------------------------------------
     def config_view(self) -> dict[str, Any]:
@@ -211,6 +162,7 @@ class MapServer:
             "tiles": o.tiles,
             "stale_s": o.stale_s,
             "push_hz": o.push_hz,
+            "terrain": None if self.terrain is None else {"path": Path(self.terrain.ground.path).name},
         }
 
     def stats(self) -> dict[str, Any]:
@@ -320,6 +272,8 @@ class MapServer:
         app.router.add_put("/api/zone/{id}", self._put_zone)
         app.router.add_delete("/api/zone/{id}", self._delete_zone)
         app.router.add_get("/api/geojson", self._geojson)
+        if self.terrain is not None:
+            self.terrain.add(app)
         app.router.add_static("/static/", STATIC_DIR)
         return app
 
@@ -492,4 +446,6 @@ async def serve(
                 await t
         await runner.cleanup()
         server.feed.undeclare()
+        if server.terrain is not None:
+            server.terrain.close()
     return 0

@@ -14,6 +14,11 @@ when the record knows the mission origin, GeoJSON (RFC 7946, WGS-84) of every
 track with its row of the table, and of the threats.  The PNG draws the
 keep-out zones in force at the end, a threat that appeared after the units
 set out in orange with when it appeared, and, with an origin, lat/lon axes.
+
+With a DEM (``ground``: ``pfp report --terrain``), each unit also gets its
+climb, the steepest ground it crossed and its seconds in view of each threat
+(``report_terrain``): three more columns, and the same figures in each track's
+GeoJSON properties, under a ``terrain`` member that says how they were measured.
 """
 
 from __future__ import annotations
@@ -246,19 +251,23 @@ def _text(rows: list[tuple[str, ...]]) -> list[str]:
     return ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
 
 
-def _geojson(rec: Record, rows: list[UnitSummary], watch: Watch) -> dict[str, Any]:
+def _geojson(
+    rec: Record, rows: list[UnitSummary], watch: Watch, table: list[tuple[str, ...]], ground: dict[str, Any]
+) -> dict[str, Any]:
     assert rec.origin is not None
     o = rec.origin
     feats: list[dict[str, Any]] = []
-    for u, row in zip(rows, table_rows(rows)[1:]):
+    for u, row in zip(rows, table[1:]):
         if not u.track:
             continue
         xy = np.array([(x, y) for _t, x, y in u.track], dtype=float)
         ll = o.to_geodetic_many(xy)  # (n, 2) lat, lon
         coords = [[round(float(lon), 8), round(float(lat), 8)] for lat, lon in ll]
         geom = {"type": "LineString", "coordinates": coords if len(coords) > 1 else coords * 2}
-        props = dict(zip(COLUMNS, row))
+        props: dict[str, Any] = dict(zip(table[0], row))
         props["kind"] = "track"
+        if u.unit in ground.get("units", {}):
+            props.update(ground["units"][u.unit])
         feats.append({"type": "Feature", "geometry": geom, "properties": props})
     for v in watch.versions:
         lat, lon = o.to_geodetic(*v.update.position)
@@ -277,14 +286,22 @@ def _geojson(rec: Record, rows: list[UnitSummary], watch: Watch) -> dict[str, An
                 },
             }
         )
-    return {"type": "FeatureCollection", "features": feats}
+    out: dict[str, Any] = {"type": "FeatureCollection", "features": feats}
+    if ground:  # a foreign member (RFC 7946 section 6.1): how the terrain figures were measured
+        out["terrain"] = ground["about"]
+    return out
 
 
-def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = print) -> list[Path]:
+def write_report(
+    rec: Record, stem: Path, intensity: str = "peak", say: Any = print, ground: tuple[str, Any] | None = None
+) -> list[Path]:
     """Print the table and write ``STEM.csv``, ``STEM.png`` and (with an origin) ``STEM.geojson``.
 
+    Args:
+        ground: a DEM's path and the unit class (``core.mobility.Mobility``) to measure the tracks for.
+
     Raises:
-        InputError: a file cannot be written.
+        InputError: a file cannot be written; the DEM (its path) cannot be read or does not cover the record.
     """
     from pfp_clients.record.coverage import describe, describe_gaps, seq_gaps
     from pfp_service.render import plot_tracks
@@ -297,6 +314,10 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
     say(f"record: {describe_gaps({u.unit: seq_gaps(u.seqs) for u in rows if u.seqs})}")
     clock = clock_name(rows)
     say(f"times (time s): {clock}")
+    over: dict[str, Any] = {}
+    if ground is not None:
+        over = _over_ground(rec, rows, watch, clock, ground, table)
+        say(over["about"]["says"])
     for line in _text(table):
         say(line)
     written: list[Path] = []
@@ -336,7 +357,7 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
         written.append(png)
         if rec.origin is not None:
             gj = stem.with_suffix(".geojson")
-            gj.write_text(json.dumps(_geojson(rec, rows, watch)))
+            gj.write_text(json.dumps(_geojson(rec, rows, watch, table, over)))
             written.append(gj)
     except OSError as exc:
         raise InputError(str(stem.parent), f"cannot write the report: {exc.strerror or exc}") from None
@@ -345,3 +366,52 @@ def write_report(rec: Record, stem: Path, intensity: str = "peak", say: Any = pr
     if rec.origin is None:
         say("no GeoJSON: the record has no origin (the planner had none when recording started)")
     return written
+
+
+def _over_ground(
+    rec: Record,
+    rows: list[UnitSummary],
+    watch: Watch,
+    clock: str,
+    ground: tuple[str, Any],
+    table: list[tuple[str, ...]],
+) -> dict[str, Any]:
+    """Each unit's climb, steepest ground and time in view, added to ``table`` (in place) and returned."""
+    from pfp_clients.record.report_terrain import load, measure_ground
+
+    path, unit = ground
+    if rec.origin is None:
+        raise InputError("--terrain", "the record has no origin: its metres cannot be placed on a DEM")
+    points = [(x, y) for u in rows for _t, x, y in u.track] + [v.update.position for v in watch.versions]
+    if not points:
+        return {}
+    terrain = load(path, rec.origin, points, unit)
+    own = clock.startswith("the units'")
+    times = {u.unit: [c for _r, c in u.clock] if own else [t for t, _x, _y in u.track] for u in rows}
+    got = measure_ground(terrain, {u.unit: u.track for u in rows}, times, watch)
+    table[0] = (*table[0], "climb m", "max slope deg", "in view s")
+    units = {}
+    for i, u in enumerate(rows, start=1):
+        g = got[u.unit]
+        seen = "; ".join(f"{t} {s:.1f}" for t, s in sorted(g.in_view_s.items()) if s > 0) or "-"
+        slope = "-" if g.max_slope_deg is None else f"{g.max_slope_deg:.1f}"
+        table[i] = (*table[i], f"{g.climb_m:.1f}", slope, seen)
+        units[u.unit] = {
+            "climb_m": round(g.climb_m, 2),
+            "max_slope_deg": None if g.max_slope_deg is None else round(g.max_slope_deg, 2),
+            "in_view_s": {t: round(s, 2) for t, s in sorted(g.in_view_s.items())},
+        }
+    cell = terrain.grid.cell_m
+    says = (
+        f"terrain: {Path(path).name} at {cell:.0f} m cells, for a {unit.kind} unit {unit.height_m:g} m tall: "
+        "climb (every rise summed), max slope (of the ground crossed), in view s (per threat, a clear "
+        "line of sight from its eye to the unit within its reach)"
+    )
+    about = {
+        "dem": Path(path).name,
+        "cell_m": round(cell, 2),
+        "unit_class": unit.kind,
+        "unit_height_m": unit.height_m,
+        "says": says,
+    }
+    return {"units": units, "about": about}

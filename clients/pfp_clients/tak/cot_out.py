@@ -123,20 +123,24 @@ def route_event(
     stale_s: float,
     callsign: str,
     remarks: str,
-    hae: float = 0.0,
+    hae: float | Sequence[float] = 0.0,
 ) -> bytes:
-    """A route (``b-m-r``): ``waypoints`` as ``(lat, lon)`` in order, each a ``<link>``, all at ``hae``.
+    """A route (``b-m-r``): ``waypoints`` as ``(lat, lon)`` in order, each a ``<link>``, at ``hae``
+    (one height for all, or one per waypoint).
 
     Raises:
-        ValueError: fewer than two waypoints.
+        ValueError: fewer than two waypoints, or not one height per waypoint.
     """
     if len(waypoints) < 2:
         raise ValueError("route_event: a route needs at least two waypoints")
+    heights = [float(hae)] * len(waypoints) if isinstance(hae, int | float) else [float(h) for h in hae]
+    if len(heights) != len(waypoints):
+        raise ValueError(f"route_event: {len(heights)} heights for {len(waypoints)} waypoints")
     lat0, lon0 = waypoints[0]
-    ev = _event(uid, "b-m-r", lat0, lon0, now, stale_s, how="h-e", hae=hae)
+    ev = _event(uid, "b-m-r", lat0, lon0, now, stale_s, how="h-e", hae=heights[0])
     d = ET.SubElement(ev, "detail")
     last = len(waypoints) - 1
-    for i, (lat, lon) in enumerate(waypoints):
+    for i, ((lat, lon), h) in enumerate(zip(waypoints, heights)):
         end = i in (0, last)
         ET.SubElement(
             d,
@@ -145,7 +149,7 @@ def route_event(
                 "uid": f"{uid}.{i}",
                 "callsign": ("start" if i == 0 else "goal") if end else f"CP{i}",
                 "type": "b-m-p-w" if end else "b-m-p-c",
-                "point": f"{float(lat)!r},{float(lon)!r},{float(hae)!r}",
+                "point": f"{float(lat)!r},{float(lon)!r},{h!r}",
                 "remarks": "",
                 "relation": "c",
             },

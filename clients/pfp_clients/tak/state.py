@@ -27,7 +27,8 @@ Rules:
   threats, units and every unit's route, at most once per ``announce_min_s``.
   A TAK server does not keep routes, so a device that joins late would
   otherwise see none until the next refresh;
-- every point carries the origin's altitude as ``hae``.
+- every point carries the origin's altitude as ``hae``, but a route's waypoints with ``ground``
+  (``pfp tak --terrain``): the DEM's height there as it is (docs/terrain.md: no geoid applied).
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class BridgeSettings:
         announce_min_s: the whole picture goes to one link at most this often.
         device_forget_s: a device silent this long is new again when next heard.
         tombstone_s: how long a tombstone lasts when the deleted marker's stale time is unknown.
+        ground: the DEM's height (m, NaN unknown) at arrays of latitudes and longitudes, or None.
     """
 
     mission: str
@@ -79,6 +81,7 @@ class BridgeSettings:
     announce_min_s: float = 1.0
     device_forget_s: float = 60.0
     tombstone_s: float = 86_400.0
+    ground: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +105,7 @@ class _Unit:
     direction: m.Direction | None = None
     route: list[tuple[float, float]] = field(default_factory=list)
     route_remarks: str = ""
+    route_hae: list[float] = field(default_factory=list)
     route_asked: float = -1e18
     route_pending: bool = False
 
@@ -450,6 +454,11 @@ class BridgeState:
         if len(ll) == len(u.route) and np.allclose(ll, u.route, atol=1e-7, rtol=0.0):
             return out
         u.route = ll
+        hae = np.full(len(ll), self._hae)
+        if self.s.ground is not None:  # off the DEM, or on no-data: the origin's altitude, as without one
+            z = self.s.ground(np.array([p[0] for p in ll]), np.array([p[1] for p in ll]))
+            hae = np.where(np.isfinite(z), z, hae)
+        u.route_hae = [float(h) for h in hae]
         u.route_remarks = f"pfp route for {unit}: {status}, {length_m:.0f} m, {len(ll)} waypoints"
         out.cot += self._send(self._uid("route", unit), self._route_cot(unit, u, now), now)
         return out
@@ -457,7 +466,7 @@ class BridgeState:
     def _route_cot(self, unit: str, u: _Unit, now: float) -> bytes:
         uid = self._uid("route", unit)
         return cot_out.route_event(
-            uid, u.route, now, self.s.stale_s, f"route {unit}", u.route_remarks, self._hae
+            uid, u.route, now, self.s.stale_s, f"route {unit}", u.route_remarks, u.route_hae or self._hae
         )
 
     def tick(self, now: float) -> Outputs:

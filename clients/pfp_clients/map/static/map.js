@@ -188,6 +188,7 @@ function createMap(config) {
     Object.entries(STATUS_COLOURS)
       .map(([k, c]) => `<span class="sw" style="background:${c}"></span>${k.replace("_", " ")}`)
       .join("") + ` &nbsp; ● manned ◆ unmanned`;
+  pfpTerrain.start(config, map);
 }
 
 // -- units --------------------------------------------------------------------------------
@@ -363,7 +364,10 @@ function upsertThreat(d) {
   });
   state.threats.set(d.id, { data: d, layers, centre });
   paintThreat(state.threats.get(d.id));
-  if (state.selectedThreat === d.id) showThreat();
+  if (state.selectedThreat === d.id) {
+    showThreat();
+    pfpTerrain.threatSelected(d.id); // moved: its viewshed again
+  }
 }
 
 function threatTtl(d) {
@@ -683,11 +687,13 @@ function selectThreat(id) {
   if (state.selectedUnit) closeUnit();
   state.selectedThreat = id;
   showThreat();
+  pfpTerrain.threatSelected(id);
 }
 
 function closeThreat() {
   state.selectedThreat = null;
   $("threat-panel").hidden = true;
+  pfpTerrain.threatClosed();
   if (state.mode === "move-threat") setMode(null);
 }
 
