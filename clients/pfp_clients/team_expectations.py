@@ -90,7 +90,7 @@ def only_cleared_by(e: Expect, track: Track, lead: Track) -> tuple[bool, str]:
             )
     if entered is None:
         return False, f"{e.unit} never entered ground {e.only_cleared_by} had crossed"
-    return True, f"every report from t={entered:.1f} s on on cleared ground"
+    return True, f"every report on cleared ground from t={entered:.1f} s"
 
 
 def link_to(e: Expect, track: Track, controller: Track) -> tuple[bool, str]:
