@@ -17,7 +17,7 @@ def test_the_scout_team_meets_its_expectations_with_a_threat_in_its_way():
     mission = "ts" + uuid.uuid4().hex[:8]
     with planner_process("--state-dir", "none", mission=mission) as (endpoint, _):
         common = ("--connect", endpoint, "--mission", mission, "--speed-up", "10")
-        judge = _pfp("inject", str(EXAMPLES / "team-scout-inject.yaml"), *common)
+        judge = _pfp("inject", str(EXAMPLES / "scout-inject.yaml"), *common)
         try:
             head = _wait_for_line(judge, "waiting")
             fleet = run_pfp(
