@@ -232,3 +232,12 @@ def test_seeded_threats_mid_route_never_take_the_follower_off_cleared_ground(see
         if main[i] != main[i + 1] and math.dist(main[i], (240.0, 0.0)) > 40.0
     ]
     assert sum(22.5 <= g <= 37.5 for g in gaps) >= 0.9 * len(gaps), f"seed {seed}"
+
+
+def test_a_follower_waits_for_a_lead_that_has_not_moved_yet_and_says_so() -> None:
+    w = _world()
+    w.apply([TeamPut("alpha", TeamUpdate(lead="r1", follow=["m1"], corridor_m=6.0))], 0.0)
+    w.apply([_report("m1", (0.0, 0.0), 0.0), _report("r1", (1.0, 0.0), 0.0)], 0.0)
+    out = w.apply([GoalSet(u, Goal(position=(200.0, 0.0))) for u in ("m1", "r1")], 0.0)
+    (d,) = [d for d in out.directions if d.unit == "m1"]
+    assert d.vector == (0.0, 0.0) and d.reason == "team alpha: holding: lead r1 has not moved yet"

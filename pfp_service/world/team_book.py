@@ -172,8 +172,11 @@ class TeamBook:
         track = track[start:]
         self.tracks[tid] = track if len(track) <= MAX_TRACK_POINTS else track[::2] + track[-1:]
 
-    def _lost(self, unit: str | None, units: Mapping[str, UnitRecord], held: set[str]) -> str:
-        """Why ``unit`` cannot be kept to: ``"is lost (...)"``, ``"has stopped"``, or ``""``."""
+    def _lost(
+        self, unit: str | None, units: Mapping[str, UnitRecord], held: set[str], moved: bool = True
+    ) -> str:
+        """Why ``unit`` cannot be kept to: ``"is lost (...)"``, ``"has stopped"`` (``"has not moved yet"``
+        when it is not known to have moved), or ``""``."""
         rec = units.get(unit) if unit is not None else None
         if rec is None or rec.position is None:
             return "is lost (no report)"
@@ -181,7 +184,7 @@ class TeamBook:
             return "is lost (no report for a while)"
         stopped = rec.progress.verdict in (Progress.HOLDING, Progress.STALLED)
         if stopped and unit not in held and rec.last_status is not DirectionStatus.ARRIVED:
-            return "has stopped"
+            return "has stopped" if moved else "has not moved yet"
         return ""
 
     def _judged(
@@ -240,7 +243,7 @@ class TeamBook:
                 out.append(roles.lead(at, _route(main), team.standoff_m, main.id))
             to = _end(out, to)
         if unit in team.follow and _moving(out):
-            lost = self._lost(team.lead, units, held)
+            lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
             track = self.tracks.get(tid, [])
             out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost))
             to = _end(out, to)
