@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
@@ -43,7 +44,7 @@ from pfp_service.core.params import ESCAPES, Escape, PlannerParams, reach
 from pfp_service.errors import InputError, from_validation
 from pfp_service.files import read_text
 from pfp_service.geo import Origin, localise_document
-from pfp_service.wire.messages import ZoneUpdate, localise_zone
+from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone, team_problems
 
 if TYPE_CHECKING:
     # Imported where used: a scenario is read (and a hostile one refused) without compiling the core.
@@ -55,9 +56,11 @@ __all__ = [
     "CHOICES",
     "PlannerSpec",
     "Scenario",
+    "TeamSpec",
     "ThreatSpec",
     "UnitSpec",
     "ZoneSpec",
+    "check_teams",
     "decode_scenario",
     "load_scenario",
 ]
@@ -185,6 +188,27 @@ class ZoneSpec(ZoneUpdate, kw_only=True, frozen=True, forbid_unknown_fields=True
     id: Id | None = None
 
 
+class TeamSpec(TeamUpdate, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A team in a file: the wire's ``TeamUpdate`` with its ``id``."""
+
+    id: Id
+
+
+def check_teams(teams: Sequence[TeamSpec], known: Collection[str] | None) -> None:
+    """A file's ``teams:`` as the planner would take them: distinct ids, and no ``team_problems``.
+
+    Raises:
+        ValueError: ``teams[i].field: reason`` for the first team refused.
+    """
+    index: dict[str, int] = {}
+    for i, t in enumerate(teams):
+        if t.id in index:
+            raise ValueError(f"teams[{i}].id: duplicate id {t.id!r}")
+        index[t.id] = i
+    for p in team_problems({t.id: t for t in teams}, known):
+        raise ValueError(f"teams[{index[p.team]}].{p.error.path}: {p.error.reason}")
+
+
 class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
     """A whole planning problem, as written in a scenario file."""
 
@@ -198,6 +222,9 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     zones: list[ZoneSpec] = []
     terrain: str | None = None  # a DEM's path, relative to the scenario file
     unit: UnitSpec = UnitSpec()
+    teams: Annotated[
+        list[TeamSpec], Meta(max_length=1_000)
+    ] = []  # checked as a team file's are; one unit plans alone
 
     def __post_init__(self) -> None:
         if self.bounds is not None:
@@ -222,6 +249,7 @@ class Scenario(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
             if zid in zone_ids:
                 raise ValueError(f"zones[{i}].id: duplicate id {zid!r}")
             zone_ids.add(zid)
+        check_teams(self.teams, None)  # a scenario's one unit has no id: any unit may be named
 
     def zone_set(self) -> ZoneSet:
         """The file's keep-out zones, for the core."""

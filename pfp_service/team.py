@@ -13,6 +13,15 @@ A team file is YAML::
 A unit never says a planner step: it drives at ``speed_mps`` and reports at
 ``rate_hz``, with its fix off by ``gps_sigma_m`` and its ``stops``, as a real
 vehicle does (``core.tracking``).
+``teams:`` group the units into teams with roles (``scenario.TeamSpec``, the
+wire's ``TeamUpdate`` with an ``id``); every unit a team names must be one of
+the file's, in one team only (but a lead may follow another team's lead), and
+no cycle of leads::
+
+    teams:
+      - {id: alpha, lead: r1, follow: [m1, m2], standoff_m: 30, corridor_m: 6,
+         controller: m1, robots: [r1, r2], radio_range_m: 80}
+
 Keep-out ``zones:`` are the wire's zone form with an ``id``, as in scenario
 files (``scenario.ZoneSpec``; vertices in metres, or ``{lat, lon}`` with an
 ``origin``); ``pfp fleet`` puts them before the goals::
@@ -35,12 +44,22 @@ from msgspec import Meta
 from pfp_service.constraints import Id, Point
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin, localise_document
-from pfp_service.scenario import ZoneSpec
+from pfp_service.scenario import TeamSpec, ZoneSpec, check_teams
 from pfp_service.wire import UnitKind
-from pfp_service.wire.messages import ZoneUpdate, localise_zone
+from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone
 from pfp_service.yamlio import load_yaml
 
-__all__ = ["CHOICES", "SPEEDS_MPS", "Stop", "Team", "UnitSpec", "generate_team", "load_team", "zone_updates"]
+__all__ = [
+    "CHOICES",
+    "SPEEDS_MPS",
+    "Stop",
+    "Team",
+    "UnitSpec",
+    "generate_team",
+    "load_team",
+    "team_updates",
+    "zone_updates",
+]
 
 Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
 RateHz = Annotated[float, Meta(gt=0.0, le=50.0)]
@@ -86,6 +105,7 @@ class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
     origin: Origin | None = None  # where [0, 0] lies; positions may then be {lat, lon}
     units: Annotated[list[UnitSpec], Meta(min_length=1, max_length=10_000)]
     zones: Annotated[list[ZoneSpec], Meta(max_length=1_000)] = []  # keep-out zones, put by pfp fleet
+    teams: Annotated[list[TeamSpec], Meta(max_length=1_000)] = []  # teams of these units, put by pfp fleet
 
     def __post_init__(self) -> None:
         seen: set[str] = set()
@@ -98,6 +118,7 @@ class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
             if zid in zone_ids:
                 raise ValueError(f"zones[{i}].id: duplicate id {zid!r}")
             zone_ids.add(zid)
+        check_teams(self.teams, seen)
 
 
 def zone_updates(team: Team) -> list[tuple[str, ZoneUpdate]]:
@@ -107,6 +128,12 @@ def zone_updates(team: Team) -> list[tuple[str, ZoneUpdate]]:
         (z.id or f"z{i + 1}", ZoneUpdate(**{f: getattr(z, f) for f in fields}))
         for i, z in enumerate(team.zones)
     ]
+
+
+def team_updates(team: Team) -> list[tuple[str, TeamUpdate]]:
+    """The file's teams as the wire puts them: ``(id, update)``."""
+    fields = TeamUpdate.__struct_fields__
+    return [(t.id, TeamUpdate(**{f: getattr(t, f) for f in fields})) for t in team.teams]
 
 
 def _localise_zones(doc: dict[str, object]) -> dict[str, object]:

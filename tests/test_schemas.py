@@ -115,6 +115,7 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
     "mission": m.decode_mission,
     "event": m.decode_event,
     "zone": m.decode_zone,
+    "team": m.decode_team,
 }
 
 
@@ -196,6 +197,13 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "ZoneUpdate": (set(), {"kind", "polygon", "circle", "ttl_s"}),
     "ZoneCircle": ({"centre", "radius_m"}, set()),
     "ZoneSummary": ({"id", "zone"}, {"ttl_s"}),
+    # added with teams
+    "TeamSummary": ({"id", "team"}, {"notes"}),
+    "TeamUpdate": (
+        set(),
+        {"members", "separation_m", "lead", "follow", "standoff_m", "corridor_m", "controller", "robots"}
+        | {"radio_range_m"},
+    ),
     "PlanResult": (
         {"status", "reason", "steps", "length", "exposure", "peak_threat", "min_clearance"}
         | {"final_distance", "path", "compute_ms", "params"},

@@ -33,6 +33,7 @@ BUILDERS = {
     KeyKind.ALIVE_PLANNER: (keys.alive_planner, keys.alive_planners, "mumt/m1/alive/planner/u1"),
     KeyKind.WORLD: (keys.world, keys.worlds, "mumt/m1/planner/u1/world"),
     KeyKind.ZONE: (keys.zone, keys.zones, "mumt/m1/zone/u1"),
+    KeyKind.TEAM: (keys.team, keys.teams, "mumt/m1/team/u1"),
 }
 
 

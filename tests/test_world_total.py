@@ -40,7 +40,7 @@ from pfp_service.wire import (
     decode_mission,
     encode,
 )
-from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+from pfp_service.wire.messages import TeamUpdate, ZoneCircle, ZoneUpdate
 from pfp_service.world.events import mission_message
 from pfp_service.world.world import (
     Deliberated,
@@ -51,6 +51,8 @@ from pfp_service.world.world import (
     MissionShared,
     PeerPlanner,
     StateReported,
+    TeamPut,
+    TeamRemoved,
     ThreatPut,
     ThreatRemoved,
     Tick,
@@ -136,6 +138,23 @@ def zones(draw: st.DrawFn) -> ZoneUpdate:
     return ZoneUpdate(polygon=[ring], ttl_s=ttl)
 
 
+@st.composite
+def teams(draw: st.DrawFn) -> TeamUpdate:
+    """A team of the units above, in any roles: clashes across teams are the world's to refuse."""
+    ids = draw(st.lists(units, unique=True, min_size=0, max_size=4))
+    lead, follow, ctl, robots = (ids + [None] * 4)[:4]
+    far = st.one_of(st.sampled_from([1e-3, 1.0, 1e5]), st.floats(1e-3, 1e5))
+    return TeamUpdate(
+        lead=lead if follow else draw(st.one_of(st.none(), st.just(lead))),
+        follow=[follow] if follow and lead else [],
+        controller=ctl,
+        robots=[robots] if robots and ctl else [],
+        standoff_m=draw(far),
+        corridor_m=draw(far),
+        radio_range_m=draw(far),
+    )
+
+
 tokens = st.tuples(st.integers(-1, 5), st.integers(-1, 5))
 inputs = st.one_of(
     st.builds(
@@ -154,6 +173,8 @@ inputs = st.one_of(
     st.builds(ThreatRemoved, threat_ids),
     st.builds(ZonePut, zone_ids, zones()),
     st.builds(ZoneRemoved, zone_ids),
+    st.builds(TeamPut, st.sampled_from(["a", "b"]), teams()),
+    st.builds(TeamRemoved, st.sampled_from(["a", "b"])),
     st.builds(TokenChanged, units, st.booleans()),
     st.builds(
         InputRejected, st.sampled_from(["mumt/m/unit/u0/goal", "junk", ""]), st.just(InputError("$", "x"))

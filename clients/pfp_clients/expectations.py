@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from pfp_clients import team_expectations as team
 from pfp_clients.script import Expect, Script, Step
 from pfp_clients.watch import Watch
 from pfp_service.coords import Coords
@@ -99,6 +100,13 @@ def judge(e: Expect, watch: Watch, zones: list[ZoneVersion] | None = None) -> Ve
     """Whether one expectation held, from what ``watch`` saw (and the zones the script put)."""
     if e.never_enters is not None:
         return _never_enters(e, watch, zones or [])
+    other = e.keeps_from or e.only_cleared_by or e.link_to
+    if other is not None:  # a team's: judged on the two units' tracks
+        check = (
+            team.keeps_from if e.keeps_from else team.only_cleared_by if e.only_cleared_by else team.link_to
+        )
+        held, detail = check(e, watch.tracks.get(e.unit, []), watch.tracks.get(other, []))
+        return Verdict(e, held, detail)
     if e.arrives_within_s is not None:
         t = watch.arrived_at_s.get(e.unit)
         if t is None:

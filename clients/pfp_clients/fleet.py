@@ -47,11 +47,12 @@ from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.natsort import natural_key
-from pfp_service.team import Team, UnitSpec, zone_updates
+from pfp_service.team import Team, UnitSpec, team_updates, zone_updates
 from pfp_service.wire import (
     Direction,
     DirectionStatus,
     Goal,
+    TeamUpdate,
     decode_direction,
     encode,
     keys,
@@ -147,6 +148,14 @@ def in_planner_frame(team: Team, planner: Origin | None, mission: str) -> tuple[
         for z in team.zones
     ]
     return msgspec.structs.replace(team, origin=planner, units=units, zones=zones), conv.line("team")
+
+
+def team_roles(team: TeamUpdate) -> list[str]:
+    """A team's roles in words, for its line: ``lead r1``, ``follow m1 m2``, ``controller m1 of r1 r2``."""
+    out = [f"lead {team.lead}"] if team.lead else []
+    out += [f"follow {' '.join(team.follow)}"] if team.follow else []
+    out += [f"controller {team.controller} of {' '.join(team.robots)}"] if team.controller else []
+    return out or [f"members {' '.join(team.members)}"]
 
 
 def run_fleet(
@@ -276,6 +285,9 @@ def run_fleet(
                 for zid, zone in zone_updates(team):  # the team's keep-out zones before its goals
                     goals.put(keys.zone(m, zid), encode(zone))
                     say(f"t={t_s:7.2f}s  keep-out zone {zid} put")
+                for tid, tm in team_updates(team):  # and its teams: their roles judge the first directions
+                    goals.put(keys.team(m, tid), encode(tm))
+                    say(f"t={t_s:7.2f}s  team {tid} put: {', '.join(team_roles(tm))}")
                 for u in units:
                     goal = _goal_of(u)
                     if goal is not None:

@@ -26,9 +26,12 @@ point).  Actions: ``add_threat``, ``move_threat``, ``remove_threat``,
 ``add_zone`` (the wire's zone: ``polygon`` rings or a ``circle``, vertices
 ``[x, y]`` or ``{lat, lon}``, optional ``ttl_s``; put again to move it),
 ``remove_zone``, ``set_goal``, ``cancel_goal``, ``wait``.  Expectations:
-``arrives_within_s``, ``min_clearance_m`` (to one threat or all) and
+``arrives_within_s``, ``min_clearance_m`` (to one threat or all),
 ``never_enters`` (a zone: no segment of the unit's track while the zone was in
-force touches it, checked exactly per segment by ``core.zones.track_enters``).
+force touches it, checked exactly per segment by ``core.zones.track_enters``),
+and a team's: ``{unit, keeps_from: other, at_least_m}``, ``{unit,
+only_cleared_by: lead, corridor_m}`` and ``{unit, link_to: controller,
+at_least_pct, radio_range_m}`` (``team_expectations``).
 """
 
 from __future__ import annotations
@@ -226,28 +229,59 @@ Step = Union[AddThreat, MoveThreat, RemoveThreat, AddZone, RemoveZone, SetGoal, 
 
 
 class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
-    """One expectation: ``arrives_within_s``, ``min_clearance_m`` (to threat ``to``, else to all) or ``never_enters``."""
+    """One expectation of ``unit``: exactly one of ``arrives_within_s``, ``min_clearance_m`` (to threat ``to``,
+    else to all), ``never_enters``, or a team's (``keeps_from``, ``only_cleared_by``, ``link_to``).
+
+    ``keeps_from: other`` with ``at_least_m``: the unit never comes closer to ``other``.
+    ``only_cleared_by: lead`` (with the team's ``corridor_m``): once in the lead's corridor, the unit is never
+    outside ground the lead crossed before it.  ``link_to: controller`` with ``at_least_pct`` (and the team's
+    ``radio_range_m``): the share of the unit's reports within radio range of its controller.
+    """
 
     unit: Id
     arrives_within_s: Positive | None = None
     min_clearance_m: NonNegative | None = None
     to: Id | None = None
     never_enters: Id | None = None
+    keeps_from: Id | None = None
+    at_least_m: NonNegative | None = None
+    only_cleared_by: Id | None = None
+    corridor_m: Positive = 30.0
+    link_to: Id | None = None
+    at_least_pct: Annotated[float, Meta(ge=0.0, le=100.0)] | None = None
+    radio_range_m: Positive = 1500.0
 
     def __post_init__(self) -> None:
-        given = [x is not None for x in (self.arrives_within_s, self.min_clearance_m, self.never_enters)]
+        kinds = (self.arrives_within_s, self.min_clearance_m, self.never_enters, self.keeps_from)
+        given = [x is not None for x in (*kinds, self.only_cleared_by, self.link_to)]
         if sum(given) != 1:
             raise ValueError(
-                "arrives_within_s: give exactly one of arrives_within_s, min_clearance_m or never_enters"
+                "arrives_within_s: give exactly one of arrives_within_s, min_clearance_m, never_enters, "
+                "keeps_from, only_cleared_by or link_to"
             )
         if self.to is not None and self.min_clearance_m is None:
             raise ValueError("to: only goes with min_clearance_m")
+        if (self.keeps_from is None) != (self.at_least_m is None):
+            raise ValueError("at_least_m: keeps_from and at_least_m go together")
+        if (self.link_to is None) != (self.at_least_pct is None):
+            raise ValueError("at_least_pct: link_to and at_least_pct go together")
 
     def describe(self) -> str:
         if self.arrives_within_s is not None:
             return f"{self.unit} arrives within {self.arrives_within_s:g} s"
         if self.never_enters is not None:
             return f"{self.unit} never enters zone {self.never_enters}"
+        if self.keeps_from is not None:
+            return f"{self.unit} keeps at least {self.at_least_m:g} m from {self.keeps_from}"
+        if self.only_cleared_by is not None:
+            return (
+                f"{self.unit} enters only ground {self.only_cleared_by} cleared ({self.corridor_m:g} m wide)"
+            )
+        if self.link_to is not None:
+            return (
+                f"{self.unit} within {self.radio_range_m:g} m of {self.link_to} "
+                f">= {self.at_least_pct:g} % of the time"
+            )
         return f"min clearance of {self.unit} to {self.to or 'every threat'} >= {self.min_clearance_m:g} m"
 
 

@@ -1,11 +1,13 @@
-"""``pfp status``: list what each planner of the mission holds: its units, threats and keep-out zones.
+"""``pfp status``: list what each planner of the mission holds: its units, threats, keep-out zones and teams.
 
 Asks the world queryable (``mumt/{m}/planner/*/world``) and the status of
 every planner.  Without ``--json``, a table of the live planners first (units
 owned, threats and zones in force, latency, deliberations, overload: several
-share a mission under ``--cluster``), then up to three tables per planner:
+share a mission under ``--cluster``), then up to four tables per planner:
 units (id, kind, phase, status, last seen, distance to goal, position), threats (id,
-position, TTL left) and keep-out zones (id, kind, shape, centroid, TTL left),
+position, TTL left), teams (id, lead, follow, controller, robots, other
+members, then what each team's roles last said of a member: held, redirected,
+link lost) and keep-out zones (id, kind, shape, centroid, TTL left),
 ids in natural order (m2 before m10).  Positions are lat/lon with the metres
 from the origin when the planner has one (``--coords`` chooses: latlon,
 metres, mgrs).  With ``--json``, one JSON array of every planner's full
@@ -115,6 +117,7 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
     lines = [
         f"planner {snap.planner}, mission {snap.mission}: {snap.units_total} units, "
         f"{snap.threats_total} threats, {snap.zones_total} zones"
+        + (f", {snap.teams_total} teams" if getattr(snap, "teams_total", 0) else "")
     ]
     if snap.units:
         rows: list[tuple[str, ...]] = [
@@ -151,6 +154,7 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
             lines.append(
                 f"... and {snap.threats_total - len(snap.threats)} more threats (--json lists them all)"
             )
+    lines += team_lines(snap)
     if snap.zones:
         rows = [("zone", "kind", "shape", "centroid", "TTL left")]
         zones = sorted(snap.zones, key=lambda z: natural_key(z.id))
@@ -159,6 +163,28 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
         lines += ["", *_table(rows)]
         if snap.zones_total > len(snap.zones):
             lines.append(f"... and {snap.zones_total - len(snap.zones)} more zones (--json lists them all)")
+    return lines
+
+
+def team_lines(snap: Any) -> list[str]:
+    """The teams table (team, lead, follow, controller, robots) and what each team's roles last said."""
+    teams = getattr(snap, "teams", [])
+    if not teams:
+        return []
+    rows: list[tuple[str, ...]] = [("team", "lead", "follow", "controller", "robots", "other members")]
+    notes: list[str] = []
+    for t in sorted(teams, key=lambda t: natural_key(t.id)):
+        m = t.team
+        roled = {m.lead, *m.follow, m.controller, *m.robots}
+        others = [u for u in m.members if u not in roled]
+        rows.append(
+            (t.id, m.lead or "-", " ".join(m.follow) or "-", m.controller or "-", " ".join(m.robots) or "-",
+             " ".join(others) or "-")
+        )  # fmt: skip
+        notes += [f"  {t.id}: {n}" for n in t.notes]
+    lines = ["", *_table(rows), *notes]
+    if snap.teams_total > len(teams):
+        lines.append(f"... and {snap.teams_total - len(teams)} more teams (--json lists those that fit)")
     return lines
 
 

@@ -203,6 +203,7 @@ class PlannerNode:
                 missions=restored.missions,
                 expired=restored.expired,
                 zones=restored.zones,
+                teams=restored.teams,
                 corrupt=restored.corrupt,
                 set_aside=restored.set_aside,
             )

@@ -47,6 +47,7 @@ class Restored:
     set_aside: str = ""
     skipped: tuple[str, ...] = ()
     zones: int = 0
+    teams: int = 0
     order: tuple[OrderRow, ...] = ()  # the write order kept (WriteOrder.load)
 
 
@@ -140,6 +141,7 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
         skipped=skipped,
         zones=kept.get("zone", 0),
         order=tuple(order),
+        teams=kept.get("team", 0),
     )
 
 

@@ -69,6 +69,21 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
             ),
             ("zone.circle", m.ZoneUpdate(circle=m.ZoneCircle(centre=(-40.0, 75.0), radius_m=25.0))),
         ],
+        "team": [
+            (
+                "team",
+                m.TeamUpdate(
+                    separation_m=20.0,
+                    lead="r1",
+                    follow=["m1", "m2"],
+                    standoff_m=300.0,
+                    corridor_m=30.0,
+                    controller="m1",
+                    robots=["r1", "r2"],
+                    radio_range_m=1500.0,
+                ),
+            )
+        ],
         "direction": [
             (
                 "direction",

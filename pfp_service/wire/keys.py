@@ -9,6 +9,7 @@ No other module spells a topic string.  The layout (one mission per prefix):
     mumt/{m}/unit/{u}/mission      planner -> planners  Mission (x0 and parameters, for failover)
     mumt/{m}/threat/{t}            any -> planner       ThreatUpdate (DELETE removes)
     mumt/{m}/zone/{z}              any -> planner       ZoneUpdate (DELETE removes)
+    mumt/{m}/team/{t}              any -> planner       TeamUpdate (DELETE dissolves)
     mumt/{m}/preview/{u}           queryable            PreviewRequest -> PlanResult
     mumt/{m}/planner/{p}/status    queryable            -> PlannerStatus
     mumt/{m}/planner/{p}/world     queryable            -> WorldSnapshot (units, threats held)
@@ -62,6 +63,8 @@ __all__ = [
     "shard_state",
     "shard_states",
     "sharded_states",
+    "team",
+    "teams",
     "template",
     "threat",
     "threats",
@@ -103,6 +106,7 @@ class KeyKind(StrEnum):
     ALIVE_PLANNER = "alive_planner"
     WORLD = "world"
     ZONE = "zone"
+    TEAM = "team"
 
 
 # ``{mission}`` and ``{id}`` are the only variables; the id is a unit, threat,
@@ -120,6 +124,7 @@ TEMPLATES: dict[KeyKind, str] = {
     KeyKind.ALIVE_PLANNER: PREFIX + "/{mission}/alive/planner/{id}",
     KeyKind.WORLD: PREFIX + "/{mission}/planner/{id}/world",
     KeyKind.ZONE: PREFIX + "/{mission}/zone/{id}",
+    KeyKind.TEAM: PREFIX + "/{mission}/team/{id}",
 }
 
 # What the ``{id}`` chunk names in each template, for people reading the layout.
@@ -136,6 +141,7 @@ ID_NAMES: dict[KeyKind, str] = {
     KeyKind.ALIVE_PLANNER: "planner",
     KeyKind.WORLD: "planner",
     KeyKind.ZONE: "zone",
+    KeyKind.TEAM: "team",
 }
 
 
@@ -276,6 +282,11 @@ def zone(mission: str, zone_id: str) -> str:
     return _build(KeyKind.ZONE, mission, zone_id, "zone")
 
 
+def team(mission: str, team_id: str) -> str:
+    """``mumt/{mission}/team/{team_id}``: a team and its roles; DELETE dissolves it."""
+    return _build(KeyKind.TEAM, mission, team_id, "team")
+
+
 def preview(mission: str, unit: str) -> str:
     """``mumt/{mission}/preview/{unit}``: the whole-path preview queryable."""
     return _build(KeyKind.PREVIEW, mission, unit, "unit")
@@ -335,6 +346,11 @@ def threats(mission: str) -> str:
 def zones(mission: str) -> str:
     """``mumt/{mission}/zone/*``."""
     return _wild(KeyKind.ZONE, mission)
+
+
+def teams(mission: str) -> str:
+    """``mumt/{mission}/team/*``."""
+    return _wild(KeyKind.TEAM, mission)
 
 
 def previews(mission: str) -> str:

@@ -78,6 +78,15 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "planner",
         "a keep-out zone no path enters; a DELETE on the key removes it",
     ),
+    MessageSpec(
+        "team",
+        m.TeamUpdate,
+        KeyKind.TEAM,
+        "put",
+        "any",
+        "planner",
+        "a team and its roles (lead, follow, controller and robots); a DELETE on the key dissolves it",
+    ),
     MessageSpec("direction", m.Direction, KeyKind.UNIT_DIRECTION, "put", "planner", "unit"),
     MessageSpec(
         "mission",

@@ -30,7 +30,7 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
-from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+from pfp_service.wire.messages import TeamUpdate, ZoneCircle, ZoneUpdate
 
 if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
     from pfp_service.core import Stepper, Threat, ThreatField
@@ -50,6 +50,8 @@ __all__ = [
     "Outputs",
     "PeerPlanner",
     "StateReported",
+    "TeamPut",
+    "TeamRemoved",
     "ThreatPut",
     "ThreatRemoved",
     "Tick",
@@ -125,6 +127,19 @@ class ZonePut:
 @dataclass(frozen=True, slots=True)
 class ZoneRemoved:
     zone: str
+
+
+@dataclass(frozen=True, slots=True)
+class TeamPut:
+    """A team put (``team/{t}``): new, or its members and roles changed if the id is known."""
+
+    team: str
+    update: TeamUpdate
+
+
+@dataclass(frozen=True, slots=True)
+class TeamRemoved:
+    team: str
 
 
 def zone_put(zone: Zone) -> ZonePut:
@@ -223,6 +238,8 @@ Input = Union[  # noqa: UP007
     ThreatRemoved,
     ZonePut,
     ZoneRemoved,
+    TeamPut,
+    TeamRemoved,
     TokenChanged,
     InputRejected,
     Deliberated,
@@ -429,14 +446,14 @@ def mission_message(record: MissionRecord, planner: str) -> Mission:
 
 
 def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
-    """What a peer planner's world reply says, as inputs: its zones and threats (with the TTL left), goals and missions.
+    """What a peer planner's world reply says, as inputs: its teams, zones and threats (with the TTL left), goals and missions.
 
     A planner started after threats and goals were published applies these
     and guides correctly from its first direction.  Its own reply is skipped.
     """
     if snap.planner == me:
         return []
-    inputs: list[Input] = []
+    inputs: list[Input] = [TeamPut(t.id, t.team) for t in snap.teams]
     for z in snap.zones:
         zone = z.zone if z.ttl_s is None else msgspec.structs.replace(z.zone, ttl_s=max(z.ttl_s, 1e-3))
         inputs.append(ZonePut(z.id, zone))

@@ -26,7 +26,7 @@ from typing import Any, Literal
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_goal, decode_mission, decode_threat, decode_unit_state, keys
-from pfp_service.wire.messages import decode_zone
+from pfp_service.wire.messages import decode_team, decode_zone
 from pfp_service.wire.messages.structs import Bounds
 from pfp_service.world.events import (
     Deliberated,
@@ -38,6 +38,8 @@ from pfp_service.world.events import (
     MissionShared,
     PeerPlanner,
     StateReported,
+    TeamPut,
+    TeamRemoved,
     ThreatPut,
     ThreatRemoved,
     TokenChanged,
@@ -213,6 +215,11 @@ def _zone_put(zone: str, z: Any) -> LogLine:
     )
 
 
+def _team_put(team: str, t: Any) -> LogLine:
+    units = list(t.units())
+    return LogLine("team put", "team %s put: %s", (team, ", ".join(units)), {"team": team, "units": units})
+
+
 def _gone(what: str, msg: str, name: str) -> Callable[[str], LogLine]:
     return lambda ident: LogLine(what, msg, (ident,), {name: ident})
 
@@ -255,6 +262,18 @@ KINDS: tuple[Kind, ...] = (
         store=Stored("zones", "id", expiry="ttl"),
         log_put=_zone_put,
         log_remove=_gone("zone removed", "keep-out zone %s removed", "zone"),
+    ),
+    Kind(
+        "team",
+        K.TEAM,
+        "write",
+        (TeamPut, TeamRemoved),
+        schema="team",
+        decode=lambda data, _bounds, _origin: decode_team(data),
+        writers=("commander",),
+        store=Stored("teams", "id"),
+        log_put=_team_put,
+        log_remove=_gone("team dissolved", "team %s dissolved", "team"),
     ),
     Kind(
         "unit state",

@@ -10,6 +10,8 @@ at its first point off the wire's map.  Pure values in and out.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Collection, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,7 +21,10 @@ from pfp_service.core.plan import predict_many
 from pfp_service.core.stepper import Advice
 from pfp_service.errors import FINITE_LIMIT
 
-__all__ = ["lookahead", "within_map"]
+if TYPE_CHECKING:
+    from pfp_service.world.world_records import UnitRecord
+
+__all__ = ["Owed", "lookahead", "owed_share", "within_map"]
 
 Track = list[tuple[float, float]]
 
@@ -50,3 +55,28 @@ def within_map(track: Track) -> Track:
         if not (-lim <= x <= lim and -lim <= y <= lim):
             return track[:i]
     return track
+
+
+# A wave's unit sent its direction without points: (unit, its advice, stepper, its version, seq).
+Owed = tuple["UnitRecord", Advice, Stepper, int, int | None]
+
+
+def owed_share(
+    owed: list[Owed], dirty: Collection[str], units: Mapping[str, UnitRecord], limit: int
+) -> tuple[list[tuple[UnitRecord, Advice]], list[Owed]]:
+    """The next ``limit`` of a wave's units still owed their points, untouched since; and the rest, still owed.
+
+    A unit heard (``dirty``), re-advised or gone since its direction went out
+    is answered otherwise and dropped; the points come from the advice it
+    was sent, so a wave paid in chunks gives what one pass would.
+    """
+    later: list[tuple[UnitRecord, Advice]] = []
+    for i, (r, a, stepper, version, seq) in enumerate(owed):
+        if r.id in dirty or units.get(r.id) is not r or not r.live() or r.seq != seq:
+            continue  # heard, gone or stale since: answered otherwise
+        if r.stepper is not stepper or stepper.version != version:
+            continue  # a new goal or world since: its direction went out afresh
+        if len(later) == limit:
+            return later, owed[i:]  # checked again when their turn comes
+        later.append((r, a))
+    return later, []

@@ -9,14 +9,15 @@ other (issue 31: no circles).  The page's bounds and cursors are described in ``
 from __future__ import annotations
 
 import bisect
+import itertools
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TypeVar
 
 import msgspec
 
 from pfp_service.wire import ThreatSummary, UnitKind, UnitSummary, WorldSnapshot
-from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES, ZoneSummary
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES, TeamSummary, ZoneSummary
 from pfp_service.world.events import mission_of
 from pfp_service.world.world_records import Records, UnitRecord
 
@@ -38,6 +39,7 @@ def page(
     threats_limit: int | None = None,
     zones_from: str | None = None,
     zones_limit: int | None = None,
+    teams: Sequence[TeamSummary] = (),
 ) -> WorldSnapshot:
     """One page of what a planner holds, for the world queryable: zones, threats, then units, sorted by id.
 
@@ -52,6 +54,7 @@ def page(
             from the first.
         max_bytes: the page's items stop short of this much JSON
             (default ``SNAPSHOT_PAGE_BYTES``, so a reply always decodes).
+        teams: the teams in force, listed first on the first page (as many as fit), on no other.
 
     Returns:
         The page; its ``next_unit``, ``next_threat`` and ``next_zone`` say where the next
@@ -110,6 +113,9 @@ def page(
             phase=r.phase,
         )
 
+    listed_teams: list[TeamSummary] = []
+    if units_from is None and threats_from is None and zones_from is None:
+        listed_teams = list(itertools.takewhile(fits, teams[:MAX_SNAPSHOT_ITEMS]))
     next_zone = listing(
         records.zones,
         zones_from,
@@ -126,6 +132,8 @@ def page(
     )
     next_unit = listing(records.units, units_from, limit, unit_summary, units)
     return WorldSnapshot(
+        teams=listed_teams,
+        teams_total=len(teams),
         planner=planner,
         mission=mission,
         units=units,

@@ -44,7 +44,9 @@ from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and o
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.world.limits import Limits
 from pfp_service.world.liveness import UNIT_TIMERS, Liveness
+from pfp_service.world.lookahead import owed_share
 from pfp_service.world.snapshot import page as snapshot_page
+from pfp_service.world.team_book import TeamBook
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
 from pfp_service.world.world_records import Records, ThreatRecord, ZoneRecord
@@ -72,6 +74,7 @@ class World:
         self._live = Liveness(s, self._book, self._timers)
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
         self.limits = Limits()
+        self.teams = TeamBook()  # the teams in force: their roles' verdicts on the directions
         # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
         self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
         self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once
@@ -110,7 +113,8 @@ class World:
     ) -> WorldSnapshot:
         """One page of what the planner holds, for the world queryable (``snapshot.page``)."""
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit)
+        teams = self.teams.summaries()
+        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit, teams)
 
     def next_deadline(self) -> float | None:
         """When the world next needs an ``apply`` (a ``Tick`` will do), on the clock ``apply`` is given.
@@ -194,6 +198,8 @@ class World:
                 self._zone_put(zid, update, b)
             case ev.ZoneRemoved(zid):
                 self._zone_gone(self._rec.remove_zone(zid), zid, "removed", b)
+            case ev.TeamPut() | ev.TeamRemoved():
+                self._team(inp, b)
             case ev.TokenChanged(unit, alive):
                 rec = self._units.get(unit)
                 if rec is not None:  # a token alone makes no unit: only a report does
@@ -341,6 +347,14 @@ class World:
         if new.expires_at is not None:
             self._timers.set(new.expires_at, "zone_expire", zid)
 
+    def _team(self, inp: ev.TeamPut | ev.TeamRemoved, b: Batch) -> None:
+        """A team put (refused on its key when it clashes with the teams in force) or dissolved: its units re-told."""
+        err, units = self.teams.apply(inp)
+        if err is not None:
+            self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
+        for rec in filter(None, map(self._units.get, units)):
+            self._tell(rec, b)
+
     def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: Batch) -> None:
         if z is not None:
             b.zones.append((zid, change, z.zone.bounds()))
@@ -416,7 +430,8 @@ class World:
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
         out.directions += [self._no_goal(r) for r in live if r.stepper is None]
         guided = [r for r in live if r.stepper is not None]
-        later = self._later(b)  # a wave's units owed their points: the next share of them
+        # a wave's units owed their points: the next share of them, the rest owed on
+        later, self._owed = owed_share(self._owed, b.dirty, self._units, OWED_PER_TICK)
         if not guided and not later:
             return
         fld, cull, n = self.field, self._rec.cull, self.settings.lookahead
@@ -455,6 +470,7 @@ class World:
                 events.append(event)
             directions.append(d)
             sent.append(rec.position)
+        out.directions[first:] = self.teams.judge(out.directions[first:], self._units)  # the roles' say
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         # a unit whose step failed lost its goal: told so, once the rest are out
@@ -463,26 +479,6 @@ class World:
     def _no_goal(self, rec: UnitRecord) -> Direction:
         self._book.steered(rec, steering.NO_GOAL)
         return steering.no_goal(rec, self.settings.planner_id)
-
-    def _later(self, b: Batch) -> list[tuple[UnitRecord, Advice]]:
-        """The next ``OWED_PER_TICK`` of a wave's units still owed their points, untouched since; the rest stay owed.
-
-        A unit heard, re-advised or gone since its direction went out is
-        answered otherwise and dropped; the points come from the advice it
-        was sent, so a wave paid in chunks gives what one pass would.
-        """
-        owed, self._owed, units = self._owed, [], self._units
-        later: list[tuple[UnitRecord, Advice]] = []
-        for i, (r, a, stepper, version, seq) in enumerate(owed):
-            if r.id in b.dirty or units.get(r.id) is not r or not r.live() or r.seq != seq:
-                continue  # heard, gone or stale since: answered otherwise
-            if r.stepper is not stepper or stepper.version != version:
-                continue  # a new goal or world since: its direction went out afresh
-            if len(later) == OWED_PER_TICK:
-                self._owed = owed[i:]  # checked again when their turn comes
-                break
-            later.append((r, a))
-        return later
 
     def _ask(self, rec: UnitRecord, fld: ThreatField, b: Batch) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None

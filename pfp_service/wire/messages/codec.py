@@ -41,6 +41,7 @@ from pfp_service.wire.messages.structs import (
     ZoneUpdate,
     fit_text,
 )
+from pfp_service.wire.messages.teams import TeamUpdate
 from pfp_service.wire.messages.world import (
     Mission,
     WorldQuery,
@@ -58,6 +59,7 @@ __all__ = [
     "decode_mission",
     "decode_planner_status",
     "decode_preview_request",
+    "decode_team",
     "decode_threat",
     "decode_unit_state",
     "decode_world_query",
@@ -84,6 +86,7 @@ _DECODERS: dict[Any, msgspec.json.Decoder[Any]] = {
         WorldSnapshot,
         Mission,
         ZoneUpdate,
+        TeamUpdate,
     )
 }
 M = TypeVar("M")
@@ -330,6 +333,14 @@ def decode_zone(
     """
     del bounds
     return decode(ZoneUpdate, data, None, origin)
+
+
+def decode_team(
+    data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
+) -> TeamUpdate:
+    """A ``TeamUpdate`` from a ``team/{t}`` PUT payload (see ``decode``); it holds no position."""
+    del bounds
+    return decode(TeamUpdate, data, None, origin)
 
 
 def decode_preview_request(

@@ -127,6 +127,7 @@ class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
     zones: Count = 0  # keep-out zones restored
     corrupt: Count = 0  # rows skipped as unreadable, plus the damaged pages of a state file set aside
     set_aside: Text = ""  # where a damaged state file was moved (kept), if one was
+    teams: Count = 0  # teams restored
 
 
 class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):

@@ -23,10 +23,12 @@ from pfp_service.wire.messages.structs import (
     ZoneUpdate,
     _Message,
 )
+from pfp_service.wire.messages.teams import MAX_TEAM_MEMBERS, TeamUpdate
 
 __all__ = [
     "Mission",
     "MissionParams",
+    "TeamSummary",
     "ThreatSummary",
     "UnitPhase",
     "UnitSummary",
@@ -111,6 +113,18 @@ class ThreatSummary(_Message, frozen=True, kw_only=True):
     ttl_s: NonNegative | None = None
 
 
+class TeamSummary(_Message, frozen=True, kw_only=True):
+    """One team in force (``WorldSnapshot.teams``) and what its roles last said of its members.
+
+    ``notes``: ``"unit: reason"`` for each member whose last direction a role held or redirected
+    (``lost link: controller m1 has stopped``, ``waiting for m1: ...``).
+    """
+
+    id: Id
+    team: TeamUpdate
+    notes: Annotated[list[Text], Meta(max_length=MAX_TEAM_MEMBERS)] = []
+
+
 class WorldSnapshot(_Message, frozen=True, kw_only=True):
     """Reply of ``mumt/{m}/planner/{p}/world``: one page of the zones, threats and units a planner holds.
 
@@ -122,7 +136,8 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     ``?zones_from=<next_zone>;threats_from=<next_threat>;units_from=<next_unit>``
     (``WorldQuery``; a list already complete is left out with ``zones_limit=0``,
     ``threats_limit=0`` or ``units_limit=0``); null means that list is complete
-    in this page, or was left out.
+    in this page, or was left out.  ``teams`` come whole on the first page only
+    (as many as fit; ``teams_total`` counts them all).
     """
 
     planner: Id
@@ -136,6 +151,8 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     zones: Annotated[list[ZoneSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
     zones_total: Count = 0
     next_zone: Id | None = None
+    teams: Annotated[list[TeamSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []  # on the first page
+    teams_total: Count = 0
 
 
 class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):

@@ -1,0 +1,318 @@
+"""The world's teams: the teams in force, their leads' tracks, and the roles' verdicts applied to directions.
+
+``TeamBook.put`` takes a team only when it agrees with the teams in force
+(``TeamIndex``: a unit in two teams, a cycle of leads); ``judge`` runs
+after the planner's directions are computed and rewrites a member's
+direction by its roles (``teams.lead``, ``teams.follow``, ``teams.link``):
+held (a zero vector, ``reach_m`` 0) or sent another way, the reason saying
+which team and why.  The planner's step is what the roles judge: a step cut
+short stays on the planner's line; a role that sends a unit elsewhere sends
+it along ground the lead crossed, to the main element's route, or back
+towards its controller.  Pure: positions come from the world's records.
+
+The team's ``separation_m`` is kept here (``separation``) for the dispersion
+term between friendly units to read; this book applies no separation itself.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import msgspec
+
+from pfp_service.errors import InputError
+from pfp_service.wire import Direction, DirectionStatus, Progress
+from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
+from pfp_service.world import teams as roles
+from pfp_service.world.events import TeamPut, TeamRemoved
+from pfp_service.world.teams import Point, Sight, Verdict
+from pfp_service.world.world_records import UnitRecord
+
+__all__ = ["MAX_TRACK_POINTS", "TeamBook"]
+
+MAX_TRACK_POINTS = 4096  # a lead's track kept at most: the part behind every follower goes first
+_ROUTE_STEPS = 16  # the main element's route ahead, in planner steps, before straight on to its goal
+
+
+class TeamBook:
+    """The teams in force, keyed by id, and what their roles need remembered: each lead's track."""
+
+    def __init__(self) -> None:
+        self.teams: dict[str, TeamUpdate] = {}
+        self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
+        self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
+        self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
+        self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
+        self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
+
+    def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
+        """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
+        old = self.teams.get(inp.team)
+        units = set(old.units()) if old is not None else set()
+        if isinstance(inp, TeamRemoved):
+            self.remove(inp.team)
+            return None, units
+        err = self.put(inp.team, inp.update)
+        return (err, set()) if err is not None else (None, units | set(inp.update.units()))
+
+    def put(self, tid: str, team: TeamUpdate) -> InputError | None:
+        """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is.
+
+        A new team is checked against the teams in force in time of its own size (``TeamIndex``);
+        one replaced or removed rebuilds the index.
+        """
+        old = self.teams.get(tid)
+        index = self._checks if old is None else _index_of({k: v for k, v in self.teams.items() if k != tid})
+        err = index.problem(team)
+        if err is not None:
+            return InputError("$." + err.path, err.reason)
+        index.add(tid, team)
+        self._checks = index
+        self.teams[tid] = team
+        if old is None or old.lead != team.lead:
+            self.tracks[tid] = []
+        if old is None:
+            for u in team.units():
+                self._of.setdefault(u, []).append(tid)
+        else:
+            self._index()
+        return None
+
+    def remove(self, tid: str) -> bool:
+        """Dissolve a team; whether there was one."""
+        if self.teams.pop(tid, None) is None:
+            return False
+        self.tracks.pop(tid, None)
+        self._checks = _index_of(self.teams)
+        self._index()
+        self.said = {u: why for u, why in self.said.items() if u in self._of}
+        return True
+
+    def _index(self) -> None:
+        of: dict[str, list[str]] = {}
+        for tid, team in self.teams.items():
+            for u in team.units():
+                of.setdefault(u, []).append(tid)
+        self._of = of
+
+    def roles(self, unit: str) -> list[tuple[str, tuple[str, ...]]]:
+        """``(team, roles)`` of each team ``unit`` is in."""
+        return [(tid, self.teams[tid].roles(unit)) for tid in self._of.get(unit, ())]
+
+    def summaries(self) -> list[TeamSummary]:
+        """The teams in force by id, each with what its roles last said of its members (``pfp status``)."""
+        return [
+            TeamSummary(
+                id=tid,
+                team=team,
+                notes=[f"{u}: {self.said[u]}"[:1024] for u in team.units() if u in self.said],
+            )
+            for tid, team in sorted(self.teams.items())
+        ]
+
+    def separation(self, unit: str) -> float | None:
+        """The least distance ``unit``'s team asks its members to keep (``None``: by class): dispersion's seam."""
+        for tid in self._of.get(unit, ()):
+            if self.teams[tid].separation_m is not None:
+                return self.teams[tid].separation_m
+        return None
+
+    # -- the roles, applied ----------------------------------------------------------
+    def judge(
+        self, directions: Sequence[Direction], units: Mapping[str, UnitRecord], sight: Sight | None = None
+    ) -> list[Direction]:
+        """``directions`` with each team member's rewritten by its roles (the rest as they are).
+
+        Args:
+            directions: the planner's directions of one batch.
+            units: the world's records, for positions, goals, staleness and progress.
+            sight: line of sight between two points over the terrain, where there is terrain.
+        """
+        if not self.teams:
+            return list(directions)
+        self._track(units)
+        held_before, self.held = self.held, set()
+        out = []
+        for d in directions:
+            rec = units.get(d.unit)
+            if d.unit not in self._of or rec is None or rec.position is None:
+                out.append(d)
+                continue
+            out.append(self._judged(d, rec, units, held_before, sight))
+        return out
+
+    def _track(self, units: Mapping[str, UnitRecord]) -> None:
+        """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
+        for tid, team in self.teams.items():
+            rec = units.get(team.lead) if team.lead is not None else None
+            if rec is None or rec.position is None or rec.stale:
+                continue
+            track = self.tracks.setdefault(tid, [])
+            if not track or math.dist(track[-1], rec.position) >= max(team.corridor_m / 16.0, 0.1):
+                track.append(rec.position)
+            if len(track) > MAX_TRACK_POINTS:
+                self._trim(tid, team, units)
+
+    def _trim(self, tid: str, team: TeamUpdate, units: Mapping[str, UnitRecord]) -> None:
+        """Drop the track behind the rearmost follower; then every other point, if it is still too long."""
+        track = self.tracks[tid]
+        behind = [
+            roles.project(r.position, track)[0]
+            for f in team.follow
+            if (r := units.get(f)) is not None and r.position is not None
+        ]
+        s = min(behind, default=0.0)
+        start = 0
+        for i in range(1, len(track)):
+            s -= math.dist(track[i - 1], track[i])
+            if s < team.corridor_m:
+                break
+            start = i
+        track = track[start:]
+        self.tracks[tid] = track if len(track) <= MAX_TRACK_POINTS else track[::2] + track[-1:]
+
+    def _lost(
+        self, unit: str | None, units: Mapping[str, UnitRecord], held: set[str], moved: bool = True
+    ) -> str:
+        """Why ``unit`` cannot be kept to: ``"is lost (...)"``, ``"has stopped"`` (``"has not moved yet"``
+        when it is not known to have moved), or ``""``."""
+        rec = units.get(unit) if unit is not None else None
+        if rec is None or rec.position is None:
+            return "is lost (no report)"
+        if rec.stale:
+            return "is lost (no report for a while)"
+        stopped = rec.progress.verdict in (Progress.HOLDING, Progress.STALLED)
+        if stopped and unit not in held and rec.last_status is not DirectionStatus.ARRIVED:
+            return "has stopped" if moved else "has not moved yet"
+        return ""
+
+    def _judged(
+        self,
+        d: Direction,
+        rec: UnitRecord,
+        units: Mapping[str, UnitRecord],
+        held_before: set[str],
+        sight: Sight | None,
+    ) -> Direction:
+        at = rec.position
+        assert at is not None
+        if d.reach_m is None or not (d.vector[0] or d.vector[1]):
+            return d  # not moving (arrived, trapped, no goal): nothing to judge
+        to = (at[0] + d.vector[0] * d.reach_m, at[1] + d.vector[1] * d.reach_m)
+        held = held_before | self.held
+        reasons: list[str] = []
+        for tid in self._of[rec.id]:
+            team = self.teams[tid]
+            for verdict in self._verdicts(tid, team, rec.id, at, to, units, held, sight):
+                if verdict.kind == "go":
+                    continue
+                reasons.append(f"team {tid}: {verdict.reason}")
+                if verdict.kind == "hold" or verdict.to is None:
+                    self.held.add(rec.id)
+                    self.said[rec.id] = "; ".join(reasons)
+                    return _held(d, self.said[rec.id])
+                to = verdict.to
+        if not reasons:
+            self.said.pop(rec.id, None)
+            return d
+        self.said[rec.id] = "; ".join(reasons)
+        return _towards(d, at, to, self.said[rec.id])
+
+    def _verdicts(
+        self,
+        tid: str,
+        team: TeamUpdate,
+        unit: str,
+        at: Point,
+        to: Point,
+        units: Mapping[str, UnitRecord],
+        held: set[str],
+        sight: Sight | None,
+    ) -> list[Verdict]:
+        """The verdicts of ``unit``'s roles in ``team``, in the order they apply: lead, follow, robot.
+
+        Each is judged on the step the one before left (a lead's place is then checked against the link).
+        """
+        out: list[Verdict] = []
+        if unit == team.lead and team.follow:
+            main = _rearmost(team.follow, units)
+            if main is None:
+                out.append(Verdict("hold", None, "waiting: no follower has reported"))
+            else:
+                out.append(roles.lead(at, _route(main), team.standoff_m, main.id))
+            to = _end(out, to)
+        if unit in team.follow and _moving(out):
+            lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
+            track = self.tracks.get(tid, [])
+            out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost))
+            to = _end(out, to)
+        if unit in team.robots and _moving(out):
+            ctl = units.get(team.controller) if team.controller is not None else None
+            lost = self._lost(team.controller, units, held)
+            c_at = ctl.position if ctl is not None else None
+            out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
+        return out
+
+
+def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:
+    index = TeamIndex()
+    for tid, team in teams.items():
+        index.add(tid, team)
+    return index
+
+
+def _moving(verdicts: list[Verdict]) -> bool:
+    return all(v.kind != "hold" for v in verdicts)
+
+
+def _end(verdicts: list[Verdict], to: Point) -> Point:
+    last = verdicts[-1] if verdicts else None
+    return last.to if last is not None and last.kind == "to" and last.to is not None else to
+
+
+def _rearmost(follow: Sequence[str], units: Mapping[str, UnitRecord]) -> UnitRecord | None:
+    """The follower furthest from its goal, of those live and with a goal: the one the lead must not lose."""
+    live = [r for f in follow if (r := units.get(f)) is not None and r.position is not None and not r.stale]
+    if not live:
+        return None
+    return max(live, key=lambda r: (r.goal is not None, r.last_distance or 0.0))
+
+
+def _route(main: UnitRecord) -> list[Point]:
+    """The main element's route from where it is: its committed route ahead, if any, then straight to its goal."""
+    assert main.position is not None
+    route = [main.position]
+    if main.stepper is not None:
+        ahead = main.stepper.route_ahead(main.position[0], main.position[1], _ROUTE_STEPS)
+        route += ahead or []
+    if main.goal is not None:
+        route.append(main.goal.position)
+    return route
+
+
+def _held(d: Direction, reason: str) -> Direction:
+    return msgspec.structs.replace(
+        d,
+        vector=(0.0, 0.0),
+        heading_deg=None,
+        reach_m=0.0,
+        lookahead=[],
+        reason=reason[:1024],
+    )
+
+
+def _towards(d: Direction, at: Point, to: Point, reason: str) -> Direction:
+    dx, dy = to[0] - at[0], to[1] - at[1]
+    far = math.hypot(dx, dy)
+    if far <= 0.0:
+        return _held(d, reason)
+    heading = math.degrees(math.atan2(dx, dy)) % 360.0
+    return msgspec.structs.replace(
+        d,
+        vector=(dx / far, dy / far),
+        heading_deg=0.0 if heading >= 360.0 else heading,
+        reach_m=far,
+        lookahead=[],
+        reason=reason[:1024],
+    )

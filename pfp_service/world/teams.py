@@ -1,0 +1,324 @@
+"""The roles of a team as verdicts on one unit's step: ``lead``, ``follow`` and the controller ``link``.
+
+Each role takes where the unit is, where its planned step would take it
+(``to``: the end of the direction's reach) and what the role needs to know of
+the others, and returns a ``Verdict``: go (the step as planned), hold (with
+the reason), or a modified step (a nearer end on the same line, or another
+point to make for, with the reason).  Pure functions of numbers: the world's
+team book (``team_book``) gathers the positions and tracks and applies what
+they say.  A verdict is never an exception: a step too short to judge goes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import shapely
+
+__all__ = [
+    "GO",
+    "STANDOFF_TOLERANCE",
+    "Sight",
+    "Verdict",
+    "follow",
+    "lead",
+    "length",
+    "link",
+    "point_at",
+    "project",
+]
+
+Point = tuple[float, float]
+# Whether two points see each other over the ground (a mast at each end); ``None`` where there is no terrain.
+Sight = Callable[[Point, Point], bool]
+# The lead waits once it is this share of its standoff further ahead than asked (the issue's ±25 %).
+STANDOFF_TOLERANCE = 0.25
+# A step is judged at points this far apart at most (a fraction of the distance kept, so a corridor or a
+# radio range is never stepped over), and at no more than this many points.
+_SAMPLES_MAX = 64
+_CLOSE_M = 1.0  # a point this close to where the unit is: it is there
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """What a role says of a unit's step: ``go``, ``hold`` (``reason``) or ``to`` another end (``reason``)."""
+
+    kind: Literal["go", "hold", "to"]
+    to: Point | None = None
+    reason: str = ""
+
+
+GO = Verdict("go")
+
+
+def _hold(reason: str) -> Verdict:
+    return Verdict("hold", None, reason)
+
+
+def _dist(a: Point, b: Point) -> float:
+    return math.hypot(b[0] - a[0], b[1] - a[1])
+
+
+class _Line:
+    """A polyline as arrays, its segments' lengths and cumulated length: made once, walked many times."""
+
+    __slots__ = ("cum", "pts", "seg")
+
+    def __init__(self, line: Sequence[Point]) -> None:
+        self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
+        self.seg = np.hypot(*np.diff(self.pts, axis=0).T) if len(self.pts) > 1 else np.zeros(0)
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg)])
+
+    @property
+    def length(self) -> float:
+        return float(self.cum[-1])
+
+    def offs(self, at: Point) -> np.ndarray:
+        """How far ``at`` is from each segment (from the one point, for a line of one)."""
+        pts = self.pts
+        if len(pts) == 1:
+            return np.array([_dist(at, (float(pts[0, 0]), float(pts[0, 1])))])
+        a, ab = pts[:-1], np.diff(pts, axis=0)
+        px, py = at
+        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        return np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
+
+    def project(self, at: Point) -> tuple[float, float]:
+        pts = self.pts
+        if len(pts) == 0:
+            return 0.0, math.inf
+        if len(pts) == 1:
+            return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
+        a, ab = pts[:-1], np.diff(pts, axis=0)
+        px, py = at
+        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        off = np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
+        i = int(np.argmin(off))
+        return float(self.cum[i] + t[i] * self.seg[i]), float(off[i])
+
+    def point_at(self, s: float) -> Point:
+        pts, cum = self.pts, self.cum
+        if len(pts) == 0:
+            raise ValueError("point_at: an empty line")
+        if s <= 0.0 or len(pts) == 1:
+            return float(pts[0, 0]), float(pts[0, 1])
+        if s >= cum[-1]:
+            return float(pts[-1, 0]), float(pts[-1, 1])
+        i = int(np.searchsorted(cum, s, side="right")) - 1  # the segment s ends on: cum[i] <= s < cum[i + 1]
+        f = (s - cum[i]) / (cum[i + 1] - cum[i])
+        return float(pts[i, 0] + (pts[i + 1, 0] - pts[i, 0]) * f), float(
+            pts[i, 1] + (pts[i + 1, 1] - pts[i, 1]) * f
+        )
+
+
+def project(at: Point, line: Sequence[Point]) -> tuple[float, float]:
+    """``(s, d)``: how far along ``line`` (a polyline, metres from its start) ``at``'s nearest point lies, and how far off it is.
+
+    One point is a line of no length; no point puts ``at`` infinitely far off.
+    """
+    return _Line(line).project(at)
+
+
+def point_at(line: Sequence[Point], s: float) -> Point:
+    """The point ``s`` metres along ``line`` from its start (its ends beyond them)."""
+    return _Line(line).point_at(s)
+
+
+def length(line: Sequence[Point]) -> float:
+    """The length of a polyline, metres."""
+    return _Line(line).length
+
+
+def _kept(at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float) -> float:
+    """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``."""
+    far = _dist(at, to)
+    n = min(_SAMPLES_MAX, max(1, math.ceil(far / spacing_m))) if spacing_m > 0.0 else 1
+    good = 0.0
+    for k in range(1, n + 1):
+        f = k / n
+        if not ok((at[0] + (to[0] - at[0]) * f, at[1] + (to[1] - at[1]) * f)):
+            return good
+        good = f
+    return good
+
+
+def _shortened(at: Point, to: Point, kept: float, reason: str) -> Verdict:
+    """The step cut to the part kept: go when all of it is, hold when too little is."""
+    if kept >= 1.0:
+        return GO
+    end = (at[0] + (to[0] - at[0]) * kept, at[1] + (to[1] - at[1]) * kept)
+    if _dist(at, end) < _CLOSE_M:
+        return _hold(reason)
+    return Verdict("to", end, reason)
+
+
+def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Verdict:
+    """The scout's step: make for the point ``standoff_m`` ahead of the main element along its route.
+
+    Args:
+        at: where the lead is.
+        route: the main element's route from where it is (its first point) onward.
+        standoff_m: how far ahead the lead keeps, metres along the route.
+        main: the main element's id, for the reason.
+
+    Returns:
+        hold while the lead is at or past its place (saying it waits for the main element once it is
+        more than ``STANDOFF_TOLERANCE`` further ahead than asked); else ``to`` its place on the route;
+        go (its own way) once the main element's route left is no longer than the standoff.
+    """
+    if not route:
+        return _hold(f"no route of {main} to lead along")
+    line = _Line(route)
+    if line.length <= standoff_m:  # the lead has cleared it all
+        return GO  # ... so it goes its own way, not onto the main element's goal
+    s, _off = line.project(at)
+    if s > standoff_m * (1.0 + STANDOFF_TOLERANCE):
+        return _hold(f"waiting for {main}: {s:,.0f} m ahead along its route, standoff {standoff_m:,.0f} m")
+    place = line.point_at(standoff_m)
+    if s >= standoff_m - _CLOSE_M or _dist(at, place) < _CLOSE_M:  # at or past its place: never back
+        return _hold(f"at its standoff {standoff_m:,.0f} m ahead of {main}")
+    return Verdict("to", place, f"leading {main} by {standoff_m:,.0f} m along its route")
+
+
+def follow(
+    at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead_id: str, lost: str
+) -> Verdict:
+    """A follower's step: only onto ground the lead has crossed (its ``track`` buffered by ``corridor_m / 2``).
+
+    Args:
+        at: where the follower is.
+        to: where its planned step ends.
+        track: the lead's track, oldest first.
+        corridor_m: the cleared corridor's width.
+        lead_id: the lead's id, for the reasons.
+        lost: why the lead cannot be followed (lost, stopped), or ``""`` when it can.
+
+    Returns:
+        hold when the lead is lost or stopped, or at the end of the cleared ground; the step cut short
+        where it would leave the corridor; ``to`` a point of the track when the planned step leaves the
+        corridor at once (along the track) or the follower is outside it (back onto it).
+    """
+    if lost:
+        return _hold(f"holding: lead {lead_id} {lost}")
+    if not track:
+        return _hold(f"holding: lead {lead_id} has cleared no ground yet")
+    half = corridor_m / 2.0
+    line = _Line(track)
+    s_at, off_at = line.project(at)
+    if off_at > half:
+        nearest = line.point_at(s_at)
+        return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
+    if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
+        return GO  # both ends within one segment's stadium, which is convex: the whole step is
+    room = _corridor_near(track, half, at, max(_dist(at, to), _CLOSE_M))
+    kept = _kept_in(room, at, to)
+    if kept >= 1.0:
+        return GO
+    if _dist(at, to) * kept >= _CLOSE_M:
+        return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
+    cleared = line.length
+    if s_at >= cleared - _CLOSE_M:  # never back along it
+        return _hold(f"at the end of the ground {lead_id} has cleared")
+    ahead = max(_dist(at, to), _CLOSE_M)
+    while (
+        ahead >= _CLOSE_M
+    ):  # a point of the track ahead, the straight way to it inside (a bend's chord is not)
+        along = line.point_at(s_at + ahead)
+        if _dist(at, along) >= _CLOSE_M and _kept_in(room, at, along) >= 1.0:
+            return Verdict("to", along, f"along the corridor {lead_id} cleared")
+        ahead /= 2.0
+    return _hold(f"at the end of the ground {lead_id} has cleared")
+
+
+def _corridor_near(track: Sequence[Point], half: float, at: Point, reach: float) -> shapely.Geometry:
+    """The corridor (``track`` buffered by ``half``) where a step of ``reach`` from ``at`` can go.
+
+    Only the track's segments within that reach are buffered, so the cost is the step's, not the
+    track's.  GEOS's buffer is inscribed in the true one (its arcs are chords): what it contains is cleared.
+    """
+    pts = np.asarray(track, dtype=float).reshape(-1, 2)
+    if len(pts) == 1:
+        return shapely.Point(pts[0]).buffer(half)
+    a, b = pts[:-1], pts[1:]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    r = reach + half
+    near = np.flatnonzero(
+        (lo[:, 0] <= at[0] + r) & (hi[:, 0] >= at[0] - r) & (lo[:, 1] <= at[1] + r) & (hi[:, 1] >= at[1] - r)
+    )
+    if len(near) == 0:
+        return shapely.Polygon()
+    lines = shapely.MultiLineString([[tuple(a[i]), tuple(b[i])] for i in near])
+    return shapely.buffer(lines, half)
+
+
+def _kept_in(room: shapely.Geometry, at: Point, to: Point) -> float:
+    """How much (0 to 1) of the straight step from ``at`` to ``to`` stays in ``room`` from its start: exact."""
+    far = _dist(at, to)
+    if far <= 0.0:
+        return 1.0 if room.covers(shapely.Point(at)) else 0.0
+    step = shapely.LineString([at, to])
+    if room.covers(step):
+        return 1.0
+    start = shapely.Point(at)
+    parts = shapely.get_parts(step.intersection(room))
+    for part in parts:
+        if isinstance(part, shapely.LineString) and part.distance(start) < 1e-9:
+            reached = max(_dist(at, (float(c[0]), float(c[1]))) for c in part.coords)
+            return min(1.0, reached / far)
+    return 0.0
+
+
+def link(
+    at: Point,
+    to: Point,
+    controller_at: Point | None,
+    radio_range_m: float,
+    controller: str,
+    lost: str,
+    sight: Sight | None = None,
+) -> Verdict:
+    """A robot's step: within ``radio_range_m`` of its controller, and in its sight where there is terrain.
+
+    Args:
+        at: where the robot is.
+        to: where its planned step ends.
+        controller_at: where the controller is (``None``: unknown).
+        radio_range_m: the controller's radio reach.
+        controller: the controller's id, for the reasons.
+        lost: why the controller cannot be kept to (lost, stopped), or ``""``.
+        sight: whether two points see each other over the ground; ``None`` without terrain.
+
+    Returns:
+        hold when the controller is lost or stopped, or the step would break the link at once; the step
+        cut short where it would; ``to`` the controller (turning back) when the link is already broken.
+    """
+    if lost or controller_at is None:
+        return _hold(f"lost link: controller {controller} {lost or 'has no position'}")
+    c = controller_at
+
+    def linked(p: Point) -> bool:
+        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p))
+
+    if not linked(at):
+        far = _dist(at, c)
+        why = (
+            f"{far:,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
+            if far > radio_range_m
+            else f"out of {controller}'s line of sight"
+        )
+        return Verdict("to", c, f"lost link ({why}): turning back")
+    # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow
+    spacing = max(radio_range_m / 16.0, _CLOSE_M) if sight is None else _dist(at, to) / _SAMPLES_MAX
+    kept = _kept(at, to, linked, spacing)
+    beyond = (
+        f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
+        if _dist(to, c) > radio_range_m
+        else f"out of {controller}'s line of sight"
+    )
+    return _shortened(at, to, kept, f"the step would break the link to {controller} ({beyond})")
