@@ -21,7 +21,7 @@ def _fleet(seed: int, n: int) -> list:
     rng = random.Random(seed)
     recs, out = Records(), []
     for i in range(n):
-        rec = recs.add(f"u{i}", True, 0.0, reported=True)
+        rec = recs.book.add(f"u{i}", True, 0.0, reported=True)
         rec.position = (rng.uniform(-500, 500), rng.uniform(-500, 500))
         goal = (rng.uniform(-500, 500), rng.uniform(-500, 500))
         rec.stepper = Stepper(rec.position, goal, resolve(PlannerParams(), rec.position, goal, ()))

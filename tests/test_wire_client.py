@@ -120,6 +120,17 @@ BUILT: dict[str, list[dict[str, Any]]] = {
         },
     ],
     "goal": [{"position": [100, 50]}, {"position": [100, 50], "delta": 2.0, "tolerance": 0.5, "step": 0.25}],
+    "team": [
+        {"members": ["m1", "r1"]},
+        {
+            "lead": "r1",
+            "follow": ["m1"],
+            "standoff_m": 300,
+            "corridor_m": 30,
+            "controller": "m1",
+            "robots": ["r1"],
+        },
+    ],
     "threat": [
         {"position": [40, 20], "sigma_range": 8, "sigma_lateral": 3},
         {
