@@ -56,7 +56,7 @@ class World:
 
     def __init__(self, settings: WorldSettings | None = None) -> None:
         self.settings = s = settings or WorldSettings()
-        self._rec = Records(s.planner.intensity)
+        self._rec = Records(s.planner.intensity, s.terrain)
         self._units = self._rec.units
         self._threats = self._rec.threats
         self._timers = Timers()
