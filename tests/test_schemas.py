@@ -166,6 +166,10 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "LatLon": ({"lat", "lon"}, set()),
     # the planner's origin in its status (added with acknowledged writes and origin checks)
     "Origin": ({"lat", "lon"}, {"alt"}),
+    "TerrainInfo": (
+        {"file", "sha256", "south", "west", "north", "east", "resolution_m", "unit"},
+        {"origin_centred"},
+    ),
     "PlannerStatus": (
         {"planner", "mission", "uptime_s"},
         {"version", "units", "units_stale", "threats", "msgs_in", "msgs_out", "rejected"}

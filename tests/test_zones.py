@@ -12,7 +12,7 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pfp_service.core.zones import Zone, ZoneSet, track_enters
+from pfp_service.core.zones import TOUCH_M, Zone, ZoneSet, track_enters
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
@@ -239,3 +239,23 @@ def test_the_raster_is_exactly_within_its_margin(seed: int) -> None:
     sd = zs.signed_distance(np.stack([gx.ravel(), gy.ravel()], 1)).reshape(shape)
     differ = (got != (sd <= margin)) & (np.abs(sd - margin) > 1e-9)
     assert not differ.any(), sd[differ][:5]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), margin=st.sampled_from([0.0, 0.5, 3.0, 40.0]))
+def test_contains_skipping_far_zones_is_the_full_search(seed: int, margin: float) -> None:
+    """``contains`` measures only zones whose box is within its margin: the same mask as measuring all."""
+    rng = np.random.default_rng(seed)
+    zones = []
+    for k in range(int(rng.integers(1, 40))):
+        x, y = rng.uniform(-200, 200, 2)
+        w, h = rng.uniform(1, 30, 2)
+        if k % 3 == 0:
+            zones.append(Zone.circle(f"c{k}", (float(x), float(y)), float(w)))
+        else:
+            ring = [(x, y), (x + w, y), (x + w, y + h), (x, y + h), (x, y)]
+            zones.append(Zone.polygon(f"p{k}", [(float(a), float(b)) for a, b in ring]))
+    zs = ZoneSet(zones)
+    pts = rng.uniform(-260, 260, (500, 2))
+    full = zs.signed_distance(pts) <= max(TOUCH_M, margin)
+    assert np.array_equal(zs.contains(pts, margin), full), seed

@@ -171,6 +171,18 @@ def register(sub: Any) -> None:
         help="mission origin in WGS-84 degrees (and metres): [0, 0] lies there and positions may be "
         "{lat, lon} (default: none)",
     )
+    p.add_argument(
+        "--terrain",
+        metavar="DEM",
+        help="plan over this DEM (GeoTIFF, DTED, SRTM .hgt; terrain extra), loaded once: threats masked "
+        "by line of sight, ground steeper than --terrain-unit's limit a barrier; with no --origin the "
+        "DEM's centre is the origin (default: none)",
+    )
+    p.add_argument(
+        "--terrain-unit",
+        choices=("foot", "wheeled", "tracked"),
+        help="the mobility class planned for over --terrain: its height and slope limit (default: foot)",
+    )
     p.set_defaults(func=run)
 
 
@@ -210,6 +222,8 @@ _FLAG_KEYS = [
     "preview_wait_ms",
     "state_dir",
     "cluster",
+    "terrain",
+    "terrain_unit",
 ]
 
 
@@ -219,6 +233,10 @@ def run(args: argparse.Namespace) -> int:
 
     flags = {k: getattr(args, k) for k in _FLAG_KEYS}
     cfg = load_config(args.config, os.environ, flags)
+    if cfg.terrain is not None:  # a bad DEM is one line and exit 2, before anything starts
+        from pfp_service.node.terrain import placed
+
+        cfg = placed(cfg)
     if cfg.zones is not None:  # a bad zones file is one line and exit 2, before anything starts
         from pfp_service.geojson import load_zones
 

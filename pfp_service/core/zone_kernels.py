@@ -252,9 +252,10 @@ def signed_many(
     boxes: np.ndarray,
     pts: np.ndarray,
     out: np.ndarray,
+    reach: float,
 ) -> None:
     for i in range(pts.shape[0]):
-        out[i] = point_zone(edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], math.inf)[0]
+        out[i] = point_zone(edges, offsets, circles, boxes, pts[i, 0], pts[i, 1], reach)[0]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -252,12 +252,15 @@ class ZoneSet:
         drop = set(replacing) | {z.id for z in extra}
         return ZoneSet((*(z for z in self.zones if z.id not in drop), *extra))
 
-    def signed_distance(self, points: np.ndarray) -> np.ndarray:
-        """Per point of ``(N, 2)``, metres to the nearest zone (<= 0 inside; ``inf`` with no zones)."""
+    def signed_distance(self, points: np.ndarray, reach: float = math.inf) -> np.ndarray:
+        """Per point of ``(N, 2)``, metres to the nearest zone (<= 0 inside; ``inf`` with no zones, or
+        none whose box is within ``reach``)."""
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.full(len(pts), math.inf)
         if self.zones and len(pts):
-            zone_kernels.signed_many(self.edges, self.offsets, self.circles, self.boxes, pts, out)
+            zone_kernels.signed_many(
+                self.edges, self.offsets, self.circles, self.boxes, pts, out, float(reach)
+            )
         return out
 
     def nearest_many(self, points: np.ndarray) -> tuple[np.ndarray, list[str]]:
@@ -271,7 +274,10 @@ class ZoneSet:
 
     def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
         """Boolean mask: which points lie in some zone (boundary included), or within ``margin_m`` of one."""
-        return self.signed_distance(points) <= max(TOUCH_M, margin_m)
+        # only zones whose box is within the margin can hold a point: the rest are skipped, not measured
+        # (a terrain's hundreds of slope barriers; tests/test_zones.py checks it against the full search)
+        limit = max(TOUCH_M, margin_m)
+        return self.signed_distance(points, limit) <= limit
 
     def zone_at(self, x: float, y: float) -> str:
         """The id of the zone holding ``(x, y)`` (the deepest), or ``""``."""

@@ -12,6 +12,7 @@ Nothing deeper than this module reads the environment.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -121,6 +122,9 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     state_dir: str = "auto"
     # scale-out: several planners share the mission, each guiding the units rendezvous hashing gives it
     cluster: bool = False
+    # a DEM planned over (terrain.live): threats masked by line of sight, slopes past the class a barrier
+    terrain: str | None = None
+    terrain_unit: Literal["foot", "wheeled", "tracked"] = "foot"  # the mobility class planned for
 
     def __post_init__(self) -> None:
         if not 0 <= self.lookahead <= 100:
@@ -136,7 +140,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
         """What the live world needs of this configuration (deliberation is always deferred in the daemon)."""
         from pfp_service.world.events import WorldSettings
 
-        return WorldSettings(
+        settings = WorldSettings(
             planner=self.planner_params(),
             threat_ttl_s=self.threat_ttl_s,
             unit_stale_s=self.unit_stale_s,
@@ -153,6 +157,14 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
             origin=self.origin,
             cluster=self.cluster,
         )
+        if self.terrain is not None:  # loaded once per process (terrain.live.load), then shared
+            from pfp_service.terrain.live import load
+
+            ground = load(self.terrain, self.origin, self.bounds_tuple(), self.terrain_unit)
+            settings = dataclasses.replace(
+                settings, terrain=ground, bounds=ground.bounds, origin=ground.origin
+            )
+        return settings
 
     def bounds_tuple(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
         if self.bounds is None:

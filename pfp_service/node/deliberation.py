@@ -160,7 +160,7 @@ class Deliberators:
         items = [(j.unit, j.token, j.kind, j.detach(), j.deadline - now) for j in chunk]  # the copy, at last
         task = Task(
             _run_chunk,
-            (field.intensity, items, field.zones),
+            (field.intensity, items, field.zones, field.sight),
             lambda out: self._done(out, chunk=chunk),
             budget_s=CHUNK_RUN_S,
             field=self._blobs.of(field.threats),
@@ -199,14 +199,18 @@ class Deliberators:
 
 # -- in the worker processes -------------------------------------------------------
 def _run_chunk(
-    intensity: str, items: list[tuple[str, tuple[int, int], str, Stepper, float]], zones: Any = None
+    intensity: str,
+    items: list[tuple[str, tuple[int, int], str, Stepper, float]],
+    zones: Any = None,
+    sight: Any = None,
 ) -> list[tuple[Deliberated | None, str]]:
-    """``Job.run`` for each item under the field in force (and its keep-out zones), each by its own deadline.
+    """``Job.run`` for each item under the field in force (its keep-out zones, its terrain's sight), each by
+    its own deadline.
 
     An error comes back as text.
     """
     started = time.monotonic()
-    field = world_field(intensity)
+    field = world_field(intensity, sight)
     if zones:  # few, and pickled with the chunk: the threats' blob stays cached in the worker
         field = field.with_zones(zones)
     out: list[tuple[Deliberated | None, str]] = []

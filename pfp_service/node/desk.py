@@ -63,6 +63,7 @@ from pfp_service.geo import Origin
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.log import get_logger
 from pfp_service.node.tasks import Blobs, Outcome, Task
+from pfp_service.node.warmup import warm_wide
 from pfp_service.node.workerproc import forget_fields, retire, world_field, world_threats
 from pfp_service.node.workers import WorkerPool
 from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
@@ -345,7 +346,7 @@ def _compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
     _ARMED[0] = True
     signal.setitimer(signal.ITIMER_REAL, budget_s + ALARM_GRACE_S)
     try:
-        field = world_field(view.settings.planner.intensity)
+        field = world_field(view.settings.planner.intensity, view.settings.terrain)
         result = preview(view, request, time.monotonic, WALK_SHARE * budget_s, max_iter, field)
         _ARMED[0] = False
         if request.geojson:
@@ -418,6 +419,7 @@ def warm_up(settings: WorldSettings | None) -> None:
     )
     preview(zoned.view("z"), None, time.monotonic, 5.0, 10_000, zoned.field)
     assert out.directions
+    warm_wide(base)  # and what only a big world reaches: many threats, shared routes, storms, terrain
 
 
 def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewDesk:

@@ -49,6 +49,7 @@ from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
 from pfp_service.node.status import planner_status
 from pfp_service.node.store import Store
+from pfp_service.node.terrain import terrain_info
 from pfp_service.node.twins import Peers, watch_twins
 from pfp_service.node.worldpages import answer_world, fetch_world
 from pfp_service.node.writes import Writes
@@ -144,6 +145,7 @@ class PlannerNode:
         self._writes = Writes(cfg, self.zid, self._lock, self._wake.set, self._intake.refused)
         # the mission's other planners: peers' tokens for the world, twins for the status and their conflict
         self._peers = Peers(cfg.mission, cfg.planner_id, cfg.cluster, self._lock, self._push)
+        self._peers.terrain = terrain_info(cfg)  # a peer over another DEM is a conflict (the world's say)
         self._declared: list[Any] = []
         self._loop_thread: threading.Thread | None = None
         self._trim = Trim()
@@ -210,7 +212,7 @@ class PlannerNode:
             self._out.event(ev, collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
-        twins = (s, m, p, self.zid, self._stop, self._peers.on_twin)
+        twins = (s, m, p, self.zid, self._stop, self._peers.on_twin, self._peers.on_terrain)
         self._twins_thread = threading.Thread(target=watch_twins, args=twins, name="pfp-twins", daemon=True)
         self._twins_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})

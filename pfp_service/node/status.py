@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from pfp_service import __version__
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.loopstats import Latency
+from pfp_service.node.terrain import terrain_info
 from pfp_service.wire import PlannerStatus
 
 __all__ = ["planner_status"]
@@ -50,4 +51,5 @@ def planner_status(
         origin=cfg.origin,
         faults=c["faults"],
         twins=twins,
+        terrain=terrain_info(cfg),
     )

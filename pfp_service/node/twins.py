@@ -18,8 +18,8 @@ import zenoh
 from pfp_service.errors import InputError
 from pfp_service.node.log import get_logger
 from pfp_service.wire import keys
-from pfp_service.wire.messages import decode_planner_status
-from pfp_service.world.events import Input, PeerPlanner
+from pfp_service.wire.messages import TerrainInfo, decode_planner_status
+from pfp_service.world.events import Input, PeerPlanner, PeerTerrain
 
 __all__ = ["PEERS_EVERY_S", "PEERS_KNOWN_S", "PEER_MISSES", "Peers", "watch_twins"]
 
@@ -35,8 +35,10 @@ def watch_twins(
     zid: str,
     stop: threading.Event,
     twin: Callable[[str, bool], None],
+    terrain: Callable[[str, TerrainInfo | None], None] | None = None,
 ) -> None:
-    """Until ``stop``: call ``twin(session id, True)`` when a twin appears and ``(.., False)`` when it goes."""
+    """Until ``stop``: call ``twin(session id, True)`` when a twin appears and ``(.., False)`` when it goes,
+    and ``terrain(planner, its TerrainInfo)`` for every other planner of the mission that answers."""
     selector = keys.planner_statuses(mission)
     missed: dict[str, int] = {}  # twins' sessions -> asks missed in a row
     while not stop.wait(PEERS_EVERY_S):
@@ -50,6 +52,8 @@ def watch_twins(
                     st = decode_planner_status(reply.ok.payload.to_bytes())
                     if st.planner == planner_id and st.session and st.session != zid:
                         seen.add(st.session)
+                    elif st.planner != planner_id and terrain is not None:
+                        terrain(st.planner, st.terrain)
         except Exception:  # the session is closing under us
             if stop.is_set():
                 return
@@ -92,6 +96,8 @@ class Peers:
         self._lock = lock
         self._push = push
         self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
+        self.terrain: TerrainInfo | None = None  # this planner's (``node.terrain.terrain_info``)
+        self._grounds: dict[str, str | None] = {}  # peers' terrain hashes, as last told to the world
 
     def on_token(self, sample: zenoh.Sample) -> None:
         """A planner's liveliness token came or went."""
@@ -124,6 +130,15 @@ class Peers:
         name = f"{self._planner_id[:50]}-{zid[:12]}"
         self._twinned(name, alive)
         self._push(PeerPlanner(name, alive, session=zid))
+
+    def on_terrain(self, planner: str, theirs: TerrainInfo | None) -> None:
+        """``watch_twins``: planner ``planner`` of the mission plans over ``theirs``: the world is told
+        (``PeerTerrain``) each time it changes, and decides whether it is a conflict."""
+        its = theirs.sha256 if theirs is not None else None
+        if self._grounds.get(planner, "") == its:
+            return
+        self._grounds[planner] = its
+        self._push(PeerTerrain(planner, theirs, self.terrain))
 
     def twins(self) -> tuple[str, ...]:
         """The twins now, sorted, at most 64 (``PlannerStatus.twins``)."""

@@ -40,14 +40,15 @@ def world_threats() -> tuple[Any, ...]:
     return _WORLD["threats"]  # type: ignore[no-any-return]
 
 
-def world_field(intensity: str) -> Any:
-    """The ``ThreatField`` of ``world_threats()``, built once per field and intensity, shared by every task."""
+def world_field(intensity: str, sight: Any = None) -> Any:
+    """The ``ThreatField`` of ``world_threats()``, built once per field, intensity and sight (the terrain's,
+    ``core.visibility``), shared by every task."""
     fields = _WORLD["fields"]
-    got = fields.get(intensity)
+    got = fields.get((intensity, sight))
     if got is None:
         from pfp_service.core import ThreatField
 
-        got = fields[intensity] = ThreatField(_WORLD["threats"], intensity)  # type: ignore[arg-type]
+        got = fields[(intensity, sight)] = ThreatField(_WORLD["threats"], intensity, sight=sight)  # type: ignore[arg-type]
     return got
 
 

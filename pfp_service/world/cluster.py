@@ -16,12 +16,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from pfp_service.wire import ConflictEvent
-from pfp_service.world.events import Batch, PeerPlanner, WorldSettings
+from pfp_service.wire.messages import TerrainInfo
+from pfp_service.world.events import Batch, PeerPlanner, PeerTerrain, WorldSettings
 from pfp_service.world.ownership import Ownership
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import UnitRecord, Units
 
-__all__ = ["Cluster"]
+__all__ = ["Cluster", "terrain_conflict"]
 
 
 class Cluster:
@@ -67,6 +68,14 @@ class Cluster:
             why = f"planner {planner!r} also serves mission {s.mission!r}; both answer every unit"
             b.out.events.append(ConflictEvent(planner=s.planner_id, other=planner, reason=why))
 
+    def terrain(self, inp: PeerTerrain, b: Batch) -> None:
+        """A peer plans over another DEM (another sha256, or none) than this one: it cannot share the units."""
+        reason = terrain_conflict(inp.mine, inp.theirs, self.settings.mission, inp.planner)
+        if reason is not None:
+            b.out.events.append(
+                ConflictEvent(planner=self.settings.planner_id, other=inp.planner, reason=reason)
+            )
+
     def settle(self, planner: str, now: float, b: Batch) -> None:
         """A peer's ``peer`` timer is due at ``now``: gone for the whole debounce, its units move."""
         s = self.settings
@@ -88,3 +97,21 @@ class Cluster:
             ):  # stale: at its next report
                 self._start(rec, b)
             self._tell(rec, b)
+
+
+def terrain_conflict(
+    mine: TerrainInfo | None, theirs: TerrainInfo | None, mission: str, other: str
+) -> str | None:
+    """Why planner ``other`` cannot share ``mission`` with this one's terrain, or ``None`` if it can."""
+    ours = mine.sha256 if mine is not None else None
+    its = theirs.sha256 if theirs is not None else None
+    if ours == its:
+        return None
+
+    def name(t: TerrainInfo | None) -> str:
+        return f"{t.file} (sha256 {t.sha256[:12]})" if t is not None else "no terrain"
+
+    return (
+        f"planner {other!r} serves mission {mission!r} over {name(theirs)}, this one over {name(mine)}: "
+        "their directions and previews disagree wherever the ground matters"
+    )

@@ -30,11 +30,12 @@ from pfp_service.wire import (
     WorldSnapshot,
     keys,
 )
-from pfp_service.wire.messages import TeamUpdate, ZoneCircle, ZoneUpdate
+from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
 
 if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
     from pfp_service.core import Stepper, Threat, ThreatField
     from pfp_service.core.zones import Zone, ZoneSet
+    from pfp_service.world.terrain import Ground
 
 __all__ = [
     "Deliberated",
@@ -49,6 +50,7 @@ __all__ = [
     "MissionShared",
     "Outputs",
     "PeerPlanner",
+    "PeerTerrain",
     "StateReported",
     "TeamPut",
     "TeamRemoved",
@@ -218,6 +220,16 @@ class PeerPlanner:
 
 
 @dataclass(frozen=True, slots=True)
+class PeerTerrain:
+    """Planner ``planner`` of this mission plans over ``theirs`` (``None``: no terrain), this one over ``mine``,
+    as their statuses say (``node.twins.watch_twins``): the world decides whether they can share units."""
+
+    planner: str
+    theirs: TerrainInfo | None
+    mine: TerrainInfo | None
+
+
+@dataclass(frozen=True, slots=True)
 class Tick:
     """Time passed: run the timers due by ``now``.
 
@@ -246,6 +258,7 @@ Input = Union[  # noqa: UP007
     MissionRestored,
     MissionShared,
     PeerPlanner,
+    PeerTerrain,
     Tick,
 ]
 
@@ -419,6 +432,7 @@ class WorldSettings:
     push_retries: int = 4  # ... this many times, until the unit's next report is answered
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
     origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
+    terrain: Ground | None = None  # the DEM planned over (``world.terrain``): sight and slope barriers
 
     def params_for(self, goal: Goal) -> PlannerParams:
         """A unit's planner parameters: service defaults, then the goal's overrides."""

@@ -37,6 +37,7 @@ from pfp_service.world.events import (
     MissionRestored,
     MissionShared,
     PeerPlanner,
+    PeerTerrain,
     StateReported,
     TeamPut,
     TeamRemoved,
@@ -286,7 +287,7 @@ KINDS: tuple[Kind, ...] = (
         own_unit=True,
     ),
     Kind("unit token", K.ALIVE_UNIT, "token", (TokenChanged,), own_unit=True),
-    Kind("planner token", K.ALIVE_PLANNER, "token", (PeerPlanner,), writers=("planner",)),
+    Kind("planner token", K.ALIVE_PLANNER, "token", (PeerPlanner, PeerTerrain), writers=("planner",)),
     Kind(
         "mission",
         K.UNIT_MISSION,

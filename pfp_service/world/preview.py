@@ -34,6 +34,7 @@ from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, PreviewRequest
 from pfp_service.world import translate
+from pfp_service.world.terrain import sight_of
 from pfp_service.world.world import UnitView, unit_key
 
 __all__ = ["HEAVY_STEPS", "MAX_PREVIEW_WHATIFS", "Cost", "admit", "preview"]
@@ -166,6 +167,8 @@ def preview(
     shared = field
     if field is not None and extra:  # the world's field, its rows reused: only the what-ifs are packed
         shared = field.plus(extra, replaced)
+    if shared is None and view.settings.terrain is not None:  # over terrain: each threat masked by its sight
+        shared = ThreatField(threats, view.settings.planner.intensity, sight=sight_of(view.settings.terrain))
     if view.zones:  # the keep-out zones in force: the preview respects them as the live unit does
         base = shared if shared is not None else ThreatField(threats, view.settings.planner.intensity)
         shared = base.with_zones(view.zones)

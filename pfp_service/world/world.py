@@ -66,7 +66,7 @@ class World:
 
     def __init__(self, settings: WorldSettings | None = None) -> None:
         self.settings = s = settings or WorldSettings()
-        self._rec = Records(s.planner.intensity)
+        self._rec = Records(s.planner.intensity, s.terrain)
         self._book = self._rec.book  # the units' one writer (``units.Units``): every step of a unit's phase
         self._units = self._rec.units
         self._threats = self._rec.threats
@@ -216,6 +216,8 @@ class World:
                     self._rec.share(rec, mission)
             case ev.PeerPlanner():
                 self._cluster.peer(inp, b)
+            case ev.PeerTerrain():
+                self._cluster.terrain(inp, b)
             case ev.Tick(t, shed):
                 self.limits.overload += shed
                 self._run_timers(t, b)

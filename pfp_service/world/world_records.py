@@ -21,6 +21,7 @@ from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.zones import Zone, ZoneSet
 from pfp_service.wire import Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world.terrain import Ground, ground_zones, sight_of
 from pfp_service.world.units import UnitRecord, Units
 
 __all__ = ["Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
@@ -44,7 +45,7 @@ class ZoneRecord:
 class Records:
     """Every unit and threat the world holds, the counts kept as they change, and the field of the threats."""
 
-    def __init__(self, intensity: str = "peak") -> None:
+    def __init__(self, intensity: str = "peak", ground: Ground | None = None) -> None:
         self.book = Units()  # the units' records and their one writer (``units.Units``)
         self.units: dict[str, UnitRecord] = self.book.records
         self.threats: dict[str, ThreatRecord] = {}
@@ -55,6 +56,10 @@ class Records:
         self._zone_set: ZoneSet | None = None  # built when asked, until the zones change
         self.cull: CullIndex | None = None
         self._stats: FieldStats | None = None  # the threats' ``field_stats``: at first use, until they change
+        self.sight, self._barriers = (
+            sight_of(ground),
+            ground_zones(ground),
+        )  # the terrain's (``world.terrain``)
 
     @property
     def field(self) -> ThreatField:
@@ -64,12 +69,13 @@ class Records:
                 ordered = [self.threats[k] for k in sorted(self.threats)]
                 for t in ordered:  # a threat put packs its row; the others keep theirs
                     if t.row is None:
-                        t.row = ThreatField([t.threat], self.intensity).packed[0]  # type: ignore[arg-type]
+                        t.row = ThreatField([t.threat], self.intensity, sight=self.sight).packed[0]  # type: ignore[arg-type]
                 threats, rows = [t.threat for t in ordered], [t.row for t in ordered]
                 self._bare = ThreatField.from_rows(threats, rows, self.intensity)  # type: ignore[arg-type]
+                self._bare.sight = self.sight  # a worker rebuilds the field from its threats with it
                 self.cull = CullIndex(self._bare.packed) if len(ordered) >= MIN_THREATS else None
                 self._stats = None  # a wave changes the threats and starts no mission: ``stats`` when asked
-            self._field = self._bare.with_zones(self.zone_set) if self.zones else self._bare
+            self._field = self._bare.with_zones(self.zone_set) if self.zones or self._barriers else self._bare
         return self._field
 
     @property
@@ -83,7 +89,7 @@ class Records:
     def zone_set(self) -> ZoneSet:
         """The zones in force, in id order (``core.zones.ZoneSet``)."""
         if self._zone_set is None:
-            self._zone_set = ZoneSet(self.zones[k].zone for k in sorted(self.zones))
+            self._zone_set = ZoneSet([*self._barriers, *(self.zones[k].zone for k in sorted(self.zones))])
         return self._zone_set
 
     # the world's input handlers name these two here; the writes are the units' owner's

@@ -28,7 +28,7 @@ from pfp_service.constraints import (
     check_spreads,
 )
 from pfp_service.errors import InputError
-from pfp_service.geo import LatLon, Origin
+from pfp_service.geo import Latitude, LatLon, Longitude, Origin
 from pfp_service.wire.messages.guidance import Progress, RouteKind
 
 __all__ = [
@@ -54,6 +54,7 @@ __all__ = [
     "Origin",
     "PlannerStatus",
     "PreviewRequest",
+    "TerrainInfo",
     "ThreatUpdate",
     "UnitKind",
     "UnitState",
@@ -378,6 +379,20 @@ class ErrorReply(_Message, frozen=True, kw_only=True):
         return cls(error=fit_text(exc.reason), field=fit_text(exc.path or "$"))
 
 
+class TerrainInfo(msgspec.Struct, frozen=True, kw_only=True):
+    """The DEM a planner plans over (``PlannerStatus.terrain``): planners of one mission must share it."""
+
+    file: Text  # the file's name, without its directory
+    sha256: Annotated[str, Meta(pattern="^[0-9a-f]{64}$")]
+    south: Latitude
+    west: Longitude
+    north: Latitude
+    east: Longitude
+    resolution_m: Positive  # the planner's terrain cell
+    unit: Text  # the mobility class planned for (core.mobility): its height and slope limit
+    origin_centred: bool = False  # the mission origin is the DEM's centre (none was given)
+
+
 class PlannerStatus(_Message, frozen=True, kw_only=True):
     """Reply of ``mumt/{m}/planner/{p}/status``: health and counters."""
 
@@ -405,3 +420,4 @@ class PlannerStatus(_Message, frozen=True, kw_only=True):
     # twins: other planners this one sees answering the same units (another id while not --cluster, or a
     # second session under its own id), each "ID" or "ID-SESSION"; pfp status and pfp health warn of them
     twins: Annotated[tuple[Text, ...], Meta(max_length=64)] = ()
+    terrain: TerrainInfo | None = None  # the DEM planned over (pfp serve --terrain); none: flat, open ground

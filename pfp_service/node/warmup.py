@@ -1,0 +1,125 @@
+"""The wide warm-up: a big tick run once before serving, so that no numba kernel compiles in the live loop.
+
+``desk.warm_up`` runs the small cases (one threat, none, a keep-out zone);
+``warm_wide`` runs what only a big world reaches, each through the path the
+live loop takes:
+
+* ``MIN_THREATS`` threats and more: the culled kernels (``cull._culled_descent``,
+  ``cull._fill``, ``cull.point_level``, ``cull._cell_level``) and a zone's
+  step rule among them (``steprule.judge_zoned``, called from Python too by
+  ``Stepper.follow``);
+* two units trapped in a cup of keep-out zone with one goal: the second
+  builds the shared route grid (``grid._edges``, ``cores._raster``,
+  ``polylines._shortcut_kept``);
+* the same kernels past ``kernels.PARALLEL_MIN_PAIRS`` (a storm's tick):
+  ``cull._culled_descent_parallel``, ``cull._predict_parallel``,
+  ``kernels.batch_descent``, and past ``PARALLEL_MIN_PAIRS_LEVEL``
+  ``kernels._parallel_level``;
+* a threat over terrain (a synthetic hill): the viewshed sweep
+  (``terrain.viewshed._sweep``) and every kernel on rows that carry a
+  visibility window.
+
+A kernel loads from numba's cache in milliseconds, or compiles in seconds
+on a fresh checkout: either way here, not in the loop.
+``tests/test_warmup.py`` runs a bigger tick after this, in a fresh
+interpreter, and fails if any kernel gained a signature.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from pfp_service.core import PlannerParams, Stepper, kernels, resolve
+from pfp_service.core.cull import MIN_THREATS, CullIndex, cell_level, predict
+from pfp_service.core.zones import ZoneSet
+from pfp_service.wire import Goal, ThreatUpdate, UnitState
+from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world.events import GoalSet, Input, StateReported, ThreatPut, Tick, WorldSettings, ZonePut
+
+__all__ = ["warm_wide"]
+
+CROWD_THREATS = MIN_THREATS + 8
+
+
+def warm_wide(base: WorldSettings) -> None:
+    """Run the big tick's kernels once (``base``'s planner parameters, deliberation inline, no bounds)."""
+    from pfp_service.world.world import World
+
+    settings = dataclasses.replace(base, deliberation="inline", bounds=None, terrain=None)
+    world = World(settings)
+    world.apply(_crowd(), 0.0)
+    for k in range(1, 4):  # the trapped pair moves a little: their routes are walked, and shared
+        world.apply(
+            [StateReported(f"c{i}", UnitState(position=(0.01 * k, 2.0 * i - 1.0))) for i in (0, 1)], k
+        )
+    _parallel(world.field.packed, world.field.zones)
+    # a batch's unit in plain descent among zones, its gradient given (``advise_many``): judged from Python
+    lone = Stepper((0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0)), None, 0)
+    lone.follow(-30.0, 0.0, 1.0, 0.0, 0.0, 1.0, world.field)
+    _terrain(settings)
+
+
+def _crowd() -> list[Input]:
+    """Threats on a ring far off, a cup of zone round two units whose goal lies past its bottom."""
+    inputs: list[Input] = []
+    for j in range(CROWD_THREATS):
+        a = 2.0 * math.pi * j / CROWD_THREATS
+        where = (60.0 + 200.0 * math.cos(a), 200.0 * math.sin(a))
+        inputs.append(ThreatPut(f"w{j}", ThreatUpdate(position=where, sigma_range=6.0, sigma_lateral=4.0)))
+    cup = [(-20.0, 20.0), (20.0, 20.0), (20.0, -20.0), (-20.0, -20.0), (-20.0, -18.0)]
+    cup += [(18.0, -18.0), (18.0, 18.0), (-20.0, 18.0), (-20.0, 20.0)]
+    inputs.append(ZonePut("cup", ZoneUpdate(polygon=[cup])))
+    for i in (0, 1):
+        inputs.append(StateReported(f"c{i}", UnitState(position=(0.0, 2.0 * i - 1.0))))
+        inputs.append(GoalSet(f"c{i}", Goal(position=(100.0, 0.0))))
+    return inputs
+
+
+def _parallel(packed: np.ndarray, zones: ZoneSet) -> None:
+    """The descent, look-ahead (among zones and none) and level kernels, serial and past their parallel
+    thresholds."""
+    rng = np.random.default_rng(0)
+    n = kernels.PARALLEL_MIN_PAIRS  # pairs >= points, whatever the threats
+    pts = np.ascontiguousarray(rng.uniform(-200.0, 300.0, (n, 2)))
+    goals = np.ascontiguousarray(np.tile([100.0, 0.0], (n, 1)))
+    gains = np.ones(n)
+    out = np.empty((n, 4))
+    kernels.descent_many(packed, pts, goals, gains, out)
+    index = CullIndex(packed)
+    index.descent(pts, goals, gains, out)
+    cell_level(index, pts[:64])
+    stepper = Stepper(
+        (0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0), []), None, 0
+    )
+    units = np.tile(stepper.rules(), (n // 4, 1))
+    for idx in (index, None):
+        for among in (zones, None):
+            for m in (n // 4, 2):
+                predict(packed, idx, pts[:m], units[:m], 4, among)
+    big = max(1, math.ceil(kernels.PARALLEL_MIN_PAIRS_LEVEL / max(packed.shape[0], 1)))
+    kernels.batch_level(packed, np.ascontiguousarray(rng.uniform(-200.0, 300.0, (big, 2))), np.empty(big))
+
+
+def _terrain(settings: WorldSettings) -> None:
+    """A threat on a hill over a small grid, a unit guided past it: the sweep and the masked rows."""
+    from pfp_service.terrain.grid import TerrainGrid
+    from pfp_service.terrain.live import of_grid
+    from pfp_service.world.world import World
+
+    xs = np.arange(41) * 10.0 - 200.0
+    gx, gy = np.meshgrid(xs, xs)
+    hill = 100.0 + 30.0 * np.exp(-(gx**2 + gy**2) / (2 * 60.0**2))
+    ground = of_grid(TerrainGrid(-200.0, -200.0, 10.0, hill))
+    world = World(dataclasses.replace(settings, terrain=ground, bounds=ground.bounds))
+    world.apply(
+        [
+            ThreatPut("h", ThreatUpdate(position=(0.0, 0.0), sigma_range=60.0, sigma_lateral=40.0)),
+            StateReported("g", UnitState(position=(-150.0, -150.0))),
+            GoalSet("g", Goal(position=(150.0, 150.0))),
+            Tick(1.0),
+        ],
+        0.0,
+    )

@@ -1,0 +1,156 @@
+"""Terrain for ``pfp serve``: one DEM loaded at start, placed round the mission origin, as the live world takes it.
+
+``load`` reads the DEM once (through ``planning.prepare``, the very path
+``pfp plan --terrain`` takes), over the mission's bounds, or over the whole
+DEM when there are none (its box on the plane, shrunk by ``EDGE_SHARE`` so
+that every corner lies within it), and with no origin given places the plane
+at the DEM's centre (``LiveTerrain.centred``, which the status says).
+
+A ``LiveTerrain`` is what the world's ``settings.terrain`` holds: its
+``sight`` (each threat's line of sight at the unit class's height) and its
+``zones`` (ground steeper than the class's limit, and unknown ground, as
+keep-out zones), and for the status its ``about``: file name, sha256, bounds
+in latitude and longitude, resolution.
+
+Passed by name, not by value.  A ``LiveTerrain`` is pickled as the arguments
+it was loaded with; a process that has loaded them (the planner, and every
+worker forked from its warm zygote) gets the same object back from
+``_LOADED``, and any other loads the file again.  A preview's view or a
+deliberation chunk then ships a few hundred bytes, never the grid.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from dataclasses import dataclass
+from typing import Any
+
+from pfp_service.core.mobility import CLASSES, Mobility
+from pfp_service.core.zones import Zone
+from pfp_service.geo import Origin
+from pfp_service.terrain.grid import TerrainGrid
+from pfp_service.terrain.threat_sight import TerrainSight
+
+__all__ = ["EDGE_SHARE", "LiveTerrain", "TerrainAbout", "load", "of_grid"]
+
+EDGE_SHARE = 0.01  # of the DEM's span, kept off each of its edges: the plane's box must lie inside it
+Bounds = tuple[tuple[float, float], tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class TerrainAbout:
+    """What the status says of the terrain (``wire.TerrainInfo``)."""
+
+    file: str
+    sha256: str
+    south: float
+    west: float
+    north: float
+    east: float
+    resolution_m: float
+    unit: str  # the mobility class planned for
+    centred: bool  # the mission origin is the DEM's centre (none was given)
+
+
+@dataclass(frozen=True, eq=False)
+class LiveTerrain:
+    """A DEM placed under a live mission: the threats' line of sight and the slope barriers (``load``)."""
+
+    grid: TerrainGrid
+    unit: Mobility
+    origin: Origin
+    bounds: Bounds  # the planner's bounds: the mission's, or the terrain's extent
+    about: TerrainAbout
+    zones: tuple[Zone, ...]
+    look: TerrainSight
+    key: tuple[Any, ...] = ()  # ``load``'s arguments: how it is pickled
+
+    def __call__(self, threat: Any, box: tuple[float, float, float, float]) -> Any:
+        """Threat ``threat``'s window (a ``core.visibility.Sight``): the terrain is its own sight, so a
+        field's ``sight`` pickles by name."""
+        return self.look(threat, box)
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        if not self.key:
+            raise TypeError("a terrain made from a grid (of_grid) is not passed between processes")
+        return _restore, self.key
+
+
+_LOADED: dict[tuple[Any, ...], LiveTerrain] = {}
+
+
+def _restore(*key: Any) -> LiveTerrain:
+    got = _LOADED.get(key)
+    return got if got is not None else load(*key)
+
+
+def _sha256(path: str) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def load(path: str, origin: Origin | None, bounds: Bounds | None, unit: str = "foot") -> LiveTerrain:
+    """The DEM at ``path`` under a mission of ``origin`` (``None``: the DEM's centre) and ``bounds``.
+
+    Once per process and arguments: a second call returns the first's terrain.
+
+    Raises:
+        InputError: the DEM cannot be read, placed, or does not cover the bounds (one line, naming the file).
+    """
+    from pfp_service.terrain.dem import check, info
+    from pfp_service.terrain.planning import prepare
+
+    key = (path, origin, bounds, unit)
+    if key in _LOADED:
+        return _LOADED[key]
+    check(path)
+    about = info(path)
+    s, w, n, e = about.bounds_latlon
+    placed = origin if origin is not None else Origin(lat=(s + n) / 2.0, lon=(w + e) / 2.0)
+    area = bounds if bounds is not None else _inner_box(placed, about.bounds_latlon)
+    ground = prepare(path, placed, [], area, CLASSES[unit])
+    (x0, y0), (x1, y1) = ground.bounds
+    terrain = LiveTerrain(
+        ground.grid,
+        ground.unit,
+        placed,
+        ((x0, y0), (x1, y1)),
+        TerrainAbout(
+            os.path.basename(path), _sha256(path), s, w, n, e, ground.grid.cell_m, unit, origin is None
+        ),
+        tuple(ground.zones),
+        ground.sight,
+        key,
+    )
+    _LOADED[key] = _LOADED[(path, placed, bounds, unit)] = terrain  # asked again with the origin it chose
+    return terrain
+
+
+def _inner_box(origin: Origin, latlon: tuple[float, float, float, float]) -> Bounds:
+    """The box on ``origin``'s plane inside the DEM's ``(south, west, north, east)``, ``EDGE_SHARE`` off each edge."""
+    s, w, n, e = latlon
+    ds, dw = EDGE_SHARE * (n - s), EDGE_SHARE * (e - w)
+    corners = [origin.to_local(lat, lon) for lat in (s + ds, n - ds) for lon in (w + dw, e - dw)]
+    sw, se, nw, ne = corners[0], corners[1], corners[2], corners[3]
+    x0, x1 = max(sw[0], nw[0]), min(se[0], ne[0])
+    y0, y1 = max(sw[1], se[1]), min(nw[1], ne[1])
+    return ((float(math.ceil(x0)), float(math.ceil(y0))), (float(math.floor(x1)), float(math.floor(y1))))
+
+
+def of_grid(grid: TerrainGrid, unit: str = "foot", zones: tuple[Zone, ...] = ()) -> LiveTerrain:
+    """A terrain straight from a grid, in this process only (the warm-up's and the tests' ground)."""
+    ny, nx = grid.shape
+    extent = (
+        (grid.x0_m, grid.y0_m),
+        (grid.x0_m + (nx - 1) * grid.cell_m, grid.y0_m + (ny - 1) * grid.cell_m),
+    )
+    mob = CLASSES[unit]
+    about = TerrainAbout("", "", 0.0, 0.0, 0.0, 0.0, grid.cell_m, unit, False)
+    return LiveTerrain(
+        grid, mob, Origin(lat=0.0, lon=0.0), extent, about, zones, TerrainSight(grid, mob.height_m)
+    )

@@ -1,0 +1,39 @@
+"""The ground under the live world, as the world takes it: a line of sight for the threats and barriers.
+
+``WorldSettings.terrain`` holds a ``Ground`` (``terrain.live.LiveTerrain``,
+loaded by the node before the world starts): every threat's packed row is
+masked by its ``sight`` (``core.visibility``), and its ``zones`` (ground too
+steep for the mission's unit class, and unknown ground) are in force with the
+keep-out zones put on the wire, so the stepper, deliberation and previews
+treat them alike, as ``pfp plan --terrain`` does.  Neither changes while the
+planner runs.  The world never reads the DEM: it is handed what it needs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+from pfp_service.core.visibility import Window
+from pfp_service.core.zones import Zone
+
+__all__ = ["Ground", "ground_zones", "sight_of"]
+
+
+class Ground(Protocol):
+    """What the world takes from a terrain: a ``core.visibility.Sight`` and the barrier zones."""
+
+    @property
+    def zones(self) -> Sequence[Zone]: ...
+
+    def __call__(self, threat: object, box: tuple[float, float, float, float]) -> Window | None: ...
+
+
+def sight_of(ground: Ground | None) -> Ground | None:
+    """The sight a field of the world's threats is built with (the ground itself), or ``None``."""
+    return ground
+
+
+def ground_zones(ground: Ground | None) -> list[Zone]:
+    """The barriers the ground puts in force before any keep-out zone, in their own order."""
+    return list(ground.zones) if ground is not None else []
