@@ -113,6 +113,10 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         ({"lat": 95.0, "lon": 0.0}, ".lat", "must be < 89.9"),
         ({"lat": 0.0}, ".lon", "is required"),
     ],
+    "terrain": [
+        ("x", "", "expected object"),
+        ({"file": "a.tif"}, ".sha256", "is required"),
+    ],
     "sigma": [
         *FINITE,
         (BIG, "", "expected a finite number"),
@@ -316,6 +320,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "latency_p50_ms": ("nonneg", OPT),
         "latency_p99_ms": ("nonneg", OPT),
         "twins": ("texts", DEF),
+        "terrain": ("terrain", OPT),
     },
     "event.rejected": {
         **EVENT_FIELDS,
