@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from pfp_clients.expectations import InjectReport
@@ -35,11 +36,12 @@ from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
 from pfp_clients.inject import report_lines, run_inject
 from pfp_clients.script import AddThreat, SetGoal, load_script
 from pfp_clients.sim import SimUnit
-from pfp_service.core.metrics import measure
+from pfp_service.core.metrics import Epoch, measure
+from pfp_service.core.threat import ThreatField
 from pfp_service.errors import map_zenoh_errors
 from pfp_service.team import load_team
 
-__all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DemoOptions", "run_demo"]
+__all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DEMO_TERRAIN_SCRIPT", "DEMO_TERRAIN_TEAM", "DemoOptions", "run_demo"]
 
 # a source checkout keeps examples/ beside clients/; an installed copy (the docker image) finds it in the cwd
 _EXAMPLES = next(
@@ -48,6 +50,9 @@ _EXAMPLES = next(
 )
 DEMO_TEAM = _EXAMPLES / "demo-team.yaml"
 DEMO_SCRIPT = _EXAMPLES / "demo-inject.yaml"
+DEMO_TERRAIN_TEAM = _EXAMPLES / "demo-terrain-team.yaml"
+DEMO_TERRAIN_SCRIPT = _EXAMPLES / "demo-terrain-inject.yaml"
+TERRAIN_UNIT = "tracked"  # the class the terrain variant plans for: its team drives tracked vehicles
 MISSION = "demo"
 INJECT_GRACE_S = 3.0  # wall seconds the script may take, after the fleet stopped, to see the last answers
 
@@ -63,6 +68,7 @@ class DemoOptions:
     script: Path = DEMO_SCRIPT
     progress_every_s: float = 1.0  # wall seconds between progress lines
     map_port: int | None = None  # serve the live map on 127.0.0.1 at this port (0: any free one)
+    terrain: Path | None = None  # plan over this DEM (the terrain variant), for TERRAIN_UNIT vehicles
 
 
 def _free_port() -> int:
@@ -80,14 +86,25 @@ def _progress(t_s: float, units: Sequence[SimUnit]) -> str:
     return f"t={t_s:6.1f}s | " + " | ".join(parts)
 
 
-def summary_rows(fleet: FleetResult, rep: InjectReport, intensity: str) -> list[tuple[str, ...]]:
-    """Per unit: status, arrival time, path length, exposure and minimum clearance."""
-    rows: list[tuple[str, ...]] = [("unit", "kind", "status", "time s", "path m", "exposure", "min clear m")]
+def summary_rows(
+    fleet: FleetResult, rep: InjectReport, intensity: str, sight: Any = None
+) -> list[tuple[str, ...]]:
+    """Per unit: status, arrival time, path length, exposure and minimum clearance.
+
+    With ``sight`` (the planner's terrain), the exposure is the threats' as line of sight masks it.
+    """
+    head = "exposure in view" if sight is not None else "exposure"
+    rows: list[tuple[str, ...]] = [("unit", "kind", "status", "time s", "path m", head, "min clear m")]
     for u in fleet.units:
         path = np.array([(p.x, p.y) for p in u.track], dtype=float).reshape(-1, 2)
         # one mission clock: segments are judged under the threats the script had put by then
         times = [p.t_s for p in u.track]
         epochs = [ep for ep, _ in rep.watch.epochs(times, intensity)]
+        if sight is not None:  # the same threats, each seeing only over the ground
+            epochs = [
+                Epoch(e.first, e.last, ThreatField(e.field.threats, e.field.intensity, sight=sight))
+                for e in epochs
+            ]
         m = measure(path, epochs) if len(path) > 1 else None
         arrived = f"{u.arrived_at_s:.1f}" if u.arrived_at_s is not None else "-"
         if m is None:
@@ -172,8 +189,16 @@ def run_demo(opts: DemoOptions, say_line: Any = print, stop: threading.Event | N
     script = load_script(opts.script)
     endpoint = f"tcp/127.0.0.1:{_free_port()}"
     cfg = ServeConfig(mission=MISSION, listen=[endpoint], log_level="error", escape="auto")
+    if opts.terrain is not None:  # loaded once, its centre the origin, as pfp serve --terrain does
+        from pfp_service.node.terrain import placed
+
+        cfg = placed(msgspec.structs.replace(cfg, terrain=str(opts.terrain), terrain_unit=TERRAIN_UNIT))
     setup_logging(cfg.log_format, cfg.log_level)
     say(f"planner: embedded router on {endpoint}, mission {MISSION!r}; speed-up x{opts.speed_up:g}")
+    if opts.terrain is not None:
+        say(
+            f"terrain: {opts.terrain.name}, planned for {TERRAIN_UNIT} vehicles; origin its centre {cfg.origin}"
+        )
     results: dict[str, Any] = {}
     errors: list[BaseException] = []
     latest: list[tuple[float, Sequence[SimUnit]]] = []
@@ -257,7 +282,8 @@ def run_demo(opts: DemoOptions, say_line: Any = print, stop: threading.Event | N
     fleet_result: FleetResult = results["fleet"]
     rep: InjectReport = results["inject"]
     say("")
-    for line in _table(summary_rows(fleet_result, rep, cfg.intensity)):
+    sight = cfg.world_settings().terrain if opts.terrain is not None else None
+    for line in _table(summary_rows(fleet_result, rep, cfg.intensity, sight)):
         say(line)
     say("expectations:")
     for line in report_lines(rep):

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +32,15 @@ def register(sub: Any) -> None:
         help="serve the live map (the map extra) while the demo runs and print its URL; "
         "PORT on 127.0.0.1, a free one if left out (default: no map)",
     )
+    p.add_argument(
+        "--terrain",
+        nargs="?",
+        const="sample",
+        metavar="DEM",
+        help="the terrain variant (the terrain extra): tracked vehicles over real ground, threats masked by "
+        "line of sight; without DEM, matplotlib's Jacksboro sample DEM (default team and script: "
+        "examples/demo-terrain-team.yaml and demo-terrain-inject.yaml)",
+    )
     p.set_defaults(func=run)
 
 
@@ -44,12 +55,25 @@ def run(args: argparse.Namespace) -> int:
     if args.map is not None and not 0 <= args.map <= 65535:
         raise InputError("--map", f"{args.map} is not a port (0-65535)")
     opts = DemoOptions(out=check_png_path(args.out, "--out"), speed_up=speed_up, map_port=args.map)
+    if args.terrain is not None:
+        require_extra("terrain", "rasterio")
+        from pfp_clients.demo import DEMO_TERRAIN_SCRIPT, DEMO_TERRAIN_TEAM
+
+        opts = dataclasses.replace(opts, team=DEMO_TERRAIN_TEAM, script=DEMO_TERRAIN_SCRIPT)
     if args.team:
         opts = dataclasses.replace(opts, team=Path(args.team))
     if args.script:
         opts = dataclasses.replace(opts, script=Path(args.script))
     from pfp_service.signals import SignalStop
 
-    with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the demo has closed
-        code = run_demo(opts, lambda s: print(s, flush=True), stop=stopping.event)
-    return stopping.exit_code(code)
+    with contextlib.ExitStack() as files:
+        if args.terrain == "sample":  # the sample DEM, written where it is read and removed after
+            from pfp_clients.sample_dem import write_jacksboro
+
+            tmp = Path(files.enter_context(tempfile.TemporaryDirectory(prefix="pfp-demo-")))
+            opts = dataclasses.replace(opts, terrain=write_jacksboro(tmp / "jacksboro.tif"))
+        elif args.terrain is not None:
+            opts = dataclasses.replace(opts, terrain=Path(args.terrain))
+        with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the demo has closed
+            code = run_demo(opts, lambda s: print(s, flush=True), stop=stopping.event)
+        return stopping.exit_code(code)
