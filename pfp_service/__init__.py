@@ -3,8 +3,8 @@
 import os as _os
 
 # numba's parallel kernels run on OpenMP here; libgomp's threads spin for a while after
-# every parallel region, taking the planning loop's core on a 2-core machine (measured:
-# list conversions after a parallel tick 5x slower).  Passive waiting, unless the user says.
+# every parallel region, taking the planning loop's core on a 2-core machine (docs/operations.md,
+# "Figures behind the code's choices").  Passive waiting, unless the user says.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 

@@ -326,7 +326,7 @@ def _serial_descent(
 
 
 # Below this many pair evaluations, waking numba's thread pool costs more than
-# it saves (measured: ~0.7 ms and 5-10 ms tail spikes for a single unit).
+# it saves (docs/operations.md, "Figures behind the code's choices").
 PARALLEL_MIN_PAIRS = 20_000
 # Level-only pairs are cheaper, so the pool pays later (path exposure, shortcut samples).
 PARALLEL_MIN_PAIRS_LEVEL = 2_000_000

@@ -56,16 +56,15 @@ DEFAULT_CONNECT = DEFAULT_ENDPOINT
 # Zenoh refuses the dotted keys one by one).
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 1.5}
 # The planner's transmit queue per link and priority, in batches, without a zenoh_config file (Zenoh's default
-# is 2): directions (interactive_high) and the rest (data) go out with DROP and a 1 ms wait, and 2 batches
-# dropped 0.04-0.6 % of 1,000 units x 10 Hz whenever Zenoh's send thread was late (every unit's link and a
-# recorder's alike, measured with `python -m benchmarks.recorder`); 16 dropped none. A batch is allocated
-# only when a link falls behind: 150 links with traffic cost 3-5 MB more (within noise).
+# is 2): directions and the rest go out with DROP and a short wait, so a queue too short drops them whenever
+# Zenoh's send thread is late; a batch is allocated only when a link falls behind (figures:
+# docs/operations.md, "Figures behind the code's choices").
 TX_QUEUE_BATCHES = {"interactive_high": 16, "data": 16}
 # A router-mode session binds its listeners, then spends Zenoh's scouting delay (500 ms by default) in
 # open() before it returns: clients connected and put meanwhile, and every goal put in that window was
 # lost, the planner having no subscriber yet (issue 34: a plain put 1.2 s after `pfp serve` launched).
-# With multicast scouting off there is nothing to wait for: open() returns as the port opens (measured:
-# 500 -> 0 ms after the port opened), and the planner subscribes about 20 ms later. A file's own
+# With multicast scouting off there is nothing to wait for: open() returns as the port opens, and the
+# planner subscribes just after (docs/operations.md, "Figures behind the code's choices"). A file's own
 # scouting/delay, and a planner that scouts by multicast, keep theirs.
 ROUTER_SCOUTING_DELAY_MS = 0
 LogFormat = Literal["human", "json"]

@@ -406,7 +406,7 @@ def warm_up(settings: WorldSettings | None) -> None:
     )
     preview(empty.view("e"), None, time.monotonic, 5.0, 10_000, empty.field)
     # and round a keep-out zone across the way: its step rule, barrier and route blocking (a first
-    # zone preview in a cold worker took 2.1 s, 0.1 s with this; load average 9 to 12)
+    # zone preview in a cold worker compiles them otherwise, past a preview's budget)
     zoned = World(dataclasses.replace(base, deliberation="inline", bounds=None))
     wall = ZoneUpdate(polygon=[[(4.0, -3.0), (5.0, -3.0), (5.0, 3.0), (4.0, 3.0), (4.0, -3.0)]])
     zoned.apply(

@@ -174,8 +174,8 @@ class PlannerNode:
         m, p = self.cfg.mission, self.cfg.planner_id
         s = self.session
         self._listen(s)
-        # Python threads (previews, deliberation) take the GIL for 5 ms at a time by default;
-        # measured: loop p99 9.0 ms with two busy preview threads, 2.4 ms at 0.5 ms.
+        # Python threads (previews, deliberation) take the GIL for 5 ms at a time by default, which
+        # the loop's p99 pays (docs/operations.md, "Figures behind the code's choices").
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         warm_up(self.world.settings)
         self._desk.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them

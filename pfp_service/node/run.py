@@ -155,10 +155,10 @@ def _run(
 
 
 # A full collection waits for this many middle ones (CPython's default: 10).  It walks every
-# object the world holds (~10 a unit), and with 10,000 units on 2 busy cores each took 110-330 ms
-# of the loop, every ~4 s, while the unit rings filled and pinned their receive buffers: the tree
-# peaked at 446-482 MB against 352 MB with none.  None of those collections found any garbage:
-# young collections still run as ever, and a full one comes every few minutes under that load.
+# object the world holds (about 10 a unit), so with a large fleet each one stalls the loop while
+# the unit rings fill and pin their receive buffers, and none found any garbage (figures:
+# docs/operations.md, "Figures behind the code's choices").  Young collections still run as
+# ever, and a full one comes every few minutes under load.
 FULL_COLLECTION_EVERY = 1000
 
 M_ARENA_MAX = -8  # glibc's mallopt parameter

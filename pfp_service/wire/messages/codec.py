@@ -125,8 +125,8 @@ def _wire_error(exc: msgspec.ValidationError | msgspec.DecodeError) -> InputErro
 
 
 # The most lat/lon positions an inbound message holds.  The lat/lon path walks the
-# document in Python (about 50 ms for 256 KiB of small objects, on a Zenoh callback
-# thread), so for these types a payload with more positions, or more JSON objects and
+# document in Python, on a Zenoh callback thread (docs/operations.md, "Figures behind
+# the code's choices"), so for these types a payload with more positions, or more JSON objects and
 # arrays than that many positions need, is refused before it is walked.
 _GEO_MAX_POSITIONS: dict[Any, int] = {
     UnitState: 1,
