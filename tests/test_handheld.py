@@ -276,7 +276,7 @@ def _app(link, mission: str, settings: Settings, **kw) -> HandheldApp:
     return HandheldApp(model, link, mission=mission, publish_hz=5.0, **kw)
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_arrow_and_bearing_follow_the_planner(planner, tmp_path: Path):
     endpoint, mission, _ = planner
     uid = "arrow"
@@ -330,7 +330,7 @@ def test_arrow_and_bearing_follow_the_planner(planner, tmp_path: Path):
     asyncio.run(scenario())
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_arrow_keys_nudge_the_published_position(planner):
     endpoint, mission, _ = planner
     uid = "nudge"
@@ -366,7 +366,7 @@ def _alive(session, mission: str) -> set[str]:
     return {str(r.ok.key_expr) for r in replies if r.ok is not None}
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_nmea_file_drives_the_position(planner, tmp_path: Path):
     endpoint, mission, _ = planner
     uid = "gps"
@@ -540,7 +540,7 @@ def test_starts_with_the_router_down_and_resends_its_goal_to_a_restarted_planner
     asyncio.run(scenario())
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_g_sets_the_goal_from_a_prompt(planner):
     endpoint, mission, _ = planner
     uid = "prompt"
@@ -685,7 +685,7 @@ def test_the_real_command_in_a_terminal_starts_with_the_router_down_and_quits_on
         os.close(master)
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_a_redraw_while_the_app_closes_ends_quietly(planner):
     """The handheld's tick can fire while Textual removes its widgets: that draw stops, no NoMatches escapes."""
     endpoint, mission, _ = planner

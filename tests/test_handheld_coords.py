@@ -68,7 +68,7 @@ async def _until(pilot, pred, what: str, timeout: float = 15.0):
     return value
 
 
-@pytest.mark.net
+@pytest.mark.proc
 @pytest.mark.parametrize("style", ["latlon", "mgrs"])
 def test_the_app_learns_the_origin_shows_and_takes_its_coordinates_and_quits_on_ctrl_c(geo_planner, style):
     pytest.importorskip("textual")
@@ -114,7 +114,7 @@ def test_the_app_learns_the_origin_shows_and_takes_its_coordinates_and_quits_on_
     assert asyncio.run(scenario()) == 130
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_a_goal_given_in_mgrs_at_start_is_set_once_the_planners_origin_is_learnt(geo_planner):
     """``pfp handheld --goal "33VWE ..."`` without ``--origin``: the goal waits for the planner's origin."""
     pytest.importorskip("textual")

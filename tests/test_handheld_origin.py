@@ -62,7 +62,7 @@ def _states_after_publish(link: RetryingLink, inbox: Inbox, n: int = 5) -> int:
     return got
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_another_origin_sends_no_position_and_says_which_to_use(planner):
     endpoint, mission, _ = planner
     with client(endpoint) as s:
@@ -78,7 +78,7 @@ def test_another_origin_sends_no_position_and_says_which_to_use(planner):
             link.close()
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_the_planners_own_origin_is_checked_and_positions_go_out(planner):
     endpoint, mission, _ = planner
     with client(endpoint) as s:
@@ -92,7 +92,7 @@ def test_the_planners_own_origin_is_checked_and_positions_go_out(planner):
             link.close()
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_the_screen_shows_the_refusal_and_goes_stale(planner):
     endpoint, mission, _ = planner
 

@@ -28,7 +28,7 @@ def planner():
         yield endpoint
 
 
-@pytest.mark.net
+@pytest.mark.proc
 def test_a_unit_reporting_lat_lon_gets_the_directions_of_one_reporting_metres(planner):
     with client(planner) as s:
         inboxes = {u: Inbox(s, keys.unit_direction(MISSION, u)) for u in ("metres", "degrees")}
