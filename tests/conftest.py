@@ -98,7 +98,9 @@ def pytest_runtest_setup(item: pytest.Item):
             if any(id(d) in _starting_fixtures for d in chain)
         ]
         if names:
-            raise TierViolation(f"fixture {', '.join(names)} of this {tier!r} test started a subprocess: mark it proc")
+            raise TierViolation(
+                f"fixture {', '.join(names)} of this {tier!r} test started a subprocess: mark it proc"
+            )
     return result
 
 

@@ -4,13 +4,13 @@ the limit, quickly and in bounded memory (alias bombs, deep nesting, huge GeoJSO
 from __future__ import annotations
 
 import json
-import math
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pfp_service import bounds
@@ -37,13 +37,11 @@ def _threat_bomb(levels: int) -> str:
 
 
 def _ring(n: int) -> list[list[float]]:
-    ring = [
-        [
-            round(15.6213 + 0.01 * math.cos(2 * math.pi * k / n), 5),
-            round(58.4105 + 0.01 * math.sin(2 * math.pi * k / n), 5),
-        ]
-        for k in range(n)
-    ]
+    # numpy, not a comprehension of math.cos and round: 800,000 points in a fraction of a second
+    turn = 2 * np.pi * np.arange(n) / n
+    xs = np.round(15.6213 + 0.01 * np.cos(turn), 5)
+    ys = np.round(58.4105 + 0.01 * np.sin(turn), 5)
+    ring = np.column_stack([xs, ys]).tolist()
     return [*ring, ring[0]]
 
 
@@ -56,13 +54,11 @@ def _collection(*rings: list[list[float]]) -> str:
 
 
 def _many_squares(n: int) -> str:
-    squares = []
-    for k in range(n):
-        x, y = round(15.6 + (k % 300) * 0.0002, 4), round(58.40 + (k // 300) * 0.0002, 4)
-        squares.append(
-            [[x, y], [round(x + 0.0001, 4), y], [round(x + 0.0001, 4), round(y + 0.0001, 4)], [x, y]]
-        )
-    return _collection(*squares)
+    k = np.arange(n)
+    xs, ys = np.round(15.6 + (k % 300) * 0.0002, 4), np.round(58.40 + (k // 300) * 0.0002, 4)
+    x1, y1 = np.round(xs + 0.0001, 4), np.round(ys + 0.0001, 4)
+    corners = np.stack([xs, ys, x1, ys, x1, y1, xs, ys], axis=1).reshape(n, 4, 2).tolist()
+    return _collection(*corners)
 
 
 def _refused(load, path: Path) -> str:
@@ -217,7 +213,7 @@ def test_a_zones_file_at_its_budget_loads_and_an_error_line_needs_no_yaml(tmp_pa
 
     n = bounds.limit("json_positions") // 16 - 1
     p = tmp_path / "full.geojson"
-    p.write_text(_collection(*[_ring(n) for _ in range(16)]).replace("},{", "},\n{"))
+    p.write_text(_collection(*[_ring(n)] * 16).replace("},{", "},\n{"))
     t0 = time.perf_counter()
     assert len(_zones(p)) == 16
     assert time.perf_counter() - t0 < 3.0
@@ -295,8 +291,8 @@ def baseline(tmp_path_factory) -> tuple[float, float]:
         ("deep.json", '{"start": [0, 0], "goal": [1, 1], "x": ' + "[" * DEEP + "]" * DEEP + "}", ["plan"], "depth"),
         ("deep-team.yaml", "name: d\nunits: " + "[" * DEEP + "]" * DEEP + "\n", ["acl", "--out", "{tmp}/acl"], "depth"),
         ("deep.toml", "x = " + "[" * DEEP + "]" * DEEP + "\n", ["serve", "--config"], "depth"),
-        ("ring.geojson", _collection(_ring(800_000)), ["plan", "examples/geo-simple.yaml", "--zones"], "json_positions"),
-        ("squares.geojson", _many_squares(100_000), ["plan", "examples/geo-simple.yaml", "--zones"], "json_positions"),
+        ("ring.geojson", lambda: _collection(_ring(800_000)), ["plan", "examples/geo-simple.yaml", "--zones"], "json_positions"),
+        ("squares.geojson", lambda: _many_squares(100_000), ["plan", "examples/geo-simple.yaml", "--zones"], "json_positions"),
         ("deep.geojson", '{"features": ' + "[" * DEEP + "]" * DEEP + "}", ["plan", "examples/geo-simple.yaml", "--zones"], "depth"),
         ("big.yaml", "start: [0, 0]\ngoal: [1, 1]\nthreats:\n" + "  - {position: [1, 1], sigma_range: 1, sigma_lateral: 1}\n" * 40_000, ["plan"], "(yaml_bytes)"),
     ],
@@ -305,7 +301,7 @@ def test_the_cli_refuses_a_hostile_file_in_one_line_in_time_and_memory(
     tmp_path, baseline, name, text, command, limit
 ):
     p = tmp_path / name
-    p.write_text(text)
+    p.write_text(text() if callable(text) else text)  # the big ones are built here, not at collection
     args = [a.format(tmp=tmp_path) for a in command]
     r, mb, seconds = _run(tmp_path, *args, str(p))
     base_mb, base_s = baseline

@@ -62,7 +62,7 @@ HOSTILE = {
     "inject.yaml": (_bomb(8, "name: i", "timeline: []\n"), ["inject", "--check"]),
     "deep.json": ('{"start": [0, 0], "goal": [1, 1], "x": ' + "[" * DEEP + "]" * DEEP + "}", ["plan"]),
     "deep.toml": ("x = " + "[" * DEEP + "]" * DEEP + "\n", ["serve", "--config"]),
-    "ring.geojson": (_collection(_ring(800_000)), ["plan", "examples/geo-simple.yaml", "--zones"]),
+    "ring.geojson": (lambda: _collection(_ring(800_000)), ["plan", "examples/geo-simple.yaml", "--zones"]),
     "big.yaml": (
         "start: [0, 0]\ngoal: [1, 1]\nthreats:\n"
         + "  - {position: [1, 1], sigma_range: 1, sigma_lateral: 1}\n" * 40_000,
@@ -79,7 +79,7 @@ def test_a_hostile_file_is_refused_within_200_mb(tmp_path: Path, name):
     if text is None:
         p.write_bytes(_mcap_bomb(2_000_000, 250_000))
     else:
-        p.write_text(text)
+        p.write_text(text() if callable(text) else text)  # the big ones are built here, not at collection
     args = [a.format(tmp=tmp_path) for a in command]
     mb, code, err = _peak(*args, str(p))
     print(f"pfp {args[0]} {name}: exit {code}, {mb:.0f} MB")

@@ -44,6 +44,16 @@ def _world(pid: str, units: int, threats: int) -> World:
     return w
 
 
+UNITS, THREATS = 3000, 1200  # past one page of each (MAX_PAYLOAD_BYTES), in both the units and the threats
+
+
+@pytest.fixture(scope="module")
+def big() -> tuple[World, World]:
+    """Two planners' worlds of ``UNITS`` and ``THREATS``, built once for the module: each unit's report
+    runs its look-ahead as it is taken in, the dearest part of these tests, and paging only reads them."""
+    return _world("p1", UNITS, THREATS), _world("p2", UNITS, THREATS)
+
+
 class _Peers:
     """What ``session.get`` would return, from in-process worlds; ``silent`` peers stop answering pages."""
 
@@ -75,8 +85,8 @@ class _Peers:
         return out
 
 
-def test_a_page_always_decodes_and_cursors_list_every_id_once():
-    w = _world("p1", 2500, 1500)
+def test_a_page_always_decodes_and_cursors_list_every_id_once(big):
+    w = big[0]
     units: list[str] = []
     threats: list[str] = []
     q = WorldQuery()
@@ -86,7 +96,7 @@ def test_a_page_always_decodes_and_cursors_list_every_id_once():
         )
         assert len(data) <= MAX_PAYLOAD_BYTES
         page = decode_world_snapshot(data)
-        assert page.units_total == 2500 and page.threats_total == 1500
+        assert page.units_total == UNITS and page.threats_total == THREATS
         assert page.units or page.threats  # every page makes progress
         units += [u.id for u in page.units]
         threats += [t.id for t in page.threats]
@@ -98,8 +108,8 @@ def test_a_page_always_decodes_and_cursors_list_every_id_once():
             units_limit=0 if page.next_unit is None else 1000,
             threats_limit=0 if page.next_threat is None else 1000,
         )
-    assert units == sorted(set(units)) and len(units) == 2500
-    assert threats == sorted(set(threats)) and len(threats) == 1500
+    assert units == sorted(set(units)) and len(units) == UNITS
+    assert threats == sorted(set(threats)) and len(threats) == THREATS
 
 
 def test_small_worlds_are_one_page_and_limits_are_kept():
@@ -160,30 +170,30 @@ def test_the_queryable_answers_a_page_or_a_structured_error():
     assert not bad.replies and decode_error_reply(err).field == "$.units_limit"
 
 
-def test_a_joiner_learns_every_unit_and_threat_across_pages():
-    peers = _Peers([_world("p1", 3000, 1200), _world("p2", 3000, 1200)])
+def test_a_joiner_learns_every_unit_and_threat_across_pages(big):
+    peers = _Peers(list(big))
     joined = fetch_world(peers, M, "p9")
     assert joined.complete and joined.peers == 2
     assert joined.pages > 3  # a first page from each, then the rest from one peer
     assert sum("p2/world?" in a for a in peers.asked) == 0 or sum("p1/world?" in a for a in peers.asked) == 0
     me = World(_settings("p9"))
     me.apply(joined.inputs, 2.0)
-    assert me.counts()["units"] == 3000 and me.counts()["threats"] == 1200
+    assert me.counts()["units"] == UNITS and me.counts()["threats"] == THREATS
     snap = me.snapshot(2.0, threats_limit=0)
     assert all(u.goal is not None and u.goal[0] == 10.0 for u in snap.units)
     assert all(u.mission is not None and u.mission.origin[1] == 0.0 for u in snap.units)  # x0 kept
 
 
-def test_a_joiner_goes_on_from_the_same_cursor_when_its_peer_stops_answering():
-    peers = _Peers([_world("p1", 2000, 0), _world("p2", 2000, 0)])
+def test_a_joiner_goes_on_from_the_same_cursor_when_its_peer_stops_answering(big):
+    peers = _Peers(list(big))
     peers.silent.add("p1")  # the fullest (tie: first by id) answers only the first ask
     joined = fetch_world(peers, M, "p9")
     assert joined.complete and any("p2/world?" in a for a in peers.asked)
-    assert len({i.unit for i in joined.inputs}) == 2000  # type: ignore[attr-defined]
+    assert len({i.unit for i in joined.inputs if hasattr(i, "unit")}) == UNITS
 
 
-def test_the_fetch_is_bounded_and_says_so():
-    peers = _Peers([_world("p1", 3000, 0)])
+def test_the_fetch_is_bounded_and_says_so(big):
+    peers = _Peers([big[0]])
     joined = fetch_world(peers, M, "p9", max_pages=2)
     assert not joined.complete and joined.pages == 2
     t = iter([0.0] + [100.0] * 10)  # past the deadline after the first ask
@@ -195,12 +205,12 @@ def test_the_fetch_is_bounded_and_says_so():
     assert fetch_world(_Peers([]), M, "p9").complete  # nobody to join: nothing missing
 
 
-def test_status_gets_one_planners_whole_world_merged():
-    peers = _Peers([_world("p1", 2500, 1100)])
+def test_status_gets_one_planners_whole_world_merged(big):
+    peers = _Peers([big[0]])
     (first,) = [decode_world_snapshot(b) for b in peers(keys.worlds(M), 1.0)]
     assert first.next_unit is not None or first.next_threat is not None
     merged, complete = whole_world(peers, M, first)
-    assert complete and len(merged.units) == 2500 and len(merged.threats) == 1100
+    assert complete and len(merged.units) == UNITS and len(merged.threats) == THREATS
     assert merged.next_unit is None and merged.next_threat is None
     cut, complete = whole_world(peers, M, first, max_pages=2)
-    assert not complete and len(cut.units) < 2500 and (cut.next_unit or cut.next_threat)
+    assert not complete and len(cut.units) < UNITS and (cut.next_unit or cut.next_threat)
