@@ -598,14 +598,15 @@ def test_an_nmea_file_is_paced_by_its_own_timestamps_or_by_nmea_rate(tmp_path: P
 
     frame = LocalFrame(48.0, 11.0)
     log = tmp_path / "walk.nmea"
-    log.write_text("".join(_gga(f"1010{10 + i:02d}.00", frame, 10.0 + i, 50.0) for i in range(4)))
+    # fixes 0.3 s apart (the file's own UTC times): a second apart, as a receiver sends them, is 3 s of waiting
+    log.write_text("".join(_gga(f"101010.{30 * i:02d}", frame, 10.0 + i, 50.0) for i in range(4)))
     inbox: queue.Queue = queue.Queue()
     reader = NmeaReader(open_nmea(str(log)), frame, inbox)
     assert reader.paced  # a regular file: a recording to replay
     reader.start()
     times = _arrivals(reader, inbox, 4)
     gaps = [b - a for a, b in zip(times, times[1:])]
-    assert len(gaps) == 3 and all(0.85 < g < 1.6 for g in gaps), gaps  # one second apart, as recorded
+    assert len(gaps) == 3 and all(0.25 < g < 0.9 for g in gaps), gaps  # 0.3 s apart, as recorded
     inbox2: queue.Queue = queue.Queue()
     fast = NmeaReader(open_nmea(str(log)), frame, inbox2, rate_hz=20.0)
     fast.start()
