@@ -38,9 +38,10 @@ def _world(pid: str, units: int, threats: int) -> World:
     w = World(_settings(pid))
     ids = [f"u{i:05d}" for i in range(units)]
     far = [ThreatPut(f"t{j:04d}", ThreatUpdate(position=(5000.0 + 10 * j, 6.0), **T)) for j in range(threats)]
-    w.apply(far, 0.0)
     w.apply([GoalSet(u, Goal(position=(10.0, 10.0 + i % 7))) for i, u in enumerate(ids)], 0.0)
     w.apply([StateReported(u, UnitState(position=(0.001 * i, 0.0))) for i, u in enumerate(ids)], 0.0)
+    # the threats last: each unit's first look-ahead then sums an empty field, not 1,200 far threats (5x cheaper)
+    w.apply(far, 0.0)
     return w
 
 
