@@ -22,7 +22,7 @@ test: $(STAMP)
 	@sh .ci/ensure-gdal
 	$(BIN)/python -m pytest -q
 
-# The in-process tiers (unit and net): under a minute on 2 cores; run it on every change.
+# The in-process tiers (unit and net): about a minute on 2 cores; run it on every change.
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -m "unit or net"
 

@@ -7,7 +7,7 @@ positions of JSON and TOML by a byte scan before parsing, and YAML's depth and
 nodes (aliases counted every time they are used) from the parser's events
 before a single node is built.  A refusal is an ``InputError`` naming the file
 and the limit, so a CLI prints one line and exits 2.  ``docs/operations.md``
-shows ``table()``; tests/test_bounds.py keeps the two the same.
+shows ``table()``; tests/unit/test_bounds.py keeps the two the same.
 """
 
 from __future__ import annotations

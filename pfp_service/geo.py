@@ -11,7 +11,7 @@ projection and its exact inverse.
 Accuracy.  Dropping the up component shortens a distance ``d`` from the origin
 by about ``d**3 / (6 R**2)``: 1.4 cm at 15 km and 3.8 cm at 21 km, the corner
 of a 30 km x 30 km area; any two points of that area keep their distance to a
-few centimetres of the Karney geodesic (tests/test_geo.py measures it with
+few centimetres of the Karney geodesic (tests/unit/test_geo.py measures it with
 geographiclib).  ``to_local`` and ``to_geodetic`` are inverses to well under a
 millimetre.  A lat/lon farther than ``MAX_RANGE_M`` from the origin is refused:
 the plane is no map of that.

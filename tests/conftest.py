@@ -61,6 +61,49 @@ class TierViolation(AssertionError):
     """A test started something its tier does not allow."""
 
 
+# Subprocesses started in this process, counted by an audit hook: a module- or session-scoped fixture
+# is set up before ``_enforce_tier`` below patches ``Popen``, so a ``net`` test whose fixture starts a
+# planner would otherwise pass as in-process.  Each fixture that starts one is remembered, and every
+# unit or net test that uses it fails in its setup, whichever test set the fixture up first.
+_started = [0]
+_starting_fixtures: set[int] = set()  # id() of each FixtureDef whose setup started a subprocess
+
+
+def _count_subprocesses(event: str, _args: tuple) -> None:
+    if event == "subprocess.Popen":
+        _started[0] += 1
+
+
+sys.addaudithook(_count_subprocesses)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_fixture_setup(fixturedef, request):
+    before = _started[0]
+    result = yield
+    if _started[0] > before:
+        _starting_fixtures.add(id(fixturedef))
+    return result
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item: pytest.Item):
+    result = yield
+    tier = _tier_of(item)
+    if tier in ("unit", "net"):
+        defs = getattr(item, "_fixtureinfo", None)
+        names = [
+            name
+            for name, chain in (defs.name2fixturedefs.items() if defs is not None else ())
+            if any(id(d) in _starting_fixtures for d in chain)
+        ]
+        if names:
+            raise TierViolation(
+                f"fixture {', '.join(names)} of this {tier!r} test started a subprocess: mark it proc"
+            )
+    return result
+
+
 @pytest.fixture(autouse=True)
 def _enforce_tier(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch):
     tier = _tier_of(request.node)

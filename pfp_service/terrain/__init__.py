@@ -19,7 +19,7 @@ from typing import Any
 
 # loaded on first use: a command that reads (or refuses) a raster never imports the compiled
 # viewshed (numba, about 100 MB, and a compile on a fresh checkout), so a hostile file is refused
-# within the bounds table's memory (tests/test_light_commands.py)
+# within the bounds table's memory (tests/proc/test_light_commands.py)
 _WHERE = {
     "Dem": "dem",
     "DemInfo": "dem",

@@ -1,0 +1,635 @@
+"""The docs cannot rot: every command README.md and docs/*.md show is run, as a user would run it.
+
+Each ```sh block (and ```console block, its ``$ `` lines) is one shell session, run in a scratch
+directory holding ``examples/`` and ``docker/`` (linked) and a copy of ``schemas/``:
+
+* a ``pfp ...`` (or ``.venv/bin/pfp``) or ``python FILE.py`` line is run; ``make``, ``pip``,
+  ``export``, ``kill``, ``docker`` ... lines are what a person types around them and are not;
+  any other line fails the test, so nothing new slips past unrun;
+* a line ending in ``&`` runs in the background: a long-running command (serve, map, tak,
+  handheld, a fleet without an end, a router) must still be up when the block ends, and then
+  stops on SIGTERM with exit 0; a finite one (inject) must end with exit 0 by the block's
+  ``wait`` line;
+* any other line must exit 0 (or N, when its comment says "(exit N)"), or, when it is a long-running command, come up (its own
+  readiness condition: a log line, an answering port, a rendered screen) and stop on SIGTERM
+  with exit 0;
+* nothing may print a traceback.
+
+A command is changed only where the machine demands it: port 7447 becomes a free port (a
+block that starts a planner gets its own, the others talk to one planner shared by the
+module), a client without ``--connect`` or ``--zenoh-config`` is pointed at it, ``pfp serve``
+as a router listens there, ``pfp map`` serves on a free local port, a TAK server host is a
+local listener, each block keeps durable state in its own directory, and benchmarks run
+with small arguments (``SHRINK``).  ```python and ```toml blocks whose first line is
+``# NAME`` are written as ``NAME`` (7447 rewritten the same way) before a block runs;
+```text blocks are never run.
+
+Beside them, in process: the README stays under 300 lines and lists every command
+``pfp --help`` shows, every relative link and anchor resolves, and the reach table of
+docs/algorithm.md is what the threat model computes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import pty
+import re
+import shlex
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import termios
+import threading
+import time
+import urllib.request
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from tests.zenoh_util import free_port, planner_process
+
+ROOT = Path(__file__).resolve().parents[2]
+README = ROOT / "README.md"
+DOCS = [README, *sorted((ROOT / "docs").glob("*.md"))]
+README_MAX_LINES = 300
+DOC_PORT = "7447"
+
+# What a person types around the commands; shown, never run here.
+NOT_RUN = {"make", "pip", ".venv/bin/pip", "export", "source", "kill", "docker", "python3", "cd"}
+PFP = {"pfp", ".venv/bin/pfp"}
+PYTHON = {"python", ".venv/bin/python"}
+# Commands that open a Zenoh session as a client of the planner (the shared flags).
+SESSION = {"health", "status", "fleet", "inject", "map", "tak", "handheld"}
+# Benchmarks at a size the test can afford: flags dropped, flags added (argparse keeps the last).
+SHRINK: dict[str, tuple[set[str], list[str]]] = {
+    "engine": (set(), ["--quick", "--no-scale", "--repeat", "1", "--baseline-repeat", "1"]),
+    "roundtrip": (set(), ["--count", "50"]),
+    "terrain": ({"--check"}, ["--repeat", "2"]),
+    "fuzz": (set(), ["--count", "20"]),
+    "service": (
+        {"--find-max", "--echo"},
+        ["--units", "20", "--rate", "5", "--threats", "5", "--duration", "2", "--no-storm", "--no-fanout"],
+    ),
+    # a pass mark for a quiet machine: here the test checks the command runs, not the machine's figures
+    "previews": (
+        set(),
+        [
+            "--scenario",
+            "storm",
+            "--queries",
+            "10",
+            "--threads",
+            "2",
+            "--live-threats",
+            "50",
+            "--max-p99-ms",
+            "10000",
+        ],
+    ),
+    "failover": (set(), ["--planners", "2", "--units", "6", "--kills", "1"]),
+    "memory": (set(), ["--units", "20", "--threats", "5", "--idle-s", "3", "--load-s", "2"]),
+    "vehicles": (set(), ["--quick"]),
+    "convergence": (set(), ["--quick"]),
+    "quality": (set(), ["--scenarios", "2", "--modes", "none,contour", "--cells", "60"]),
+}
+START_TIMEOUT_S = 90.0
+RUN_TIMEOUT_S = 400.0
+
+
+# -- reading the docs -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Block:
+    doc: Path
+    line: int  # of the opening fence, 1-based
+    lang: str
+    text: str
+
+    @property
+    def name(self) -> str:
+        return f"{self.doc.relative_to(ROOT)}:{self.line}"
+
+
+def blocks(doc: Path) -> list[Block]:
+    found: list[Block] = []
+    lines = doc.read_text().splitlines()
+    i = 0
+    while i < len(lines):
+        m = re.match(r"^```(\w*)\s*$", lines[i])
+        if m:
+            j = i + 1
+            while j < len(lines) and not lines[j].startswith("```"):
+                j += 1
+            found.append(Block(doc, i + 1, m[1], "\n".join(lines[i + 1 : j])))
+            i = j
+        i += 1
+    return found
+
+
+@dataclass
+class Line:
+    words: list[str]  # the command, without environment assignments and "&"
+    env: dict[str, str]
+    background: bool
+    text: str
+    exit_code: int = 0  # what the doc says it exits with: "(exit N)" in its comment
+
+    @property
+    def program(self) -> str:
+        return self.words[0] if self.words else ""
+
+    @property
+    def subcommand(self) -> str:
+        return self.words[1] if self.program in PFP and len(self.words) > 1 else ""
+
+
+def session_lines(block: Block) -> list[Line]:
+    """The block's lines as commands: continuations joined, comments and blank lines dropped."""
+    out: list[Line] = []
+    for raw in block.text.replace("\\\n", " ").splitlines():
+        if block.lang == "console":  # "$ command" lines; the rest is its output
+            if not raw.startswith("$ "):
+                continue
+            raw = raw[2:]
+        words = shlex.split(raw, comments=True)
+        if not words:
+            continue
+        background = words[-1] == "&"
+        if background:
+            words = words[:-1]
+        elif words[-1].endswith("&") and not words[-1].endswith("&&"):
+            words[-1] = words[-1][:-1]
+            background = True
+        env: dict[str, str] = {}
+        while words and re.match(r"^[A-Z_][A-Z0-9_]*=", words[0]):
+            k, v = words.pop(0).split("=", 1)
+            env[k] = v
+        said = re.search(r"\(exit (\d+)\)", raw.partition(" #")[2])
+        out.append(Line(words, env, background, raw.strip(), int(said[1]) if said else 0))
+    return out
+
+
+def runnable(line: Line) -> bool:
+    """True for a line this test runs; False for one it shows only.
+
+    Raises:
+        AssertionError: a line it does not know what to do with.
+    """
+    if line.program in PFP or (line.program in PYTHON and line.words[1:2] and line.words[1].endswith(".py")):
+        return True
+    if line.program in NOT_RUN or line.program == "wait":
+        return False
+    raise AssertionError(f"a doc command this test cannot run or skip: {line.text!r}")
+
+
+def sh_blocks() -> list[Block]:
+    return [b for doc in DOCS for b in blocks(doc) if b.lang in ("sh", "console")]
+
+
+def named_files() -> dict[str, str]:
+    """``# NAME`` python and toml blocks: the files the sh blocks use."""
+    files: dict[str, str] = {}
+    for doc in DOCS:
+        for b in blocks(doc):
+            first = b.text.splitlines()[0] if b.text else ""
+            m = re.match(r"^# ([\w.-]+\.(py|toml))\b", first)
+            if b.lang in ("python", "toml") and m:
+                assert m[1] not in files, f"{b.name}: {m[1]} is written twice in the docs"
+                files[m[1]] = b.text + "\n"
+    return files
+
+
+def long_running(line: Line) -> bool:
+    """Runs until stopped: it must come up and stay up."""
+    sub = line.subcommand
+    if sub in ("serve", "map", "tak", "handheld"):
+        return True
+    if sub == "fleet":
+        return "--until-arrived" not in line.words and "--duration-s" not in line.words
+    return line.program in PYTHON and line.background
+
+
+# -- running them ------------------------------------------------------------------------------------
+def flag(words: list[str], name: str) -> str | None:
+    for i, w in enumerate(words):
+        if w == name and i + 1 < len(words):
+            return words[i + 1]
+        if w.startswith(name + "="):
+            return w.split("=", 1)[1]
+    return None
+
+
+@dataclass
+class Proc:
+    line: Line
+    popen: subprocess.Popen[bytes]
+    log: Path
+    ready: str  # what "started" means, for messages
+    http_port: int | None = None
+    pty_out: list[bytes] = field(default_factory=list)
+
+    def output(self) -> str:
+        text = self.log.read_text(errors="replace") if self.log.exists() else ""
+        return text + b"".join(self.pty_out).decode(errors="replace")
+
+
+class TakServer:
+    """A local TCP listener standing in for a TAK server's streaming port."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen()
+        self.port = self.sock.getsockname()[1]
+        self.connected = threading.Event()
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self) -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = self.sock.accept()
+                self.connected.set()
+                threading.Thread(target=self._drain, args=(conn,), daemon=True).start()
+
+    @staticmethod
+    def _drain(conn: socket.socket) -> None:
+        with conn, contextlib.suppress(OSError):
+            while conn.recv(65536):
+                pass
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class Session:
+    """One ```sh block, run as a shell would, with what the machine needs changed."""
+
+    def __init__(self, block: Block, work: Path, shared_endpoint: str, tak: TakServer) -> None:
+        self.block = block
+        self.work = work
+        self.lines = [ln for ln in session_lines(block) if runnable(ln) or ln.program == "wait"]
+        own = any(_starts_a_router(ln) for ln in self.lines)
+        self.port = str(free_port()) if own else shared_endpoint.rsplit(":", 1)[1]
+        self.tak = tak
+        self.state = Path(tempfile.mkdtemp(prefix="state-", dir=work))
+        self.procs: list[Proc] = []
+
+    # rewriting
+    def localise(self, text: str) -> str:
+        text = text.replace(f":{DOC_PORT}", f":{self.port}")
+        text = text.replace("10.0.0.1:", "127.0.0.1:")
+        return text.replace("takserver:8087", f"127.0.0.1:{self.tak.port}")
+
+    def argv(self, line: Line) -> tuple[list[str], int | None]:
+        words = [self.localise(w) for w in line.words]
+        http_port = None
+        if line.program in PYTHON:
+            return [sys.executable, *words[1:]], None
+        args = words[1:]
+        sub = line.subcommand
+        if sub in SESSION and flag(args, "--connect") is None and flag(args, "--zenoh-config") is None:
+            args += ["--connect", f"tcp/127.0.0.1:{self.port}"]
+        if sub == "serve":
+            mode = flag(args, "--mode") or "router"
+            given = [flag(args, f) for f in ("--listen", "--config", "--zenoh-config")]
+            if mode == "router" and given == [None, None, None]:
+                args += ["--listen", f"tcp/127.0.0.1:{self.port}"]
+        if sub == "map":
+            http_port = free_port()
+            args = [a for i, a in enumerate(args) if a != "--http" and (i == 0 or args[i - 1] != "--http")]
+            args += ["--http", f"127.0.0.1:{http_port}"]
+        if sub == "bench":
+            drop, add = SHRINK[args[1]]
+            args = [a for a in args if a not in drop] + add
+        return [sys.executable, "-m", "pfp_service", *args], http_port
+
+    def env(self, line: Line) -> dict[str, str]:
+        return {
+            **os.environ,
+            "PYTHONUNBUFFERED": "1",
+            "XDG_STATE_HOME": str(self.state),
+            "COLUMNS": "100",
+            "LINES": "40",
+            **line.env,
+        }
+
+    # processes
+    def start(self, line: Line) -> Proc:
+        argv, http_port = self.argv(line)
+        log = Path(tempfile.mkstemp(prefix="out-", suffix=".txt", dir=self.work)[1])
+        if line.subcommand == "handheld":  # a terminal UI: it refuses to run without a terminal
+            master, slave = pty.openpty()
+            fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 100, 0, 0))
+            popen = subprocess.Popen(
+                argv, cwd=self.work, env={**self.env(line), "TERM": "xterm-256color"},
+                stdin=slave, stdout=slave, stderr=slave, start_new_session=True,
+            )  # fmt: skip
+            os.close(slave)
+            proc = Proc(line, popen, log, "its screen shows the planner's status", http_port)
+            threading.Thread(target=_read_pty, args=(master, proc.pty_out), daemon=True).start()
+        else:
+            with log.open("wb") as out:
+                popen = subprocess.Popen(
+                    argv, cwd=self.work, env=self.env(line), stdout=out, stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL,
+                )  # fmt: skip
+            proc = Proc(line, popen, log, "", http_port)
+        self.procs.append(proc)
+        return proc
+
+    def wait_ready(self, proc: Proc) -> None:
+        """Until the command is up (its own condition); fails if it exits or errs first."""
+        sub = proc.line.subcommand
+        checks = {
+            "serve": ("its log says 'planner ready'", lambda: "planner ready" in proc.output()),
+            "map": ("its page answers", lambda: _http_ok(proc.http_port)),
+            "tak": ("it connected to the TAK server", self.tak.connected.is_set),
+            "handheld": ("its screen shows a planner status", lambda: _tui_ready(proc.output())),
+        }
+        if proc.line.program in PYTHON:  # a router from a config: up when its port answers
+            checks[""] = (f"port {self.port} answers", lambda: _port_open(int(self.port)))
+        what, ready = checks.get(sub, ("", lambda: True))
+        if sub == "fleet":
+            what, ready = "it printed progress", lambda: bool(proc.output().strip())
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while not ready():
+            code = proc.popen.poll()
+            assert code is None, (
+                f"{proc.line.text!r} exited with {code} before {what}:\n{proc.output()[-3000:]}"
+            )
+            assert time.monotonic() < deadline, (
+                f"{proc.line.text!r}: not up in {START_TIMEOUT_S:g} s ({what})"
+            )
+            time.sleep(0.1)
+        assert "Traceback" not in proc.output(), f"{proc.line.text!r}:\n{proc.output()[-3000:]}"
+
+    def stop(self, proc: Proc) -> None:
+        """SIGTERM; a long-running command then exits 0 with no traceback."""
+        assert proc.popen.poll() is None, (
+            f"{proc.line.text!r} did not stay up (exit {proc.popen.returncode}):\n{proc.output()[-3000:]}"
+        )
+        proc.popen.send_signal(signal.SIGTERM)
+        try:
+            code = proc.popen.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.popen.kill()
+            proc.popen.wait()
+            raise AssertionError(f"{proc.line.text!r} did not stop within 30 s of SIGTERM") from None
+        assert code == 0, f"{proc.line.text!r}: exit {code} after SIGTERM:\n{proc.output()[-3000:]}"
+        assert "Traceback" not in proc.output(), f"{proc.line.text!r}:\n{proc.output()[-3000:]}"
+
+    def finish(self, proc: Proc) -> None:
+        """A finite command: exit 0 (or the code its doc line says), no traceback."""
+        try:
+            code = proc.popen.wait(timeout=RUN_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.popen.kill()
+            proc.popen.wait()
+            raise AssertionError(f"{proc.line.text!r} did not finish in {RUN_TIMEOUT_S:g} s") from None
+        want = proc.line.exit_code
+        assert code == want, f"{proc.line.text!r}: exit {code}, not {want}:\n{proc.output()[-3000:]}"
+        assert "Traceback" not in proc.output(), f"{proc.line.text!r}:\n{proc.output()[-3000:]}"
+
+    def run(self) -> None:
+        background: list[Proc] = []
+        try:
+            for line in self.lines:
+                t0 = time.monotonic()
+                if line.program == "wait":
+                    for proc in [p for p in background if not long_running(p.line)]:
+                        self.finish(proc)
+                        background.remove(proc)
+                    continue
+                proc = self.start(line)
+                if line.background:
+                    background.append(proc)
+                    if long_running(line):
+                        self.wait_ready(proc)
+                elif long_running(line):
+                    self.wait_ready(proc)
+                    self.stop(proc)
+                else:
+                    self.finish(proc)
+                print(f"{time.monotonic() - t0:6.1f} s  {line.text}")
+            for proc in reversed(background):  # the planner last: clients first, as a shell's kill would
+                if long_running(proc.line) or proc.popen.poll() is None:
+                    self.stop(proc)
+                else:
+                    self.finish(proc)
+        finally:
+            for proc in self.procs:
+                if proc.popen.poll() is None:
+                    proc.popen.kill()
+                    proc.popen.wait()
+
+
+def _starts_a_router(line: Line) -> bool:
+    """A planner on its own embedded router, or a router from a config: the block gets its own port."""
+    if line.program in PYTHON:
+        return line.background
+    if line.subcommand != "serve":
+        return False
+    flags = [flag(line.words, f) for f in ("--config", "--zenoh-config")]
+    return (flag(line.words, "--mode") or "router") == "router" and flags == [None, None]
+
+
+def _read_pty(fd: int, into: list[bytes]) -> None:
+    with contextlib.suppress(OSError):
+        while chunk := os.read(fd, 65536):
+            into.append(chunk)
+    with contextlib.suppress(OSError):
+        os.close(fd)
+
+
+def _http_ok(port: int | None) -> bool:
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2) as r:
+            return r.status == 200
+    except OSError:
+        return False
+
+
+def _port_open(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(1)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def _tui_ready(screen: str) -> bool:
+    plain = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", screen)
+    return any(status in plain for status in ("EN ROUTE", "ESCAPING", "ARRIVED"))
+
+
+# -- fixtures ----------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def work(tmp_path_factory) -> Path:
+    """A scratch directory as a checkout looks to the commands: examples, docker, schemas."""
+    path = tmp_path_factory.mktemp("docs")
+    (path / "examples").symlink_to(ROOT / "examples")
+    (path / "docker").symlink_to(ROOT / "docker")
+    shutil.copytree(ROOT / "schemas", path / "schemas")
+    return path
+
+
+@pytest.fixture(scope="module")
+def shared_planner() -> Iterator[str]:
+    with planner_process("--state-dir", "none") as (endpoint, _proc):
+        yield endpoint
+
+
+@pytest.fixture(scope="module")
+def tak_server() -> Iterator[TakServer]:
+    server = TakServer()
+    yield server
+    server.close()
+
+
+SH_BLOCKS = [b for b in sh_blocks() if any(runnable(ln) for ln in session_lines(b))]
+
+
+@pytest.mark.multi
+@pytest.mark.timeout(1200)
+@pytest.mark.parametrize("block", SH_BLOCKS, ids=[b.name for b in SH_BLOCKS])
+def test_every_command_the_docs_show_runs(
+    block: Block, work: Path, shared_planner: str, tak_server: TakServer
+):
+    session = Session(block, work, shared_planner, tak_server)
+    for name, text in named_files().items():
+        (work / name).write_text(session.localise(text))
+    session.run()
+
+
+# -- in process --------------------------------------------------------------------------------------
+@pytest.mark.unit
+def test_every_doc_line_is_run_or_known_to_be_shown():
+    for block in sh_blocks():
+        for line in session_lines(block):
+            runnable(line)  # raises for a line it would neither run nor skip
+            if line.program in PYTHON and line.words[1:2]:
+                assert line.words[1] in named_files(), f"{block.name}: {line.words[1]} is not a doc file"
+
+
+@pytest.mark.unit
+def test_the_readme_is_a_first_hour_long():
+    lines = README.read_text().splitlines()
+    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines; move detail into docs/"
+
+
+@pytest.mark.unit
+def test_the_readme_command_table_lists_every_command():
+    from pfp_service.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    commands = set(sub.choices)  # type: ignore[arg-type]
+    bench = sub.choices["bench"]  # type: ignore[index]
+    benchmarks = set(next(a for a in bench._actions if a.dest == "benchmark").choices)  # type: ignore[arg-type]
+    table = [ln for ln in README.read_text().splitlines() if ln.startswith("| `pfp ")]
+    shown = {re.match(r"^\| `pfp (\w+)", ln)[1] for ln in table}  # type: ignore[index]
+    assert commands - shown == set(), f"commands missing from the README's table: {sorted(commands - shown)}"
+    assert shown - commands == set(), (
+        f"the README's table shows commands pfp lacks: {sorted(shown - commands)}"
+    )
+    bench_row = next(ln for ln in table if ln.startswith("| `pfp bench"))
+    missing = {b for b in benchmarks if b not in bench_row}
+    assert missing == set(), f"benchmarks missing from the README's table: {sorted(missing)}"
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor for a heading."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return text.replace(" ", "-")
+
+
+def _anchors(doc: Path) -> set[str]:
+    text = re.sub(r"^```.*?^```", "", doc.read_text(), flags=re.S | re.M)
+    return {_slug(m[1]) for m in re.finditer(r"^#{1,6} (.+)$", text, flags=re.M)}
+
+
+@pytest.mark.unit
+def test_every_relative_link_resolves():
+    bad = []
+    for doc in DOCS:
+        text = re.sub(r"^```.*?^```", "", doc.read_text(), flags=re.S | re.M)
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if re.match(r"^[a-z]+:", target):
+                continue  # http(s), mailto: not checked here
+            path, _, anchor = target.partition("#")
+            dest = (doc.parent / path).resolve() if path else doc
+            if not dest.exists():
+                bad.append(f"{doc.name}: {target} (no such file)")
+            elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+                bad.append(f"{doc.name}: {target} (no such heading)")
+    assert bad == []
+
+
+@pytest.mark.unit
+def test_the_vehicle_example_is_about_twenty_lines():
+    files = named_files()
+    assert "vehicle.py" in files
+    code = [ln for ln in files["vehicle.py"].splitlines() if ln.strip() and not ln.startswith("#")]
+    assert len(code) <= 22, f"the README's vehicle client grew to {len(code)} lines"
+
+
+@pytest.mark.unit
+def test_the_reach_table_is_what_the_threat_model_computes():
+    """docs/algorithm.md's "Choosing sigma_range" table, recomputed from core.threat."""
+    import numpy as np
+    from scipy.optimize import brentq
+
+    from pfp_service.core.threat import Threat, ThreatField
+
+    text = (ROOT / "docs" / "algorithm.md").read_text()
+    rows = re.findall(
+        r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) / ([\d.]+) \|$", text, re.M
+    )
+    assert len(rows) == 5
+    for skew, *shown in rows:
+        threat = Threat.from_facing((0.0, 0.0), 0.0, 1.0, 0.6, float(skew))  # faces north, sigma_range 1
+        field = ThreatField([threat], "peak")
+
+        def level(x: float, y: float, f=field) -> float:
+            return float(f.level(np.array([[x, y]]))[0])
+
+        peak_y = threat.mode()[1]
+        want = []
+        for share in (0.1, 0.5):
+            ahead = brentq(lambda y, s=share: level(0.0, y) - s, peak_y, 20.0)
+            behind = -brentq(lambda y, s=share: level(0.0, y) - s, -20.0, peak_y)
+            across = brentq(lambda x, s=share: level(x, peak_y) - s, 0.0, 20.0) / 0.6
+            want.append((ahead, behind, across))
+        (a10, b10, c10), (a50, b50, c50) = want
+        expected = [a10, b10, a50, b50, c10, c50]
+        for got, exp in zip(map(float, shown), expected):
+            assert got == pytest.approx(exp, abs=0.006), f"skew {skew}: {shown} vs {expected}"
+
+
+@pytest.mark.unit
+def test_the_vehicle_example_speaks_the_wire_contract():
+    """Its keys are templates of wire.keys, and the fields it writes and reads are the messages' own."""
+    from pfp_service.wire import keys
+    from pfp_service.wire.messages import Direction, Goal, UnitState
+
+    code = named_files()["vehicle.py"]
+    used = {
+        k.replace("{M}", "{mission}").replace("{U}", "{unit}") for k in re.findall(r'f"(mumt/[^"]+)"', code)
+    }
+    templates = {keys.template(kind) for kind in keys.KeyKind}
+    templates |= {
+        keys.TEMPLATES[kind].replace("{id}", "*") for kind in keys.KeyKind
+    }  # asked of every planner
+    assert used and used <= templates, used - templates
+    wrote = {
+        UnitState: set(re.findall(r'"(\w+)":', code.split("state = ", 1)[1].splitlines()[0])),
+        Goal: set(re.findall(r'"(\w+)":', code.split("/goal", 1)[1].splitlines()[0])),
+        Direction: set(re.findall(r'd\["(\w+)"\]', code)),
+    }
+    for message, names in wrote.items():
+        assert names and names <= set(message.__struct_fields__), (message.__name__, names)

@@ -1,0 +1,702 @@
+"""Wire messages: every field's bad values, size limits, mission bounds, evolution, conversions."""
+
+from __future__ import annotations
+
+import copy
+import json
+import subprocess
+import sys
+import typing
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import msgspec
+import pytest
+
+from pfp_service.errors import InputError
+from pfp_service.wire import messages as m
+from pfp_service.wire.examples import examples
+from pfp_service.world import translate
+
+BIG = 7.77e77  # written as 1e999 on the wire: parses to infinity
+MISSING = object()
+REQ, OPT, DEF = "required", "optional (null allowed)", "defaulted (null not allowed)"
+
+
+def _base() -> dict[str, Any]:
+    ex = {name: json.loads(m.encode(obj)) for group in examples().values() for name, obj in group}
+    ex["what_if_threat"] = ex["preview_request"]["threats"][0]
+    return ex
+
+
+BASES = _base()
+
+DECODERS: dict[str, Callable[[bytes], Any]] = {
+    "unit_state": m.decode_unit_state,
+    "goal": m.decode_goal,
+    "threat": m.decode_threat,
+    "preview_request": m.decode_preview_request,
+    "what_if_threat": m.decode_preview_request,
+    "direction": m.decode_direction,
+    "error_reply": m.decode_error_reply,
+    "planner_status": m.decode_planner_status,
+    "event.rejected": m.decode_event,
+    "event.replan": m.decode_event,
+    "event.trapped": m.decode_event,
+    "event.arrived": m.decode_event,
+}
+TYPES: dict[str, type] = {
+    "unit_state": m.UnitState,
+    "goal": m.Goal,
+    "threat": m.ThreatUpdate,
+    "preview_request": m.PreviewRequest,
+    "what_if_threat": m.WhatIfThreat,
+    "direction": m.Direction,
+    "error_reply": m.ErrorReply,
+    "planner_status": m.PlannerStatus,
+    "event.rejected": m.RejectedEvent,
+    "event.replan": m.ReplanEvent,
+    "event.trapped": m.TrappedEvent,
+    "event.arrived": m.ArrivedEvent,
+}
+
+# Bad values by field type: (value, sub-path, fragment of the reason).
+FINITE = [("1", "", "expected a finite number"), (True, "", "got bool")]
+BAD: dict[str, list[tuple[Any, str, str]]] = {
+    "point": [
+        ("1,2", "", "expected array, got str"),
+        ({"x": 1, "y": 2}, "", "expected array, got object"),
+        ([1.0], "", "expected array of length 2"),
+        ([1.0, 2.0, 3.0], "", "expected array of length 2"),
+        ([BIG, 0.0], "[0]", "expected a finite number"),
+        ([0.0, -BIG], "[1]", "expected a finite number"),
+        ([2e9, 0.0], "[0]", "expected a finite number within ±1e+09"),
+        ([0.0, "x"], "[1]", "expected a finite number, got str"),
+        ([0.0, None], "[1]", "expected a finite number, got null"),
+    ],
+    # An infinity (1e999) fails the upper bound, which the reason names.
+    "angle": [
+        *FINITE,
+        (BIG, "", "must be <= 360"),
+        (360.5, "", "must be <= 360"),
+        (-361, "", "must be >= -360"),
+    ],
+    "positive": [
+        *FINITE,
+        (BIG, "", "expected a finite number"),
+        (-BIG, "", "must be > 0"),
+        (0, "", "must be > 0"),
+        (-1.5, "", "must be > 0"),
+        (2e9, "", "finite number within"),
+    ],
+    # a step or a tolerance: a millimetre at least (constraints.LENGTH_MIN_M), so never subnormal
+    "length": [
+        *FINITE,
+        (BIG, "", "expected a finite number"),
+        (-BIG, "", "must be >= 0.001"),
+        (0, "", "must be >= 0.001"),
+        (5e-324, "", "must be >= 0.001"),
+        (1e-300, "", "must be >= 0.001"),
+        (0.0009, "", "must be >= 0.001"),
+        (2e9, "", "finite number within"),
+    ],
+    "delta": [
+        *FINITE,
+        (BIG, "", "expected a finite number"),
+        (0, "", "must be >= 1e-09"),
+        (5e-324, "", "must be >= 1e-09"),
+        (-1, "", "must be >= 1e-09"),
+        (2e9, "", "finite number within"),
+    ],
+    "origin": [
+        ("x", "", "expected object"),
+        ({"lat": 95.0, "lon": 0.0}, ".lat", "must be < 89.9"),
+        ({"lat": 0.0}, ".lon", "is required"),
+    ],
+    "terrain": [
+        ("x", "", "expected object"),
+        ({"file": "a.tif"}, ".sha256", "is required"),
+    ],
+    "sigma": [
+        *FINITE,
+        (BIG, "", "expected a finite number"),
+        (-BIG, "", "must be >= 0.001"),
+        (0, "", "must be >= 0.001"),
+        (1e-170, "", "must be >= 0.001"),
+        (2e9, "", "finite number within"),
+    ],
+    "nonneg": [
+        *FINITE,
+        (BIG, "", "finite number"),
+        (-0.001, "", "must be >= 0"),
+        (2e9, "", "finite number within"),
+    ],
+    "skew": [
+        *FINITE,
+        (BIG, "", "must be <= 1000"),
+        (-0.1, "", "must be >= 0"),
+        (1000.5, "", "must be <= 1000"),
+    ],
+    "weight": [
+        *FINITE,
+        (BIG, "", "must be <= 1e+06"),
+        (-1, "", "must be >= 0"),
+        (1e6 + 1, "", "must be <= 1e+06"),
+    ],
+    "speed": [
+        *FINITE,
+        (BIG, "", "must be <= 1000"),
+        (-1, "", "must be >= 0"),
+        (1000.1, "", "must be <= 1000"),
+    ],
+    "time": [
+        *FINITE,
+        (BIG, "", "must be <= 1e+11"),
+        (-1, "", "must be >= 0"),
+        (1e12, "", "must be <= 1e+11"),
+    ],
+    "count": [
+        (-1, "", "must be >= 0"),
+        (2**53, "", "must be <="),
+        (1.5, "", "expected int"),
+        ("1", "", "expected int"),
+        (True, "", "got bool"),
+    ],
+    "iterations": [(0, "", "must be >= 1"), (10_000_001, "", "must be <="), (1.5, "", "expected int")],
+    "id": [
+        ("", "", "matching regex"),
+        ("a b", "", "matching regex"),
+        ("a/b", "", "matching regex"),
+        ("u*", "", "matching regex"),
+        ("x" * 65, "", "matching regex"),
+        (5, "", "expected str, got int"),
+    ],
+    "text": [
+        ("x" * 1025, "", "length must be <= 1024"),
+        (5, "", "expected str, got int"),
+        ([], "", "expected str"),
+    ],
+    "unit_kind": [
+        ("robot", "", "unknown value 'robot' (expected one of: manned, unmanned)"),
+        (1, "", "expected str"),
+    ],
+    "status": [
+        ("lost", "", "expected one of: en_route, escaping, arrived, trapped, no_goal"),
+        (0, "", "expected str"),
+    ],
+    "points": [
+        ("x", "", "expected array"),
+        ([[0.0, 0.0]] * (m.MAX_LOOKAHEAD + 1), "", "length must be <= 1000"),
+        ([[0.0, 0.0], [1.0]], "[1]", "expected array of length 2"),
+        ([[0.0, BIG]], "[0][1]", "expected a finite number"),
+    ],
+    "route": [
+        ("detour", "", "expected one of: , descent, lower_exposure, around_trap, escape, leave"),
+        (0, "", "expected str"),
+    ],
+    "progress": [
+        ("stuck", "", "expected one of: , moving, holding, stalled"),
+        (0, "", "expected str"),
+    ],
+    "bool": [(1, "", "expected bool"), ("true", "", "expected bool")],
+    "latlons": [
+        ("x", "", "expected array"),
+        ([{"lat": 0.0, "lon": 0.0}] * (m.MAX_LOOKAHEAD + 1), "", "length must be <= 1000"),
+        ([{"lat": 91.0, "lon": 0.0}], "[0].lat", "must be <= 90"),
+        ([{"lat": 0.0, "lon": -180.5}], "[0].lon", "must be >= -180"),
+        ([{"lat": 0.0}], "[0].lon", "is required"),
+        ([[0.0, 0.0]], "[0]", "expected object"),
+    ],
+    "changes": [
+        ("t1", "", "expected array"),
+        ([{"threat": "t1", "change": "moved"}], "[0].change", "matching regex"),
+        ([{"change": "put"}], "[0].threat", "is required"),
+    ],
+    "texts": [
+        ("p1", "", "expected array, got str"),
+        ([3], "[0]", "expected str"),
+        (["p"] * 65, "", "length must be <= 64"),
+    ],
+    "ids": [
+        ("u1", "", "expected array, got str"),
+        (["ok", "a b"], "[1]", "matching regex"),
+        ([3], "[0]", "expected str"),
+    ],
+    "whatif_threats": [
+        ("t1", "", "expected array"),
+        ([BASES["what_if_threat"]] * 2, "[1].id", "duplicate id 'ambush'"),
+        (
+            [{**BASES["what_if_threat"], "id": f"t{i}"} for i in range(m.MAX_WHATIF_THREATS + 1)],
+            "",
+            "length must be <= 256",
+        ),
+        ([{"position": [0, 0]}], "[0].sigma_range", "is required"),
+    ],
+}
+
+# Every field of every message: its type in BAD, and whether it is required, nullable or defaulted.
+THREAT_FIELDS = {
+    "position": ("point", REQ),
+    "facing_deg": ("angle", DEF),
+    "sigma_range": ("sigma", REQ),
+    "sigma_lateral": ("sigma", REQ),
+    "skew": ("skew", DEF),
+    "weight": ("weight", DEF),
+    "ttl_s": ("positive", OPT),
+}
+EVENT_FIELDS = {"planner": ("id", OPT), "t": ("time", OPT)}
+FIELDS: dict[str, dict[str, tuple[str, str]]] = {
+    "unit_state": {
+        "position": ("point", REQ),
+        "t": ("time", OPT),
+        "seq": ("count", OPT),
+        "kind": ("unit_kind", OPT),
+        "speed_mps": ("speed", OPT),
+        "heading_deg": ("angle", OPT),
+    },
+    "goal": {
+        "position": ("point", REQ),
+        "delta": ("delta", OPT),
+        "tolerance": ("length", OPT),
+        "step": ("length", OPT),
+    },
+    "threat": THREAT_FIELDS,
+    "what_if_threat": {**THREAT_FIELDS, "id": ("id", REQ)},
+    "preview_request": {
+        "start": ("point", OPT),
+        "goal": ("point", OPT),
+        "threats": ("whatif_threats", DEF),
+        "delta": ("delta", OPT),
+        "step": ("length", OPT),
+        "tolerance": ("length", OPT),
+        "max_iter": ("iterations", OPT),
+        "geojson": ("bool", DEF),
+    },
+    "direction": {
+        "unit": ("id", REQ),
+        "seq": ("count", OPT),
+        "status": ("status", REQ),
+        "vector": ("point", REQ),
+        "heading_deg": ("angle", OPT),
+        "distance_to_goal": ("nonneg", OPT),
+        "threat_level": ("nonneg", DEF),
+        "lookahead": ("points", DEF),
+        "reason": ("text", DEF),
+        "deliberating": ("bool", DEF),
+        "planner": ("id", OPT),
+        "true_bearing_deg": ("angle", OPT),
+        "lookahead_geo": ("latlons", DEF),
+        "reach_m": ("nonneg", OPT),
+        "route": ("route", DEF),
+        "progress": ("progress", DEF),
+        "route_left_m": ("nonneg", OPT),
+    },
+    "error_reply": {"error": ("text", REQ), "field": ("text", DEF)},
+    "planner_status": {
+        "planner": ("id", REQ),
+        "mission": ("id", REQ),
+        "version": ("text", DEF),
+        "uptime_s": ("nonneg", REQ),
+        **{
+            c: ("count", DEF)
+            for c in (
+                "units",
+                "units_stale",
+                "threats",
+                "zones",
+                "msgs_in",
+                "msgs_out",
+                "rejected",
+                "deliberating",
+                "overload",
+                "units_owned",
+                "pushes",
+                "pushes_resent",
+                "faults",
+            )
+        },
+        "session": ("text", DEF),
+        "origin": ("origin", OPT),
+        "latency_p50_ms": ("nonneg", OPT),
+        "latency_p99_ms": ("nonneg", OPT),
+        "twins": ("texts", DEF),
+        "terrain": ("terrain", OPT),
+    },
+    "event.rejected": {
+        **EVENT_FIELDS,
+        "key": ("text", REQ),
+        "field": ("text", DEF),
+        "reason": ("text", REQ),
+        "truncated": ("bool", DEF),
+        "suppressed": ("count", DEF),
+    },
+    "event.replan": {
+        **EVENT_FIELDS,
+        "units": ("ids", REQ),
+        "reason": ("text", REQ),
+        "changes": ("changes", DEF),
+        "more": ("count", DEF),
+        "more_units": ("count", DEF),
+    },
+    "event.trapped": {
+        **EVENT_FIELDS,
+        "unit": ("id", REQ),
+        "position": ("point", REQ),
+        "reason": ("text", DEF),
+    },
+    "event.arrived": {
+        **EVENT_FIELDS,
+        "unit": ("id", REQ),
+        "position": ("point", REQ),
+        "distance_to_goal": ("nonneg", DEF),
+    },
+}
+
+
+def _payload(name: str, field: str, value: Any) -> tuple[bytes, str]:
+    """The valid example of ``name`` with ``field`` set to ``value`` (or removed), and its path prefix."""
+    if name == "what_if_threat":
+        outer = copy.deepcopy(BASES["preview_request"])
+        inner, prefix = outer["threats"][0], "$.threats[0]"
+    else:
+        outer = inner = copy.deepcopy(BASES[name])
+        prefix = "$"
+    if value is MISSING:
+        inner.pop(field, None)
+    else:
+        inner[field] = value
+    return json.dumps(outer, ensure_ascii=False).replace(
+        repr(BIG).replace("e", "e+"), "1e999"
+    ).encode(), prefix
+
+
+def _bad_cases() -> Iterator[Any]:
+    for name, fields in FIELDS.items():
+        for field, (kind, how) in fields.items():
+            for value, sub, reason in BAD[kind]:
+                yield pytest.param(name, field, value, sub, reason, id=f"{name}.{field}={str(value)[:20]}")
+            if how == REQ:
+                yield pytest.param(name, field, MISSING, "", "is required", id=f"{name}.{field}=missing")
+            if how != OPT:
+                yield pytest.param(name, field, None, "", "got null", id=f"{name}.{field}=null")
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(("name", "field", "value", "sub", "reason"), list(_bad_cases()))
+def test_every_bad_value_of_every_field_is_rejected_with_its_path(
+    name: str, field: str, value: Any, sub: str, reason: str
+) -> None:
+    data, prefix = _payload(name, field, value)
+    with pytest.raises(InputError) as e:
+        DECODERS[name](data)
+    assert e.value.path == f"{prefix}.{field}{sub}", str(e.value)
+    # Optional fields say "expected array | null" or "a finite number or null"; the rest is the same.
+    assert reason in e.value.reason.replace(" | null", "").replace(" or null", ""), str(e.value)
+    assert str(e.value) == f"{e.value.path}: {e.value.reason}"
+
+
+def _good_cases() -> Iterator[Any]:
+    for name, fields in FIELDS.items():
+        for field, (_, how) in fields.items():
+            if how == OPT:
+                yield pytest.param(name, field, None, id=f"{name}.{field}=null")
+            if how != REQ:
+                yield pytest.param(name, field, MISSING, id=f"{name}.{field}=missing")
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(("name", "field", "value"), list(_good_cases()))
+def test_optional_fields_may_be_left_out(name: str, field: str, value: Any) -> None:
+    data, _ = _payload(name, field, value)
+    DECODERS[name](data)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("name", list(FIELDS))
+def test_the_table_covers_every_field_of_every_message(name: str) -> None:
+    """A new field must join FIELDS (and so get its bad values tested) and must have a default."""
+    info = msgspec.inspect.type_info(TYPES[name])
+    assert isinstance(info, msgspec.inspect.StructType)
+    actual = {}
+    for f in info.fields:
+        nullable = isinstance(f.type, msgspec.inspect.UnionType) and f.type.includes_none
+        actual[f.name] = REQ if f.required else OPT if nullable else DEF
+    assert actual == {f: how for f, (_, how) in FIELDS[name].items()}
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("name", list(DECODERS))
+def test_examples_decode_and_round_trip(name: str) -> None:
+    payload = BASES["preview_request"] if name == "what_if_threat" else BASES[name]
+    msg = DECODERS[name](json.dumps(payload).encode())
+    assert msgspec.json.decode(m.encode(msg)) == payload
+
+
+@pytest.mark.unit
+def test_boundary_values_are_accepted() -> None:
+    m.decode_unit_state(
+        b'{"position":[-1e9,1e9],"heading_deg":-360,"speed_mps":0,"seq":9007199254740991,"t":0}'
+    )
+    m.decode_threat(
+        b'{"position":[0,0],"facing_deg":360,"sigma_range":1e-3,"sigma_lateral":1e3,"skew":1000,"weight":0}'
+    )
+    m.decode_direction(
+        b'{"unit":"' + b"u" * 64 + b'","status":"no_goal","vector":[0,0],"reason":"' + b"r" * 1024 + b'"}'
+    )
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    ("data", "reason"),
+    [
+        (b"", "empty payload"),
+        (b"{", "malformed JSON"),
+        (b'{"position":[NaN,0]}', "malformed JSON"),
+        (b'{"position":[Infinity,0]}', "malformed JSON"),
+        (b"\xff\xfe", "malformed JSON"),
+        (b"[1,2]", "expected object, got array"),
+        (b"null", "expected object, got null"),
+        (b'"hello"', "expected object, got str"),
+    ],
+)
+def test_whole_payload_errors_have_the_root_path(data: bytes, reason: str) -> None:
+    with pytest.raises(InputError) as e:
+        m.decode_unit_state(data)
+    assert e.value.path == "$"
+    assert reason in e.value.reason
+
+
+@pytest.mark.unit
+def test_payload_size_is_limited_before_parsing() -> None:
+    pad = b" " * m.MAX_PAYLOAD_BYTES
+    ok = b'{"position":[1,2]}'
+    m.decode_unit_state(ok + pad[: m.MAX_PAYLOAD_BYTES - len(ok)])
+    with pytest.raises(InputError) as e:
+        m.decode_unit_state(ok + pad)
+    assert (e.value.path, e.value.reason) == (
+        "$",
+        f"payload of {m.MAX_PAYLOAD_BYTES + len(ok)} bytes exceeds the limit of {m.MAX_PAYLOAD_BYTES}",
+    )
+
+
+@pytest.mark.unit
+def test_the_largest_legitimate_preview_request_fits() -> None:
+    threat = {**BASES["what_if_threat"], "facing_deg": -123.456789, "sigma_range": 123.456789}
+    many = [{**threat, "id": "t" * 60 + f"{i:04d}", "position": [-1e8 / 3, 1e8 / 7]} for i in range(256)]
+    data = json.dumps({**BASES["preview_request"], "threats": many}).encode()
+    assert len(data) < m.MAX_PAYLOAD_BYTES
+    assert len(m.decode_preview_request(data).threats) == 256
+
+
+@pytest.mark.unit
+def test_decoders_accept_zenoh_style_buffers() -> None:
+    data = json.dumps(BASES["unit_state"]).encode()
+    assert m.decode_unit_state(bytearray(data)) == m.decode_unit_state(memoryview(data))
+
+
+# -- mission bounds ---------------------------------------------------------------
+BOUNDS = ((0.0, 0.0), (10.0, 20.0))
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("pos", [[0, 0], [10, 20], [5, 7.5], [0, 20]])
+def test_positions_within_bounds_pass(pos: list[float]) -> None:
+    body = json.dumps({"position": pos}).encode()
+    m.decode_unit_state(body, BOUNDS)
+    m.decode_goal(body, BOUNDS)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("pos", [[-0.001, 5], [10.001, 5], [5, -1], [5, 20.5], [-100, 100]])
+@pytest.mark.parametrize("name", ["unit_state", "goal", "threat"])
+def test_positions_outside_bounds_are_rejected(pos: list[float], name: str) -> None:
+    data, _ = _payload(name, "position", pos)
+    DECODERS[name](data)  # no bounds configured: fine
+    with pytest.raises(InputError) as e:
+        DECODERS[name](data, BOUNDS)  # type: ignore[call-arg]
+    assert e.value.path == "$.position"
+    assert "outside the mission bounds [[0, 0], [10, 20]]" in e.value.reason
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    ("change", "path"),
+    [
+        ({"start": [-1, 0]}, "$.start"),
+        ({"goal": [11, 0]}, "$.goal"),
+        ({"threats": [{**BASES["what_if_threat"], "position": [5, 25]}]}, "$.threats[0].position"),
+    ],
+)
+def test_preview_request_positions_are_bounded(change: dict[str, Any], path: str) -> None:
+    body = {"start": [1, 1], "goal": [9, 9], "threats": [{**BASES["what_if_threat"], "position": [5, 5]}]}
+    m.decode_preview_request(json.dumps(body).encode(), BOUNDS)
+    with pytest.raises(InputError) as e:
+        m.decode_preview_request(json.dumps({**body, **change}).encode(), BOUNDS)
+    assert e.value.path == path
+
+
+@pytest.mark.unit
+def test_messages_without_positions_pass_any_bounds() -> None:
+    m.check_bounds(m.ErrorReply(error="x"), BOUNDS)
+    m.check_bounds(m.PreviewRequest(), BOUNDS)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("bad", [((0, 0), (0, 10)), ((5, 0), (1, 10)), ((0, 10), (10, 0))])
+def test_inverted_bounds_are_a_configuration_error(bad: Any) -> None:
+    with pytest.raises(ValueError, match="bounds"):
+        m.check_bounds(m.Goal(position=(0, 0)), bad)
+
+
+# -- evolution ----------------------------------------------------------------------
+class UnitStateV2(m.UnitState, frozen=True, kw_only=True):
+    """What a later contract might add: new fields, each with a default."""
+
+    battery_pct: float = 100.0
+    fix: dict[str, Any] = msgspec.field(default_factory=dict)
+
+
+class WhatIfThreatV2(m.WhatIfThreat, frozen=True, kw_only=True):
+    label: str = ""
+
+
+class PreviewRequestV2(m.PreviewRequest, frozen=True, kw_only=True):
+    threats: list[WhatIfThreatV2] = msgspec.field(default_factory=list)  # type: ignore[assignment]
+    horizon_s: float | None = None
+
+
+@pytest.mark.unit
+def test_an_older_decoder_reads_a_newer_message() -> None:
+    newer = UnitStateV2(position=(1.0, 2.0), seq=7, battery_pct=55.0, fix={"hdop": 0.9, "sats": [1, 2]})
+    assert m.decode_unit_state(msgspec.json.encode(newer)) == m.UnitState(position=(1.0, 2.0), seq=7)
+    nested = PreviewRequestV2(
+        goal=(3.0, 4.0),
+        horizon_s=30.0,
+        threats=[
+            WhatIfThreatV2(id="a", position=(1.0, 1.0), sigma_range=1.0, sigma_lateral=1.0, label="tank")
+        ],
+    )
+    old = m.decode_preview_request(msgspec.json.encode(nested))
+    assert old.goal == (3.0, 4.0)
+    assert old.threats == [m.WhatIfThreat(id="a", position=(1.0, 1.0), sigma_range=1.0, sigma_lateral=1.0)]
+
+
+@pytest.mark.unit
+def test_a_newer_decoder_reads_an_older_message() -> None:
+    old = m.encode(m.UnitState(position=(1.0, 2.0)))
+    assert msgspec.json.decode(old, type=UnitStateV2).battery_pct == 100.0
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("name", list(DECODERS))
+def test_unknown_fields_are_ignored_everywhere(name: str) -> None:
+    payload = copy.deepcopy(BASES["preview_request"] if name == "what_if_threat" else BASES[name])
+    payload["x_future"] = {"nested": [1, None, "a"]}
+    if name in ("preview_request", "what_if_threat"):
+        payload["threats"][0]["x_future"] = 1
+    DECODERS[name](json.dumps(payload).encode())
+
+
+@pytest.mark.unit
+def test_an_unknown_event_kind_names_the_known_ones() -> None:
+    with pytest.raises(InputError) as e:
+        m.decode_event(b'{"kind":"teleported","unit":"u1"}')
+    assert e.value.path == "$.kind"
+    assert "rejected, replan, trapped, arrived" in e.value.reason
+
+
+@pytest.mark.unit
+def test_event_kinds_match_the_union() -> None:
+    tags = set()
+    for t in typing.get_args(m.AnyEvent):
+        info = msgspec.inspect.type_info(t)
+        assert isinstance(info, msgspec.inspect.StructType)
+        tags.add(info.tag)
+    assert tags == set(m.EVENT_KINDS)
+
+
+# -- helpers the daemon uses ----------------------------------------------------------
+@pytest.mark.unit
+def test_threat_update_converts_to_the_core_threat() -> None:
+    from pfp_service.core.threat import Threat
+
+    upd = m.decode_threat(json.dumps(BASES["threat"]).encode())
+    assert translate.threat(upd, "t9") == Threat.from_facing((4.0, 5.0), 180.0, 2.0, 1.0, 3.0, 1.0, "t9")
+
+
+@pytest.mark.unit
+def test_empty_preview_body_means_the_live_preview() -> None:
+    assert m.decode_preview_request(None) == m.decode_preview_request(b"") == m.decode_preview_request(b"{}")
+    assert not m.decode_preview_request(None).what_if
+    assert m.decode_preview_request(b'{"max_iter": 10}').what_if
+
+
+@pytest.mark.unit
+def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
+    with pytest.raises(InputError) as e:
+        m.decode_threat(b'{"position":[0,0],"sigma_range":0,"sigma_lateral":1}')
+    reply = m.ErrorReply.of(e.value)
+    assert msgspec.json.decode(m.encode(reply)) == {"error": "must be >= 0.001", "field": "$.sigma_range"}
+    ev = m.RejectedEvent.of("k/1", e.value, planner="p1", t=5.0)
+    assert msgspec.json.decode(m.encode(ev)) == {
+        "kind": "rejected",
+        "planner": "p1",
+        "t": 5.0,
+        "key": "k/1",
+        "field": "$.sigma_range",
+        "reason": "must be >= 0.001",
+        "truncated": False,
+        "suppressed": 0,
+    }
+    assert m.decode_event(m.encode(ev)) == ev
+
+
+@pytest.mark.unit
+def test_direction_status_values_are_the_contract() -> None:
+    assert [s.value for s in m.DirectionStatus] == ["en_route", "escaping", "arrived", "trapped", "no_goal"]
+
+
+@pytest.mark.unit
+def test_the_preview_reply_is_what_pfp_plan_json_prints(capsys: pytest.CaptureFixture[str]) -> None:
+    from pathlib import Path
+
+    from pfp_service.cli import main
+    from pfp_service.core.plan import PlanResult
+
+    scenario = Path(__file__).resolve().parents[2] / "examples" / "paper-simple.yaml"
+    assert main(["plan", str(scenario), "--json"]) == 0
+    out = capsys.readouterr().out
+    result = translate.decode_plan_result(out.encode())
+    assert isinstance(result, PlanResult)
+    assert m.encode(result).decode() == out.strip()
+
+
+@pytest.mark.proc
+def test_wire_modules_import_without_zenoh_or_numpy() -> None:
+    code = (
+        "import sys, pfp_service.wire.messages, pfp_service.wire.keys, pfp_service.wire;"
+        "bad = {'zenoh', 'numpy', 'numba'} & set(sys.modules); assert not bad, bad"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(
+    ("body", "path"),
+    [
+        (b'{"position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}', "$.sigma_range"),
+        (b'{"position": [0, 0], "sigma_range": 1e8, "sigma_lateral": 1}', "$.sigma_lateral"),
+    ],
+)
+def test_wire_threat_rejects_degenerate_sigma(body, path):
+    with pytest.raises(InputError) as exc:
+        m.decode_threat(body)
+    assert exc.value.path == path
+
+
+@pytest.mark.unit
+def test_wire_what_if_rejects_degenerate_sigma():
+    body = b'{"threats": [{"id": "x", "position": [0, 0], "sigma_range": 1e-170, "sigma_lateral": 5}]}'
+    with pytest.raises(InputError) as exc:
+        m.decode_preview_request(body)
+    assert exc.value.path == "$.threats[0].sigma_range"
