@@ -3,7 +3,7 @@
 Random bytes, truncated JSON, deep nesting, wrong types, NaN and Infinity, huge
 numbers, out-of-range values, bad UTF-8, non-objects, impossible lat/lon
 positions, megabyte payloads and valid payloads on keys with odd ids.  Also the
-property tests' source (tests/test_fuzz_wire.py).
+property tests' source (tests/unit/test_fuzz_wire.py).
 """
 
 from __future__ import annotations

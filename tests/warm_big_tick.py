@@ -1,6 +1,6 @@
 """A big tick after the warm-up, in a fresh interpreter: prints the numba kernels that gained a signature.
 
-Run by tests/test_warmup.py as ``python tests/warm_big_tick.py [--no-wide]``;
+Run by tests/proc/test_warmup.py as ``python tests/warm_big_tick.py [--no-wide]``;
 ``--no-wide`` skips ``warmup.warm_wide``, to show that the tick does reach
 kernels only the wide warm-up loads (the test can fail).
 """

@@ -275,7 +275,7 @@ class ZoneSet:
     def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
         """Boolean mask: which points lie in some zone (boundary included), or within ``margin_m`` of one."""
         # only zones whose box is within the margin can hold a point: the rest are skipped, not measured
-        # (a terrain's hundreds of slope barriers; tests/test_zones.py checks it against the full search)
+        # (a terrain's hundreds of slope barriers; tests/unit/test_zones.py checks it against the full search)
         limit = max(TOUCH_M, margin_m)
         return self.signed_distance(points, limit) <= limit
 

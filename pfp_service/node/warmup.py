@@ -21,7 +21,7 @@ live loop takes:
 
 A kernel loads from numba's cache in milliseconds, or compiles in seconds
 on a fresh checkout: either way here, not in the loop.
-``tests/test_warmup.py`` runs a bigger tick after this, in a fresh
+``tests/proc/test_warmup.py`` runs a bigger tick after this, in a fresh
 interpreter, and fails if any kernel gained a signature.
 """
 

@@ -6,7 +6,7 @@ queryables and their one generic handler (``node.writes``), the durable state's 
 commits and its read-back (``node.statefile``, ``node.store``, ``node.staterows``), the log line
 of each change (``node.log``), the key a failure is blamed on (``blame``), who may write each
 key under access control (``node.access``), and the check of docs/wire.md's key table
-(``tests/test_kinds.py``).  A new kind is one entry here and one handler in
+(``tests/unit/test_kinds.py``).  A new kind is one entry here and one handler in
 ``World._apply_one`` (docs/development.md, "Add an input kind").
 
 A ``write`` kind is put and deleted by anyone its roles allow (goals, threats, zones): decoded by

@@ -11,7 +11,7 @@ cannot name.
 
 The core is imported where it is used, as the wire did before: a client or a
 command that reads a hostile file imports this module without compiling the
-core's kernels (tests/test_light_commands.py).
+core's kernels (tests/proc/test_light_commands.py).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ import uuid
 import pytest
 
 from tests.conftest import EXAMPLES, run_pfp
-from tests.test_inject import _pfp, _wait_for_line
+from tests.unit.test_inject import _pfp, _wait_for_line
 from tests.zenoh_util import planner_process
 
 pytestmark = pytest.mark.proc

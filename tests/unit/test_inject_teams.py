@@ -9,7 +9,7 @@ from pfp_clients.watch import Watch
 
 from pfp_service.errors import InputError
 from pfp_service.world.world import TeamPut, ThreatPut, ThreatUpdate
-from tests.test_world_teams import TEAM, _drive, _world
+from tests.unit.test_world_teams import TEAM, _drive, _world
 
 pytestmark = pytest.mark.unit
 

@@ -23,8 +23,8 @@ from pfp_service.core.mobility import CLASSES
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from tests.conftest import run_pfp
+from tests.proc.test_map_cli import _one_line_exit_2
 from tests.terrain_data import jacksboro, write_geographic
-from tests.test_map_cli import _one_line_exit_2
 
 M = "rt"
 S = 1_000_000_000
@@ -139,7 +139,7 @@ def test_a_record_without_origin_or_a_dem_not_under_it_is_one_line_exit_2(tmp_pa
     # a decompression bomb is refused from its header (test_light_commands measures the others' peak)
     from rasterio.transform import from_origin
 
-    from tests.test_terrain import _write
+    from tests.unit.test_terrain import _write
 
     bomb = _write(
         tmp_path / "bomb.tif", width=8_000, height=1_000, blockysize=1_000, compress="deflate",

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from pfp_service.wire import keys
+from tests.browser.test_map_browser import _screenshot, map_process, page_at, playwright  # noqa: F401 - a fixture
 from tests.conftest import run_pfp
+from tests.proc.test_map_cli import _one_line_exit_2, router  # noqa: F401 - a fixture
 from tests.terrain_data import jacksboro, observers, write_geographic
-from tests.test_map_browser import _screenshot, map_process, page_at, playwright  # noqa: F401 - a fixture
-from tests.test_map_cli import _one_line_exit_2, router  # noqa: F401 - a fixture
 from tests.zenoh_util import client, free_port, put_json
 
 

@@ -16,8 +16,8 @@ from pfp_clients.tak.state import BridgeSettings, BridgeState
 
 from pfp_service.geo import Origin
 from tests.conftest import run_pfp
+from tests.proc.test_map_cli import _one_line_exit_2
 from tests.terrain_data import jacksboro, write_geographic, write_utm
-from tests.test_map_cli import _one_line_exit_2
 from tests.zenoh_util import free_port
 
 T0 = 1_796_000_000.0

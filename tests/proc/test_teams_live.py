@@ -9,7 +9,7 @@ import pytest
 
 from pfp_service.wire import decode_world_snapshot, keys
 from tests.conftest import run_pfp
-from tests.test_team_files import ALPHA, UNITS
+from tests.unit.test_team_files import ALPHA, UNITS
 from tests.zenoh_util import Inbox, client, planner_process, put_in_force, put_json
 
 pytestmark = pytest.mark.proc
