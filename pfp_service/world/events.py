@@ -32,6 +32,7 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
+from pfp_service.world.separations import DispersionSettings
 
 __all__ = [
     "Deliberated",
@@ -382,6 +383,7 @@ class WorldSettings:
     push_retries: int = 4  # ... this many times, until the unit's next report is answered
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
     origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
+    dispersion: DispersionSettings = field(default_factory=DispersionSettings)  # off unless enabled
 
     def params_for(self, goal: Goal) -> PlannerParams:
         """A unit's planner parameters: service defaults, then the goal's overrides."""

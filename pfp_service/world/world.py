@@ -12,7 +12,7 @@ its own tests: the records and the threats' field (``world_records``), the
 timer heap (``timers``), staleness, forgetting and push re-sends
 (``liveness``), cluster ownership (``ownership``), the limits on rejections
 and fault lines (``limits``), a unit's mission (``missions``), the reactive
-step and its look-ahead (``steering``, ``lookahead``) and the snapshot's
+step, its look-ahead and dispersion (``steering``, ``lookahead``, ``dispersion``), the snapshot's
 pages (``snapshot.page``).  Unbounded work (look-ahead, escape searches) is
 deliberation: a ``Job`` whose result is adopted only for the goal and world
 still in force.  Bulkheads: ``apply`` is total; a failure belongs to the
@@ -30,8 +30,8 @@ from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.wire import ConflictEvent, Goal, ThreatChange, ThreatUpdate, UnitState, WorldSnapshot, keys
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
+from pfp_service.world import dispersion, missions, steering
 from pfp_service.world import events as ev
-from pfp_service.world import missions, steering
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.world.limits import Limits
@@ -63,6 +63,7 @@ class World:
         self._live = Liveness(s, self._rec, self._timers)
         self._own = Ownership(s.planner_id, s.cluster)
         self.limits = Limits()
+        self._disp = dispersion.Dispersion(s.dispersion, self._units)  # off unless enabled: today's world
         # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
         self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
 
@@ -303,9 +304,7 @@ class World:
                 self._rec.hand_over(rec)
                 continue
             rec.owned = True
-            if (
-                rec.goal is not None and rec.position is not None and not rec.stale
-            ):  # stale: at its next report
+            if rec.goal is not None and rec.position is not None and not rec.stale:  # stale: when it reports
                 self._start(rec, b)
             self._tell(rec, b)
 
@@ -437,12 +436,12 @@ class World:
         steered: steering.Steered = []
         failed: steering.Failed = []
         if (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0:  # the wave first
-            advised, failed = steering.advise(guided, fld, cull)
+            advised, failed = steering.advise(guided, fld, cull, self._disp)
             steered = [(r, a, []) for r, a in advised]
             self._owed += [(r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None]
             b.wave = {r.id for r, _ in advised}
         elif guided:
-            steered, failed = steering.steer(guided, fld, cull, n)
+            steered, failed = steering.steer(guided, fld, cull, n, self._disp)
         if later:
             tracked, lost = steering.ahead(later, fld, cull, n)
             steered += tracked
@@ -469,6 +468,7 @@ class World:
             sent.append(rec.position)
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
+        out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
         # a unit whose step failed lost its goal: told so, once the rest are out
         out.directions += [steering.no_goal(r, p) for r, _ in failed if r.id in self._units and r.live()]
 
