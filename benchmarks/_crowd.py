@@ -14,6 +14,7 @@ taken from the world: the nearest friendly unit of each unit at each tick
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import random
 import time
@@ -69,6 +70,7 @@ class Outcome:
     longest_deadlock_s: float = 0.0  # the longest such stretch among those with a deadlock in them
     still_holding: int = 0
     tick_cpu_s: list[float] = field(default_factory=list)  # each apply's CPU time
+    shadow_cpu_s: list[float] = field(default_factory=list)  # the shadow world's, on the same inputs
     states: int = 0  # state reports applied
     sim_s: float = 0.0
 
@@ -92,7 +94,7 @@ def gaps(n: int = 200, seed: int = 1, gap_m: float = 240.0) -> Crowd:
         goals.append((x * 1.4, 1500.0 + 110.0 * (rows - 1 - r)))  # the front row goes farthest
     kinds = ["manned" if rng.random() < 0.2 else "unmanned" for _ in range(n)]
     threats = wall((-1000.0, 0.0, 1000.0), gap_m)
-    return Crowd("200 units through 3 gaps", starts, goals, kinds, threats)
+    return Crowd(f"{n} units through 3 gaps", starts, goals, kinds, threats)
 
 
 def converging(n: int = 1000, seed: int = 2) -> Crowd:
@@ -132,10 +134,15 @@ def simulate(
     lookahead: int = 5,
     limit_s: float | None = None,
     record: list[tuple[float, Direction]] | None = None,
+    shadow: DispersionSettings | None = None,
 ) -> Outcome:
     """Drive ``crowd`` through a world with ``dispersion`` (``None``: off) until every unit rests or time is up.
 
     ``record``: every direction sent, with its time, is appended to it.
+    ``shadow``: a second world with these settings is given the very same
+    inputs each tick (its directions unused, its jobs run as the first's),
+    and its ``apply`` timed in ``Outcome.shadow_cpu_s``: the cost of the two
+    settings on identical inputs, in one sitting.
     """
     settings = WorldSettings(
         deliberation="deferred",
@@ -145,6 +152,7 @@ def simulate(
         dispersion=dispersion or DispersionSettings(),
     )
     world = World(settings)
+    twin = None if shadow is None else World(dataclasses.replace(settings, dispersion=shadow))
     ids = crowd.ids()
     n = len(ids)
     pos = np.array(crowd.starts, dtype=float)
@@ -160,7 +168,10 @@ def simulate(
     setup: list[ev.Input] = [ev.ThreatPut(t, u) for t, u in crowd.threats.items()]
     setup += [ev.GoalSet(u, _goal(g)) for u, g in zip(ids, crowd.goals)]
     world.apply(setup, 0.0)
+    if twin is not None:
+        twin.apply(setup, 0.0)
     done: list[ev.Input] = []
+    twin_done: list[ev.Input] = []
     t, seq = 0.0, 0
     limit = crowd.limit_s if limit_s is None else limit_s
     from scipy.spatial import cKDTree
@@ -168,6 +179,7 @@ def simulate(
     while t <= limit:
         seq += 1
         inputs: list[ev.Input] = list(done)
+        done_before = done
         inputs += [
             ev.StateReported(u, UnitState(position=(float(p[0]), float(p[1])), seq=seq, kind=k))
             for u, p, k in zip(ids, pos.tolist(), kinds)
@@ -177,6 +189,11 @@ def simulate(
         out.tick_cpu_s.append(time.process_time() - c0)
         out.states += n
         done = [job.run() for job in o.jobs if not job.cancelled]
+        if twin is not None:
+            c0 = time.process_time()
+            to = twin.apply(twin_done + inputs[len(done_before) :], t)
+            out.shadow_cpu_s.append(time.process_time() - c0)
+            twin_done = [job.run() for job in to.jobs if not job.cancelled]
         locks = [e for e in o.events if isinstance(e, DeadlockEvent)]
         out.deadlocks += len(locks)
         deadlocked |= {e.unit for e in locks}

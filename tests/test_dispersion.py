@@ -165,3 +165,16 @@ def test_advise_many_without_push_and_with_a_zero_push_agree():
         ]
 
     assert advise_many(steppers(), fld, pts) == advise_many(steppers(), fld, pts, push=np.zeros((3, 2)))
+
+
+def test_serve_config_turns_dispersion_on_with_classes_and_units(tmp_path):
+    from pfp_service.node.config import load_config
+
+    assert load_config(None, {}, {}).world_settings().dispersion == DispersionSettings()  # off by default
+    toml = tmp_path / "pfp.toml"
+    toml.write_text(
+        'separation_m = {foot = 8}\nunit_class = {d1 = "foot"}\nmanned_first = false\ndeadlock_s = 4\n'
+    )
+    d = load_config(toml, {}, {"dispersion": True}).world_settings().dispersion
+    assert d.enabled and not d.manned_first and d.deadlock_s == d.backoff_s == 4.0
+    assert (d.separation("d1"), d.separation("v1"), d.separation_m["tracked"]) == (8.0, 50.0, 50.0)
