@@ -21,9 +21,9 @@ very same point have no gradient between them; the one of lower index is
 pushed west, the other east, so they part.
 
 ``NeighbourIndex`` is a ``scipy.spatial.cKDTree`` over every unit's
-position, built once per tick; ``gradients`` asks it only for the units
-being advised, so a tick costs ``O(k log N)`` for ``k`` units advised among
-``N``.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
+position, built once per tick, and its pairs within reach found once, in
+compiled code (``query_pairs``); ``gradients`` sums them for the units
+being advised.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
 """
 
 from __future__ import annotations
@@ -87,16 +87,26 @@ class NeighbourIndex:
         self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
         self.tree = cKDTree(self.points) if len(self.points) else None
         self.radius = REACH * float(self.seps.max()) if len(self.seps) else 0.0
+        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every ordered pair ``(i, j)``, ``i != j``, within the widest reach: one compiled query, kept."""
+        if self._pairs is None:
+            if self.tree is None:
+                none = np.zeros(0, np.intp)
+                self._pairs = (none, none)
+            else:
+                ij = self.tree.query_pairs(self.radius, output_type="ndarray").astype(np.intp)
+                self._pairs = (np.concatenate([ij[:, 0], ij[:, 1]]), np.concatenate([ij[:, 1], ij[:, 0]]))
+        return self._pairs
 
     def near(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate pairs ``(i, j)`` for the units at ``rows``: every ``j`` within the widest reach of ``i``."""
-        rows = np.asarray(rows, dtype=np.intp)
-        if self.tree is None or not len(rows):
-            return np.zeros(0, np.intp), np.zeros(0, np.intp)
-        found = self.tree.query_ball_point(self.points[rows], r=self.radius, return_sorted=False)
-        counts = np.fromiter(map(len, found), dtype=np.intp, count=len(rows))
-        j = np.fromiter((k for ks in found for k in ks), dtype=np.intp, count=int(counts.sum()))
-        return np.repeat(rows, counts), j
+        """Candidate pairs ``(i, j)`` for the units at ``rows``: every other ``j`` within the widest reach of ``i``."""
+        i, j = self.pairs()
+        wanted = np.zeros(len(self.points), dtype=bool)
+        wanted[np.asarray(rows, dtype=np.intp)] = True
+        keep = wanted[i]
+        return i[keep], j[keep]
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""

@@ -129,7 +129,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     unit_class: dict[Id, MobilityClass] = {}  # each unit's mobility class, where not default_class
     default_class: MobilityClass = "wheeled"
     manned_first: bool = True  # right of way: manned before unmanned, then by id (off: by id alone)
-    deadlock_s: Positive = 10.0  # a unit held this long is in a deadlock, and backs off as long
+    deadlock_s: Positive = 6.0  # a unit held this long is in a deadlock, and backs off as long
 
     def __post_init__(self) -> None:
         if not 0 <= self.lookahead <= 100:

@@ -47,6 +47,7 @@ YIELD_AT = 1.5  # a lower-priority unit closing on a higher one within this many
 # a yielding unit pushed this hard (a neighbour within about its separation: PUSH (1 - 1 / REACH) is
 # one at exactly the separation) moves away along its push instead of holding still
 CROWDED = PUSH * (1.0 - 1.0 / REACH)
+KEEP = 1.1  # no direction drives a unit within this many separations of another (``_short``)
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 
@@ -154,7 +155,42 @@ class Dispersion:
                 directions[k] = self._back_off(d, i, j, hold)
                 continue
             directions[k] = self._yield(d, i, j, gap, pair)
+        self._short(directions, moving)
         return events
+
+    def _short(self, directions: list[Direction], moving: list[int]) -> None:
+        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations, in place.
+
+        A direction's ray against every neighbour's disc of ``KEEP`` times the
+        pair's separation, in one vectorised pass: the unit goes no further
+        than the disc's edge (0, holding, when it is inside one and closing),
+        so no direction ever drives a unit into another's separation, whatever
+        pushes it.  The margin is for the other unit, which moves meanwhile.
+        """
+        index = self._index
+        assert index is not None
+        go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
+        if not go:
+            return
+        rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
+        at = np.full(len(self._recs), -1, dtype=np.intp)
+        at[rows] = np.arange(len(rows))
+        vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
+        i, j = index.near(rows)
+        n = at[i]
+        rel = index.points[j] - index.points[i]
+        along = (rel * vec[n]).sum(axis=1)
+        keep_m = KEEP * np.maximum(index.seps[i], index.seps[j])
+        across2 = (rel * rel).sum(axis=1) - along * along
+        hit = (along > 0.0) & (across2 < keep_m * keep_m)
+        enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+        safe = np.full(len(go), np.inf)
+        np.minimum.at(safe, n[hit], enter)
+        for m in np.flatnonzero(np.isfinite(safe)).tolist():
+            k, cut = go[m], float(safe[m])
+            d = directions[k]
+            if d.reach_m is None or cut < d.reach_m:
+                directions[k] = msgspec.structs.replace(d, reach_m=cut)
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
@@ -178,7 +214,6 @@ class Dispersion:
             return None
         del self._stall[d.unit]
         _, jj = index.near(np.array([i]))
-        jj = jj[jj != i]
         if not len(jj):
             return None
         gaps = np.hypot(*(index.points[jj] - index.points[i]).T)
@@ -198,14 +233,15 @@ class Dispersion:
             return []
         rows = np.array([self._row[d.unit] for d in moving], dtype=np.intp)
         vec = np.array([d.vector for d in moving], dtype=float).reshape(-1, 2)
-        at = {r: k for k, r in enumerate(rows.tolist())}
+        at = np.full(len(self._recs), -1, dtype=np.intp)
+        at[rows] = np.arange(len(rows))
         i, j = index.near(rows)
         n = len(self._recs)
         first = np.fromiter((priority(r, s.manned_first)[0] for r in self._recs), dtype=np.intp, count=n)
         rank = np.empty(n, dtype=np.intp)  # the total order of right of way, 0 first
         rank[np.lexsort((np.array([r.id for r in self._recs]), first))] = np.arange(n)
         goes = np.fromiter((self._goes(r) for r in self._recs), dtype=bool, count=n)
-        k = np.fromiter((at[x] for x in i.tolist()), dtype=np.intp, count=len(i))
+        k = at[i]
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
         closing = (rel * vec[k]).sum(axis=1) > 0.0

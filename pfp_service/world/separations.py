@@ -36,8 +36,8 @@ class DispersionSettings:
     default_class: str = "wheeled"
     classes: Mapping[str, str] = field(default_factory=dict)  # unit id -> mobility class
     manned_first: bool = True
-    deadlock_s: float = 10.0
-    backoff_s: float = 10.0
+    deadlock_s: float = 6.0
+    backoff_s: float = 6.0
 
     def separation(self, unit: str) -> float:
         """The unit's separation in metres, by its class."""
