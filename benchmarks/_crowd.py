@@ -79,7 +79,7 @@ def gaps(n: int = 200, seed: int = 1, gap_m: float = 240.0) -> Crowd:
     """``n`` vehicles from the south to the north through a line of threats with three gaps.
 
     Starts on a jittered grid 90 m apart (clear of 50 m), goals a grid 3 km
-    north (the front row's the farthest, as a column marches), beyond a line of threats along y = 0 facing south,
+    north, 154 m by 130 m apart (the front row's the farthest, as a column marches), beyond a line of threats along y = 0 facing south,
     broken by three gaps of ``gap_m`` at x = -1000, 0 and 1000.  A fifth of
     the units are manned, chosen by the seed.
     """
@@ -91,18 +91,19 @@ def gaps(n: int = 200, seed: int = 1, gap_m: float = 240.0) -> Crowd:
         r, c = divmod(k, cols)
         x = (c - (cols - 1) / 2) * 110.0
         starts.append((x + rng.uniform(-10, 10), -1500.0 - 90.0 * r + rng.uniform(-10, 10)))
-        goals.append((x * 1.4, 1500.0 + 110.0 * (rows - 1 - r)))  # the front row goes farthest
+        goals.append((x * 1.4, 1500.0 + 130.0 * (rows - 1 - r)))  # the front row goes farthest
     kinds = ["manned" if rng.random() < 0.2 else "unmanned" for _ in range(n)]
     threats = wall((-1000.0, 0.0, 1000.0), gap_m)
     return Crowd(f"{n} units through 3 gaps", starts, goals, kinds, threats)
 
 
 def converging(n: int = 1000, seed: int = 2) -> Crowd:
-    """``n`` vehicles converging: a wide grid 150 m apart driving to one half its size, 3 km north.
+    """``n`` vehicles converging: a wide grid 200 m apart driving to one 0.6 its size, 4 km north.
 
     Each unit keeps its place in the grid (north rows to north rows), so no
-    unit must cross ground its arrived neighbours hold; the routes converge
-    by half.  A few threats stand in the middle; a fifth are manned.
+    unit must cross ground its arrived neighbours hold; the goals, 120 m
+    apart, leave a way between two arrived units that keeps the separation
+    and its margin (2 x 1.1 x 50 m: goals any closer wall the inner ones in).  A few threats stand in the middle; a fifth are manned.
     """
     rng = random.Random(seed)
     cols = 40
@@ -110,9 +111,9 @@ def converging(n: int = 1000, seed: int = 2) -> Crowd:
     starts, goals = [], []
     for k in range(n):
         r, c = divmod(k, cols)
-        x, y = (c - (cols - 1) / 2) * 150.0, (r - (rows - 1) / 2) * 150.0
+        x, y = (c - (cols - 1) / 2) * 200.0, (r - (rows - 1) / 2) * 200.0
         starts.append((x + rng.uniform(-20, 20), y - 3000.0 + rng.uniform(-20, 20)))
-        goals.append((x * 0.55, y * 0.55 + 1000.0))
+        goals.append((x * 0.6, y * 0.6 + 1000.0))
     kinds = ["manned" if rng.random() < 0.2 else "unmanned" for _ in range(n)]
     threats = {
         f"t{k}": ThreatUpdate(

@@ -4,7 +4,7 @@ Seeded crowds driven through the sans-I/O world in process
 (``benchmarks._crowd.simulate``: every unit reports each simulated second,
 drives along its direction at 5 m/s, deliberation runs between ticks):
 200 vehicles through a line of threats with three gaps, and 1,000 vehicles
-whose goals converge to a grid half the size of their start.  Each crowd runs
+whose goals converge to a grid 0.6 the size of their start (``_crowd``).  Each crowd runs
 twice, without and with dispersion (defaults: 50 m between vehicles), and
 the figures are measured on the tracks.
 

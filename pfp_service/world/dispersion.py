@@ -1,30 +1,33 @@
 """Dispersion in the live world: separations by class, the push in the field, right of way and deadlocks.
 
 Off unless ``DispersionSettings.enabled``: then the world is what it was,
-bit for bit.  On, each ``apply`` that advises units does three things:
+bit for bit.  On, each ``apply`` that advises units does four things:
 
 1. ``Dispersion.push``: a k-d tree over every unit the world holds a fresh
    position for (guided, arrived, without a goal: a friendly unit is in the
    way whatever it is doing), built once, and each advised unit's share of
-   the repulsive term (``core.dispersion``) added to the gradient it descends.
+   the repulsive term (``core.dispersion``), which it descends with the
+   field (``core.batch.advise_many``: a unit on another route turns by it).
 2. ``Dispersion.right_of_way``: a unit whose direction closes on a moving
    unit of higher priority within ``YIELD_AT`` separations holds, with
    status ``yielding`` and a reason naming the other unit, and goes when the
-   other has drawn away.  Priority: manned before unmanned (unless
-   ``manned_first`` is off), then the smaller id.  The order is total, so
-   no two units ever yield to each other.
+   other has drawn away (or makes room, when a unit is within about its
+   separation).  Priority: manned before unmanned (unless ``manned_first``
+   is off), then the smaller id.  The order is total, so no two units ever
+   yield to each other.
 3. A deadlock, a unit yielding for ``deadlock_s`` to a unit that has not
-   drawn away (the other held back by the yielder's own push, or standing
-   still), is reported (``DeadlockEvent``) and broken: the yielder backs off,
-   straight away from the other unit, for ``backoff_s``, then goes on as any
-   unit does.  Detected within ``deadlock_s`` and released ``backoff_s``
+   drawn away, or a pushed unit no nearer its goal for ``deadlock_s`` (two
+   units pushing each other to a standstill), is reported
+   (``DeadlockEvent``) and broken: the unit of lower priority (or the one
+   that can move) backs off, away and aside, for ``backoff_s``, then goes on
+   as any unit does.  Detected within ``deadlock_s``, released ``backoff_s``
    later: a bounded time.
+4. ``_short``: no direction takes a unit within ``KEEP`` separations of
+   another; its reach is cut at that disc's edge.
 
 A unit's separation is its mobility class's (``separations``); a pair keeps
 the larger of its two.  Look-ahead points are the threat field's descent:
-neighbours move meanwhile.  A unit on
-a route (an escape) or in a keep-out zone follows its route without the
-push, but right of way holds it all the same.
+neighbours move meanwhile.
 """
 
 from __future__ import annotations
