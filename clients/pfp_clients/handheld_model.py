@@ -47,6 +47,7 @@ STATUS_LABELS: Final = {
     DirectionStatus.TRAPPED: "TRAPPED",
     DirectionStatus.ARRIVED: "ARRIVED",
     DirectionStatus.NO_GOAL: "NO GOAL",
+    DirectionStatus.YIELDING: "YIELDING",
 }
 WAITING_LABEL: Final = "WAITING FOR PLANNER"
 _MOVING: Final = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)

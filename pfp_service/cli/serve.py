@@ -159,6 +159,13 @@ def register(sub: Any) -> None:
         "rendezvous hashing gives it, and takes over a failed planner's units (default: off)",
     )
     p.add_argument(
+        "--dispersion",
+        action="store_const",
+        const=True,
+        help="keep friendly units apart (50 m between vehicles, 5 m on foot; per class and unit in the "
+        "config file), with right of way and deadlocks broken (default: off)",
+    )
+    p.add_argument(
         "--state-dir",
         metavar="DIR",
         help="durable state (threats, goals, missions) in SQLite; 'none' turns it off "
@@ -224,6 +231,7 @@ _FLAG_KEYS = [
     "cluster",
     "terrain",
     "terrain_unit",
+    "dispersion",
 ]
 
 

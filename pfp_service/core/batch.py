@@ -9,6 +9,8 @@ where the unit is in a keep-out zone or on a route), identical to calling
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pfp_service.core import kernels
@@ -16,12 +18,19 @@ from pfp_service.core.advice import Advice, Need, StepStatus
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.stepper import Stepper
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.tracking import Route
 
 __all__ = ["advise_many"]
 
+_OWN = (Route.NONE, Route.DESCENT)  # routes whose heading is the batch's (pushed) descent
+
 
 def advise_many(
-    steppers: list[Stepper], field: ThreatField, positions: np.ndarray, cull: CullIndex | None = None
+    steppers: list[Stepper],
+    field: ThreatField,
+    positions: np.ndarray,
+    cull: CullIndex | None = None,
+    push: np.ndarray | None = None,
 ) -> list[Advice]:
     """``advise`` for many units under one field, with one vectorised kernel call.
 
@@ -31,6 +40,12 @@ def advise_many(
         positions: ``(N, 2)`` reported positions, row i for ``steppers[i]``.
         cull: ``field``'s cull index: only nearby threats are evaluated, within
             the bound ``core.cull`` proves (used from ``cull.MIN_THREATS`` threats).
+        push: ``(N, 2)`` an extra gradient per unit in units of its field's
+            slope where it stands (dispersion, ``core.dispersion``): row i's
+            descent (plain, or a tracked descent) follows ``grad f + |grad f|
+            push[i]``.  A unit steered otherwise (another route, a keep-out
+            zone) turns its heading ``h`` to ``h - push[i]`` (normalised), the
+            same sum with the heading as the field's slope, for one step.
 
     Returns:
         One ``Advice`` per stepper, in order; identical to calling ``advise`` one by one.
@@ -44,13 +59,19 @@ def advise_many(
         cull.descent(pts, goals, gains, out)
     else:
         kernels.descent_many(field.packed, pts, goals, gains, out)
+    if push is not None:  # only rows with a neighbour near: a unit alone is advised as without dispersion
+        near = push.any(axis=1)
+        out[near, :2] += out[near, 3:4] * push[near]
+        out[near, 3] = np.hypot(out[near, 0], out[near, 1])
     rows = out.tolist()
     coords = pts.tolist()
     # a unit in a keep-out zone, or whose goal is in one, is judged by ``advise`` (``Stepper._zoned``)
     zoned = (field.zones.contains(pts) | field.zones.contains(goals)).tolist() if field.zones else [False] * n
-    result = []
+    result: list[Advice] = []
+    alone: list[int] = []  # advised by the stepper's own rule, not from the batch's gradient
     for s, (x, y), (fx, fy, level, norm), z in zip(steppers, coords, rows, zoned):
         if z:
+            alone.append(len(result))
             result.append(s.advise(field, x, y))
             continue
         if s._terminal is None and s._run is None:
@@ -64,6 +85,7 @@ def advise_many(
         if early is not None:
             result.append(early._replace(level=level) if early.status is StepStatus.TRAPPED else early)
         elif s._foresee and not s.defer:  # looking ahead inline (a preview): not the batch's descent
+            alone.append(len(result))
             result.append(s.advise(field, x, y))
         else:
             if s._foresee:  # deferred: ask for the look-ahead and descend meanwhile, as ``advise`` does
@@ -73,4 +95,40 @@ def advise_many(
                 result.append(s._escaping(field, x, y, level, grad=(fx, fy, level, norm)))
             else:
                 result.append(s.follow(x, y, fx, fy, level, norm, field))
+    if push is not None:
+        _turn(result, steppers, coords, push, alone)
     return result
+
+
+def _turn(
+    result: list[Advice],
+    steppers: list[Stepper],
+    coords: list[list[float]],
+    push: np.ndarray,
+    alone: list[int],
+) -> None:
+    """Turn, in place, each advice not made from the pushed gradient by its unit's push (``advise_many``).
+
+    The heading becomes ``h - push`` normalised, or where that would turn
+    back along the route, square across the push on ``h``'s side (the unit
+    goes round its neighbours, not back); the advice holds for one step at
+    most (to where that step ends): the route or the zone rule judges again
+    at the next report.
+    """
+    again, pushes = set(alone), push.tolist()
+    for k, adv in enumerate(result):
+        if adv.status.terminal or not (k in again or adv.route not in _OWN):
+            continue
+        px, py = pushes[k]
+        if px == 0.0 and py == 0.0:
+            continue
+        vx, vy = adv.dx - px, adv.dy - py
+        if vx * adv.dx + vy * adv.dy < 0.0:  # not back along a route: round the neighbours, across the push
+            vx, vy = (-py, px) if px * adv.dy - py * adv.dx >= 0.0 else (py, -px)
+        v = math.hypot(vx, vy)
+        if not v > 0.0:
+            continue
+        r = min(adv.reach, steppers[k].params.step)
+        dx, dy = vx / v, vy / v
+        x, y = coords[k]
+        result[k] = adv._replace(dx=dx, dy=dy, reach=r, to_x=x + r * dx, to_y=y + r * dy)

@@ -173,6 +173,10 @@ class Stepper(DescentStepper):
         """The strategy of each escape committed to, in order."""
         return list(self._escaper.log) if self._escaper is not None else []
 
+    def held(self) -> None:
+        """The unit holds by order (it yields right of way): no progress is no trap; judge afresh when it goes."""
+        steprule.reset_watch(self._unit)
+
     def world_changed(self) -> None:
         """Threats appeared, moved or vanished: judge progress afresh from here."""
         steprule.reset_watch(self._unit)

@@ -25,6 +25,7 @@ from msgspec import Meta
 from pfp_service.bounds import check_depth, scan_toml
 from pfp_service.constraints import Delta, Finite, Id, NonNegative, Positive, Step, Tolerance
 from pfp_service.core import PlannerParams
+from pfp_service.core.mobility import MobilityClass
 from pfp_service.core.params import Escape
 from pfp_service.errors import InputError, from_validation, map_zenoh_errors
 from pfp_service.files import read_text
@@ -33,6 +34,7 @@ from pfp_service.scenario import CHOICES
 
 if TYPE_CHECKING:
     from pfp_service.world.events import WorldSettings
+    from pfp_service.world.separations import DispersionSettings
 
 __all__ = [
     "CONNECT_RETRY",
@@ -124,6 +126,13 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     # a DEM planned over (terrain.live): threats masked by line of sight, slopes past the class a barrier
     terrain: str | None = None
     terrain_unit: Literal["foot", "wheeled", "tracked"] = "foot"  # the mobility class planned for
+    # dispersion between friendly units (docs/operations.md, "Dispersion"): off unless turned on
+    dispersion: bool = False
+    separation_m: dict[MobilityClass, Positive] = {}  # a class's separation, over the defaults
+    unit_class: dict[Id, MobilityClass] = {}  # each unit's mobility class, where not default_class
+    default_class: MobilityClass = "wheeled"
+    manned_first: bool = True  # right of way: manned before unmanned, then by id (off: by id alone)
+    deadlock_s: Positive = 6.0  # a unit held this long is in a deadlock, and backs off as long
 
     def __post_init__(self) -> None:
         if not 0 <= self.lookahead <= 100:
@@ -155,6 +164,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
             max_threats=self.max_threats,
             origin=self.origin,
             cluster=self.cluster,
+            dispersion=self.dispersion_settings(),
         )
         if self.terrain is not None:  # loaded once per process (terrain.live.load), then shared
             from pfp_service.terrain.live import load
@@ -164,6 +174,22 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
                 settings, terrain=ground, bounds=ground.bounds, origin=ground.origin
             )
         return settings
+
+    def dispersion_settings(self) -> DispersionSettings:
+        """The world's dispersion settings: the class defaults with this file's overrides."""
+        from pfp_service.world.separations import SEPARATION_M, DispersionSettings
+
+        separation: dict[str, float] = dict(SEPARATION_M)
+        separation.update((str(k), v) for k, v in self.separation_m.items())
+        return DispersionSettings(
+            enabled=self.dispersion,
+            separation_m=separation,
+            default_class=self.default_class,
+            classes=dict(self.unit_class),
+            manned_first=self.manned_first,
+            deadlock_s=self.deadlock_s,
+            backoff_s=self.deadlock_s,
+        )
 
     def bounds_tuple(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
         if self.bounds is None:

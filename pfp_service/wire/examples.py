@@ -225,5 +225,16 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                 "event.conflict",
                 m.ConflictEvent(other="planner-2", reason="a second planner on mission default"),
             ),
+            (
+                "event.deadlock",
+                m.DeadlockEvent(
+                    unit="ugv-2",
+                    other="ugv-1",
+                    position=(310.0, 42.0),
+                    held_s=10.2,
+                    backoff_s=10.0,
+                    reason="ugv-2 held 10 s for ugv-1, which did not draw away: ugv-2 backs off for 10 s",
+                ),
+            ),
         ],
     }

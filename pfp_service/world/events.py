@@ -31,6 +31,7 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
+from pfp_service.world.separations import DispersionSettings
 
 if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
     from pfp_service.core import Stepper, Threat, ThreatField
@@ -433,6 +434,7 @@ class WorldSettings:
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
     origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
     terrain: Ground | None = None  # the DEM planned over (``world.terrain``): sight and slope barriers
+    dispersion: DispersionSettings = field(default_factory=DispersionSettings)  # off unless enabled
 
     def params_for(self, goal: Goal) -> PlannerParams:
         """A unit's planner parameters: service defaults, then the goal's overrides."""

@@ -40,6 +40,7 @@ from pfp_service.wire import (
 )
 from pfp_service.wire.geodetic import with_geodetic_many
 from pfp_service.wire.messages import MAX_EVENT_ITEMS
+from pfp_service.world.dispersion import Dispersion
 from pfp_service.world.lookahead import Track, lookahead, within_map
 from pfp_service.world.units import NO_GOAL, UnitRecord, Verdict
 
@@ -74,36 +75,42 @@ Failed = list[tuple[UnitRecord, BaseException]]
 
 
 def steer(
-    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None, n: int
+    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None, n: int, disp: Dispersion | None = None
 ) -> tuple[Steered, Failed]:
     """Advise the units (each with a stepper and a position) and predict ``n`` positions ahead.
+
+    ``disp``: the world's dispersion, whose push each unit descends with the field (``advise``).
 
     Returns:
         (unit, advice, look-ahead) for each unit steered, in the order given,
         and (unit, error) for each unit that failed alone.
     """
-    advised, failed = advise(guided, fld, cull)
+    advised, failed = advise(guided, fld, cull, disp)
     steered, lost = ahead(advised, fld, cull, n)
     return steered, failed + lost
 
 
 def advise(
-    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None
+    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None, disp: Dispersion | None = None
 ) -> tuple[list[tuple[UnitRecord, Advice]], Failed]:
     """Advise the units (each with a stepper and a position): the first half of ``steer``, no look-ahead.
+
+    With ``disp`` (on), each unit descends the field plus its neighbours'
+    repulsion (``Dispersion.push``, ``advise_many``'s ``push``).
 
     Returns:
         (unit, advice) for each unit advised, in the order given, and (unit,
         error) for each unit that failed alone or whose direction is not finite.
     """
     failed: Failed = []
+    push = disp.push(guided) if disp is not None else None
     try:
-        advices = _advise(guided, fld, cull)
+        advices = _advise(guided, fld, cull, push)
     except Exception:  # one unit's numbers broke the batch: each alone, the poisoned dropped
         advices, alone, guided = [], guided, []
-        for rec in alone:
+        for k, rec in enumerate(alone):
             try:
-                advices += _advise([rec], fld, cull)
+                advices += _advise([rec], fld, cull, None if push is None else push[k : k + 1])
                 guided.append(rec)
             except Exception as exc:
                 failed.append((rec, exc))
@@ -160,9 +167,12 @@ def _within(tracks: list[Track]) -> bool:
     return bool(np.all(np.abs(flat) <= FINITE_LIMIT))  # NaN is not within
 
 
-def _advise(guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None) -> list[Advice]:
+def _advise(
+    guided: list[UnitRecord], fld: ThreatField, cull: CullIndex | None, push: np.ndarray | None
+) -> list[Advice]:
     steppers = [r.stepper for r in guided]
-    return advise_many(steppers, fld, np.array([r.position for r in guided], dtype=float), cull)  # type: ignore[arg-type]
+    at = np.array([r.position for r in guided], dtype=float)
+    return advise_many(steppers, fld, at, cull, push)  # type: ignore[arg-type]
 
 
 def _ahead(

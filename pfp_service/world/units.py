@@ -318,6 +318,12 @@ class Units:
         if moved:
             self._to(rec, Step.STEERED)
 
+    def yielded(self, rec: UnitRecord, verdict: Verdict) -> None:
+        """The unit holds or makes room for another (dispersion's right of way): held on purpose, not trapped."""
+        if rec.stepper is not None:
+            rec.stepper.held()
+        self.steered(rec, verdict)
+
     def asked(self, rec: UnitRecord, job: Job) -> None:
         """A deliberation job was asked for the unit."""
         rec.job = job

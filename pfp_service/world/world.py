@@ -12,7 +12,7 @@ its own tests: the records and the threats' field (``world_records``), the
 timer heap (``timers``), staleness, forgetting and push re-sends
 (``liveness``), cluster ownership (``ownership``), the limits on rejections
 and fault lines (``limits``), a unit's mission (``missions``), the reactive
-step and its look-ahead (``steering``, ``lookahead``) and the snapshot's
+step, its look-ahead and dispersion (``steering``, ``lookahead``, ``dispersion``), the snapshot's
 pages (``snapshot.page``).  Unbounded work (look-ahead, escape searches) is
 deliberation: a ``Job`` whose result is adopted only for the goal and world
 still in force.  Bulkheads: ``apply`` is total; a failure belongs to the
@@ -37,8 +37,8 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
+from pfp_service.world import dispersion, kinds, missions, steering, translate
 from pfp_service.world import events as ev
-from pfp_service.world import kinds, missions, steering, translate
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
@@ -75,6 +75,9 @@ class World:
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
         self.limits = Limits()
         self.teams = TeamBook()  # the teams in force: their roles' verdicts on the directions
+        self._disp = dispersion.Dispersion(
+            s.dispersion, self._units, self._book.yielded
+        )  # off unless enabled
         # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
         self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
         self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once
@@ -440,12 +443,12 @@ class World:
         steered: steering.Steered = []
         failed: steering.Failed = []
         if (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0:  # the wave first
-            advised, failed = steering.advise(guided, fld, cull)
+            advised, failed = steering.advise(guided, fld, cull, self._disp)
             steered = [(r, a, []) for r, a in advised]
             self._owed += [(r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None]
             b.wave = {r.id for r, _ in advised}
         elif guided:
-            steered, failed = steering.steer(guided, fld, cull, n)
+            steered, failed = steering.steer(guided, fld, cull, n, self._disp)
         if later:
             tracked, lost = steering.ahead(later, fld, cull, n)
             steered += tracked
@@ -475,6 +478,7 @@ class World:
         out.directions[first:] = self.teams.judge(out.directions[first:], self._units)  # the roles' say
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
+        out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
         # a unit whose step failed lost its goal: told so, once the rest are out
         out.directions += [self._no_goal(r) for r, _ in failed if r.id in self._units and r.live()]
 

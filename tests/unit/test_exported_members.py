@@ -17,6 +17,7 @@ EXPECTED = [
     "ArrivedEvent",
     "Bounds",
     "ConflictEvent",
+    "DeadlockEvent",
     "Direction",
     "DirectionStatus",
     "ErrorReply",

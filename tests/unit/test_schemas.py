@@ -185,6 +185,11 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "ForgottenEvent": ({"kind", "unit"}, {"planner", "t", "stale_s"}),
     "RestoredEvent": ({"kind"}, {"planner", "t", "threats", "goals", "missions", "expired"}),
     "ConflictEvent": ({"kind", "other"}, {"planner", "t", "reason"}),
+    # dispersion's deadlocks (issue 33)
+    "DeadlockEvent": (
+        {"kind", "unit", "other", "position"},
+        {"planner", "t", "held_s", "backoff_s", "reason"},
+    ),
     "UnitSummary": (
         {"id"},
         {"kind", "status", "position", "goal", "last_seen_s", "distance_to_goal", "stale"},

@@ -653,7 +653,15 @@ def test_error_reply_and_rejected_event_carry_path_and_reason() -> None:
 
 @pytest.mark.unit
 def test_direction_status_values_are_the_contract() -> None:
-    assert [s.value for s in m.DirectionStatus] == ["en_route", "escaping", "arrived", "trapped", "no_goal"]
+    # the contract only grows: "yielding" (dispersion's right of way, issue 33) came last
+    assert [s.value for s in m.DirectionStatus] == [
+        "en_route",
+        "escaping",
+        "arrived",
+        "trapped",
+        "no_goal",
+        "yielding",
+    ]
 
 
 @pytest.mark.unit

@@ -26,6 +26,7 @@ __all__ = [
     "AnyEvent",
     "ArrivedEvent",
     "ConflictEvent",
+    "DeadlockEvent",
     "Event",
     "ForgottenEvent",
     "RejectedEvent",
@@ -137,6 +138,21 @@ class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):
     reason: Text = ""
 
 
+class DeadlockEvent(Event, frozen=True, kw_only=True, tag="deadlock"):
+    """A unit yielding right of way (``yielding``) has held this long for a unit that did not draw away.
+
+    ``unit`` backs off from ``other`` (the unit it yields to) for ``backoff_s``,
+    and then goes on as any unit does; ``reason`` says so in words.
+    """
+
+    unit: Id
+    other: Id
+    position: Point
+    held_s: NonNegative = 0.0
+    backoff_s: NonNegative = 0.0
+    reason: Text = ""
+
+
 AnyEvent = Union[  # noqa: UP007
     RejectedEvent,
     ReplanEvent,
@@ -146,6 +162,7 @@ AnyEvent = Union[  # noqa: UP007
     ForgottenEvent,
     RestoredEvent,
     ConflictEvent,
+    DeadlockEvent,
 ]
 EVENT_KINDS: tuple[str, ...] = (
     "rejected",
@@ -156,4 +173,5 @@ EVENT_KINDS: tuple[str, ...] = (
     "forgotten",
     "restored",
     "conflict",
+    "deadlock",
 )

@@ -110,6 +110,7 @@ class DirectionStatus(StrEnum):
     ARRIVED = "arrived"
     TRAPPED = "trapped"
     NO_GOAL = "no_goal"
+    YIELDING = "yielding"  # holding: right of way to a friendly unit (dispersion); goes when it has passed
 
 
 CHOICES: dict[str, tuple[str, ...]] = {
@@ -323,7 +324,7 @@ class Direction(_Message, frozen=True, kw_only=True):
         unit: the unit this is for.
         seq: the ``seq`` of the state it answers (null when it had none, or when
             a threat or goal change triggered it: then the latest seen).
-        status: ``en_route | escaping | arrived | trapped | no_goal``.
+        status: ``en_route | escaping | arrived | trapped | no_goal | yielding``.
         vector: unit vector ``[dx, dy]`` to move along; ``[0, 0]`` when not moving.
         heading_deg: the vector as a compass heading, null when not moving.
         distance_to_goal: metres, null without a goal.

@@ -1,0 +1,126 @@
+"""Dispersion: the repulsive term between friendly units, its exact gradient, and the neighbour index.
+
+Unit ``i`` at ``p`` feels each friendly unit ``j`` at ``q_j`` within the
+pair's reach ``rho_ij = REACH * s_ij`` (``s_ij`` the pair's separation)
+through the potential
+
+    phi_i(p) = sum_j (rho_ij / 2) (1 - d_ij / rho_ij)^2,   d_ij = |p - q_j| < rho_ij
+
+whose gradient is exact and closed-form:
+
+    grad phi_i(p) = - sum_j (1 - d_ij / rho_ij) (p - q_j) / d_ij
+
+Each pair's share of it is at most 1 (dimensionless), so the world weighs
+it against the field the unit descends as the zone barrier is weighed
+(``steprule``): ``PUSH * |grad f|`` where the unit stands, frozen for the
+step.  A unit descending ``f + PUSH |grad f| phi`` straight at a neighbour
+that stands still stops where ``PUSH (1 - d / rho) = 1``, that is at
+``d = rho (1 - 1 / PUSH)`` (``4/3 s`` with the defaults): a third outside
+the separation, so a crowd's jostling keeps clear of it.  Two units on the
+very same point have no gradient between them; the one of lower index is
+pushed west, the other east, so they part.
+
+``NeighbourIndex`` is a ``scipy.spatial.cKDTree`` over every unit's
+position, built once per tick, and its pairs within reach found once, in
+compiled code (``query_pairs``); ``gradients`` sums them for the units
+being advised.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["PUSH", "REACH", "NeighbourIndex", "brute_gradients", "gradient", "potential"]
+
+REACH = 2.0  # a neighbour is felt within this many separations
+PUSH = 3.0  # the term's weight in units of the field's own slope where the unit stands
+
+
+def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
+    """``phi(p)`` from neighbours ``q`` (``(M, 2)``) with reaches ``rho`` (``(M,)``), in metres."""
+    d = np.hypot(p[0] - q[:, 0], p[1] - q[:, 1])
+    near = d < rho
+    return float(np.sum(0.5 * rho[near] * (1.0 - d[near] / rho[near]) ** 2))
+
+
+def gradient(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """``grad phi(p)``, exact, from neighbours ``q`` with reaches ``rho``; a coincident neighbour adds nothing."""
+    dx, dy = p[0] - q[:, 0], p[1] - q[:, 1]
+    d = np.hypot(dx, dy)
+    near = (d < rho) & (d > 0.0)
+    w = np.where(near, (1.0 - d / rho) / np.where(near, d, 1.0), 0.0)
+    return np.array([-np.sum(w * dx), -np.sum(w * dy)])
+
+
+def _pair_terms(
+    points: np.ndarray, seps: np.ndarray, i: np.ndarray, j: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sum over pairs ``(i, j)`` (``i`` the row) of each pair's gradient share, as ``(n,)`` x and y."""
+    keep = i != j
+    i, j = i[keep], j[keep]
+    dx = points[i, 0] - points[j, 0]
+    dy = points[i, 1] - points[j, 1]
+    d = np.hypot(dx, dy)
+    rho = REACH * np.maximum(seps[i], seps[j])
+    near = d < rho
+    i, j, dx, dy, d, rho = i[near], j[near], dx[near], dy[near], d[near], rho[near]
+    same = d == 0.0
+    w = (1.0 - d / rho) / np.where(same, 1.0, d)
+    gx = -w * dx
+    gy = -w * dy
+    gx[same] = np.where(i[same] < j[same], 1.0, -1.0)  # -grad: the lower index goes west
+    gy[same] = 0.0
+    return np.bincount(i, gx, minlength=n), np.bincount(i, gy, minlength=n)
+
+
+class NeighbourIndex:
+    """Every unit's position and separation, with a k-d tree over them: built once per tick.
+
+    Args:
+        points: ``(N, 2)`` positions in metres.
+        seps: ``(N,)`` each unit's separation in metres (a pair keeps the larger).
+    """
+
+    def __init__(self, points: np.ndarray, seps: np.ndarray) -> None:
+        self.points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+        self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
+        self.tree = cKDTree(self.points) if len(self.points) else None
+        self.radius = REACH * float(self.seps.max()) if len(self.seps) else 0.0
+        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every ordered pair ``(i, j)``, ``i != j``, within the widest reach: one compiled query, kept."""
+        if self._pairs is None:
+            if self.tree is None:
+                none = np.zeros(0, np.intp)
+                self._pairs = (none, none)
+            else:
+                ij = self.tree.query_pairs(self.radius, output_type="ndarray").astype(np.intp)
+                self._pairs = (np.concatenate([ij[:, 0], ij[:, 1]]), np.concatenate([ij[:, 1], ij[:, 0]]))
+        return self._pairs
+
+    def near(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate pairs ``(i, j)`` for the units at ``rows``: every other ``j`` within the widest reach of ``i``."""
+        i, j = self.pairs()
+        wanted = np.zeros(len(self.points), dtype=bool)
+        wanted[np.asarray(rows, dtype=np.intp)] = True
+        keep = wanted[i]
+        return i[keep], j[keep]
+
+    def gradients(self, rows: np.ndarray) -> np.ndarray:
+        """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
+        rows = np.asarray(rows, dtype=np.intp)
+        i, j = self.near(rows)
+        gx, gy = _pair_terms(self.points, self.seps, i, j, len(self.points))
+        return np.column_stack([gx[rows], gy[rows]])
+
+
+def brute_gradients(points: np.ndarray, seps: np.ndarray) -> np.ndarray:
+    """``grad phi`` for every unit against every other, ``O(N^2)``: the reference for ``NeighbourIndex``."""
+    n = len(points)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    gx, gy = _pair_terms(
+        np.asarray(points, dtype=float), np.asarray(seps, dtype=float), i.ravel(), j.ravel(), n
+    )
+    return np.column_stack([gx, gy])
