@@ -18,7 +18,7 @@ import pytest
 
 pytestmark = pytest.mark.proc
 
-SCRIPT = Path(__file__).with_name("warm_big_tick.py")
+SCRIPT = Path(__file__).resolve().parents[1] / "warm_big_tick.py"
 ROOT = SCRIPT.parent.parent
 
 

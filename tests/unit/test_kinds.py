@@ -25,7 +25,7 @@ from pfp_service.world.kinds import KINDS, STORED, WRITES
 pytestmark = pytest.mark.unit
 
 M = "m1"
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "wire.md"
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "wire.md"
 
 
 def _example(kind: kinds.Kind):
