@@ -23,8 +23,9 @@ import numpy as np
 from pfp_service.core import StepStatus, Threat, ThreatField
 from pfp_service.core.advice import Advice
 from pfp_service.core.batch import advise_many
-from pfp_service.core.cull import CullIndex, corridors_meet, influence_boxes
+from pfp_service.core.cull import RELATIVE_BOUND, CullIndex, corridors_meet, influence_boxes
 from pfp_service.core.tracking import PURSUIT_TOLERANCE_STEPS, Route
+from pfp_service.core.visibility import Sight
 from pfp_service.errors import FINITE_LIMIT, InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import (
@@ -70,6 +71,9 @@ STATUS = {
 
 Steered = list[tuple[UnitRecord, Advice, Track]]
 _ROUTE_KIND = {r: RouteKind(r.value) for r in Route}  # the core's names on the wire, looked up once
+# over terrain, a corridor is looked at every this many metres (at most this many points) for a threat's sight
+SEEN_STEP_M = 25.0
+SEEN_SAMPLES = 513
 ZONE_REACH = 0.25  # a zone's box is widened by this share of its diagonal: its barrier's reach, generously
 Failed = list[tuple[UnitRecord, BaseException]]
 
@@ -298,6 +302,7 @@ def reached(
     touched: list[Threat],
     intensity: str,
     zones: Sequence[tuple[float, float, float, float]] = (),
+    sight: Sight | None = None,
 ) -> list[bool]:
     """Which units (each with a stepper and a position) a change of the ``touched`` threats or zones can reach.
 
@@ -305,24 +310,59 @@ def reached(
     culled, ``cull.influence_boxes``), or a touched zone's box (``zones``:
     ``(xmin, ymin, xmax, ymax)``, widened by ``ZONE_REACH`` of its diagonal for
     the barrier that bends descent away near its edge), meets the unit's
-    corridor to its goal (``cull.corridors_meet``).  Every other unit's
-    direction is unchanged within the cull bound.  If the vectorised test
-    fails, every unit counts as reached: dearer, never wrong.
+    corridor to its goal (``cull.corridors_meet``).  Over terrain (``sight``) a
+    threat reaches only a unit it can see somewhere along that corridor
+    (``_seen``): behind a ridge its term is zero, and so is its pull on the
+    unit's direction.  Every other unit's direction is unchanged within the
+    cull bound.  If the vectorised test fails, every unit counts as reached:
+    dearer, never wrong.
     """
     if not guided:
         return []
     try:
-        boxes = influence_boxes(ThreatField(touched, intensity).packed) if touched else np.zeros((0, 4))  # type: ignore[arg-type]
-        if len(zones):
-            zb = np.array(zones, dtype=float).reshape(-1, 4)
-            pad = ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
-            boxes = np.concatenate([boxes, zb + np.hstack([-pad, -pad, pad, pad])])
         n = len(guided)  # each unit's start and goal in one pass: a wave's first look at every unit
         ends = itertools.chain.from_iterable((*r.position, *r.stepper.goal) for r in guided)  # type: ignore[misc, union-attr]
         flat = np.fromiter(ends, dtype=float, count=4 * n).reshape(n, 4)
-        return corridors_meet(flat[:, :2], flat[:, 2:], boxes).tolist()  # type: ignore[no-any-return]
+        starts, goals = flat[:, :2], flat[:, 2:]
+        hit = np.zeros(n, dtype=bool)
+        if touched:
+            boxes = influence_boxes(ThreatField(touched, intensity).packed)  # type: ignore[arg-type]
+            if sight is None:
+                hit |= corridors_meet(starts, goals, boxes)
+            else:
+                for threat, box in zip(touched, boxes, strict=True):
+                    near = corridors_meet(starts, goals, box[None, :])
+                    if near.any():
+                        near[near] = _seen(threat, box, starts[near], goals[near], intensity, sight)
+                        hit |= near
+        if len(zones):
+            zb = np.array(zones, dtype=float).reshape(-1, 4)
+            pad = ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
+            hit |= corridors_meet(starts, goals, zb + np.hstack([-pad, -pad, pad, pad]))
+        return hit.tolist()
     except Exception:
         return [True] * len(guided)
+
+
+def _seen(
+    threat: Threat, box: np.ndarray, starts: np.ndarray, goals: np.ndarray, intensity: str, sight: Sight
+) -> np.ndarray:
+    """Whether ``threat`` sees each corridor (start to goal) anywhere inside its influence box.
+
+    The corridor is sampled every ``SEEN_STEP_M`` (at most ``SEEN_SAMPLES`` points); a
+    sample is seen where the masked level is at least ``RELATIVE_BOUND`` of the
+    blind one (the cull's own bound on what a term may change).
+    """
+    length = float(np.hypot(*(goals - starts).T).max(initial=0.0))
+    k = int(min(SEEN_SAMPLES, max(2, math.ceil(length / SEEN_STEP_M) + 1)))
+    t = np.linspace(0.0, 1.0, k)[None, :, None]
+    pts = starts[:, None, :] + t * (goals - starts)[:, None, :]  # (units, k, 2)
+    inside = (
+        (pts[..., 0] >= box[0]) & (pts[..., 0] <= box[2]) & (pts[..., 1] >= box[1]) & (pts[..., 1] <= box[3])
+    )
+    blind = ThreatField([threat], intensity).level(pts)  # type: ignore[arg-type]
+    masked = ThreatField([threat], intensity, sight=sight).level(pts)  # type: ignore[arg-type]
+    return np.asarray((inside & (blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any(axis=1))
 
 
 def replan(

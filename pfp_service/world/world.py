@@ -416,7 +416,7 @@ class World:
         """
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
         reached = steering.reached(
-            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones]
+            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight
         )
         rejudge, tell = self._book.rejudge, self._tell  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):

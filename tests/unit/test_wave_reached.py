@@ -53,3 +53,31 @@ def test_a_unit_that_cannot_be_read_makes_every_unit_reached():
         translate.threat(ThreatUpdate(position=(5000.0, 5000.0), sigma_range=1.0, sigma_lateral=1.0), "t")
     ]
     assert steering.reached(guided, touched, "peak") == [True] * 20
+
+
+def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
+    """A threat behind a ridge: the unit in the valley it cannot see keeps its direction; the one in its view is re-told."""
+    from pfp_service.core import Threat
+    from pfp_service.terrain.grid import TerrainGrid
+    from pfp_service.terrain.threat_sight import TerrainSight
+
+    xs = np.arange(-3000.0, 3000.0 + 10.0, 20.0)
+    gx, gy = np.meshgrid(xs, xs)
+    ridge = TerrainGrid(-3000.0, -3000.0, 20.0, np.maximum(0.0, 60.0 - 0.2 * np.abs(gx)))  # along x = 0
+    sight = TerrainSight(ridge, 1.8)
+    behind = Threat.from_facing((-1000.0, 0.0), 90.0, 800.0, 800.0, 0.0, 1.0, "t", observer_height_m=2.0)
+    recs = Records()
+    fleet = []
+    for uid, x in (("valley", 600.0), ("front", -500.0)):  # east of the ridge, hidden; west of it, in view
+        rec = recs.book.add(uid, True, 0.0, reported=True)
+        rec.position = (x, -300.0)
+        rec.stepper = Stepper(rec.position, (x, 300.0), resolve(PlannerParams(), rec.position, (x, 300.0), ()))
+        fleet.append(rec)
+    assert steering.reached(fleet, [behind], "peak") == [True, True]  # blind: both corridors meet its box
+    assert steering.reached(fleet, [behind], "peak", (), sight) == [False, True]
+    # the cause, measured apart: the masked field is nil along the valley's corridor, not in front
+    valley = np.column_stack([np.full(7, 600.0), np.linspace(-300.0, 300.0, 7)])
+    front = np.column_stack([np.full(7, -500.0), np.linspace(-300.0, 300.0, 7)])
+    masked = ThreatField([behind], "peak", sight=sight)
+    assert masked.level(valley).max() < 1e-6 * ThreatField([behind], "peak").level(valley).max()
+    assert masked.level(front).min() > 0.5 * ThreatField([behind], "peak").level(front).min()
