@@ -71,7 +71,9 @@ def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
     for uid, x in (("valley", 600.0), ("front", -500.0)):  # east of the ridge, hidden; west of it, in view
         rec = recs.book.add(uid, True, 0.0, reported=True)
         rec.position = (x, -300.0)
-        rec.stepper = Stepper(rec.position, (x, 300.0), resolve(PlannerParams(), rec.position, (x, 300.0), ()))
+        rec.stepper = Stepper(
+            rec.position, (x, 300.0), resolve(PlannerParams(), rec.position, (x, 300.0), ())
+        )
         fleet.append(rec)
     assert steering.reached(fleet, [behind], "peak") == [True, True]  # blind: both corridors meet its box
     assert steering.reached(fleet, [behind], "peak", (), sight) == [False, True]
