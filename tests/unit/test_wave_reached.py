@@ -62,7 +62,7 @@ def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
     from pfp_service.terrain.threat_sight import TerrainSight
 
     xs = np.arange(-3000.0, 3000.0 + 10.0, 20.0)
-    gx, gy = np.meshgrid(xs, xs)
+    gx, _ = np.meshgrid(xs, xs)
     ridge = TerrainGrid(-3000.0, -3000.0, 20.0, np.maximum(0.0, 60.0 - 0.2 * np.abs(gx)))  # along x = 0
     sight = TerrainSight(ridge, 1.8)
     behind = Threat.from_facing((-1000.0, 0.0), 90.0, 800.0, 800.0, 0.0, 1.0, "t", observer_height_m=2.0)
