@@ -55,6 +55,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             "tests with more than one tier (mark each test of a mixed module, not the module): "
             + ", ".join(mixed[:10])
         )
+    # cheapest tier first (TIERS' order), each in its collected order: a fresh clone's in-process tests
+    # compile the numba kernels into the cache before the first planner process starts and warms up
+    rank = {name: i for i, name in enumerate(TIERS)}
+    items.sort(key=lambda item: rank[_tier_of(item) or "unit"])
 
 
 class TierViolation(AssertionError):

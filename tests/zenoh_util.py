@@ -42,7 +42,8 @@ def client(endpoint: str):
         session.close()
 
 
-def wait_for_planner(endpoint: str, mission: str, timeout: float = 60.0) -> None:
+def wait_for_planner(endpoint: str, mission: str, timeout: float = 180.0) -> None:
+    """Until the planner answers its status; a first start on a fresh checkout compiles its kernels (a minute of CPU)."""
     deadline = time.monotonic() + timeout
     last: Exception | None = None
     while time.monotonic() < deadline:
