@@ -10,9 +10,8 @@ directory holding ``examples/`` and ``docker/`` (linked) and a copy of ``schemas
   handheld, a fleet without an end, a router) must still be up when the block ends, and then
   stops on SIGTERM with exit 0; a finite one (inject) must end with exit 0 by the block's
   ``wait`` line;
-* any other line must exit 0 (or N, when its comment says "(exit N)"), or, when it is a long-running command, come up (its own
-  readiness condition: a log line, an answering port, a rendered screen) and stop on SIGTERM
-  with exit 0;
+* any other line must exit 0 (or N, when its comment says "(exit N)"), or, when long-running, come
+  up (a log line, an answering port, a rendered screen) and stop on SIGTERM with exit 0;
 * nothing may print a traceback.
 
 A command is changed only where the machine demands it: port 7447 becomes a free port (a
@@ -24,9 +23,7 @@ with small arguments (``SHRINK``).  ```python and ```toml blocks whose first lin
 ``# NAME`` are written as ``NAME`` (7447 rewritten the same way) before a block runs;
 ```text blocks are never run.
 
-Beside them, in process: the README stays under 300 lines and lists every command
-``pfp --help`` shows, every relative link and anchor resolves, and the reach table of
-docs/algorithm.md is what the threat model computes.
+In process beside them: ``test_docs_in_process``.
 """
 
 from __future__ import annotations
@@ -69,6 +66,7 @@ PYTHON = {"python", ".venv/bin/python"}
 # Commands that open a Zenoh session as a client of the planner (the shared flags).
 SESSION = {"health", "status", "fleet", "inject", "map", "tak", "handheld"}
 # Benchmarks at a size the test can afford: flags dropped, flags added (argparse keeps the last).
+PREVIEW_LOAD = ["--live-threats", "50", "--max-p99-ms", "10000"]
 SHRINK: dict[str, tuple[set[str], list[str]]] = {
     "engine": (set(), ["--quick", "--no-scale", "--repeat", "1", "--baseline-repeat", "1"]),
     "roundtrip": (set(), ["--count", "50"]),
@@ -79,21 +77,7 @@ SHRINK: dict[str, tuple[set[str], list[str]]] = {
         ["--units", "20", "--rate", "5", "--threats", "5", "--duration", "2", "--no-storm", "--no-fanout"],
     ),
     # a pass mark for a quiet machine: here the test checks the command runs, not the machine's figures
-    "previews": (
-        set(),
-        [
-            "--scenario",
-            "storm",
-            "--queries",
-            "10",
-            "--threads",
-            "2",
-            "--live-threats",
-            "50",
-            "--max-p99-ms",
-            "10000",
-        ],
-    ),
+    "previews": (set(), ["--scenario", "storm", "--queries", "10", "--threads", "2", *PREVIEW_LOAD]),
     "failover": (set(), ["--planners", "2", "--units", "6", "--kills", "1"]),
     "memory": (set(), ["--units", "20", "--threats", "5", "--idle-s", "3", "--load-s", "2"]),
     "vehicles": (set(), ["--quick"]),
@@ -504,132 +488,3 @@ def test_every_command_the_docs_show_runs(
     for name, text in named_files().items():
         (work / name).write_text(session.localise(text))
     session.run()
-
-
-# -- in process --------------------------------------------------------------------------------------
-@pytest.mark.unit
-def test_every_doc_line_is_run_or_known_to_be_shown():
-    for block in sh_blocks():
-        for line in session_lines(block):
-            runnable(line)  # raises for a line it would neither run nor skip
-            if line.program in PYTHON and line.words[1:2]:
-                assert line.words[1] in named_files(), f"{block.name}: {line.words[1]} is not a doc file"
-
-
-@pytest.mark.unit
-def test_the_readme_is_a_first_hour_long():
-    lines = README.read_text().splitlines()
-    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines; move detail into docs/"
-
-
-@pytest.mark.unit
-def test_the_readme_command_table_lists_every_command():
-    from pfp_service.cli import build_parser
-
-    parser = build_parser()
-    sub = next(a for a in parser._actions if a.dest == "command")
-    commands = set(sub.choices)  # type: ignore[arg-type]
-    bench = sub.choices["bench"]  # type: ignore[index]
-    benchmarks = set(next(a for a in bench._actions if a.dest == "benchmark").choices)  # type: ignore[arg-type]
-    table = [ln for ln in README.read_text().splitlines() if ln.startswith("| `pfp ")]
-    shown = {re.match(r"^\| `pfp (\w+)", ln)[1] for ln in table}  # type: ignore[index]
-    assert commands - shown == set(), f"commands missing from the README's table: {sorted(commands - shown)}"
-    assert shown - commands == set(), (
-        f"the README's table shows commands pfp lacks: {sorted(shown - commands)}"
-    )
-    bench_row = next(ln for ln in table if ln.startswith("| `pfp bench"))
-    missing = {b for b in benchmarks if b not in bench_row}
-    assert missing == set(), f"benchmarks missing from the README's table: {sorted(missing)}"
-
-
-def _slug(heading: str) -> str:
-    """GitHub's anchor for a heading."""
-    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
-    return text.replace(" ", "-")
-
-
-def _anchors(doc: Path) -> set[str]:
-    text = re.sub(r"^```.*?^```", "", doc.read_text(), flags=re.S | re.M)
-    return {_slug(m[1]) for m in re.finditer(r"^#{1,6} (.+)$", text, flags=re.M)}
-
-
-@pytest.mark.unit
-def test_every_relative_link_resolves():
-    bad = []
-    for doc in DOCS:
-        text = re.sub(r"^```.*?^```", "", doc.read_text(), flags=re.S | re.M)
-        for target in re.findall(r"\]\(([^)\s]+)\)", text):
-            if re.match(r"^[a-z]+:", target):
-                continue  # http(s), mailto: not checked here
-            path, _, anchor = target.partition("#")
-            dest = (doc.parent / path).resolve() if path else doc
-            if not dest.exists():
-                bad.append(f"{doc.name}: {target} (no such file)")
-            elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
-                bad.append(f"{doc.name}: {target} (no such heading)")
-    assert bad == []
-
-
-@pytest.mark.unit
-def test_the_vehicle_example_is_about_twenty_lines():
-    files = named_files()
-    assert "vehicle.py" in files
-    code = [ln for ln in files["vehicle.py"].splitlines() if ln.strip() and not ln.startswith("#")]
-    assert len(code) <= 22, f"the README's vehicle client grew to {len(code)} lines"
-
-
-@pytest.mark.unit
-def test_the_reach_table_is_what_the_threat_model_computes():
-    """docs/algorithm.md's "Choosing sigma_range" table, recomputed from core.threat."""
-    import numpy as np
-    from scipy.optimize import brentq
-
-    from pfp_service.core.threat import Threat, ThreatField
-
-    text = (ROOT / "docs" / "algorithm.md").read_text()
-    rows = re.findall(
-        r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) / ([\d.]+) \|$", text, re.M
-    )
-    assert len(rows) == 5
-    for skew, *shown in rows:
-        threat = Threat.from_facing((0.0, 0.0), 0.0, 1.0, 0.6, float(skew))  # faces north, sigma_range 1
-        field = ThreatField([threat], "peak")
-
-        def level(x: float, y: float, f=field) -> float:
-            return float(f.level(np.array([[x, y]]))[0])
-
-        peak_y = threat.mode()[1]
-        want = []
-        for share in (0.1, 0.5):
-            ahead = brentq(lambda y, s=share: level(0.0, y) - s, peak_y, 20.0)
-            behind = -brentq(lambda y, s=share: level(0.0, y) - s, -20.0, peak_y)
-            across = brentq(lambda x, s=share: level(x, peak_y) - s, 0.0, 20.0) / 0.6
-            want.append((ahead, behind, across))
-        (a10, b10, c10), (a50, b50, c50) = want
-        expected = [a10, b10, a50, b50, c10, c50]
-        for got, exp in zip(map(float, shown), expected):
-            assert got == pytest.approx(exp, abs=0.006), f"skew {skew}: {shown} vs {expected}"
-
-
-@pytest.mark.unit
-def test_the_vehicle_example_speaks_the_wire_contract():
-    """Its keys are templates of wire.keys, and the fields it writes and reads are the messages' own."""
-    from pfp_service.wire import keys
-    from pfp_service.wire.messages import Direction, Goal, UnitState
-
-    code = named_files()["vehicle.py"]
-    used = {
-        k.replace("{M}", "{mission}").replace("{U}", "{unit}") for k in re.findall(r'f"(mumt/[^"]+)"', code)
-    }
-    templates = {keys.template(kind) for kind in keys.KeyKind}
-    templates |= {
-        keys.TEMPLATES[kind].replace("{id}", "*") for kind in keys.KeyKind
-    }  # asked of every planner
-    assert used and used <= templates, used - templates
-    wrote = {
-        UnitState: set(re.findall(r'"(\w+)":', code.split("state = ", 1)[1].splitlines()[0])),
-        Goal: set(re.findall(r'"(\w+)":', code.split("/goal", 1)[1].splitlines()[0])),
-        Direction: set(re.findall(r'd\["(\w+)"\]', code)),
-    }
-    for message, names in wrote.items():
-        assert names and names <= set(message.__struct_fields__), (message.__name__, names)
