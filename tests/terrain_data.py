@@ -29,16 +29,10 @@ def jacksboro() -> tuple[np.ndarray, float, float, float]:
 
 
 def write_geographic(path: Path) -> Path:
-    import rasterio
-    from rasterio.transform import from_origin
+    """The sample DEM as ``pfp demo --terrain`` writes it (``pfp_clients.sample_dem``)."""
+    from pfp_clients.sample_dem import write_jacksboro
 
-    z, west, north, step = jacksboro()
-    with rasterio.open(
-        path, "w", driver="GTiff", width=z.shape[1], height=z.shape[0], count=1, dtype="int16",
-        crs="EPSG:4326", transform=from_origin(west, north, step, step), nodata=-32768,
-    ) as out:  # fmt: skip
-        out.write(z, 1)
-    return path
+    return write_jacksboro(path)
 
 
 def write_utm(src: Path, path: Path) -> Path:

@@ -75,12 +75,12 @@ class Dispersion:
         self,
         settings: DispersionSettings,
         units: Mapping[str, UnitRecord],
-        yielded: Callable[[UnitRecord, Verdict], None] | None = None,
+        yielded: Callable[[UnitRecord, Verdict], None],
     ) -> None:
         self.settings = settings
         self._units = units  # the world's records, read (every unit with a fresh position is in the way)
         # what a held unit's record keeps is the units' owner's to write (``units.Units.yielded``)
-        self._yielded = yielded if yielded is not None else _keep
+        self._yielded = yielded
         self._held: dict[str, _Hold] = {}
         self._index: NeighbourIndex | None = None
         self._recs: list[UnitRecord] = []
@@ -334,10 +334,3 @@ def _held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -
         reach_m=reach_m,
         reason=reason,
     )
-
-
-def _keep(rec: UnitRecord, verdict: Verdict) -> None:
-    """Without the units' owner (a bare ``Dispersion`` in a test): the verdict kept on the record as it would."""
-    if rec.stepper is not None:
-        rec.stepper.held()
-    rec.last_status, rec.last_reason, rec.last_distance, rec.last_vector = verdict
