@@ -71,7 +71,6 @@ Elevation = Callable[[np.ndarray, np.ndarray], np.ndarray]
 ZONE_LEVEL = 0.1
 ZONE_VERTICES = 96
 CIRCLE_VERTICES = 72
-_BISECTIONS = 60
 METRICS = (
     "status",
     "reason",
@@ -95,31 +94,9 @@ def zone_ring(t: Threat, level: float, vertices: int = ZONE_VERTICES) -> np.ndar
     Raises:
         ValueError: ``level`` outside (0, 1) or a weightless threat (it has no zone).
     """
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level: must be strictly between 0 and 1, got {level}")
-    if not t.weight > 0.0:
-        raise ValueError(f"threat {t.id!r}: a threat of weight 0 has no zone")
-    from pfp_service.core.cores import Cores
-    from pfp_service.core.threat import ThreatField
+    from pfp_service.core.shapes import level_ring
 
-    cores = Cores(ThreatField([t]))
-    mx, my = t.mode()
-    theta = 2.0 * math.pi * np.arange(vertices) / vertices  # from east, counter-clockwise
-    d = np.column_stack([np.cos(theta), np.sin(theta)])
-    (o00, _), (_, o11) = t.omega
-    lo = np.zeros(vertices)
-    hi = np.full(vertices, math.sqrt(max(o00, o11)))
-    for _ in range(64):  # grow until every ray has left the zone; a Gaussian tail does within ~10 sigma
-        outside = cores.ratio(np.array([mx, my]) + hi[:, None] * d)[0] < level
-        if outside.all():
-            break
-        hi = np.where(outside, hi, 2.0 * hi)
-    for _ in range(_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        inside = cores.ratio(np.array([mx, my]) + mid[:, None] * d)[0] >= level
-        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
-    r = 0.5 * (lo + hi)
-    return np.asarray(np.array([mx, my]) + r[:, None] * d)
+    return level_ring(t, level, vertices)
 
 
 def _lonlat(origin: Origin, xy: np.ndarray, elevation: Elevation | None = None) -> list[list[float]]:

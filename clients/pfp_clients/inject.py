@@ -42,7 +42,6 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import (
     ArrivedEvent,
-    ThreatUpdate,
     decode_direction,
     decode_event,
     decode_unit_state,
@@ -182,15 +181,7 @@ class _Runner:
                 self.say(f"t={t_s:7.2f}s  threat {step.threat} is gone; move skipped")
                 return
             facing = old.update.facing_deg if step.facing_deg is None else step.facing_deg
-            moved = ThreatUpdate(
-                position=step.position,
-                facing_deg=facing,
-                sigma_range=old.update.sigma_range,
-                sigma_lateral=old.update.sigma_lateral,
-                skew=old.update.skew,
-                weight=old.update.weight,
-                ttl_s=old.update.ttl_s,
-            )
+            moved = msgspec.structs.replace(old.update, position=step.position, facing_deg=facing)
             s.put(keys.threat(m, step.threat), encode(moved))
             w.threat_put(step.threat, moved, t_s)
         elif isinstance(step, RemoveThreat):

@@ -102,6 +102,17 @@ def zone_centroid(update: Any) -> tuple[float, float]:
     return float(c.x), float(c.y)
 
 
+def _shape(update: Any) -> str:
+    """The threat's shape and its first parameter (a skew-normal's facing, an area's radius)."""
+    from pfp_service.world import translate
+
+    try:
+        rows = translate.describe(update)
+    except ValueError:  # a shape this command does not know: its name alone
+        return str(update.shape)
+    return " ".join(value for _, value in rows[:2])
+
+
 def _ttl(ttl_s: float | None) -> str:
     return "no expiry" if ttl_s is None else f"{ttl_s:.1f} s"
 
@@ -145,10 +156,10 @@ def snapshot_lines(snap: Any, coords: Coords | None = None) -> list[str]:
         if snap.units_total > len(snap.units):
             lines.append(f"... and {snap.units_total - len(snap.units)} more units (--json lists them all)")
     if snap.threats:
-        rows = [("threat", "position", "facing", "TTL left")]
+        rows = [("threat", "position", "shape", "TTL left")]
         threats = sorted(snap.threats, key=lambda t: natural_key(t.id))
         for t, pos in zip(threats, coords.points([t.threat.position for t in threats])):
-            rows.append((t.id, pos, f"{t.threat.facing_deg:g}°", _ttl(t.ttl_s)))
+            rows.append((t.id, pos, _shape(t.threat), _ttl(t.ttl_s)))
         lines += ["", *_table(rows)]
         if snap.threats_total > len(snap.threats):
             lines.append(

@@ -192,6 +192,12 @@ class Threat:
             )
         return math.sqrt(lam_min)
 
+    def max_sigma(self) -> float:
+        """Widest standard deviation ``sqrt(lambda_max(Omega))`` in metres: how far the threat reaches."""
+        (o00, o01), (_, o11) = self.omega
+        half_trace = 0.5 * (o00 + o11)
+        return math.sqrt(half_trace + math.sqrt(max(half_trace**2 - (o00 * o11 - o01 * o01), 0.0)))
+
     def translated(self, dx: float, dy: float) -> Threat:
         return Threat(
             (self.xi[0] + dx, self.xi[1] + dy),

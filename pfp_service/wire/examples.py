@@ -54,7 +54,11 @@ def examples() -> dict[str, list[tuple[str, Any]]]:
                     weight=1.0,
                     ttl_s=30.0,
                 ),
-            )
+            ),
+            (
+                "threat.area",
+                m.ThreatUpdate(position=(40.0, 25.0), shape="area", params={"radius_m": 6.0}, ttl_s=600.0),
+            ),
         ],
         "zone": [
             (

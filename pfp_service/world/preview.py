@@ -25,14 +25,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import Any
 
 import msgspec
 
-from pfp_service.core import PlanResult, Scheduled, Stepper, ThreatField, plan, resolve
+from pfp_service.core import PlanResult, Scheduled, Stepper, Threat, ThreatField, plan, resolve
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, PreviewRequest
+from pfp_service.wire.messages.structs import DEFAULT_SHAPE
 from pfp_service.world import translate
 from pfp_service.world.terrain import sight_of
 from pfp_service.world.world import UnitView, unit_key
@@ -67,7 +67,7 @@ def admit(
     (``$.threats``); a what-if so wide that an escape route round it
     (the route search's grid spans the distance plus three spreads on each
     side, and its route is resampled at the step) would have more than
-    ``max_iter_cap`` points (``$.threats[i].sigma_range``).  A plain preview (the unit's own mission,
+    ``max_iter_cap`` points (``$.threats[i].sigma_range``, or ``.params`` for another shape).  A plain preview (the unit's own mission,
     accepted by the world) is never refused: its walk is capped instead.
     ``stats`` is ``field_stats(view.threats)``, kept by a caller per field.
 
@@ -91,7 +91,7 @@ def admit(
         path = "$.step" if req.step is not None else "$.goal"
         if given is None:  # derived (``resolve``): a few thousand steps at most, whatever the distance
             base = stats if stats is not None else field_stats(view.threats)
-            narrowest = min((translate.threat(t, t.id).min_sigma() for t in req.threats), default=math.inf)
+            narrowest = min((t.min_sigma() for t in whatifs(req)), default=math.inf)
             merged = FieldStats(min(base.min_sigma, narrowest), base.median_ratio)
             given = resolve(view.params_for(goal_msg), start, goal_msg.position, stats=merged).step
             path = ""
@@ -113,19 +113,33 @@ def admit(
         )
     route_points = 0.0
     if req.threats:
-        widest = max(range(len(req.threats)), key=lambda i: _sigma(req.threats[i]))
-        route_points = (dist + ROUTE_SIGMAS * _sigma(req.threats[widest])) / step_m
+        widths = [t.max_sigma() for t in whatifs(req)]
+        widest = max(range(len(widths)), key=widths.__getitem__)
+        route_points = (dist + ROUTE_SIGMAS * widths[widest]) / step_m
         if route_points > max_iter_cap:
+            field = "sigma_range" if req.threats[widest].shape == DEFAULT_SHAPE else "params"
             raise InputError(
-                f"$.threats[{widest}].sigma_range",
-                f"a what-if threat {_sigma(req.threats[widest]):.3g} m wide: an escape route round it could "
+                f"$.threats[{widest}].{field}",
+                f"a what-if threat {widths[widest]:.3g} m wide: an escape route round it could "
                 f"have {route_points:.3g} points at a {step_m:.3g} m step, more than a preview's {max_iter_cap}",
             )
     return Cost(min(steps, float(max_iter_cap)), route_points, len(req.threats))
 
 
-def _sigma(t: Any) -> float:
-    return float(max(t.sigma_range, t.sigma_lateral))
+def whatifs(req: PreviewRequest) -> list[Threat]:
+    """The request's what-if threats as core values, or the first its shape refuses, by index and field.
+
+    Raises:
+        InputError: ``$.threats[i].<field>``.
+    """
+    out = []
+    for i, t in enumerate(req.threats):
+        try:
+            out.append(translate.threat(t, t.id))
+        except ValueError as exc:
+            field, _, reason = str(exc).partition(": ")
+            raise InputError(f"$.threats[{i}].{field}", reason) from exc
+    return out
 
 
 def preview(
@@ -160,7 +174,7 @@ def preview(
         raise InputError("$.goal", f"unit {view.unit!r} has no goal; give a goal")
     goal = (goal_msg.position[0], goal_msg.position[1])
     start = (start[0], start[1])
-    extra = [translate.threat(t, t.id) for t in req.threats]
+    extra = whatifs(req)
     replaced = {e.id for e in extra}  # a what-if threat with a live id stands in for it
     threats = [t for t in view.threats if t.id not in replaced] + extra
     schedule = [Scheduled(t) for t in threats]

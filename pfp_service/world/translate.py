@@ -2,7 +2,7 @@
 
 The wire imports no core and the core no wire (import-linter's contracts hold
 both without exceptions), so whatever turns one into the other lives here:
-a ``ThreatUpdate`` into a core ``Threat`` (``threat``), a ``ZoneUpdate`` into a
+a ``ThreatUpdate`` into a core ``Threat`` through its shape (``threat``), a ``ZoneUpdate`` into a
 core ``Zone`` (``zone``), and the preview reply, which is the core's
 ``PlanResult`` itself, into bytes (``fit_reply``) and back
 (``decode_plan_result``).  ``supplied()`` gives the wire's contract generator
@@ -22,6 +22,7 @@ import msgspec
 
 from pfp_service.wire import MAX_PAYLOAD_BYTES, ThreatUpdate, decode, encode
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.wire.messages.structs import DEFAULT_SHAPE
 from pfp_service.wire.schema import Supplied
 
 if TYPE_CHECKING:
@@ -29,22 +30,47 @@ if TYPE_CHECKING:
     from pfp_service.core.threat import Threat
     from pfp_service.core.zones import Zone
 
-__all__ = ["decode_plan_result", "fit_reply", "supplied", "threat", "zone"]
+__all__ = ["decode_plan_result", "describe", "fit_reply", "shape_params", "supplied", "threat", "zone"]
 
 
 def threat(update: ThreatUpdate, threat_id: str) -> Threat:
-    """The core's ``Threat`` for ``update``, named ``threat_id``."""
-    from pfp_service.core.threat import Threat
+    """The core's ``Threat`` for ``update``, named ``threat_id``, through its shape (``core.shapes``).
 
-    return Threat.from_facing(
-        update.position,
-        update.facing_deg,
-        update.sigma_range,
-        update.sigma_lateral,
-        update.skew,
-        update.weight,
-        threat_id,
-    )
+    Raises:
+        ValueError: ``"<field>: <reason>"``: a shape the planner does not know, or
+            parameters its shape refuses.
+    """
+    from pfp_service.core import shapes
+
+    shape = shapes.get(update.shape)
+    params = shapes.check_params(shape, shape_params(update))
+    return shape.threat(update.position, params, update.weight, threat_id)
+
+
+def shape_params(update: ThreatUpdate) -> dict[str, float]:
+    """The parameters ``update`` gives its shape: the skew-normal's are its top-level fields, as before shapes."""
+    if update.shape != DEFAULT_SHAPE:
+        return dict(update.params or {})
+    assert update.sigma_range is not None and update.sigma_lateral is not None  # the decoder's check
+    return {
+        "facing_deg": update.facing_deg,
+        "sigma_range": update.sigma_range,
+        "sigma_lateral": update.sigma_lateral,
+        "skew": update.skew,
+    }
+
+
+def describe(update: ThreatUpdate) -> list[tuple[str, str]]:
+    """``(label, value)`` rows of a threat's shape and parameters, for a panel, a status line or a remark.
+
+    Raises:
+        ValueError: as ``threat``.
+    """
+    from pfp_service.core import shapes
+
+    shape = shapes.get(update.shape)
+    params = shapes.check_params(shape, shape_params(update))
+    return [("shape", shape.name), *shape.describe(params)]
 
 
 def zone(update: ZoneUpdate, zone_id: str) -> Zone:

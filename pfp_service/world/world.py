@@ -324,7 +324,13 @@ class World:
             self._reject(keys.threat(s.mission, tid), err, b, K.THREAT)
             return
         ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
-        new = ThreatRecord(msg, translate.threat(msg, tid), None if ttl is None else b.now + ttl)
+        try:
+            threat = translate.threat(msg, tid)
+        except ValueError as exc:  # a shape this planner lacks, or parameters its shape refuses
+            field, _, reason = str(exc).partition(": ")
+            self._reject(keys.threat(s.mission, tid), InputError(f"$.{field}", reason), b, K.THREAT)
+            return
+        new = ThreatRecord(msg, threat, None if ttl is None else b.now + ttl)
         old = self._rec.put_threat(tid, new)
         b.touched += [new.threat] if old is None else [old.threat, new.threat]
         if new.expires_at is not None:

@@ -400,8 +400,8 @@ def test_allow_edit_drops_moves_and_deletes_a_threat_and_sets_a_goal(playwright,
         assert math.hypot(*turned["vector"]) == pytest.approx(1.0, abs=1e-6)  # the planner steers round it
         drop = page.js("() => pfpMap.threats.get('drop1').data")
         assert (
-            drop["facing_deg"] == 270
-            and drop["sigma_range"] == 4
+            drop["update"]["facing_deg"] == 270
+            and drop["update"]["sigma_range"] == 4
             and drop["position"][1] == pytest.approx(21, abs=0.5)
         )
 

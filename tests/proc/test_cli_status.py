@@ -76,9 +76,9 @@ def test_status_lists_units_and_threats_as_tables(world):
         out,
         re.M,
     ), out
-    assert re.search(r"^threat\s+position\s+facing\s+TTL left$", out, re.M)
-    assert re.search(r"^e1\s+\(4\.0, 6\.0\)\s+0°\s+no expiry$", out, re.M), out
-    assert re.search(r"^e2\s+\(7\.0, 3\.0\)\s+90°\s+(5\d\d|600)\.\d s$", out, re.M), out
+    assert re.search(r"^threat\s+position\s+shape\s+TTL left$", out, re.M)
+    assert re.search(r"^e1\s+\(4\.0, 6\.0\)\s+skew_normal 0°\s+no expiry$", out, re.M), out
+    assert re.search(r"^e2\s+\(7\.0, 3\.0\)\s+skew_normal 90°\s+(5\d\d|600)\.\d s$", out, re.M), out
     assert re.search(r"^zone\s+kind\s+shape\s+centroid\s+TTL left$", out, re.M), out
     # the centroid of the polygon less its hole: (50 * 200 - 46.67 * 8) / 192, (45 * 200 - 43.33 * 8) / 192
     assert re.search(

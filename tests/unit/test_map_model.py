@@ -200,7 +200,7 @@ def test_threats_put_move_delete_and_expire_by_their_ttl():
     d = m.take_delta(10.0)
     e1 = d["threats"]["e1"]
     assert e1["expires_at"] == 40.0 and d["threats"]["e2"]["expires_at"] is None
-    assert len(e1["zone"]) == len(e1["core"]) == 48 and e1["facing_deg"] == 90
+    assert len(e1["zone"]) == len(e1["core"]) == 48 and e1["update"]["facing_deg"] == 90
     m.apply([ThreatSeen("e2", None), ThreatSeen("nope", None)], now=11.0)
     assert m.take_delta(11.0) == {"type": "delta", "now": 11.0, "threats_removed": ["e2"]}
     assert m.take_delta(39.9) is None

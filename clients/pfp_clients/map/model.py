@@ -22,7 +22,7 @@ from typing import Any
 
 import msgspec
 
-from pfp_clients.map.geometry import CORE_FRACTION, ZONE_FRACTION, outline, peak_point
+from pfp_clients.map.geometry import ThreatView, threat_view
 from pfp_clients.map.samples import (
     AliveSeen,
     DirectionSeen,
@@ -46,7 +46,6 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import ZoneUpdate
-from pfp_service.world import translate
 
 __all__ = [
     "MAX_REJECTED_GROUPS",
@@ -112,47 +111,6 @@ class _Unit:
         return out
 
 
-@dataclass(slots=True)
-class _Threat:
-    id: str
-    update: ThreatUpdate
-    put_at: float
-    expires_at: float | None
-    zone: list[tuple[float, float]]
-    core: list[tuple[float, float]]
-    peak: tuple[float, float]
-
-    def view(self) -> dict[str, Any]:
-        u = self.update
-        return {
-            "id": self.id,
-            "position": u.position,
-            "facing_deg": u.facing_deg,
-            "sigma_range": u.sigma_range,
-            "sigma_lateral": u.sigma_lateral,
-            "skew": u.skew,
-            "weight": u.weight,
-            "ttl_s": u.ttl_s,
-            "put_at": self.put_at,
-            "expires_at": self.expires_at,
-            "zone": self.zone,
-            "core": self.core,
-            "peak": self.peak,
-        }
-
-
-def _threat_of(threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: float | None) -> _Threat:
-    return _Threat(
-        threat_id,
-        update,
-        now,
-        None if ttl_left_s is None else now + ttl_left_s,
-        outline(update, ZONE_FRACTION),
-        outline(update, CORE_FRACTION) if update.weight > 0 else [],
-        peak_point(translate.threat(update, threat_id)),
-    )
-
-
 def _zone_view(zone_id: str, z: ZoneUpdate, now: float, ttl_left_s: float | None) -> dict[str, Any]:
     """A zone as the page draws it: its rings (metres; a polygon's outer ring first) or its circle."""
     return {
@@ -205,7 +163,7 @@ class MapModel:
         self.debounce_s = debounce_s
         self.track_max = track_max
         self.units: dict[str, _Unit] = {}
-        self.threats: dict[str, _Threat] = {}
+        self.threats: dict[str, ThreatView] = {}
         self.zones: dict[str, dict[str, Any]] = {}  # zone id -> its view
         self.zone_updates: dict[str, ZoneUpdate] = {}  # zone id -> as put (metres), for the GeoJSON export
         self._dirty_zones: set[str] = set()
@@ -290,7 +248,12 @@ class MapModel:
                     self._on_world(world, now)
 
     def _put_threat(self, threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: float | None) -> None:
-        self.threats[threat_id] = _threat_of(threat_id, update, now, ttl_left_s)
+        try:
+            self.threats[threat_id] = threat_view(threat_id, update, now, ttl_left_s)
+        except (
+            ValueError
+        ):  # a shape or parameters the planner refuses too: it keeps what it had, so does the map
+            return
         self._dirty_threats.add(threat_id)
         self._removed_threats.discard(threat_id)
 

@@ -41,6 +41,7 @@ from pfp_clients.watch import Watch
 from pfp_service.coords import Coords
 from pfp_service.errors import InputError
 from pfp_service.wire import ThreatUpdate, keys
+from pfp_service.world import translate
 
 __all__ = ["UnitSummary", "clock_name", "popups", "summarise", "table_rows", "write_report", "zones_at_end"]
 
@@ -280,9 +281,8 @@ def _geojson(
                     "id": v.threat_id,
                     "from_s": round(v.start_s, 2),
                     "until_s": None if math.isinf(v.end_s) else round(v.end_s, 2),
-                    "sigma_range": v.update.sigma_range,
-                    "sigma_lateral": v.update.sigma_lateral,
-                    "facing_deg": v.update.facing_deg,
+                    "shape": v.update.shape,
+                    **translate.shape_params(v.update),
                 },
             }
         )

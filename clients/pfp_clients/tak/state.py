@@ -47,6 +47,7 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
+from pfp_service.world import translate
 
 __all__ = ["BridgeSettings", "BridgeState", "Tombstone"]
 
@@ -316,10 +317,8 @@ class BridgeState:
     def _threat_cot(self, tid: str, t: m.ThreatUpdate, now: float) -> bytes:
         lat, lon = self.s.origin.to_geodetic(*t.position)
         stale = min(t.ttl_s, self.s.stale_s) if t.ttl_s is not None else self.s.stale_s
-        remarks = (
-            f"pfp threat {tid}: sigma_range {t.sigma_range:g} m, sigma_lateral {t.sigma_lateral:g} m, "
-            f"skew {t.skew:g}, weight {t.weight:g}"
-        )
+        rows = [*translate.describe(t), ("weight", f"{t.weight:g}")]
+        remarks = f"pfp threat {tid}: " + ", ".join(f"{label} {value}" for label, value in rows)
         return cot_out.threat_event(
             self._uid("threat", tid), lat, lon, now, stale, t.facing_deg, remarks, f"threat {tid}", self._hae
         )
@@ -341,11 +340,12 @@ class BridgeState:
             return out
         try:
             t = m.decode_threat(payload, origin=self.s.origin)
-        except InputError as exc:
+            cot_bytes = self._threat_cot(tid, t, now)
+        except (InputError, ValueError) as exc:  # ValueError: a shape the planner refuses too
             self.log(f"ignored threat {tid}: {exc}")
             return out
         self.threats[tid] = t
-        out.cot += self._send(self._uid("threat", tid), self._threat_cot(tid, t, now), now)
+        out.cot += self._send(self._uid("threat", tid), cot_bytes, now)
         return out
 
     def on_zones_in_force(self, zones: list[m.ZoneSummary], now: float) -> Outputs:

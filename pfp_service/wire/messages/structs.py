@@ -15,6 +15,7 @@ from msgspec import Meta
 
 from pfp_service.constraints import (
     Delta,
+    Finite,
     Id,
     Iterations,
     NonNegative,
@@ -82,6 +83,11 @@ MAX_WORLD_QUERY_CHARS = 1024  # the longest world query parameters read; longer 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
 Angle = Annotated[float, Meta(ge=-360.0, le=360.0)]
+# A threat's shape is named here and defined in the core's registry (``core.shapes``), which the wire
+# cannot import: the wire checks the name's form and the planner whether it knows it.
+DEFAULT_SHAPE = "skew_normal"
+ShapeName = Annotated[str, Meta(pattern="^[a-z][a-z0-9_]{0,31}$")]
+ShapeParams = Annotated[dict[ShapeName, Finite], Meta(max_length=16)]
 Speed = Annotated[float, Meta(ge=0.0, le=1000.0)]
 # Sender's clock in seconds (Unix time or any epoch it likes); not checked against ours.
 Time = Annotated[float, Meta(ge=0.0, le=1e11)]
@@ -175,23 +181,37 @@ class ThreatUpdate(_Message, frozen=True, kw_only=True):
     Attributes:
         position: the enemy position, ``[x, y]`` in metres or ``{"lat", "lon"}`` in WGS-84
             degrees when the planner has a mission origin.
-        facing_deg: the direction it faces, compass degrees.
-        sigma_range: spread along the facing, metres (>= 0.001).
-        sigma_lateral: spread across the facing, metres (>= 0.001).
+        shape: the kind of threat (``core.shapes``): ``skew_normal`` (the default) or ``area``;
+            a name the planner does not know is refused on the threat's key (field ``$.shape``).
+        facing_deg: the direction it faces, compass degrees (``skew_normal``).
+        sigma_range: spread along the facing, metres (>= 0.001); required by ``skew_normal``.
+        sigma_lateral: spread across the facing, metres (>= 0.001); required by ``skew_normal``.
         skew: how far the threat reaches forward rather than back (0 = symmetric, <= 1000).
+        params: every other shape's parameters by name, e.g. ``{"radius_m": 300}`` for ``area``
+            (the skew-normal's are the four fields above).
         weight: how much it matters (0 to 1e6).
         ttl_s: seconds until it expires unless put again; absent = until deleted.
     """
 
     position: Point
+    shape: ShapeName = DEFAULT_SHAPE
     facing_deg: Angle = 0.0
-    sigma_range: Sigma
-    sigma_lateral: Sigma
+    sigma_range: Sigma | None = None
+    sigma_lateral: Sigma | None = None
     skew: Skew = 0.0
+    params: ShapeParams | None = None
     weight: Weight = 1.0
     ttl_s: Positive | None = None
 
     def __post_init__(self) -> None:
+        if self.shape != DEFAULT_SHAPE:
+            return  # its params are the shape's to check (world/translate.py)
+        if self.sigma_range is None:
+            raise ValueError("sigma_range: is required by the skew_normal shape")
+        if self.sigma_lateral is None:
+            raise ValueError("sigma_lateral: is required by the skew_normal shape")
+        if self.params:
+            raise ValueError("params: the skew_normal shape takes its fields at the top level")
         check_spreads(self.sigma_range, self.sigma_lateral)
 
 

@@ -126,12 +126,6 @@ function toMetres(ll) {
   return [e, n];
 }
 
-// a point `dist` metres from p along a compass heading
-function along(p, headingDeg, dist) {
-  const b = (headingDeg * Math.PI) / 180;
-  return [p[0] + dist * Math.sin(b), p[1] + dist * Math.cos(b)];
-}
-
 function createMap(config) {
   state.config = config;
   state.frame = config.origin ? frame(config.origin) : null;
@@ -347,11 +341,8 @@ function upsertThreat(d) {
   const zone = L.polygon(d.zone.map(toLatLng), { color: "#d32f2f", weight: 1, dashArray: "4 3", fillColor: "#e53935", fillOpacity: 0.1 });
   const layers = [zone];
   if (d.core && d.core.length) layers.push(L.polygon(d.core.map(toLatLng), { color: "#b71c1c", weight: 1, fillColor: "#b71c1c", fillOpacity: 0.35 }));
-  const reach = 1.5 * d.sigma_range;
-  const tip = along(pos, d.facing_deg, reach);
-  const barbs = [along(tip, d.facing_deg + 150, 0.3 * reach), tip, along(tip, d.facing_deg - 150, 0.3 * reach)];
-  layers.push(L.polyline([toLatLng(pos), toLatLng(tip)], { color: "#4a0000", weight: 2 }));
-  layers.push(L.polyline(barbs.map(toLatLng), { color: "#4a0000", weight: 2 }));
+  // the shape's own marks (a skew-normal's facing arrow), drawn as given: the page knows no shape's parameters
+  (d.marks || []).forEach((line) => layers.push(L.polyline(line.map(toLatLng), { color: "#4a0000", weight: 2 })));
   const centre = L.circleMarker(toLatLng(pos), { radius: 4, color: "#4a0000", weight: 1, fillColor: "#fff", fillOpacity: 1 });
   layers.push(centre);
   centre.bindTooltip("", { permanent: true, direction: "right", offset: [6, 0], className: "threat-label" });
@@ -677,9 +668,8 @@ function showThreat() {
   const ttl = threatTtl(d);
   $("threat-info").innerHTML =
     row("position", `${fmt(d.position[0])}, ${fmt(d.position[1])} m`) +
-    row("facing", `${fmt(d.facing_deg, 0)}°`) +
-    row("σ range / lateral", `${fmt(d.sigma_range, 2)} / ${fmt(d.sigma_lateral, 2)} m`) +
-    row("skew, weight", `${fmt(d.skew, 2)}, ${fmt(d.weight, 2)}`) +
+    (d.rows || []).map(([label, value]) => row(label, esc(value))).join("") +
+    row("weight", fmt(d.weight, 2)) +
     row("TTL left", ttl === null ? "none (until deleted)" : ageText(Math.max(0, ttl)));
 }
 
@@ -792,8 +782,8 @@ async function onMapClick(e) {
   if (mode === "drop-threat") await edit("PUT", `/api/threat/${m(newThreatId())}`, threatForm(p));
   else if (mode === "move-threat" && state.threats.has(state.selectedThreat)) {
     const d = state.threats.get(state.selectedThreat).data;
-    const body = { position: p, facing_deg: d.facing_deg, sigma_range: d.sigma_range, sigma_lateral: d.sigma_lateral, skew: d.skew, weight: d.weight };
-    if (d.ttl_s !== null) body.ttl_s = d.ttl_s;
+    const body = { ...d.update, position: p }; // the threat as put, whatever its shape, moved
+    if (body.ttl_s === null) delete body.ttl_s;
     await edit("PUT", `/api/threat/${m(d.id)}`, body);
   } else if (mode === "set-goal" && state.selectedUnit) await edit("PUT", `/api/goal/${m(state.selectedUnit)}`, { position: p });
 }
