@@ -37,14 +37,19 @@ def threat(update: ThreatUpdate, threat_id: str) -> Threat:
     """The core's ``Threat`` for ``update``, named ``threat_id``, through its shape (``core.shapes``).
 
     Raises:
-        ValueError: ``"<field>: <reason>"``: a shape the planner does not know, or
-            parameters its shape refuses.
+        ShapeError: ``"<field>: <reason>"`` (a ``ValueError``): a shape the planner
+            does not know, or parameters its shape refuses.
     """
     from pfp_service.core import shapes
 
-    shape = shapes.get(update.shape)
-    params = shapes.check_params(shape, shape_params(update))
-    return shape.threat(update.position, params, update.weight, threat_id)
+    try:
+        shape = shapes.get(update.shape)
+        params = shapes.check_params(shape, shape_params(update))
+        return shape.threat(update.position, params, update.weight, threat_id)
+    except shapes.ShapeError as exc:
+        if update.shape != DEFAULT_SHAPE:
+            raise
+        raise shapes.ShapeError(str(exc).removeprefix("params.")) from exc  # its fields are top-level
 
 
 def shape_params(update: ThreatUpdate) -> dict[str, float]:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import copy
 
 from pfp_service.core import ThreatField
+from pfp_service.core.shapes import ShapeError
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.wire import (
@@ -326,7 +327,7 @@ class World:
         ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
         try:
             threat = translate.threat(msg, tid)
-        except ValueError as exc:  # a shape this planner lacks, or parameters its shape refuses
+        except ShapeError as exc:  # a shape this planner lacks, or parameters its shape refuses
             field, _, reason = str(exc).partition(": ")
             self._reject(keys.threat(s.mission, tid), InputError(f"$.{field}", reason), b, K.THREAT)
             return

@@ -241,7 +241,9 @@ RELAXED: dict[str, set[str]] = {
 def test_schemas_only_grow_and_new_fields_have_defaults(struct: str) -> None:
     d = _defs()[struct]
     required, optional = V1[struct]
-    assert set(d.get("required", [])) == required - RELAXED.get(struct, set()), "a new field must have a default"
+    assert set(d.get("required", [])) == required - RELAXED.get(struct, set()), (
+        "a new field must have a default"
+    )
     assert required | optional <= set(d["properties"]), "a published field was removed"
 
 

@@ -130,19 +130,19 @@ def test_a_step_too_fine_for_the_distance_is_refused_with_its_path_and_a_close_g
 
 
 def test_an_input_that_fails_inside_is_rejected_alone_and_logged_once_a_minute_per_key():
-    # no decoder lets a zero spread through; a struct built in process can carry one
-    broken = ThreatUpdate(position=(0.0, 0.0), sigma_range=0.0, sigma_lateral=0.0)
+    # no decoder lets a non-finite position through; a struct built in process can carry one
+    broken = ThreatUpdate(position=(math.nan, 0.0), sigma_range=1.0, sigma_lateral=1.0)
     w = World(WorldSettings(planner=PlannerParams(intensity="density", delta=0.08)))
     w.apply([GoalSet(u, Goal(position=(10.0, 12.0))) for u in INNOCENTS], 0.0)
     out = w.apply([ThreatPut("bad", broken), ThreatPut("e1", THREAT), *_states(0.0)], 0.0)
     _valid(out)
     (ev,) = [e for e in out.events if isinstance(e, RejectedEvent)]
-    assert ev.key == keys.threat("default", "bad") and "ZeroDivisionError" in ev.reason
+    assert ev.key == keys.threat("default", "bad") and "ValueError" in ev.reason
     assert "this input alone was dropped" in ev.reason
     assert {d.unit for d in out.directions} == set(INNOCENTS)  # and the good threat is in force
     assert w.counts()["threats"] == 1 and w.counts()["faults"] == 1
     (f,) = out.faults
-    assert (f.key, f.error, f.suppressed) == (ev.key, "ZeroDivisionError", 0) and f.where.endswith(
+    assert (f.key, f.error, f.suppressed) == (ev.key, "ValueError", 0) and f.where.endswith(
         ".py:" + f.where.split(":")[-1]
     )
     for t in range(1, 60):  # the same key again and again: rejected (rate-limited), logged no more

@@ -12,12 +12,21 @@ from collections.abc import Mapping
 from types import MappingProxyType
 
 from pfp_service.core.shapes import area, skew_normal
-from pfp_service.core.shapes.base import Param, ThreatShape, check_params, evaluate, level_ring, reach_box
+from pfp_service.core.shapes.base import (
+    Param,
+    ShapeError,
+    ThreatShape,
+    check_params,
+    evaluate,
+    level_ring,
+    reach_box,
+)
 
 __all__ = [
     "DEFAULT",
     "SHAPES",
     "Param",
+    "ShapeError",
     "ThreatShape",
     "check_params",
     "evaluate",
@@ -36,9 +45,9 @@ def get(name: str) -> ThreatShape:
     """The shape named ``name``.
 
     Raises:
-        ValueError: ``"shape: ..."`` naming the shapes there are.
+        ShapeError: ``"shape: ..."`` naming the shapes there are.
     """
     shape = SHAPES.get(name)
     if shape is None:
-        raise ValueError(f"shape: unknown threat shape {name!r} (known: {', '.join(SHAPES)})")
+        raise ShapeError(f"shape: unknown threat shape {name!r} (known: {', '.join(SHAPES)})")
     return shape

@@ -29,11 +29,28 @@ from pfp_service.core.options import Intensity
 if TYPE_CHECKING:  # the kernels compile on first use: describing a shape needs none
     from pfp_service.core.threat import Threat
 
-__all__ = ["Param", "Point", "Polyline", "ThreatShape", "check_params", "evaluate", "level_ring", "reach_box"]
+__all__ = [
+    "Param",
+    "Point",
+    "Polyline",
+    "ShapeError",
+    "ThreatShape",
+    "check_params",
+    "evaluate",
+    "level_ring",
+    "reach_box",
+]
 
 Point = tuple[float, float]
 Polyline = list[Point]
 _BISECTIONS = 60  # halvings of the first bracket: far below a millimetre at any spread
+
+
+class ShapeError(ValueError):
+    """A shape the registry lacks, or parameters a shape refuses: ``"<field>: <reason>"``.
+
+    A refusal of the input, where any other exception from a shape is a fault.
+    """
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,22 +103,22 @@ def check_params(shape: ThreatShape, given: Mapping[str, float]) -> dict[str, fl
     """``given`` with the defaults filled in, refused unless every name is known and every value in bounds.
 
     Raises:
-        ValueError: ``"params.<name>: <reason>"``, the field first as every wire rejection.
+        ShapeError: ``"params.<name>: <reason>"``, the field first as every wire rejection.
     """
     known = {p.name: p for p in shape.params}
     for name in given:
         if name not in known:
-            raise ValueError(
+            raise ShapeError(
                 f"params.{name}: not a parameter of the {shape.name} shape (it takes {sorted(known)})"
             )
     out: dict[str, float] = {}
     for p in shape.params:
         v = given.get(p.name, p.default)
         if v is None:
-            raise ValueError(f"params.{p.name}: is required by the {shape.name} shape")
+            raise ShapeError(f"params.{p.name}: is required by the {shape.name} shape")
         v = float(v)
         if not (math.isfinite(v) and p.lo <= v <= p.hi):
-            raise ValueError(f"params.{p.name}: must be within [{p.lo:g}, {p.hi:g}], got {v!r}")
+            raise ShapeError(f"params.{p.name}: must be within [{p.lo:g}, {p.hi:g}], got {v!r}")
         out[p.name] = v
     return out
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from pfp_service.constraints import SIGMA_MIN_M, SIGMA_RATIO_MAX
-from pfp_service.core.shapes.base import Param, Point, Polyline, level_ring, rounded
+from pfp_service.core.shapes.base import Param, Point, Polyline, ShapeError, level_ring, rounded
 from pfp_service.errors import FINITE_LIMIT
 
 if TYPE_CHECKING:  # the kernels compile on first use: describing a shape needs none
@@ -43,7 +43,7 @@ class SkewNormal:
     def threat(self, position: Point, params: Mapping[str, float], weight: float, threat_id: str) -> Threat:
         sr, sl = params["sigma_range"], params["sigma_lateral"]
         if max(sr, sl) > SIGMA_RATIO_MAX * min(sr, sl):
-            raise ValueError(
+            raise ShapeError(
                 f"params.sigma_lateral: sigma_range and sigma_lateral must be within a factor {SIGMA_RATIO_MAX:g}"
             )
         from pfp_service.core.threat import Threat
