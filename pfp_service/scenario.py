@@ -14,6 +14,7 @@ bytes, and ``Scenario.to_plan_args`` hands the core what it needs.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Collection, Sequence
@@ -45,6 +46,7 @@ from pfp_service.errors import InputError, from_validation
 from pfp_service.files import read_text
 from pfp_service.geo import Origin, localise_document
 from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone, team_problems
+from pfp_service.wire.messages.structs import DEFAULT_SHAPE, ShapeName, ShapeParams
 
 if TYPE_CHECKING:
     # Imported where used: a scenario is read (and a hostile one refused) without compiling the core.
@@ -82,11 +84,14 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
 
     User form: ``position, facing_deg, sigma_range, sigma_lateral, skew, weight``.
     Raw form: ``position`` (xi), ``omega`` (2x2 SPD) and ``alpha`` instead of the
-    facing, sigmas and skew.
+    facing, sigmas and skew.  Another shape (``core.shapes``): ``shape`` and its
+    ``params``, as on the wire.
     """
 
     id: Id | None = None
     position: Point
+    shape: ShapeName = DEFAULT_SHAPE
+    params: ShapeParams | None = None
     facing_deg: Finite = 0.0
     sigma_range: Sigma | None = None
     sigma_lateral: Sigma | None = None
@@ -98,6 +103,15 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
     observer_height_m: Height = 2.0
 
     def __post_init__(self) -> None:
+        if self.shape != DEFAULT_SHAPE:
+            if self.omega is not None or self.sigma_range is not None or self.sigma_lateral is not None:
+                raise ValueError(f"shape: a {self.shape} threat takes params, not omega or sigmas")
+            from pfp_service.core import shapes
+
+            shapes.check_params(shapes.get(self.shape), self.params or {})
+            return
+        if self.params:
+            raise ValueError("params: the skew_normal shape takes its fields at the top level")
         if self.omega is None:
             if self.sigma_range is None:
                 raise ValueError("sigma_range: is required (or give the raw form omega and alpha)")
@@ -124,6 +138,13 @@ class ThreatSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_field
         from pfp_service.core.threat import Threat
 
         tid = self.id or default_id
+        if self.shape != DEFAULT_SHAPE:
+            from pfp_service.core import shapes
+
+            shape = shapes.get(self.shape)
+            params = shapes.check_params(shape, self.params or {})
+            t = shape.threat((self.position[0], self.position[1]), params, self.weight, tid)
+            return dataclasses.replace(t, observer_height_m=self.observer_height_m)
         if self.omega is None:
             assert self.sigma_range is not None and self.sigma_lateral is not None
             return Threat.from_facing(

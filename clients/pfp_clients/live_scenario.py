@@ -82,6 +82,8 @@ def _threat_step(i: int, t: Any, tid: str, dt_s: float) -> AddThreat:
     return AddThreat(
         threat=tid,
         position=t.position,
+        shape=t.shape,
+        params=t.params,
         facing_deg=((t.facing_deg + 360.0) % 720.0) - 360.0,  # the wire's -360..360
         sigma_range=t.sigma_range,
         sigma_lateral=t.sigma_lateral,

@@ -43,12 +43,21 @@ from typing import Annotated, Union
 import msgspec
 from msgspec import Meta
 
-from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Skew, Weight, check_spreads
+from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Skew, Weight
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import Goal, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate, localise_zone
-from pfp_service.wire.messages.structs import MAX_ZONE_RINGS, Ring, ZoneCircle, ZoneKind
+from pfp_service.wire.messages.structs import (
+    DEFAULT_SHAPE,
+    MAX_ZONE_RINGS,
+    Ring,
+    ShapeName,
+    ShapeParams,
+    ZoneCircle,
+    ZoneKind,
+)
+from pfp_service.world import translate
 from pfp_service.yamlio import load_yaml, located
 
 __all__ = [
@@ -114,23 +123,27 @@ class AddThreat(_Step, kw_only=True, frozen=True, tag="add_threat"):
 
     threat: Id
     position: Point
+    shape: ShapeName = DEFAULT_SHAPE
     facing_deg: Angle = 0.0
-    sigma_range: Sigma
-    sigma_lateral: Sigma
+    sigma_range: Sigma | None = None
+    sigma_lateral: Sigma | None = None
     skew: Skew = 0.0
+    params: ShapeParams | None = None
     weight: Weight = 1.0
     ttl_s: Positive | None = None
 
     def __post_init__(self) -> None:
-        check_spreads(self.sigma_range, self.sigma_lateral)
+        translate.check(self.update())  # the message's own checks, then its shape's
 
     def update(self) -> ThreatUpdate:
         return ThreatUpdate(
             position=self.position,
+            shape=self.shape,
             facing_deg=self.facing_deg,
             sigma_range=self.sigma_range,
             sigma_lateral=self.sigma_lateral,
             skew=self.skew,
+            params=self.params,
             weight=self.weight,
             ttl_s=self.ttl_s,
         )

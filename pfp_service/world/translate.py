@@ -30,7 +30,16 @@ if TYPE_CHECKING:
     from pfp_service.core.threat import Threat
     from pfp_service.core.zones import Zone
 
-__all__ = ["decode_plan_result", "describe", "fit_reply", "shape_params", "supplied", "threat", "zone"]
+__all__ = [
+    "check",
+    "decode_plan_result",
+    "describe",
+    "fit_reply",
+    "shape_params",
+    "supplied",
+    "threat",
+    "zone",
+]
 
 
 def threat(update: ThreatUpdate, threat_id: str) -> Threat:
@@ -50,6 +59,19 @@ def threat(update: ThreatUpdate, threat_id: str) -> Threat:
         if update.shape != DEFAULT_SHAPE:
             raise
         raise shapes.ShapeError(str(exc).removeprefix("params.")) from exc  # its fields are top-level
+
+
+def check(update: ThreatUpdate) -> None:
+    """Refuse ``update`` as ``threat`` would for its shape and parameters, without the compiled core.
+
+    For readers of files (a script, a scenario) that refuse a threat when they load it.
+
+    Raises:
+        ShapeError: as ``threat``.
+    """
+    from pfp_service.core import shapes
+
+    shapes.check_params(shapes.get(update.shape), shape_params(update))
 
 
 def shape_params(update: ThreatUpdate) -> dict[str, float]:

@@ -176,3 +176,61 @@ def test_the_map_draws_what_the_shape_gives_and_skips_what_the_planner_refuses()
     radii = [math.hypot(x - 3.0, y + 2.0) for x, y in a1["zone"]]
     assert max(radii) - min(radii) < 2e-3  # a circle
     assert a1["update"]["params"] == {"radius_m": 5.0}  # what the page puts back when it moves it
+
+
+AREA_SCENARIO = b"""
+name: scout report
+start: [0, 0]
+goal: [20, 0]
+threats:
+  - {id: seen, position: [10, 0.5], shape: area, params: {radius_m: 2}}
+"""
+
+
+def test_a_scenario_file_takes_an_area_and_the_plan_goes_round_it():
+    from pfp_service.core import plan
+    from pfp_service.scenario import decode_scenario
+
+    sc = decode_scenario(AREA_SCENARIO, "yaml")
+    (threat,) = [s.threat for s in sc.schedule()]
+    assert threat.omega == ((4.0, 0.0), (0.0, 4.0)) and threat.id == "seen"
+    result = plan(sc.start, sc.goal, sc.schedule(), sc.planner.to_params())
+    assert result.status == "reached" and min(y for _, y in result.path) < -1.0  # round the circle's south
+
+
+@pytest.mark.parametrize(
+    ("threat", "field"),
+    [
+        ("{position: [1, 1], shape: area}", "params.radius_m"),
+        ("{position: [1, 1], shape: area, params: {radius_m: 2}, sigma_range: 1}", "shape"),
+        ("{position: [1, 1], shape: cone}", "shape"),
+        ("{position: [1, 1], sigma_range: 1, sigma_lateral: 1, params: {radius_m: 2}}", "params"),
+    ],
+)
+def test_a_scenario_refuses_a_bad_shape_with_its_field(threat, field):
+    from pfp_service.scenario import decode_scenario
+
+    doc = b"start: [0, 0]\ngoal: [5, 5]\nthreats:\n  - " + threat.encode() + b"\n"
+    with pytest.raises(InputError) as err:
+        decode_scenario(doc, "yaml")
+    assert err.value.path == f"threats[0].{field}"  # a file's paths have no $
+
+
+def test_an_injection_script_adds_an_area_and_refuses_an_unknown_shape(tmp_path):
+    from pfp_clients.script import AddThreat, load_script
+
+    good = tmp_path / "good.yaml"
+    good.write_text(
+        "duration_s: 10\ntimeline:\n  - {do: add_threat, threat: s1, position: [4, 6], shape: area, params: {radius_m: 3}}\n"
+    )
+    (step,) = load_script(good).timeline
+    assert isinstance(step, AddThreat) and translate.threat(step.update(), "s1").omega == (
+        (9.0, 0.0),
+        (0.0, 9.0),
+    )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        "duration_s: 10\ntimeline:\n  - {do: add_threat, threat: s1, position: [4, 6], shape: cone}\n"
+    )
+    with pytest.raises(InputError, match="unknown threat shape 'cone'"):
+        load_script(bad)
