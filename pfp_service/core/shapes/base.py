@@ -61,7 +61,7 @@ class Param:
         name: its key (``params.<name>`` on the wire), with its unit in the name.
         lo, hi: inclusive bounds.
         default: its value when absent; ``None`` makes it required.
-        doc: one line for the docs and the schema.
+        doc: one line saying what it is, for the docs.
     """
 
     name: str
@@ -80,7 +80,7 @@ class ThreatShape(Protocol):
 
     @property
     def summary(self) -> str:
-        """One line for the docs and ``describe``'s first row."""
+        """One line saying what kind of enemy it models."""
 
     @property
     def params(self) -> tuple[Param, ...]:
