@@ -288,6 +288,17 @@ def test_the_map_shows_units_threats_staleness_and_a_preview(playwright, tmp_pat
             ), label
             zone = page.js("() => pfpMap.threats.get('pop').data.zone.length")
             assert zone == 48
+            # drawn from what the feed gives: zone, core, the shape's two arrow lines, the centre
+            assert page.js("() => pfpMap.threats.get('pop').layers.length") == 5
+            put_json(
+                s,
+                keys.threat(mission, "seen"),
+                {"position": [-20, 40], "shape": "area", "params": {"radius_m": 3}},
+            )
+            page.wait("() => pfpMap.threats.has('seen')", timeout_s=2.0)
+            assert page.js("() => pfpMap.threats.get('seen').layers.length") == 3  # an area faces no way
+            s.delete(keys.threat(mission, "seen"))
+            page.wait("() => !pfpMap.threats.has('seen')", timeout_s=2.0)
             t0 = time.monotonic()
             s.delete(keys.threat(mission, "pop"))
             page.wait("() => !pfpMap.threats.has('pop')", timeout_s=1.0)
