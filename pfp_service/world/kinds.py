@@ -27,7 +27,8 @@ from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import decode_goal, decode_mission, decode_threat, decode_unit_state, keys
 from pfp_service.wire.messages import decode_team, decode_zone
-from pfp_service.wire.messages.structs import Bounds
+from pfp_service.wire.messages.structs import Bounds, ThreatUpdate
+from pfp_service.world import translate
 from pfp_service.world.events import (
     Deliberated,
     GoalCancelled,
@@ -166,6 +167,21 @@ class Kind:
         return self.put(ident, self.decode(payload, bounds, origin))  # type: ignore[no-any-return]
 
 
+def _decode_threat(data: bytes, bounds: Bounds | None, origin: Origin | None) -> ThreatUpdate:
+    """The wire's decoder, then its shape's checks: a threat this planner cannot plan is refused unstored.
+
+    Raises:
+        InputError: ``$.shape`` or ``$.params.<name>`` (``translate.check``), or as ``decode_threat``.
+    """
+    update = decode_threat(data, bounds, origin)
+    try:
+        translate.check(update)
+    except ValueError as exc:
+        field, _, reason = str(exc).partition(": ")
+        raise InputError(f"$.{field}", reason) from exc
+    return update
+
+
 _FIELDS: dict[type[Any], tuple[str, ...]] = {}  # an input class's field names, looked up once
 
 
@@ -246,7 +262,7 @@ KINDS: tuple[Kind, ...] = (
         "write",
         (ThreatPut, ThreatRemoved),
         schema="threat",
-        decode=decode_threat,
+        decode=_decode_threat,
         writers=("reporter",),
         store=Stored("threats", "id", expiry="ttl_or_default"),
         log_put=_threat_put,

@@ -234,3 +234,25 @@ def test_an_injection_script_adds_an_area_and_refuses_an_unknown_shape(tmp_path)
     )
     with pytest.raises(InputError, match="unknown threat shape 'cone'"):
         load_script(bad)
+
+
+def test_the_threat_kind_refuses_a_shape_it_cannot_plan_before_it_is_stored():
+    from pfp_service.world.kinds import BY_INPUT
+
+    kind = BY_INPUT[ThreatPut]
+    put = kind.make(
+        "a1",
+        False,
+        json.dumps({"position": [1, 2], "shape": "area", "params": {"radius_m": 3}}).encode(),
+        None,
+        None,
+    )
+    assert isinstance(put, ThreatPut) and put.update.params == {"radius_m": 3.0}
+    with pytest.raises(InputError) as err:
+        kind.make("c1", False, b'{"position": [1, 2], "shape": "cone"}', None, None)
+    assert err.value.path == "$.shape"
+    with pytest.raises(InputError) as err:
+        kind.make(
+            "a2", False, b'{"position": [1, 2], "shape": "area", "params": {"radius_m": -1}}', None, None
+        )
+    assert err.value.path == "$.params.radius_m"
