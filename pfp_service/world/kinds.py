@@ -176,9 +176,8 @@ def _decode_threat(data: bytes, bounds: Bounds | None, origin: Origin | None) ->
     update = decode_threat(data, bounds, origin)
     try:
         translate.check(update)
-    except ValueError as exc:
-        field, _, reason = str(exc).partition(": ")
-        raise InputError(f"$.{field}", reason) from exc
+    except translate.ShapeError as exc:
+        raise translate.refusal(exc) from exc
     return update
 
 

@@ -136,9 +136,8 @@ def whatifs(req: PreviewRequest) -> list[Threat]:
     for i, t in enumerate(req.threats):
         try:
             out.append(translate.threat(t, t.id))
-        except ValueError as exc:
-            field, _, reason = str(exc).partition(": ")
-            raise InputError(f"$.threats[{i}].{field}", reason) from exc
+        except translate.ShapeError as exc:
+            raise translate.refusal(exc, f"$.threats[{i}]") from exc
     return out
 
 

@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING
 
 import msgspec
 
+from pfp_service.core.shapes import ShapeError
+from pfp_service.errors import InputError
 from pfp_service.wire import MAX_PAYLOAD_BYTES, ThreatUpdate, decode, encode
 from pfp_service.wire.messages import ZoneUpdate
 from pfp_service.wire.messages.structs import DEFAULT_SHAPE
@@ -31,10 +33,12 @@ if TYPE_CHECKING:
     from pfp_service.core.zones import Zone
 
 __all__ = [
+    "ShapeError",
     "check",
     "decode_plan_result",
     "describe",
     "fit_reply",
+    "refusal",
     "shape_params",
     "supplied",
     "threat",
@@ -85,6 +89,12 @@ def shape_params(update: ThreatUpdate) -> dict[str, float]:
         "sigma_lateral": update.sigma_lateral,
         "skew": update.skew,
     }
+
+
+def refusal(exc: ShapeError, prefix: str = "$") -> InputError:
+    """A shape's refusal (``"<field>: <reason>"``) as the wire's, its field under ``prefix``."""
+    field, _, reason = str(exc).partition(": ")
+    return InputError(f"{prefix}.{field}", reason)
 
 
 def describe(update: ThreatUpdate) -> list[tuple[str, str]]:

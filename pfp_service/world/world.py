@@ -25,7 +25,6 @@ from __future__ import annotations
 import copy
 
 from pfp_service.core import ThreatField
-from pfp_service.core.shapes import ShapeError
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.wire import (
@@ -327,9 +326,8 @@ class World:
         ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
         try:
             threat = translate.threat(msg, tid)
-        except ShapeError as exc:  # a shape this planner lacks, or parameters its shape refuses
-            field, _, reason = str(exc).partition(": ")
-            self._reject(keys.threat(s.mission, tid), InputError(f"$.{field}", reason), b, K.THREAT)
+        except translate.ShapeError as exc:  # restored, or a peer's: a write is checked when decoded
+            self._reject(keys.threat(s.mission, tid), translate.refusal(exc), b, K.THREAT)
             return
         new = ThreatRecord(msg, threat, None if ttl is None else b.now + ttl)
         old = self._rec.put_threat(tid, new)
