@@ -67,8 +67,9 @@ def admit(
     (``$.threats``); a what-if so wide that an escape route round it
     (the route search's grid spans the distance plus three spreads on each
     side, and its route is resampled at the step) would have more than
-    ``max_iter_cap`` points (``$.threats[i].sigma_range``, or ``.params`` for another shape).  A plain preview (the unit's own mission,
-    accepted by the world) is never refused: its walk is capped instead.
+    ``max_iter_cap`` points (``$.threats[i].sigma_range``, or ``.params`` for
+    another shape).  A plain preview (the unit's own mission, accepted by the
+    world) is never refused: its walk is capped instead.
     ``stats`` is ``field_stats(view.threats)``, kept by a caller per field.
 
     Raises:

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import msgspec
 
+from pfp_service.core import shapes
 from pfp_service.core.shapes import ShapeError
 from pfp_service.errors import InputError
 from pfp_service.wire import MAX_PAYLOAD_BYTES, ThreatUpdate, decode, encode
@@ -53,16 +54,11 @@ def threat(update: ThreatUpdate, threat_id: str) -> Threat:
         ShapeError: ``"<field>: <reason>"`` (a ``ValueError``): a shape the planner
             does not know, or parameters its shape refuses.
     """
-    from pfp_service.core import shapes
-
+    shape, params = _checked(update)
     try:
-        shape = shapes.get(update.shape)
-        params = shapes.check_params(shape, shape_params(update))
         return shape.threat(update.position, params, update.weight, threat_id)
-    except shapes.ShapeError as exc:
-        if update.shape != DEFAULT_SHAPE:
-            raise
-        raise shapes.ShapeError(str(exc).removeprefix("params.")) from exc  # its fields are top-level
+    except ShapeError as exc:
+        raise _named(update, exc) from exc
 
 
 def check(update: ThreatUpdate) -> None:
@@ -73,9 +69,20 @@ def check(update: ThreatUpdate) -> None:
     Raises:
         ShapeError: as ``threat``.
     """
-    from pfp_service.core import shapes
+    _checked(update)
 
-    shapes.check_params(shapes.get(update.shape), shape_params(update))
+
+def _checked(update: ThreatUpdate) -> tuple[shapes.ThreatShape, dict[str, float]]:
+    try:
+        shape = shapes.get(update.shape)
+        return shape, shapes.check_params(shape, shape_params(update))
+    except ShapeError as exc:
+        raise _named(update, exc) from exc
+
+
+def _named(update: ThreatUpdate, exc: ShapeError) -> ShapeError:
+    """The refusal with the field as the message names it: the skew-normal's are top-level."""
+    return exc if update.shape != DEFAULT_SHAPE else ShapeError(str(exc).removeprefix("params."))
 
 
 def shape_params(update: ThreatUpdate) -> dict[str, float]:
@@ -103,10 +110,7 @@ def describe(update: ThreatUpdate) -> list[tuple[str, str]]:
     Raises:
         ValueError: as ``threat``.
     """
-    from pfp_service.core import shapes
-
-    shape = shapes.get(update.shape)
-    params = shapes.check_params(shape, shape_params(update))
+    shape, params = _checked(update)
     return [("shape", shape.name), *shape.describe(params)]
 
 
