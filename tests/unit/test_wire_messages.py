@@ -17,6 +17,8 @@ from pfp_service.wire.examples import examples
 BIG = 7.77e77  # written as 1e999 on the wire: parses to infinity
 MISSING = object()
 REQ, OPT, DEF = "required", "optional (null allowed)", "defaulted (null not allowed)"
+# Required by the default threat shape (skew_normal) only: optional in the type, and null counts as absent.
+SHAPE_REQ = "required by the skew_normal shape"
 
 
 def _base() -> dict[str, Any]:
@@ -159,6 +161,18 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         (True, "", "got bool"),
     ],
     "iterations": [(0, "", "must be >= 1"), (10_000_001, "", "must be <="), (1.5, "", "expected int")],
+    "shape": [
+        ("Cone", "", "matching regex"),
+        ("x" * 33, "", "matching regex"),
+        (1, "", "expected str, got int"),
+    ],
+    # the skew-normal takes none: each case is refused before its shape is asked
+    "shape_params": [
+        ([1.0], "", "expected object, got array"),
+        ({f"p{i}": 1.0 for i in range(17)}, "", "length must be <= 16"),
+        ({"radius_m": "x"}, "[...]", "expected a finite number, got str"),
+        ({"radius_m": 1.0}, "", "the skew_normal shape takes its fields at the top level"),
+    ],
     "id": [
         ("", "", "matching regex"),
         ("a b", "", "matching regex"),
@@ -226,17 +240,19 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
             "",
             "length must be <= 256",
         ),
-        ([{"position": [0, 0]}], "[0].sigma_range", "is required"),
+        ([{"position": [0, 0], "id": "w"}], "[0].sigma_range", "is required"),
     ],
 }
 
 # Every field of every message: its type in BAD, and whether it is required, nullable or defaulted.
 THREAT_FIELDS = {
     "position": ("point", REQ),
+    "shape": ("shape", DEF),
     "facing_deg": ("angle", DEF),
-    "sigma_range": ("sigma", REQ),
-    "sigma_lateral": ("sigma", REQ),
+    "sigma_range": ("sigma", SHAPE_REQ),
+    "sigma_lateral": ("sigma", SHAPE_REQ),
     "skew": ("skew", DEF),
+    "params": ("shape_params", OPT),
     "weight": ("weight", DEF),
     "ttl_s": ("positive", OPT),
 }
@@ -371,9 +387,11 @@ def _bad_cases() -> Iterator[Any]:
         for field, (kind, how) in fields.items():
             for value, sub, reason in BAD[kind]:
                 yield pytest.param(name, field, value, sub, reason, id=f"{name}.{field}={str(value)[:20]}")
-            if how == REQ:
+            if how in (REQ, SHAPE_REQ):
                 yield pytest.param(name, field, MISSING, "", "is required", id=f"{name}.{field}=missing")
-            if how != OPT:
+            if how == SHAPE_REQ:
+                yield pytest.param(name, field, None, "", "is required", id=f"{name}.{field}=null")
+            elif how != OPT:
                 yield pytest.param(name, field, None, "", "got null", id=f"{name}.{field}=null")
 
 
@@ -396,7 +414,7 @@ def _good_cases() -> Iterator[Any]:
         for field, (_, how) in fields.items():
             if how == OPT:
                 yield pytest.param(name, field, None, id=f"{name}.{field}=null")
-            if how != REQ:
+            if how not in (REQ, SHAPE_REQ):
                 yield pytest.param(name, field, MISSING, id=f"{name}.{field}=missing")
 
 
@@ -417,7 +435,7 @@ def test_the_table_covers_every_field_of_every_message(name: str) -> None:
     for f in info.fields:
         nullable = isinstance(f.type, msgspec.inspect.UnionType) and f.type.includes_none
         actual[f.name] = REQ if f.required else OPT if nullable else DEF
-    assert actual == {f: how for f, (_, how) in FIELDS[name].items()}
+    assert actual == {f: OPT if how == SHAPE_REQ else how for f, (_, how) in FIELDS[name].items()}
 
 
 @pytest.mark.unit
