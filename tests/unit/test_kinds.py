@@ -16,7 +16,7 @@ from pfp_service.node.config import ServeConfig
 from pfp_service.node.store import TABLES, Store
 from pfp_service.node.writes import Writes, subscriptions
 from pfp_service.wire import encode, keys
-from pfp_service.wire.examples import examples
+from pfp_service.wire.contract import examples
 from pfp_service.wire.schema import LIVELINESS, MESSAGES
 from pfp_service.world import kinds
 from pfp_service.world.events import InputRejected, MissionRestored, Tick
