@@ -198,14 +198,11 @@ class PlannerNode:
             self._peers.ask(s)
         self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
-            ev = RestoredEvent(
+            ev = RestoredEvent.counted(
+                restored.kept,
                 planner=p,
-                threats=restored.threats,
-                goals=restored.goals,
                 missions=restored.missions,
                 expired=restored.expired,
-                zones=restored.zones,
-                teams=restored.teams,
                 corrupt=restored.corrupt,
                 set_aside=restored.set_aside,
             )

@@ -379,7 +379,12 @@ MESSAGES: tuple[MessageSpec, ...] = (
                 ),
                 ("event.stale", m.StaleEvent(unit="ugv-3", position=(120.0, 40.5), reason="silent for 10 s")),
                 ("event.forgotten", m.ForgottenEvent(unit="ugv-3", stale_s=600.0)),
-                ("event.restored", m.RestoredEvent(threats=20, goals=50, missions=48, expired=1, zones=3)),
+                (
+                    "event.restored",
+                    m.RestoredEvent.counted(
+                        {"goal": 50, "threat": 20, "zone": 3, "team": 1}, missions=48, expired=1
+                    ),
+                ),
                 (
                     "event.conflict",
                     m.ConflictEvent(other="planner-2", reason="a second planner on mission default"),

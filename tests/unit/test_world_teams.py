@@ -190,7 +190,7 @@ def test_a_team_is_stored_restored_and_counted_in_the_restored_event(tmp_path) -
         )
         store.commit_inputs([TeamRemoved("bravo")], 1001.0, None)
         back = store.restore(2000.0)
-        assert back.inputs == [TeamPut("alpha", TEAM)] and back.teams == 1
+        assert back.inputs == [TeamPut("alpha", TEAM)] and back.kept["team"] == 1
     finally:
         store.close()
 
