@@ -1,19 +1,23 @@
-"""One table of the world's input kinds: each names its key, decoder, inputs, blame, store rows, log line, writers and schema.
+"""One table of the world's input kinds: each names its key, mode, decoder, inputs, blame, store rows, log line, writers and schema.
 
 A kind of input the world takes from the wire is one ``Kind`` in ``KINDS``.  What is written
-out once per kind elsewhere is read from here: the node's write subscriptions, acknowledged-write
-queryables and their one generic handler (``node.writes``), the durable state's tables, its
-commits and its read-back (``node.statefile``, ``node.store``, ``node.staterows``), the log line
-of each change (``node.log``), the key a failure is blamed on (``blame``), who may write each
-key under access control (``node.access``), and the check of docs/wire.md's key table
-(``tests/unit/test_kinds.py``).  A new kind is one entry here and one handler in
-``World._apply_one`` (docs/development.md, "Add an input kind").
+out once per kind elsewhere is read from here: the node's subscriptions (``node.node._wire``, by
+the kind's mode), its acknowledged-write queryables and their one generic handler
+(``node.writes``), the durable state's tables, its commits, its read-back and the ``restored``
+event's counts (``node.statefile``, ``node.store``, ``node.staterows``), the log line of each
+change (``node.log``), the key a failure is blamed on (``blame``), who may write each key under
+access control (``node.access``), and the check of docs/wire.md's key table
+(``tests/unit/test_kinds.py``).  A new kind is one entry here (its put and remove inputs, derived
+from ``events.Written``, declared beside it) and one handler in ``World._apply_one``
+(docs/development.md, "Add an input kind").
 
-A ``write`` kind is put and deleted by anyone its roles allow (goals, threats, zones): decoded by
-the generic handler, committed before it is applied, logged, restored at a restart.  The other
-modes name keys the node reads its own way (unit states in rings, liveliness tokens, the
-missions planners share), here for their blame, schema and writers.  Pure values: no zenoh, no
-clock, no sqlite3 (a table is named by its columns; ``node.store`` writes the SQL).
+The mode says how the node reads a kind.  A ``write`` kind is put and deleted by anyone its roles
+allow (goals, threats, zones, teams): decoded by the generic handler, committed before it is
+applied, logged, restored at a restart.  The others: ``state``, unit states in rings (and the
+planner's shards); ``token``, a liveliness token whose input is made from its id and whether it
+came or went; ``peers``, the mission's planners' tokens (``node.twins.Peers``); ``shared``, what
+planners share, read under ``--cluster`` only.  Pure values: no zenoh, no clock, no sqlite3 (a
+table is named by its columns; ``node.store`` writes the SQL).
 """
 
 from __future__ import annotations
@@ -65,7 +69,7 @@ __all__ = [
 ]
 
 K = keys.KeyKind
-Mode = Literal["write", "state", "token", "shared"]
+Mode = Literal["write", "state", "token", "peers", "shared"]  # how the node reads it (``node._wire``)
 Decoder = Callable[[bytes, Bounds | None, Origin | None], Any]
 
 
@@ -110,8 +114,9 @@ class Kind:
         name: the kind's word in messages and logs (``goal``).
         key: its key in ``wire.keys``; the ``{id}`` chunk is the id of every input of it.
         mode: how the node reads it (module docstring).
-        inputs: its world inputs (a write kind's put, then its remove), then any other input
-            blamed on its key (a restored mission is a goal's).  The first field of each is the id.
+        inputs: its world inputs (a write kind's put, then its remove; a token's or shared kind's
+            one input), then any other input blamed on its key (a restored mission is a goal's).
+            The first field of each is the id.
         blames_unit: the id is a unit's, whose goal goes when applying one of these fails.
         schema: its message's name in ``wire.schema.MESSAGES`` (``None``: no payload).
         decode: payload, bounds, origin -> message; raises ``InputError``.
@@ -136,7 +141,7 @@ class Kind:
 
     @property
     def put(self) -> type[Any]:
-        """A write kind's put input, ``put(id, message)``."""
+        """Its first input, ``put(id, message)``: a write kind's put, a token's ``(id, alive)``, a shared record."""
         return self.inputs[0]
 
     @property
@@ -155,7 +160,7 @@ class Kind:
     def make(
         self, ident: str, delete: bool, payload: bytes, bounds: Bounds | None, origin: Origin | None
     ) -> Input:
-        """A write kind's input for a put (``payload`` decoded) or a DELETE of ``ident``.
+        """A write (or shared) kind's input for a put (``payload`` decoded) or a DELETE of ``ident``.
 
         Raises:
             InputError: the payload does not decode.
@@ -287,7 +292,7 @@ KINDS: tuple[Kind, ...] = (
         own_unit=True,
     ),
     Kind("unit token", K.ALIVE_UNIT, "token", (TokenChanged,), own_unit=True),
-    Kind("planner token", K.ALIVE_PLANNER, "token", (PeerPlanner, PeerTerrain), writers=("planner",)),
+    Kind("planner token", K.ALIVE_PLANNER, "peers", (PeerPlanner, PeerTerrain), writers=("planner",)),
     Kind(
         "mission",
         K.UNIT_MISSION,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 import threading
+import typing
 from pathlib import Path
 
 import pytest
@@ -14,12 +15,12 @@ from pfp_service.errors import InputError
 from pfp_service.node import access
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.store import TABLES, Store
-from pfp_service.node.writes import Writes, subscriptions
-from pfp_service.wire import encode, keys
+from pfp_service.node.writes import Writes
+from pfp_service.wire import RestoredEvent, decode_event, encode, keys
 from pfp_service.wire.contract import examples
 from pfp_service.wire.schema import LIVELINESS, MESSAGES
 from pfp_service.world import kinds
-from pfp_service.world.events import InputRejected, MissionRestored, Tick
+from pfp_service.world.events import Input, InputRejected, MissionRestored, Tick, Written
 from pfp_service.world.kinds import KINDS, STORED, WRITES
 
 pytestmark = pytest.mark.unit
@@ -57,12 +58,25 @@ def test_its_schema_is_the_contract_message_of_its_key_and_its_decoder_reads_it(
     assert kind.decode is not None and kind.decode(encode(msg), None, None) == msg
 
 
-def test_the_node_subscribes_to_and_serves_every_write_kind_once():
-    subs = subscriptions(M)
-    assert [k for k, _ in subs] == list(WRITES)
-    for kind, key_expr in subs:
-        assert key_expr == keys.TEMPLATES[kind.key].format(mission=M, id="*")
-        assert keys.parse(key_expr.replace("*", "x1")) == keys.Key(kind.key, M, "x1")
+@pytest.mark.parametrize("kind", KINDS, ids=lambda k: k.name)
+def test_each_kind_has_a_mode_the_node_wires_and_a_wildcard_of_its_own_key(kind):
+    # node._wire matches on the mode with assert_never, so mypy refuses a mode it does not wire;
+    # tests/proc/test_kinds_wiring.py checks the subscriptions a real node declares
+    assert kind.mode in typing.get_args(kinds.Mode)
+    key_expr = kind.wildcard(M)
+    assert key_expr == keys.TEMPLATES[kind.key].format(mission=M, id="*")
+    assert keys.parse(key_expr.replace("*", "x1")) == keys.Key(kind.key, M, "x1")
+
+
+@pytest.mark.parametrize("kind", KINDS, ids=lambda k: k.name)
+def test_a_write_kinds_inputs_and_only_those_are_written(kind):
+    # Input names events.Written once: a new kind's put and remove derive from it, wherever declared
+    written = [issubclass(cls, Written) for cls in kind.inputs]
+    if kind.mode == "write":
+        assert written[:2] == [True, True] and not any(written[2:])
+    else:
+        assert not any(written)
+    assert all(cls in typing.get_args(Input) or issubclass(cls, Written) for cls in kind.inputs)
 
 
 @pytest.mark.parametrize("kind", WRITES, ids=lambda k: k.name)
@@ -115,7 +129,7 @@ def test_the_acl_grants_each_write_kind_to_its_writers_and_the_planner_only(kind
 def test_the_acl_lets_the_writers_of_each_other_kind_write_it(kind):
     team = access.Mission(M, ("p1",), ("u1",))
     by_name = {p.name: p.grants for p in access.principals_for(team, {"p1": ("planner",)})}
-    how = ("liveliness_token",) if kind.mode == "token" else ("put",)
+    how = ("liveliness_token",) if kind.mode in ("token", "peers") else ("put",)
     for role in kind.writers:
         assert role == "planner"  # the only mission-wide writer of these today
         key = kind.key_of(M, "p1")
@@ -145,6 +159,20 @@ def test_each_stored_kind_has_its_table_and_comes_back_from_the_store(kind, tmp_
         assert store.restore(1001.0).inputs == []
     finally:
         store.close()
+
+
+def test_the_restored_event_counts_every_stored_kind_by_name(tmp_path):
+    store = Store(tmp_path)
+    try:
+        store.commit_inputs([k.put(f"x{i}", _example(k)) for i, k in enumerate(STORED)], 1000.0, None)
+        kept = store.restore(1000.0).kept
+    finally:
+        store.close()
+    assert kept == {k.name: 1 for k in STORED}
+    ev = RestoredEvent.counted(kept, planner="p1", missions=0, expired=0)
+    back = decode_event(encode(ev))  # a kind's name is a valid key of the wire's ``kinds``
+    assert isinstance(back, RestoredEvent) and back.kinds == kept
+    assert (back.threats, back.goals, back.zones, back.teams) == (1, 1, 1, 1)  # older readers' fields
 
 
 def test_a_units_rows_are_restored_after_the_rest_and_as_its_mission_where_recorded(tmp_path):

@@ -56,7 +56,10 @@ def test_a_corrupt_page_is_moved_aside_kept_and_the_readable_rows_salvaged(tmp_p
     assert aside.name == "state.sqlite3.corrupt-20231114T221320Z" and aside.exists()
     assert GARBAGE in aside.read_bytes()  # kept as found
     assert r.corrupt >= 1
-    assert (r.kept["threat"], r.kept["goal"]) == (0, 200)  # the goals' pages were readable: every goal is back
+    assert (r.kept["threat"], r.kept["goal"]) == (
+        0,
+        200,
+    )  # the goals' pages were readable: every goal is back
     # the fresh file is sound, and a second start finds nothing wrong
     again = Store(tmp_path).restore(1000.0)
     assert (again.corrupt, again.set_aside, again.kept["goal"]) == (0, "", 200)

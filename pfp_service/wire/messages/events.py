@@ -139,13 +139,11 @@ class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
     @classmethod
     def counted(cls, kinds: dict[str, int], **rest: Any) -> RestoredEvent:
         """The event for ``kinds`` (restored, by kind name), its named counts filled from it."""
-        named = {field: kinds.get(kind, 0) for field, kind in _NAMED_COUNTS.items()}
-        return cls(kinds=kinds, **named, **rest)
-
-
-# the counts the event named one by one before ``kinds``, kept for older readers; a kind added
-# since is counted in ``kinds`` only (schemas only grow: these stay as they are)
-_NAMED_COUNTS = {"threats": "threat", "goals": "goal", "zones": "zone", "teams": "team"}
+        # the counts named one by one before ``kinds``, kept for older readers; a kind added since
+        # is counted in ``kinds`` only (schemas only grow: these stay as they are)
+        got = kinds.get
+        threats, goals, zones, teams = got("threat", 0), got("goal", 0), got("zone", 0), got("team", 0)
+        return cls(kinds=kinds, threats=threats, goals=goals, zones=zones, teams=teams, **rest)
 
 
 class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):
