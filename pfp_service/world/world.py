@@ -224,6 +224,8 @@ class World:
             case ev.Tick(t, shed):
                 self.limits.overload += shed
                 self._run_timers(t, b)
+            case _:  # a kind in the table without its case here: rejected on its key, never dropped unsaid
+                raise TypeError(f"no handler for {type(inp).__name__} in World._apply_one")
 
     # -- bulkheads ------------------------------------------------------------------
     def _key(self, kind: keys.KeyKind, ident: str) -> str:

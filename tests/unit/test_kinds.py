@@ -20,13 +20,14 @@ from pfp_service.wire import RestoredEvent, decode_event, encode, keys
 from pfp_service.wire.contract import examples
 from pfp_service.wire.schema import LIVELINESS, MESSAGES
 from pfp_service.world import kinds
-from pfp_service.world.events import Input, InputRejected, MissionRestored, Tick, Written
+from pfp_service.world.events import Input, InputRejected, MissionRestored, Tick, WorldSettings, Written
 from pfp_service.world.kinds import KINDS, STORED, WRITES
 
 pytestmark = pytest.mark.unit
 
 M = "m1"
-DOCS = Path(__file__).resolve().parents[2] / "docs" / "wire.md"
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs" / "wire.md"
 
 
 def _example(kind: kinds.Kind):
@@ -243,3 +244,25 @@ def test_the_docs_key_table_has_each_kind_with_its_schema(kind):
         assert who == "liveliness token"
     if kind.mode == "write":
         assert who == "any → planner" and "a DELETE" in payload
+
+
+@pytest.mark.parametrize("kind", WRITES, ids=lambda k: k.name)
+def test_the_world_has_a_handler_for_each_write_kinds_put_and_remove(kind):
+    from pfp_service.world.world import World
+
+    w = World(WorldSettings(mission=M))
+    for inp in (kind.put("x1", _example(kind)), kind.remove("x1")):
+        out = w.apply([inp], 0.0)  # an input no case takes is a fault (``_apply_one``'s last case)
+        assert not out.faults, out.faults
+
+
+def test_the_docs_list_of_files_a_new_kind_touches_names_real_files_and_at_most_six():
+    text = (ROOT / "docs" / "development.md").read_text()
+    said = re.search(r"A new write kind \(.*?\) is these edits, (\d+) files:\n\n(.*?)\n\n", text, re.S)
+    assert said, "docs/development.md: no 'A new write kind ... is these edits, N files:' list"
+    files = re.findall(r"^\d+\. `([^`]+)`", said[2], re.M)
+    assert len(files) == int(said[1]) <= 6
+    for f in files:
+        assert (ROOT / f).is_file(), f
+    # each derived piece reads the table: none of the node's modules is on the list
+    assert not any(f.startswith("pfp_service/node/") for f in files)
