@@ -284,11 +284,11 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "reply",
         "planner",
         "any",
-        "keep-out zones, threats and units the planner holds, a page at a time: "
-        "`next_zone`/`next_threat`/`next_unit` say where the next page starts, asked with "
-        "`?zones_from=ID;threats_from=ID;units_from=ID` (and `zones_limit`, `threats_limit`, "
-        "`units_limit`: 0 to 1000, 0 leaves a list out); a bad parameter gets an error_reply; "
-        "`pfp status` asks every planner",
+        "keep-out zones, threats, writes (teams, and kinds added since) and units the planner holds, "
+        "a page at a time: `next_zone`/`next_threat`/`next_write`/`next_unit` say where the next page "
+        "starts, asked with `?zones_from=ID;threats_from=ID;writes_from=KIND.ID;units_from=ID` (and "
+        "`zones_limit`, `threats_limit`, `writes_limit`, `units_limit`: 0 to 1000, 0 leaves a list "
+        "out); a bad parameter gets an error_reply; `pfp status` asks every planner",
         examples=tuple(
             [
                 (
@@ -331,6 +331,12 @@ MESSAGES: tuple[MessageSpec, ...] = (
                                 ),
                             )
                         ],
+                        writes=[
+                            m.WriteSummary(
+                                kind="team", id="alpha", body={"lead": "r1", "follow": ["m1", "m2"]}
+                            )
+                        ],
+                        writes_total=1,
                         units_total=1,
                         threats_total=1,
                         zones_total=2,

@@ -13,8 +13,6 @@ import zlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Union
 
-import msgspec
-
 from pfp_service.core.params import PlannerParams, Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
@@ -27,7 +25,6 @@ from pfp_service.wire import (
     ThreatChange,
     ThreatUpdate,
     UnitState,
-    WorldSnapshot,
     keys,
 )
 from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
@@ -64,7 +61,6 @@ __all__ = [
     "Written",
     "ZonePut",
     "ZoneRemoved",
-    "inputs_from_snapshot",
     "mission_message",
     "mission_of",
     "unit_key",
@@ -462,28 +458,3 @@ def mission_message(record: MissionRecord, planner: str) -> Mission:
     m = mission_of((record.goal, record.origin, record.params), planner)
     assert m is not None
     return m
-
-
-def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
-    """What a peer planner's world reply says, as inputs: its teams, zones and threats (with the TTL left), goals and missions.
-
-    A planner started after threats and goals were published applies these
-    and guides correctly from its first direction.  Its own reply is skipped.
-    """
-    if snap.planner == me:
-        return []
-    inputs: list[Input] = [TeamPut(t.id, t.team) for t in snap.teams]
-    for z in snap.zones:
-        zone = z.zone if z.ttl_s is None else msgspec.structs.replace(z.zone, ttl_s=max(z.ttl_s, 1e-3))
-        inputs.append(ZonePut(z.id, zone))
-    for t in snap.threats:
-        update = t.threat if t.ttl_s is None else msgspec.structs.replace(t.threat, ttl_s=max(t.ttl_s, 1e-3))
-        inputs.append(ThreatPut(t.id, update))
-    for u in snap.units:
-        if u.mission is not None:
-            params = Resolved(**msgspec.structs.asdict(u.mission.params))
-            origin = (u.mission.origin[0], u.mission.origin[1])
-            inputs.append(MissionRestored(u.id, u.mission.goal, origin, params))
-        elif u.goal is not None:
-            inputs.append(GoalSet(u.id, Goal(position=u.goal)))
-    return inputs

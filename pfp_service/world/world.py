@@ -113,11 +113,13 @@ class World:
         threats_limit: int | None = None,
         zones_from: str | None = None,
         zones_limit: int | None = None,
+        writes_from: str | None = None,
+        writes_limit: int | None = None,
     ) -> WorldSnapshot:
-        """One page of what the planner holds, for the world queryable (``snapshot.page``)."""
-        s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        teams = self.teams.summaries()
-        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit, teams)
+        """One page of what the planner holds, for the world queryable (``snapshot.page``); ``writes``: ``kinds.held``."""
+        s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit, zones_from)
+        listed = (self.teams.summaries(), kinds.held(self), writes_from, writes_limit)
+        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_limit, *listed)
 
     def next_deadline(self) -> float | None:
         """When the world next needs an ``apply`` (a ``Tick`` will do), on the clock ``apply`` is given.

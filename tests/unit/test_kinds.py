@@ -16,7 +16,7 @@ from pfp_service.node import access
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.store import TABLES, Store
 from pfp_service.node.writes import Writes
-from pfp_service.wire import RestoredEvent, decode_event, encode, keys
+from pfp_service.wire import RestoredEvent, decode_event, decode_world_query, encode, keys
 from pfp_service.wire.contract import examples
 from pfp_service.wire.schema import LIVELINESS, MESSAGES
 from pfp_service.world import kinds
@@ -266,3 +266,51 @@ def test_the_docs_list_of_files_a_new_kind_touches_names_real_files_and_at_most_
         assert (ROOT / f).is_file(), f
     # each derived piece reads the table: none of the node's modules is on the list
     assert not any(f.startswith("pfp_service/node/") for f in files)
+
+
+def _paged(world):
+    """``world``'s pages as a peer answers them, one item of each list a page."""
+
+    def ask(selector: str, _timeout_s: float) -> list[bytes]:
+        q = decode_world_query(selector.partition("?")[2])
+        page = world.snapshot(
+            1.0,
+            min(q.units_limit, 1),
+            q.units_from,
+            q.threats_from,
+            threats_limit=min(q.threats_limit, 1),
+            zones_from=q.zones_from,
+            zones_limit=min(q.zones_limit, 1),
+            writes_from=q.writes_from,
+            writes_limit=min(q.writes_limit, 1),
+        )
+        return [encode(page)]
+
+    return ask
+
+
+@pytest.mark.parametrize("kind", WRITES, ids=lambda k: k.name)
+def test_a_joining_planner_learns_each_write_kind_from_a_peers_pages(kind):
+    from pfp_service.node.worldpages import fetch_world
+    from pfp_service.world.world import World
+
+    def world(pid: str) -> World:
+        return World(WorldSettings(mission=M, planner_id=pid))
+
+    def held(w: World) -> dict[str, list[tuple[object, ...]]]:  # each list's ids and time left (a put's
+        s = w.snapshot(1.0)  # own ttl_s is the time left once learnt), and each unit's goal
+        return {
+            "units": [(u.id, u.goal) for u in s.units],
+            "threats": [(t.id, t.ttl_s) for t in s.threats],
+            "zones": [(z.id, z.ttl_s) for z in s.zones],
+            "writes": [(x.kind, x.id, x.ttl_s) for x in s.writes],
+        }
+
+    peer, empty = world("p1"), world("p1")
+    peer.apply([kind.put("x1", _example(kind))], 0.0)
+    assert held(peer) != held(empty), f"{kind.name}: not in the world snapshot (a list, or Kind.held)"
+    joined = fetch_world(_paged(peer), M, "p2")
+    assert joined.complete and joined.inputs
+    learnt = world("p2")
+    learnt.apply(joined.inputs, 1.0)  # at the time the pages were read: the same time left
+    assert held(learnt) == held(peer)

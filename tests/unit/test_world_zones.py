@@ -18,7 +18,7 @@ from pfp_service.wire import (
     encode,
 )
 from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
-from pfp_service.world.events import inputs_from_snapshot
+from pfp_service.world.kinds import inputs_from_snapshot
 from pfp_service.world.preview import preview
 from pfp_service.world.world import (
     GoalSet,
