@@ -399,19 +399,19 @@ class World:
     def _world_changed(self, b: Batch) -> None:
         """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
 
-        A unit out of reach, neither escaping nor deliberating, keeps its
-        direction: a contingency costs what it touches, not the whole fleet.
+        A unit out of reach keeps its direction (one escaping or deliberating
+        out of its wider reach, its job too): a contingency costs what it
+        touches, not the whole fleet.
         """
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
+        wide = [r.stepper.escaping or r.job is not None or r.stepper.pending is not None for r in guided]  # type: ignore[union-attr]
         reached = steering.reached(
-            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight
+            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight, wide
         )
         rejudge, tell = self._book.rejudge, self._tell  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
-                st = rec.stepper
-                assert st is not None
-                if hit or st.escaping or rec.job is not None or st.pending is not None:
+                if hit:
                     rejudge(rec)
                     tell(rec, b)
             except Exception as exc:
