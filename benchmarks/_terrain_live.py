@@ -56,7 +56,7 @@ def live(grid: Any, tif: Path, seed: int = 32) -> dict[str, Any]:
     srv = start_server("planner", stale_s=600.0, extra=("--terrain", str(tif)))
     out: dict[str, Any] = {"units": UNITS, "seen_by_exact_ray": int(sees[:UNITS].sum())}
     try:
-        g = LoadGen(srv.endpoint, [(float(x), float(y)) for x, y in starts], 0.0)  # the units stand still
+        g = _connected(lambda: LoadGen(srv.endpoint, [(float(x), float(y)) for x, y in starts], 0.0), srv)
         try:
             g.wait_ready(300.0)
             for i in range(UNITS + 1):
@@ -79,6 +79,18 @@ def live(grid: Any, tif: Path, seed: int = 32) -> dict[str, Any]:
     finally:
         out["server"] = srv.stop()
     return out
+
+
+def _connected(make: Any, srv: Any, cap_s: float = 300.0) -> Any:
+    """The load generator (units standing still) once the planner listens: it loads the DEM first."""
+    t0 = time.perf_counter()
+    while True:
+        try:
+            return make()
+        except Exception:
+            if time.perf_counter() - t0 > cap_s or srv.proc.poll() is not None:
+                raise
+            time.sleep(1.0)
 
 
 def _wave(g: Any, sees: np.ndarray, threat: Any) -> dict[str, Any]:
