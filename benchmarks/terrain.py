@@ -21,6 +21,11 @@ scenarios of ``tests/terrain_scenarios.py`` (``_cost``: each scenario planned
 blind and over terrain in turn, so both share the run's load).  The cost row
 needs a checkout (the scenarios live with the tests); without one it is
 reported as not run, and ``--check`` fails.
+
+The live rows (``_terrain_live``, skipped with ``--no-live``): ``pfp serve
+--terrain`` over the same grid and 1,000 units over Zenoh; a threat put at
+the centre must re-direct every unit it sees within 100 ms, and the
+bystanders' p99 with a threat moved must stay within 20 % of without.
 """
 
 from __future__ import annotations
