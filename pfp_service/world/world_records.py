@@ -140,6 +140,8 @@ class Records:
         record.seen = key = sight_key(record.threat, box)
         now_in = self.threats.get(tid)
         if key in self.sight or (now_in is not None and now_in.seen == key):
+            if key not in self.sight and now_in is not None:  # in force blind still: masked when it lands
+                record.blind = now_in.blind
             self.held.pop(tid, None)
             return False, None
         before = self.held.get(tid)
@@ -150,7 +152,8 @@ class Records:
     def landed(self, tid: str, key: SightKey, window: Window | None) -> tuple[str, ThreatRecord] | None:
         """A window landed: ``("put", record)`` for a threat held for it, ``("seen", record)`` for one in force
         blind, whose row is masked now; ``None``: for a threat since moved or removed (dropped)."""
-        assert self.sight is not None
+        if self.sight is None:  # no terrain: nothing was asked
+            return None
         held = self.held.get(tid)
         now_in = self.threats.get(tid)
         if held is not None and held[0].seen == key:

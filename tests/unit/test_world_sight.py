@@ -18,6 +18,7 @@ from pfp_service.wire import Goal, ReplanEvent, ThreatUpdate, UnitState
 from pfp_service.world.terrain import answer
 from pfp_service.world.world import (
     GoalSet,
+    SightLanded,
     StateReported,
     ThreatPut,
     ThreatRemoved,
@@ -98,6 +99,7 @@ def test_a_window_that_never_lands_puts_the_threat_in_force_blind_then_masks_it_
     out = w.apply([Tick(1.1)], 1.1)  # given up: blind, the safe side, so both units are re-directed
     assert sorted(_replans(out)[0].units) == ["front", "valley"] and len(w.field.threats) == 1
     late = answer(ground, ask)
+    w.apply([ThreatPut("t", BEHIND)], 1.15)  # put again where it stands, still blind: no second ask
     out = w.apply([late], 1.2)  # masked now: re-judged as a put, the units it sees
     assert _replans(out)[0].units == ["front"]
     valley = w.field.level(np.array([[600.0, 0.0]]))[0]
@@ -129,6 +131,12 @@ def test_a_world_deliberating_inline_computes_the_window_at_once():
         w.apply([GoalSet(uid, Goal(position=(x, 300.0)))], 0.0)
     out = w.apply([ThreatPut("t", BEHIND)], 1.0)
     assert not out.sights and ground.calls == 1 and _replans(out)[0].units == ["front"]
+
+
+def test_a_window_landing_in_a_world_without_terrain_is_ignored():
+    w = World(WorldSettings(lookahead=0))
+    out = w.apply([SightLanded("t", (0.0,), None)], 1.0)
+    assert not out.directions and not out.faults and len(w.field.threats) == 0
 
 
 def test_a_big_grid_put_stays_off_the_sweep():
