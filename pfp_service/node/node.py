@@ -50,7 +50,7 @@ from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
 from pfp_service.node.status import planner_status
 from pfp_service.node.store import Store
-from pfp_service.node.terrain import terrain_info
+from pfp_service.node.terrain import Sights, terrain_info
 from pfp_service.node.twins import Peers, watch_twins
 from pfp_service.node.worldpages import answer_world, fetch_world
 from pfp_service.node.writes import Writes
@@ -157,6 +157,7 @@ class PlannerNode:
         self._uid_of: dict[str, str] = {}
         self._direction_of: dict[str, zenoh.KeyExpr] = {}
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
+        self._sights = Sights(self.world.settings.terrain, self._push)  # threats' windows, off the loop
         self._desk = desk if desk is not None else preview_desk(cfg, clock)
 
     # -- lifecycle --------------------------------------------------------------
@@ -474,6 +475,7 @@ class PlannerNode:
                 )
         self._deliberators.cancel(out.cancelled)
         self._deliberators.submit(out.jobs)
+        self._sights.submit(out.sights)
         self._deliberators.feed()
         done = self.clock()
         for _msg, t_recv in states.values():

@@ -29,6 +29,7 @@ from pfp_service.wire import (
 )
 from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
 from pfp_service.world.separations import DispersionSettings
+from pfp_service.world.terrain import SightAsk, SightLanded
 
 if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
     from pfp_service.core import Stepper, Threat, ThreatField
@@ -49,6 +50,8 @@ __all__ = [
     "Outputs",
     "PeerPlanner",
     "PeerTerrain",
+    "SightAsk",
+    "SightLanded",
     "StateReported",
     "TeamPut",
     "TeamRemoved",
@@ -259,6 +262,7 @@ Input = Union[  # noqa: UP007
     MissionShared,
     PeerPlanner,
     PeerTerrain,
+    SightLanded,
     Tick,
 ]
 
@@ -361,11 +365,12 @@ class Outputs:
     missions: list[MissionRecord] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
     cancelled: list[Job] = field(default_factory=list)  # jobs returned before and no longer wanted
+    sights: list[SightAsk] = field(default_factory=list)  # threats' windows to compute off the loop
 
     def __bool__(self) -> bool:
         return bool(
             self.directions or self.events or self.jobs or self.missions or self.faults or self.cancelled
-        )
+        ) or bool(self.sights)
 
 
 @dataclass(slots=True)
@@ -433,6 +438,9 @@ class WorldSettings:
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
     origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
     terrain: Ground | None = None  # the DEM planned over (``world.terrain``): sight and slope barriers
+    sight_wait_s: float = (
+        0.25  # a threat over terrain held this long for its window, then blind (``world.terrain``)
+    )
     dispersion: DispersionSettings = field(default_factory=DispersionSettings)  # off unless enabled
 
     def params_for(self, goal: Goal) -> PlannerParams:
