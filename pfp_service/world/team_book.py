@@ -22,8 +22,9 @@ from collections.abc import Mapping, Sequence
 import msgspec
 
 from pfp_service.errors import InputError
-from pfp_service.wire import Direction, DirectionStatus, Progress
+from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
+from pfp_service.world import team_goal
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
 from pfp_service.world.teams import Point, Sight, Verdict
@@ -45,6 +46,7 @@ class TeamBook:
         self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
+        self._placing: dict[str, Goal] = {}  # a team goal just put: each member's place, for the world to set
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -54,7 +56,16 @@ class TeamBook:
             self.remove(inp.team)
             return None, units
         err = self.put(inp.team, inp.update)
+        if err is None and _placing_changed(old, inp.update):
+            self._placing.update(team_goal.places(inp.update))
         return (err, set()) if err is not None else (None, units | set(inp.update.units()))
+
+    def placed(self, units: Mapping[str, UnitRecord]) -> list[tuple[str, Goal]]:
+        """The places a team goal just put gives its members, to be set as their goals: once each, and
+        none a member already has (a restored or shared mission for the very place stands)."""
+        out = [(u, g) for u, g in self._placing.items() if (r := units.get(u)) is None or r.goal != g]
+        self._placing = {}
+        return out
 
     def put(self, tid: str, team: TeamUpdate) -> InputError | None:
         """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is.
@@ -100,16 +111,15 @@ class TeamBook:
         """``(team, roles)`` of each team ``unit`` is in."""
         return [(tid, self.teams[tid].roles(unit)) for tid in self._of.get(unit, ())]
 
-    def summaries(self) -> list[TeamSummary]:
-        """The teams in force by id, each with what its roles last said of its members (``pfp status``)."""
-        return [
-            TeamSummary(
-                id=tid,
-                team=team,
-                notes=[f"{u}: {self.said[u]}"[:1024] for u in team.units() if u in self.said],
-            )
-            for tid, team in sorted(self.teams.items())
-        ]
+    def summaries(self, units: Mapping[str, UnitRecord]) -> list[TeamSummary]:
+        """The teams in force by id, each with what its roles last said of its members and its slowest
+        member's ETA (``pfp status``)."""
+        out = []
+        for tid, team in sorted(self.teams.items()):
+            eta_s, slowest = team_goal.eta(team, units)
+            notes = [f"{u}: {self.said[u]}"[:1024] for u in team.units() if u in self.said]
+            out.append(TeamSummary(id=tid, team=team, notes=notes, eta_s=eta_s, slowest=slowest))
+        return out
 
     def separation(self, unit: str) -> float | None:
         """The least distance ``unit``'s team asks its members to keep (``None``: by class): dispersion's seam."""
@@ -253,6 +263,21 @@ class TeamBook:
             c_at = ctl.position if ctl is not None else None
             out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
         return out
+
+
+def _placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:
+    """Whether a team put gives its members new places: a goal new, moved, or placed otherwise."""
+    if new.goal is None:
+        return False
+    if old is None:
+        return True
+    return (old.goal, old.offsets, old.spacing_m, old.separation_m, team_goal.column(old)) != (
+        new.goal,
+        new.offsets,
+        new.spacing_m,
+        new.separation_m,
+        team_goal.column(new),
+    )
 
 
 def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:

@@ -116,7 +116,7 @@ class World:
     ) -> WorldSnapshot:
         """One page of what the planner holds, for the world queryable (``snapshot.page``)."""
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        teams = self.teams.summaries()
+        teams = self.teams.summaries(self._units)
         return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit, teams)
 
     def next_deadline(self) -> float | None:
@@ -359,6 +359,8 @@ class World:
             self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
         for rec in filter(None, map(self._units.get, units)):
             self._tell(rec, b)
+        for unit, goal in self.teams.placed(self._units):  # a team goal: each member's place, its goal
+            self._adopt(unit, goal, None, b)
 
     def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: Batch) -> None:
         if z is not None:
