@@ -14,13 +14,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import shapely
 
 __all__ = [
     "GO",
+    "SIGHT_CLEARANCE_M",
     "STANDOFF_TOLERANCE",
     "Sight",
     "Verdict",
@@ -33,8 +34,18 @@ __all__ = [
 ]
 
 Point = tuple[float, float]
-# Whether two points see each other over the ground (a mast at each end); ``None`` where there is no terrain.
-Sight = Callable[[Point, Point], bool]
+
+
+class Sight(Protocol):
+    """Whether two points see each other over the ground (a mast at each end), the sight line clearing
+    it by ``clearance_m``; ``None`` where there is no terrain."""
+
+    def __call__(self, a: Point, b: Point, clearance_m: float = 0.0) -> bool: ...
+
+
+# A robot's step keeps its sight line this far above the ground, where the link itself needs none: the
+# controller's own next step then does not put a robot stopped at the edge of its sight in the shadow.
+SIGHT_CLEARANCE_M = 1.0
 # The lead waits once it is this share of its standoff further ahead than asked (the issue's ±25 %).
 STANDOFF_TOLERANCE = 0.25
 # A step is judged at points this far apart at most (a fraction of the distance kept, so a corridor or a
@@ -302,8 +313,8 @@ def link(
         return _hold(f"lost link: controller {controller} {lost or 'has no position'}")
     c = controller_at
 
-    def linked(p: Point) -> bool:
-        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p))
+    def linked(p: Point, clearance_m: float = 0.0) -> bool:
+        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p, clearance_m))
 
     if not linked(at):
         far = _dist(at, c)
@@ -315,7 +326,7 @@ def link(
         return Verdict("to", c, f"lost link ({why}): turning back")
     # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow
     spacing = max(radio_range_m / 16.0, _CLOSE_M) if sight is None else _dist(at, to) / _SAMPLES_MAX
-    kept = _kept(at, to, linked, spacing)
+    kept = _kept(at, to, lambda p: linked(p, SIGHT_CLEARANCE_M), spacing)
     beyond = (
         f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
         if _dist(to, c) > radio_range_m

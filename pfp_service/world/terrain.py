@@ -5,8 +5,9 @@ loaded by the node before the world starts): every threat's packed row is
 masked by its ``sight`` (``core.visibility``), and its ``zones`` (ground too
 steep for the mission's unit class, and unknown ground) are in force with the
 keep-out zones put on the wire, so the stepper, deliberation and previews
-treat them alike, as ``pfp plan --terrain`` does.  Neither changes while the
-planner runs.  The world never reads the DEM: it is handed what it needs.
+treat them alike, as ``pfp plan --terrain`` does; its ``sees`` is the line of
+sight a controller's link keeps to its robots (``team_book``).  None changes
+while the planner runs.  The world never reads the DEM: it is handed what it needs.
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ from typing import Protocol
 
 from pfp_service.core.visibility import Window
 from pfp_service.core.zones import Zone
+from pfp_service.world.teams import Sight
 
-__all__ = ["Ground", "ground_zones", "sight_of"]
+__all__ = ["Ground", "ground_zones", "link_sight", "sight_of"]
 
 
 class Ground(Protocol):
@@ -28,6 +30,8 @@ class Ground(Protocol):
 
     def __call__(self, threat: object, box: tuple[float, float, float, float]) -> Window | None: ...
 
+    def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool: ...
+
 
 def sight_of(ground: Ground | None) -> Ground | None:
     """The sight a field of the world's threats is built with (the ground itself), or ``None``."""
@@ -37,3 +41,8 @@ def sight_of(ground: Ground | None) -> Ground | None:
 def ground_zones(ground: Ground | None) -> list[Zone]:
     """The barriers the ground puts in force before any keep-out zone, in their own order."""
     return list(ground.zones) if ground is not None else []
+
+
+def link_sight(ground: Ground | None) -> Sight | None:
+    """The line of sight between two units a controller's link needs, or ``None`` without terrain."""
+    return ground.sees if ground is not None else None

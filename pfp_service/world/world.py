@@ -47,6 +47,7 @@ from pfp_service.world.liveness import UNIT_TIMERS, Liveness
 from pfp_service.world.lookahead import owed_share
 from pfp_service.world.snapshot import page as snapshot_page
 from pfp_service.world.team_book import TeamBook
+from pfp_service.world.terrain import link_sight
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
 from pfp_service.world.world_records import Records, ThreatRecord, ZoneRecord
@@ -477,7 +478,10 @@ class World:
                 events.append(event)
             directions.append(d)
             sent.append(rec.position)
-        out.directions[first:] = self.teams.judge(out.directions[first:], self._units)  # the roles' say
+        sight = link_sight(self.settings.terrain)  # a robot's link to its controller: range and sight
+        out.directions[first:] = self.teams.judge(
+            out.directions[first:], self._units, sight
+        )  # the roles' say
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off

@@ -46,7 +46,10 @@ def test_places_put_the_column_in_order_and_a_formation_at_its_offsets() -> None
     got = team_goal.places(wedge)
     assert got["a"] == GOAL and got["b"].position == (220.0, -20.0) and got["c"].position == (260.0, -20.0)
     # without spacing_m the column keeps the team's separation, else the default
-    assert team_goal.places(TeamUpdate(members=["a", "b"], goal=Goal(position=(0.0, 0.0))))["b"].tolerance == 50.0
+    assert (
+        team_goal.places(TeamUpdate(members=["a", "b"], goal=Goal(position=(0.0, 0.0))))["b"].tolerance
+        == 50.0
+    )
     sep = TeamUpdate(members=["a", "b"], separation_m=15.0, goal=Goal(position=(0.0, 0.0)))
     assert team_goal.places(sep)["b"].tolerance == 15.0
     assert team_goal.places(TeamUpdate(members=["a"])) == {}
@@ -86,7 +89,9 @@ def test_a_team_goal_sets_each_members_goal_once_and_a_put_again_keeps_their_mis
 def test_a_column_arrives_in_order_on_the_cleared_corridor_with_a_threat_mid_route() -> None:
     """The product question "a follower whose goal is outside its lead's corridor": a column place cannot be."""
     w = _world()
-    w.apply([_report(u, p, 0.0) for u, p in {"r1": (6.0, 0.0), "m1": (0.0, 0.0), "m2": (-8.0, 0.0)}.items()], 0.0)
+    w.apply(
+        [_report(u, p, 0.0) for u, p in {"r1": (6.0, 0.0), "m1": (0.0, 0.0), "m2": (-8.0, 0.0)}.items()], 0.0
+    )
     w.apply([TeamPut("alpha", SCOUTED)], 0.0)
     bad = ThreatUpdate(
         position=(120.0, -3.0), facing_deg=270.0, sigma_range=10.0, sigma_lateral=6.0, skew=2.0, weight=20.0
@@ -126,4 +131,6 @@ def test_the_team_eta_is_its_slowest_members_and_status_shows_it() -> None:
     w.apply([StateReported("b", msgspec.structs.replace(_report("b", (50.0, 0.0), 0.0).state))], 2.0)
     (t,) = w.snapshot(2.0).teams
     assert t.eta_s is None and t.slowest == "b"
-    assert "ETA unknown (b not moving)" in "\n".join(snapshot_lines(decode_world_snapshot(encode(w.snapshot(2.0)))))
+    assert "ETA unknown (b not moving)" in "\n".join(
+        snapshot_lines(decode_world_snapshot(encode(w.snapshot(2.0))))
+    )

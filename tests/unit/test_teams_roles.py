@@ -108,10 +108,10 @@ def _ridge_sight() -> roles.Sight:
     ctl = (20, 10)  # row = y + 20, col = x
     lowest = lowest_visible_height(z, ctl, 2.0, 1e9, 1.0)
 
-    def sight(c: tuple[float, float], p: tuple[float, float]) -> bool:
+    def sight(c: tuple[float, float], p: tuple[float, float], clearance_m: float = 0.0) -> bool:
         assert (round(c[1]) + 20, round(c[0])) == ctl
         r, col = round(p[1]) + 20, round(p[0])
-        return bool(lowest[r, col] <= 2.0)
+        return bool(lowest[r, col] <= 2.0 - clearance_m)
 
     return sight
 
