@@ -255,7 +255,9 @@ class TeamBook:
         if unit in team.follow and _moving(out):
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
             track = self.tracks.get(tid, [])
-            out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost))
+            me = units.get(unit)
+            goal = me.goal.position if me is not None and me.goal is not None else None
+            out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost, goal))
             to = _end(out, to)
         if unit in team.robots and _moving(out):
             ctl = units.get(team.controller) if team.controller is not None else None

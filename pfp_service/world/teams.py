@@ -198,7 +198,13 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
 
 
 def follow(
-    at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead_id: str, lost: str
+    at: Point,
+    to: Point,
+    track: Sequence[Point],
+    corridor_m: float,
+    lead_id: str,
+    lost: str,
+    goal: Point | None = None,
 ) -> Verdict:
     """A follower's step: only onto ground the lead has crossed (its ``track`` buffered by ``corridor_m / 2``).
 
@@ -209,6 +215,8 @@ def follow(
         corridor_m: the cleared corridor's width.
         lead_id: the lead's id, for the reasons.
         lost: why the lead cannot be followed (lost, stopped), or ``""`` when it can.
+        goal: the follower's goal, named in the hold at the end of the cleared ground when it lies
+            off the corridor (the follower holds there until the lead clears ground to it, or its goal moves).
 
     Returns:
         hold when the lead is lost or stopped, or at the end of the cleared ground; the step cut short
@@ -231,11 +239,15 @@ def follow(
     kept = _kept_in(room, at, to)
     if kept >= 1.0:
         return GO
+    s_goal, off_goal = line.project(goal) if goal is not None else (0.0, 0.0)
+    # its goal off the cleared ground, and the lead's track past it (not heading there): to the nearest of it
+    if off_goal > half + _CLOSE_M and s_goal < line.length - _CLOSE_M:
+        return _nearest_goal(line, track, half, at, s_at, s_goal, _dist(at, to), lead_id, off_goal - half)
     if _dist(at, to) * kept >= _CLOSE_M:
         return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
     cleared = line.length
     if s_at >= cleared - _CLOSE_M:  # never back along it
-        return _hold(f"at the end of the ground {lead_id} has cleared")
+        return _at_end(line, half, lead_id, goal)
     ahead = max(_dist(at, to), _CLOSE_M)
     while (
         ahead >= _CLOSE_M
@@ -244,7 +256,48 @@ def follow(
         if _dist(at, along) >= _CLOSE_M and _kept_in(room, at, along) >= 1.0:
             return Verdict("to", along, f"along the corridor {lead_id} cleared")
         ahead /= 2.0
+    return _at_end(line, half, lead_id, goal)
+
+
+def _at_end(line: _Line, half: float, lead_id: str, goal: Point | None) -> Verdict:
+    """The hold at the end of the cleared ground (naming its goal, when that lies off the ground)."""
+    off = line.project(goal)[1] - half if goal is not None else 0.0
+    if off > _CLOSE_M:
+        return _hold(f"at the end of the ground {lead_id} has cleared: {_off_goal(lead_id, off)}")
     return _hold(f"at the end of the ground {lead_id} has cleared")
+
+
+def _off_goal(lead_id: str, off: float) -> str:
+    return f"its goal lies {off:,.0f} m off the ground {lead_id} cleared (give the team a goal, or move it)"
+
+
+def _nearest_goal(
+    line: _Line,
+    track: Sequence[Point],
+    half: float,
+    at: Point,
+    s_at: float,
+    s_goal: float,
+    step: float,
+    lead_id: str,
+    off: float,
+) -> Verdict:
+    """A follower whose goal lies off the cleared ground goes along the track to the point nearest its
+    goal and holds there, saying so: it never enters ground its lead has not crossed, and does not
+    dither between its planner's pull and the corridor.  It goes on once the lead clears ground
+    nearer its goal, or its goal moves."""
+    why = _off_goal(lead_id, off)
+    if abs(s_goal - s_at) < _CLOSE_M:
+        return _hold(f"at the cleared ground nearest its goal: {why}")
+    sign = 1.0 if s_goal > s_at else -1.0
+    ahead = max(min(step, abs(s_goal - s_at)), _CLOSE_M)
+    room = _corridor_near(track, half, at, ahead + _CLOSE_M)
+    while ahead >= _CLOSE_M:
+        p = line.point_at(s_at + sign * ahead)
+        if _dist(at, p) >= _CLOSE_M and _kept_in(room, at, p) >= 1.0:
+            return Verdict("to", p, f"to the cleared ground nearest its goal: {why}")
+        ahead /= 2.0
+    return _hold(f"at the cleared ground nearest its goal: {why}")
 
 
 def _corridor_near(track: Sequence[Point], half: float, at: Point, reach: float) -> shapely.Geometry:

@@ -134,3 +134,25 @@ def test_the_team_eta_is_its_slowest_members_and_status_shows_it() -> None:
     assert "ETA unknown (b not moving)" in "\n".join(
         snapshot_lines(decode_world_snapshot(encode(w.snapshot(2.0))))
     )
+
+
+def test_a_follower_whose_goal_lies_off_the_cleared_ground_holds_at_its_end_and_says_so() -> None:
+    """Without a team goal the product question stands: the follower never enters uncleared ground, so it
+    holds at the end of what its lead cleared, and its status names the goal that lies off it."""
+    w = _world()
+    w.apply([TeamPut("alpha", TeamUpdate(lead="r1", follow=["m1"], standoff_m=60.0, corridor_m=6.0))], 0.0)
+    tracks, said = _drive(
+        w,
+        start={"r1": (6.0, 0.0), "m1": (0.0, 0.0)},
+        goal={"r1": (120.0, 0.0), "m1": (60.0, 80.0)},
+        speed={"r1": 3.0, "m1": 2.0},
+        seconds=160.0,
+    )
+    (last,) = [d for d in said if d.unit == "m1"][-1:]
+    assert (
+        last.vector == (0.0, 0.0) and "at the cleared ground nearest its goal: its goal lies" in last.reason
+    )
+    cleared = shapely.LineString(tracks["r1"]).buffer(3.0 + 0.05)
+    first = next(i for i, p in enumerate(tracks["m1"]) if cleared.contains(shapely.Point(p)))
+    assert all(cleared.contains(shapely.Point(p)) for p in tracks["m1"][first:])
+    assert math.dist(tracks["m1"][-1], (60.0, 80.0)) > 10.0
