@@ -41,7 +41,16 @@ from pfp_service.core.threat import ThreatField
 from pfp_service.errors import map_zenoh_errors
 from pfp_service.team import load_team
 
-__all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DEMO_TERRAIN_SCRIPT", "DEMO_TERRAIN_TEAM", "DemoOptions", "run_demo"]
+__all__ = [
+    "DEMO_SCRIPT",
+    "DEMO_TEAM",
+    "DEMO_TEAMS_SCRIPT",
+    "DEMO_TEAMS_TEAM",
+    "DEMO_TERRAIN_SCRIPT",
+    "DEMO_TERRAIN_TEAM",
+    "DemoOptions",
+    "run_demo",
+]
 
 # a source checkout keeps examples/ beside clients/; an installed copy (the docker image) finds it in the cwd
 _EXAMPLES = next(
@@ -52,6 +61,8 @@ DEMO_TEAM = _EXAMPLES / "demo-team.yaml"
 DEMO_SCRIPT = _EXAMPLES / "demo-inject.yaml"
 DEMO_TERRAIN_TEAM = _EXAMPLES / "demo-terrain-team.yaml"
 DEMO_TERRAIN_SCRIPT = _EXAMPLES / "demo-terrain-inject.yaml"
+DEMO_TEAMS_TEAM = _EXAMPLES / "demo-teams-team.yaml"  # the teaming variant: its units, with no goals
+DEMO_TEAMS_SCRIPT = _EXAMPLES / "demo-teams-inject.yaml"  # ... its teams, each with one goal
 TERRAIN_UNIT = "tracked"  # the class the terrain variant plans for: its team drives tracked vehicles
 MISSION = "demo"
 INJECT_GRACE_S = 3.0  # wall seconds the script may take, after the fleet stopped, to see the last answers

@@ -52,6 +52,9 @@ STANDOFF_TOLERANCE = 0.25
 # radio range is never stepped over), and at no more than this many points.
 _SAMPLES_MAX = 64
 _CLOSE_M = 1.0  # a point this close to where the unit is: it is there
+# A follower is kept this share of the corridor's half-width inside its edge: a step cut where it would
+# leave ends on the edge itself, which a check of the track (rounding, another buffer) may put outside.
+_EDGE_SHARE = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,10 +230,10 @@ def follow(
         return _hold(f"holding: lead {lead_id} {lost}")
     if not track:
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
-    half = corridor_m / 2.0
+    half = corridor_m / 2.0 * (1.0 - _EDGE_SHARE)
     line = _Line(track)
     s_at, off_at = line.project(at)
-    if off_at > half:
+    if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
     if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
@@ -243,7 +246,10 @@ def follow(
     # its goal off the cleared ground, and the lead's track past it (not heading there): to the nearest of it
     if off_goal > half + _CLOSE_M and s_goal < line.length - _CLOSE_M:
         return _nearest_goal(line, track, half, at, s_at, s_goal, _dist(at, to), lead_id, off_goal - half)
-    if _dist(at, to) * kept >= _CLOSE_M:
+    cut = (at[0] + (to[0] - at[0]) * kept, at[1] + (to[1] - at[1]) * kept)
+    # a step cut short that would take it back along the track is not taken: pressed against the
+    # corridor's edge by its planner (a threat beside the track), it would go back and forth
+    if _dist(at, to) * kept >= _CLOSE_M and line.project(cut)[0] >= s_at - _CLOSE_M:
         return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
     cleared = line.length
     if s_at >= cleared - _CLOSE_M:  # never back along it
