@@ -73,6 +73,11 @@ class LiveTerrain:
         field's ``sight`` pickles by name."""
         return self.look(threat, box)
 
+    @property
+    def resolution_m(self) -> float:
+        """The grid's cell, metres: what a line of sight over it can tell apart."""
+        return self.grid.cell_m
+
     def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
         """Whether two units at ``a`` and ``b`` see each other over the ground (a controller's link), each
         as high as the unit class, the sight line ``clearance_m`` clear of it (``link_sight.sees``)."""

@@ -38,7 +38,8 @@ Point = tuple[float, float]
 
 class Sight(Protocol):
     """Whether two points see each other over the ground (a mast at each end), the sight line clearing
-    it by ``clearance_m``; ``None`` where there is no terrain."""
+    it by ``clearance_m``; ``None`` where there is no terrain.  One with a ``resolution_m`` (the ground's
+    cell) is asked along a step every half of it at most, not finer."""
 
     def __call__(self, a: Point, b: Point, clearance_m: float = 0.0) -> bool: ...
 
@@ -383,8 +384,13 @@ def link(
             else f"out of {controller}'s line of sight"
         )
         return Verdict("to", c, f"lost link ({why}): turning back")
-    # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow
-    spacing = max(radio_range_m / 16.0, _CLOSE_M) if sight is None else _dist(at, to) / _SAMPLES_MAX
+    # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
+    # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
+    spacing = (
+        max(radio_range_m / 16.0, _CLOSE_M)
+        if sight is None
+        else max(_dist(at, to) / _SAMPLES_MAX, getattr(sight, "resolution_m", 0.0) / 2.0)
+    )
     kept = _kept(at, to, lambda p: linked(p, SIGHT_CLEARANCE_M), spacing)
     beyond = (
         f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"

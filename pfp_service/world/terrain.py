@@ -13,6 +13,7 @@ while the planner runs.  The world never reads the DEM: it is handed what it nee
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 from pfp_service.core.visibility import Window
@@ -32,6 +33,9 @@ class Ground(Protocol):
 
     def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool: ...
 
+    @property
+    def resolution_m(self) -> float: ...
+
 
 def sight_of(ground: Ground | None) -> Ground | None:
     """The sight a field of the world's threats is built with (the ground itself), or ``None``."""
@@ -43,6 +47,17 @@ def ground_zones(ground: Ground | None) -> list[Zone]:
     return list(ground.zones) if ground is not None else []
 
 
+@dataclass(frozen=True, slots=True)
+class _GroundSight:
+    """A ground's line of sight between two units, with its resolution (``teams.Sight``)."""
+
+    ground: Ground
+    resolution_m: float
+
+    def __call__(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
+        return self.ground.sees(a, b, clearance_m)
+
+
 def link_sight(ground: Ground | None) -> Sight | None:
     """The line of sight between two units a controller's link needs, or ``None`` without terrain."""
-    return ground.sees if ground is not None else None
+    return _GroundSight(ground, ground.resolution_m) if ground is not None else None
