@@ -39,7 +39,8 @@ _ROUTE_STEPS = 16  # the main element's route ahead, in planner steps, before st
 class TeamBook:
     """The teams in force, keyed by id, and what their roles need remembered: each lead's track."""
 
-    def __init__(self) -> None:
+    def __init__(self, sight: Sight | None = None) -> None:
+        self.sight = sight  # line of sight over the world's terrain, for the controllers' links (fixed)
         self.teams: dict[str, TeamUpdate] = {}
         self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
         self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
@@ -137,8 +138,10 @@ class TeamBook:
         Args:
             directions: the planner's directions of one batch.
             units: the world's records, for positions, goals, staleness and progress.
-            sight: line of sight between two points over the terrain, where there is terrain.
+            sight: line of sight between two points over the terrain, where there is terrain
+                (default: the book's own, the world's terrain's).
         """
+        sight = sight if sight is not None else self.sight
         if not self.teams:
             return list(directions)
         self._track(units)

@@ -75,7 +75,7 @@ class World:
         self._live = Liveness(s, self._book, self._timers)
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
         self.limits = Limits()
-        self.teams = TeamBook()  # the teams in force: their roles' verdicts on the directions
+        self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
         self._disp = dispersion.Dispersion(
             s.dispersion, self._units, self._book.yielded
         )  # off unless enabled
@@ -478,10 +478,7 @@ class World:
                 events.append(event)
             directions.append(d)
             sent.append(rec.position)
-        sight = link_sight(self.settings.terrain)  # a robot's link to its controller: range and sight
-        out.directions[first:] = self.teams.judge(
-            out.directions[first:], self._units, sight
-        )  # the roles' say
+        out.directions[first:] = self.teams.judge(out.directions[first:], self._units)  # the roles' say
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
