@@ -34,12 +34,13 @@ import numpy as np
 from pfp_clients.expectations import InjectReport
 from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
 from pfp_clients.inject import report_lines, run_inject
-from pfp_clients.script import AddThreat, SetGoal, load_script
+from pfp_clients.script import AddTeam, AddThreat, SetGoal, load_script
 from pfp_clients.sim import SimUnit
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.threat import ThreatField
 from pfp_service.errors import map_zenoh_errors
 from pfp_service.team import load_team
+from pfp_service.world.team_goal import places
 
 __all__ = [
     "DEMO_SCRIPT",
@@ -145,7 +146,9 @@ def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> N
     tracks: dict[str, Sequence[Sequence[float]]] = {u.id: [(p.x, p.y) for p in u.track] for u in fleet.units}
     goals: dict[str, Sequence[float]] = {u.id: u.spec.goal for u in fleet.units if u.spec.goal is not None}
     old_goals: dict[str, Sequence[float]] = {}
-    for f in rep.fired:  # goals the script gave
+    for f in rep.fired:  # goals the script gave (a team's: each member's place, as the planner gives it)
+        if isinstance(f.step, AddTeam):
+            goals.update({u: g.position for u, g in places(f.step.update()).items()})
         if isinstance(f.step, SetGoal):
             if f.step.unit in goals and tuple(goals[f.step.unit]) != tuple(f.step.position):
                 old_goals.setdefault(f.step.unit, goals[f.step.unit])
