@@ -292,7 +292,7 @@ KINDS: tuple[Kind, ...] = (
         "write",
         (TeamPut, TeamRemoved),
         schema="team",
-        decode=lambda data, _bounds, _origin: decode_team(data),
+        decode=decode_team,
         writers=("commander",),
         store=Stored("teams", "id"),
         log_put=_team_put,

@@ -6,7 +6,8 @@ masked by its window of lowest visible heights (``core.visibility``), and
 its ``zones`` (ground too steep for the mission's unit class, and unknown
 ground) are in force with the keep-out zones put on the wire, so the
 stepper, deliberation and previews treat them alike, as ``pfp plan
---terrain`` does.  Neither changes while the planner runs.  The world never
+--terrain`` does; its ``sees`` is the line of sight a controller's link
+keeps to its robots (``team_book``).  None changes while the planner runs.  The world never
 reads the DEM: it is handed what it needs.
 
 Sight off the loop.  A threat's window is a viewshed sweep over its reach
@@ -36,6 +37,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 if TYPE_CHECKING:  # the compiled core's types: the world's inputs (``events``) import this module
     from pfp_service.core.visibility import Window
     from pfp_service.core.zones import Zone
+    from pfp_service.world.teams import Sight
 
 __all__ = [
     "LOOKS_SPARE",
@@ -45,6 +47,7 @@ __all__ = [
     "SightLanded",
     "answer",
     "ground_zones",
+    "link_sight",
     "sight_key",
     "sight_of",
 ]
@@ -60,6 +63,11 @@ class Ground(Protocol):
     def zones(self) -> Sequence[Zone]: ...
 
     def __call__(self, threat: object, box: tuple[float, float, float, float]) -> Window | None: ...
+
+    def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool: ...
+
+    @property
+    def resolution_m(self) -> float: ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,3 +139,19 @@ def sight_of(ground: Ground | None) -> Ground | None:
 def ground_zones(ground: Ground | None) -> list[Zone]:
     """The barriers the ground puts in force before any keep-out zone, in their own order."""
     return list(ground.zones) if ground is not None else []
+
+
+@dataclass(frozen=True, slots=True)
+class _GroundSight:
+    """A ground's line of sight between two units, with its resolution (``teams.Sight``)."""
+
+    ground: Ground
+    resolution_m: float
+
+    def __call__(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
+        return self.ground.sees(a, b, clearance_m)
+
+
+def link_sight(ground: Ground | None) -> Sight | None:
+    """The line of sight between two units a controller's link needs, or ``None`` without terrain."""
+    return _GroundSight(ground, ground.resolution_m) if ground is not None else None

@@ -46,6 +46,7 @@ from pfp_service.world.liveness import UNIT_TIMERS, Liveness
 from pfp_service.world.lookahead import owed_share
 from pfp_service.world.snapshot import page as snapshot_page
 from pfp_service.world.team_book import TeamBook
+from pfp_service.world.terrain import link_sight
 from pfp_service.world.threat_puts import ThreatPuts
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
@@ -75,7 +76,7 @@ class World:
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
         self.limits = Limits()
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
-        self.teams = TeamBook()  # the teams in force: their roles' verdicts on the directions
+        self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
         self._disp = dispersion.Dispersion(
             s.dispersion, self._units, self._book.yielded
         )  # off unless enabled
@@ -119,7 +120,7 @@ class World:
     ) -> WorldSnapshot:
         """One page of what the planner holds, for the world queryable (``snapshot.page``); ``writes``: ``kinds.held``."""
         s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit, zones_from)
-        listed = (self.teams.summaries(), kinds.held(self), writes_from, writes_limit)
+        listed = (self.teams.summaries(self._units), kinds.held(self), writes_from, writes_limit)
         return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_limit, *listed)
 
     def next_deadline(self) -> float | None:
@@ -351,6 +352,8 @@ class World:
             self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
         for rec in filter(None, map(self._units.get, units)):
             self._tell(rec, b)
+        for unit, goal in self.teams.placed(self._units):  # a team goal: each member's place, its goal
+            self._adopt(unit, goal, None, b)
 
     def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: Batch) -> None:
         if z is not None:

@@ -122,12 +122,16 @@ class TeamSummary(_Message, frozen=True, kw_only=True):
     """One team in force (``WorldSnapshot.teams``) and what its roles last said of its members.
 
     ``notes``: ``"unit: reason"`` for each member whose last direction a role held or redirected
-    (``lost link: controller m1 has stopped``, ``waiting for m1: ...``).
+    (``lost link: controller m1 has stopped``, ``waiting for m1: ...``).  ``eta_s``: the team's
+    time to arrive, its slowest member's (``slowest``); null with ``slowest`` set: that member is
+    lost or not moving; null with no ``slowest``: no member has a goal.
     """
 
     id: Id
     team: TeamUpdate
     notes: Annotated[list[Text], Meta(max_length=MAX_TEAM_MEMBERS)] = []
+    eta_s: NonNegative | None = None
+    slowest: Id | None = None
 
 
 class WriteSummary(_Message, frozen=True, kw_only=True):
