@@ -39,7 +39,10 @@ class Counted:
 
     def __init__(self, ground) -> None:
         self.ground, self.calls = ground, 0
-        self.zones = ground.zones
+        self.zones, self.resolution_m = ground.zones, ground.resolution_m
+
+    def sees(self, a, b, clearance_m: float = 0.0) -> bool:  # a controller's link: not a sweep
+        return self.ground.sees(a, b, clearance_m)
 
     def __call__(self, threat, box):
         self.calls += 1
