@@ -110,6 +110,7 @@ def start_server(
     forget_s: float | None = None,
     connect: str | None = None,
     planner_id: str = PLANNER_ID,
+    extra: tuple[str, ...] = (),
 ) -> Server:
     """Start ``kind`` (``planner``, ``echo`` or ``router``) in router mode on a free loopback port.
 
@@ -131,6 +132,7 @@ def start_server(
             cmd += ["--unit-forget-s", f"{forget_s:g}"]
         if escape is not None:
             cmd += ["--escape", escape]
+        cmd += list(extra)  # more of ``pfp serve``'s flags (``--terrain DEM``)
     else:
         main = "echo_main" if kind == "echo" else "router_main"
         code = f"import sys; from benchmarks._responders import {main}; {main}(sys.argv[1])"

@@ -21,6 +21,11 @@ scenarios of ``tests/terrain_scenarios.py`` (``_cost``: each scenario planned
 blind and over terrain in turn, so both share the run's load).  The cost row
 needs a checkout (the scenarios live with the tests); without one it is
 reported as not run, and ``--check`` fails.
+
+The live rows (``_terrain_live``, skipped with ``--no-live``): ``pfp serve
+--terrain`` over the same grid and 1,000 units over Zenoh; a threat put at
+the centre must re-direct every unit it sees within 100 ms, and the
+bystanders' p99 with a threat moved must stay within 20 % of without.
 """
 
 from __future__ import annotations
@@ -39,6 +44,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks._terrain_live import met as live_met
+from benchmarks._terrain_live import print_live
+
 TARGET_MS = 50.0
 RADIUS_M = 5_000.0
 CURVATURE = 0.85714  # gdal_viewshed's default -cc, passed to both
@@ -48,6 +56,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cell", type=float, default=10.0, help="grid spacing in metres (default: 10)")
     p.add_argument("--repeat", type=int, default=20, help="timed sweeps after the warm-up (default: 20)")
     p.add_argument("--height", type=float, default=2.0, help="the observer's eye above ground (default: 2)")
+    p.add_argument(
+        "--no-live", action="store_true", help="skip the live rows (pfp serve --terrain, 1,000 units)"
+    )
     p.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -140,10 +151,12 @@ def run(args: argparse.Namespace) -> int:
         out.update(_gdal(gdal, grid, origin, obs, args.height, ours, cells, ray))
     out["memory"] = _memory(args.cell)
     out["cost"] = _cost()
+    out["live"] = _live(grid, origin) if not args.no_live else {"not_run": "--no-live"}
     out["load_average"] = {"before": list(load_before), "after": list(os.getloadavg())}
     met = out["sweep_ms_median"] <= TARGET_MS  # type: ignore[operator]
     met = met and out["memory"]["terrain_added_mb"] <= MEMORY_TARGET_MB  # type: ignore[index]
     met = met and out["cost"].get("ratio", math.inf) <= COST_TARGET  # type: ignore[attr-defined]
+    met = met and all(live_met(out["live"]))  # type: ignore[arg-type]
     if args.json:
         print(json.dumps(out))
     else:
@@ -221,6 +234,7 @@ def _print(out: dict[str, object], met: bool) -> None:
         )
     else:
         print(f"  cost (20 Jacksboro plans)   not run: {cost['not_run']}")
+    print_live(out["live"])  # type: ignore[arg-type]
     la = out["load_average"]
     print(f"  load average                {_load(la['before'])} before, {_load(la['after'])} after")  # type: ignore[index]
     sweep_ok = out["sweep_ms_median"] <= TARGET_MS  # type: ignore[operator]
@@ -233,6 +247,24 @@ def _print(out: dict[str, object], met: bool) -> None:
     print(
         f"  {_mark(mem_ok)} terrain adds <= {MEMORY_TARGET_MB:g} MB PSS for 1,000 x 1,000 cells and 100 threats"
     )
+    wave_ok, by_ok = live_met(out["live"])  # type: ignore[arg-type]
+    print(
+        f"  {_mark(wave_ok)} a threat put ahead of 1,000 live units re-directs every unit it sees <= 100 ms"
+    )
+    print(f"  {_mark(by_ok)} bystanders' p99 with it within 20 % of without (same run, A/B)")
+
+
+def _live(grid: Any, origin: Any) -> dict[str, Any]:
+    """The live rows (``_terrain_live``), against ``pfp serve`` over this grid written as a GeoTIFF."""
+    from benchmarks._terrain_live import live
+
+    with tempfile.TemporaryDirectory(prefix="pfp-bench-terrain-live-") as tmp:
+        tif = Path(tmp) / "grid.tif"
+        _write(tif, grid, origin)
+        try:
+            return live(grid, tif)
+        except Exception as exc:  # a planner that would not start, a session that would not open
+            return {"not_run": f"{type(exc).__name__}: {exc}"[:300]}
 
 
 def _mark(ok: bool) -> str:

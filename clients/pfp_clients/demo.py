@@ -34,14 +34,24 @@ import numpy as np
 from pfp_clients.expectations import InjectReport
 from pfp_clients.fleet import FleetOptions, FleetResult, run_fleet
 from pfp_clients.inject import report_lines, run_inject
-from pfp_clients.script import AddThreat, SetGoal, load_script
+from pfp_clients.script import AddTeam, AddThreat, SetGoal, load_script
 from pfp_clients.sim import SimUnit
 from pfp_service.core.metrics import Epoch, measure
 from pfp_service.core.threat import ThreatField
 from pfp_service.errors import map_zenoh_errors
 from pfp_service.team import load_team
+from pfp_service.world.team_goal import places
 
-__all__ = ["DEMO_SCRIPT", "DEMO_TEAM", "DEMO_TERRAIN_SCRIPT", "DEMO_TERRAIN_TEAM", "DemoOptions", "run_demo"]
+__all__ = [
+    "DEMO_SCRIPT",
+    "DEMO_TEAM",
+    "DEMO_TEAMS_SCRIPT",
+    "DEMO_TEAMS_TEAM",
+    "DEMO_TERRAIN_SCRIPT",
+    "DEMO_TERRAIN_TEAM",
+    "DemoOptions",
+    "run_demo",
+]
 
 # a source checkout keeps examples/ beside clients/; an installed copy (the docker image) finds it in the cwd
 _EXAMPLES = next(
@@ -52,6 +62,8 @@ DEMO_TEAM = _EXAMPLES / "demo-team.yaml"
 DEMO_SCRIPT = _EXAMPLES / "demo-inject.yaml"
 DEMO_TERRAIN_TEAM = _EXAMPLES / "demo-terrain-team.yaml"
 DEMO_TERRAIN_SCRIPT = _EXAMPLES / "demo-terrain-inject.yaml"
+DEMO_TEAMS_TEAM = _EXAMPLES / "demo-teams-team.yaml"  # the teaming variant: its units, with no goals
+DEMO_TEAMS_SCRIPT = _EXAMPLES / "demo-teams-inject.yaml"  # ... its teams, each with one goal
 TERRAIN_UNIT = "tracked"  # the class the terrain variant plans for: its team drives tracked vehicles
 MISSION = "demo"
 INJECT_GRACE_S = 3.0  # wall seconds the script may take, after the fleet stopped, to see the last answers
@@ -134,7 +146,9 @@ def _plot(fleet: FleetResult, rep: InjectReport, intensity: str, out: Path) -> N
     tracks: dict[str, Sequence[Sequence[float]]] = {u.id: [(p.x, p.y) for p in u.track] for u in fleet.units}
     goals: dict[str, Sequence[float]] = {u.id: u.spec.goal for u in fleet.units if u.spec.goal is not None}
     old_goals: dict[str, Sequence[float]] = {}
-    for f in rep.fired:  # goals the script gave
+    for f in rep.fired:  # goals the script gave (a team's: each member's place, as the planner gives it)
+        if isinstance(f.step, AddTeam):
+            goals.update({u: g.position for u, g in places(f.step.update()).items()})
         if isinstance(f.step, SetGoal):
             if f.step.unit in goals and tuple(goals[f.step.unit]) != tuple(f.step.position):
                 old_goals.setdefault(f.step.unit, goals[f.step.unit])

@@ -73,7 +73,7 @@ def _never_enters(e: Expect, watch: Watch, zones: list[ZoneVersion]) -> Verdict:
     from pfp_service.core.zones import track_enters
 
     versions = [v for v in zones if v.zone_id == e.never_enters]
-    track = watch.tracks.get(e.unit, [])
+    track = watch.tracks.get(e.unit or "", [])
     if not versions:
         return Verdict(e, False, f"zone {e.never_enters} was never put")
     if len(track) < 2:
@@ -96,8 +96,29 @@ def _never_enters(e: Expect, watch: Watch, zones: list[ZoneVersion]) -> Verdict:
     return Verdict(e, True, f"{checked} track segments checked, none touches it")
 
 
-def judge(e: Expect, watch: Watch, zones: list[ZoneVersion] | None = None) -> Verdict:
-    """Whether one expectation held, from what ``watch`` saw (and the zones the script put)."""
+def _team_arrives(e: Expect, watch: Watch, members: tuple[str, ...]) -> Verdict:
+    """Every member of ``e.team`` arrived within ``e.arrives_within_s``: the team's time is its last member's."""
+    assert e.arrives_within_s is not None
+    if not members:
+        return Verdict(e, False, f"team {e.team} has no members")
+    late = [u for u in members if u not in watch.arrived_at_s]
+    if late:
+        last = watch.statuses.get(late[0], "never heard of")
+        return Verdict(e, False, f"{late[0]} not arrived (last status: {last})")
+    t, u = max((watch.arrived_at_s[u], u) for u in members)
+    return Verdict(e, t <= e.arrives_within_s, f"arrived at {t:.1f} s (the last, {u})")
+
+
+def judge(
+    e: Expect,
+    watch: Watch,
+    zones: list[ZoneVersion] | None = None,
+    teams: dict[str, tuple[str, ...]] | None = None,
+) -> Verdict:
+    """Whether one expectation held, from what ``watch`` saw (and the zones and teams the script put)."""
+    if e.team is not None:
+        return _team_arrives(e, watch, (teams or {}).get(e.team, ()))
+    assert e.unit is not None
     if e.never_enters is not None:
         return _never_enters(e, watch, zones or [])
     other = e.keeps_from or e.only_cleared_by or e.link_to

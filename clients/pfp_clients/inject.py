@@ -25,16 +25,19 @@ import msgspec
 from pfp_clients.expectations import Fired, InjectReport, ZoneVersion, judge
 from pfp_clients.frames import learn_planner_origin, planner_origin, reframe
 from pfp_clients.script import (
+    AddTeam,
     AddThreat,
     AddZone,
     CancelGoal,
     MoveThreat,
+    RemoveTeam,
     RemoveThreat,
     RemoveZone,
     Script,
     SetGoal,
     Step,
     Wait,
+    team_members,
 )
 from pfp_clients.watch import Watch
 from pfp_service.coords import Coords
@@ -59,8 +62,10 @@ __all__ = [
 
 
 def _settled(script: Script, watch: Watch, t_s: float) -> bool:
+    teams = team_members(script)
     for e in script.expect:
-        if e.unit in watch.arrived_at_s:
+        units = teams.get(e.team, ()) if e.team is not None else (e.unit,)
+        if all(u in watch.arrived_at_s for u in units):
             continue
         if e.arrives_within_s is not None and t_s > e.arrives_within_s:
             continue
@@ -120,11 +125,14 @@ class _Runner:
         """What the timeline waits for now, in words: the entry, and its trigger's distance or time."""
         tl = self.script.timeline
         if self.index >= len(tl):
+            teams = team_members(self.script)
             due = [
-                f"{e.unit} to arrive (by {e.arrives_within_s:g} s)"
+                f"{e.who} to arrive (by {e.arrives_within_s:g} s)"
                 for e in self.script.expect
                 if e.arrives_within_s is not None
-                and e.unit not in self.watch.arrived_at_s
+                and not all(
+                    u in self.watch.arrived_at_s for u in (teams.get(e.team, ()) if e.team else (e.unit,))
+                )
                 and t_s <= e.arrives_within_s
             ]
             pending = self.s.pending()
@@ -197,6 +205,10 @@ class _Runner:
         elif isinstance(step, RemoveZone):
             s.delete(keys.zone(m, step.zone))
             self.zone_removed(step.zone, t_s)
+        elif isinstance(step, AddTeam):
+            s.put(keys.team(m, step.team), encode(step.update()))
+        elif isinstance(step, RemoveTeam):
+            s.delete(keys.team(m, step.team))
 
 
 def _zone_reframed(step: AddZone, conv: Callable[[tuple[float, float]], tuple[float, float]]) -> AddZone:
@@ -225,6 +237,10 @@ def script_in_planner_frame(
             step = _zone_reframed(step, conv)
         if isinstance(step, AddThreat | MoveThreat | SetGoal):
             step = msgspec.structs.replace(step, position=conv(step.position))
+        if isinstance(step, AddTeam) and step.goal is not None:
+            step = msgspec.structs.replace(
+                step, goal=msgspec.structs.replace(step.goal, position=conv(step.goal.position))
+            )
         if step.when is not None:
             step = msgspec.structs.replace(
                 step, when=msgspec.structs.replace(step.when, of=conv(step.when.of))
@@ -349,7 +365,7 @@ def run_inject(
             with contextlib.suppress(Exception):  # already gone with the session
                 sub.undeclare()
     say(f"t={t_s:7.2f}s  inject stops: {reason}")
-    verdicts = [judge(e, w, run.zones) for e in script.expect]
+    verdicts = [judge(e, w, run.zones, team_members(script)) for e in script.expect]
     unfired = list(range(run.index, len(script.timeline)))
     return InjectReport(script, run.fired, unfired, verdicts, w, t_s, t0, speed_up, reason, coords=run.coords)
 

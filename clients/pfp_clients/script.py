@@ -25,13 +25,16 @@ start; at once if already past) or ``when`` (a unit within ``within_m`` of a
 point).  Actions: ``add_threat``, ``move_threat``, ``remove_threat``,
 ``add_zone`` (the wire's zone: ``polygon`` rings or a ``circle``, vertices
 ``[x, y]`` or ``{lat, lon}``, optional ``ttl_s``; put again to move it),
-``remove_zone``, ``set_goal``, ``cancel_goal``, ``wait``.  Expectations:
+``remove_zone``, ``add_team`` (the wire's team, its fields beside ``team:``,
+its id: put again to change it, ``goal`` included), ``remove_team``,
+``set_goal``, ``cancel_goal``, ``wait``.  Expectations:
 ``arrives_within_s``, ``min_clearance_m`` (to one threat or all),
 ``never_enters`` (a zone: no segment of the unit's track while the zone was in
 force touches it, checked exactly per segment by ``core.zones.track_enters``),
 and a team's: ``{unit, keeps_from: other, at_least_m}``, ``{unit,
 only_cleared_by: lead, corridor_m}`` and ``{unit, link_to: controller,
-at_least_pct, radio_range_m}`` (``team_expectations``).
+at_least_pct, radio_range_m}`` (``team_expectations``), and ``{team,
+arrives_within_s}`` (every member of a team the timeline adds arrives in time).
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ from pfp_service.constraints import Id, NonNegative, Point, Positive, Sigma, Ske
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.wire import Goal, ThreatUpdate
-from pfp_service.wire.messages import ZoneUpdate, localise_zone
+from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone
 from pfp_service.wire.messages.structs import (
     DEFAULT_SHAPE,
     MAX_ZONE_RINGS,
@@ -57,16 +60,19 @@ from pfp_service.wire.messages.structs import (
     ZoneCircle,
     ZoneKind,
 )
+from pfp_service.wire.messages.teams import Distance, Ids, Offsets
 from pfp_service.world import translate
 from pfp_service.yamlio import load_yaml, located
 
 __all__ = [
     "ACTIONS",
+    "AddTeam",
     "AddThreat",
     "AddZone",
     "CancelGoal",
     "Expect",
     "MoveThreat",
+    "RemoveTeam",
     "RemoveThreat",
     "RemoveZone",
     "Script",
@@ -75,6 +81,7 @@ __all__ = [
     "Wait",
     "When",
     "load_script",
+    "team_members",
 ]
 
 Angle = Annotated[float, Meta(ge=-360.0, le=360.0)]
@@ -84,6 +91,8 @@ ACTIONS = (
     "remove_threat",
     "add_zone",
     "remove_zone",
+    "add_team",
+    "remove_team",
     "set_goal",
     "cancel_goal",
     "wait",
@@ -204,6 +213,45 @@ class RemoveZone(_Step, kw_only=True, frozen=True, tag="remove_zone"):
         return f"remove zone {self.zone}"
 
 
+class AddTeam(_Step, kw_only=True, frozen=True, tag="add_team"):
+    """Put a team (or change one: put it again), as the wire's ``TeamUpdate`` (docs/teams.md)."""
+
+    team: Id
+    members: Ids = []
+    separation_m: Distance | None = None
+    lead: Id | None = None
+    follow: Ids = []
+    standoff_m: Distance = 300.0
+    corridor_m: Distance = 30.0
+    controller: Id | None = None
+    robots: Ids = []
+    radio_range_m: Distance = 1500.0
+    goal: Goal | None = None
+    offsets: Offsets = {}
+    spacing_m: Distance | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.update()  # the wire's own checks: roles, lists, offsets
+
+    def update(self) -> TeamUpdate:
+        return TeamUpdate(**{f: getattr(self, f) for f in TeamUpdate.__struct_fields__})
+
+    def describe(self, show: Show = None) -> str:
+        units = self.update().units()
+        goal = f", its goal {_shown(self.goal.position, show)}" if self.goal is not None else ""
+        return f"add team {self.team}: {' '.join(units)}{goal}"
+
+
+class RemoveTeam(_Step, kw_only=True, frozen=True, tag="remove_team"):
+    """Dissolve a team."""
+
+    team: Id
+
+    def describe(self, show: Show = None) -> str:
+        return f"remove team {self.team}"
+
+
 class SetGoal(_Step, kw_only=True, frozen=True, tag="set_goal"):
     """Give a unit a goal; ``step``/``tolerance``/``delta`` as in the wire ``Goal``."""
 
@@ -238,12 +286,15 @@ class Wait(_Step, kw_only=True, frozen=True, tag="wait"):
         return f"wait {self.seconds:g} s"
 
 
-Step = Union[AddThreat, MoveThreat, RemoveThreat, AddZone, RemoveZone, SetGoal, CancelGoal, Wait]  # noqa: UP007
+Step = Union[  # noqa: UP007
+    AddThreat, MoveThreat, RemoveThreat, AddZone, RemoveZone, AddTeam, RemoveTeam, SetGoal, CancelGoal, Wait
+]
 
 
 class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
     """One expectation of ``unit``: exactly one of ``arrives_within_s``, ``min_clearance_m`` (to threat ``to``,
     else to all), ``never_enters``, or a team's (``keeps_from``, ``only_cleared_by``, ``link_to``).
+    Or of ``team`` (in place of ``unit``), with ``arrives_within_s``: every member arrives in time.
 
     ``keeps_from: other`` with ``at_least_m``: the unit never comes closer to ``other``.
     ``only_cleared_by: lead`` (with the team's ``corridor_m``): once in the lead's corridor, the unit is never
@@ -251,7 +302,8 @@ class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=Tr
     ``radio_range_m``): the share of the unit's reports within radio range of its controller.
     """
 
-    unit: Id
+    unit: Id | None = None
+    team: Id | None = None
     arrives_within_s: Positive | None = None
     min_clearance_m: NonNegative | None = None
     to: Id | None = None
@@ -264,7 +316,16 @@ class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=Tr
     at_least_pct: Annotated[float, Meta(ge=0.0, le=100.0)] | None = None
     radio_range_m: Positive = 1500.0
 
+    @property
+    def who(self) -> str:
+        """The unit judged, or ``team X``."""
+        return self.unit if self.unit is not None else f"team {self.team}"
+
     def __post_init__(self) -> None:
+        if (self.unit is None) == (self.team is None):
+            raise ValueError("unit: give a unit, or a team (with arrives_within_s)")
+        if self.team is not None and self.arrives_within_s is None:
+            raise ValueError("team: a team's expectation is arrives_within_s")
         kinds = (self.arrives_within_s, self.min_clearance_m, self.never_enters, self.keeps_from)
         given = [x is not None for x in (*kinds, self.only_cleared_by, self.link_to)]
         if sum(given) != 1:
@@ -281,7 +342,7 @@ class Expect(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=Tr
 
     def describe(self) -> str:
         if self.arrives_within_s is not None:
-            return f"{self.unit} arrives within {self.arrives_within_s:g} s"
+            return f"{self.who} arrives within {self.arrives_within_s:g} s"
         if self.never_enters is not None:
             return f"{self.unit} never enters zone {self.never_enters}"
         if self.keeps_from is not None:
@@ -326,6 +387,10 @@ def _check_references(script: Script) -> None:
             if step.zone not in zones:
                 raise InputError(f"timeline[{i}].zone", f"{step.zone!r} is not added earlier in the timeline")
             zones.discard(step.zone)
+    teams = {s.team for s in script.timeline if isinstance(s, AddTeam)}
+    for i, e in enumerate(script.expect):
+        if e.team is not None and e.team not in teams:
+            raise InputError(f"expect[{i}].team", f"team {e.team!r} is never added by the timeline")
     ever = {s.threat for s in script.timeline if isinstance(s, AddThreat)}
     ever_zones = {s.zone for s in script.timeline if isinstance(s, AddZone)}
     for i, e in enumerate(script.expect):
@@ -375,3 +440,8 @@ def _localise_zones(doc: dict[str, object]) -> dict[str, object]:
         for i, e in enumerate(timeline)
     ]
     return {**doc, "timeline": steps}
+
+
+def team_members(script: Script) -> dict[str, tuple[str, ...]]:
+    """Each team the timeline adds and its members, as last put."""
+    return {s.team: s.update().units() for s in script.timeline if isinstance(s, AddTeam)}

@@ -193,6 +193,11 @@ def team_lines(snap: Any) -> list[str]:
              " ".join(others) or "-")
         )  # fmt: skip
         notes += [f"  {t.id}: {n}" for n in t.notes]
+        slowest = getattr(t, "slowest", None)  # null from an older planner
+        if slowest is not None:
+            eta = "unknown" if t.eta_s is None else f"{t.eta_s:,.0f} s"
+            why = f"{slowest} not moving" if t.eta_s is None else slowest
+            notes.append(f"  {t.id}: ETA {eta} ({why})")
     lines = ["", *_table(rows), *notes]
     if snap.teams_total > len(teams):
         lines.append(f"... and {snap.teams_total - len(teams)} more teams (--json lists those that fit)")

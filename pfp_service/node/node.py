@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import functools
 import math
 import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, assert_never
 
 import zenoh
 
@@ -49,7 +50,7 @@ from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
 from pfp_service.node.status import planner_status
 from pfp_service.node.store import Store
-from pfp_service.node.terrain import terrain_info
+from pfp_service.node.terrain import Sights, terrain_info
 from pfp_service.node.twins import Peers, watch_twins
 from pfp_service.node.worldpages import answer_world, fetch_world
 from pfp_service.node.writes import Writes
@@ -59,7 +60,6 @@ from pfp_service.wire import (
     PlannerStatus,
     RestoredEvent,
     UnitState,
-    decode_mission,
     decode_unit_state,
     encode,
     keys,
@@ -67,14 +67,13 @@ from pfp_service.wire import (
 from pfp_service.world.events import (
     Input,
     InputRejected,
-    MissionShared,
     StateReported,
     Tick,
-    TokenChanged,
     mission_message,
     zone_put,
 )
 from pfp_service.world.intake import Intake
+from pfp_service.world.kinds import KINDS, Kind
 from pfp_service.world.world import World
 
 __all__ = ["PlannerNode"]
@@ -158,6 +157,7 @@ class PlannerNode:
         self._uid_of: dict[str, str] = {}
         self._direction_of: dict[str, zenoh.KeyExpr] = {}
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
+        self._sights = Sights(self.world.settings.terrain, self._push)  # threats' windows, off the loop
         self._desk = desk if desk is not None else preview_desk(cfg, clock)
 
     # -- lifecycle --------------------------------------------------------------
@@ -198,14 +198,11 @@ class PlannerNode:
             self._peers.ask(s)
         self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
-            ev = RestoredEvent(
+            ev = RestoredEvent.counted(
+                restored.kept,
                 planner=p,
-                threats=restored.threats,
-                goals=restored.goals,
                 missions=restored.missions,
                 expired=restored.expired,
-                zones=restored.zones,
-                teams=restored.teams,
                 corrupt=restored.corrupt,
                 set_aside=restored.set_aside,
             )
@@ -218,24 +215,50 @@ class PlannerNode:
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
 
     def _listen(self, s: zenoh.Session) -> None:
-        """Declare every subscriber and queryable; their callbacks only enqueue, so the loop need not run yet."""
+        """Declare every subscriber and queryable; their callbacks only enqueue, so the loop need not run yet.
+
+        Each input kind's subscriptions come from its entry (``world.kinds.KINDS``, in its order:
+        the writes first, since a lost goal stays lost and a lost state is followed by the unit's
+        next report), wired as its mode says (``_wire``); then the queryables.
+        """
         m, p = self.cfg.mission, self.cfg.planner_id
-        # the writes first: a lost goal stays lost, a lost state is followed by the unit's next report
-        self._declared += self._writes.declare(s, m)
-        # unit states arrive in rings Zenoh keeps (no Python thread, no GIL per sample); the loop
-        # drains them: the latest STATE_RING states, older ones dropped first under a flood
-        self._rings.add("plain", keys.unit_states(m))
-        self._sync_shards()
+        for kind in KINDS:
+            self._declared += self._wire(s, kind)
         self._declared += [
-            s.liveliness().declare_subscriber(keys.alive_units(m), self._on_alive, history=True),
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
             s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
-            s.liveliness().declare_subscriber(keys.alive_planners(m), self._peers.on_token, history=True),
         ]
-        if self.cfg.cluster:
-            self._declared.append(s.declare_subscriber(keys.unit_missions(m), self._on_mission))
         log.info("listening", extra={"fields": {"mission": m, "planner": p}})
+
+    def _wire(self, s: zenoh.Session, kind: Kind) -> list[Any]:
+        """One input kind's subscriptions, as its mode (``world.kinds.Mode``) says it is read."""
+        m = self.cfg.mission
+        match kind.mode:
+            case "write":  # plain puts and acknowledged writes, one generic handler (writes.py)
+                return self._writes.declare(s, m, kind)
+            case "state":
+                # in rings Zenoh keeps (no Python thread, no GIL per sample), which the loop drains: the
+                # latest STATE_RING states, older ones dropped first under a flood; and this planner's shards
+                self._rings.add("plain", kind.wildcard(m))
+                self._sync_shards()
+                return []
+            case "token":  # a unit's token: its input made from the id and whether it came or went
+                on = functools.partial(self._on_token, kind, keys.KeyOf(kind.key, m))
+                return [s.liveliness().declare_subscriber(kind.wildcard(m), on, history=True)]
+            case "peers":  # the mission's planners: peers for the world, twins for the status (twins.py)
+                return [
+                    s.liveliness().declare_subscriber(kind.wildcard(m), self._peers.on_token, history=True)
+                ]
+            case (
+                "shared"
+            ):  # what planners share: read only under --cluster, where another may take a unit over
+                if not self.cfg.cluster:
+                    return []
+                on = functools.partial(self._on_shared, kind, keys.KeyOf(kind.key, m))
+                return [s.declare_subscriber(kind.wildcard(m), on)]
+            case _:
+                assert_never(kind.mode)
 
     def stop(self) -> None:
         self._stop.set()
@@ -283,12 +306,12 @@ class PlannerNode:
     def _direction_key(self, unit: str) -> zenoh.KeyExpr:
         return _remembered(self._direction_of, unit, lambda u: zenoh.KeyExpr(self._direction_keys.key(u)))
 
-    def _on_alive(self, sample: zenoh.Sample) -> None:
+    def _on_token(self, kind: Kind, ids: keys.KeyOf, sample: zenoh.Sample) -> None:
         try:
-            uid = keys.parse(str(sample.key_expr)).id
+            uid = ids.id(str(sample.key_expr))
         except InputError:
             return
-        self._push(TokenChanged(uid, sample.kind == zenoh.SampleKind.PUT))
+        self._push(kind.put(uid, sample.kind == zenoh.SampleKind.PUT))
 
     def _join(self, s: zenoh.Session) -> None:
         """Apply what the planners already serving the mission hold, every page of it (none: ~1 ms)."""
@@ -307,14 +330,14 @@ class PlannerNode:
             level = log.info if joined.complete else log.warning
             level("joined the mission's planners", extra={"fields": joined.fields()})
 
-    def _on_mission(self, sample: zenoh.Sample) -> None:
-        key, kind = str(sample.key_expr), None  # the key's kind, once the key itself parsed
+    def _on_shared(self, kind: Kind, ids: keys.KeyOf, sample: zenoh.Sample) -> None:
+        key, known = str(sample.key_expr), None  # the key's kind, once the key itself parsed
         try:
-            uid, kind = keys.parse(key).id, keys.KeyKind.UNIT_MISSION
+            uid, known = ids.id(key), kind.key
             if sample.kind == zenoh.SampleKind.PUT:
-                self._push(MissionShared(uid, decode_mission(sample.payload.to_bytes())))
+                self._push(kind.make(uid, False, sample.payload.to_bytes(), None, None))
         except InputError as err:
-            self._push(InputRejected(key, err, kind))
+            self._push(InputRejected(key, err, known))
 
     def _on_query(self, kind: str, query: zenoh.Query) -> None:
         with self._lock:
@@ -452,6 +475,7 @@ class PlannerNode:
                 )
         self._deliberators.cancel(out.cancelled)
         self._deliberators.submit(out.jobs)
+        self._sights.submit(out.sights)
         self._deliberators.feed()
         done = self.clock()
         for _msg, t_recv in states.values():

@@ -33,21 +33,19 @@ _BAD_ROW = (InputError, ValueError, TypeError, KeyError, msgspec.MsgspecError)
 class Restored:
     """What a restart found: inputs to apply, and the counts for the ``restored`` event.
 
-    ``corrupt`` counts the rows skipped as unreadable (named in ``skipped`` as
+    ``kept``: the rows restored per stored write kind, by its name (``world.kinds.STORED``:
+    ``{"threat": 20, "goal": 50, ...}``, every stored kind named); ``corrupt`` counts the rows skipped as unreadable (named in ``skipped`` as
     ``table/key``), plus the damaged pages of a file set aside (at least one);
     ``set_aside`` is where that file was moved, or ``""``.
     """
 
     inputs: list[Input]
-    threats: int
-    goals: int
+    kept: dict[str, int]
     missions: int
     expired: int
     corrupt: int = 0
     set_aside: str = ""
     skipped: tuple[str, ...] = ()
-    zones: int = 0
-    teams: int = 0
     order: tuple[OrderRow, ...] = ()  # the write order kept (WriteOrder.load)
 
 
@@ -132,17 +130,7 @@ def read_state(db: sqlite3.Connection, wall_now: float, transaction: Callable[[]
                 tx.execute("INSERT INTO set_aside VALUES (?, ?, ?, ?, ?)", (table, key, body, why, wall_now))
                 tx.execute(f"DELETE FROM {table} WHERE rowid = ?", (rowid,))
     skipped = tuple(f"{table}/{key}" for table, _r, key, _b, _w in bad)
-    return Restored(
-        inputs,
-        kept.get("threat", 0),
-        kept.get("goal", 0),
-        n_missions,
-        expired,
-        skipped=skipped,
-        zones=kept.get("zone", 0),
-        order=tuple(order),
-        teams=kept.get("team", 0),
-    )
+    return Restored(inputs, kept, n_missions, expired, skipped=skipped, order=tuple(order))
 
 
 def _why(exc: BaseException) -> str:

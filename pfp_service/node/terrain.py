@@ -6,16 +6,33 @@ when none was given, so every position on the wire, the status and the
 zones' file share the plane the world plans on.  ``terrain_info`` is the
 status's ``TerrainInfo`` (a peer over another DEM is the world's conflict:
 ``world.cluster.terrain_conflict``).
+
+``Sights`` computes the threats' windows the world asks for
+(``Outputs.sights``, ``world.terrain``) off the planning loop: one thread,
+started when asked and gone when nothing waits, latest wins per threat (an
+ask for a threat put again meanwhile is dropped unrun), each window handed
+back to the node's inbox as a ``SightLanded``.  The sweep is compiled
+without the GIL (``viewshed._sweep``), so the loop runs on beside it; a
+window that fails is logged and never lands, and the world's ``sight``
+timer puts its threat in force blind.
 """
 
 from __future__ import annotations
 
+import threading
+import time
+from collections.abc import Callable, Sequence
+
 import msgspec
 
 from pfp_service.node.config import ServeConfig
+from pfp_service.node.log import get_logger
 from pfp_service.wire.messages import TerrainInfo
+from pfp_service.world.terrain import Ground, SightAsk, SightLanded, answer
 
-__all__ = ["placed", "terrain_info"]
+__all__ = ["Sights", "placed", "terrain_info"]
+
+log = get_logger("terrain")
 
 
 def placed(cfg: ServeConfig) -> ServeConfig:
@@ -49,3 +66,50 @@ def terrain_info(cfg: ServeConfig) -> TerrainInfo | None:
         unit=a.unit,
         origin_centred=a.centred,
     )
+
+
+class Sights:
+    """The world's asks for threats' windows, computed on one thread off the loop, latest wins."""
+
+    def __init__(self, ground: Ground | None, deliver: Callable[[SightLanded], None]) -> None:
+        self._ground = ground
+        self._deliver = deliver
+        self._lock = threading.Lock()
+        self._waiting: dict[str, SightAsk] = {}  # by threat: the newest ask only
+        self._thread: threading.Thread | None = None
+        self._logged_at = 0.0
+
+    def submit(self, asks: Sequence[SightAsk]) -> None:
+        """Compute ``asks`` off the loop (one waiting for the same threat is replaced)."""
+        if not asks or self._ground is None:
+            return
+        with self._lock:
+            for ask in asks:
+                self._waiting.pop(ask.threat, None)
+                self._waiting[ask.threat] = ask  # at the back: the threats in the order put
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="pfp-sight", daemon=True)
+                self._thread.start()
+
+    def idle(self) -> bool:
+        """Whether nothing waits or runs (the tests' condition)."""
+        with self._lock:
+            return self._thread is None
+
+    def _run(self) -> None:
+        assert self._ground is not None
+        while True:
+            with self._lock:
+                if not self._waiting:
+                    self._thread = None
+                    return
+                ask = self._waiting.pop(next(iter(self._waiting)))
+            try:
+                landed = answer(self._ground, ask)
+            except Exception as exc:  # never lands: the world's timer puts the threat in force blind
+                if time.monotonic() - self._logged_at >= 1.0:
+                    self._logged_at = time.monotonic()
+                    fields = {"threat": ask.threat, "error": type(exc).__name__, "detail": str(exc)[:200]}
+                    log.error("a threat's sight failed", extra={"fields": fields})
+                continue
+            self._deliver(landed)

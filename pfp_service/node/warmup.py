@@ -9,8 +9,10 @@ live loop takes:
   step rule among them (``steprule.judge_zoned``, called from Python too by
   ``Stepper.follow``);
 * two units trapped in a cup of keep-out zone with one goal: the second
-  builds the shared route grid (``grid._edges``, ``cores._raster``,
-  ``polylines._shortcut_kept``);
+  builds the shared route grid (``grid._edges``, ``cores._raster``);
+* a route shortened among those threats with no zone in force, as a route
+  search over open ground does: the compiled ``polylines._shortcut_kept``
+  (the cup's zone sends its routes down the numpy path instead);
 * the same kernels past ``kernels.PARALLEL_MIN_PAIRS`` (a storm's tick):
   ``cull._culled_descent_parallel``, ``cull._predict_parallel``,
   ``kernels.batch_descent``, and past ``PARALLEL_MIN_PAIRS_LEVEL``
@@ -32,7 +34,7 @@ import math
 
 import numpy as np
 
-from pfp_service.core import PlannerParams, Stepper, kernels, resolve
+from pfp_service.core import PlannerParams, Stepper, Threat, ThreatField, kernels, resolve
 from pfp_service.core.cull import MIN_THREATS, CullIndex, cell_level, predict
 from pfp_service.core.zones import ZoneSet
 from pfp_service.wire import Goal, ThreatUpdate, UnitState
@@ -56,6 +58,7 @@ def warm_wide(base: WorldSettings) -> None:
             [StateReported(f"c{i}", UnitState(position=(0.01 * k, 2.0 * i - 1.0))) for i in (0, 1)], k
         )
     _parallel(world.field.packed, world.field.zones)
+    _shortcut(world.field.threats)
     # a batch's unit in plain descent among zones, its gradient given (``advise_many``): judged from Python
     lone = Stepper((0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0)), None, 0)
     lone.follow(-30.0, 0.0, 1.0, 0.0, 0.0, 1.0, world.field)
@@ -76,6 +79,14 @@ def _crowd() -> list[Input]:
         inputs.append(StateReported(f"c{i}", UnitState(position=(0.0, 2.0 * i - 1.0))))
         inputs.append(GoalSet(f"c{i}", Goal(position=(100.0, 0.0))))
     return inputs
+
+
+def _shortcut(threats: tuple[Threat, ...]) -> None:
+    """A path shortened over ``threats`` (a cull index, no zone): ``polylines._shortcut_kept``."""
+    from pfp_service.core.polylines import shortcut_kept
+
+    path = np.column_stack([np.linspace(-50.0, 150.0, 9), np.linspace(0.0, 20.0, 9) ** 0.5])
+    shortcut_kept(ThreatField(threats), np.ascontiguousarray(path), 1.0, None)
 
 
 def _parallel(packed: np.ndarray, zones: ZoneSet) -> None:

@@ -2,12 +2,13 @@
 
 A page itself is built by ``snapshot.page`` (pure, the world's); this module is its I/O.
 
-A ``WorldSnapshot`` lists at most ``MAX_SNAPSHOT_ITEMS`` zones, threats and
-units each (in that order: a zone matters most to a joining planner) and stops
+A ``WorldSnapshot`` lists at most ``MAX_SNAPSHOT_ITEMS`` zones, threats, writes (the write kinds
+listed by kind: teams, and any kind added since) and units each (in that order: a zone matters
+most to a joining planner) and stops
 short of ``SNAPSHOT_PAGE_BYTES`` of JSON, so every reply decodes; its
-``next_zone``, ``next_threat`` and ``next_unit`` say where the next page
+``next_zone``, ``next_threat``, ``next_write`` and ``next_unit`` say where the next page
 starts, and the query's parameters (``WorldQuery``:
-``?zones_from=ID;threats_from=ID;units_from=ID``) ask for it.  Ids are
+``?zones_from=ID;threats_from=ID;writes_from=KIND.ID;units_from=ID``) ask for it.  Ids are
 cursors, not offsets, so an item added or removed between two pages shifts
 nothing: each id present throughout is listed exactly once.  A zone may be
 large (up to 4,096 vertices: 90 to 165 KB of JSON), so a world of many zones
@@ -39,7 +40,8 @@ from pfp_service.wire import (
     encode,
     keys,
 )
-from pfp_service.world.events import Input, inputs_from_snapshot
+from pfp_service.world.events import Input
+from pfp_service.world.kinds import inputs_from_snapshot
 
 if TYPE_CHECKING:
     from pfp_service.world.world import World
@@ -85,6 +87,8 @@ def answer_world(query: Any, world: World, now: float, mission: str, planner: st
         threats_limit=q.threats_limit,
         zones_from=q.zones_from,
         zones_limit=q.zones_limit,
+        writes_from=q.writes_from,
+        writes_limit=q.writes_limit,
     )
     query.reply(keys.world(mission, planner), encode(page), encoding=zenoh_encoding())
 
@@ -100,6 +104,7 @@ class Joined:
     units: int = 0  # units and threats listed, over every page
     threats: int = 0
     zones: int = 0
+    writes: int = 0  # the write kinds listed by kind (teams, ...)
 
     def fields(self) -> dict[str, Any]:
         return {
@@ -109,6 +114,7 @@ class Joined:
             "units": self.units,
             "threats": self.threats,
             "zones": self.zones,
+            "writes": self.writes,
             "inputs": len(self.inputs),
         }
 
@@ -132,14 +138,15 @@ class _Cursors:
     units: str | None = None
     threats: str | None = None
     zones: str | None = None
+    writes: str | None = None
 
     @classmethod
     def after(cls, page: WorldSnapshot) -> _Cursors:
-        return cls(page.next_unit, page.next_threat, page.next_zone)
+        return cls(page.next_unit, page.next_threat, page.next_zone, page.next_write)
 
     @property
     def done(self) -> bool:
-        return self.units is None and self.threats is None and self.zones is None
+        return self.units is None and self.threats is None and self.zones is None and self.writes is None
 
 
 def _next_page(ask: Ask, mission: str, planner: str, at: _Cursors, timeout_s: float) -> WorldSnapshot | None:
@@ -152,6 +159,8 @@ def _next_page(ask: Ask, mission: str, planner: str, at: _Cursors, timeout_s: fl
         units_limit=full.units_limit if at.units is not None else 0,
         threats_limit=full.threats_limit if at.threats is not None else 0,
         zones_limit=full.zones_limit if at.zones is not None else 0,
+        writes_from=at.writes,
+        writes_limit=full.writes_limit if at.writes is not None else 0,
     )
     sel = f"{keys.world(mission, planner)}?{q.selector_parameters()}"
     pages = [p for p in _decode(ask(sel, timeout_s), "") if p.planner == planner]
@@ -175,7 +184,12 @@ def whole_world(
         planner's silence cuts it short.
     """
     end = clock() + deadline_s
-    units, threats, zones = list(first.units), list(first.threats), list(first.zones)
+    units, threats, zones, writes = (
+        list(first.units),
+        list(first.threats),
+        list(first.zones),
+        list(first.writes),
+    )
     at = _Cursors.after(first)
     pages = 1
     while not at.done:
@@ -188,15 +202,18 @@ def whole_world(
         units += page.units
         threats += page.threats
         zones += page.zones
+        writes += page.writes
         at = _Cursors.after(page)
     merged = msgspec.structs.replace(
         first,
         units=units,
         threats=threats,
         zones=zones,
+        writes=writes,
         next_unit=at.units,
         next_threat=at.threats,
         next_zone=at.zones,
+        next_write=at.writes,
     )
     return merged, at.done
 
@@ -235,13 +252,16 @@ def fetch_world(
         got.units += len(page.units)
         got.threats += len(page.threats)
         got.zones += len(page.zones)
+        got.writes += len(page.writes)
 
     for page in first:
         take(page)
     if not first:
         return got
     # the fullest peer first; the others, in turn, if it stops answering
-    peers = sorted(first, key=lambda p: (-(p.units_total + p.threats_total + p.zones_total), p.planner))
+    peers = sorted(
+        first, key=lambda p: (-(p.units_total + p.threats_total + p.zones_total + p.writes_total), p.planner)
+    )
     at = _Cursors.after(peers[0])
     for peer in peers:
         while not at.done:

@@ -1,8 +1,9 @@
-"""The world's write kinds (goals, threats, zones: ``world.kinds.WRITES``) on their way to it: plain puts
-and acknowledged-write queries.
+"""The world's write kinds (goals, threats, zones, teams: ``world.kinds.WRITES``) on their way to it:
+plain puts and acknowledged-write queries.
 
-Each write kind is one subscriber and one queryable (``subscriptions``), both handled by the one
-generic handler (``_make``: the key's id, then the kind's put or remove).  Callbacks decode a write into its ``Input`` (or an ``InputRejected`` naming
+Each write kind is one subscriber and one queryable (``declare``, which the node calls for each
+kind of mode ``write``), both handled by the one generic handler (``_maker``: the key's id, then
+the kind's put or remove).  Callbacks decode a write into its ``Input`` (or an ``InputRejected`` naming
 why) and queue it, bounded (``WRITES_MAX``; past it a put is counted lost and
 a query dropped, its writer asks again).  The planning loop takes a slice per
 tick (``take``), orders it (``admit``: ``wire.delivery.WriteOrder`` says
@@ -30,17 +31,12 @@ from pfp_service.node.config import ServeConfig
 from pfp_service.wire import keys
 from pfp_service.wire.delivery import WriteAck, WriteMark, WriteOrder, decode_mark
 from pfp_service.world.events import Input, InputRejected
-from pfp_service.world.kinds import WRITES, Kind
+from pfp_service.world.kinds import Kind
 
-__all__ = ["WRITES_MAX", "Write", "Writes", "subscriptions"]
+__all__ = ["WRITES_MAX", "Write", "Writes"]
 
 WRITES_MAX = 100_000  # goal, threat and zone writes waiting (puts and queries); more are shed
 _JSON = zenoh.Encoding.APPLICATION_JSON
-
-
-def subscriptions(mission: str) -> list[tuple[Kind, str]]:
-    """Each write kind and the key expression the planner subscribes to and serves acknowledged writes on."""
-    return [(kind, kind.wildcard(mission)) for kind in WRITES]
 
 
 class Write:
@@ -79,15 +75,14 @@ class Writes:
         self._waiting: collections.deque[Write] = collections.deque()
         self.order = WriteOrder()  # the node settles it once the store has committed (or refused) a batch
 
-    def declare(self, s: zenoh.Session, mission: str) -> list[Any]:
-        """Subscribe to each write kind's keys, and serve them as acknowledged-write queryables (wire.delivery:
+    def declare(self, s: zenoh.Session, mission: str, kind: Kind) -> list[Any]:
+        """Subscribe to one write kind's keys, and serve them as acknowledged-write queryables (wire.delivery:
         the same writes, asked until a planner answers)."""
-        declared: list[Any] = []
-        for kind, key_expr in subscriptions(mission):
-            make = self._maker(kind, mission)
-            declared.append(s.declare_subscriber(key_expr, functools.partial(self._on_sample, make=make)))
-            declared.append(s.declare_queryable(key_expr, functools.partial(self._on_query, make=make)))
-        return declared
+        make, key_expr = self._maker(kind, mission), kind.wildcard(mission)
+        return [
+            s.declare_subscriber(key_expr, functools.partial(self._on_sample, make=make)),
+            s.declare_queryable(key_expr, functools.partial(self._on_query, make=make)),
+        ]
 
     # -- the loop's side (under the lock for take and waiting) ------------------------------
     def take(self, most: int) -> collections.deque[Write]:

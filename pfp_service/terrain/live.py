@@ -31,6 +31,7 @@ from pfp_service.core.mobility import CLASSES, Mobility
 from pfp_service.core.zones import Zone
 from pfp_service.geo import Origin
 from pfp_service.terrain.grid import TerrainGrid
+from pfp_service.terrain.link_sight import sees
 from pfp_service.terrain.threat_sight import TerrainSight
 
 __all__ = ["EDGE_SHARE", "LiveTerrain", "TerrainAbout", "load", "of_grid"]
@@ -71,6 +72,16 @@ class LiveTerrain:
         """Threat ``threat``'s window (a ``core.visibility.Sight``): the terrain is its own sight, so a
         field's ``sight`` pickles by name."""
         return self.look(threat, box)
+
+    @property
+    def resolution_m(self) -> float:
+        """The grid's cell, metres: what a line of sight over it can tell apart."""
+        return self.grid.cell_m
+
+    def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
+        """Whether two units at ``a`` and ``b`` see each other over the ground (a controller's link), each
+        as high as the unit class, the sight line ``clearance_m`` clear of it (``link_sight.sees``)."""
+        return sees(self.grid, a, b, self.unit.height_m, clearance_m)
 
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
         if not self.key:

@@ -31,7 +31,6 @@ from collections import OrderedDict
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import minimum_filter
 
 from pfp_service.core.visibility import Window
 from pfp_service.terrain.grid import TerrainGrid
@@ -107,13 +106,19 @@ def coarsen(low: np.ndarray, f: int) -> np.ndarray:
 
     The last row and column reach the window's end or just past it (the
     edge's heights carried on), so the coarse window covers the fine one.
+    Only the rows and columns kept are reduced (rows first, then columns of
+    those), not a filter over every fine cell: on 1,001 x 1,001 cells it is
+    a few per cent of the sweep, where a full ``minimum_filter`` cost twice
+    the sweep (BENCHMARKS.md, "Terrain"; docs/terrain.md).  A NaN (unknown,
+    or beyond the radius) makes its neighbourhood 0, as ``nan_to_num`` first
+    would: every height is ``>= 0``.
     """
     if f == 1:
         return low
     ny, nx = low.shape
     my, mx = -(-(ny - 1) // f) + 1, -(-(nx - 1) // f) + 1
-    padded = np.pad(
-        np.nan_to_num(low, nan=0.0), ((0, (my - 1) * f + 1 - ny), (0, (mx - 1) * f + 1 - nx)), "edge"
-    )
-    out: np.ndarray = minimum_filter(padded, size=2 * (f // 2) + 1, mode="nearest")[::f, ::f]
-    return np.ascontiguousarray(out)
+    near = np.arange(-(f // 2), f // 2 + 1)
+    rows = np.clip(np.arange(my)[:, None] * f + near, 0, ny - 1)  # clipped: the edge carried on
+    cols = np.clip(np.arange(mx)[:, None] * f + near, 0, nx - 1)
+    out = low[rows].min(axis=1)[:, cols].min(axis=2)
+    return np.ascontiguousarray(np.nan_to_num(out, nan=0.0))

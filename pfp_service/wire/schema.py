@@ -1,7 +1,7 @@
-"""The published contract: JSON Schema, an example and the key of every wire message.
+"""The published contract: JSON Schema, examples and the key of every wire message (``contract.MESSAGES``).
 
 ``render(supplied)`` returns the whole ``schemas/`` directory as ``{relative path: text}``
-from the Structs themselves, so it cannot drift from the code.  The wire imports no
+from the Structs themselves and their specs, so it cannot drift from the code.  The wire imports no
 core, so a message whose type is the core's (the preview reply, ``PlanResult``) has
 no type in ``MESSAGES``: a higher layer supplies it and its examples
 (``world.translate.supplied()``).  ``diff()`` says what on disk is stale and
@@ -23,27 +23,22 @@ import msgspec
 from pfp_service.geo import POSITION_FIELDS, LatLon
 from pfp_service.wire import keys
 from pfp_service.wire import messages as m
-from pfp_service.wire.examples import examples
-from pfp_service.wire.keys import KeyKind
+from pfp_service.wire.contract import LIVELINESS, MESSAGES, MessageSpec, examples
 
-__all__ = ["CONTRACT_VERSION", "MESSAGES", "MessageSpec", "Supplied", "diff", "render", "write"]
+__all__ = [
+    "CONTRACT_VERSION",
+    "LIVELINESS",
+    "MESSAGES",
+    "MessageSpec",
+    "Supplied",
+    "diff",
+    "render",
+    "write",
+]
 
 # Bumped only for a change an older client cannot read; adding a defaulted field is not one.
 CONTRACT_VERSION = 1
 JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
-
-
-@dataclass(frozen=True)
-class MessageSpec:
-    """One message of the contract: its name, type, key and who sends it how."""
-
-    name: str
-    type: Any
-    key: KeyKind | None
-    op: str
-    sender: str
-    receiver: str
-    note: str = ""
 
 
 @dataclass(frozen=True)
@@ -53,98 +48,6 @@ class Supplied:
 
     type: Any
     examples: tuple[tuple[str, Any], ...]
-
-
-MESSAGES: tuple[MessageSpec, ...] = (
-    MessageSpec("unit_state", m.UnitState, KeyKind.UNIT_STATE, "put", "unit", "planner"),
-    MessageSpec(
-        "goal", m.Goal, KeyKind.UNIT_GOAL, "put", "any", "planner", "a DELETE on the key cancels the goal"
-    ),
-    MessageSpec(
-        "threat",
-        m.ThreatUpdate,
-        KeyKind.THREAT,
-        "put",
-        "any",
-        "planner",
-        "a DELETE on the key removes the threat",
-    ),
-    MessageSpec(
-        "zone",
-        m.ZoneUpdate,
-        KeyKind.ZONE,
-        "put",
-        "any",
-        "planner",
-        "a keep-out zone no path enters; a DELETE on the key removes it",
-    ),
-    MessageSpec(
-        "team",
-        m.TeamUpdate,
-        KeyKind.TEAM,
-        "put",
-        "any",
-        "planner",
-        "a team and its roles (lead, follow, controller and robots); a DELETE on the key dissolves it",
-    ),
-    MessageSpec("direction", m.Direction, KeyKind.UNIT_DIRECTION, "put", "planner", "unit"),
-    MessageSpec(
-        "mission",
-        m.Mission,
-        KeyKind.UNIT_MISSION,
-        "put",
-        "planner",
-        "planner",
-        "a unit's x0 and resolved parameters, so another planner can take it over",
-    ),
-    MessageSpec(
-        "preview_request",
-        m.PreviewRequest,
-        KeyKind.PREVIEW,
-        "get payload",
-        "any",
-        "planner",
-        "optional; no payload previews the unit's live state to its live goal",
-    ),
-    MessageSpec(
-        "preview_reply",
-        None,  # the core's PlanResult, which the wire cannot name: supplied to render()
-        KeyKind.PREVIEW,
-        "reply",
-        "planner",
-        "any",
-        "the same object as `pfp plan --json`; with `geojson: true` in the request, an RFC 7946 "
-        "FeatureCollection (path, threats, zones) in WGS-84",
-    ),
-    MessageSpec(
-        "error_reply",
-        m.ErrorReply,
-        None,
-        "reply_err",
-        "planner",
-        "any",
-        "answer to a bad preview, status or world query",
-    ),
-    MessageSpec("planner_status", m.PlannerStatus, KeyKind.PLANNER_STATUS, "reply", "planner", "any"),
-    MessageSpec(
-        "world_snapshot",
-        m.WorldSnapshot,
-        KeyKind.WORLD,
-        "reply",
-        "planner",
-        "any",
-        "keep-out zones, threats and units the planner holds, a page at a time: "
-        "`next_zone`/`next_threat`/`next_unit` say where the next page starts, asked with "
-        "`?zones_from=ID;threats_from=ID;units_from=ID` (and `zones_limit`, `threats_limit`, "
-        "`units_limit`: 0 to 1000, 0 leaves a list out); a bad parameter gets an error_reply; "
-        "`pfp status` asks every planner",
-    ),
-    MessageSpec(
-        "event", m.AnyEvent, KeyKind.EVENT, "put", "planner", "any", "`kind` repeats the key's last chunk"
-    ),
-)
-
-LIVELINESS: tuple[KeyKind, ...] = (KeyKind.ALIVE_UNIT, KeyKind.ALIVE_PLANNER)
 
 
 def _dump(obj: Any) -> str:

@@ -13,8 +13,6 @@ import zlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Union
 
-import msgspec
-
 from pfp_service.core.params import PlannerParams, Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
@@ -27,11 +25,11 @@ from pfp_service.wire import (
     ThreatChange,
     ThreatUpdate,
     UnitState,
-    WorldSnapshot,
     keys,
 )
 from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
 from pfp_service.world.separations import DispersionSettings
+from pfp_service.world.terrain import SightAsk, SightLanded
 
 if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
     from pfp_service.core import Stepper, Threat, ThreatField
@@ -52,6 +50,8 @@ __all__ = [
     "Outputs",
     "PeerPlanner",
     "PeerTerrain",
+    "SightAsk",
+    "SightLanded",
     "StateReported",
     "TeamPut",
     "TeamRemoved",
@@ -61,9 +61,9 @@ __all__ = [
     "TokenChanged",
     "UnitView",
     "WorldSettings",
+    "Written",
     "ZonePut",
     "ZoneRemoved",
-    "inputs_from_snapshot",
     "mission_message",
     "mission_of",
     "unit_key",
@@ -90,6 +90,15 @@ def unit_key(unit_id: str) -> int:
 
 # -- inputs -------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
+class Written:
+    """A write kind's put or remove (``world.kinds.WRITES``): the id first, a put's message second.
+
+    Every write input derives from it, and ``Input`` names this base rather than each class,
+    so a new kind's inputs, declared beside its entry in ``world.kinds``, need no edit here.
+    """
+
+
+@dataclass(frozen=True, slots=True)
 class StateReported:
     """A unit said where it is (``unit/{u}/state``)."""
 
@@ -98,29 +107,29 @@ class StateReported:
 
 
 @dataclass(frozen=True, slots=True)
-class GoalSet:
+class GoalSet(Written):
     unit: str
     goal: Goal
 
 
 @dataclass(frozen=True, slots=True)
-class GoalCancelled:
+class GoalCancelled(Written):
     unit: str
 
 
 @dataclass(frozen=True, slots=True)
-class ThreatPut:
+class ThreatPut(Written):
     threat: str
     update: ThreatUpdate
 
 
 @dataclass(frozen=True, slots=True)
-class ThreatRemoved:
+class ThreatRemoved(Written):
     threat: str
 
 
 @dataclass(frozen=True, slots=True)
-class ZonePut:
+class ZonePut(Written):
     """A keep-out zone put (``zone/{z}``): new, or moved or reshaped if the id is known."""
 
     zone: str
@@ -128,12 +137,12 @@ class ZonePut:
 
 
 @dataclass(frozen=True, slots=True)
-class ZoneRemoved:
+class ZoneRemoved(Written):
     zone: str
 
 
 @dataclass(frozen=True, slots=True)
-class TeamPut:
+class TeamPut(Written):
     """A team put (``team/{t}``): new, or its members and roles changed if the id is known."""
 
     team: str
@@ -141,7 +150,7 @@ class TeamPut:
 
 
 @dataclass(frozen=True, slots=True)
-class TeamRemoved:
+class TeamRemoved(Written):
     team: str
 
 
@@ -245,14 +254,7 @@ class Tick:
 
 Input = Union[  # noqa: UP007
     StateReported,
-    GoalSet,
-    GoalCancelled,
-    ThreatPut,
-    ThreatRemoved,
-    ZonePut,
-    ZoneRemoved,
-    TeamPut,
-    TeamRemoved,
+    Written,  # every write kind's put and remove: GoalSet, ThreatPut, ZoneRemoved, TeamPut, ...
     TokenChanged,
     InputRejected,
     Deliberated,
@@ -260,6 +262,7 @@ Input = Union[  # noqa: UP007
     MissionShared,
     PeerPlanner,
     PeerTerrain,
+    SightLanded,
     Tick,
 ]
 
@@ -362,11 +365,12 @@ class Outputs:
     missions: list[MissionRecord] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
     cancelled: list[Job] = field(default_factory=list)  # jobs returned before and no longer wanted
+    sights: list[SightAsk] = field(default_factory=list)  # threats' windows to compute off the loop
 
     def __bool__(self) -> bool:
         return bool(
             self.directions or self.events or self.jobs or self.missions or self.faults or self.cancelled
-        )
+        ) or bool(self.sights)
 
 
 @dataclass(slots=True)
@@ -434,6 +438,9 @@ class WorldSettings:
     cluster: bool = False  # scale-out configured: other planners are peers, not a conflict
     origin: Origin | None = None  # the mission origin: directions also carry true bearing and lat/lon
     terrain: Ground | None = None  # the DEM planned over (``world.terrain``): sight and slope barriers
+    sight_wait_s: float = (
+        0.25  # a threat over terrain held this long for its window, then blind (``world.terrain``)
+    )
     dispersion: DispersionSettings = field(default_factory=DispersionSettings)  # off unless enabled
 
     def params_for(self, goal: Goal) -> PlannerParams:
@@ -459,28 +466,3 @@ def mission_message(record: MissionRecord, planner: str) -> Mission:
     m = mission_of((record.goal, record.origin, record.params), planner)
     assert m is not None
     return m
-
-
-def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
-    """What a peer planner's world reply says, as inputs: its teams, zones and threats (with the TTL left), goals and missions.
-
-    A planner started after threats and goals were published applies these
-    and guides correctly from its first direction.  Its own reply is skipped.
-    """
-    if snap.planner == me:
-        return []
-    inputs: list[Input] = [TeamPut(t.id, t.team) for t in snap.teams]
-    for z in snap.zones:
-        zone = z.zone if z.ttl_s is None else msgspec.structs.replace(z.zone, ttl_s=max(z.ttl_s, 1e-3))
-        inputs.append(ZonePut(z.id, zone))
-    for t in snap.threats:
-        update = t.threat if t.ttl_s is None else msgspec.structs.replace(t.threat, ttl_s=max(t.ttl_s, 1e-3))
-        inputs.append(ThreatPut(t.id, update))
-    for u in snap.units:
-        if u.mission is not None:
-            params = Resolved(**msgspec.structs.asdict(u.mission.params))
-            origin = (u.mission.origin[0], u.mission.origin[1])
-            inputs.append(MissionRestored(u.id, u.mission.goal, origin, params))
-        elif u.goal is not None:
-            inputs.append(GoalSet(u.id, Goal(position=u.goal)))
-    return inputs

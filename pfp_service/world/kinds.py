@@ -1,33 +1,42 @@
-"""One table of the world's input kinds: each names its key, decoder, inputs, blame, store rows, log line, writers and schema.
+"""One table of the world's input kinds: each names its key, mode, decoder, inputs, blame, store rows, log line, writers and schema.
 
 A kind of input the world takes from the wire is one ``Kind`` in ``KINDS``.  What is written
-out once per kind elsewhere is read from here: the node's write subscriptions, acknowledged-write
-queryables and their one generic handler (``node.writes``), the durable state's tables, its
-commits and its read-back (``node.statefile``, ``node.store``, ``node.staterows``), the log line
-of each change (``node.log``), the key a failure is blamed on (``blame``), who may write each
-key under access control (``node.access``), and the check of docs/wire.md's key table
-(``tests/unit/test_kinds.py``).  A new kind is one entry here and one handler in
-``World._apply_one`` (docs/development.md, "Add an input kind").
+out once per kind elsewhere is read from here: the node's subscriptions (``node.node._wire``, by
+the kind's mode), its acknowledged-write queryables and their one generic handler
+(``node.writes``), the durable state's tables, its commits, its read-back and the ``restored``
+event's counts (``node.statefile``, ``node.store``, ``node.staterows``), the world snapshot's
+``writes`` a joining planner learns it from (``held``, ``from_snapshot``), the log line of each
+change (``node.log``), the key a failure is blamed on (``blame``), who may write each key under
+access control (``node.access``), and the check of docs/wire.md's key table
+(``tests/unit/test_kinds.py``).  A new kind is one entry here (its put and remove inputs, derived
+from ``events.Written``, declared beside it) and one handler in ``World._apply_one``
+(docs/development.md, "Add an input kind").
 
-A ``write`` kind is put and deleted by anyone its roles allow (goals, threats, zones): decoded by
-the generic handler, committed before it is applied, logged, restored at a restart.  The other
-modes name keys the node reads its own way (unit states in rings, liveliness tokens, the
-missions planners share), here for their blame, schema and writers.  Pure values: no zenoh, no
-clock, no sqlite3 (a table is named by its columns; ``node.store`` writes the SQL).
+The mode says how the node reads a kind.  A ``write`` kind is put and deleted by anyone its roles
+allow (goals, threats, zones, teams): decoded by the generic handler, committed before it is
+applied, logged, restored at a restart.  The others: ``state``, unit states in rings (and the
+planner's shards); ``token``, a liveliness token whose input is made from its id and whether it
+came or went; ``peers``, the mission's planners' tokens (``node.twins.Peers``); ``shared``, what
+planners share, read under ``--cluster`` only.  Pure values: no zenoh, no clock, no sqlite3 (a
+table is named by its columns; ``node.store`` writes the SQL).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
+import msgspec
+
+from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.wire import decode_goal, decode_mission, decode_threat, decode_unit_state, keys
+from pfp_service.wire import Goal, decode_goal, decode_mission, decode_threat, decode_unit_state, keys
 from pfp_service.wire.messages import decode_team, decode_zone
 from pfp_service.wire.messages.structs import Bounds, ThreatUpdate
+from pfp_service.wire.messages.world import WorldSnapshot
 from pfp_service.world import translate
 from pfp_service.world.events import (
     Deliberated,
@@ -39,6 +48,7 @@ from pfp_service.world.events import (
     MissionShared,
     PeerPlanner,
     PeerTerrain,
+    SightLanded,
     StateReported,
     TeamPut,
     TeamRemoved,
@@ -51,23 +61,30 @@ from pfp_service.world.events import (
 
 __all__ = [
     "BY_INPUT",
+    "BY_NAME",
     "KINDS",
+    "LISTED",
     "STORED",
     "WRITES",
     "WRITE_OF",
+    "Held",
     "Kind",
     "LogLine",
     "Stored",
     "blame",
+    "held",
     "ident",
+    "inputs_from_snapshot",
     "log_line",
     "message",
     "rejected",
 ]
 
 K = keys.KeyKind
-Mode = Literal["write", "state", "token", "shared"]
+Mode = Literal["write", "state", "token", "peers", "shared"]  # how the node reads it (``node._wire``)
 Decoder = Callable[[bytes, Bounds | None, Origin | None], Any]
+# the records of the write kinds listed by kind in the world snapshot: ``kind.id`` -> (kind, id, message, expires_at)
+Held = Mapping[str, tuple[str, str, Any, float | None]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,8 +128,9 @@ class Kind:
         name: the kind's word in messages and logs (``goal``).
         key: its key in ``wire.keys``; the ``{id}`` chunk is the id of every input of it.
         mode: how the node reads it (module docstring).
-        inputs: its world inputs (a write kind's put, then its remove), then any other input
-            blamed on its key (a restored mission is a goal's).  The first field of each is the id.
+        inputs: its world inputs (a write kind's put, then its remove; a token's or shared kind's
+            one input), then any other input blamed on its key (a restored mission is a goal's).
+            The first field of each is the id.
         blames_unit: the id is a unit's, whose goal goes when applying one of these fails.
         schema: its message's name in ``wire.schema.MESSAGES`` (``None``: no payload).
         decode: payload, bounds, origin -> message; raises ``InputError``.
@@ -120,6 +138,9 @@ class Kind:
         own_unit: each unit may also write its own key (unless ``pfp acl --no-unit-goals``).
         store: its rows in the state database (``None``: not kept).
         log_put, log_remove: the log line of a put (id, message) and of a remove (id).
+        held: a write kind's records in force, read from the ``World``: id -> (message, expires_at).
+            Listed by kind in the world snapshot's ``writes``, so a joining planner learns them
+            (``None``: the snapshot lists it its own way: goals with their units, threats, zones).
     """
 
     name: str
@@ -134,10 +155,11 @@ class Kind:
     store: Stored | None = None
     log_put: Callable[[str, Any], LogLine] | None = None
     log_remove: Callable[[str], LogLine] | None = None
+    held: Callable[[Any], Mapping[str, tuple[Any, float | None]]] | None = None
 
     @property
     def put(self) -> type[Any]:
-        """A write kind's put input, ``put(id, message)``."""
+        """Its first input, ``put(id, message)``: a write kind's put, a token's ``(id, alive)``, a shared record."""
         return self.inputs[0]
 
     @property
@@ -156,7 +178,7 @@ class Kind:
     def make(
         self, ident: str, delete: bool, payload: bytes, bounds: Bounds | None, origin: Origin | None
     ) -> Input:
-        """A write kind's input for a put (``payload`` decoded) or a DELETE of ``ident``.
+        """A write (or shared) kind's input for a put (``payload`` decoded) or a DELETE of ``ident``.
 
         Raises:
             InputError: the payload does not decode.
@@ -259,7 +281,7 @@ KINDS: tuple[Kind, ...] = (
         "threat",
         K.THREAT,
         "write",
-        (ThreatPut, ThreatRemoved),
+        (ThreatPut, ThreatRemoved, SightLanded),
         schema="threat",
         decode=_decode_threat,
         writers=("reporter",),
@@ -285,11 +307,12 @@ KINDS: tuple[Kind, ...] = (
         "write",
         (TeamPut, TeamRemoved),
         schema="team",
-        decode=lambda data, _bounds, _origin: decode_team(data),
+        decode=decode_team,
         writers=("commander",),
         store=Stored("teams", "id"),
         log_put=_team_put,
         log_remove=_gone("team dissolved", "team %s dissolved", "team"),
+        held=lambda world: {tid: (team, None) for tid, team in world.teams.teams.items()},
     ),
     Kind(
         "unit state",
@@ -302,7 +325,7 @@ KINDS: tuple[Kind, ...] = (
         own_unit=True,
     ),
     Kind("unit token", K.ALIVE_UNIT, "token", (TokenChanged,), own_unit=True),
-    Kind("planner token", K.ALIVE_PLANNER, "token", (PeerPlanner, PeerTerrain), writers=("planner",)),
+    Kind("planner token", K.ALIVE_PLANNER, "peers", (PeerPlanner, PeerTerrain), writers=("planner",)),
     Kind(
         "mission",
         K.UNIT_MISSION,
@@ -317,6 +340,8 @@ KINDS: tuple[Kind, ...] = (
 
 WRITES: tuple[Kind, ...] = tuple(k for k in KINDS if k.mode == "write")
 BY_INPUT: dict[type[Any], Kind] = {cls: k for k in KINDS for cls in k.inputs}
+BY_NAME: dict[str, Kind] = {k.name: k for k in KINDS}
+LISTED: tuple[Kind, ...] = tuple(k for k in WRITES if k.held is not None)  # in the snapshot's ``writes``
 # the write kinds kept in the state database, a unit's (goals) after the rest: its tables are made, salvaged
 # and read back in this order (a restored mission is planned among the threats and zones in force)
 STORED: tuple[Kind, ...] = tuple(
@@ -364,3 +389,52 @@ def log_line(inp: object) -> LogLine | None:
     if put:
         return kind.log_put(ident(inp), message(inp)) if kind.log_put is not None else None  # type: ignore[arg-type]
     return kind.log_remove(ident(inp)) if kind.log_remove is not None else None  # type: ignore[arg-type]
+
+
+def held(world: Any) -> Held:
+    """The records of the write kinds listed by kind (``LISTED``) in ``world``, for the snapshot's ``writes``."""
+    return {
+        f"{k.name}.{ident}": (k.name, ident, msg, expires_at)
+        for k in LISTED
+        if k.held is not None
+        for ident, (msg, expires_at) in k.held(world).items()
+    }
+
+
+def inputs_from_snapshot(snap: WorldSnapshot, me: str) -> list[Input]:
+    """What a peer planner's world page says, as inputs: its writes listed by kind (``LISTED``: teams),
+    zones and threats (with the time left), goals and missions.
+
+    A planner started after threats and goals were published applies these and guides correctly
+    from its first direction.  Its own page is skipped.  A listed kind this planner does not know
+    (a newer planner's) is skipped; a body its kind's decoder refuses is an ``InputRejected`` on
+    its key.  A planner older than ``writes`` gives its teams in ``teams``.
+    """
+    if snap.planner == me:
+        return []
+    inputs: list[Input] = [TeamPut(t.id, t.team) for t in snap.teams] if not snap.writes_total else []
+    for w in snap.writes:
+        kind = BY_NAME.get(w.kind)
+        if kind is None or kind.held is None or kind.decode is None:
+            continue
+        try:
+            msg = kind.decode(msgspec.json.encode(w.body), None, None)
+        except InputError as err:
+            inputs.append(InputRejected(kind.key_of(snap.mission, w.id), err, kind.key))
+            continue
+        inputs.append(kind.put(w.id, _time_left(msg, w.ttl_s)))
+    inputs += [ZonePut(z.id, _time_left(z.zone, z.ttl_s)) for z in snap.zones]
+    inputs += [ThreatPut(t.id, _time_left(t.threat, t.ttl_s)) for t in snap.threats]
+    for u in snap.units:
+        if u.mission is not None:
+            params = Resolved(**msgspec.structs.asdict(u.mission.params))
+            origin = (u.mission.origin[0], u.mission.origin[1])
+            inputs.append(MissionRestored(u.id, u.mission.goal, origin, params))
+        elif u.goal is not None:
+            inputs.append(GoalSet(u.id, Goal(position=u.goal)))
+    return inputs
+
+
+def _time_left(msg: Any, ttl_s: float | None) -> Any:
+    """A peer's message with the time it has left as its own ``ttl_s`` (``None``: it does not expire)."""
+    return msg if ttl_s is None else msgspec.structs.replace(msg, ttl_s=max(ttl_s, 1e-3))

@@ -17,8 +17,15 @@ from typing import TypeVar
 import msgspec
 
 from pfp_service.wire import ThreatSummary, UnitKind, UnitSummary, WorldSnapshot
-from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, SNAPSHOT_PAGE_BYTES, TeamSummary, ZoneSummary
+from pfp_service.wire.messages import (
+    MAX_SNAPSHOT_ITEMS,
+    SNAPSHOT_PAGE_BYTES,
+    TeamSummary,
+    WriteSummary,
+    ZoneSummary,
+)
 from pfp_service.world.events import mission_of
+from pfp_service.world.kinds import Held
 from pfp_service.world.world_records import Records, UnitRecord
 
 __all__ = ["page"]
@@ -40,8 +47,11 @@ def page(
     zones_from: str | None = None,
     zones_limit: int | None = None,
     teams: Sequence[TeamSummary] = (),
+    held: Held | None = None,
+    writes_from: str | None = None,
+    writes_limit: int | None = None,
 ) -> WorldSnapshot:
-    """One page of what a planner holds, for the world queryable: zones, threats, then units, sorted by id.
+    """One page of what a planner holds, for the world queryable: zones, threats, writes, then units, sorted by id.
 
     Args:
         records: the world's records (read only).
@@ -55,6 +65,8 @@ def page(
         max_bytes: the page's items stop short of this much JSON
             (default ``SNAPSHOT_PAGE_BYTES``, so a reply always decodes).
         teams: the teams in force, listed first on the first page (as many as fit), on no other.
+        held: the records of the write kinds listed by kind (``world.kinds.Kind.held``), by
+            ``kind.id``: listed after the threats, from ``writes_from``, at most ``writes_limit``.
 
     Returns:
         The page; its ``next_unit``, ``next_threat`` and ``next_zone`` say where the next
@@ -67,7 +79,7 @@ def page(
     def fits(item: msgspec.Struct) -> bool:
         nonlocal room
         size = len(msgspec.json.encode(item)) + 1  # and its comma
-        if size > room and (units or threats or zones):
+        if size > room and (units or threats or zones or writes):
             return False
         room -= size
         return True
@@ -75,6 +87,7 @@ def page(
     units: list[UnitSummary] = []
     threats: list[ThreatSummary] = []
     zones: list[ZoneSummary] = []
+    writes: list[WriteSummary] = []
 
     def listing(
         records_of: Mapping[str, R],
@@ -114,7 +127,7 @@ def page(
         )
 
     listed_teams: list[TeamSummary] = []
-    if units_from is None and threats_from is None and zones_from is None:
+    if units_from is None and threats_from is None and zones_from is None and writes_from is None:
         listed_teams = list(itertools.takewhile(fits, teams[:MAX_SNAPSHOT_ITEMS]))
     next_zone = listing(
         records.zones,
@@ -129,6 +142,13 @@ def page(
         limit if threats_limit is None else threats_limit,
         lambda tid, t: ThreatSummary(id=tid, threat=t.update, ttl_s=ttl(t.expires_at)),
         threats,
+    )
+    next_write = listing(
+        held or {},
+        writes_from,
+        limit if writes_limit is None else writes_limit,
+        lambda _key, h: WriteSummary(kind=h[0], id=h[1], body=msgspec.to_builtins(h[2]), ttl_s=ttl(h[3])),
+        writes,
     )
     next_unit = listing(records.units, units_from, limit, unit_summary, units)
     return WorldSnapshot(
@@ -145,4 +165,7 @@ def page(
         next_unit=next_unit,
         next_threat=next_threat,
         next_zone=next_zone,
+        writes=writes,
+        writes_total=len(held or {}),
+        next_write=next_write,
     )

@@ -75,6 +75,10 @@ _ROUTE_KIND = {r: RouteKind(r.value) for r in Route}  # the core's names on the 
 SEEN_STEP_M = 25.0
 SEEN_SAMPLES = 513
 ZONE_REACH = 0.25  # a zone's box is widened by this share of its diagonal: its barrier's reach, generously
+# an escaping or deliberating unit may leave its straight corridor (an escape's detour, a foresight's
+# path): its corridor is then the box of its position and goal, widened by this share of their distance
+WIDE_REACH = 0.5
+WIDE_SAMPLES = 24  # over terrain, that box is looked at on this many points a side for a threat's sight
 Failed = list[tuple[UnitRecord, BaseException]]
 
 
@@ -303,6 +307,7 @@ def reached(
     intensity: str,
     zones: Sequence[tuple[float, float, float, float]] = (),
     sight: Sight | None = None,
+    wide: Sequence[bool] | None = None,
 ) -> list[bool]:
     """Which units (each with a stepper and a position) a change of the ``touched`` threats or zones can reach.
 
@@ -314,8 +319,12 @@ def reached(
     threat reaches only a unit it can see somewhere along that corridor
     (``_seen``): behind a ridge its term is zero, and so is its pull on the
     unit's direction.  Every other unit's direction is unchanged within the
-    cull bound.  If the vectorised test fails, every unit counts as reached:
-    dearer, never wrong.
+    cull bound.  A unit marked ``wide`` (escaping or deliberating: it may
+    leave its corridor) is reached when a touched threat or zone meets the
+    box of its position and goal widened by ``WIDE_REACH`` of their
+    distance, and over terrain when the threat sees somewhere in that box
+    (``_seen_in_box``).  If the vectorised test fails, every unit counts as
+    reached: dearer, never wrong.
     """
     if not guided:
         return []
@@ -339,9 +348,59 @@ def reached(
             zb = np.array(zones, dtype=float).reshape(-1, 4)
             pad = ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
             hit |= corridors_meet(starts, goals, zb + np.hstack([-pad, -pad, pad, pad]))
+        if wide is not None and any(wide):
+            w = np.flatnonzero(np.asarray(wide, dtype=bool) & ~hit)
+            hit[w] = _wide(starts[w], goals[w], touched, intensity, zones, sight)
         return hit.tolist()
     except Exception:
         return [True] * len(guided)
+
+
+def _wide(
+    starts: np.ndarray,
+    goals: np.ndarray,
+    touched: list[Threat],
+    intensity: str,
+    zones: Sequence[tuple[float, float, float, float]],
+    sight: Sight | None,
+) -> np.ndarray:
+    """``reached`` for units that may leave their corridor: their boxes widened by ``WIDE_REACH``."""
+    pad = WIDE_REACH * np.hypot(*(goals - starts).T)[:, None]
+    lo, hi = np.minimum(starts, goals) - pad, np.maximum(starts, goals) + pad
+    units = np.hstack([lo, hi])  # (n, 4): x0, y0, x1, y1
+    hit = np.zeros(len(units), dtype=bool)
+    if len(zones):
+        zb = np.array(zones, dtype=float).reshape(-1, 4)
+        zpad = ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
+        hit |= _boxes_meet(units, zb + np.hstack([-zpad, -zpad, zpad, zpad])).any(axis=1)
+    if touched:
+        boxes = influence_boxes(ThreatField(touched, intensity).packed)  # type: ignore[arg-type]
+        meet = _boxes_meet(units, boxes)  # (n, threats)
+        for j, threat in enumerate(touched):
+            for i in np.flatnonzero(meet[:, j] & ~hit):
+                hit[i] = sight is None or _seen_in_box(threat, boxes[j], units[i], intensity, sight)
+    return hit
+
+
+def _boxes_meet(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(len(a), len(b))``: whether box ``a[i]`` meets box ``b[j]`` (``x0, y0, x1, y1``)."""
+    return (
+        (a[:, None, 0] <= b[None, :, 2])
+        & (b[None, :, 0] <= a[:, None, 2])
+        & (a[:, None, 1] <= b[None, :, 3])
+        & (b[None, :, 1] <= a[:, None, 3])
+    )
+
+
+def _seen_in_box(threat: Threat, box: np.ndarray, unit: np.ndarray, intensity: str, sight: Sight) -> bool:
+    """Whether ``threat`` sees anywhere in the part of ``unit``'s box within its own ``box`` (``_seen``'s bound)."""
+    x0, y0 = max(box[0], unit[0]), max(box[1], unit[1])
+    x1, y1 = min(box[2], unit[2]), min(box[3], unit[3])
+    gx, gy = np.meshgrid(np.linspace(x0, x1, WIDE_SAMPLES), np.linspace(y0, y1, WIDE_SAMPLES))
+    pts = np.column_stack([gx.ravel(), gy.ravel()])
+    blind = ThreatField([threat], intensity).level(pts)  # type: ignore[arg-type]
+    masked = ThreatField([threat], intensity, sight=sight).level(pts)  # type: ignore[arg-type]
+    return bool(((blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any())
 
 
 def _seen(

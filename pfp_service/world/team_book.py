@@ -22,8 +22,9 @@ from collections.abc import Mapping, Sequence
 import msgspec
 
 from pfp_service.errors import InputError
-from pfp_service.wire import Direction, DirectionStatus, Progress
+from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
+from pfp_service.world import team_goal
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
 from pfp_service.world.teams import Point, Sight, Verdict
@@ -38,13 +39,15 @@ _ROUTE_STEPS = 16  # the main element's route ahead, in planner steps, before st
 class TeamBook:
     """The teams in force, keyed by id, and what their roles need remembered: each lead's track."""
 
-    def __init__(self) -> None:
+    def __init__(self, sight: Sight | None = None) -> None:
+        self.sight = sight  # line of sight over the world's terrain, for the controllers' links (fixed)
         self.teams: dict[str, TeamUpdate] = {}
         self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
         self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
         self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
+        self._placing: dict[str, Goal] = {}  # a team goal just put: each member's place, for the world to set
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -54,7 +57,16 @@ class TeamBook:
             self.remove(inp.team)
             return None, units
         err = self.put(inp.team, inp.update)
+        if err is None and _placing_changed(old, inp.update):
+            self._placing.update(team_goal.places(inp.update))
         return (err, set()) if err is not None else (None, units | set(inp.update.units()))
+
+    def placed(self, units: Mapping[str, UnitRecord]) -> list[tuple[str, Goal]]:
+        """The places a team goal just put gives its members, to be set as their goals: once each, and
+        none a member already has (a restored or shared mission for the very place stands)."""
+        out = [(u, g) for u, g in self._placing.items() if (r := units.get(u)) is None or r.goal != g]
+        self._placing = {}
+        return out
 
     def put(self, tid: str, team: TeamUpdate) -> InputError | None:
         """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is.
@@ -100,16 +112,15 @@ class TeamBook:
         """``(team, roles)`` of each team ``unit`` is in."""
         return [(tid, self.teams[tid].roles(unit)) for tid in self._of.get(unit, ())]
 
-    def summaries(self) -> list[TeamSummary]:
-        """The teams in force by id, each with what its roles last said of its members (``pfp status``)."""
-        return [
-            TeamSummary(
-                id=tid,
-                team=team,
-                notes=[f"{u}: {self.said[u]}"[:1024] for u in team.units() if u in self.said],
-            )
-            for tid, team in sorted(self.teams.items())
-        ]
+    def summaries(self, units: Mapping[str, UnitRecord]) -> list[TeamSummary]:
+        """The teams in force by id, each with what its roles last said of its members and its slowest
+        member's ETA (``pfp status``)."""
+        out = []
+        for tid, team in sorted(self.teams.items()):
+            eta_s, slowest = team_goal.eta(team, units)
+            notes = [f"{u}: {self.said[u]}"[:1024] for u in team.units() if u in self.said]
+            out.append(TeamSummary(id=tid, team=team, notes=notes, eta_s=eta_s, slowest=slowest))
+        return out
 
     def separation(self, unit: str) -> float | None:
         """The least distance ``unit``'s team asks its members to keep (``None``: by class): dispersion's seam."""
@@ -127,8 +138,10 @@ class TeamBook:
         Args:
             directions: the planner's directions of one batch.
             units: the world's records, for positions, goals, staleness and progress.
-            sight: line of sight between two points over the terrain, where there is terrain.
+            sight: line of sight between two points over the terrain, where there is terrain
+                (default: the book's own, the world's terrain's).
         """
+        sight = sight if sight is not None else self.sight
         if not self.teams:
             return list(directions)
         self._track(units)
@@ -245,7 +258,9 @@ class TeamBook:
         if unit in team.follow and _moving(out):
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
             track = self.tracks.get(tid, [])
-            out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost))
+            me = units.get(unit)
+            goal = me.goal.position if me is not None and me.goal is not None else None
+            out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost, goal))
             to = _end(out, to)
         if unit in team.robots and _moving(out):
             ctl = units.get(team.controller) if team.controller is not None else None
@@ -253,6 +268,21 @@ class TeamBook:
             c_at = ctl.position if ctl is not None else None
             out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
         return out
+
+
+def _placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:
+    """Whether a team put gives its members new places: a goal new, moved, or placed otherwise."""
+    if new.goal is None:
+        return False
+    if old is None:
+        return True
+    return (old.goal, old.offsets, old.spacing_m, old.separation_m, team_goal.column(old)) != (
+        new.goal,
+        new.offsets,
+        new.spacing_m,
+        new.separation_m,
+        team_goal.column(new),
+    )
 
 
 def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:

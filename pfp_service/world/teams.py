@@ -14,13 +14,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import shapely
 
 __all__ = [
     "GO",
+    "SIGHT_CLEARANCE_M",
     "STANDOFF_TOLERANCE",
     "Sight",
     "Verdict",
@@ -33,14 +34,28 @@ __all__ = [
 ]
 
 Point = tuple[float, float]
-# Whether two points see each other over the ground (a mast at each end); ``None`` where there is no terrain.
-Sight = Callable[[Point, Point], bool]
+
+
+class Sight(Protocol):
+    """Whether two points see each other over the ground (a mast at each end), the sight line clearing
+    it by ``clearance_m``; ``None`` where there is no terrain.  One with a ``resolution_m`` (the ground's
+    cell) is asked along a step every half of it at most, not finer."""
+
+    def __call__(self, a: Point, b: Point, clearance_m: float = 0.0) -> bool: ...
+
+
+# A robot's step keeps its sight line this far above the ground, where the link itself needs none: the
+# controller's own next step then does not put a robot stopped at the edge of its sight in the shadow.
+SIGHT_CLEARANCE_M = 1.0
 # The lead waits once it is this share of its standoff further ahead than asked (the issue's ±25 %).
 STANDOFF_TOLERANCE = 0.25
 # A step is judged at points this far apart at most (a fraction of the distance kept, so a corridor or a
 # radio range is never stepped over), and at no more than this many points.
 _SAMPLES_MAX = 64
 _CLOSE_M = 1.0  # a point this close to where the unit is: it is there
+# A follower is kept this share of the corridor's half-width inside its edge: a step cut where it would
+# leave ends on the edge itself, which a check of the track (rounding, another buffer) may put outside.
+_EDGE_SHARE = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,7 +202,13 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
 
 
 def follow(
-    at: Point, to: Point, track: Sequence[Point], corridor_m: float, lead_id: str, lost: str
+    at: Point,
+    to: Point,
+    track: Sequence[Point],
+    corridor_m: float,
+    lead_id: str,
+    lost: str,
+    goal: Point | None = None,
 ) -> Verdict:
     """A follower's step: only onto ground the lead has crossed (its ``track`` buffered by ``corridor_m / 2``).
 
@@ -198,6 +219,8 @@ def follow(
         corridor_m: the cleared corridor's width.
         lead_id: the lead's id, for the reasons.
         lost: why the lead cannot be followed (lost, stopped), or ``""`` when it can.
+        goal: the follower's goal, named in the hold at the end of the cleared ground when it lies
+            off the corridor (the follower holds there until the lead clears ground to it, or its goal moves).
 
     Returns:
         hold when the lead is lost or stopped, or at the end of the cleared ground; the step cut short
@@ -208,10 +231,10 @@ def follow(
         return _hold(f"holding: lead {lead_id} {lost}")
     if not track:
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
-    half = corridor_m / 2.0
+    half = corridor_m / 2.0 * (1.0 - _EDGE_SHARE)
     line = _Line(track)
     s_at, off_at = line.project(at)
-    if off_at > half:
+    if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
     if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
@@ -220,11 +243,18 @@ def follow(
     kept = _kept_in(room, at, to)
     if kept >= 1.0:
         return GO
-    if _dist(at, to) * kept >= _CLOSE_M:
+    s_goal, off_goal = line.project(goal) if goal is not None else (0.0, 0.0)
+    # its goal off the cleared ground, and the lead's track past it (not heading there): to the nearest of it
+    if off_goal > half + _CLOSE_M and s_goal < line.length - _CLOSE_M:
+        return _nearest_goal(line, track, half, at, s_at, s_goal, _dist(at, to), lead_id, off_goal - half)
+    cut = (at[0] + (to[0] - at[0]) * kept, at[1] + (to[1] - at[1]) * kept)
+    # a step cut short that would take it back along the track is not taken: pressed against the
+    # corridor's edge by its planner (a threat beside the track), it would go back and forth
+    if _dist(at, to) * kept >= _CLOSE_M and line.project(cut)[0] >= s_at - _CLOSE_M:
         return _shortened(at, to, kept, f"kept to the corridor {lead_id} cleared")
     cleared = line.length
     if s_at >= cleared - _CLOSE_M:  # never back along it
-        return _hold(f"at the end of the ground {lead_id} has cleared")
+        return _at_end(line, half, lead_id, goal)
     ahead = max(_dist(at, to), _CLOSE_M)
     while (
         ahead >= _CLOSE_M
@@ -233,7 +263,48 @@ def follow(
         if _dist(at, along) >= _CLOSE_M and _kept_in(room, at, along) >= 1.0:
             return Verdict("to", along, f"along the corridor {lead_id} cleared")
         ahead /= 2.0
+    return _at_end(line, half, lead_id, goal)
+
+
+def _at_end(line: _Line, half: float, lead_id: str, goal: Point | None) -> Verdict:
+    """The hold at the end of the cleared ground (naming its goal, when that lies off the ground)."""
+    off = line.project(goal)[1] - half if goal is not None else 0.0
+    if off > _CLOSE_M:
+        return _hold(f"at the end of the ground {lead_id} has cleared: {_off_goal(lead_id, off)}")
     return _hold(f"at the end of the ground {lead_id} has cleared")
+
+
+def _off_goal(lead_id: str, off: float) -> str:
+    return f"its goal lies {off:,.0f} m off the ground {lead_id} cleared (give the team a goal, or move it)"
+
+
+def _nearest_goal(
+    line: _Line,
+    track: Sequence[Point],
+    half: float,
+    at: Point,
+    s_at: float,
+    s_goal: float,
+    step: float,
+    lead_id: str,
+    off: float,
+) -> Verdict:
+    """A follower whose goal lies off the cleared ground goes along the track to the point nearest its
+    goal and holds there, saying so: it never enters ground its lead has not crossed, and does not
+    dither between its planner's pull and the corridor.  It goes on once the lead clears ground
+    nearer its goal, or its goal moves."""
+    why = _off_goal(lead_id, off)
+    if abs(s_goal - s_at) < _CLOSE_M:
+        return _hold(f"at the cleared ground nearest its goal: {why}")
+    sign = 1.0 if s_goal > s_at else -1.0
+    ahead = max(min(step, abs(s_goal - s_at)), _CLOSE_M)
+    room = _corridor_near(track, half, at, ahead + _CLOSE_M)
+    while ahead >= _CLOSE_M:
+        p = line.point_at(s_at + sign * ahead)
+        if _dist(at, p) >= _CLOSE_M and _kept_in(room, at, p) >= 1.0:
+            return Verdict("to", p, f"to the cleared ground nearest its goal: {why}")
+        ahead /= 2.0
+    return _hold(f"at the cleared ground nearest its goal: {why}")
 
 
 def _corridor_near(track: Sequence[Point], half: float, at: Point, reach: float) -> shapely.Geometry:
@@ -302,8 +373,8 @@ def link(
         return _hold(f"lost link: controller {controller} {lost or 'has no position'}")
     c = controller_at
 
-    def linked(p: Point) -> bool:
-        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p))
+    def linked(p: Point, clearance_m: float = 0.0) -> bool:
+        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p, clearance_m))
 
     if not linked(at):
         far = _dist(at, c)
@@ -313,9 +384,14 @@ def link(
             else f"out of {controller}'s line of sight"
         )
         return Verdict("to", c, f"lost link ({why}): turning back")
-    # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow
-    spacing = max(radio_range_m / 16.0, _CLOSE_M) if sight is None else _dist(at, to) / _SAMPLES_MAX
-    kept = _kept(at, to, linked, spacing)
+    # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
+    # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
+    spacing = (
+        max(radio_range_m / 16.0, _CLOSE_M)
+        if sight is None
+        else max(_dist(at, to) / _SAMPLES_MAX, getattr(sight, "resolution_m", 0.0) / 2.0)
+    )
+    kept = _kept(at, to, lambda p: linked(p, SIGHT_CLEARANCE_M), spacing)
     beyond = (
         f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
         if _dist(to, c) > radio_range_m

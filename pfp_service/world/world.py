@@ -30,8 +30,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import (
     Direction,
     Goal,
-    ThreatChange,
-    ThreatUpdate,
+    ThreatUpdate,  # noqa: F401 -- named from here by its callers
     UnitState,
     WorldSnapshot,
     keys,
@@ -47,9 +46,11 @@ from pfp_service.world.liveness import UNIT_TIMERS, Liveness
 from pfp_service.world.lookahead import owed_share
 from pfp_service.world.snapshot import page as snapshot_page
 from pfp_service.world.team_book import TeamBook
+from pfp_service.world.terrain import link_sight
+from pfp_service.world.threat_puts import ThreatPuts
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
-from pfp_service.world.world_records import Records, ThreatRecord, ZoneRecord
+from pfp_service.world.world_records import Records, ZoneRecord
 
 __all__ = ["World", *ev.__all__]
 
@@ -74,7 +75,8 @@ class World:
         self._live = Liveness(s, self._book, self._timers)
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
         self.limits = Limits()
-        self.teams = TeamBook()  # the teams in force: their roles' verdicts on the directions
+        self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
+        self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
         self._disp = dispersion.Dispersion(
             s.dispersion, self._units, self._book.yielded
         )  # off unless enabled
@@ -113,11 +115,13 @@ class World:
         threats_limit: int | None = None,
         zones_from: str | None = None,
         zones_limit: int | None = None,
+        writes_from: str | None = None,
+        writes_limit: int | None = None,
     ) -> WorldSnapshot:
-        """One page of what the planner holds, for the world queryable (``snapshot.page``)."""
-        s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit)
-        teams = self.teams.summaries()
-        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_from, zones_limit, teams)
+        """One page of what the planner holds, for the world queryable (``snapshot.page``); ``writes``: ``kinds.held``."""
+        s, page = self.settings, (limit, units_from, threats_from, max_bytes, threats_limit, zones_from)
+        listed = (self.teams.summaries(self._units), kinds.held(self), writes_from, writes_limit)
+        return snapshot_page(self._rec, now, s.mission, s.planner_id, *page, zones_limit, *listed)
 
     def next_deadline(self) -> float | None:
         """When the world next needs an ``apply`` (a ``Tick`` will do), on the clock ``apply`` is given.
@@ -194,9 +198,11 @@ class World:
                     self._rec.drop_mission(rec)
                     self._tell(rec, b)
             case ev.ThreatPut(tid, update):
-                self._threat_put(tid, update, b)
+                self._puts.put(tid, update, b)
             case ev.ThreatRemoved(tid):
-                self._threat_gone(self._rec.remove_threat(tid), tid, "removed", b)
+                self._puts.gone(self._rec.remove_threat(tid), tid, "removed", b)
+            case ev.SightLanded():
+                self._puts.landed(inp, b)
             case ev.ZonePut(zid, update):
                 self._zone_put(zid, update, b)
             case ev.ZoneRemoved(zid):
@@ -224,6 +230,8 @@ class World:
             case ev.Tick(t, shed):
                 self.limits.overload += shed
                 self._run_timers(t, b)
+            case _:  # a kind in the table without its case here: rejected on its key, never dropped unsaid
+                raise TypeError(f"no handler for {type(inp).__name__} in World._apply_one")
 
     # -- bulkheads ------------------------------------------------------------------
     def _key(self, kind: keys.KeyKind, ident: str) -> str:
@@ -316,26 +324,6 @@ class World:
             self._start(rec, b)
             self._tell(rec, b)
 
-    def _threat_put(self, tid: str, msg: ThreatUpdate, b: Batch) -> None:
-        s = self.settings
-        if tid not in self._threats and len(self._threats) >= s.max_threats:
-            self.limits.overload += 1
-            err = InputError("$", f"planner at max_threats ({s.max_threats})")
-            self._reject(keys.threat(s.mission, tid), err, b, K.THREAT)
-            return
-        ttl = msg.ttl_s if msg.ttl_s is not None else s.threat_ttl_s
-        try:
-            threat = translate.threat(msg, tid)
-        except translate.ShapeError as exc:  # restored, or a peer's: a write is checked when decoded
-            self._reject(keys.threat(s.mission, tid), translate.refusal(exc), b, K.THREAT)
-            return
-        new = ThreatRecord(msg, threat, None if ttl is None else b.now + ttl)
-        old = self._rec.put_threat(tid, new)
-        b.touched += [new.threat] if old is None else [old.threat, new.threat]
-        if new.expires_at is not None:
-            self._timers.set(new.expires_at, "expire", tid)
-        b.changes.append(ThreatChange(threat=tid, change="put", position=msg.position))
-
     def _zone_put(self, zid: str, msg: ZoneUpdate, b: Batch) -> None:
         s = self.settings
         if zid not in self._rec.zones and len(self._rec.zones) >= s.max_zones:
@@ -364,15 +352,12 @@ class World:
             self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
         for rec in filter(None, map(self._units.get, units)):
             self._tell(rec, b)
+        for unit, goal in self.teams.placed(self._units):  # a team goal: each member's place, its goal
+            self._adopt(unit, goal, None, b)
 
     def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: Batch) -> None:
         if z is not None:
             b.zones.append((zid, change, z.zone.bounds()))
-
-    def _threat_gone(self, t: ThreatRecord | None, tid: str, change: str, b: Batch) -> None:
-        if t is not None:
-            b.touched.append(t.threat)
-            b.changes.append(ThreatChange(threat=tid, change=change, position=t.update.position))
 
     def _deliberated(self, done: ev.Deliberated, b: Batch) -> None:
         rec = self._units.get(done.unit)
@@ -389,15 +374,20 @@ class World:
                 if kind == "peer":  # a peer's token gone for the whole debounce: its units move
                     self._cluster.settle(ident, now, b)
                 elif kind == "expire":
-                    self._threat_gone(self._rec.expire(ident, now), ident, "expired", b)
+                    self._puts.gone(self._rec.expire(ident, now), ident, "expired", b)
+                elif kind == "sight":  # a threat's window not landed in time: in force blind
+                    self._puts.give_up(ident, b)
                 elif kind == "zone_expire":
                     self._zone_gone(self._rec.expire_zone(ident, now), ident, "expired", b)
                 elif kind in UNIT_TIMERS and (rec := self._units.get(ident)) is not None:
                     self._live.due(kind, rec, now, b.out)
             except Exception as exc:  # the bulkhead: this timer alone fails
-                on = {"expire": K.THREAT, "zone_expire": K.ZONE, "peer": K.ALIVE_PLANNER}.get(
-                    kind, K.UNIT_GOAL
-                )
+                on = {
+                    "expire": K.THREAT,
+                    "sight": K.THREAT,
+                    "zone_expire": K.ZONE,
+                    "peer": K.ALIVE_PLANNER,
+                }.get(kind, K.UNIT_GOAL)
                 self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, on, exc)
 
     # -- planning -------------------------------------------------------------------
@@ -416,19 +406,19 @@ class World:
     def _world_changed(self, b: Batch) -> None:
         """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
 
-        A unit out of reach, neither escaping nor deliberating, keeps its
-        direction: a contingency costs what it touches, not the whole fleet.
+        A unit out of reach keeps its direction (one escaping or deliberating
+        out of its wider reach, its job too): a contingency costs what it
+        touches, not the whole fleet.
         """
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
+        wide = [r.stepper.escaping or r.job is not None or r.stepper.pending is not None for r in guided]  # type: ignore[union-attr]
         reached = steering.reached(
-            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight
+            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight, wide
         )
         rejudge, tell = self._book.rejudge, self._tell  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
-                st = rec.stepper
-                assert st is not None
-                if hit or st.escaping or rec.job is not None or st.pending is not None:
+                if hit:
                     rejudge(rec)
                     tell(rec, b)
             except Exception as exc:

@@ -18,10 +18,11 @@ import numpy as np
 from pfp_service.core import Threat, ThreatField
 from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
+from pfp_service.core.visibility import Window, reach_box
 from pfp_service.core.zones import Zone, ZoneSet
 from pfp_service.wire import Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
-from pfp_service.world.terrain import Ground, ground_zones, sight_of
+from pfp_service.world.terrain import Ground, Looks, SightAsk, SightKey, ground_zones, sight_key
 from pfp_service.world.units import UnitRecord, Units
 
 __all__ = ["Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
@@ -33,6 +34,8 @@ class ThreatRecord:
     threat: Threat
     expires_at: float | None
     row: np.ndarray | None = None  # the threat's packed row in the field, once packed (``Records.field``)
+    seen: SightKey | None = None  # over terrain, its window's key (``world.terrain.sight_key``)
+    blind: bool = False  # over terrain, in force before its window landed (``Records.give_up``)
 
 
 @dataclass(slots=True)
@@ -56,10 +59,11 @@ class Records:
         self._zone_set: ZoneSet | None = None  # built when asked, until the zones change
         self.cull: CullIndex | None = None
         self._stats: FieldStats | None = None  # the threats' ``field_stats``: at first use, until they change
-        self.sight, self._barriers = (
-            sight_of(ground),
-            ground_zones(ground),
-        )  # the terrain's (``world.terrain``)
+        # the terrain's (``world.terrain``): the ground, for a worker rebuilding the field; the windows
+        # landed, which the world's rows are masked by; the threats held for theirs, with when to give up
+        self.ground, self._barriers = ground, ground_zones(ground)
+        self.sight: Looks | None = Looks() if ground is not None else None
+        self.held: dict[str, tuple[ThreatRecord, float]] = {}
 
     @property
     def field(self) -> ThreatField:
@@ -72,7 +76,7 @@ class Records:
                         t.row = ThreatField([t.threat], self.intensity, sight=self.sight).packed[0]  # type: ignore[arg-type]
                 threats, rows = [t.threat for t in ordered], [t.row for t in ordered]
                 self._bare = ThreatField.from_rows(threats, rows, self.intensity)  # type: ignore[arg-type]
-                self._bare.sight = self.sight  # a worker rebuilds the field from its threats with it
+                self._bare.sight = self.ground  # a worker rebuilds the field from its threats with it
                 self.cull = CullIndex(self._bare.packed) if len(ordered) >= MIN_THREATS else None
                 self._stats = None  # a wave changes the threats and starts no mission: ``stats`` when asked
             self._field = self._bare.with_zones(self.zone_set) if self.zones or self._barriers else self._bare
@@ -120,7 +124,57 @@ class Records:
 
     def remove_threat(self, tid: str) -> ThreatRecord | None:
         self._bare = self._field = None
+        self.held.pop(tid, None)
         return self.threats.pop(tid, None)
+
+    # -- a threat's sight over terrain (``world.terrain``) ------------------------------
+    def hold(self, tid: str, record: ThreatRecord, until: float) -> tuple[bool, SightAsk | None]:
+        """Whether ``record`` waits for its window (until ``until`` at most), and the ask for it if not asked yet.
+
+        Not held: no terrain, its window landed already, or the threat in
+        force stands on the same key (a put again where it stood).
+        """
+        if self.sight is None:
+            return False, None
+        box = reach_box(ThreatField([record.threat], self.intensity).packed[0])  # type: ignore[arg-type]
+        record.seen = key = sight_key(record.threat, box)
+        now_in = self.threats.get(tid)
+        if key in self.sight or (now_in is not None and now_in.seen == key):
+            if key not in self.sight and now_in is not None:  # in force blind still: masked when it lands
+                record.blind = now_in.blind
+            self.held.pop(tid, None)
+            return False, None
+        before = self.held.get(tid)
+        asked = before is not None and before[0].seen == key  # a put again while its window is on its way
+        self.held[tid] = (record, before[1] if asked and before is not None else until)
+        return True, None if asked else SightAsk(tid, key, record.threat, box)
+
+    def landed(self, tid: str, key: SightKey, window: Window | None) -> tuple[str, ThreatRecord] | None:
+        """A window landed: ``("put", record)`` for a threat held for it, ``("seen", record)`` for one in force
+        blind, whose row is masked now; ``None``: for a threat since moved or removed (dropped)."""
+        if self.sight is None:  # no terrain: nothing was asked
+            return None
+        held = self.held.get(tid)
+        now_in = self.threats.get(tid)
+        if held is not None and held[0].seen == key:
+            del self.held[tid]
+            self.sight.land(key, window, len(self.threats) + 1)
+            return "put", held[0]
+        if now_in is not None and now_in.seen == key and now_in.blind:
+            self.sight.land(key, window, len(self.threats))
+            now_in.blind, now_in.row = False, None
+            self._bare = self._field = None
+            return "seen", now_in
+        return None
+
+    def give_up(self, tid: str, now: float) -> ThreatRecord | None:
+        """The threat held for its window until ``now``, to take force blind; ``None``: none is due."""
+        held = self.held.get(tid)
+        if held is None or held[1] > now:
+            return None
+        del self.held[tid]
+        held[0].blind = True
+        return held[0]
 
     def expire(self, tid: str, now: float) -> ThreatRecord | None:
         """Remove a threat whose TTL has run out at ``now`` (one put again since is kept); returns it."""

@@ -59,7 +59,7 @@ def test_store_restores_threats_with_the_time_left_goals_and_missions(tmp_path):
     store.close()
 
     again = Store(tmp_path / "s").restore(wall_now=1004.0)
-    assert (again.threats, again.goals, again.missions, again.expired) == (2, 1, 1, 0)
+    assert (again.kept["threat"], again.kept["goal"], again.missions, again.expired) == (2, 1, 1, 0)
     puts = {i.threat: i.update for i in again.inputs if isinstance(i, ThreatPut)}
     assert set(puts) == {"e1", "short"} and math.isclose(puts["short"].ttl_s, 6.0)
     (mission,) = [i for i in again.inputs if isinstance(i, MissionRestored)]

@@ -88,3 +88,47 @@ def test_a_simulated_team_meets_its_expectations() -> None:
     ):
         v = judge(e, watch)
         assert v.held, (e.describe(), v.detail)
+
+
+def test_add_team_is_read_with_the_wire_s_checks_and_a_team_arrival_is_judged_on_its_last_member(
+    tmp_path,
+) -> None:
+    from pfp_clients.script import AddTeam, team_members
+
+    p = tmp_path / "inject.yaml"
+    p.write_text(
+        "timeline:\n"
+        "  - {do: add_team, team: alpha, lead: r1, follow: [m1], controller: m1, robots: [r1],\n"
+        "     goal: {position: [240, 0], tolerance: 1}, spacing_m: 8}\n"
+        "  - {do: remove_team, team: alpha, at_s: 100}\n"
+        "expect:\n"
+        "  - {team: alpha, arrives_within_s: 120}\n"
+    )
+    script = load_script(p)
+    (add, _gone) = script.timeline
+    assert isinstance(add, AddTeam) and add.update().goal is not None and add.update().spacing_m == 8.0
+    assert add.describe() == "add team alpha: r1 m1, its goal (240, 0)"
+    assert team_members(script) == {"alpha": ("r1", "m1")}
+    assert script.expect[0].describe() == "team alpha arrives within 120 s"
+    w = _watch({"r1": [(0.0, 0.0)], "m1": [(0.0, 0.0)]})
+    e = script.expect[0]
+    v = judge(e, w, teams=team_members(script))
+    assert not v.held and v.detail == "r1 not arrived (last status: never heard of)"
+    w.on_arrived_event("r1", 80.0)
+    w.on_arrived_event("m1", 95.5)
+    v = judge(e, w, teams=team_members(script))
+    assert v.held and v.detail == "arrived at 95.5 s (the last, m1)"
+    w.arrived_at_s["m1"] = 130.0
+    assert not judge(e, w, teams=team_members(script)).held
+    # a team the wire refuses is refused in the file, naming the field; so is an expectation of a team never added
+    p.write_text("timeline:\n  - {do: add_team, team: alpha, lead: r1, follow: [r1]}\n")
+    with pytest.raises(InputError) as err:
+        load_script(p)
+    assert "inject.yaml line 2" in err.value.path and "cannot follow itself" in err.value.reason
+    p.write_text("expect:\n  - {team: bravo, arrives_within_s: 10}\n")
+    with pytest.raises(InputError) as err:
+        load_script(p)
+    assert err.value.path == "inject.yaml line 2, expect[0].team"
+    p.write_text("expect:\n  - {team: bravo, unit: m1, arrives_within_s: 10}\n")
+    with pytest.raises(InputError):
+        load_script(p)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 import threading
+import typing
 from pathlib import Path
 
 import pytest
@@ -14,18 +15,19 @@ from pfp_service.errors import InputError
 from pfp_service.node import access
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.store import TABLES, Store
-from pfp_service.node.writes import Writes, subscriptions
-from pfp_service.wire import encode, keys
-from pfp_service.wire.examples import examples
+from pfp_service.node.writes import Writes
+from pfp_service.wire import RestoredEvent, decode_event, decode_world_query, encode, keys
+from pfp_service.wire.contract import examples
 from pfp_service.wire.schema import LIVELINESS, MESSAGES
 from pfp_service.world import kinds
-from pfp_service.world.events import InputRejected, MissionRestored, Tick
+from pfp_service.world.events import Input, InputRejected, MissionRestored, Tick, WorldSettings, Written
 from pfp_service.world.kinds import KINDS, STORED, WRITES
 
 pytestmark = pytest.mark.unit
 
 M = "m1"
-DOCS = Path(__file__).resolve().parents[2] / "docs" / "wire.md"
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs" / "wire.md"
 
 
 def _example(kind: kinds.Kind):
@@ -57,12 +59,25 @@ def test_its_schema_is_the_contract_message_of_its_key_and_its_decoder_reads_it(
     assert kind.decode is not None and kind.decode(encode(msg), None, None) == msg
 
 
-def test_the_node_subscribes_to_and_serves_every_write_kind_once():
-    subs = subscriptions(M)
-    assert [k for k, _ in subs] == list(WRITES)
-    for kind, key_expr in subs:
-        assert key_expr == keys.TEMPLATES[kind.key].format(mission=M, id="*")
-        assert keys.parse(key_expr.replace("*", "x1")) == keys.Key(kind.key, M, "x1")
+@pytest.mark.parametrize("kind", KINDS, ids=lambda k: k.name)
+def test_each_kind_has_a_mode_the_node_wires_and_a_wildcard_of_its_own_key(kind):
+    # node._wire matches on the mode with assert_never, so mypy refuses a mode it does not wire;
+    # tests/proc/test_kinds_wiring.py checks the subscriptions a real node declares
+    assert kind.mode in typing.get_args(kinds.Mode)
+    key_expr = kind.wildcard(M)
+    assert key_expr == keys.TEMPLATES[kind.key].format(mission=M, id="*")
+    assert keys.parse(key_expr.replace("*", "x1")) == keys.Key(kind.key, M, "x1")
+
+
+@pytest.mark.parametrize("kind", KINDS, ids=lambda k: k.name)
+def test_a_write_kinds_inputs_and_only_those_are_written(kind):
+    # Input names events.Written once: a new kind's put and remove derive from it, wherever declared
+    written = [issubclass(cls, Written) for cls in kind.inputs]
+    if kind.mode == "write":
+        assert written[:2] == [True, True] and not any(written[2:])
+    else:
+        assert not any(written)
+    assert all(cls in typing.get_args(Input) or issubclass(cls, Written) for cls in kind.inputs)
 
 
 @pytest.mark.parametrize("kind", WRITES, ids=lambda k: k.name)
@@ -115,7 +130,7 @@ def test_the_acl_grants_each_write_kind_to_its_writers_and_the_planner_only(kind
 def test_the_acl_lets_the_writers_of_each_other_kind_write_it(kind):
     team = access.Mission(M, ("p1",), ("u1",))
     by_name = {p.name: p.grants for p in access.principals_for(team, {"p1": ("planner",)})}
-    how = ("liveliness_token",) if kind.mode == "token" else ("put",)
+    how = ("liveliness_token",) if kind.mode in ("token", "peers") else ("put",)
     for role in kind.writers:
         assert role == "planner"  # the only mission-wide writer of these today
         key = kind.key_of(M, "p1")
@@ -145,6 +160,20 @@ def test_each_stored_kind_has_its_table_and_comes_back_from_the_store(kind, tmp_
         assert store.restore(1001.0).inputs == []
     finally:
         store.close()
+
+
+def test_the_restored_event_counts_every_stored_kind_by_name(tmp_path):
+    store = Store(tmp_path)
+    try:
+        store.commit_inputs([k.put(f"x{i}", _example(k)) for i, k in enumerate(STORED)], 1000.0, None)
+        kept = store.restore(1000.0).kept
+    finally:
+        store.close()
+    assert kept == {k.name: 1 for k in STORED}
+    ev = RestoredEvent.counted(kept, planner="p1", missions=0, expired=0)
+    back = decode_event(encode(ev))  # a kind's name is a valid key of the wire's ``kinds``
+    assert isinstance(back, RestoredEvent) and back.kinds == kept
+    assert (back.threats, back.goals, back.zones, back.teams) == (1, 1, 1, 1)  # older readers' fields
 
 
 def test_a_units_rows_are_restored_after_the_rest_and_as_its_mission_where_recorded(tmp_path):
@@ -215,3 +244,73 @@ def test_the_docs_key_table_has_each_kind_with_its_schema(kind):
         assert who == "liveliness token"
     if kind.mode == "write":
         assert who == "any → planner" and "a DELETE" in payload
+
+
+@pytest.mark.parametrize("kind", WRITES, ids=lambda k: k.name)
+def test_the_world_has_a_handler_for_each_write_kinds_put_and_remove(kind):
+    from pfp_service.world.world import World
+
+    w = World(WorldSettings(mission=M))
+    for inp in (kind.put("x1", _example(kind)), kind.remove("x1")):
+        out = w.apply([inp], 0.0)  # an input no case takes is a fault (``_apply_one``'s last case)
+        assert not out.faults, out.faults
+
+
+def test_the_docs_list_of_files_a_new_kind_touches_names_real_files_and_at_most_six():
+    text = (ROOT / "docs" / "development.md").read_text()
+    said = re.search(r"A new write kind \(.*?\) is these edits, (\d+) files:\n\n(.*?)\n\n", text, re.S)
+    assert said, "docs/development.md: no 'A new write kind ... is these edits, N files:' list"
+    files = re.findall(r"^\d+\. `([^`]+)`", said[2], re.M)
+    assert len(files) == int(said[1]) <= 6
+    for f in files:
+        assert (ROOT / f).is_file(), f
+    # each derived piece reads the table: none of the node's modules is on the list
+    assert not any(f.startswith("pfp_service/node/") for f in files)
+
+
+def _paged(world):
+    """``world``'s pages as a peer answers them, one item of each list a page."""
+
+    def ask(selector: str, _timeout_s: float) -> list[bytes]:
+        q = decode_world_query(selector.partition("?")[2])
+        page = world.snapshot(
+            1.0,
+            min(q.units_limit, 1),
+            q.units_from,
+            q.threats_from,
+            threats_limit=min(q.threats_limit, 1),
+            zones_from=q.zones_from,
+            zones_limit=min(q.zones_limit, 1),
+            writes_from=q.writes_from,
+            writes_limit=min(q.writes_limit, 1),
+        )
+        return [encode(page)]
+
+    return ask
+
+
+@pytest.mark.parametrize("kind", WRITES, ids=lambda k: k.name)
+def test_a_joining_planner_learns_each_write_kind_from_a_peers_pages(kind):
+    from pfp_service.node.worldpages import fetch_world
+    from pfp_service.world.world import World
+
+    def world(pid: str) -> World:
+        return World(WorldSettings(mission=M, planner_id=pid))
+
+    def held(w: World) -> dict[str, list[tuple[object, ...]]]:  # each list's ids and time left (a put's
+        s = w.snapshot(1.0)  # own ttl_s is the time left once learnt), and each unit's goal
+        return {
+            "units": [(u.id, u.goal) for u in s.units],
+            "threats": [(t.id, t.ttl_s) for t in s.threats],
+            "zones": [(z.id, z.ttl_s) for z in s.zones],
+            "writes": [(x.kind, x.id, x.ttl_s) for x in s.writes],
+        }
+
+    peer, empty = world("p1"), world("p1")
+    peer.apply([kind.put("x1", _example(kind))], 0.0)
+    assert held(peer) != held(empty), f"{kind.name}: not in the world snapshot (a list, or Kind.held)"
+    joined = fetch_world(_paged(peer), M, "p2")
+    assert joined.complete and joined.inputs
+    learnt = world("p2")
+    learnt.apply(joined.inputs, 1.0)  # at the time the pages were read: the same time left
+    assert held(learnt) == held(peer)

@@ -206,6 +206,8 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "ZoneUpdate": (set(), {"kind", "polygon", "circle", "ttl_s"}),
     "ZoneCircle": ({"centre", "radius_m"}, set()),
     "ZoneSummary": ({"id", "zone"}, {"ttl_s"}),
+    # added with the write kinds listed by kind (issue 31)
+    "WriteSummary": ({"kind", "id", "body"}, {"ttl_s"}),
     # added with teams
     "TeamSummary": ({"id", "team"}, {"notes"}),
     "TeamUpdate": (

@@ -56,10 +56,13 @@ def test_a_corrupt_page_is_moved_aside_kept_and_the_readable_rows_salvaged(tmp_p
     assert aside.name == "state.sqlite3.corrupt-20231114T221320Z" and aside.exists()
     assert GARBAGE in aside.read_bytes()  # kept as found
     assert r.corrupt >= 1
-    assert (r.threats, r.goals) == (0, 200)  # the goals' pages were readable: every goal is back
+    assert (r.kept["threat"], r.kept["goal"]) == (
+        0,
+        200,
+    )  # the goals' pages were readable: every goal is back
     # the fresh file is sound, and a second start finds nothing wrong
     again = Store(tmp_path).restore(1000.0)
-    assert (again.corrupt, again.set_aside, again.goals) == (0, "", 200)
+    assert (again.corrupt, again.set_aside, again.kept["goal"]) == (0, "", 200)
 
 
 @pytest.mark.unit
@@ -70,7 +73,7 @@ def test_a_file_that_is_not_a_database_starts_empty_and_is_kept(tmp_path):
     assert r.inputs == [] and r.corrupt >= 1 and Path(r.set_aside).read_bytes().startswith(b"this is not")
     store.commit_inputs([GoalSet("u", Goal(position=(1, 1)))], 0.0, None)  # and it works
     store.close()
-    assert Store(tmp_path).restore(0.0).goals == 1
+    assert Store(tmp_path).restore(0.0).kept["goal"] == 1
 
 
 @pytest.mark.unit
@@ -87,7 +90,7 @@ def test_rows_past_a_damaged_page_are_salvaged(tmp_path):
     _scribble(db, offset=(middle - 1) * page_size, data=GARBAGE[:page_size])  # one leaf in the middle
     r = Store(tmp_path).restore(0.0)
     assert r.set_aside and r.corrupt >= 1
-    assert 1800 < r.goals < 2000  # the rest of the table, either side of the lost leaf
+    assert 1800 < r.kept["goal"] < 2000  # the rest of the table, either side of the lost leaf
 
 
 @pytest.mark.unit
@@ -111,7 +114,7 @@ def test_damage_to_any_page_never_raises_and_the_store_works_after(tmp_path, kin
             _scribble(d / "state.sqlite3", page * 4096 + rng.randrange(4096), rng.randbytes(1))
         store = Store(d)
         r = store.restore(1000.0)  # never raises
-        assert r.goals <= 200 and r.threats <= 50, (seed, page)
+        assert r.kept["goal"] <= 200 and r.kept["threat"] <= 50, (seed, page)
         assert bool(r.set_aside) <= (r.corrupt >= 1), (seed, page)
         store.commit_inputs([GoalSet("after", Goal(position=(1, 1)))], 1000.0, None)
         store.close()
@@ -131,7 +134,7 @@ def test_the_wal_of_a_killed_planner_shadows_a_damaged_page(tmp_path):
     store.close()
     _scribble(snap / "state.sqlite3")
     r = Store(snap).restore(0.0)
-    assert (r.goals, r.corrupt, r.set_aside) == (50, 0, "")
+    assert (r.kept["goal"], r.corrupt, r.set_aside) == (50, 0, "")
 
 
 @pytest.mark.unit
@@ -145,7 +148,7 @@ def test_a_corrupt_row_is_skipped_named_kept_and_the_rest_loads(tmp_path):
     con.close()
     r = Store(tmp_path).restore(1000.0)
     assert set(r.skipped) == {"goals/u2", "threats/e1", "missions/u3"} and r.corrupt == 3
-    assert (r.threats, r.goals, r.missions, r.set_aside) == (2, 4, 0, "")
+    assert (r.kept["threat"], r.kept["goal"], r.missions, r.set_aside) == (2, 4, 0, "")
     assert not any(isinstance(i, MissionRestored) for i in r.inputs)  # u3 comes back from its goal
     assert GoalSet("u3", Goal(position=(10, 3))) in r.inputs
     # kept out of the way, so the next start is clean

@@ -59,8 +59,8 @@ def test_follow_takes_the_track_when_its_step_leaves_the_corridor_at_once() -> N
 def test_follow_holds_at_the_end_of_the_cleared_ground_and_when_the_lead_is_lost() -> None:
     track = [(0.0, 0.0), (100.0, 0.0)]
     v = roles.follow((100.0, 0.0), (130.0, 0.0), track, 10.0, "r1", "")  # into the corridor's end cap
-    assert v.kind == "to" and v.to == pytest.approx((105.0, 0.0))
-    v = roles.follow((105.0, 0.0), (130.0, 0.0), track, 10.0, "r1", "")
+    assert v.kind == "to" and v.to == pytest.approx((104.9, 0.0))  # 2 % of the half-width inside its edge
+    v = roles.follow((104.9, 0.0), (130.0, 0.0), track, 10.0, "r1", "")
     assert v.kind == "hold" and v.reason == "at the end of the ground r1 has cleared"
     v = roles.follow((10.0, 0.0), (30.0, 0.0), track, 10.0, "r1", "is lost (no report for a while)")
     assert v.kind == "hold" and v.reason == "holding: lead r1 is lost (no report for a while)"
@@ -108,10 +108,10 @@ def _ridge_sight() -> roles.Sight:
     ctl = (20, 10)  # row = y + 20, col = x
     lowest = lowest_visible_height(z, ctl, 2.0, 1e9, 1.0)
 
-    def sight(c: tuple[float, float], p: tuple[float, float]) -> bool:
+    def sight(c: tuple[float, float], p: tuple[float, float], clearance_m: float = 0.0) -> bool:
         assert (round(c[1]) + 20, round(c[0])) == ctl
         r, col = round(p[1]) + 20, round(p[0])
-        return bool(lowest[r, col] <= 2.0)
+        return bool(lowest[r, col] <= 2.0 - clearance_m)
 
     return sight
 

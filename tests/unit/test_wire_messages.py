@@ -12,7 +12,7 @@ import pytest
 
 from pfp_service.errors import InputError
 from pfp_service.wire import messages as m
-from pfp_service.wire.examples import examples
+from pfp_service.wire.contract import examples
 
 BIG = 7.77e77  # written as 1e999 on the wire: parses to infinity
 MISSING = object()

@@ -51,8 +51,8 @@ def test_a_superseded_job_never_overwrites_a_newer_result():
     w = _deferred(planner=PlannerParams(escape="auto"))
     out = w.apply([*_horseshoe(), _state("u", 0, 0), GoalSet("u", Goal(position=(100, 100)))], 0.0)
     (old,) = out.jobs
-    # the world changes before the job lands: a new job is asked, the old one is cancelled
-    out = w.apply([ThreatPut("far", ThreatUpdate(position=(-500, -500), **T))], 0.1)
+    # the world changes within the unit's reach before the job lands: a new job is asked, the old one is cancelled
+    out = w.apply([ThreatPut("behind", ThreatUpdate(position=(-40, -40), **T))], 0.1)
     assert (
         out.cancelled == [old] and not old.cancelled
     )  # said as an output; the job the world returned is left alone
@@ -68,6 +68,16 @@ def test_a_superseded_job_never_overwrites_a_newer_result():
     w.apply([GoalCancelled("u")], 0.6)
     d = _one(w.apply([job.run(0.7), _state("u", 0, 0)], 0.7), "u")
     assert d.status is DirectionStatus.NO_GOAL
+
+
+def test_a_change_out_of_a_deliberating_units_widened_reach_leaves_its_job_alone():
+    w = _deferred(planner=PlannerParams(escape="auto"))
+    out = w.apply([*_horseshoe(), _state("u", 0, 0), GoalSet("u", Goal(position=(100, 100)))], 0.0)
+    (job,) = out.jobs
+    out = w.apply([ThreatPut("far", ThreatUpdate(position=(-500, -500), **T))], 0.1)
+    assert not out.cancelled and not out.jobs and not out.directions  # not re-judged: its job stands
+    d = _one(w.apply([job.run(0.2), _state("u", 0, 0)], 0.2), "u")
+    assert d.status is DirectionStatus.ESCAPING and w.counts()["deliberating"] == 0
 
 
 def test_a_job_past_its_deadline_is_not_computed_and_the_unit_descends():

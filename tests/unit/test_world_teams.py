@@ -160,7 +160,7 @@ def test_a_robot_whose_controller_stops_holds_at_once_and_says_why() -> None:
 def test_the_world_snapshot_lists_teams_with_their_notes_and_a_peer_takes_them() -> None:
     from pfp_service.cli.status import snapshot_lines
     from pfp_service.wire import decode_world_snapshot, encode
-    from pfp_service.world.events import inputs_from_snapshot
+    from pfp_service.world.kinds import inputs_from_snapshot
 
     w = _world()
     w.apply([TeamPut("alpha", TeamUpdate(controller="m1", robots=["r1"], members=["x"]))], 0.0)
@@ -190,7 +190,7 @@ def test_a_team_is_stored_restored_and_counted_in_the_restored_event(tmp_path) -
         )
         store.commit_inputs([TeamRemoved("bravo")], 1001.0, None)
         back = store.restore(2000.0)
-        assert back.inputs == [TeamPut("alpha", TEAM)] and back.teams == 1
+        assert back.inputs == [TeamPut("alpha", TEAM)] and back.kept["team"] == 1
     finally:
         store.close()
 

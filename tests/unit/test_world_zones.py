@@ -18,7 +18,7 @@ from pfp_service.wire import (
     encode,
 )
 from pfp_service.wire.messages import ZoneCircle, ZoneUpdate
-from pfp_service.world.events import inputs_from_snapshot
+from pfp_service.world.kinds import inputs_from_snapshot
 from pfp_service.world.preview import preview
 from pfp_service.world.world import (
     GoalSet,
@@ -130,7 +130,7 @@ def test_zones_are_stored_and_restored_with_the_time_left(tmp_path):
     store.close()
     store = Store(tmp_path)
     got = store.restore(1004.0)
-    assert got.zones == 2
+    assert got.kept["zone"] == 2
     zones = {i.zone: i.update for i in got.inputs if isinstance(i, ZonePut)}
     assert set(zones) == {"a", "b"} and zones["a"] == WALL and zones["b"].ttl_s == pytest.approx(6.0)
     store.close()

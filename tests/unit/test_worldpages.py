@@ -19,7 +19,8 @@ from pfp_service.wire import (
     encode,
     keys,
 )
-from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+from pfp_service.wire.messages import TeamUpdate
+from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut, World, WorldSettings
 
 pytestmark = pytest.mark.unit
 
@@ -81,6 +82,8 @@ class _Peers:
                 threats_limit=q.threats_limit,
                 zones_from=q.zones_from,
                 zones_limit=q.zones_limit,
+                writes_from=q.writes_from,
+                writes_limit=q.writes_limit,
             )
             out.append(encode(page))
         return out
@@ -215,3 +218,21 @@ def test_status_gets_one_planners_whole_world_merged(big):
     assert merged.next_unit is None and merged.next_threat is None
     cut, complete = whole_world(peers, M, first, max_pages=2)
     assert not complete and len(cut.units) < UNITS and (cut.next_unit or cut.next_threat)
+
+
+def test_the_kinds_listed_by_kind_page_by_cursor_and_a_joiner_learns_every_one():
+    w = World(_settings("p1"))
+    w.apply([TeamPut(f"t{i}", TeamUpdate(members=[f"a{i}", f"b{i}"])) for i in range(5)], 0.0)
+    first = w.snapshot(1.0, writes_limit=2)
+    assert [x.id for x in first.writes] == ["t0", "t1"] and first.next_write == "team.t2"
+    assert first.writes_total == 5 and len(first.teams) == 5  # the teams for people, whole, as before
+    assert (
+        decode_world_query(WorldQuery(writes_from="team.t2").selector_parameters()).writes_from == "team.t2"
+    )
+    joined = fetch_world(_Peers([w]), M, "p2")
+    assert joined.complete and joined.writes == 5
+    assert [i for i in joined.inputs if isinstance(i, TeamPut)] == [
+        TeamPut(f"t{i}", w.teams.teams[f"t{i}"]) for i in range(5)
+    ]
+    with pytest.raises(InputError):  # a cursor is a kind's name and an id
+        decode_world_query("writes_from=t2")

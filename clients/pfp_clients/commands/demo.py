@@ -41,6 +41,12 @@ def register(sub: Any) -> None:
         "line of sight; without DEM, matplotlib's Jacksboro sample DEM (default team and script: "
         "examples/demo-terrain-team.yaml and demo-terrain-inject.yaml)",
     )
+    p.add_argument(
+        "--teams",
+        action="store_true",
+        help="the teaming variant: a scout leading the manned vehicle that controls it, and a wedge of robots, "
+        "each team given one goal (examples/demo-teams-team.yaml and demo-teams-inject.yaml; docs/teams.md)",
+    )
     p.set_defaults(func=run)
 
 
@@ -60,6 +66,10 @@ def run(args: argparse.Namespace) -> int:
         from pfp_clients.demo import DEMO_TERRAIN_SCRIPT, DEMO_TERRAIN_TEAM
 
         opts = dataclasses.replace(opts, team=DEMO_TERRAIN_TEAM, script=DEMO_TERRAIN_SCRIPT)
+    if args.teams:
+        from pfp_clients.demo import DEMO_TEAMS_SCRIPT, DEMO_TEAMS_TEAM
+
+        opts = dataclasses.replace(opts, team=DEMO_TEAMS_TEAM, script=DEMO_TEAMS_SCRIPT)
     if args.team:
         opts = dataclasses.replace(opts, team=Path(args.team))
     if args.script:

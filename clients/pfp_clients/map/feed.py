@@ -27,6 +27,7 @@ from pfp_clients.map.samples import (
     Input,
     StateSeen,
     StatusSeen,
+    TeamSeen,
     ThreatSeen,
     WorldSeen,
     ZoneSeen,
@@ -47,7 +48,7 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.encoding import zenoh_encoding
-from pfp_service.wire.messages import decode_zone
+from pfp_service.wire.messages import decode_team, decode_zone
 from pfp_service.world.translate import decode_plan_result
 
 __all__ = ["Feed", "PreviewError"]
@@ -137,6 +138,9 @@ class Feed:
                 chunk(smp), None if is_delete(smp) else decode_zone(smp.payload.to_bytes(), None, self.origin)
             )
 
+        def on_team(smp: Any) -> Input:
+            return TeamSeen(chunk(smp), None if is_delete(smp) else decode_team(smp.payload.to_bytes()))
+
         def on_event(smp: Any) -> Input:
             return EventSeen(decode_event(smp.payload.to_bytes()))
 
@@ -149,6 +153,7 @@ class Feed:
             s.declare_subscriber(keys.goals(m), self._enqueue(on_goal)),
             s.declare_subscriber(keys.threats(m), self._enqueue(on_threat)),
             s.declare_subscriber(keys.zones(m), self._enqueue(on_zone)),
+            s.declare_subscriber(keys.teams(m), self._enqueue(on_team)),
             s.declare_subscriber(keys.events(m), self._enqueue(on_event)),
             s.liveliness().declare_subscriber(keys.alive_units(m), self._enqueue(on_alive), history=True),
         ]

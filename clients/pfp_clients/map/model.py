@@ -22,6 +22,7 @@ from typing import Any
 
 import msgspec
 
+from pfp_clients.map.deltas import merge_deltas
 from pfp_clients.map.geometry import ThreatView, threat_view
 from pfp_clients.map.samples import (
     AliveSeen,
@@ -31,10 +32,12 @@ from pfp_clients.map.samples import (
     Input,
     StateSeen,
     StatusSeen,
+    TeamSeen,
     ThreatSeen,
     WorldSeen,
     ZoneSeen,
 )
+from pfp_clients.map.team_layer import TeamLayer
 from pfp_service.errors import InputError
 from pfp_service.wire import (
     Event,
@@ -165,6 +168,7 @@ class MapModel:
         self.units: dict[str, _Unit] = {}
         self.threats: dict[str, ThreatView] = {}
         self.zones: dict[str, dict[str, Any]] = {}  # zone id -> its view
+        self.teams = TeamLayer()  # teams, and their leads' tracks (the cleared corridors)
         self.zone_updates: dict[str, ZoneUpdate] = {}  # zone id -> as put (metres), for the GeoJSON export
         self._dirty_zones: set[str] = set()
         self._removed_zones: set[str] = set()
@@ -204,6 +208,7 @@ class MapModel:
                         u.speed_mps = st.speed_mps
                     if st.heading_deg is not None:
                         u.heading_deg = st.heading_deg
+                    self.teams.moved(unit_id, pos)
                     if now - u.track_t >= self.track_interval_s and (not u.track or u.track[-1] != _cm(pos)):
                         u.track_t = now
                         u.track.append(_cm(pos))
@@ -246,13 +251,13 @@ class MapModel:
                     self._dirty_status.add(st.planner)
                 case WorldSeen(world):
                     self._on_world(world, now)
+                case TeamSeen(team_id, team):
+                    self.teams.put(team_id, team)
 
     def _put_threat(self, threat_id: str, update: ThreatUpdate, now: float, ttl_left_s: float | None) -> None:
         try:
             self.threats[threat_id] = threat_view(threat_id, update, now, ttl_left_s)
-        except (
-            ValueError
-        ):  # a shape or parameters the planner refuses too: it keeps what it had, so does the map
+        except ValueError:  # a shape or parameters the planner refuses too: it keeps what it had, so the map
             return
         self._dirty_threats.add(threat_id)
         self._removed_threats.discard(threat_id)
@@ -292,6 +297,9 @@ class MapModel:
         for z in world.zones:
             if z.id not in self.zones:
                 self._put_zone(z.id, z.zone, now, z.ttl_s)
+        for tm in world.teams:
+            if tm.id not in self.teams.teams:
+                self.teams.put(tm.id, tm.team)
 
     def _on_event(self, ev: Event, now: float) -> None:
         t = ev.t if ev.t is not None else now
@@ -364,6 +372,7 @@ class MapModel:
         if self._removed_zones:
             out["zones_removed"] = sorted(self._removed_zones)
         self._dirty_zones, self._removed_zones = set(), set()
+        out.update(self.teams.take())
         if self._new_events:
             out["events"] = self._new_events[-(self.events.maxlen or 100) :]
         if self._dirty_rejected:
@@ -385,6 +394,7 @@ class MapModel:
             "units": {uid: u.view(list(u.track)) for uid, u in self.units.items()},
             "threats": {tid: t.view() for tid, t in self.threats.items()},
             "zones": dict(self.zones),
+            "teams": self.teams.all(),
             "events": list(self.events),
             "rejected": {g: dict(a) for g, a in self.rejected.items()},
             "status": dict(self.status),
@@ -394,64 +404,6 @@ class MapModel:
         """The unit's last reported speed in m/s (for a preview's ETA), if it reported one."""
         u = self.units.get(unit_id)
         return None if u is None else u.speed_mps
-
-
-def merge_deltas(
-    old: dict[str, Any] | None, new: dict[str, Any], track_max: int = 200, events_max: int = 100
-) -> dict[str, Any]:
-    """One delta saying what ``old`` then ``new`` say, for a browser that has not taken ``old`` yet.
-
-    A unit's or threat's newer view wins, but a unit's new track points add up;
-    a put after a removal cancels it and a removal after a put drops the put, so
-    an id is never both shown and removed.  Events add up to ``events_max``.
-    """
-    if old is None:
-        return new
-    out = dict(old)
-    out["now"] = new["now"]
-    units = dict(old.get("units", {}))
-    removed_units = set(old.get("units_removed", ()))
-    for uid, view in new.get("units", {}).items():
-        prior = units.get(uid)
-        if prior is not None:
-            view = {**view, "track_add": (prior["track_add"] + view["track_add"])[-track_max:]}
-        units[uid] = view
-        removed_units.discard(uid)
-    for uid in new.get("units_removed", ()):
-        units.pop(uid, None)
-        removed_units.add(uid)
-    threats = dict(old.get("threats", {}))
-    removed_threats = set(old.get("threats_removed", ()))
-    for tid, view in new.get("threats", {}).items():
-        threats[tid] = view
-        removed_threats.discard(tid)
-    for tid in new.get("threats_removed", ()):
-        threats.pop(tid, None)
-        removed_threats.add(tid)
-    zones = dict(old.get("zones", {}))
-    removed_zones = set(old.get("zones_removed", ()))
-    for zid, view in new.get("zones", {}).items():
-        zones[zid] = view
-        removed_zones.discard(zid)
-    for zid in new.get("zones_removed", ()):
-        zones.pop(zid, None)
-        removed_zones.add(zid)
-    for name, value in (
-        ("units", units),
-        ("units_removed", sorted(removed_units)),
-        ("threats", threats),
-        ("threats_removed", sorted(removed_threats)),
-        ("zones", zones),
-        ("zones_removed", sorted(removed_zones)),
-        ("events", (old.get("events", []) + new.get("events", []))[-events_max:]),
-        ("rejected", {**old.get("rejected", {}), **new.get("rejected", {})}),
-        ("status", {**old.get("status", {}), **new.get("status", {})}),
-    ):
-        if value:
-            out[name] = value
-        else:
-            out.pop(name, None)
-    return out
 
 
 def eta_s(length_m: float, speed_mps: float | None) -> float | None:

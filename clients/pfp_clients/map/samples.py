@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from pfp_service.wire import Direction, Event, Goal, PlannerStatus, ThreatUpdate, UnitState, WorldSnapshot
-from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.wire.messages import TeamUpdate, ZoneUpdate
 
 __all__ = [
     "AliveSeen",
@@ -19,6 +19,7 @@ __all__ = [
     "Input",
     "StateSeen",
     "StatusSeen",
+    "TeamSeen",
     "ThreatSeen",
     "WorldSeen",
     "ZoneSeen",
@@ -63,6 +64,14 @@ class ZoneSeen:
 
 
 @dataclass(frozen=True, slots=True)
+class TeamSeen:
+    """A team put, or dissolved (``update`` is None)."""
+
+    team: str
+    update: TeamUpdate | None
+
+
+@dataclass(frozen=True, slots=True)
 class AliveSeen:
     unit: str
     alive: bool
@@ -91,6 +100,7 @@ Input = (
     | GoalSeen
     | ThreatSeen
     | ZoneSeen
+    | TeamSeen
     | AliveSeen
     | EventSeen
     | StatusSeen

@@ -19,6 +19,10 @@ With a DEM (``ground``: ``pfp report --terrain``), each unit also gets its
 climb, the steepest ground it crossed and its seconds in view of each threat
 (``report_terrain``): three more columns, and the same figures in each track's
 GeoJSON properties, under a ``terrain`` member that says how they were measured.
+
+With teams in the record, a second table (and ``STEM.teams.csv``): each team's
+closest two members and its robots' link outages, each listed with its cause
+(``report_teams``).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ import msgspec
 import numpy as np
 
 from pfp_clients.record.mcapfile import Record
+from pfp_clients.record.report_teams import team_rows
 from pfp_clients.watch import Watch
 from pfp_service.coords import Coords
 from pfp_service.errors import InputError
@@ -320,6 +325,14 @@ def write_report(
         say(over["about"]["says"])
     for line in _text(table):
         say(line)
+    teams, outages = team_rows(rec, {u.unit: u.track for u in rows})
+    if len(teams) > 1:  # per team: its closest two members, and its robots' link outages with their cause
+        say("")
+        for line in [
+            *_text(teams),
+            *(f"  {o.robot} out of link {o.start_s:.1f}-{o.end_s:.1f} s: {o.cause}" for o in outages),
+        ]:
+            say(line)
     written: list[Path] = []
     csv_path = stem.with_suffix(".csv")
     png = stem.with_suffix(".png")
@@ -327,6 +340,10 @@ def write_report(
         with csv_path.open("w", newline="") as f:
             csv.writer(f).writerows(table)
         written.append(csv_path)
+        if len(teams) > 1:
+            with stem.with_suffix(".teams.csv").open("w", newline="") as f:
+                csv.writer(f).writerows(teams)
+            written.append(stem.with_suffix(".teams.csv"))
         latest: dict[str, Any] = {}
         first: dict[str, Any] = {}
         for v in watch.versions:

@@ -224,6 +224,7 @@ async def _main(
     subs = [
         session.declare_subscriber(keys.threats(mission), enqueue("threat")),
         session.declare_subscriber(keys.zones(mission), enqueue("zone")),
+        session.declare_subscriber(keys.teams(mission), enqueue("team")),
         session.declare_subscriber(keys.unit_states_any(mission), enqueue("state")),
         session.declare_subscriber(keys.unit_directions(mission), enqueue("direction")),
         session.declare_subscriber(keys.events(mission), enqueue("event")),
@@ -275,6 +276,8 @@ async def _main(
                 emit(state.on_threat(key, payload, now))
             elif kind == "zone":
                 emit(state.on_zone(key, payload, now))
+            elif kind == "team":
+                state.on_team(key, payload)  # its members' remarks, at their next direction
             elif payload is None:
                 continue
             elif kind == "state":

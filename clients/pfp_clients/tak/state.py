@@ -27,6 +27,7 @@ Rules:
   threats, units and every unit's route, at most once per ``announce_min_s``.
   A TAK server does not keep routes, so a device that joins late would
   otherwise see none until the next refresh;
+- a team member's marker says its team and roles in its remarks (``team_roles``);
 - every point carries the origin's altitude as ``hae``, but a route's waypoints with ``ground``
   (``pfp tak --terrain``): the DEM's height there as it is (docs/terrain.md: no geoid applied).
 """
@@ -41,6 +42,7 @@ import numpy as np
 
 from pfp_clients.tak import cot, cot_out
 from pfp_clients.tak.outputs import Outputs, ZenohDelete, ZenohPut
+from pfp_clients.tak.team_roles import TeamRoles, thin
 from pfp_clients.tak.tombs import Tombstone, Tombstones
 from pfp_service import geo
 from pfp_service.errors import InputError
@@ -111,13 +113,6 @@ class _Unit:
     route_pending: bool = False
 
 
-def _thin(path: np.ndarray, n: int) -> np.ndarray:
-    if len(path) <= n:
-        return path
-    idx = np.unique(np.round(np.linspace(0, len(path) - 1, n)).astype(int))
-    return path[idx]
-
-
 class BridgeState:
     """The bridge between a TAK network and the planner's Zenoh keys (see the module docstring)."""
 
@@ -137,6 +132,8 @@ class BridgeState:
         self.zones_from_tak: dict[str, _Marker] = {}  # zone id -> the shape TAK gave us
         self.zones_heard: set[str] = set()  # zone ids put or deleted on Zenoh since the bridge started
         self.units: dict[str, _Unit] = {}
+        self.teams = TeamRoles(log)  # a member's marker says its team and roles (on_team)
+        self.on_team = self.teams.on_team
         self._last_refresh = -1e18
         self.dropped = 0
 
@@ -385,6 +382,8 @@ class BridgeState:
         if d.distance_to_goal is not None:
             parts.append(f"{d.distance_to_goal:.0f} m to goal")
         parts.append(f"threat level {d.threat_level:.3g}")
+        if team := self.teams.remark(unit):
+            parts.append(team)
         if d.reason:
             parts.append(d.reason)
         return cot_out.unit_event(
@@ -448,7 +447,7 @@ class BridgeState:
         out = Outputs()
         if len(path) < 2:
             return out
-        pts = _thin(np.asarray(path, dtype=float), self.s.route_points)
+        pts = thin(np.asarray(path, dtype=float), self.s.route_points)
         ll = [(float(a), float(b)) for a, b in self.s.origin.to_geodetic_many(pts)]
         u = self.units.setdefault(unit, _Unit())
         if len(ll) == len(u.route) and np.allclose(ll, u.route, atol=1e-7, rtol=0.0):

@@ -98,6 +98,7 @@ from pfp_service.wire.messages.world import (
     UnitSummary,
     WorldQuery,
     WorldSnapshot,
+    WriteSummary,
     ZoneSummary,
 )
 
@@ -157,6 +158,7 @@ __all__ = [
     "WhatIfThreat",
     "WorldQuery",
     "WorldSnapshot",
+    "WriteSummary",
     "ZoneCircle",
     "ZoneSummary",
     "ZoneUpdate",

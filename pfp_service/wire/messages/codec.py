@@ -260,6 +260,11 @@ def _positions(msg: object) -> Iterator[tuple[str, tuple[float, float]]]:
             yield "$.goal", msg.goal
         for i, t in enumerate(msg.threats):
             yield f"$.threats[{i}].position", t.position
+    elif isinstance(msg, TeamUpdate) and msg.goal is not None:  # a team's goal, and each place offset from it
+        gx, gy = msg.goal.position
+        yield "$.goal.position", msg.goal.position
+        for u, (dx, dy) in msg.offsets.items():
+            yield f"$.offsets.{u}", (gx + dx, gy + dy)
 
 
 def check_bounds(msg: object, bounds: Bounds) -> None:
@@ -338,9 +343,8 @@ def decode_zone(
 def decode_team(
     data: bytes | bytearray | memoryview | None, bounds: Bounds | None = None, origin: Origin | None = None
 ) -> TeamUpdate:
-    """A ``TeamUpdate`` from a ``team/{t}`` PUT payload (see ``decode``); it holds no position."""
-    del bounds
-    return decode(TeamUpdate, data, None, origin)
+    """A ``TeamUpdate`` from a ``team/{t}`` PUT payload (see ``decode``): its goal's places within ``bounds``."""
+    return decode(TeamUpdate, data, bounds, origin)
 
 
 def decode_preview_request(

@@ -6,7 +6,7 @@ Apart from the other Structs (``structs``) because they are one family with one 
 
 from __future__ import annotations
 
-from typing import Annotated, Union
+from typing import Annotated, Any, Union
 
 from msgspec import Meta
 
@@ -119,7 +119,12 @@ class ArrivedEvent(Event, frozen=True, kw_only=True, tag="arrived"):
 
 
 class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
-    """A planner started from its durable state: how much it found."""
+    """A planner started from its durable state: how much it found.
+
+    ``kinds``: the count restored of every kind of write it keeps, by the kind's name (``goal``,
+    ``threat``, ``zone``, ``team``, and any kind added later); ``threats``, ``goals``, ``zones`` and
+    ``teams`` repeat the first four for readers older than ``kinds`` (``counted`` fills both).
+    """
 
     threats: Count = 0
     goals: Count = 0
@@ -129,6 +134,16 @@ class RestoredEvent(Event, frozen=True, kw_only=True, tag="restored"):
     corrupt: Count = 0  # rows skipped as unreadable, plus the damaged pages of a state file set aside
     set_aside: Text = ""  # where a damaged state file was moved (kept), if one was
     teams: Count = 0  # teams restored
+    kinds: Annotated[dict[Id, Count], Meta(max_length=64)] = {}  # added with it; {} from an older planner
+
+    @classmethod
+    def counted(cls, kinds: dict[str, int], **rest: Any) -> RestoredEvent:
+        """The event for ``kinds`` (restored, by kind name), its named counts filled from it."""
+        # the counts named one by one before ``kinds``, kept for older readers; a kind added since
+        # is counted in ``kinds`` only (schemas only grow: these stay as they are)
+        got = kinds.get
+        threats, goals, zones, teams = got("threat", 0), got("goal", 0), got("zone", 0), got("team", 0)
+        return cls(kinds=kinds, threats=threats, goals=goals, zones=zones, teams=teams, **rest)
 
 
 class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):

@@ -18,7 +18,7 @@ from msgspec import Meta
 
 from pfp_service.constraints import Id
 from pfp_service.errors import InputError
-from pfp_service.wire.messages.structs import _Message
+from pfp_service.wire.messages.structs import Goal, _Message
 
 __all__ = [
     "MAX_TEAM_MEMBERS",
@@ -34,6 +34,8 @@ MAX_TEAM_MEMBERS = 256  # ids in one list of a team; a platoon's vehicles, not a
 RADIO_RANGE_MAX_M = 100_000.0
 Distance = Annotated[float, Meta(gt=0.0, le=RADIO_RANGE_MAX_M)]
 Ids = Annotated[list[Id], Meta(max_length=MAX_TEAM_MEMBERS)]
+Offset = Annotated[float, Meta(ge=-RADIO_RANGE_MAX_M, le=RADIO_RANGE_MAX_M)]
+Offsets = Annotated[dict[Id, tuple[Offset, Offset]], Meta(max_length=MAX_TEAM_MEMBERS)]
 
 
 class TeamUpdate(_Message, frozen=True, kw_only=True):
@@ -52,6 +54,11 @@ class TeamUpdate(_Message, frozen=True, kw_only=True):
         robots: each keeps within ``radio_range_m`` of ``controller`` (and in its line of sight over terrain);
             a step that would break the link is not taken.
         radio_range_m: the controller's radio reach, metres.
+        goal: the team's goal: each member is given its place by it (``teams.places``): a member in
+            ``offsets`` the goal moved by its offset, every other in column order (the lead first, then
+            the followers, then the rest), the ``i``-th arriving within ``i * spacing_m`` more of the goal.
+        offsets: ``[east, north]`` metres from the team's goal to a member's place (a formation).
+        spacing_m: the distance between two places in the column; absent, ``separation_m``, else 50 m.
     """
 
     members: Ids = []
@@ -63,6 +70,9 @@ class TeamUpdate(_Message, frozen=True, kw_only=True):
     controller: Id | None = None
     robots: Ids = []
     radio_range_m: Distance = 1500.0
+    goal: Goal | None = None
+    offsets: Offsets = {}
+    spacing_m: Distance | None = None
 
     def __post_init__(self) -> None:
         for name in ("members", "follow", "robots"):
@@ -82,6 +92,12 @@ class TeamUpdate(_Message, frozen=True, kw_only=True):
         if self.controller is not None and self.controller in self.robots:
             i = self.robots.index(self.controller)
             raise ValueError(f"robots[{i}]: the controller {self.controller!r} cannot control itself")
+        if self.offsets and self.goal is None:
+            raise ValueError("offsets: a formation's offsets need the team's goal")
+        units = set(self.units())
+        for u in self.offsets:
+            if u not in units:
+                raise ValueError(f"offsets.{u}: {u!r} is not a member of the team")
 
     def units(self) -> tuple[str, ...]:
         """Every unit of the team, once each: members, then the lead, followers, controller and robots."""

@@ -6,7 +6,7 @@ Apart from the messages between a unit and its planner (``structs``), which thes
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Annotated
+from typing import Annotated, Any
 
 import msgspec
 from msgspec import Meta
@@ -34,8 +34,13 @@ __all__ = [
     "UnitSummary",
     "WorldQuery",
     "WorldSnapshot",
+    "WriteCursor",
+    "WriteSummary",
     "ZoneSummary",
 ]
+
+# where a page's ``writes`` go on: ``{kind}.{id}`` (a kind's name and an id are key chunks, with no ``.``)
+WriteCursor = Annotated[str, Meta(pattern=r"^[A-Za-z0-9_-]{1,64}\.[A-Za-z0-9_-]{1,64}$")]
 
 
 class ZoneSummary(_Message, frozen=True, kw_only=True):
@@ -117,12 +122,30 @@ class TeamSummary(_Message, frozen=True, kw_only=True):
     """One team in force (``WorldSnapshot.teams``) and what its roles last said of its members.
 
     ``notes``: ``"unit: reason"`` for each member whose last direction a role held or redirected
-    (``lost link: controller m1 has stopped``, ``waiting for m1: ...``).
+    (``lost link: controller m1 has stopped``, ``waiting for m1: ...``).  ``eta_s``: the team's
+    time to arrive, its slowest member's (``slowest``); null with ``slowest`` set: that member is
+    lost or not moving; null with no ``slowest``: no member has a goal.
     """
 
     id: Id
     team: TeamUpdate
     notes: Annotated[list[Text], Meta(max_length=MAX_TEAM_MEMBERS)] = []
+    eta_s: NonNegative | None = None
+    slowest: Id | None = None
+
+
+class WriteSummary(_Message, frozen=True, kw_only=True):
+    """One record in force of a write kind listed by kind (``WorldSnapshot.writes``): a team, or a kind added later.
+
+    ``kind`` is its kind's name (``team``), ``body`` its message as put (that kind's schema, a
+    ``TeamUpdate`` for a team), ``ttl_s`` the time left (null: no expiry).  A joining planner
+    decodes ``body`` with its kind's decoder, and skips a kind it does not know.
+    """
+
+    kind: Id
+    id: Id
+    body: dict[str, Any]
+    ttl_s: NonNegative | None = None
 
 
 class WorldSnapshot(_Message, frozen=True, kw_only=True):
@@ -137,7 +160,10 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     (``WorldQuery``; a list already complete is left out with ``zones_limit=0``,
     ``threats_limit=0`` or ``units_limit=0``); null means that list is complete
     in this page, or was left out.  ``teams`` come whole on the first page only
-    (as many as fit; ``teams_total`` counts them all).
+    (as many as fit; ``teams_total`` counts them all), with what their roles said, for people.
+    ``writes`` list the write kinds a planner learns by kind (teams, and any kind added later),
+    by kind and id, after the threats; ``next_write`` (``kind.id``) is where the next page starts
+    (``?writes_from=<next_write>``); ``writes_total`` counts them all.
     """
 
     planner: Id
@@ -153,16 +179,19 @@ class WorldSnapshot(_Message, frozen=True, kw_only=True):
     next_zone: Id | None = None
     teams: Annotated[list[TeamSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []  # on the first page
     teams_total: Count = 0
+    writes: Annotated[list[WriteSummary], Meta(max_length=MAX_SNAPSHOT_ITEMS)] = []
+    writes_total: Count = 0  # added with writes; 0 from an older planner (its teams are in ``teams``)
+    next_write: WriteCursor | None = None
 
 
 class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The parameters of a world query: which page (``…/world?units_from=ID;threats_from=ID;zones_from=ID``).
+    """The parameters of a world query: which page (``…/world?units_from=ID;threats_from=ID;zones_from=ID;writes_from=KIND.ID``).
 
     Not a payload: Zenoh selector parameters, ``;``-separated, each at most
-    once.  ``units_from``, ``threats_from`` and ``zones_from`` are the first ids
-    the page lists (a reply's ``next_unit``, ``next_threat`` and ``next_zone``);
+    once.  ``units_from``, ``threats_from``, ``zones_from`` and ``writes_from`` are the first ids
+    the page lists (a reply's ``next_unit``, ``next_threat``, ``next_zone`` and ``next_write``);
     without one a list starts at its first id.  ``units_limit``,
-    ``threats_limit`` and ``zones_limit`` cap each list (0 to
+    ``threats_limit``, ``zones_limit`` and ``writes_limit`` cap each list (0 to
     ``MAX_SNAPSHOT_ITEMS``; 0 leaves it out, for a list already complete).
     An unknown, repeated or malformed parameter is refused (``decode_world_query``).
     """
@@ -173,6 +202,8 @@ class WorldQuery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     threats_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
     zones_from: Id | None = None
     zones_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
+    writes_from: WriteCursor | None = None
+    writes_limit: Annotated[int, Meta(ge=0, le=MAX_SNAPSHOT_ITEMS)] = MAX_SNAPSHOT_ITEMS
 
     def selector_parameters(self) -> str:
         """These parameters as a selector's ``?…`` part, without the ``?`` (empty: all defaults)."""

@@ -824,6 +824,7 @@ function apply(msg) {
   (msg.zones_removed || []).forEach((id) => removeZone(id, false));
   Object.values(msg.units || {}).forEach((d) => upsertUnit(d, full));
   (msg.units_removed || []).forEach(removeUnit);
+  pfpTeams.apply(msg, full); // teams.js: lead-follow lines, radio circles, cleared corridors
   if (msg.events) {
     addEvents(msg.events);
     const sel = state.selectedUnit;
