@@ -37,7 +37,7 @@ import msgspec
 from pfp_service.core.params import Resolved
 from pfp_service.core.stepper import Stepper
 from pfp_service.errors import InputError
-from pfp_service.wire import DirectionStatus, Goal, RejectedEvent, ThreatUpdate, UnitKind, UnitState
+from pfp_service.wire import Direction, DirectionStatus, Goal, RejectedEvent, ThreatUpdate, UnitKind, UnitState
 from pfp_service.wire.messages import (
     MAX_PREVIEW_MEMBERS,
     MemberTrack,
@@ -84,6 +84,7 @@ class MemberSeed:
     origin: Point | None = None
     stepper: Stepper | None = None
     status: DirectionStatus | None = None  # its last direction's
+    direction: Direction | None = None  # as the team book last judged it: what it moves on now
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,7 +113,7 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
     units = team.units()
     if len(units) > MAX_PREVIEW_MEMBERS:
         raise InputError("$", f"team {team_id!r} has {len(units)} members; a preview replays {MAX_PREVIEW_MEMBERS}")
-    rec = world.records
+    rec, sent = world.records, world.teams.sent
     members = []
     for u in sorted(units):
         r = rec.units.get(u)
@@ -121,7 +122,9 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
             continue
         stepper = copy.deepcopy(r.stepper) if r.stepper is not None and r.goal is not None else None
         members.append(
-            MemberSeed(u, r.position, r.progress.speed_mps, r.kind, r.goal, r.origin, stepper, r.last_status)
+            MemberSeed(
+                u, r.position, r.progress.speed_mps, r.kind, r.goal, r.origin, stepper, r.last_status, sent.get(u)
+            )
         )
     threats = tuple(
         (tid, _left(t.update, t.expires_at, now)) for tid, t in sorted(rec.threats.items())
@@ -166,6 +169,20 @@ class _Vehicle:
     @property
     def kind(self) -> UnitKind | None:
         return UnitKind(self.seed.kind) if self.seed.kind in KINDS else None
+
+    def take(self, d: Direction | None, t_s: float) -> None:
+        """Hold ``d`` as its newest direction (``None``: none came), noting a change of what it says."""
+        if d is None:
+            return
+        self.status, self.vector = d.status, d.vector
+        self.left_m = math.inf if d.reach_m is None else d.reach_m
+        self.to_goal_m = d.distance_to_goal
+        said = (d.status, _NUMBERS.sub("#", d.reason))
+        if said != self.said and len(self.statuses) < MAX_STATUS_CHANGES:
+            self.statuses.append(StatusChange(t_s=t_s, status=d.status, reason=d.reason))
+        self.said = said
+        if d.status is DirectionStatus.ARRIVED and self.arrived_s is None:
+            self.arrived_s = t_s
 
     def advance(self, dt_s: float) -> None:
         if self.status not in _MOVING:
@@ -223,30 +240,26 @@ def replay(
         assert m.stepper is not None and m.origin is not None
         rec = w.records.units[m.unit]
         w.records.book.started(rec, Started((m.goal, m.origin, m.stepper.params), copy.deepcopy(m.stepper)))  # type: ignore[arg-type]
+    unsent = [c for c in cars if c.seed.direction is None]
+    if unsent:  # a member not yet judged in the team: the direction its next report would get
+        again = {d.unit: d for d in w.apply([c.report(0.0) for c in cars], 0.0).directions}
+        for c in unsent:
+            c.take(again.get(c.seed.unit), 0.0)
+    for c in cars:
+        c.take(c.seed.direction, 0.0)
+        c.track.append((0.0, *c.at))
     w.teams.tracks[s.team_id] = list(s.track)
     w.teams.held = set(s.held)
     t, stopped = 0.0, "horizon"
-    steps = math.ceil(req.horizon_s / req.dt_s)
-    for k in range(steps + 1):
-        t = k * req.dt_s
-        if k:
-            for car in cars:
-                car.advance(req.dt_s)
+    for k in range(1, math.ceil(req.horizon_s / req.dt_s) + 1):
+        t = k * req.dt_s  # each member moves on the direction it holds, then reports, as the fleet's do
+        for car in cars:
+            car.advance(req.dt_s)
         out = w.apply([car.report(t) for car in cars], t)
         by_unit = {d.unit: d for d in out.directions}
         for car in cars:
-            d = by_unit.get(car.seed.unit)
-            if d is not None:
-                car.status, car.vector = d.status, d.vector
-                car.left_m = math.inf if d.reach_m is None else d.reach_m
-                car.to_goal_m = d.distance_to_goal
-                said = (d.status, _NUMBERS.sub("#", d.reason))
-                if said != car.said and len(car.statuses) < MAX_STATUS_CHANGES:
-                    car.statuses.append(StatusChange(t_s=t, status=d.status, reason=d.reason))
-                car.said = said
-                if d.status is DirectionStatus.ARRIVED and car.arrived_s is None:
-                    car.arrived_s = t
-            car.track.append((t, car.at[0], car.at[1]))
+            car.take(by_unit.get(car.seed.unit), t)
+            car.track.append((t, *car.at))
         if all(c.arrived_s is not None for c in cars if c.seed.unit in ids):
             stopped = "arrived"
             break

@@ -37,13 +37,12 @@ def _fleet() -> dict[str, SimUnit]:
 
 
 def _live(w: World, fleet: dict[str, SimUnit], t0: float, t1: float) -> dict[str, list[tuple[float, float, float]]]:
-    """The fleet driven by ``w`` from ``t0`` to ``t1``: each unit's ``(t, x, y)`` as it reports."""
+    """The fleet driven by ``w`` from ``t0`` (its first move's end) to ``t1``: each unit's ``(t, x, y)`` as it reports."""
     tracks: dict[str, list[tuple[float, float, float]]] = {u: [] for u in fleet}
     t = t0
     while t <= t1 + 1e-9:
-        if t > t0:
-            for u in fleet.values():
-                u.advance(DT, t, 0.0)
+        for u in fleet.values():
+            u.advance(DT, t, 0.0)
         out = w.apply([StateReported(u.id, u.state(t)) for u in fleet.values()], t)
         for d in out.directions:
             fleet[d.unit].on_direction(d, t)
@@ -86,7 +85,7 @@ def test_a_team_preview_is_the_track_the_live_world_then_drives(at_s: float) -> 
         by_t = {round(t - at_s, 6): (x, y) for t, x, y in live[m.unit]}
         gaps = [math.dist((x, y), by_t[round(t, 6)]) for t, x, y in m.points if round(t, 6) in by_t]
         assert len(gaps) >= len(m.points) - 1  # every replayed time but the first (now) is a live one
-        assert max(gaps) <= 0.5, (m.unit, max(gaps))  # the stated tolerance: one planner step
+        assert max(gaps) <= 0.01, (m.unit, max(gaps))  # the same code on the same inputs: the same track
     # the team's ETA is its slowest member's, and the live fleet arrived then too
     arrived = {m.unit: m.arrived_s for m in got.members}
     assert got.eta_s == max(a for a in arrived.values() if a is not None)
@@ -103,9 +102,10 @@ def test_a_team_preview_is_bounded_by_its_budget_and_refuses_a_member_without_sp
     seeded = team_preview.seed(w, "alpha", 0.0)
     assert seeded is not None
     ticks = iter(range(10**6))
-    got = team_preview.replay(seeded, TeamPreviewRequest(horizon_s=600.0), lambda: float(next(ticks)), 5.0)
+    request = TeamPreviewRequest(horizon_s=600.0, speeds={"m1": 2.0, "r1": 3.0})
+    got = team_preview.replay(seeded, request, lambda: float(next(ticks)), 5.0)
     assert got.stopped == "budget" and got.eta_s is None and got.simulated_s < 10.0
-    stopped = [m for m in seeded.members]
+    stopped = list(seeded.members)
     frozen = team_preview.TeamSeed(
         seeded.team_id,
         seeded.team,
