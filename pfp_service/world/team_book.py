@@ -45,7 +45,9 @@ class TeamBook:
         self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
-        self.sent: dict[str, Direction] = {}  # member -> its direction as last judged (a team preview's first move)
+        self.sent: dict[
+            str, Direction
+        ] = {}  # member -> its direction as last judged (a team preview's first move)
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""

@@ -30,14 +30,22 @@ import dataclasses
 import math
 import re
 from collections.abc import Callable
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 import msgspec
 
 from pfp_service.core.params import Resolved
 from pfp_service.core.stepper import Stepper
 from pfp_service.errors import InputError
-from pfp_service.wire import Direction, DirectionStatus, Goal, RejectedEvent, ThreatUpdate, UnitKind, UnitState
+from pfp_service.wire import (
+    Direction,
+    DirectionStatus,
+    Goal,
+    RejectedEvent,
+    ThreatUpdate,
+    UnitKind,
+    UnitState,
+)
 from pfp_service.wire.messages import (
     MAX_PREVIEW_MEMBERS,
     MemberTrack,
@@ -57,14 +65,14 @@ from pfp_service.world.events import (
     ZonePut,
 )
 from pfp_service.world.units import Started
-
-if TYPE_CHECKING:
-    from pfp_service.world.world import World
+from pfp_service.world.world import World
 
 __all__ = ["MAX_REPLY_POINTS", "MemberSeed", "TeamSeed", "replay", "seed"]
 
-MAX_REPLY_POINTS = 20_000  # track points in one reply, all members together: a longer replay is thinned
-MAX_STATUS_CHANGES = 256  # per member: a reason that keeps changing is cut, not the reply's size
+MAX_REPLY_POINTS = (
+    4_000  # track points in one reply, all members together (at cm and ms): a longer replay is thinned
+)
+MAX_STATUS_CHANGES = 1_024  # all members together: a reason that keeps changing is cut, not the reply's size
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 _NUMBERS = re.compile(r"-?\d+(\.\d+)?")
 Point = tuple[float, float]
@@ -112,7 +120,9 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
         return None
     units = team.units()
     if len(units) > MAX_PREVIEW_MEMBERS:
-        raise InputError("$", f"team {team_id!r} has {len(units)} members; a preview replays {MAX_PREVIEW_MEMBERS}")
+        raise InputError(
+            "$", f"team {team_id!r} has {len(units)} members; a preview replays {MAX_PREVIEW_MEMBERS}"
+        )
     rec, sent = world.records, world.teams.sent
     members = []
     for u in sorted(units):
@@ -123,12 +133,18 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
         stepper = copy.deepcopy(r.stepper) if r.stepper is not None and r.goal is not None else None
         members.append(
             MemberSeed(
-                u, r.position, r.progress.speed_mps, r.kind, r.goal, r.origin, stepper, r.last_status, sent.get(u)
+                u,
+                r.position,
+                r.progress.speed_mps,
+                r.kind,
+                r.goal,
+                r.origin,
+                stepper,
+                r.last_status,
+                sent.get(u),
             )
         )
-    threats = tuple(
-        (tid, _left(t.update, t.expires_at, now)) for tid, t in sorted(rec.threats.items())
-    )
+    threats = tuple((tid, _left(t.update, t.expires_at, now)) for tid, t in sorted(rec.threats.items()))
     zones = tuple((zid, _left(z.update, z.expires_at, now)) for zid, z in sorted(rec.zones.items()))
     return TeamSeed(
         team_id,
@@ -165,6 +181,7 @@ class _Vehicle:
     statuses: list[StatusChange] = dataclasses.field(default_factory=list)
     said: tuple[DirectionStatus, str] | None = None
     arrived_s: float | None = None
+    max_changes: int = MAX_STATUS_CHANGES
 
     @property
     def kind(self) -> UnitKind | None:
@@ -178,7 +195,7 @@ class _Vehicle:
         self.left_m = math.inf if d.reach_m is None else d.reach_m
         self.to_goal_m = d.distance_to_goal
         said = (d.status, _NUMBERS.sub("#", d.reason))
-        if said != self.said and len(self.statuses) < MAX_STATUS_CHANGES:
+        if said != self.said and len(self.statuses) < self.max_changes:
             self.statuses.append(StatusChange(t_s=t_s, status=d.status, reason=d.reason))
         self.said = said
         if d.status is DirectionStatus.ARRIVED and self.arrived_s is None:
@@ -214,8 +231,6 @@ def replay(
     Raises:
         InputError: a member with a goal has no speed, reported or given (``$.speeds``).
     """
-    from pfp_service.world.world import World  # the world imports this module's seed's users, not it
-
     req = request or TeamPreviewRequest()
     deadline = clock() + budget_s
     guided = [m for m in s.members if m.position is not None and m.goal is not None and m.stepper is not None]
@@ -246,6 +261,7 @@ def replay(
         for c in unsent:
             c.take(again.get(c.seed.unit), 0.0)
     for c in cars:
+        c.max_changes = max(8, MAX_STATUS_CHANGES // len(cars))
         c.take(c.seed.direction, 0.0)
         c.track.append((0.0, *c.at))
     w.teams.tracks[s.team_id] = list(s.track)
@@ -296,7 +312,10 @@ def _thinned(cars: list[_Vehicle], members: tuple[MemberSeed, ...]) -> list[Memb
         pts = c.track[::every]
         if pts[-1] is not c.track[-1]:
             pts.append(c.track[-1])
+        pts = [(round(t, 3), round(x, 2), round(y, 2)) for t, x, y in pts]
         out.append(
-            MemberTrack(unit=m.unit, speed_mps=c.speed_mps, points=pts, statuses=c.statuses, arrived_s=c.arrived_s)
+            MemberTrack(
+                unit=m.unit, speed_mps=c.speed_mps, points=pts, statuses=c.statuses, arrived_s=c.arrived_s
+            )
         )
     return out

@@ -10,8 +10,8 @@ import math
 import time
 
 import pytest
-
 from pfp_clients.sim import SimUnit
+
 from pfp_service.core import PlannerParams
 from pfp_service.errors import InputError
 from pfp_service.team import UnitSpec
@@ -23,7 +23,13 @@ from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut, 
 pytestmark = pytest.mark.unit
 
 TEAM = TeamUpdate(
-    lead="r1", follow=["m1"], standoff_m=30.0, corridor_m=6.0, controller="m1", robots=["r1"], radio_range_m=60.0
+    lead="r1",
+    follow=["m1"],
+    standoff_m=30.0,
+    corridor_m=6.0,
+    controller="m1",
+    robots=["r1"],
+    radio_range_m=60.0,
 )
 DT = 0.5
 
@@ -36,7 +42,9 @@ def _fleet() -> dict[str, SimUnit]:
     return {s.id: SimUnit(s, rate_hz=1.0 / DT) for s in specs}
 
 
-def _live(w: World, fleet: dict[str, SimUnit], t0: float, t1: float) -> dict[str, list[tuple[float, float, float]]]:
+def _live(
+    w: World, fleet: dict[str, SimUnit], t0: float, t1: float
+) -> dict[str, list[tuple[float, float, float]]]:
     """The fleet driven by ``w`` from ``t0`` (its first move's end) to ``t1``: each unit's ``(t, x, y)`` as it reports."""
     tracks: dict[str, list[tuple[float, float, float]]] = {u: [] for u in fleet}
     t = t0
@@ -109,7 +117,10 @@ def test_a_team_preview_is_bounded_by_its_budget_and_refuses_a_member_without_sp
     frozen = team_preview.TeamSeed(
         seeded.team_id,
         seeded.team,
-        tuple(team_preview.MemberSeed(m.unit, m.position, 0.0, m.kind, m.goal, m.origin, m.stepper) for m in stopped),
+        tuple(
+            team_preview.MemberSeed(m.unit, m.position, 0.0, m.kind, m.goal, m.origin, m.stepper)
+            for m in stopped
+        ),
         seeded.track,
         seeded.held,
         seeded.settings,
