@@ -66,6 +66,13 @@ def test_a_team_preview_matches_the_tracks_the_team_then_drives() -> None:
 
         step(0.0)
         put_in_force(s, M, goals)
+        # refused, naming why: a team not in force, a bad body, a member that has not reported moving
+        (nobody,) = s.get(keys.team_preview(M, "nobody"), timeout=20.0)
+        assert nobody.err is not None and "no team 'nobody'" in nobody.err.payload.to_string()
+        (bad,) = s.get(keys.team_preview(M, "alpha"), payload=b'{"dt_s": 0}', timeout=20.0)
+        assert bad.err is not None and json.loads(bad.err.payload.to_bytes())["field"] == "$.dt_s"
+        (still,) = s.get(keys.team_preview(M, "alpha"), timeout=20.0)
+        assert still.err is not None and json.loads(still.err.payload.to_bytes())["field"] == "$.speeds"
         live: dict[str, dict[float, tuple[float, float]]] = {u: {} for u in fleet}
         t = 0.0
         preview: TeamPreview | None = None
