@@ -134,6 +134,7 @@ class PreviewDesk:
         wait_s: longest a preview may wait for a worker; one that could not start by then is
             answered ``busy`` at once.
         memory_mb: address space each worker may add to its warm size.
+        team_budget_s: a team preview's budget instead of ``budget_s`` (a replay steps a world).
     """
 
     def __init__(
@@ -147,9 +148,11 @@ class PreviewDesk:
         origin: Origin | None,
         wait_s: float = 2.0,
         memory_mb: float | None = WORKER_MEMORY_MB,
+        team_budget_s: float = 5.0,
     ) -> None:
         self._queue_max = queue
         self._budget_s = budget_s
+        self._team_budget_s = team_budget_s
         self._wait_s = wait_s
         self._max_iter = max_iter
         self._clock = clock
@@ -198,7 +201,8 @@ class PreviewDesk:
             return
         blob = self._blobs.of(view.threats)
         job = (dataclasses.replace(view, threats=()), request, self._origin, self._budget_s, self._max_iter)
-        self._queue(query, key, compute, job, HEAVY if cost.heavy else LIGHT, _priority(cost), received, blob)
+        lane = HEAVY if cost.heavy else LIGHT
+        self._queue(query, key, compute, job, lane, _priority(cost), received, blob, self._budget_s)
 
     def team(self, query: zenoh.Query, world: World, received: float) -> None:
         """A team preview query: seeded from ``world`` in the loop thread (``team_preview.seed``), then queued.
@@ -229,7 +233,8 @@ class PreviewDesk:
             self.refuse(query, ErrorReply.of(err))
             return
         steps = len(seed.members) * request.horizon_s / request.dt_s
-        self._queue(query, key, compute_team, (seed, request, self._budget_s), HEAVY, steps, received, None)
+        job = (seed, request, self._team_budget_s)
+        self._queue(query, key, compute_team, job, HEAVY, steps, received, None, self._team_budget_s)
 
     def _queue(
         self,
@@ -241,6 +246,7 @@ class PreviewDesk:
         priority: float,
         received: float,
         blob: Any,
+        budget_s: float,
     ) -> None:
         """Queue one admitted job in ``lane``, or answer ``busy`` at once if it could not start in time."""
         now = self._clock()
@@ -249,7 +255,7 @@ class PreviewDesk:
         if len(self._pending) >= self._queue_max or now + wait > start_by:
             self._busy(query, wait)
             return
-        answer = _Answer(query, start_by + self._budget_s + ALARM_GRACE_S)
+        answer = _Answer(query, start_by + budget_s + ALARM_GRACE_S)
         with self._lock:
             self._pending[id(answer)] = answer
             heapq.heappush(self._deadlines, (answer.last, id(answer), answer))
@@ -258,7 +264,7 @@ class PreviewDesk:
             fn,
             (job,),
             lambda out: self._done(out, answer=answer, key=key, lane=lane, wait=self._expected_wait(lane)),
-            budget_s=self._budget_s + ALARM_GRACE_S,
+            budget_s=budget_s + ALARM_GRACE_S,
             start_by=start_by + offset,
             field=blob,
             lane=lane,
@@ -421,4 +427,5 @@ def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) 
         cfg.bounds_tuple(),
         cfg.origin,
         wait_s=cfg.preview_wait_ms / 1e3,
+        team_budget_s=cfg.team_preview_budget_ms / 1e3,
     )

@@ -39,7 +39,7 @@ def test_a_team_preview_matches_the_tracks_the_team_then_drives() -> None:
     team = load_team(ROOT / "examples" / "team-scout.yaml")
     fleet = {u.id: SimUnit(u, rate_hz=1.0 / DT) for u in team.units}
     with (
-        planner_process("--preview-budget-ms", "20000", mission=M) as (endpoint, _proc),
+        planner_process("--team-preview-budget-ms", "20000", mission=M) as (endpoint, _proc),
         client(endpoint) as s,
     ):
         answers: queue.Queue[Direction] = queue.Queue()
