@@ -16,8 +16,9 @@ would drive for vehicles moving at their reported speeds.
 
 What the replay does not hold: units outside the team (dispersion from them
 is not replayed), a deliberation's latency (its escape searches land at once,
-``deliberation="inline"``), and each member's progress watch, which starts
-afresh (its first replayed reports judge whether it moves).
+``deliberation="inline"``), each member's progress watch, which starts afresh
+(its first replayed reports judge whether it moves), and under ``--cluster``
+the missions of members another planner guides (they stand where they are).
 
 Sans-I/O: ``seed`` reads the live world; ``replay`` takes a seed, a clock and
 a budget (checked at every step) and returns a ``TeamPreview``.
@@ -69,15 +70,15 @@ from pfp_service.world.world import World
 
 __all__ = ["MAX_REPLY_POINTS", "MemberSeed", "TeamSeed", "replay", "seed"]
 
-MAX_REPLY_POINTS = (
-    4_000  # track points in one reply, all members together (at cm and ms): a longer replay is thinned
-)
+# Track points in one reply, all members together, at cm and ms: a longer replay is thinned evenly
+# (each point is about 25 bytes of JSON, and a reply must fit the wire's 256 KiB).
+MAX_REPLY_POINTS = 4_000
 MAX_STATUS_CHANGES = 1_024  # all members together: a reason that keeps changing is cut, not the reply's size
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 _NUMBERS = re.compile(r"-?\d+(\.\d+)?")
 Point = tuple[float, float]
-KINDS = frozenset(k.value for k in UnitKind)
-M = TypeVar("M", ThreatUpdate, ZoneUpdate)
+_KINDS = frozenset(k.value for k in UnitKind)
+_M = TypeVar("_M", ThreatUpdate, ZoneUpdate)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,7 +159,7 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
     )
 
 
-def _left(msg: M, expires_at: float | None, now: float) -> M | None:
+def _left(msg: _M, expires_at: float | None, now: float) -> _M | None:
     """``msg`` with the time it has left as its TTL (``None``: it has expired)."""
     if expires_at is None:
         return msgspec.structs.replace(msg, ttl_s=None)
@@ -185,7 +186,7 @@ class _Vehicle:
 
     @property
     def kind(self) -> UnitKind | None:
-        return UnitKind(self.seed.kind) if self.seed.kind in KINDS else None
+        return UnitKind(self.seed.kind) if self.seed.kind in _KINDS else None
 
     def take(self, d: Direction | None, t_s: float) -> None:
         """Hold ``d`` as its newest direction (``None``: none came), noting a change of what it says."""
