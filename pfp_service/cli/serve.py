@@ -92,6 +92,11 @@ def register(sub: Any) -> None:
         "--preview-budget-ms", type=positive_float, help="time budget of one preview (default: 500)"
     )
     w.add_argument(
+        "--team-preview-budget-ms",
+        type=positive_float,
+        help="time budget of one team preview (default: 5000)",
+    )
+    w.add_argument(
         "--preview-max-iter", type=positive_int, help="iteration cap of one preview (default: 200000)"
     )
     w.add_argument(
@@ -211,6 +216,7 @@ _FLAG_KEYS = [
     "unit_stale_s",
     "liveliness_debounce_s",
     "preview_budget_ms",
+    "team_preview_budget_ms",
     "preview_max_iter",
     "lookahead",
     "tick_s",

@@ -136,6 +136,7 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
     own = (keys.planner_status(mission, planner), keys.world(mission, planner))
     every = (keys.planner_statuses(mission), keys.worlds(mission))
     writes = tuple(k.wildcard(mission) for k in WRITES)  # every write kind: read and acknowledged
+    previews = (keys.previews(mission), keys.team_previews(mission))  # a unit's, a team's
     return [
         *_subscribe(keys.unit_states(mission), keys.sharded_states(mission), *writes),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
@@ -146,9 +147,9 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
         # its own status and world queryables; replies also on the wildcards that
         # `pfp health` and `pfp status` ask with
         # ... and the goal, threat and zone queryables that acknowledge writes (wire.delivery)
-        Grant(INGRESS, ("declare_queryable",), (keys.previews(mission), *own, *writes)),
-        Grant(INGRESS, ("reply",), (keys.previews(mission), *every, *writes)),
-        Grant(EGRESS, ("query",), (keys.previews(mission), *every, *writes)),
+        Grant(INGRESS, ("declare_queryable",), (*previews, *own, *writes)),
+        Grant(INGRESS, ("reply",), (*previews, *every, *writes)),
+        Grant(EGRESS, ("query",), (*previews, *every, *writes)),
         *_token(keys.alive_planner(mission, planner)),
         # other planners' status and world: conflict detection, `pfp health` with the planner's identity
         *_ask(*every),
@@ -160,7 +161,10 @@ def reporter_grants(mission: str) -> list[Grant]:
 
 
 def commander_grants(mission: str) -> list[Grant]:
-    return [*_acked_write(mission, *_written_by("commander", mission)), *_ask(keys.previews(mission))]
+    return [
+        *_acked_write(mission, *_written_by("commander", mission)),
+        *_ask(keys.previews(mission), keys.team_previews(mission)),
+    ]
 
 
 def observer_grants(mission: str) -> list[Grant]:

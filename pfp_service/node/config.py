@@ -104,6 +104,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     tick_s: Positive = 0.05
     loop_trace: str | None = None  # a file: the planning loop's time, a JSON line a second (LoopTrace)
     preview_budget_ms: Positive = 500.0
+    team_preview_budget_ms: Positive = 5000.0  # a team's replay: every member, a world's apply per step
     preview_max_iter: int = 200_000
     preview_workers: Annotated[int, Meta(ge=1, le=64)] = 2
     preview_queue: Annotated[int, Meta(ge=1, le=100_000)] = 256

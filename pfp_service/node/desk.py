@@ -48,7 +48,6 @@ import contextlib
 import dataclasses
 import heapq
 import math
-import signal
 import threading
 import time
 from collections.abc import Callable
@@ -56,21 +55,31 @@ from typing import Any
 
 import zenoh
 
-from pfp_service import geojson
 from pfp_service.core.params import FieldStats, field_stats
-from pfp_service.errors import DeadlinePassed, InputError
+from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.node.config import ServeConfig
+from pfp_service.node.desk_work import ALARM_GRACE_S, compute, compute_team
 from pfp_service.node.log import get_logger
 from pfp_service.node.tasks import Blobs, Outcome, Task
 from pfp_service.node.warmup import warm_wide
-from pfp_service.node.workerproc import forget_fields, retire, world_field, world_threats
 from pfp_service.node.workers import WorkerPool
-from pfp_service.wire import ErrorReply, Goal, ThreatUpdate, UnitState, decode_preview_request, encode
-from pfp_service.wire.messages import Bounds, ZoneUpdate
+from pfp_service.wire import (
+    ErrorReply,
+    Goal,
+    ThreatUpdate,
+    UnitState,
+    decode,
+    decode_preview_request,
+    encode,
+    keys,
+)
+from pfp_service.wire.messages import Bounds, TeamPreviewRequest, ZoneUpdate
 from pfp_service.world.events import GoalSet, StateReported, ThreatPut, UnitView, WorldSettings, ZonePut
 from pfp_service.world.preview import Cost, admit, preview
-from pfp_service.world.translate import fit_reply
+from pfp_service.world.team_preview import TeamSeed
+from pfp_service.world.team_preview import seed as team_seed
+from pfp_service.world.world import World
 
 __all__ = ["EXPIRY_GRACE_S", "WORKER_MEMORY_MB", "WORKER_NICE", "PreviewDesk", "warm_up"]
 
@@ -79,8 +88,6 @@ _JSON = zenoh.Encoding.APPLICATION_JSON
 EXPIRY_GRACE_S = 1.0  # a backstop: a preview unanswered this long past its last moment is answered "expired"
 WORKER_MEMORY_MB = 1024.0  # address space a preview worker may add to its warm size (measured: ~0.3 GB used)
 WORKER_NICE = 10  # preview workers yield the cores to the live loop
-ALARM_GRACE_S = 0.05  # the worker's alarm stops any phase this long past the budget
-WALK_SHARE = 0.5  # of the budget, for the walk; measuring its path may take as long again (``plan``)
 LIGHT, HEAVY = 0, 1
 _FIRST_GUESS_S = {LIGHT: 0.02, HEAVY: 0.5}  # run time assumed before any is measured
 _EWMA = 0.2
@@ -127,6 +134,7 @@ class PreviewDesk:
         wait_s: longest a preview may wait for a worker; one that could not start by then is
             answered ``busy`` at once.
         memory_mb: address space each worker may add to its warm size.
+        team_budget_s: a team preview's budget instead of ``budget_s`` (a replay steps a world).
     """
 
     def __init__(
@@ -140,9 +148,11 @@ class PreviewDesk:
         origin: Origin | None,
         wait_s: float = 2.0,
         memory_mb: float | None = WORKER_MEMORY_MB,
+        team_budget_s: float = 5.0,
     ) -> None:
-        self._queue = queue
+        self._queue_max = queue
         self._budget_s = budget_s
+        self._team_budget_s = team_budget_s
         self._wait_s = wait_s
         self._max_iter = max_iter
         self._clock = clock
@@ -189,29 +199,76 @@ class PreviewDesk:
         except InputError as err:
             self.refuse(query, ErrorReply.of(err))
             return
+        blob = self._blobs.of(view.threats)
+        job = (dataclasses.replace(view, threats=()), request, self._origin, self._budget_s, self._max_iter)
         lane = HEAVY if cost.heavy else LIGHT
+        self._queue(query, key, compute, job, lane, _priority(cost), received, blob, self._budget_s)
+
+    def team(self, query: zenoh.Query, world: World, received: float) -> None:
+        """A team preview query: seeded from ``world`` in the loop thread (``team_preview.seed``), then queued.
+
+        The planner guiding the team's lead (else its first member) answers; the others stay silent.
+        """
+        key = str(query.key_expr)
+        try:
+            tid = keys.parse(key).id
+            team = world.teams.teams.get(tid)
+            if team is not None and not world.owns(team.lead or min(team.units(), default=tid)):
+                query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
+                return
+            seed = team_seed(world, tid, self._clock())
+            if seed is None:
+                raise InputError("key", f"no team {tid!r} in force")
+        except InputError as err:
+            self.refuse(query, ErrorReply.of(err))
+            return
+        self.submit_team(query, key, seed, received)
+
+    def submit_team(self, query: zenoh.Query, key: str, seed: TeamSeed, received: float) -> None:
+        """Admit one team preview (``world.team_preview``) and queue it: heavy, a replay of every member."""
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        try:
+            request = decode(TeamPreviewRequest, payload) if payload else TeamPreviewRequest()
+        except InputError as err:
+            self.refuse(query, ErrorReply.of(err))
+            return
+        steps = len(seed.members) * request.horizon_s / request.dt_s
+        job = (seed, request, self._team_budget_s)
+        self._queue(query, key, compute_team, job, HEAVY, steps, received, None, self._team_budget_s)
+
+    def _queue(
+        self,
+        query: zenoh.Query,
+        key: str,
+        fn: Callable[[Any], tuple[str, bytes]],
+        job: tuple[Any, ...],
+        lane: int,
+        priority: float,
+        received: float,
+        blob: Any,
+        budget_s: float,
+    ) -> None:
+        """Queue one admitted job in ``lane``, or answer ``busy`` at once if it could not start in time."""
         now = self._clock()
         start_by = received + self._wait_s
         wait = self._expected_wait(lane)
-        if len(self._pending) >= self._queue or now + wait > start_by:
+        if len(self._pending) >= self._queue_max or now + wait > start_by:
             self._busy(query, wait)
             return
-        answer = _Answer(query, start_by + self._budget_s + ALARM_GRACE_S)
+        answer = _Answer(query, start_by + budget_s + ALARM_GRACE_S)
         with self._lock:
             self._pending[id(answer)] = answer
             heapq.heappush(self._deadlines, (answer.last, id(answer), answer))
-        blob = self._blobs.of(view.threats)
-        job = (dataclasses.replace(view, threats=()), request, self._origin, self._budget_s, self._max_iter)
         offset = time.monotonic() - now  # the pool's deadlines are on time.monotonic
         task = Task(
-            _compute,
+            fn,
             (job,),
             lambda out: self._done(out, answer=answer, key=key, lane=lane, wait=self._expected_wait(lane)),
-            budget_s=self._budget_s + ALARM_GRACE_S,
+            budget_s=budget_s + ALARM_GRACE_S,
             start_by=start_by + offset,
             field=blob,
             lane=lane,
-            priority=_priority(cost),
+            priority=priority,
         )
         self._pool.submit(task)
 
@@ -314,69 +371,6 @@ def _decode_error(body: bytes) -> ErrorReply:
     return decode_error_reply(body)
 
 
-# -- in the worker processes -------------------------------------------------------
-class _Overrun(BaseException):
-    """The worker's alarm: the preview's budget is spent (not an ``Exception``: nothing may swallow it)."""
-
-
-_ARMED = [False]
-_FIRED = [False]
-
-
-def _alarm(signum: int, frame: Any) -> None:
-    if _ARMED[0]:
-        _ARMED[0] = False
-        _FIRED[0] = True
-        raise _Overrun
-
-
-def _compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
-    """One preview in a worker: ``("reply", body)`` or ``("error", ErrorReply JSON)``.
-
-    The walk stops itself at half the budget and measuring the path by the
-    whole; an alarm just past it stops any other phase (a route search, a
-    foresight): the caches it may have left half-built are dropped, or, when
-    the alarm surfaced through compiled code, the worker is retired.
-    """
-    view, request, origin, budget_s, max_iter = job
-    threats = world_threats()
-    view = dataclasses.replace(view, threats=threats)
-    signal.signal(signal.SIGALRM, _alarm)
-    _FIRED[0] = False
-    _ARMED[0] = True
-    signal.setitimer(signal.ITIMER_REAL, budget_s + ALARM_GRACE_S)
-    try:
-        field = world_field(view.settings.planner.intensity, view.settings.terrain)
-        result = preview(view, request, time.monotonic, WALK_SHARE * budget_s, max_iter, field)
-        _ARMED[0] = False
-        if request.geojson:
-            return "reply", geojson.preview_reply(origin, result, threats, result.path[0], result.path[-1])
-        return "reply", fit_reply(result)
-    except InputError as err:
-        return "error", encode(ErrorReply.of(err))
-    except DeadlinePassed:
-        return "error", encode(ErrorReply(error="expired: the preview's budget was spent measuring its path"))
-    except BaseException as exc:
-        if not _FIRED[0]:
-            raise
-        if isinstance(exc, _Overrun):  # stopped between two bytecodes of ours: the caches it fed go
-            _forget_caches()
-        else:  # surfaced through C (numba's dispatcher wraps it in a SystemError): a fresh worker
-            retire()
-        return "error", encode(ErrorReply(error="expired: the preview's budget was spent and it was stopped"))
-    finally:
-        _ARMED[0] = False
-        signal.setitimer(signal.ITIMER_REAL, 0)
-
-
-def _forget_caches() -> None:
-    """What an interrupted phase may have left half-built: the shared fields and the route cache."""
-    from pfp_service.core.routes import ROUTES
-
-    forget_fields()
-    ROUTES.clear()
-
-
 def _warm_worker() -> None:
     warm_up(None)
 
@@ -433,4 +427,5 @@ def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) 
         cfg.bounds_tuple(),
         cfg.origin,
         wait_s=cfg.preview_wait_ms / 1e3,
+        team_budget_s=cfg.team_preview_budget_ms / 1e3,
     )

@@ -226,6 +226,7 @@ class PlannerNode:
             self._declared += self._wire(s, kind)
         self._declared += [
             s.declare_queryable(keys.previews(m), lambda q: self._on_query("preview", q)),
+            s.declare_queryable(keys.team_previews(m), lambda q: self._on_query("team", q)),
             s.declare_queryable(keys.planner_status(m, p), lambda q: self._on_query("status", q)),
             s.declare_queryable(keys.world(m, p), lambda q: self._on_query("world", q)),
         ]
@@ -502,6 +503,8 @@ class PlannerNode:
         elif kind == "world":
             answer_world(query, self.world, self.clock(), m, p)
             query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
+        elif kind == "team":
+            self._desk.team(query, self.world, t_recv)
         else:
             key = str(query.key_expr)
             try:

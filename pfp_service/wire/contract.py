@@ -242,6 +242,54 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "FeatureCollection (path, threats, zones) in WGS-84",
     ),
     MessageSpec(
+        "team_preview_request",
+        m.TeamPreviewRequest,
+        KeyKind.TEAM_PREVIEW,
+        "get payload",
+        "any",
+        "planner",
+        "optional; no payload replays the team from its members' live states for up to 600 s",
+        examples=(
+            ("team_preview_request", m.TeamPreviewRequest(horizon_s=300.0, dt_s=0.5, speeds={"r1": 3.0})),
+        ),
+    ),
+    MessageSpec(
+        "team_preview",
+        m.TeamPreview,
+        KeyKind.TEAM_PREVIEW,
+        "reply",
+        "planner",
+        "any",
+        "every member's track over time as the live world would drive it, and the team's ETA",
+        examples=(
+            (
+                "team_preview",
+                m.TeamPreview(
+                    team="alpha",
+                    eta_s=95.5,
+                    members=[
+                        m.MemberTrack(
+                            unit="m1",
+                            speed_mps=2.0,
+                            points=[(0.0, 59.0, 0.0), (0.5, 60.0, 0.0), (95.5, 239.29, 0.06)],
+                            statuses=[
+                                m.StatusChange(t_s=0.0, status=m.DirectionStatus.EN_ROUTE),
+                                m.StatusChange(
+                                    t_s=16.5,
+                                    status=m.DirectionStatus.EN_ROUTE,
+                                    reason="team alpha: kept to the corridor r1 cleared",
+                                ),
+                                m.StatusChange(t_s=95.5, status=m.DirectionStatus.ARRIVED),
+                            ],
+                            arrived_s=95.5,
+                        )
+                    ],
+                    simulated_s=95.5,
+                ),
+            ),
+        ),
+    ),
+    MessageSpec(
         "error_reply",
         m.ErrorReply,
         None,

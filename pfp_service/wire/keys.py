@@ -11,6 +11,7 @@ No other module spells a topic string.  The layout (one mission per prefix):
     mumt/{m}/zone/{z}              any -> planner       ZoneUpdate (DELETE removes)
     mumt/{m}/team/{t}              any -> planner       TeamUpdate (DELETE dissolves)
     mumt/{m}/preview/{u}           queryable            PreviewRequest -> PlanResult
+    mumt/{m}/preview/team/{t}      queryable            TeamPreviewRequest -> TeamPreview
     mumt/{m}/planner/{p}/status    queryable            -> PlannerStatus
     mumt/{m}/planner/{p}/world     queryable            -> WorldSnapshot (units, threats held)
     mumt/{m}/event/{kind}          planner -> any       Event
@@ -64,6 +65,8 @@ __all__ = [
     "shard_states",
     "sharded_states",
     "team",
+    "team_preview",
+    "team_previews",
     "teams",
     "template",
     "threat",
@@ -107,6 +110,7 @@ class KeyKind(StrEnum):
     WORLD = "world"
     ZONE = "zone"
     TEAM = "team"
+    TEAM_PREVIEW = "team_preview"
 
 
 # ``{mission}`` and ``{id}`` are the only variables; the id is a unit, threat,
@@ -125,6 +129,7 @@ TEMPLATES: dict[KeyKind, str] = {
     KeyKind.WORLD: PREFIX + "/{mission}/planner/{id}/world",
     KeyKind.ZONE: PREFIX + "/{mission}/zone/{id}",
     KeyKind.TEAM: PREFIX + "/{mission}/team/{id}",
+    KeyKind.TEAM_PREVIEW: PREFIX + "/{mission}/preview/team/{id}",
 }
 
 # What the ``{id}`` chunk names in each template, for people reading the layout.
@@ -142,6 +147,7 @@ ID_NAMES: dict[KeyKind, str] = {
     KeyKind.WORLD: "planner",
     KeyKind.ZONE: "zone",
     KeyKind.TEAM: "team",
+    KeyKind.TEAM_PREVIEW: "team",
 }
 
 
@@ -292,6 +298,11 @@ def preview(mission: str, unit: str) -> str:
     return _build(KeyKind.PREVIEW, mission, unit, "unit")
 
 
+def team_preview(mission: str, team_id: str) -> str:
+    """``mumt/{mission}/preview/team/{team_id}``: the team preview queryable (every member's track)."""
+    return _build(KeyKind.TEAM_PREVIEW, mission, team_id, "team")
+
+
 def planner_status(mission: str, planner: str) -> str:
     """``mumt/{mission}/planner/{planner}/status``: health and counters queryable."""
     return _build(KeyKind.PLANNER_STATUS, mission, planner, "planner")
@@ -356,6 +367,11 @@ def teams(mission: str) -> str:
 def previews(mission: str) -> str:
     """``mumt/{mission}/preview/*``: what a planner declares its preview queryable on."""
     return _wild(KeyKind.PREVIEW, mission)
+
+
+def team_previews(mission: str) -> str:
+    """``mumt/{mission}/preview/team/*``: what a planner declares its team preview queryable on."""
+    return _wild(KeyKind.TEAM_PREVIEW, mission)
 
 
 def planner_statuses(mission: str) -> str:

@@ -48,6 +48,9 @@ class TeamBook:
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
         self._placing: dict[str, Goal] = {}  # a team goal just put: each member's place, for the world to set
+        self.sent: dict[
+            str, Direction
+        ] = {}  # member -> its direction as last judged (a team preview's first move)
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -99,6 +102,7 @@ class TeamBook:
         self._checks = _index_of(self.teams)
         self._index()
         self.said = {u: why for u, why in self.said.items() if u in self._of}
+        self.sent = {u: d for u, d in self.sent.items() if u in self._of}
         return True
 
     def _index(self) -> None:
@@ -153,6 +157,7 @@ class TeamBook:
                 out.append(d)
                 continue
             out.append(self._judged(d, rec, units, held_before, sight))
+            self.sent[d.unit] = out[-1]
         return out
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:

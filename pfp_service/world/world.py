@@ -68,6 +68,7 @@ class World:
     def __init__(self, settings: WorldSettings | None = None) -> None:
         self.settings = s = settings or WorldSettings()
         self._rec = Records(s.planner.intensity, s.terrain)
+        self.records = self._rec  # read, never written, by others: a team preview's seed (``team_preview``)
         self._book = self._rec.book  # the units' one writer (``units.Units``): every step of a unit's phase
         self._units = self._rec.units
         self._threats = self._rec.threats

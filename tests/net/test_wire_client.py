@@ -155,6 +155,28 @@ BUILT: dict[str, list[dict[str, Any]]] = {
         },
         {"circle": {"centre": [50, -20], "radius_m": 12.5}},
     ],
+    "team_preview_request": [{}, {"horizon_s": 120, "dt_s": 0.25, "speeds": {"r1": 3.0}}],
+    "team_preview": [
+        {"team": "alpha"},
+        {
+            "team": "alpha",
+            "eta_s": 95.5,
+            "members": [
+                {
+                    "unit": "m1",
+                    "speed_mps": 2,
+                    "points": [[0, 59, 0], [95.5, 239.3, 0.1]],
+                    "statuses": [
+                        {"t_s": 0, "status": "en_route"},
+                        {"t_s": 95.5, "status": "arrived", "reason": ""},
+                    ],
+                    "arrived_s": 95.5,
+                }
+            ],
+            "simulated_s": 95.5,
+            "stopped": "arrived",
+        },
+    ],
     "preview_request": [
         {},
         {"goal": [5, 5], "max_iter": 500},

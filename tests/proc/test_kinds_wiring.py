@@ -47,7 +47,12 @@ def test_a_planner_subscribes_to_every_kind_as_its_mode_says(cluster):
             if kind.mode == "state":
                 assert rings["plain"] == kind.wildcard(M)
         others = {str(k) for k in declared} - {k.wildcard(M) for k in KINDS}
-        assert others == {f"mumt/{M}/preview/*", f"mumt/{M}/planner/p1/status", f"mumt/{M}/planner/p1/world"}
+        assert others == {
+            f"mumt/{M}/preview/*",
+            f"mumt/{M}/preview/team/*",
+            f"mumt/{M}/planner/p1/status",
+            f"mumt/{M}/planner/p1/world",
+        }
     finally:
         node.stop()
         session.close()

@@ -116,6 +116,8 @@ DECODE: dict[str, Callable[[bytes], Any]] = {
     "event": m.decode_event,
     "zone": m.decode_zone,
     "team": m.decode_team,
+    "team_preview_request": lambda b: m.decode(m.TeamPreviewRequest, b),
+    "team_preview": lambda b: m.decode(m.TeamPreview, b),
 }
 
 
@@ -210,6 +212,10 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     "WriteSummary": ({"kind", "id", "body"}, {"ttl_s"}),
     # added with teams
     "TeamSummary": ({"id", "team"}, {"notes"}),
+    "TeamPreviewRequest": (set(), {"horizon_s", "dt_s", "speeds"}),
+    "TeamPreview": ({"team"}, {"eta_s", "members", "simulated_s", "stopped"}),
+    "MemberTrack": ({"unit"}, {"speed_mps", "points", "statuses", "arrived_s"}),
+    "StatusChange": ({"t_s", "status"}, {"reason"}),
     "TeamUpdate": (
         set(),
         {"members", "separation_m", "lead", "follow", "standoff_m", "corridor_m", "controller", "robots"}

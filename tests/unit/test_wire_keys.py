@@ -34,6 +34,7 @@ BUILDERS = {
     KeyKind.WORLD: (keys.world, keys.worlds, "mumt/m1/planner/u1/world"),
     KeyKind.ZONE: (keys.zone, keys.zones, "mumt/m1/zone/u1"),
     KeyKind.TEAM: (keys.team, keys.teams, "mumt/m1/team/u1"),
+    KeyKind.TEAM_PREVIEW: (keys.team_preview, keys.team_previews, "mumt/m1/preview/team/u1"),
 }
 
 

@@ -81,6 +81,14 @@ from pfp_service.wire.messages.structs import (
     ZoneUpdate,
     fit_text,
 )
+from pfp_service.wire.messages.team_preview import (
+    MAX_PREVIEW_MEMBERS,
+    MAX_REPLAY_HORIZON_S,
+    MemberTrack,
+    StatusChange,
+    TeamPreview,
+    TeamPreviewRequest,
+)
 from pfp_service.wire.messages.teams import (
     MAX_TEAM_MEMBERS,
     RADIO_RANGE_MAX_M,
@@ -109,6 +117,8 @@ __all__ = [
     "MAX_EVENT_ITEMS",
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",
+    "MAX_PREVIEW_MEMBERS",
+    "MAX_REPLAY_HORIZON_S",
     "MAX_SNAPSHOT_ITEMS",
     "MAX_TEAM_MEMBERS",
     "MAX_WHATIF_THREATS",
@@ -131,6 +141,7 @@ __all__ = [
     "ForgottenEvent",
     "Goal",
     "LatLon",
+    "MemberTrack",
     "Mission",
     "MissionParams",
     "Origin",
@@ -142,7 +153,10 @@ __all__ = [
     "RestoredEvent",
     "RouteKind",
     "StaleEvent",
+    "StatusChange",
     "TeamIndex",
+    "TeamPreview",
+    "TeamPreviewRequest",
     "TeamProblem",
     "TeamSummary",
     "TeamUpdate",
