@@ -25,9 +25,9 @@ steeper than its unit's limit; the masked exposure <= the terrain-blind
 plan's in every case and >= 30 % lower on the median; J / J* <= 1.10 at the
 90th percentile.  The exposure targets are checked against the blind plan's
 reported exposure; the comparison with its true (masked) exposure is printed
-beside them, because a terrain-aware plan trades exposure for length as J
-prices them, and the blind plan's wide detours are often out of view by
-chance (the J-optimal path over terrain is more exposed than them too).
+beside them: the blind plan's wide detours are often out of view by chance,
+at a length no J-minimising planner pays (the J-optimal path over terrain is
+more exposed than them too; docs/terrain.md, "Figures").
 Needs a checkout (the scenarios live with the tests).
 """
 

@@ -46,8 +46,9 @@ from pfp_service.core import kernels, polylines, steprule
 from pfp_service.core.cores import SEARCH_FRACTION, Cores
 from pfp_service.core.grid import GridGraph
 from pfp_service.core.metrics import LAMBDA
-from pfp_service.core.routes import ROUTES, Ask, RouteCache
+from pfp_service.core.routes import GLOBAL_CELLS, ROUTES, Ask, RouteCache, route_cell, wary_tie
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.visibility import finest_cell
 
 __all__ = [
     "AUTO_ORDER",
@@ -63,8 +64,6 @@ __all__ = [
     "route_cell",
 ]
 
-GLOBAL_CELLS = 100  # the coarsest route search: cells along the longer side
-ROUTE_MAX_CELLS = 300
 _MAX_RAISES = 6  # x1.5 each: up to 11x the trap's level
 _MAX_EXITS = 4
 Bounds = tuple[tuple[float, float], tuple[float, float]]
@@ -303,23 +302,6 @@ _WALLED: weakref.WeakKeyDictionary[
 ] = weakref.WeakKeyDictionary()
 
 
-def route_cell(span_m: float, s_min_m: float, fine: bool = True) -> float:
-    """Cell size of a route search over ``span_m``: fine enough for the narrowest threat.
-
-    Fine: a sixth of the narrowest standard deviation (so a gap a fraction of
-    a standard deviation wide still holds grid nodes), at most ``span / 100``,
-    no finer than ``span / ROUTE_MAX_CELLS``.  Coarse (``fine=False``): a third,
-    and half the cells (at 100 cells the coarse route round wide thin pancakes
-    cost up to 1.65 J*).  Either way never wider than 3.5 narrowest standard
-    deviations, past which an edge's probe points could step over a core
-    (then up to ``2 * ROUTE_MAX_CELLS``).
-    """
-    most = ROUTE_MAX_CELLS if fine else ROUTE_MAX_CELLS // 2
-    h = min(span_m / GLOBAL_CELLS, s_min_m / (6.0 if fine else 3.0))
-    h = max(h, span_m / most)
-    return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
-
-
 _WIDEST: weakref.WeakKeyDictionary[ThreatField, float] = weakref.WeakKeyDictionary()
 
 
@@ -370,7 +352,8 @@ def global_corners(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | N
             (bx0, by0), (bx1, by1) = tr.bounds
             x0, y0, x1, y1 = max(x0, bx0), max(y0, by0), min(x1, bx1), min(y1, by1)
         span = max(x1 - x0, y1 - y0)
-        coarse, fine = route_cell(span, s_min, fine=False), route_cell(span, s_min)
+        sight = finest_cell(tr.field.packed)
+        coarse, fine = route_cell(span, s_min, False, sight), route_cell(span, s_min, True, sight)
         for h in (coarse, fine) if coarse > 1.01 * fine else (fine,):
             ask = Ask(
                 tr.field,
@@ -405,7 +388,8 @@ def global_corners(tr: Trap, routes: RouteCache | None = None) -> np.ndarray | N
             )
             + f" (local grid of {grid.cell_m:.3g} m cells)"
         )
-    return np.asarray(found.polyline, dtype=np.float64)
+    corners = np.asarray(found.polyline, dtype=np.float64)
+    return wary_tie(ask, corners, tr.step, cache) if math.isfinite(sight) else corners
 
 
 def _what(tr: Trap) -> str:

@@ -19,11 +19,14 @@ from pfp_service.core import kernels
 from pfp_service.core.cores import Cores
 from pfp_service.core.cull import cell_level, index_of, point_level
 from pfp_service.core.threat import ThreatField
+from pfp_service.core.visibility import finest_cell
 
 __all__ = [
+    "SIGHT_SPACING",
     "pieces",
     "polyline_clear",
     "resample",
+    "sample_spacing",
     "segment_costs",
     "segment_hits",
     "shortcut",
@@ -31,19 +34,53 @@ __all__ = [
 ]
 
 _WINDOW = 48  # grid edges a shortcut may replace at once
-_SAMPLES = 17  # Simpson points on a candidate shortcut
+_CHUNK = 8  # candidates priced at once, farthest first (``_shortcut_kept_numpy``)
+_SAMPLES = 17  # Simpson points on a candidate shortcut, at least
+_MAX_INTERVALS = 4096  # Simpson intervals on a candidate shortcut, at most
+SIGHT_SPACING = 1.0  # of the finest visibility window's cell: the most a masked field's samples lie apart
 
 
-def segment_costs(field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
-    """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points."""
-    t = np.linspace(0.0, 1.0, _SAMPLES)
+def sample_spacing(field: ThreatField) -> float:
+    """The most two Simpson samples of a segment may lie apart under ``field`` (``inf``: no bound).
+
+    An unmasked level is smooth over a threat's spread, and ``_SAMPLES``
+    points a segment price it.  A masked one steps from hidden to seen over
+    a visibility window's cell (``visibility.finest_cell``), so a long
+    candidate priced by a fixed count of points can fall between the seen
+    patches and look cheaper than the grid edges it replaces, while the
+    path walked (and measured at every step) is not.
+    """
+    return SIGHT_SPACING * finest_cell(field.packed)
+
+
+@numba.njit(cache=True, nogil=True)
+def _intervals(length: float, spacing: float) -> int:
+    """Simpson intervals (even) on a segment ``length`` long: ``_SAMPLES - 1``, or more to keep within ``spacing``."""
+    n = _SAMPLES - 1
+    if math.isfinite(spacing) and spacing > 0.0 and length > n * spacing:
+        n = min(_MAX_INTERVALS, 2 * math.ceil(0.5 * length / spacing))
+    return n
+
+
+def segment_costs(
+    field: ThreatField, a: np.ndarray, b: np.ndarray, lam: float, spacing: float | None = None
+) -> np.ndarray:
+    """``J`` of straight segments ``a[k] -> b[k]`` by composite Simpson on ``_SAMPLES`` points at least.
+
+    Over a masked field the samples lie at most ``spacing`` apart (default
+    ``sample_spacing(field)``): all the segments of one call on the count
+    the longest needs.
+    """
+    spacing = sample_spacing(field) if spacing is None else spacing
+    length = np.hypot(*(b - a).T)
+    n = int(_intervals(float(length.max()) if len(length) else 0.0, spacing))
+    t = np.linspace(0.0, 1.0, n + 1)
     pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
     index = index_of(field)  # many threats: each point sums only its cell's (cull.py)
-    lv = field.level_culled(pts) if index is None else cell_level(index, pts)
-    w = np.ones(_SAMPLES)
+    lv = field.level(pts) if index is None else cell_level(index, pts)
+    w = np.ones(n + 1)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
-    length = np.hypot(*(b - a).T)
-    return np.asarray(length + lam * length * (lv @ w) / (3.0 * (_SAMPLES - 1)))
+    return np.asarray(length + lam * length * (lv @ w) / (3.0 * n))
 
 
 def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
@@ -53,7 +90,7 @@ def shortcut(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | Non
 
 @numba.njit(cache=True, nogil=True)
 def _segment_cost(  # type: ignore[no-untyped-def]
-    packed, grid, indptr, indices, ax, ay, bx, by, lam, w, limit
+    packed, grid, indptr, indices, ax, ay, bx, by, lam, spacing, limit
 ):  # fmt: skip
     """``segment_costs`` of one segment, each sample's level from its cell of the index (``cull._cell_level``).
 
@@ -65,14 +102,16 @@ def _segment_cost(  # type: ignore[no-untyped-def]
     length = math.hypot(dx, dy)
     if length > limit:
         return math.inf
-    scale = lam * length / (3.0 * (_SAMPLES - 1))
+    n = _intervals(length, spacing)
+    scale = lam * length / (3.0 * n)
     acc = 0.0
-    for s in range(_SAMPLES):
-        t = s * (1.0 / (_SAMPLES - 1))
-        acc += point_level(packed, grid, indptr, indices, ax + t * dx, ay + t * dy) * w[s]
+    for s in range(n + 1):
+        t = s * (1.0 / n)
+        w = 1.0 if s == 0 or s == n else (4.0 if s % 2 == 1 else 2.0)
+        acc += point_level(packed, grid, indptr, indices, ax + t * dx, ay + t * dy) * w
         if length + scale * acc > limit * (1.0 + 1e-9):  # clearly past it, whatever the rounding
             return math.inf
-    return length + lam * length * acc / (3.0 * (_SAMPLES - 1))
+    return length + lam * length * acc / (3.0 * n)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -168,13 +207,10 @@ def segment_hits(cores: Cores, pts: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _shortcut_kept(  # type: ignore[no-untyped-def]
-    pts, lam, packed, grid, indptr, indices, check, cpacked, boxes, fraction, spacing
+    pts, lam, packed, grid, indptr, indices, check, cpacked, boxes, fraction, spacing, sampling
 ):  # fmt: skip
     """``shortcut_kept`` compiled: from each kept point the farthest candidate first, and only until one passes."""
     n = pts.shape[0]
-    w = np.ones(_SAMPLES)
-    for s in range(1, _SAMPLES - 1):
-        w[s] = 4.0 if s % 2 == 1 else 2.0
     prefix = np.zeros(n)
     for k in range(n - 1):
         seg = _segment_cost(
@@ -187,7 +223,7 @@ def _shortcut_kept(  # type: ignore[no-untyped-def]
             pts[k + 1, 0],
             pts[k + 1, 1],
             lam,
-            w,
+            sampling,
             math.inf,
         )
         prefix[k + 1] = prefix[k] + seg
@@ -200,7 +236,17 @@ def _shortcut_kept(  # type: ignore[no-untyped-def]
         for j in range(min(n - 1, i + _WINDOW), i + 1, -1):
             limit = (prefix[j] - prefix[i]) * (1.0 + 1e-12)
             direct = _segment_cost(
-                packed, grid, indptr, indices, pts[i, 0], pts[i, 1], pts[j, 0], pts[j, 1], lam, w, limit
+                packed,
+                grid,
+                indptr,
+                indices,
+                pts[i, 0],
+                pts[i, 1],
+                pts[j, 0],
+                pts[j, 1],
+                lam,
+                sampling,
+                limit,
             )
             if direct > limit:
                 continue
@@ -247,6 +293,7 @@ def shortcut_kept(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores 
             np.ascontiguousarray(boxes),
             fraction,
             float(spacing),
+            sample_spacing(field),
         )
         return out
     return _shortcut_kept_numpy(field, pts, lam, cores)
@@ -254,21 +301,25 @@ def shortcut_kept(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores 
 
 def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
     """``shortcut_kept`` with every candidate of a window evaluated at once (any field, zones included)."""
-    seg = segment_costs(field, pts[:-1], pts[1:], lam)
+    spacing = sample_spacing(field)
+    seg = segment_costs(field, pts[:-1], pts[1:], lam, spacing)
     prefix = np.concatenate([[0.0], np.cumsum(seg)])
     keep = [0]
     i = 0
     n = len(pts)
     while i < n - 1:
-        js = np.arange(i + 2, min(n, i + _WINDOW + 1))
         best = i + 1
-        if len(js):
-            direct = segment_costs(field, np.repeat(pts[i : i + 1], len(js), axis=0), pts[js], lam)
+        # farthest first, a chunk at a time, until one passes: the same pick as the whole window's
+        for top in range(min(n - 1, i + _WINDOW), i + 1, -_CHUNK):
+            js = np.arange(top, max(i + 1, top - _CHUNK), -1)
+            direct = segment_costs(field, np.repeat(pts[i : i + 1], len(js), axis=0), pts[js], lam, spacing)
             ok = direct <= (prefix[js] - prefix[i]) * (1.0 + 1e-12)
-            for j in js[ok][::-1]:
+            for j in js[ok]:
                 if cores is None or not cores.first_hit(pts[[i, j]]):
                     best = int(j)
                     break
+            if best > i + 1:
+                break
         keep.append(best)
         i = best
     return np.array(keep)

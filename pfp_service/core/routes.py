@@ -58,6 +58,7 @@ between threads holds its own lock around every call.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import weakref
 from collections import OrderedDict
@@ -68,13 +69,31 @@ import numpy as np
 from pfp_service.core.astar import lazy_route
 from pfp_service.core.cores import Cores
 from pfp_service.core.grid import GridGraph, Route
-from pfp_service.core.polylines import shortcut_kept
+from pfp_service.core.metrics import LAMBDA, path_cost
+from pfp_service.core.polylines import resample, shortcut_kept
 from pfp_service.core.threat import ThreatField
 
-__all__ = ["CELL_SLACK", "ROOM", "ROUTES", "Ask", "Found", "RouteCache", "RouteStats"]
+__all__ = [
+    "CELL_SLACK",
+    "GLOBAL_CELLS",
+    "ROOM",
+    "ROUTES",
+    "Ask",
+    "Found",
+    "RouteCache",
+    "RouteStats",
+    "route_cell",
+    "wary_tie",
+]
 
 Box = tuple[tuple[float, float], tuple[float, float]]
 
+GLOBAL_CELLS = 100  # the coarsest route search: cells along the longer side
+ROUTE_MAX_CELLS = 300
+SIGHT_CELLS = 1.0  # over a masked field, a route search's cell is at most this many visibility window cells
+WARY_LAMBDA = 2.0  # over a masked field, a second route search prices exposure this much more ...
+WARY_CELL = 3.0  # ... on cells this much coarser (it is only asked whether a less exposed way ties) ...
+WARY_MARGIN = 0.01  # ... and wins a tie: its J at most this much above the first's, and less exposed
 ROOM = 0.25  # a shared goal's grid: this share of the asked box's span to spare on every side
 REFINE = 2.0  # a shared goal's grid: its cell this much finer than the asked one (the search is paid once)
 CELL_SLACK = 0.25  # a kept grid's cell may be this much coarser than the asked one
@@ -429,3 +448,51 @@ def _shortcut(ask: Ask, pts: np.ndarray, tail: np.ndarray | None) -> np.ndarray:
 
 ROUTES = RouteCache()
 """The process's shared cache, used by ``escape_strategies.global_route`` unless it is given another."""
+
+
+def route_cell(span_m: float, s_min_m: float, fine: bool = True, sight_m: float = math.inf) -> float:
+    """Cell size of a route search over ``span_m``: fine enough for the narrowest threat, and its sight.
+
+    Fine: a sixth of the narrowest standard deviation (so a gap a fraction of
+    a standard deviation wide still holds grid nodes), at most ``span / 100``,
+    no finer than ``span / ROUTE_MAX_CELLS``.  Coarse (``fine=False``): a third,
+    and half the cells (at 100 cells the coarse route round wide thin pancakes
+    cost up to 1.65 J*).  Either way never wider than 3.5 narrowest standard
+    deviations, past which an edge's probe points could step over a core
+    (then up to ``2 * ROUTE_MAX_CELLS``).  Over a masked field (``sight_m``,
+    ``visibility.finest_cell``) at most ``SIGHT_CELLS`` window cells, before
+    those floors: coarser, an edge's three samples straddle a seen patch.
+    """
+    most = ROUTE_MAX_CELLS if fine else ROUTE_MAX_CELLS // 2
+    h = min(span_m / GLOBAL_CELLS, s_min_m / (6.0 if fine else 3.0), SIGHT_CELLS * sight_m)
+    h = max(h, span_m / most)
+    return max(min(h, 3.5 * s_min_m), span_m / (2 * ROUTE_MAX_CELLS))
+
+
+def wary_tie(ask: Ask, corners: np.ndarray, step: float, cache: RouteCache) -> np.ndarray:
+    """Over a masked field: ``corners``, or the route searched at ``WARY_LAMBDA`` times lambda if it ties on ``J``.
+
+    A masked level steps from hidden to seen over a window cell, and a route
+    grid prices it from a few samples an edge: two ways round a ridge can
+    then differ in ``J`` by less than that pricing's error (``WARY_MARGIN``)
+    and in exposure many times over (a gap between two threats' cores in
+    view of one, against the ground behind them).  Both are priced as the
+    unit will walk them (resampled at ``step``, Simpson on every piece); the
+    less exposed wins such a tie, and only such a tie.  The search is the
+    stepper's, so a preview and the live unit make the same choice.
+    """
+    a = resample(corners, step)
+    ja = path_cost(a, ask.field, LAMBDA)
+    la = float(np.hypot(*np.diff(a, axis=0).T).sum())
+    if ja - la <= WARY_MARGIN * ja:  # its exposure is within a tie's margin of J: no tie could save more
+        return corners
+    wary = cache.find(dataclasses.replace(ask, lam=WARY_LAMBDA * ask.lam, cell_m=WARY_CELL * ask.cell_m))
+    if not len(wary.polyline):
+        return corners
+    other = np.asarray(wary.polyline, dtype=np.float64)
+    b = resample(other, step)
+    jb = path_cost(b, ask.field, LAMBDA)
+    lb = float(np.hypot(*np.diff(b, axis=0).T).sum())
+    if jb <= (1.0 + WARY_MARGIN) * ja and jb - lb < ja - la:  # tied on J, and less exposed
+        return other
+    return corners

@@ -25,7 +25,17 @@ import numpy as np
 
 from pfp_service.core import kernels
 
-__all__ = ["REACH_FLOOR", "Sight", "Window", "concat", "reach_box", "stack_rows", "unmasked", "widen"]
+__all__ = [
+    "REACH_FLOOR",
+    "Sight",
+    "Window",
+    "concat",
+    "finest_cell",
+    "reach_box",
+    "stack_rows",
+    "unmasked",
+    "widen",
+]
 
 # A threat's window covers where its own term is at least this share of its
 # peak: beyond, the mask multiplies almost nothing, and the window is clamped.
@@ -121,6 +131,20 @@ def concat(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[: a.shape[0], : a.shape[1]] = a
     out[a.shape[0] :, : b.shape[1]] = b
     return out
+
+
+def finest_cell(packed: np.ndarray) -> float:
+    """The finest window cell among ``packed``'s threats (metres); ``inf`` when none is masked.
+
+    A masked level changes over a window cell (its lowest visible heights
+    step from hidden to seen there), where an unmasked one changes over a
+    threat's spread: whatever samples a masked field along a line (a route
+    search's edges, a shortcut's candidates) must sample at this scale.
+    """
+    if not len(packed) or packed.shape[1] <= kernels.VIS_CELL:
+        return math.inf
+    masked = packed[:, kernels.VIS_NX] > 0
+    return float(packed[masked, kernels.VIS_CELL].min()) if masked.any() else math.inf
 
 
 def unmasked(packed: np.ndarray) -> np.ndarray:
