@@ -76,8 +76,8 @@ class World:
         self.limits = Limits()
         self.teams = TeamBook()  # the teams in force: their roles' verdicts on the directions
         self._disp = dispersion.Dispersion(
-            s.dispersion, self._units, self._book.yielded
-        )  # off unless enabled
+            s.dispersion, self._units, self._book.yielded, self.teams.dispersed
+        )  # off unless enabled; a team's separation_m among its members
         # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
         self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
         self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once
