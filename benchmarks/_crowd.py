@@ -226,8 +226,8 @@ def simulate(
         deadlocked |= {e.unit for e in found}
         for e in found:  # from where each stood when it began
             pair = [row[e.unit], row[e.other]] if e.other in row else [row[e.unit]]
-            start = max(round((t - e.held_s) / dt_s), 0)
-            open_locks.append((t - e.held_s, pair, to_goal[min(start, len(to_goal) - 1)][pair]))
+            tick = max(round((t - e.held_s) / dt_s), 0)
+            open_locks.append((t - e.held_s, pair, to_goal[min(tick, len(to_goal) - 1)][pair]))
         if record is not None:
             record += [(t, d) for d in o.directions]
         if tracks is not None:

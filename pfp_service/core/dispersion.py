@@ -106,7 +106,7 @@ def pair_separation(
         floor = np.minimum(s, RELAX * gap)
         relaxed = floor + (s - floor) * np.minimum(far / (RELAX_OVER * s), 1.0)
         s = np.where(np.isfinite(relaxed), relaxed, s)
-    return s
+    return np.asarray(s, dtype=np.float64)
 
 
 def _pair_terms(
@@ -198,7 +198,7 @@ def brute_gradients(
     """``grad phi`` for every unit against every other, ``O(N^2)``: the reference for ``NeighbourIndex``."""
     points, seps = np.asarray(points, dtype=float), np.asarray(seps, dtype=float)
     n = len(points)
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    i, j = i.ravel(), j.ravel()
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    i, j = ii.ravel(), jj.ravel()
     gx, gy = _pair_terms(points, pair_separation(points, seps, i, j, team, team_sep, goals), i, j, n)
     return np.column_stack([gx, gy])

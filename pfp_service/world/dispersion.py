@@ -315,7 +315,7 @@ class Dispersion:
         j = self._row[hold.other]
         tx, ty = self._towards(i, (0.0, 0.0))
         rx, ry = (index.points[j] - index.points[i]).tolist()
-        return rx * tx + ry * ty <= 0.0
+        return bool(rx * tx + ry * ty <= 0.0)
 
     def _blockers(self, moving: list[Direction]) -> list[int]:
         """For each direction, the row of the nearest unit it must yield to, or -1: one vectorised pass."""

@@ -100,3 +100,29 @@ def test_a_team_keeps_its_separation_m_among_its_members_and_by_class_with_other
     untouched: list = []
     _crowd.simulate(plain, ON, tracks=untouched)
     assert min(float(np.hypot(*(p[0] - p[1]))) for p in untouched) < 0.9 * 120.0  # the case is a real one
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_index_with_teams_and_goals_gives_what_every_pair_gives(seed):
+    from pfp_service.core.dispersion import NeighbourIndex, brute_gradients, pair_separation
+
+    rng = np.random.default_rng(seed)
+    n = 300
+    pts = rng.uniform(-1000, 1000, (n, 2))
+    seps = rng.choice([5.0, 50.0], n)
+    team = rng.choice([-1, 0, 1], n)
+    team_sep = np.where(team == 0, 120.0, np.where(team == 1, 20.0, np.nan))
+    goals = np.where(rng.random((n, 1)) < 0.5, pts + rng.uniform(-60, 60, (n, 2)), np.nan)
+    index = NeighbourIndex(pts, seps, team, team_sep, goals)
+    got = index.gradients(np.arange(n))
+    np.testing.assert_allclose(got, brute_gradients(pts, seps, team, team_sep, goals), rtol=1e-12, atol=1e-15)
+    i, j = np.array([0, 1, 2]), np.array([3, 4, 5])
+    for a, b, s in zip(i, j, pair_separation(pts, seps, i, j, team, team_sep, goals)):
+        want = (
+            120.0 if team[a] == team[b] == 0 else 20.0 if team[a] == team[b] == 1 else max(seps[a], seps[b])
+        )
+        if np.isfinite(goals[a]).all() and np.isfinite(goals[b]).all():
+            far = max(np.hypot(*(pts[a] - goals[a])), np.hypot(*(pts[b] - goals[b])))
+            want = _relaxed(want, float(np.hypot(*(goals[a] - goals[b]))), float(far))
+        assert s == pytest.approx(want)
+    assert index.radius == 2.0 * 120.0  # the widest pair is felt: the team's, not the class's
