@@ -17,7 +17,8 @@ unit whose distance to its goal fell by ``PROGRESS`` of its separation
 within ``deadlock_s`` is coming nearer it, and a unit yielding to it (or
 pushed to a standstill behind it) is in a queue that moves, not in a
 deadlock; but a unit that has yielded ``STARVED`` times ``deadlock_s`` in
-all, whomever to, is in one all the same (a stream that never ends).
+all, whomever to, takes its turn (the grace, without backing off): a stream
+of units that never ends does not hold it for ever.
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ __all__ = [
 
 PROGRESS = 0.1  # a unit whose distance to goal falls by this share of its separation comes nearer it
 ESCALATE = 3.0  # two units locking again within this many (deadlock_s + backoff_s): the other backs off
-STARVED = 3.0  # a unit yielding this many ``deadlock_s`` in all, whoever it yields to, is in a deadlock
+STARVED = 3.0  # a unit yielding this many ``deadlock_s`` in all, to units that move, takes its turn
 ROUND_BACKOFFS = 4.0  # going round a unit at rest lasts at most this many ``backoff_s``
 ROUND_AT = 1.2  # ... at this many separations from it: outside ``KEEP``, so the cut does not stop it
 

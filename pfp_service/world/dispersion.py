@@ -190,14 +190,18 @@ class Dispersion:
             pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
             if hold is None:
                 hold = self._held[d.unit] = Hold(other, now, gap, began=now)
+            elif now - hold.began >= deadlocks.STARVED * s.deadlock_s:  # a stream that never ends: its turn
+                del self._held[d.unit]
+                locks.resolved(d.unit, now)
+                continue
             elif hold.other != other:  # yielding still, to another: the clock runs on
                 hold.other, hold.gap = other, gap
-            elif now - hold.began >= deadlocks.STARVED * s.deadlock_s or (
+            elif (
                 now - hold.since >= s.deadlock_s
                 and gap <= hold.gap + _DRAWN_AWAY * pair
                 and not locks.progressing(other, now)
-            ):  # held for a unit neither passing nor coming nearer its goal, or held too long in all
-                events.append(self._lock(i, j, now - hold.began, now))
+            ):  # held for a unit neither passing nor coming nearer its goal
+                events.append(self._lock(i, j, now - hold.since, now))
                 if (mine := self._held.get(d.unit)) is not None and mine.until > now:
                     directions[k] = self._resolve(d, i, j, mine)
                     continue
