@@ -48,7 +48,7 @@ __all__ = [
 
 PROGRESS = 0.1  # a unit whose distance to goal falls by this share of its separation comes nearer it
 ESCALATE = 3.0  # two units locking again within this many (deadlock_s + backoff_s): the other backs off
-STARVED = 3.0  # a unit yielding this many ``deadlock_s`` in all, to units that move, takes its turn
+STARVED = 2.0  # a unit yielding this many ``deadlock_s`` in all, to units that move, takes its turn
 ROUND_BACKOFFS = 4.0  # going round a unit at rest lasts at most this many ``backoff_s``
 ROUND_AT = 1.2  # ... at this many separations from it: outside ``KEEP``, so the cut does not stop it
 
