@@ -63,6 +63,9 @@ KEEP = 1.1  # no direction drives a unit within this many separations of another
 # by ``_short``, rather than yielding: right of way is for paths that meet, and a queue that holds still
 # at every gap never flows
 AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
+# a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
+# reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
+TEAM_WIDEST = 4.0
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 
@@ -127,7 +130,12 @@ class Dispersion:
             if any(t is not None for t in teams):
                 names = {t[0]: k for k, t in enumerate(sorted({t for t in teams if t is not None}))}
                 team = np.fromiter((-1 if t is None else names[t[0]] for t in teams), dtype=np.intp, count=n)
-                team_sep = np.fromiter((math.nan if t is None else t[1] for t in teams), dtype=float, count=n)
+                most = TEAM_WIDEST * max(
+                    self.settings.separation_m.values()
+                )  # the search's reach grows with it
+                team_sep = np.fromiter(
+                    (math.nan if t is None else min(t[1], most) for t in teams), dtype=float, count=n
+                )
         goals = np.array(
             [r.goal.position if r.goal is not None else (math.nan, math.nan) for r in recs], dtype=float
         ).reshape(-1, 2)

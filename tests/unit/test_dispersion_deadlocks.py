@@ -126,3 +126,21 @@ def test_the_index_with_teams_and_goals_gives_what_every_pair_gives(seed):
             want = _relaxed(want, float(np.hypot(*(goals[a] - goals[b]))), float(far))
         assert s == pytest.approx(want)
     assert index.radius == 2.0 * 120.0  # the widest pair is felt: the team's, not the class's
+
+
+def test_a_hostile_team_separation_is_kept_only_up_to_its_bound():
+    from pfp_service.wire import Goal, UnitKind, UnitState
+    from pfp_service.world import events as ev
+    from pfp_service.world.world import World, WorldSettings
+
+    w = World(WorldSettings(deliberation="deferred", dispersion=ON))
+    far = [(f"u{k}", (3000.0 * k, 0.0)) for k in range(4)]
+    states = [ev.StateReported(u, UnitState(position=p, kind=UnitKind.UNMANNED)) for u, p in far]
+    w.apply(
+        [*states, ev.TeamPut("big", TeamUpdate(members=[u for u, _ in far], separation_m=100_000.0))], 0.0
+    )
+    w.apply([ev.GoalSet(u, Goal(position=(p[0], 900.0))) for u, p in far], 0.5)
+    out = w.apply(states, 1.0)
+    assert [e for e in out.events if type(e).__name__ == "RejectedEvent"] == []
+    assert {d.status for d in out.directions} == {DirectionStatus.EN_ROUTE}
+    assert all(abs(d.vector[0]) < 1e-9 for d in out.directions)  # 3 km apart: no push, straight north
