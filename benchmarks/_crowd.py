@@ -27,6 +27,7 @@ from pfp_service.wire import (
     Direction,
     DirectionStatus,
     Goal,
+    TeamUpdate,
     ThreatUpdate,
     UnitKind,
     UnitState,
@@ -35,7 +36,18 @@ from pfp_service.world import events as ev
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.world import World, WorldSettings
 
-__all__ = ["Crowd", "Outcome", "converging", "gaps", "head_on", "one_gap", "simulate", "wall"]
+__all__ = [
+    "Crowd",
+    "Outcome",
+    "converging",
+    "crowded_goal",
+    "gaps",
+    "head_on",
+    "one_gap",
+    "pinned",
+    "simulate",
+    "wall",
+]
 
 _MOVES = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING, DirectionStatus.YIELDING)
 
@@ -51,6 +63,7 @@ class Crowd:
     threats: dict[str, ThreatUpdate]
     speed_mps: float = 5.0
     limit_s: float = 1800.0  # simulated time at most
+    teams: dict[str, TeamUpdate] = field(default_factory=dict)
 
     def ids(self) -> list[str]:
         return [f"u{k:04d}" for k in range(len(self.starts))]
@@ -69,6 +82,8 @@ class Outcome:
     longest_hold_s: float = 0.0  # the longest a unit yielded (held or backed off) without a break
     longest_deadlock_s: float = 0.0  # the longest such stretch among those with a deadlock in them
     still_holding: int = 0
+    longest_clearing_s: float = 0.0  # the longest from a deadlock's start until both its units moved on
+    not_cleared: int = 0  # deadlocks whose units had not moved on when the run ended
     tick_cpu_s: list[float] = field(default_factory=list)  # each apply's CPU time
     shadow_cpu_s: list[float] = field(default_factory=list)  # the shadow world's, on the same inputs
     states: int = 0  # state reports applied
@@ -136,10 +151,14 @@ def simulate(
     limit_s: float | None = None,
     record: list[tuple[float, Direction]] | None = None,
     shadow: DispersionSettings | None = None,
+    tracks: list[np.ndarray] | None = None,
+    locks: list[tuple[float, DeadlockEvent]] | None = None,
 ) -> Outcome:
     """Drive ``crowd`` through a world with ``dispersion`` (``None``: off) until every unit rests or time is up.
 
     ``record``: every direction sent, with its time, is appended to it.
+    ``tracks``: every unit's position at each tick, ``(n, 2)`` a tick, is appended to it.
+    ``locks``: every deadlock reported, with its time, is appended to it.
     ``shadow``: a second world with these settings is given the very same
     inputs each tick (its directions unused, its jobs run as the first's),
     and its ``apply`` timed in ``Outcome.shadow_cpu_s``: the cost of the two
@@ -164,6 +183,9 @@ def simulate(
     resting = np.zeros(n, dtype=bool)
     out = Outcome()
     held_since: dict[str, float] = {}
+    goals = np.array(crowd.goals, dtype=float)
+    to_goal: list[np.ndarray] = []  # each unit's distance to its goal, each tick
+    open_locks: list[tuple[float, list[int], np.ndarray]] = []  # (start, its two units, their distances then)
     deadlocked: set[str] = set()
     row = {u: k for k, u in enumerate(ids)}
     setup: list[ev.Input] = [ev.ThreatPut(t, u) for t, u in crowd.threats.items()]
@@ -179,12 +201,16 @@ def simulate(
 
     while t <= limit:
         seq += 1
+        to_goal.append(np.hypot(*(pos - goals).T))
+        open_locks = _clearing(out, open_locks, to_goal[-1], resting, sep, t)
         inputs: list[ev.Input] = list(done)
         done_before = done
         inputs += [
             ev.StateReported(u, UnitState(position=(float(p[0]), float(p[1])), seq=seq, kind=k))
             for u, p, k in zip(ids, pos.tolist(), kinds)
         ]
+        if seq == 1:  # once the units are known: a team naming units not yet seen is refused
+            inputs += [ev.TeamPut(tid, team) for tid, team in crowd.teams.items()]
         c0 = time.process_time()
         o = world.apply(inputs, t)
         out.tick_cpu_s.append(time.process_time() - c0)
@@ -195,11 +221,19 @@ def simulate(
             to = twin.apply(twin_done + inputs[len(done_before) :], t)
             out.shadow_cpu_s.append(time.process_time() - c0)
             twin_done = [job.run() for job in to.jobs if not job.cancelled]
-        locks = [e for e in o.events if isinstance(e, DeadlockEvent)]
-        out.deadlocks += len(locks)
-        deadlocked |= {e.unit for e in locks}
+        found = [e for e in o.events if isinstance(e, DeadlockEvent)]
+        out.deadlocks += len(found)
+        deadlocked |= {e.unit for e in found}
+        for e in found:  # from where each stood when it began
+            pair = [row[e.unit], row[e.other]] if e.other in row else [row[e.unit]]
+            tick = max(round((t - e.held_s) / dt_s), 0)
+            open_locks.append((t - e.held_s, pair, to_goal[min(tick, len(to_goal) - 1)][pair]))
         if record is not None:
             record += [(t, d) for d in o.directions]
+        if tracks is not None:
+            tracks.append(pos.copy())
+        if locks is not None:
+            locks += [(t, e) for e in found]
         for d in o.directions:
             k = row[d.unit]
             if d.status is DirectionStatus.ARRIVED and d.unit not in out.arrived_s:
@@ -228,7 +262,36 @@ def simulate(
     for u, since in held_since.items():
         _hold_ended(out, t - since, u in deadlocked)
     out.still_holding, out.sim_s = len(held_since), t
+    for start, _, _ in _clearing(out, open_locks, np.hypot(*(pos - goals).T), resting, sep, t):
+        out.not_cleared += 1
+        out.longest_clearing_s = max(out.longest_clearing_s, t - start)
     return out
+
+
+CLEARED = 0.1  # a deadlock is cleared when each of its units is this many separations nearer its goal
+
+
+def _clearing(
+    out: Outcome,
+    open_locks: list[tuple[float, list[int], np.ndarray]],
+    to_goal: np.ndarray,
+    resting: np.ndarray,
+    sep: np.ndarray,
+    t: float,
+) -> list[tuple[float, list[int], np.ndarray]]:
+    """The deadlocks not cleared yet; each cleared one's time from its start into ``out``.
+
+    Cleared, measured on the tracks: each of the two units is nearer its goal
+    than when the deadlock began, by ``CLEARED`` of its separation, or rests
+    (arrived, trapped).
+    """
+    still = []
+    for start, pair, then in open_locks:
+        if np.all(resting[pair] | (to_goal[pair] <= then - CLEARED * sep[pair])):
+            out.longest_clearing_s = max(out.longest_clearing_s, t - start)
+        else:
+            still.append((start, pair, then))
+    return still
 
 
 def _hold_ended(out: Outcome, held: float, deadlock: bool) -> None:
@@ -287,3 +350,26 @@ def head_on() -> Crowd:
         threats={},
         limit_s=600.0,
     )
+
+
+def pinned(gap_m: float = 320.0) -> Crowd:
+    """Unmanned ``u0001`` driving north through a gap where manned ``u0000`` stands on its goal, in the middle."""
+    return Crowd(
+        "one unit past another at rest in a gap",
+        starts=[(0.0, 0.0), (0.0, -500.0)],
+        goals=[(0.0, 0.0), (0.0, 600.0)],
+        kinds=["manned", "unmanned"],
+        threats=wall((0.0,), gap_m, span=1200.0),
+        limit_s=600.0,
+    )
+
+
+def crowded_goal(n: int = 8, radius_m: float = 20.0) -> Crowd:
+    """``n`` vehicles from a ring 600 m out to goals on a ring ``radius_m`` across, closer than their separation."""
+    starts, goals = [], []
+    for k in range(n):
+        a = 2.0 * math.pi * k / n
+        starts.append((600.0 * math.sin(a), 600.0 * math.cos(a)))
+        goals.append((radius_m * math.sin(a), radius_m * math.cos(a)))
+    kinds = ["manned" if k % 3 == 0 else "unmanned" for k in range(n)]
+    return Crowd(f"{n} units, one crowded goal area", starts, goals, kinds, {}, limit_s=900.0)

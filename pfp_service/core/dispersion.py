@@ -20,6 +20,16 @@ the separation, so a crowd's jostling keeps clear of it.  Two units on the
 very same point have no gradient between them; the one of lower index is
 pushed west, the other east, so they part.
 
+A pair's separation (``pair_separation``) is the larger of its two
+units' (by class), or their team's ``separation_m`` when both are in one
+team that sets it; and near a shared goal it relaxes: a pair whose goals
+are closer than ``1 / RELAX`` separations could never both arrive, so as
+the farther of the two from its goal comes within ``RELAX_OVER``
+separations of it, the pair's separation shrinks linearly towards
+``RELAX`` times the gap between their goals (never below it, never above
+the separation).  At their goals the two then stand outside each other's
+stopping distance (``4/3 RELAX < 1`` of the goals' gap).
+
 ``NeighbourIndex`` is a ``scipy.spatial.cKDTree`` over every unit's
 position, built once per tick, and its pairs within reach found once, in
 compiled code (``query_pairs``); ``gradients`` sums them for the units
@@ -31,10 +41,22 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["PUSH", "REACH", "NeighbourIndex", "brute_gradients", "gradient", "potential"]
+__all__ = [
+    "PUSH",
+    "REACH",
+    "RELAX",
+    "RELAX_OVER",
+    "NeighbourIndex",
+    "brute_gradients",
+    "gradient",
+    "pair_separation",
+    "potential",
+]
 
 REACH = 2.0  # a neighbour is felt within this many separations
 PUSH = 3.0  # the term's weight in units of the field's own slope where the unit stands
+RELAX = 0.6  # near a shared goal a pair keeps at least this share of its goals' gap (4/3 of it < 1)
+RELAX_OVER = 2.0  # ... relaxing as the farther of the two comes within this many separations of its goal
 
 
 def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
@@ -53,16 +75,50 @@ def gradient(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> np.ndarray:
     return np.array([-np.sum(w * dx), -np.sum(w * dy)])
 
 
+def pair_separation(
+    points: np.ndarray,
+    seps: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    team: np.ndarray | None = None,
+    team_sep: np.ndarray | None = None,
+    goals: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each pair ``(i, j)``'s separation in metres: by class, by team, relaxed near a shared goal.
+
+    Args:
+        points: ``(N, 2)`` positions.
+        seps: ``(N,)`` each unit's separation by its class (a pair keeps the larger).
+        i, j: the pairs, as rows.
+        team: ``(N,)`` each unit's team as a number, ``-1`` for none; a pair in one team keeps ...
+        team_sep: ``(N,)`` ... its team's separation instead.
+        goals: ``(N, 2)`` each unit's goal, NaN for none: a pair with both relaxes near them.
+    """
+    s = np.maximum(seps[i], seps[j])
+    if team is not None and team_sep is not None:
+        s = np.where((team[i] == team[j]) & (team[i] >= 0), team_sep[i], s)
+    if goals is not None:
+        gap = np.hypot(goals[i, 0] - goals[j, 0], goals[i, 1] - goals[j, 1])  # NaN without both goals
+        far = np.maximum(
+            np.hypot(points[i, 0] - goals[i, 0], points[i, 1] - goals[i, 1]),
+            np.hypot(points[j, 0] - goals[j, 0], points[j, 1] - goals[j, 1]),
+        )
+        floor = np.minimum(s, RELAX * gap)
+        relaxed = floor + (s - floor) * np.minimum(far / (RELAX_OVER * s), 1.0)
+        s = np.where(np.isfinite(relaxed), relaxed, s)
+    return np.asarray(s, dtype=np.float64)
+
+
 def _pair_terms(
-    points: np.ndarray, seps: np.ndarray, i: np.ndarray, j: np.ndarray, n: int
+    points: np.ndarray, pair_s: np.ndarray, i: np.ndarray, j: np.ndarray, n: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Sum over pairs ``(i, j)`` (``i`` the row) of each pair's gradient share, as ``(n,)`` x and y."""
+    """Sum over pairs ``(i, j)`` (``i`` the row; ``pair_s`` their separations) of each pair's gradient share."""
     keep = i != j
-    i, j = i[keep], j[keep]
+    i, j, pair_s = i[keep], j[keep], pair_s[keep]
     dx = points[i, 0] - points[j, 0]
     dy = points[i, 1] - points[j, 1]
     d = np.hypot(dx, dy)
-    rho = REACH * np.maximum(seps[i], seps[j])
+    rho = REACH * pair_s
     near = d < rho
     i, j, dx, dy, d, rho = i[near], j[near], dx[near], dy[near], d[near], rho[near]
     same = d == 0.0
@@ -80,14 +136,30 @@ class NeighbourIndex:
     Args:
         points: ``(N, 2)`` positions in metres.
         seps: ``(N,)`` each unit's separation in metres (a pair keeps the larger).
+        team, team_sep, goals: as ``pair_separation``'s (``None``: no teams, no goals).
     """
 
-    def __init__(self, points: np.ndarray, seps: np.ndarray) -> None:
+    def __init__(
+        self,
+        points: np.ndarray,
+        seps: np.ndarray,
+        team: np.ndarray | None = None,
+        team_sep: np.ndarray | None = None,
+        goals: np.ndarray | None = None,
+    ) -> None:
         self.points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
+        self.team, self.team_sep, self.goals = team, team_sep, goals
         self.tree = cKDTree(self.points) if len(self.points) else None
-        self.radius = REACH * float(self.seps.max()) if len(self.seps) else 0.0
+        widest = max(
+            float(self.seps.max()), float(np.nanmax(team_sep, initial=0.0)) if team_sep is not None else 0.0
+        )
+        self.radius = REACH * widest if len(self.seps) else 0.0
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
+    def pair_seps(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """The separation of each pair ``(i, j)`` (``pair_separation``) in metres."""
+        return pair_separation(self.points, self.seps, i, j, self.team, self.team_sep, self.goals)
 
     def pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ordered pair ``(i, j)``, ``i != j``, within the widest reach: one compiled query, kept."""
@@ -112,15 +184,21 @@ class NeighbourIndex:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
         rows = np.asarray(rows, dtype=np.intp)
         i, j = self.near(rows)
-        gx, gy = _pair_terms(self.points, self.seps, i, j, len(self.points))
+        gx, gy = _pair_terms(self.points, self.pair_seps(i, j), i, j, len(self.points))
         return np.column_stack([gx[rows], gy[rows]])
 
 
-def brute_gradients(points: np.ndarray, seps: np.ndarray) -> np.ndarray:
+def brute_gradients(
+    points: np.ndarray,
+    seps: np.ndarray,
+    team: np.ndarray | None = None,
+    team_sep: np.ndarray | None = None,
+    goals: np.ndarray | None = None,
+) -> np.ndarray:
     """``grad phi`` for every unit against every other, ``O(N^2)``: the reference for ``NeighbourIndex``."""
+    points, seps = np.asarray(points, dtype=float), np.asarray(seps, dtype=float)
     n = len(points)
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    gx, gy = _pair_terms(
-        np.asarray(points, dtype=float), np.asarray(seps, dtype=float), i.ravel(), j.ravel(), n
-    )
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    i, j = ii.ravel(), jj.ravel()
+    gx, gy = _pair_terms(points, pair_separation(points, seps, i, j, team, team_sep, goals), i, j, n)
     return np.column_stack([gx, gy])

@@ -1,4 +1,4 @@
-"""Dispersion in the live world: separations by class, the push in the field, right of way and deadlocks.
+"""Dispersion in the live world: separations by class and team, the push in the field, right of way and deadlocks.
 
 Off unless ``DispersionSettings.enabled``: then the world is what it was,
 bit for bit.  On, each ``apply`` that advises units does four things:
@@ -15,57 +15,67 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    separation).  Priority: manned before unmanned (unless ``manned_first``
    is off), then the smaller id.  The order is total, so no two units ever
    yield to each other.
-3. A deadlock, a unit yielding for ``deadlock_s`` to a unit that has not
-   drawn away, or a pushed unit no nearer its goal for ``deadlock_s`` (two
-   units pushing each other to a standstill), is reported
-   (``DeadlockEvent``) and broken: the unit of lower priority (or the one
-   that can move) backs off, away and aside, for ``backoff_s``, then goes on
-   as any unit does.  Detected within ``deadlock_s``, released ``backoff_s``
-   later: a bounded time.
+3. Deadlocks (``deadlocks``): a unit yielding for ``deadlock_s`` while the
+   units it yields to neither draw away nor come nearer their own goals (a
+   queue that moves is no deadlock), or a pushed unit no nearer its goal
+   for ``deadlock_s``, is reported (``DeadlockEvent``) and resolved for a
+   bounded time: against a unit at rest (arrived, trapped, without a goal)
+   the blocked unit goes round it on its goal's side until it has passed
+   it; between two units that can move, the one of lower priority backs
+   off, away and aside, for ``backoff_s``, and when the same two lock again
+   soon after, the other one does (escalation).  A unit whose resolution
+   ends goes under its own right of way for ``deadlock_s`` (it yields to no
+   one, ``_short`` still keeps it apart), so no unit yields for longer than
+   ``deadlock_s`` plus its resolution with a deadlock in it.
 4. ``_short``: no direction takes a unit within ``KEEP`` separations of
    another; its reach is cut at that disc's edge.
 
-A unit's separation is its mobility class's (``separations``); a pair keeps
-the larger of its two.  Look-ahead points are the threat field's descent:
-neighbours move meanwhile.
+A unit's separation is its mobility class's (``separations``), or its
+team's ``separation_m`` towards the members of its team; a pair keeps the
+larger of its two, and relaxes near a shared goal
+(``core.dispersion.pair_separation``).  Look-ahead points are the threat
+field's descent: neighbours move meanwhile.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 
 import msgspec
 import numpy as np
 
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
 from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus, Event
+from pfp_service.world import deadlocks
+from pfp_service.world.deadlocks import Hold
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord, Verdict
 
-__all__ = ["YIELD_AT", "Dispersion", "priority"]
+__all__ = ["YIELD_AT", "Dispersion", "TeamOf", "priority"]
 
 YIELD_AT = 1.5  # a lower-priority unit closing on a higher one within this many separations holds
 # a yielding unit pushed this hard (a neighbour within about its separation: PUSH (1 - 1 / REACH) is
 # one at exactly the separation) moves away along its push instead of holding still
 CROWDED = PUSH * (1.0 - 1.0 / REACH)
 KEEP = 1.1  # no direction drives a unit within this many separations of another (``_short``)
+# a unit with another straight ahead (within 45 degrees) going its way (within 60) follows it, kept back
+# by ``_short``, rather than yielding: right of way is for paths that meet, and a queue that holds still
+# at every gap never flows
+AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
+# a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
+# reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
+TEAM_WIDEST = 4.0
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
+
+# the team a unit is in that sets a separation, and that separation (``TeamBook.dispersed``), or None
+TeamOf = Callable[[str], "tuple[str, float] | None"]
 
 
 def priority(rec: UnitRecord, manned_first: bool) -> tuple[int, str]:
     """The unit's right of way as a sort key: smaller goes first."""
     return (0 if manned_first and rec.kind == "manned" else 1, rec.id)
-
-
-@dataclass(slots=True)
-class _Hold:
-    other: str
-    since: float
-    gap: float  # the distance to ``other`` when the hold began (or it last drew away)
-    backoff_until: float = -math.inf
 
 
 class Dispersion:
@@ -76,22 +86,22 @@ class Dispersion:
         settings: DispersionSettings,
         units: Mapping[str, UnitRecord],
         yielded: Callable[[UnitRecord, Verdict], None],
+        team_of: TeamOf | None = None,
     ) -> None:
         self.settings = settings
         self._units = units  # the world's records, read (every unit with a fresh position is in the way)
         # what a held unit's record keeps is the units' owner's to write (``units.Units.yielded``)
         self._yielded = yielded
-        self._held: dict[str, _Hold] = {}
+        self._team_of = team_of
+        self._held: dict[str, Hold] = {}
+        self._locks = deadlocks.Locks(settings)
         self._index: NeighbourIndex | None = None
         self._recs: list[UnitRecord] = []
         self._row: dict[str, int] = {}
         self._pushed: dict[str, list[float]] = {}  # each unit advised in this ``apply``: its push
-        self._stall: dict[
-            str, tuple[float, float]
-        ] = {}  # a pushed unit: its best distance to goal, and since
 
     def holding(self) -> int:
-        """How many units hold (yield or back off) now."""
+        """How many units hold (yield, back off or go round) now."""
         return len(self._held)
 
     def push(self, guided: list[UnitRecord]) -> np.ndarray | None:
@@ -113,16 +123,35 @@ class Dispersion:
         recs = [r for r in self._units.values() if r.position is not None and not r.stale]
         sep = self.settings.separation
         self._recs, self._row = recs, {r.id: k for k, r in enumerate(recs)}
+        n = len(recs)
+        team, team_sep = None, None
+        if self._team_of is not None:
+            teams = [self._team_of(r.id) for r in recs]
+            if any(t is not None for t in teams):
+                names = {t[0]: k for k, t in enumerate(sorted({t for t in teams if t is not None}))}
+                team = np.fromiter((-1 if t is None else names[t[0]] for t in teams), dtype=np.intp, count=n)
+                most = TEAM_WIDEST * max(
+                    self.settings.separation_m.values()
+                )  # the search's reach grows with it
+                team_sep = np.fromiter(
+                    (math.nan if t is None else min(t[1], most) for t in teams), dtype=float, count=n
+                )
+        goals = np.array(
+            [r.goal.position if r.goal is not None else (math.nan, math.nan) for r in recs], dtype=float
+        ).reshape(-1, 2)
         self._index = NeighbourIndex(
             np.array([r.position for r in recs], dtype=float).reshape(-1, 2),
-            np.fromiter((sep(r.id) for r in recs), dtype=float, count=len(recs)),
+            np.fromiter((sep(r.id) for r in recs), dtype=float, count=n),
+            team,
+            team_sep,
+            goals,
         )
         push = PUSH * self._index.gradients(np.array([self._row[r.id] for r in guided], dtype=np.intp))
         self._pushed = dict(zip((r.id for r in guided), push.tolist()))
         return push
 
     def right_of_way(self, directions: list[Direction], first: int, now: float) -> list[Event]:
-        """Hold (or back off) the units of ``directions[first:]`` that must yield, in place; the deadlocks found.
+        """Hold (or resolve a deadlock for) the units of ``directions[first:]`` that must yield, in place; the deadlocks found.
 
         Only units advised in this ``apply`` (after ``push``) are judged; the
         others keep their holds until they are advised again.
@@ -135,35 +164,57 @@ class Dispersion:
             for k in range(first, len(directions))
             if (d := directions[k]).status in _MOVING and d.unit in self._row
         ]
+        locks = self._locks
+        if len(self._held) + len(locks) > 2 * len(self._row) + 64:  # units forgotten meanwhile: theirs go
+            self._held = {u: h for u, h in self._held.items() if u in self._row}
+            locks.keep(self._row)
+        for k in moving:  # who is coming nearer its goal, before anyone is judged by it
+            d = directions[k]
+            locks.progressed(d.unit, d.distance_to_goal, float(index.seps[self._row[d.unit]]), now)
         blocker = self._blockers([directions[k] for k in moving])
         events: list[Event] = []
         for k, j in zip(moving, blocker):
             d = directions[k]
             i = self._row[d.unit]
             hold = self._held.get(d.unit)
-            if hold is not None and hold.backoff_until > now and hold.other in self._row:
-                directions[k] = self._back_off(d, i, self._row[hold.other], hold)
-                continue
+            if hold is not None and hold.until > -math.inf:  # a deadlock's resolution
+                if hold.until > now and hold.other in self._row and not self._passed(hold, i):
+                    directions[k] = self._resolve(d, i, self._row[hold.other], hold)
+                    continue
+                del self._held[d.unit]
+                locks.resolved(d.unit, now)
+                hold = None
+            if locks.in_grace(d.unit, now):
+                j = -1
             if j < 0:
                 self._held.pop(d.unit, None)
-                lock = self._stalled(d, i, now)
-                if lock is not None:
+                if (lock := self._stalled(d, i, now)) is not None:
                     events.append(lock)
-                    if (hold := self._held.get(d.unit)) is not None:  # this unit backs off, from now
-                        directions[k] = self._back_off(d, i, self._row[hold.other], hold)
+                    if (hold := self._held.get(d.unit)) is not None:  # this unit resolves it, from now
+                        directions[k] = self._resolve(d, i, self._row[hold.other], hold)
                 continue
             other = self._recs[j].id
             gap = float(np.hypot(*(index.points[i] - index.points[j])))
-            pair = max(index.seps[i], index.seps[j])
-            if hold is None or hold.other != other or hold.backoff_until > -math.inf:
-                hold = self._held[d.unit] = _Hold(other, now, gap)
-            elif gap > hold.gap + _DRAWN_AWAY * pair:  # it is passing: the clock starts again
-                hold.since, hold.gap = now, gap
-            elif now - hold.since >= s.deadlock_s:
-                hold.backoff_until = now + s.backoff_s
-                events.append(self._deadlock(d.unit, other, i, now - hold.since))
-                directions[k] = self._back_off(d, i, j, hold)
+            pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+            if hold is None:
+                hold = self._held[d.unit] = Hold(other, now, gap, began=now)
+            elif now - hold.began >= deadlocks.STARVED * s.deadlock_s:  # a stream that never ends: its turn
+                del self._held[d.unit]
+                locks.resolved(d.unit, now)
                 continue
+            elif hold.other != other:  # yielding still, to another: the clock runs on
+                hold.other, hold.gap = other, gap
+            elif (
+                now - hold.since >= s.deadlock_s
+                and gap <= hold.gap + _DRAWN_AWAY * pair
+                and not locks.progressing(other, now)
+            ):  # held for a unit neither passing nor coming nearer its goal
+                events.append(self._lock(i, j, now - hold.since, now))
+                if (mine := self._held.get(d.unit)) is not None and mine.until > now:
+                    directions[k] = self._resolve(d, i, j, mine)
+                    continue
+            elif gap > hold.gap + _DRAWN_AWAY * pair or locks.progressing(other, now):
+                hold.since, hold.gap = now, gap  # it is passing, or a queue that moves: no deadlock yet
             directions[k] = self._yield(d, i, j, gap, pair)
         self._short(directions, moving)
         return events
@@ -190,7 +241,7 @@ class Dispersion:
         n = at[i]
         rel = index.points[j] - index.points[i]
         along = (rel * vec[n]).sum(axis=1)
-        keep_m = KEEP * np.maximum(index.seps[i], index.seps[j])
+        keep_m = KEEP * index.pair_seps(i, j)
         across2 = (rel * rel).sum(axis=1) - along * along
         hit = (along > 0.0) & (across2 < keep_m * keep_m)
         enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
@@ -206,34 +257,77 @@ class Dispersion:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
 
         Two units pushing each other to a standstill (head on, or one against
-        a unit that stands still) are a deadlock too: the one of lower
-        priority of the unit and its nearest neighbour backs off (the unit
-        itself, if the neighbour is not moving).
+        a unit at rest) are a deadlock too, with the nearest unit ahead (on
+        the goal's side; else the nearest): ``_lock`` says who resolves it.
         """
-        index, s = self._index, self.settings
+        index = self._index
         assert index is not None
         px, py = self._pushed.get(d.unit, (0.0, 0.0))
-        if (px == 0.0 and py == 0.0) or d.distance_to_goal is None:
-            self._stall.pop(d.unit, None)
+        if px == 0.0 and py == 0.0:
             return None
-        best = self._stall.get(d.unit)
-        if best is None or d.distance_to_goal < best[0] - _DRAWN_AWAY * index.seps[i]:
-            self._stall[d.unit] = (d.distance_to_goal, now)
+        stuck = self._locks.stuck_for(d.unit, now)
+        if stuck < self.settings.deadlock_s:
             return None
-        if now - best[1] < s.deadlock_s:
-            return None
-        del self._stall[d.unit]
         _, jj = index.near(np.array([i]))
         if not len(jj):
             return None
-        gaps = np.hypot(*(index.points[jj] - index.points[i]).T)
-        j = int(jj[int(gaps.argmin())])
+        rel = index.points[jj] - index.points[i]
+        gaps = np.hypot(rel[:, 0], rel[:, 1])
+        ahead = (rel @ np.array(self._towards(i, d.vector))) > 0.0
+        j = int(jj[int(np.where(ahead, gaps, gaps + 1e9).argmin())])
+        self._locks.forget(d.unit)
+        if self._locks.progressing(
+            self._recs[j].id, now
+        ):  # behind a unit that comes nearer its goal: a queue
+            return None
+        return self._lock(i, j, stuck, now)
+
+    def _lock(self, i: int, j: int, held_s: float, now: float) -> DeadlockEvent:
+        """A deadlock between the units at rows ``i`` (found blocked) and ``j``: who resolves it, how, and its event."""
+        index, s = self._index, self.settings
+        assert index is not None
         me, other = self._recs[i], self._recs[j]
-        first = s.manned_first
-        can = other.last_status in _MOVING or other.last_status is DirectionStatus.YIELDING  # not at rest
-        lower, higher = (other, me) if can and priority(other, first) > priority(me, first) else (me, other)
-        self._held[lower.id] = _Hold(higher.id, best[1], float(gaps.min()), now + s.backoff_s)
-        return self._deadlock(lower.id, higher.id, self._row[lower.id], now - best[1])
+        at_rest = not (other.last_status in _MOVING or other.last_status is DirectionStatus.YIELDING)
+        if at_rest:  # it will not move: go round it
+            mover, blocker, round_ = me, other, True
+        else:
+            first = s.manned_first
+            lower, higher = (other, me) if priority(other, first) > priority(me, first) else (me, other)
+            mover, blocker = (
+                (lower, higher) if self._locks.who_backs_off(lower.id, higher.id, now) else (higher, lower)
+            )
+            round_ = False
+        until = now + (deadlocks.ROUND_BACKOFFS * s.backoff_s if round_ else s.backoff_s)
+        m, b = self._row[mover.id], self._row[blocker.id]
+        gap = float(np.hypot(*(index.points[m] - index.points[b])))
+        self._held[mover.id] = Hold(blocker.id, now, gap, until=until, round=round_)
+        if mover is not me and (mine := self._held.get(me.id)) is not None:
+            mine.since = mine.began = now  # the other makes way: this one holds on, its clocks from now
+        return deadlocks.event(
+            mover.id, blocker.id, index.points[m], held_s, until - now, round_, other.last_status
+        )
+
+    def _towards(self, i: int, otherwise: tuple[float, float]) -> tuple[float, float]:
+        """The unit's way to its goal, as a unit vector (``otherwise`` when it has no goal, or is on it)."""
+        rec, index = self._recs[i], self._index
+        assert index is not None
+        if rec.goal is not None:
+            gx, gy = (np.asarray(rec.goal.position, dtype=float) - index.points[i]).tolist()
+            norm = math.hypot(gx, gy)
+            if norm > 0.0:
+                return gx / norm, gy / norm
+        return otherwise
+
+    def _passed(self, hold: Hold, i: int) -> bool:
+        """Whether a unit going round another has it behind (on the far side from its goal)."""
+        if not hold.round:
+            return False
+        index = self._index
+        assert index is not None
+        j = self._row[hold.other]
+        tx, ty = self._towards(i, (0.0, 0.0))
+        rx, ry = (index.points[j] - index.points[i]).tolist()
+        return bool(rx * tx + ry * ty <= 0.0)
 
     def _blockers(self, moving: list[Direction]) -> list[int]:
         """For each direction, the row of the nearest unit it must yield to, or -1: one vectorised pass."""
@@ -251,16 +345,14 @@ class Dispersion:
         rank = np.empty(n, dtype=np.intp)  # the total order of right of way, 0 first
         rank[np.lexsort((np.array([r.id for r in self._recs]), first))] = np.arange(n)
         goes = np.fromiter((self._goes(r) for r in self._recs), dtype=bool, count=n)
+        way = np.array([r.last_vector or (0.0, 0.0) for r in self._recs], dtype=float).reshape(-1, 2)
         k = at[i]
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
         closing = (rel * vec[k]).sum(axis=1) > 0.0
-        keep = (
-            (rank[j] < rank[i])
-            & goes[j]
-            & closing
-            & (gap < YIELD_AT * np.maximum(index.seps[i], index.seps[j]))
-        )
+        ahead = (rel * vec[k]).sum(axis=1) > AHEAD * gap
+        behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
+        keep = (rank[j] < rank[i]) & goes[j] & closing & ~behind & (gap < YIELD_AT * index.pair_seps(i, j))
         best = np.full(len(moving), -1, dtype=np.intp)
         near = np.full(len(moving), np.inf)
         for kk, jj, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
@@ -291,32 +383,20 @@ class Dispersion:
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, None))
         return _held(d, (0.0, 0.0), 0.0, reason)
 
-    def _back_off(self, d: Direction, i: int, j: int, hold: _Hold) -> Direction:
+    def _resolve(self, d: Direction, i: int, j: int, hold: Hold) -> Direction:
+        """The direction of a unit resolving a deadlock: round the unit at rest, or backing off from it."""
         index = self._index
         assert index is not None
-        ax, ay = (index.points[i] - index.points[j]).tolist()
-        norm = math.hypot(ax, ay)
-        ax, ay = (ax / norm, ay / norm) if norm > 0.0 else (-1.0, 0.0)
-        px, py = self._pushed.get(d.unit, (0.0, 0.0))
-        # away from the unit it yields to and aside (to its left as seen from it: head on, the two
-        # no longer share a line), and from every other unit as the push says
-        vx, vy = ax - ay - px, ay + ax - py
-        v = math.hypot(vx, vy)
-        vec = (vx / v, vy / v) if v > 0.0 else (0.0, 0.0)
-        pair = float(max(index.seps[i], index.seps[j]))
+        pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+        rel = index.points[i] - index.points[j]
+        if hold.round:
+            vec = deadlocks.round_vector(rel, self._towards(i, d.vector), pair)
+        else:
+            vec = deadlocks.back_off_vector(rel, self._pushed.get(d.unit, (0.0, 0.0)))
         rec = self._recs[i]
-        reason = (
-            f"backing off from {hold.other} to clear a deadlock; goes on after {self.settings.backoff_s:g} s"
-        )
+        reason = deadlocks.resolving(hold, self._recs[j].last_status)
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
         return _held(d, vec, pair, reason)
-
-    def _deadlock(self, unit: str, other: str, i: int, held_s: float) -> DeadlockEvent:
-        assert self._index is not None
-        x, y = self._index.points[i].tolist()
-        b = self.settings.backoff_s
-        why = f"{unit} held {held_s:.0f} s for {other}, which did not draw away: {unit} backs off for {b:g} s"
-        return DeadlockEvent(unit=unit, other=other, position=(x, y), held_s=held_s, backoff_s=b, reason=why)
 
 
 def _held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:

@@ -10,7 +10,7 @@ short stays on the planner's line; a role that sends a unit elsewhere sends
 it along ground the lead crossed, to the main element's route, or back
 towards its controller.  Pure: positions come from the world's records.
 
-The team's ``separation_m`` is kept here (``separation``) for the dispersion
+The team's ``separation_m`` is kept here (``separation``, ``dispersed``) for the dispersion
 term between friendly units to read; this book applies no separation itself.
 """
 
@@ -131,6 +131,13 @@ class TeamBook:
         for tid in self._of.get(unit, ()):
             if self.teams[tid].separation_m is not None:
                 return self.teams[tid].separation_m
+        return None
+
+    def dispersed(self, unit: str) -> tuple[str, float] | None:
+        """The team ``unit`` is in that sets ``separation_m``, and that separation (dispersion keeps it among its members)."""
+        for tid in self._of.get(unit, ()):
+            if (sep := self.teams[tid].separation_m) is not None:
+                return tid, sep
         return None
 
     # -- the roles, applied ----------------------------------------------------------

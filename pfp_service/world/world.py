@@ -79,8 +79,8 @@ class World:
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
         self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
         self._disp = dispersion.Dispersion(
-            s.dispersion, self._units, self._book.yielded
-        )  # off unless enabled
+            s.dispersion, self._units, self._book.yielded, self.teams.dispersed
+        )  # off unless enabled; a team's separation_m among its members
         # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
         self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
         self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once

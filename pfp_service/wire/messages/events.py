@@ -154,10 +154,11 @@ class ConflictEvent(Event, frozen=True, kw_only=True, tag="conflict"):
 
 
 class DeadlockEvent(Event, frozen=True, kw_only=True, tag="deadlock"):
-    """A unit yielding right of way (``yielding``) has held this long for a unit that did not draw away.
+    """Dispersion found a deadlock: ``unit`` and ``other`` held, or stood still, this long.
 
-    ``unit`` backs off from ``other`` (the unit it yields to) for ``backoff_s``,
-    and then goes on as any unit does; ``reason`` says so in words.
+    ``unit`` resolves it (``yielding``) for at most ``backoff_s``: it backs off
+    from ``other``, or goes round it when ``other`` is at rest, and then goes
+    on as any unit does; ``reason`` says so in words.
     """
 
     unit: Id
