@@ -21,12 +21,14 @@ very same point have no gradient between them; the one of lower index is
 pushed west, the other east, so they part.
 
 ``NeighbourIndex`` is a ``scipy.spatial.cKDTree`` over every unit's
-position, built once per tick, and its pairs within reach found once, in
-compiled code (``query_pairs``); ``gradients`` sums them for the units
-being advised.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
+position, built once per tick; the pairs within reach of the units being
+advised are found in compiled code (``query_ball_point`` for a few of them,
+``query_pairs`` once for many) and ``gradients`` sums them.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -35,6 +37,7 @@ __all__ = ["PUSH", "REACH", "NeighbourIndex", "brute_gradients", "gradient", "po
 
 REACH = 2.0  # a neighbour is felt within this many separations
 PUSH = 3.0  # the term's weight in units of the field's own slope where the unit stands
+FEW_ROWS = 4  # ``near`` queries its rows alone while they are under a quarter of the units
 
 
 def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
@@ -101,12 +104,25 @@ class NeighbourIndex:
         return self._pairs
 
     def near(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate pairs ``(i, j)`` for the units at ``rows``: every other ``j`` within the widest reach of ``i``."""
-        i, j = self.pairs()
-        wanted = np.zeros(len(self.points), dtype=bool)
-        wanted[np.asarray(rows, dtype=np.intp)] = True
-        keep = wanted[i]
-        return i[keep], j[keep]
+        """Candidate pairs ``(i, j)`` for the units at ``rows``: every other ``j`` within the widest reach of ``i``.
+
+        A few rows (a live tick's reports) are queried on their own, so a tick
+        costs what it advises, not every pair of the fleet; many take the
+        fleet's pairs, found once.  Either way the same pairs.
+        """
+        rows = np.unique(np.asarray(rows, dtype=np.intp))
+        if self.tree is None or len(rows) * FEW_ROWS >= len(self.points):
+            i, j = self.pairs()
+            wanted = np.zeros(len(self.points), dtype=bool)
+            wanted[rows] = True
+            keep = wanted[i]
+            return i[keep], j[keep]
+        found = self.tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
+        counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=len(rows))
+        j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=int(counts.sum()))
+        i = np.repeat(rows, counts)
+        other = i != j
+        return i[other], j[other]
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""

@@ -86,6 +86,7 @@ class Dispersion:
         self._recs: list[UnitRecord] = []
         self._row: dict[str, int] = {}
         self._pushed: dict[str, list[float]] = {}  # each unit advised in this ``apply``: its push
+        self._seps: dict[str, float] = {}  # each unit's separation, by its class: fixed by the settings
         self._stall: dict[
             str, tuple[float, float]
         ] = {}  # a pushed unit: its best distance to goal, and since
@@ -111,11 +112,18 @@ class Dispersion:
 
     def _push(self, guided: list[UnitRecord]) -> np.ndarray:
         recs = [r for r in self._units.values() if r.position is not None and not r.stale]
-        sep = self.settings.separation
         self._recs, self._row = recs, {r.id: k for k, r in enumerate(recs)}
+        seps = self._seps
+        if len(seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
+            seps.clear()
+        sep = self.settings.separation
         self._index = NeighbourIndex(
             np.array([r.position for r in recs], dtype=float).reshape(-1, 2),
-            np.fromiter((sep(r.id) for r in recs), dtype=float, count=len(recs)),
+            np.fromiter(
+                (seps[u] if (u := r.id) in seps else seps.setdefault(u, sep(u)) for r in recs),
+                dtype=float,
+                count=len(recs),
+            ),
         )
         push = PUSH * self._index.gradients(np.array([self._row[r.id] for r in guided], dtype=np.intp))
         self._pushed = dict(zip((r.id for r in guided), push.tolist()))
@@ -154,7 +162,7 @@ class Dispersion:
                 continue
             other = self._recs[j].id
             gap = float(np.hypot(*(index.points[i] - index.points[j])))
-            pair = max(index.seps[i], index.seps[j])
+            pair = float(max(index.seps[i], index.seps[j]))  # a Direction's reach_m: a float the wire encodes
             if hold is None or hold.other != other or hold.backoff_until > -math.inf:
                 hold = self._held[d.unit] = _Hold(other, now, gap)
             elif gap > hold.gap + _DRAWN_AWAY * pair:  # it is passing: the clock starts again
@@ -246,21 +254,23 @@ class Dispersion:
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
         i, j = index.near(rows)
-        n = len(self._recs)
-        first = np.fromiter((priority(r, s.manned_first)[0] for r in self._recs), dtype=np.intp, count=n)
-        rank = np.empty(n, dtype=np.intp)  # the total order of right of way, 0 first
-        rank[np.lexsort((np.array([r.id for r in self._recs]), first))] = np.arange(n)
-        goes = np.fromiter((self._goes(r) for r in self._recs), dtype=bool, count=n)
-        k = at[i]
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
-        closing = (rel * vec[k]).sum(axis=1) > 0.0
-        keep = (
-            (rank[j] < rank[i])
-            & goes[j]
-            & closing
-            & (gap < YIELD_AT * np.maximum(index.seps[i], index.seps[j]))
-        )
+        closing = (rel * vec[at[i]]).sum(axis=1) > 0.0
+        close = closing & (gap < YIELD_AT * np.maximum(index.seps[i], index.seps[j]))
+        i, j, gap = i[close], j[close], gap[close]
+        # the order of right of way among the units of the pairs left (0 first): compared only within
+        # them, it is the total order's, at the cost of the tick's reports, not of the fleet
+        n = len(self._recs)
+        used = np.unique(np.concatenate([i, j]))
+        recs = [self._recs[u] for u in used.tolist()]
+        first = np.fromiter((priority(r, s.manned_first)[0] for r in recs), dtype=np.intp, count=len(recs))
+        rank = np.zeros(n, dtype=np.intp)
+        rank[used[np.lexsort((np.array([r.id for r in recs]), first))]] = np.arange(len(recs))
+        goes = np.zeros(n, dtype=bool)
+        goes[used] = np.fromiter((self._goes(r) for r in recs), dtype=bool, count=len(recs))
+        k = at[i]
+        keep = (rank[j] < rank[i]) & goes[j]
         best = np.full(len(moving), -1, dtype=np.intp)
         near = np.full(len(moving), np.inf)
         for kk, jj, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
