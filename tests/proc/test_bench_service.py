@@ -120,9 +120,10 @@ def test_bench_service_teams_compares_teams_and_dispersion_with_a_plain_planner(
     assert t["teams"]["teams"] == 4  # a team for every four units
     assert len(t["rounds"]) == 2
     for row in t["rounds"]:
-        for kind in ("plain", "teams"):
-            assert row[kind]["us_per_state"] is not None and row[kind]["us_per_state"] > 0, row
-        assert row["ratio"] is not None
+        for kind in ("plain", "teams"):  # CPU is read in clock ticks: a second of a light load may read 0
+            assert row[kind]["us_per_state"] is not None and row[kind]["us_per_state"] >= 0, row
+            assert row[kind]["unanswered_fraction"] < 0.5, row  # both planners answered
+        assert "ratio" in row
     for kind in ("plain", "teams"):  # a tick that fails to publish logs an error: none did
         assert t[kind]["exit"]["exit_code"] == 0 and t[kind]["exit"]["error_lines"] == 0, t[kind]["exit"]
     target = json.loads(r.stdout)["targets"][-1]
