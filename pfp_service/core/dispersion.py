@@ -91,6 +91,7 @@ class NeighbourIndex:
         self.tree = cKDTree(self.points) if len(self.points) else None
         self.radius = REACH * float(self.seps.max()) if len(self.seps) else 0.0
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+        self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
 
     def pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ordered pair ``(i, j)``, ``i != j``, within the widest reach: one compiled query, kept."""
@@ -108,21 +109,25 @@ class NeighbourIndex:
 
         A few rows (a live tick's reports) are queried on their own, so a tick
         costs what it advises, not every pair of the fleet; many take the
-        fleet's pairs, found once.  Either way the same pairs.
+        fleet's pairs, found once.  Either way the same pairs.  Rows among
+        those of the last query (the tick's moving units after its advised
+        ones) take that query's pairs.
         """
         rows = np.unique(np.asarray(rows, dtype=np.intp))
+        last = self._near
+        if last is not None and np.isin(rows, last[0], assume_unique=True).all():
+            return _kept(last[1], last[2], rows, len(self.points))
         if self.tree is None or len(rows) * FEW_ROWS >= len(self.points):
-            i, j = self.pairs()
-            wanted = np.zeros(len(self.points), dtype=bool)
-            wanted[rows] = True
-            keep = wanted[i]
-            return i[keep], j[keep]
-        found = self.tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
-        counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=len(rows))
-        j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=int(counts.sum()))
-        i = np.repeat(rows, counts)
-        other = i != j
-        return i[other], j[other]
+            i, j = _kept(*self.pairs(), rows, len(self.points))
+        else:
+            found = self.tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
+            counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=len(rows))
+            j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=int(counts.sum()))
+            i = np.repeat(rows, counts)
+            other = i != j
+            i, j = i[other], j[other]
+        self._near = (rows, i, j)
+        return i, j
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
@@ -130,6 +135,14 @@ class NeighbourIndex:
         i, j = self.near(rows)
         gx, gy = _pair_terms(self.points, self.seps, i, j, len(self.points))
         return np.column_stack([gx[rows], gy[rows]])
+
+
+def _kept(i: np.ndarray, j: np.ndarray, rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs ``(i, j)`` whose ``i`` is one of ``rows``, in their order."""
+    wanted = np.zeros(n, dtype=bool)
+    wanted[rows] = True
+    keep = wanted[i]
+    return i[keep], j[keep]
 
 
 def brute_gradients(points: np.ndarray, seps: np.ndarray) -> np.ndarray:

@@ -42,8 +42,14 @@ def test_near_for_a_few_rows_is_the_fleets_pairs(seed: int) -> None:
     assert _pairs(*few) == _pairs(i[keep], j[keep])
     assert len(few[0]) == int(keep.sum())  # no pair twice
     assert not np.any(few[0] == few[1])
+    some = rows[: len(rows) // 2]  # rows among the last query's take its pairs
+    part = index.near(some)
+    keep = np.isin(i, some)
+    assert _pairs(*part) == _pairs(i[keep], j[keep]) and len(part[0]) == int(keep.sum())
     many = index.near(np.arange(200))  # the fleet's pairs, as before
     assert _pairs(*many) == _pairs(i, j)
+    fresh = NeighbourIndex(pts, seps).near(some)  # the same pairs queried afresh, in the same order
+    assert np.array_equal(fresh[0], part[0]) and np.array_equal(fresh[1], part[1])
 
 
 def test_a_crowded_yield_encodes() -> None:
