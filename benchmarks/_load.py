@@ -37,6 +37,7 @@ __all__ = [
     "ProcMeter",
     "Received",
     "Server",
+    "connected",
     "start_cluster",
     "start_server",
 ]
@@ -117,6 +118,7 @@ def start_server(
     The planner's ``unit_stale_s`` is ``stale_s`` (the bench's quiet windows must not make units
     stale) and its ``unit_forget_s`` is ``forget_s`` (``None``: its default).  With ``connect``
     the planner is instead a ``--cluster`` client of the router there, named ``planner_id``.
+    ``extra``: more ``pfp serve`` flags (``--dispersion``).
     """
     endpoint = connect or f"tcp/127.0.0.1:{_free_port()}"
     if kind == "planner":
@@ -142,6 +144,18 @@ def start_server(
         cmd, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdout=subprocess.DEVNULL, stderr=log
     )
     return Server(kind, endpoint, proc, log)
+
+
+def connected(make: Any, cap_s: float = 30.0) -> LoadGen:
+    """``make()`` once the router process listens (it starts in its own process: seconds on a loaded machine)."""
+    t0 = time.perf_counter()
+    while True:
+        try:
+            return make()  # type: ignore[no-any-return]
+        except Exception:
+            if time.perf_counter() - t0 > cap_s:
+                raise
+            time.sleep(0.3)
 
 
 class _SumMeter:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from benchmarks._service_teams import print_teams
+
 __all__ = ["print_doc"]
 
 
@@ -120,6 +122,8 @@ def print_doc(doc: dict[str, Any]) -> None:
             print(f"  {kind} log: {ex['error_lines']} error lines, first: {ex['first_errors'][:2]}")
     if "scale_out" in doc:
         _print_scale_out(doc["scale_out"], ld)
+    if "teams" in doc:
+        print_teams(doc["teams"])
     print()
     for t in doc["targets"]:
         flag = "n/a" if t["met"] is None else ("ok" if t["met"] else "MISSED")

@@ -45,7 +45,7 @@ from typing import Any
 
 from benchmarks._check import add_check_arg, exit_code
 from benchmarks._layout import AREA_M, layout
-from benchmarks._load import MISSION, Cluster, LoadGen, Server, start_cluster, start_server
+from benchmarks._load import MISSION, Cluster, LoadGen, Server, connected, start_cluster, start_server
 from benchmarks._phases import (
     MAX_P99_MS,
     STEP_M,
@@ -58,6 +58,7 @@ from benchmarks._phases import (
     steady,
     storm,
 )
+from benchmarks._service_teams import add_teams_arguments, teams_cost, teams_target
 from benchmarks._service_text import print_doc
 from pfp_service.argtypes import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
@@ -126,6 +127,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="with K > 1, also run the steady load against 1 and against K --cluster planners "
         "behind a separate router, in turn: what the other K-1 processes buy (default 1: no scale-out)",
     )
+    add_teams_arguments(p)
     p.add_argument("--seed", type=int, default=2023, help="layout seed (default 2023)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_check_arg(p)
@@ -200,7 +202,7 @@ def run_all(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str
     n = args.units
     try:
         for k in kinds:
-            gens[k] = _connected(lambda e=servers[k].endpoint: LoadGen(e, lay["starts"], STEP_M))
+            gens[k] = connected(lambda e=servers[k].endpoint: LoadGen(e, lay["starts"], STEP_M))
             gens[k].wait_ready()
         for k in kinds:
             idle = servers[k].meter.memory_mb()["rss_mb"]
@@ -265,18 +267,6 @@ def _owned_settled(g: LoadGen, units: int, cap_s: float = 30.0) -> float | None:
     return None
 
 
-def _connected(make: Any, cap_s: float = 30.0) -> LoadGen:
-    """``make()`` once the router process listens (it starts in its own process: seconds on a loaded machine)."""
-    t0 = time.perf_counter()
-    while True:
-        try:
-            return make()  # type: ignore[no-any-return]
-        except Exception:
-            if time.perf_counter() - t0 > cap_s:
-                raise
-            time.sleep(0.3)
-
-
 def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[str, Any]:
     """The steady load against 1 planner and against ``--planners`` K, each behind its own router.
 
@@ -294,7 +284,7 @@ def scale_out(args: argparse.Namespace, lay: dict[str, Any], bar: Bar) -> dict[s
         for n in sizes:
             clusters[n] = start_cluster(n, args.escape)
         for n in sizes:
-            gens[n] = _connected(lambda c=clusters[n]: LoadGen(c.endpoint, lay["starts"], STEP_M, c.ids))
+            gens[n] = connected(lambda c=clusters[n]: LoadGen(c.endpoint, lay["starts"], STEP_M, c.ids))
             gens[n].wait_ready()
         prepared = {}
         for n in sizes:
@@ -476,9 +466,11 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         runs = run_all(args, lay, bar)
         if args.planners > 1:
             doc["scale_out"] = scale_out(args, lay, bar)
+        if args.teams:
+            doc["teams"] = teams_cost(args, lay, bar, min(TARGETS["cpu_rate_per_s"], args.units * args.rate))
     doc["echo"] = runs.get("echo")
     doc["planner"] = runs["planner"]
-    doc["targets"] = targets(doc)
+    doc["targets"] = targets(doc) + ([teams_target(doc["teams"])] if "teams" in doc else [])
     return doc
 
 

@@ -31,12 +31,14 @@ the separation).  At their goals the two then stand outside each other's
 stopping distance (``4/3 RELAX < 1`` of the goals' gap).
 
 ``NeighbourIndex`` is a ``scipy.spatial.cKDTree`` over every unit's
-position, built once per tick, and its pairs within reach found once, in
-compiled code (``query_pairs``); ``gradients`` sums them for the units
-being advised.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
+position, built once per tick; the pairs within reach of the units being
+advised are found in compiled code (``query_ball_point`` for a few of them,
+``query_pairs`` once for many) and ``gradients`` sums them.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -57,6 +59,7 @@ REACH = 2.0  # a neighbour is felt within this many separations
 PUSH = 3.0  # the term's weight in units of the field's own slope where the unit stands
 RELAX = 0.6  # near a shared goal a pair keeps at least this share of its goals' gap (4/3 of it < 1)
 RELAX_OVER = 2.0  # ... relaxing as the farther of the two comes within this many separations of its goal
+FEW_ROWS = 4  # ``near`` queries its rows alone while they are under a quarter of the units
 
 
 def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
@@ -156,6 +159,7 @@ class NeighbourIndex:
         )
         self.radius = REACH * widest if len(self.seps) else 0.0
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+        self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
 
     def pair_seps(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """The separation of each pair ``(i, j)`` (``pair_separation``) in metres."""
@@ -173,12 +177,29 @@ class NeighbourIndex:
         return self._pairs
 
     def near(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate pairs ``(i, j)`` for the units at ``rows``: every other ``j`` within the widest reach of ``i``."""
-        i, j = self.pairs()
-        wanted = np.zeros(len(self.points), dtype=bool)
-        wanted[np.asarray(rows, dtype=np.intp)] = True
-        keep = wanted[i]
-        return i[keep], j[keep]
+        """Candidate pairs ``(i, j)`` for the units at ``rows``: every other ``j`` within the widest reach of ``i``.
+
+        A few rows (a live tick's reports) are queried on their own, so a tick
+        costs what it advises, not every pair of the fleet; many take the
+        fleet's pairs, found once.  Either way the same pairs.  Rows among
+        those of the last query (the tick's moving units after its advised
+        ones) take that query's pairs.
+        """
+        rows = np.unique(np.asarray(rows, dtype=np.intp))
+        last = self._near
+        if last is not None and np.isin(rows, last[0], assume_unique=True).all():
+            return _kept(last[1], last[2], rows, len(self.points))
+        if self.tree is None or len(rows) * FEW_ROWS >= len(self.points):
+            i, j = _kept(*self.pairs(), rows, len(self.points))
+        else:
+            found = self.tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
+            counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=len(rows))
+            j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=int(counts.sum()))
+            i = np.repeat(rows, counts)
+            other = i != j
+            i, j = i[other], j[other]
+        self._near = (rows, i, j)
+        return i, j
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
@@ -186,6 +207,14 @@ class NeighbourIndex:
         i, j = self.near(rows)
         gx, gy = _pair_terms(self.points, self.pair_seps(i, j), i, j, len(self.points))
         return np.column_stack([gx[rows], gy[rows]])
+
+
+def _kept(i: np.ndarray, j: np.ndarray, rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs ``(i, j)`` whose ``i`` is one of ``rows``, in their order."""
+    wanted = np.zeros(n, dtype=bool)
+    wanted[rows] = True
+    keep = wanted[i]
+    return i[keep], j[keep]
 
 
 def brute_gradients(

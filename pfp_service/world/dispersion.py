@@ -99,6 +99,7 @@ class Dispersion:
         self._recs: list[UnitRecord] = []
         self._row: dict[str, int] = {}
         self._pushed: dict[str, list[float]] = {}  # each unit advised in this ``apply``: its push
+        self._seps: dict[str, float] = {}  # each unit's separation, by its class: fixed by the settings
 
     def holding(self) -> int:
         """How many units hold (yield, back off or go round) now."""
@@ -121,9 +122,11 @@ class Dispersion:
 
     def _push(self, guided: list[UnitRecord]) -> np.ndarray:
         recs = [r for r in self._units.values() if r.position is not None and not r.stale]
-        sep = self.settings.separation
         self._recs, self._row = recs, {r.id: k for k, r in enumerate(recs)}
         n = len(recs)
+        seps, sep = self._seps, self.settings.separation
+        if len(seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
+            seps.clear()
         team, team_sep = None, None
         if self._team_of is not None:
             teams = [self._team_of(r.id) for r in recs]
@@ -141,7 +144,11 @@ class Dispersion:
         ).reshape(-1, 2)
         self._index = NeighbourIndex(
             np.array([r.position for r in recs], dtype=float).reshape(-1, 2),
-            np.fromiter((sep(r.id) for r in recs), dtype=float, count=n),
+            np.fromiter(
+                (seps[u] if (u := r.id) in seps else seps.setdefault(u, sep(u)) for r in recs),
+                dtype=float,
+                count=n,
+            ),
             team,
             team_sep,
             goals,
@@ -340,19 +347,27 @@ class Dispersion:
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
         i, j = index.near(rows)
-        n = len(self._recs)
-        first = np.fromiter((priority(r, s.manned_first)[0] for r in self._recs), dtype=np.intp, count=n)
-        rank = np.empty(n, dtype=np.intp)  # the total order of right of way, 0 first
-        rank[np.lexsort((np.array([r.id for r in self._recs]), first))] = np.arange(n)
-        goes = np.fromiter((self._goes(r) for r in self._recs), dtype=bool, count=n)
-        way = np.array([r.last_vector or (0.0, 0.0) for r in self._recs], dtype=float).reshape(-1, 2)
-        k = at[i]
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
-        closing = (rel * vec[k]).sum(axis=1) > 0.0
-        ahead = (rel * vec[k]).sum(axis=1) > AHEAD * gap
+        along = (rel * vec[at[i]]).sum(axis=1)
+        close = (along > 0.0) & (gap < YIELD_AT * index.pair_seps(i, j))  # closing, and near
+        i, j, gap, along = i[close], j[close], gap[close], along[close]
+        # the order of right of way among the units of the pairs left (0 first): compared only within
+        # them, it is the total order's, at the cost of the tick's reports, not of the fleet
+        n = len(self._recs)
+        used = np.unique(np.concatenate([i, j]))
+        recs = [self._recs[u] for u in used.tolist()]
+        first = np.fromiter((priority(r, s.manned_first)[0] for r in recs), dtype=np.intp, count=len(recs))
+        rank = np.zeros(n, dtype=np.intp)
+        rank[used[np.lexsort((np.array([r.id for r in recs]), first))]] = np.arange(len(recs))
+        goes = np.zeros(n, dtype=bool)
+        goes[used] = np.fromiter((self._goes(r) for r in recs), dtype=bool, count=len(recs))
+        way = np.zeros((n, 2), dtype=float)
+        way[used] = np.array([r.last_vector or (0.0, 0.0) for r in recs], dtype=float).reshape(-1, 2)
+        k = at[i]
+        ahead = along > AHEAD * gap
         behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = (rank[j] < rank[i]) & goes[j] & closing & ~behind & (gap < YIELD_AT * index.pair_seps(i, j))
+        keep = (rank[j] < rank[i]) & goes[j] & ~behind
         best = np.full(len(moving), -1, dtype=np.intp)
         near = np.full(len(moving), np.inf)
         for kk, jj, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):

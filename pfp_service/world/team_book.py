@@ -51,6 +51,8 @@ class TeamBook:
         self.sent: dict[
             str, Direction
         ] = {}  # member -> its direction as last judged (a team preview's first move)
+        # team -> its lead's position ``_track`` last looked at: unmoved, a tick looks no further
+        self._looked: dict[str, object] = {}
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -85,6 +87,7 @@ class TeamBook:
         index.add(tid, team)
         self._checks = index
         self.teams[tid] = team
+        self._looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
         if old is None:
@@ -99,6 +102,7 @@ class TeamBook:
         if self.teams.pop(tid, None) is None:
             return False
         self.tracks.pop(tid, None)
+        self._looked.pop(tid, None)
         self._checks = _index_of(self.teams)
         self._index()
         self.said = {u: why for u, why in self.said.items() if u in self._of}
@@ -169,10 +173,12 @@ class TeamBook:
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
+        looked = self._looked
         for tid, team in self.teams.items():
             rec = units.get(team.lead) if team.lead is not None else None
-            if rec is None or rec.position is None or rec.stale:
-                continue
+            if rec is None or rec.position is None or rec.stale or looked.get(tid) is rec.position:
+                continue  # no lead to track, or the very position looked at before (a report makes a new one)
+            looked[tid] = rec.position
             track = self.tracks.setdefault(tid, [])
             if not track or math.dist(track[-1], rec.position) >= max(team.corridor_m / 16.0, 0.1):
                 track.append(rec.position)

@@ -107,3 +107,24 @@ def test_bench_service_state_keys_gives_a_row_per_key_in_one_run():
             )  # answered on both
         names = {t["target"] for t in doc["targets"]}
         assert {"plain key p50 <= 1.2x shard key p50", "plain key unanswered <= shard key's + 20 %"} <= names
+
+
+def test_bench_service_teams_compares_teams_and_dispersion_with_a_plain_planner():
+    r = run_pfp(
+        "bench", "service", "--units", "16", "--rate", "4", "--threats", "3", "--duration", "1",
+        "--no-storm", "--no-fanout", "--teams", "--teams-rounds", "2", "--json",
+        timeout=240,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    t = json.loads(r.stdout)["teams"]
+    assert t["teams"]["teams"] == 4  # a team for every four units
+    assert len(t["rounds"]) == 2
+    for row in t["rounds"]:
+        for kind in ("plain", "teams"):  # CPU is read in clock ticks: a second of a light load may read 0
+            assert row[kind]["us_per_state"] is not None and row[kind]["us_per_state"] >= 0, row
+            assert row[kind]["unanswered_fraction"] < 0.5, row  # both planners answered
+        assert "ratio" in row
+    for kind in ("plain", "teams"):  # a tick that fails to publish logs an error: none did
+        assert t[kind]["exit"]["exit_code"] == 0 and t[kind]["exit"]["error_lines"] == 0, t[kind]["exit"]
+    target = json.loads(r.stdout)["targets"][-1]
+    assert target["target"].startswith("teams + dispersion") and target["measured"] == t["ratio_median"]

@@ -1,0 +1,152 @@
+"""``pfp bench service --teams``: what teams and dispersion cost the live planner, CPU per state (issue 33).
+
+Two planners run at once, each a router in its own process on a free loopback
+port: one as ``pfp bench service`` starts it, and one with ``--dispersion`` to
+which a team is put for every four units (``teams``: neighbours along the
+west edge, a lead scouting for two followers, the first follower controlling
+the lead and a robot).  Both get the same threats and goals (put plainly, no
+storm), their deliberations land, and then they take the same steady load in
+turn, ``--teams-rounds`` times each, at the rate CPU per state is compared
+at (``TARGETS["cpu_rate_per_s"]``, where neither saturates), so the two share
+the machine's noise.  A round's figure is the planner's CPU (its process
+tree, workers counted) over the states answered; the target is their ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from typing import Any
+
+from benchmarks._load import MISSION, LoadGen, Server, connected, start_server
+from benchmarks._phases import STEP_M, Bar, deliberations_landed, register, steady
+
+__all__ = ["TEAM_SIZE", "add_teams_arguments", "print_teams", "teams", "teams_cost", "teams_target"]
+
+TEAM_SIZE = 4
+RATIO_MAX = 1.2  # issue 33: with teams and dispersion, CPU per state within 1.2x of without
+KINDS = {"plain": (), "teams": ("--dispersion",)}
+
+
+def add_teams_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--teams",
+        action="store_true",
+        help="also run a planner with --dispersion and a team for every 4 units beside a plain one, "
+        "their steady loads in turn: CPU per state with and without (issue 33)",
+    )
+    p.add_argument(
+        "--teams-rounds", type=int, default=3, help="with --teams: steady loads of each, in turn (default 3)"
+    )
+
+
+def teams(starts: list[tuple[float, float]], units: int) -> dict[str, Any]:
+    """A team for every ``TEAM_SIZE`` units, neighbours along the edge (sorted by ``y``): id -> ``TeamUpdate``."""
+    from pfp_service.wire import TeamUpdate
+
+    order = sorted(range(units), key=lambda i: starts[i][1])
+    out: dict[str, Any] = {}
+    for k in range(units // TEAM_SIZE):
+        lead, a, b, robot = (f"u{i}" for i in order[TEAM_SIZE * k : TEAM_SIZE * (k + 1)])
+        out[f"g{k}"] = TeamUpdate(
+            lead=lead,
+            follow=[a, b],
+            standoff_m=40.0,
+            corridor_m=8.0,
+            controller=a,
+            robots=[lead, robot],
+            radio_range_m=300.0,
+        )
+    return out
+
+
+def _prepare(kind: str, g: LoadGen, lay: dict[str, Any], n: int) -> dict[str, Any]:
+    from pfp_service.wire import Goal, keys
+
+    for tid, t in lay["threats"]:
+        g.put_json(keys.threat(MISSION, tid), t)
+    res: dict[str, Any] = {"registered": register(g, n)}
+    if kind == "teams":
+        made = teams(lay["starts"], n)
+        for tid, team in made.items():
+            g.put_json(keys.team(MISSION, tid), team)
+        res["teams"] = len(made)
+    for i in range(n + 1):
+        g.put_json(keys.unit_goal(MISSION, g.ids[i]), Goal(position=lay["goals"][i], step=STEP_M))
+    g.settle(0.5, 10.0)
+    res["deliberations"] = deliberations_landed(g, 120.0)
+    return res
+
+
+def teams_cost(args: argparse.Namespace, lay: dict[str, Any], bar: Bar, rate_per_s: float) -> dict[str, Any]:
+    """Both planners up at once, their steady loads at ``rate_per_s`` in turn; CPU per state of each round."""
+    n = args.units
+    servers: dict[str, Server] = {}
+    gens: dict[str, LoadGen] = {}
+    res: dict[str, Any] = {"rate_per_s": rate_per_s, "rounds": []}
+    try:
+        for kind, flags in KINDS.items():
+            servers[kind] = start_server("planner", args.escape, extra=flags)
+        for kind in KINDS:
+            gens[kind] = connected(lambda e=servers[kind].endpoint: LoadGen(e, lay["starts"], STEP_M), 60.0)
+            gens[kind].wait_ready(120.0)
+        for kind in KINDS:
+            res[kind] = _prepare(kind, gens[kind], lay, n)
+        for r in range(max(args.teams_rounds, 1)):
+            row: dict[str, Any] = {}
+            for kind in KINDS if r % 2 == 0 else reversed(KINDS):  # each goes first in turn
+                st = steady(gens[kind], servers[kind], n, rate_per_s / n, args.duration, bar, f"{kind} r{r}")
+                cpu, answered = st.get("cpu_percent"), st["answered_per_s"]
+                row[kind] = {
+                    "us_per_state": None if cpu is None or not answered else 1e4 * cpu / answered,
+                    "unanswered_fraction": st["unanswered_fraction"],
+                    "p50_ms": st["p50_ms"],
+                    "p99_ms": st["p99_ms"],
+                    "loadavg": st["loadavg"],
+                    "statuses": st["statuses"],
+                }
+                gens[kind].settle(0.5, 5.0)
+            a, b = row["plain"]["us_per_state"], row["teams"]["us_per_state"]
+            row["ratio"] = None if a is None or b is None or not a else b / a
+            res["rounds"].append(row)
+    finally:
+        for g in gens.values():
+            g.close()
+        for kind, srv in servers.items():
+            res.setdefault(kind, {})["exit"] = srv.stop()
+    ratios = [r["ratio"] for r in res["rounds"] if r["ratio"] is not None]
+    res["ratio_median"] = statistics.median(ratios) if ratios else None
+    return res
+
+
+def teams_target(t: dict[str, Any]) -> dict[str, Any]:
+    """The issue's row: the median ratio of CPU per state, with teams and dispersion over without."""
+    m = t["ratio_median"]
+    return {
+        "target": f"teams + dispersion: CPU per state <= {RATIO_MAX:g}x without (median of rounds)",
+        "measured": m,
+        "limit": RATIO_MAX,
+        "met": None if m is None else m <= RATIO_MAX,
+    }
+
+
+def print_teams(t: dict[str, Any]) -> None:
+    """The rounds as text."""
+    print(
+        f"\n[teams] {t['teams'].get('teams', 0)} teams of {TEAM_SIZE} and --dispersion against a plain planner, "
+        f"{t['rate_per_s']:.0f} states/s each in turn:"
+    )
+    for i, r in enumerate(t["rounds"]):
+        a, b = r["plain"], r["teams"]
+        print(
+            f"  round {i + 1}: without {_us(a['us_per_state'])} us/state, with {_us(b['us_per_state'])} us/state, "
+            f"x{_us(r['ratio'], '.2f')} (unanswered {100 * a['unanswered_fraction']:.2f} / "
+            f"{100 * b['unanswered_fraction']:.2f} %, p99 {_us(a['p99_ms'], '.1f')} / {_us(b['p99_ms'], '.1f')} ms, "
+            f"load avg {a['loadavg']:.1f})"
+        )
+    last = t["rounds"][-1]["teams"]["statuses"] if t["rounds"] else {}
+    print(f"  median x{_us(t['ratio_median'], '.2f')}; with teams, the last statuses: {last}")
+
+
+def _us(v: float | None, fmt: str = ".1f") -> str:
+    return "-" if v is None else format(v, fmt)
