@@ -48,17 +48,17 @@ from pfp_service.node.log import get_logger, log_changes
 from pfp_service.node.loopstats import Latency, LoopTrace, Trim, demote_native_threads
 from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
+from pfp_service.node.startup import join, restore, restored_event
 from pfp_service.node.status import planner_status
 from pfp_service.node.store import Store
 from pfp_service.node.terrain import Sights, terrain_info
 from pfp_service.node.twins import Peers, watch_twins
-from pfp_service.node.worldpages import answer_world, fetch_world
+from pfp_service.node.worldpages import answer_world
 from pfp_service.node.writes import Writes
 from pfp_service.wire import (
     ErrorReply,
     ForgottenEvent,
     PlannerStatus,
-    RestoredEvent,
     UnitState,
     decode_unit_state,
     encode,
@@ -70,7 +70,6 @@ from pfp_service.world.events import (
     StateReported,
     Tick,
     mission_message,
-    zone_put,
 )
 from pfp_service.world.intake import Intake
 from pfp_service.world.kinds import KINDS, Kind
@@ -179,34 +178,13 @@ class PlannerNode:
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         warm_up(self.world.settings)
         self._desk.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them
-        restored = None
-        if self.store is not None:
-            restored = self.store.restore(time.time())
-            self._writes.order.load(restored.order)  # an older write asked again stays superseded
-            with gcpause.paused():  # as every apply of the loop's (gcpause)
-                self.world.apply(restored.inputs, self.clock())
-        if self.cfg.zones is not None:  # the --zones file: in force (and stored) before the first state
-            from pfp_service.geojson import load_zones
-
-            filed: list[Input] = [zone_put(z) for z in load_zones(self.cfg.zones, self._origin)]
-            if self.store is not None:
-                filed = self.store.commit_batch(filed, time.time(), self.cfg.threat_ttl_s, self.cfg.mission)
-            with gcpause.paused():
-                self.world.apply(filed, self.clock())
-        self._join(s)
+        restored = restore(self.world, self.store, self._writes, self.cfg, self.clock)
+        join(s, self.world, self.cfg, self.clock)
         if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
             self._peers.ask(s)
         self._declared.append(s.liveliness().declare_token(keys.alive_planner(m, p)))
         if restored is not None:
-            ev = RestoredEvent.counted(
-                restored.kept,
-                planner=p,
-                missions=restored.missions,
-                expired=restored.expired,
-                corrupt=restored.corrupt,
-                set_aside=restored.set_aside,
-            )
-            self._out.event(ev, collections.Counter())
+            self._out.event(restored_event(restored, p), collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
         twins = (s, m, p, self.zid, self._stop, self._peers.on_twin, self._peers.on_terrain)
@@ -313,23 +291,6 @@ class PlannerNode:
         except InputError:
             return
         self._push(kind.put(uid, sample.kind == zenoh.SampleKind.PUT))
-
-    def _join(self, s: zenoh.Session) -> None:
-        """Apply what the planners already serving the mission hold, every page of it (none: ~1 ms)."""
-
-        def ask(selector: str, timeout_s: float) -> list[bytes]:
-            # other sessions only: our own world queryable, declared above, is not answered before the
-            # loop starts, so asking it too cost the whole page timeout (2 s) at every start
-            replies = s.get(selector, timeout=timeout_s, allowed_destination=zenoh.Locality.REMOTE)
-            return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
-
-        joined = fetch_world(ask, self.cfg.mission, self.cfg.planner_id)
-        if joined.inputs:
-            with gcpause.paused():
-                self.world.apply(joined.inputs, self.clock())
-        if joined.peers:
-            level = log.info if joined.complete else log.warning
-            level("joined the mission's planners", extra={"fields": joined.fields()})
 
     def _on_shared(self, kind: Kind, ids: keys.KeyOf, sample: zenoh.Sample) -> None:
         key, known = str(sample.key_expr), None  # the key's kind, once the key itself parsed
