@@ -16,6 +16,11 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# The test targets write bytecode even where the shell says not to (PYTHONDONTWRITEBYTECODE):
+# without it pytest rewrites the asserts of every test module again on each run, 6 s of a
+# test-fast run's CPU, and every `pfp` a test starts compiles the package again.
+test test-fast test-proc: export PYTHONDONTWRITEBYTECODE =
+
 # Every tier (tests/conftest.py names them): what CI runs, after `make check`.
 test: $(STAMP)
 	@sh .ci/ensure-chromium

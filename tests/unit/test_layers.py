@@ -9,6 +9,7 @@ pyproject.toml as well; the sans-I/O world's modules are listed there, once, and
 from __future__ import annotations
 
 import ast
+import functools
 import tomllib
 from pathlib import Path
 
@@ -50,6 +51,8 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
+# Each test reads every module's imports: parsed once, not once a test.
+@functools.cache
 def _imports(path: Path) -> list[tuple[str, bool]]:
     """(module, only for type checking) for every import in the file, relative ones resolved."""
     tree = ast.parse(path.read_text(), str(path))
