@@ -101,10 +101,15 @@ def test_generated_team_is_seeded_and_mixed():
 
 @pytest.mark.unit
 def test_example_team_files_load():
+    from pfp_clients.script import load_script
+
     from tests.conftest import EXAMPLES
 
     for path in EXAMPLES.glob("*team*.yaml"):
-        assert load_team(path).units
+        if path.name.endswith("-inject.yaml"):  # an injection script beside its team file
+            assert load_script(path).timeline
+        else:
+            assert load_team(path).units
 
 
 def _d(status: DirectionStatus, seq: int, vector=(1.0, 0.0), dist=10.0) -> Direction:
