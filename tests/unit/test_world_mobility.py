@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -111,3 +112,37 @@ def test_barrier_sets_are_made_when_first_asked_and_bounded():
     for deg in range(1, BARRIER_SETS + 3):
         ground.barriers(deg)
     assert len(ground._sets) == BARRIER_SETS
+
+
+def _drive(w: World, uid: str, start: tuple[float, float], goal: Goal, steps: int = 400):
+    """Drive ``uid`` along its directions until it arrives or is trapped: its last direction and its track."""
+    x, y = start
+    w.apply([StateReported(uid, UnitState(position=(x, y), seq=0))], 0.0)
+    out = w.apply([GoalSet(uid, goal)], 0.0)
+    track = [(x, y)]
+    for k in range(1, steps):
+        (d,) = [d for d in out.directions if d.unit == uid]
+        if d.status.value in ("arrived", "trapped"):
+            return d, track
+        hop = min(d.reach_m or 25.0, 25.0)
+        x, y = x + hop * d.vector[0], y + hop * d.vector[1]
+        track.append((x, y))
+        out = w.apply([StateReported(uid, UnitState(position=(x, y), seq=k))], float(k))
+    return d, track
+
+
+def test_a_mesa_top_is_climbed_on_foot_and_its_walls_trap_a_wheeled_unit_after_deliberating():
+    top = Goal(position=(0.0, 0.0), tolerance=20.0)
+    foot, walked = _drive(
+        _world(), "foot", (0.0, -2000.0), msgspec.structs.replace(top, mobility=GoalMobility(kind="foot"))
+    )
+    wheels, driven = _drive(
+        _world(),
+        "wheels",
+        (0.0, -2000.0),
+        msgspec.structs.replace(top, mobility=GoalMobility(kind="wheeled")),
+    )
+    assert foot.status.value == "arrived", foot
+    assert math.hypot(*walked[-1]) < 100.0  # up the wall, onto the top
+    assert wheels.status.value == "trapped" and "slope>17deg" in (wheels.reason or ""), wheels
+    assert math.hypot(*driven[-1]) > 800.0  # it never climbed the wall
