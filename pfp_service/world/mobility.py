@@ -53,9 +53,14 @@ def slope_limit(goal: Goal | None) -> int | None:
     return round(limit)
 
 
-def by_limit(guided: list[Any], owed: list[tuple[Any, Any]]) -> dict[int | None, tuple[list[Any], list[Any]]]:
+def by_limit(
+    guided: list[Any], owed: list[tuple[Any, Any]], terrain: bool = True
+) -> dict[int | None, tuple[list[Any], list[Any]]]:
     """The units to steer (records) and those owed their points (``(record, advice)``) by their slope limit,
-    each in the order given: each group is steered under its own field (``Records.field_for``)."""
+    each in the order given: each group is steered under its own field (``Records.field_for``).  Without
+    ``terrain`` a class changes nothing: one group, as given."""
+    if not terrain:
+        return {None: (guided, owed)}
     groups: dict[int | None, tuple[list[Any], list[Any]]] = {}
     for rec in guided:
         groups.setdefault(slope_limit(rec.goal), ([], []))[0].append(rec)

@@ -439,7 +439,8 @@ class World:
         steered: steering.Steered = []
         failed: steering.Failed = []
         wave_first = (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0
-        for slope, (group, owed) in mobility.by_limit(guided, later).items():  # a field per slope limit
+        groups = mobility.by_limit(guided, later, self._rec.ground is not None)  # a field per slope limit
+        for slope, (group, owed) in groups.items():
             fld = field_for(slope)
             lost: steering.Failed = []
             if group and wave_first:  # the wave first
