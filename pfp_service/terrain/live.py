@@ -87,8 +87,8 @@ class LiveTerrain:
         """The barrier zones of a unit climbing ``max_slope_deg`` whole degrees (``None``: the class's,
         ``zones``), made the first time a limit is asked for; the least recently used dropped past
         ``BARRIER_SETS``."""
-        if max_slope_deg is None:
-            return self.zones
+        if max_slope_deg is None or (self.key and max_slope_deg == self.unit.max_slope_deg):
+            return self.zones  # a loaded terrain's zones are its class's barriers (``planning.prepare``)
         got = self._sets.get(max_slope_deg)
         if got is None:
             from pfp_service.terrain.barriers import barrier_zones

@@ -82,7 +82,9 @@ def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_
     dem = str(write_geographic(tmp_path / "jacksboro.tif"))
     ep = f"tcp/127.0.0.1:{free_port()}"
     cfg = placed(ServeConfig(mission=MISSION, listen=[ep], terrain=dem, lookahead=0, unit_stale_s=120.0))
-    goal, start = _places(load(dem, cfg.origin, cfg.bounds_tuple(), cfg.terrain_unit))
+    ground = load(dem, cfg.origin, cfg.bounds_tuple(), cfg.terrain_unit)
+    assert ground.barriers(30) is ground.zones  # a soldier's goal over a foot planner: its own barriers
+    goal, start = _places(ground)
     session = zenoh.open(zenoh_config(cfg))
     node = PlannerNode(session, cfg)
     try:
