@@ -9,7 +9,9 @@ at the DEM's centre (``LiveTerrain.centred``, which the status says).
 A ``LiveTerrain`` is what the world's ``settings.terrain`` holds: its
 ``sight`` (each threat's line of sight at the unit class's height) and its
 ``zones`` (ground steeper than the class's limit, and unknown ground, as
-keep-out zones), and for the status its ``about``: file name, sha256, bounds
+keep-out zones), its ``barriers`` for any other slope limit (a unit whose goal
+names another class, ``world.mobility``: made when first asked, at most
+``BARRIER_SETS`` kept), and for the status its ``about``: file name, sha256, bounds
 in latitude and longitude, resolution.
 
 Passed by name, not by value.  A ``LiveTerrain`` is pickled as the arguments
@@ -24,7 +26,8 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, field
 from typing import Any
 
 from pfp_service.core.mobility import CLASSES, Mobility
@@ -34,9 +37,10 @@ from pfp_service.terrain.grid import TerrainGrid
 from pfp_service.terrain.link_sight import sees
 from pfp_service.terrain.threat_sight import TerrainSight
 
-__all__ = ["EDGE_SHARE", "LiveTerrain", "TerrainAbout", "load", "of_grid"]
+__all__ = ["BARRIER_SETS", "EDGE_SHARE", "LiveTerrain", "TerrainAbout", "load", "of_grid"]
 
 EDGE_SHARE = 0.01  # of the DEM's span, kept off each of its edges: the plane's box must lie inside it
+BARRIER_SETS = 4  # slope limits' barrier sets kept besides the planner's class's: the classes and an override
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
 
@@ -67,6 +71,7 @@ class LiveTerrain:
     zones: tuple[Zone, ...]
     look: TerrainSight
     key: tuple[Any, ...] = ()  # ``load``'s arguments: how it is pickled
+    _sets: OrderedDict[int, tuple[Zone, ...]] = field(default_factory=OrderedDict, repr=False)
 
     def __call__(self, threat: Any, box: tuple[float, float, float, float]) -> Any:
         """Threat ``threat``'s window (a ``core.visibility.Sight``): the terrain is its own sight, so a
@@ -77,6 +82,22 @@ class LiveTerrain:
     def resolution_m(self) -> float:
         """The grid's cell, metres: what a line of sight over it can tell apart."""
         return self.grid.cell_m
+
+    def barriers(self, max_slope_deg: int | None) -> tuple[Zone, ...]:
+        """The barrier zones of a unit climbing ``max_slope_deg`` whole degrees (``None``: the class's,
+        ``zones``), made the first time a limit is asked for; the least recently used dropped past
+        ``BARRIER_SETS``."""
+        if max_slope_deg is None or (self.key and max_slope_deg == self.unit.max_slope_deg):
+            return self.zones  # a loaded terrain's zones are its class's barriers (``planning.prepare``)
+        got = self._sets.get(max_slope_deg)
+        if got is None:
+            from pfp_service.terrain.barriers import barrier_zones
+
+            got = self._sets[max_slope_deg] = tuple(barrier_zones(self.grid, float(max_slope_deg)))
+            while len(self._sets) > BARRIER_SETS:
+                self._sets.popitem(last=False)
+        self._sets.move_to_end(max_slope_deg)
+        return got
 
     def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
         """Whether two units at ``a`` and ``b`` see each other over the ground (a controller's link), each

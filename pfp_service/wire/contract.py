@@ -74,7 +74,17 @@ MESSAGES: tuple[MessageSpec, ...] = (
         "any",
         "planner",
         "a DELETE on the key cancels the goal",
-        examples=tuple([("goal", m.Goal(position=(10.0, 10.0), tolerance=0.1))]),
+        examples=tuple(
+            [
+                ("goal", m.Goal(position=(10.0, 10.0), tolerance=0.1)),
+                (
+                    "goal.mobility",
+                    m.Goal(
+                        position=(10.0, 10.0), mobility=m.GoalMobility(kind="wheeled", max_slope_deg=20.0)
+                    ),
+                ),
+            ]
+        ),
     ),
     MessageSpec(
         "threat",

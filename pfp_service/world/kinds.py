@@ -37,7 +37,7 @@ from pfp_service.wire import Goal, decode_goal, decode_mission, decode_threat, d
 from pfp_service.wire.messages import decode_team, decode_zone
 from pfp_service.wire.messages.structs import Bounds, ThreatUpdate
 from pfp_service.wire.messages.world import WorldSnapshot
-from pfp_service.world import translate
+from pfp_service.world import mobility, translate
 from pfp_service.world.events import (
     Deliberated,
     GoalCancelled,
@@ -203,6 +203,11 @@ def _decode_threat(data: bytes, bounds: Bounds | None, origin: Origin | None) ->
     return update
 
 
+def _decode_goal(data: bytes, bounds: Bounds | None, origin: Origin | None) -> Goal:
+    """The wire's decoder, then its mobility class's check (``world.mobility``): an unknown class is refused."""
+    return mobility.check(decode_goal(data, bounds, origin))
+
+
 _FIELDS: dict[type[Any], tuple[str, ...]] = {}  # an input class's field names, looked up once
 
 
@@ -270,7 +275,7 @@ KINDS: tuple[Kind, ...] = (
         (GoalSet, GoalCancelled, MissionRestored, Deliberated),
         blames_unit=True,
         schema="goal",
-        decode=decode_goal,
+        decode=_decode_goal,
         writers=("commander",),
         own_unit=True,
         store=Stored("goals", "unit", per_unit=True),

@@ -16,6 +16,7 @@ from pfp_service.core import Resolved, Stepper, ThreatField, resolve
 from pfp_service.core.params import FieldStats
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal
+from pfp_service.world import mobility
 from pfp_service.world.events import MissionRecord, WorldSettings
 from pfp_service.world.units import Started, UnitRecord
 
@@ -37,6 +38,9 @@ def fix(
     Returns:
         The mission, or why it is refused (the goal's field path and the reason).
     """
+    refused = mobility.refusal(goal)  # a goal put in-process skipped the decoder's check
+    if refused is not None:
+        return refused
     to = (goal.position[0], goal.position[1])
     if shared is not None and shared[0] == goal:
         origin, resolved = shared[1], shared[2]

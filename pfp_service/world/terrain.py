@@ -4,7 +4,8 @@
 loaded by the node before the world starts): every threat's packed row is
 masked by its window of lowest visible heights (``core.visibility``), and
 its ``zones`` (ground too steep for the mission's unit class, and unknown
-ground) are in force with the keep-out zones put on the wire, so the
+ground; a unit whose goal names another class, ``world.mobility``, plans
+around its ``barriers`` for that class's slope instead) are in force with the keep-out zones put on the wire, so the
 stepper, deliberation and previews treat them alike, as ``pfp plan
 --terrain`` does; its ``sees`` is the line of sight a controller's link
 keeps to its robots (``team_book``).  None changes while the planner runs.  The world never
@@ -63,6 +64,8 @@ class Ground(Protocol):
     def zones(self) -> Sequence[Zone]: ...
 
     def __call__(self, threat: object, box: tuple[float, float, float, float]) -> Window | None: ...
+
+    def barriers(self, max_slope_deg: int | None) -> Sequence[Zone]: ...
 
     def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool: ...
 

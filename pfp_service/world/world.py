@@ -36,7 +36,7 @@ from pfp_service.wire import (
     keys,
 )
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
-from pfp_service.world import dispersion, kinds, missions, steering, translate
+from pfp_service.world import dispersion, kinds, missions, mobility, steering, translate
 from pfp_service.world import events as ev
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
@@ -98,7 +98,7 @@ class World:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec, s = self._units.get(unit_id), self.settings
         threats = self.field.threats  # the same tuple while the field stands: a desk can cache it
-        zones = self._rec.zone_set  # the same set while the zones stand
+        zones = self._rec.zones_of(rec.goal if rec else None)  # the same set while the zones stand
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
@@ -394,7 +394,7 @@ class World:
     # -- planning -------------------------------------------------------------------
     def _start(self, rec: UnitRecord, b: Batch, record: bool = True) -> None:
         """Fix the unit's mission and give it a stepper (``missions.start``); a mission refused drops the goal."""
-        fld = self.field  # builds the stats with it
+        fld = self._rec.field_of(rec)  # builds the stats with it
         started = missions.start(rec, self.settings, fld, self._rec.stats)
         if isinstance(started, InputError):
             self._reject(self._key(K.UNIT_GOAL, rec.id), started, b, K.UNIT_GOAL)
@@ -435,20 +435,29 @@ class World:
         later, self._owed = owed_share(self._owed, b.dirty, self._units, OWED_PER_TICK)
         if not guided and not later:
             return
-        fld, cull, n = self.field, self._rec.cull, self.settings.lookahead
+        field_for, n, cull = self._rec.field_for, self.settings.lookahead, self._rec.cull_index
         steered: steering.Steered = []
         failed: steering.Failed = []
-        if (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0:  # the wave first
-            advised, failed = steering.advise(guided, fld, cull, self._disp)
-            steered = [(r, a, []) for r, a in advised]
-            self._owed += [(r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None]
-            b.wave = {r.id for r, _ in advised}
-        elif guided:
-            steered, failed = steering.steer(guided, fld, cull, n, self._disp)
-        if later:
-            tracked, lost = steering.ahead(later, fld, cull, n)
-            steered += tracked
+        wave_first = (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0
+        groups = mobility.by_limit(guided, later, self._rec.ground is not None)  # a field per slope limit
+        for slope, (group, owed) in groups.items():
+            fld = field_for(slope)
+            lost: steering.Failed = []
+            if group and wave_first:  # the wave first
+                advised, lost = steering.advise(group, fld, cull, self._disp)
+                steered += [(r, a, []) for r, a in advised]
+                self._owed += [
+                    (r, a, st, st.version, r.seq) for r, a in advised if (st := r.stepper) is not None
+                ]
+                b.wave |= {r.id for r, _ in advised}
+            elif group:
+                done, lost = steering.steer(group, fld, cull, n, self._disp)
+                steered += done
             failed += lost
+            if owed:
+                tracked, lost = steering.ahead(owed, fld, cull, n)
+                steered += tracked
+                failed += lost
         for rec, exc in failed:
             self._unit_fault(b, rec, exc)
         first, sent = len(out.directions), []
@@ -462,7 +471,7 @@ class World:
                 if job is None and rec.id not in wave:  # a wave's jobs are asked with its points
                     st = rec.stepper
                     if st is not None and st.pending is not None:
-                        self._ask(rec, fld, b)
+                        self._ask(rec, self._rec.field_of(rec), b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
                 failed.append((rec, exc))

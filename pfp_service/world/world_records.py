@@ -20,12 +20,15 @@ from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.visibility import Window, reach_box
 from pfp_service.core.zones import Zone, ZoneSet
-from pfp_service.wire import Mission, ThreatUpdate
+from pfp_service.wire import Goal, Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world.mobility import slope_limit
 from pfp_service.world.terrain import Ground, Looks, SightAsk, SightKey, ground_zones, sight_key
 from pfp_service.world.units import UnitRecord, Units
 
-__all__ = ["Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
+__all__ = ["MAX_SLOPE_SETS", "Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
+
+MAX_SLOPE_SETS = 8  # slope limits whose zone sets and fields are kept at once (classes and a few overrides)
 
 
 @dataclass(slots=True)
@@ -64,6 +67,9 @@ class Records:
         self.ground, self._barriers = ground, ground_zones(ground)
         self.sight: Looks | None = Looks() if ground is not None else None
         self.held: dict[str, tuple[ThreatRecord, float]] = {}
+        # per slope limit a goal names (``world.mobility``): its zone set and field, while the world's stand
+        self._sets: tuple[ZoneSet | None, dict[int, ZoneSet]] = (None, {})
+        self._fields: tuple[ThreatField | None, dict[int, ThreatField]] = (None, {})
 
     @property
     def field(self) -> ThreatField:
@@ -95,6 +101,55 @@ class Records:
         if self._zone_set is None:
             self._zone_set = ZoneSet([*self._barriers, *(self.zones[k].zone for k in sorted(self.zones))])
         return self._zone_set
+
+    def zone_set_for(self, slope: int | None) -> ZoneSet:
+        """The zones in force for a unit climbing ``slope`` whole degrees: its barriers, then the keep-out zones
+        (``None``, or no terrain: ``zone_set``)."""
+        base = self.zone_set
+        if slope is None or self.ground is None:
+            return base
+        of, sets = self._sets
+        if of is not base:
+            sets = {}
+            self._sets = (base, sets)
+        got = sets.get(slope)
+        if got is None:
+            if len(sets) >= MAX_SLOPE_SETS:
+                sets.clear()
+            got = sets[slope] = ZoneSet(
+                [*self.ground.barriers(slope), *(self.zones[k].zone for k in sorted(self.zones))]
+            )
+        return got
+
+    def field_for(self, slope: int | None) -> ThreatField:
+        """``field`` with the zones in force for a unit climbing ``slope`` whole degrees (``zone_set_for``)."""
+        base = self.field
+        if slope is None or self.ground is None:
+            return base
+        of, fields = self._fields
+        if of is not base:
+            fields = {}
+            self._fields = (base, fields)
+        got = fields.get(slope)
+        if got is None:
+            if len(fields) >= MAX_SLOPE_SETS:
+                fields.clear()
+            assert self._bare is not None  # built with ``field``
+            got = fields[slope] = self._bare.with_zones(self.zone_set_for(slope))
+        return got
+
+    @property
+    def cull_index(self) -> CullIndex | None:
+        """The cull index of the threats in force (``cull``), the field built first."""
+        return self.cull if self.field is not None else None
+
+    def zones_of(self, goal: Goal | None) -> ZoneSet:
+        """The zones in force for a unit with ``goal``: the barriers of its mobility class (``world.mobility``)."""
+        return self.zone_set_for(slope_limit(goal))
+
+    def field_of(self, rec: UnitRecord) -> ThreatField:
+        """The field in force for ``rec``: with the barriers of its goal's mobility class (``world.mobility``)."""
+        return self.field_for(slope_limit(rec.goal))
 
     # the world's input handlers name these two here; the writes are the units' owner's
     def drop_mission(self, rec: UnitRecord) -> None:

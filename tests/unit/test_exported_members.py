@@ -24,6 +24,7 @@ EXPECTED = [
     "Event",
     "ForgottenEvent",
     "Goal",
+    "GoalMobility",
     "LatLon",
     "Mission",
     "MissionParams",

@@ -149,7 +149,8 @@ def test_every_example_decodes_and_re_encodes_identically(name: str) -> None:
 # here stays, and no field is ever required that was not required then.
 V1: dict[str, tuple[set[str], set[str]]] = {
     "UnitState": ({"position"}, {"t", "seq", "kind", "speed_mps", "heading_deg"}),
-    "Goal": ({"position"}, {"delta", "tolerance", "step"}),
+    "Goal": ({"position"}, {"delta", "tolerance", "step", "mobility"}),
+    "GoalMobility": ({"class"}, {"max_slope_deg"}),
     "ThreatUpdate": (
         {"position", "sigma_range", "sigma_lateral"},
         {"facing_deg", "skew", "weight", "ttl_s"},

@@ -232,6 +232,13 @@ BAD: dict[str, list[tuple[Any, str, str]]] = {
         (["ok", "a b"], "[1]", "matching regex"),
         ([3], "[0]", "expected str"),
     ],
+    "mobility": [
+        ("foot", "", "expected object, got str"),
+        ({}, ".class", "is required"),
+        ({"class": "Foot!"}, ".class", "matching regex"),
+        ({"class": "foot", "max_slope_deg": 0.5}, ".max_slope_deg", "must be >= 1"),
+        ({"class": "foot", "max_slope_deg": 90}, ".max_slope_deg", "must be <= 89"),
+    ],
     "whatif_threats": [
         ("t1", "", "expected array"),
         ([BASES["what_if_threat"]] * 2, "[1].id", "duplicate id 'ambush'"),
@@ -271,6 +278,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "delta": ("delta", OPT),
         "tolerance": ("length", OPT),
         "step": ("length", OPT),
+        "mobility": ("mobility", OPT),
     },
     "threat": THREAT_FIELDS,
     "what_if_threat": {**THREAT_FIELDS, "id": ("id", REQ)},

@@ -51,6 +51,7 @@ __all__ = [
     "DirectionStatus",
     "ErrorReply",
     "Goal",
+    "GoalMobility",
     "LatLon",
     "Origin",
     "PlannerStatus",
@@ -153,6 +154,24 @@ class UnitState(_Message, frozen=True, kw_only=True):
     heading_deg: Angle | None = None
 
 
+MobilityName = Annotated[str, Meta(pattern="^[a-z][a-z0-9_]{0,31}$")]
+SlopeDeg = Annotated[float, Meta(ge=1.0, le=89.0)]
+
+
+class GoalMobility(_Message, frozen=True, kw_only=True):
+    """A goal's mobility class: the ground its unit can cross (``core.mobility.CLASSES``).
+
+    Attributes:
+        kind: the class, ``foot``, ``wheeled`` or ``tracked`` (JSON ``class``); a name the
+            planner does not know is refused on the goal's key (field ``$.mobility.class``).
+        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's;
+            planned to the whole degree.
+    """
+
+    kind: MobilityName = msgspec.field(name="class")
+    max_slope_deg: SlopeDeg | None = None
+
+
 class Goal(_Message, frozen=True, kw_only=True):
     """Where a unit should go; put on ``mumt/{m}/unit/{u}/goal``, a DELETE cancels it.
 
@@ -167,12 +186,15 @@ class Goal(_Message, frozen=True, kw_only=True):
             more than ``max_iter`` steps to reach the goal from where the unit is
             is refused when the mission is fixed (a ``rejected`` event on the
             goal's key, field ``$.step``).
+        mobility: the unit's mobility class over terrain (``GoalMobility``): its slope limit
+            makes the barriers it plans around; absent, the planner's ``--terrain-unit``.
     """
 
     position: Point
     delta: Delta | None = None
     tolerance: Tolerance | None = None
     step: Step | None = None
+    mobility: GoalMobility | None = None
 
 
 class ThreatUpdate(_Message, frozen=True, kw_only=True):

@@ -1,0 +1,123 @@
+"""A goal's mobility class over Zenoh, over real terrain: each unit plans round its own slope barriers (issue 32).
+
+A planner (``PlannerNode``, in this process, ``--terrain-unit foot``) serves
+over the Jacksboro DEM on a loopback Zenoh router.  Two units are sent to the
+same goal on ground steeper than a wheeled vehicle climbs (17 degrees) and
+gentler than a soldier's limit (30): the soldier is guided, the wheeled unit
+is ``trapped`` with a reason naming the slope.  A third goal naming an unknown
+class is rejected on ``$.mobility.class`` and the others carry on.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from pfp_service.node.config import ServeConfig, zenoh_config
+from pfp_service.node.node import PlannerNode
+from pfp_service.node.terrain import placed
+from pfp_service.terrain.barriers import barrier_cells
+from pfp_service.terrain.live import load
+from pfp_service.wire import (
+    Direction,
+    Goal,
+    GoalMobility,
+    RejectedEvent,
+    UnitState,
+    decode,
+    decode_event,
+    encode,
+    keys,
+)
+from tests.terrain_data import write_geographic
+from tests.zenoh_util import client, free_port
+
+pytestmark = pytest.mark.net
+
+MISSION = "livemobility"
+
+
+def _places(ground) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A goal on a cell a wheeled unit cannot enter and a soldier can, and a start near it a wheeled unit can."""
+    g = ground.grid
+    c = g.cell_m
+    wheeled, _ = barrier_cells(g, 17.0)
+    foot, unknown = barrier_cells(g, 30.0)
+    ny, nx = wheeled.shape
+    mid = np.array([ny // 2, nx // 2])
+    goals = np.argwhere(wheeled & ~foot & ~unknown)
+    goals = goals[np.argsort(np.abs(goals - mid).sum(axis=1))]
+    flat = ~wheeled & ~unknown
+    for k, i in goals:
+        for dk, di in ((-8, 0), (8, 0), (0, -8), (0, 8), (-12, -12), (12, 12)):
+            kk, ii = k + dk, i + di
+            if 0 <= kk < ny and 0 <= ii < nx and flat[max(kk - 1, 0) : kk + 2, max(ii - 1, 0) : ii + 2].all():
+                centre = lambda a, b: (float(g.x0_m + (b + 0.5) * c), float(g.y0_m + (a + 0.5) * c))
+                return centre(k, i), centre(kk, ii)
+    raise AssertionError("no slope between 17 and 30 degrees on the DEM")
+
+
+def _until(q: queue.Queue, want, timeout: float):
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise AssertionError("timed out")
+        got = q.get(timeout=left)
+        if want(got):
+            return got
+
+
+def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_a_bad_class_is_refused(
+    tmp_path, monkeypatch
+):
+    from pfp_service.node.desk import PreviewDesk
+
+    real_wait = PreviewDesk.wait_ready  # previews are not under test: the node waits for no worker
+    monkeypatch.setattr(PreviewDesk, "wait_ready", lambda self, timeout_s=0.0: real_wait(self, 0.0))
+    dem = str(write_geographic(tmp_path / "jacksboro.tif"))
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    cfg = placed(ServeConfig(mission=MISSION, listen=[ep], terrain=dem, lookahead=0, unit_stale_s=120.0))
+    ground = load(dem, cfg.origin, cfg.bounds_tuple(), cfg.terrain_unit)
+    assert ground.barriers(30) is ground.zones  # a soldier's goal over a foot planner: its own barriers
+    goal, start = _places(ground)
+    session = zenoh.open(zenoh_config(cfg))
+    node = PlannerNode(session, cfg)
+    try:
+        node.start()
+        with client(ep) as c:
+            directions: queue.Queue = queue.Queue()
+            rejected: queue.Queue = queue.Queue()
+            subs = [
+                c.declare_subscriber(
+                    keys.unit_directions(MISSION),
+                    lambda s: directions.put(decode(Direction, s.payload.to_bytes())),
+                ),
+                c.declare_subscriber(
+                    keys.event(MISSION, "rejected"),
+                    lambda s: rejected.put(decode_event(s.payload.to_bytes())),
+                ),
+            ]
+            classes = {"soldier": "foot", "truck": "wheeled", "bad": "hovercraft"}
+            for uid, kind in classes.items():
+                body = Goal(position=goal, tolerance=1.0, mobility=GoalMobility(kind=kind))
+                c.put(keys.unit_goal(MISSION, uid), encode(body))
+                c.put(keys.unit_state(MISSION, uid), encode(UnitState(position=start, seq=1)))
+            refused = _until(rejected, lambda e: isinstance(e, RejectedEvent), 60.0)
+            assert refused.key == keys.unit_goal(MISSION, "bad") and refused.field == "$.mobility.class"
+            seen: dict[str, Direction] = {}
+            while set(seen) != {"soldier", "truck"}:
+                d = _until(directions, lambda d: d.status.value != "no_goal", 120.0)
+                seen[d.unit] = d
+            assert seen["soldier"].status.value == "en_route", seen["soldier"]
+            assert seen["truck"].status.value == "trapped", seen["truck"]
+            assert "slope>17deg" in (seen["truck"].reason or "")
+            for s in subs:
+                s.undeclare()
+    finally:
+        node.stop()
+        session.close()
