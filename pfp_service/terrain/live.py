@@ -30,7 +30,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
-from pfp_service.core.mobility import CLASSES, Mobility
+from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, Mobility
 from pfp_service.core.zones import Zone
 from pfp_service.geo import Origin
 from pfp_service.terrain.grid import TerrainGrid
@@ -99,6 +99,12 @@ class LiveTerrain:
         self._sets.move_to_end(max_slope_deg)
         return got
 
+    def hold_class_limits(self) -> None:
+        """Build the barriers of every class's limit now (``core.mobility.CLASS_LIMITS``), before the
+        planner serves: the world plans each unit at one of them, so the loop never builds a set."""
+        for limit in CLASS_LIMITS:
+            self.barriers(limit)
+
     def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
         """Whether two units at ``a`` and ``b`` see each other over the ground (a controller's link), each
         as high as the unit class, the sight line ``clearance_m`` clear of it (``link_sight.sees``)."""
@@ -159,6 +165,7 @@ def load(path: str, origin: Origin | None, bounds: Bounds | None, unit: str = "f
         ground.sight,
         key,
     )
+    terrain.hold_class_limits()
     _LOADED[key] = _LOADED[(path, placed, bounds, unit)] = terrain  # asked again with the origin it chose
     return terrain
 
@@ -183,6 +190,8 @@ def of_grid(grid: TerrainGrid, unit: str = "foot", zones: tuple[Zone, ...] = ())
     )
     mob = CLASSES[unit]
     about = TerrainAbout("", "", 0.0, 0.0, 0.0, 0.0, grid.cell_m, unit, False)
-    return LiveTerrain(
+    terrain = LiveTerrain(
         grid, mob, Origin(lat=0.0, lon=0.0), extent, about, zones, TerrainSight(grid, mob.height_m)
     )
+    terrain.hold_class_limits()
+    return terrain

@@ -5,8 +5,10 @@ A goal may carry a ``mobility`` (``wire.GoalMobility``): a class of
 Over terrain the unit then plans around the ground steeper than that limit
 (``terrain.live.LiveTerrain.barriers``) instead of the planner's class's
 (``--terrain-unit``); without terrain it changes nothing.  The limit is
-planned to the whole degree, so that units of one class and near overrides
-share one set of barriers and one field.  Sight stays the planner's class's:
+planned at a class's limit (``core.mobility.CLASS_LIMITS``): an override at
+the steepest of them not above it, the safe side, since a barrier set for a
+new limit takes seconds to build over a large DEM and none is built on the
+live loop; an override below every class's limit is refused.  Sight stays the planner's class's:
 a threat's line of sight is computed once for every unit, at that height.
 """
 
@@ -14,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pfp_service.core.mobility import CLASSES
+from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, planned_limit
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal
 
@@ -27,6 +29,11 @@ def refusal(goal: Goal) -> InputError | None:
     if mob is not None and mob.kind not in CLASSES:
         return InputError(
             "$.mobility.class", f"unknown mobility class {mob.kind!r} (one of {', '.join(CLASSES)})"
+        )
+    if mob is not None and mob.max_slope_deg is not None and planned_limit(mob.max_slope_deg) is None:
+        return InputError(
+            "$.mobility.max_slope_deg",
+            f"{mob.max_slope_deg:g} is below {CLASS_LIMITS[0]}, the gentlest class limit the planner holds barriers for",
         )
     return None
 
@@ -50,7 +57,7 @@ def slope_limit(goal: Goal | None) -> int | None:
     if mob is None or mob.kind not in CLASSES:
         return None
     limit = mob.max_slope_deg if mob.max_slope_deg is not None else CLASSES[mob.kind].max_slope_deg
-    return round(limit)
+    return planned_limit(limit)
 
 
 def by_limit(

@@ -60,17 +60,19 @@ def test_the_same_goal_on_a_slope_is_reached_on_foot_and_trapped_on_wheels_namin
             "foot": _goal("foot"),
             "wheels": _goal("wheeled"),
             "planner_class": _goal(None),
-            "climber": _goal("wheeled", max_slope_deg=25.4),  # an override, planned at 25 degrees
+            "climber": _goal("wheeled", max_slope_deg=30.4),  # an override, planned at foot's 30 degrees
+            "careful": _goal("foot", max_slope_deg=25.0),  # planned at wheels' 17: the safe side
         },
     )
     status = {d.unit: d for d in out.directions}
     assert status["foot"].status.value == "en_route", status["foot"]
     assert status["planner_class"].status.value == "en_route"
     assert status["climber"].status.value == "en_route"
-    assert status["wheels"].status.value == "trapped"
-    assert "slope>17deg" in (status["wheels"].reason or "")
-    (trapped,) = [e for e in out.events if isinstance(e, TrappedEvent)]
-    assert trapped.unit == "wheels" and "slope>17deg" in trapped.reason
+    for uid in ("wheels", "careful"):
+        assert status[uid].status.value == "trapped", status[uid]
+        assert "slope>17deg" in (status[uid].reason or "")
+    trapped = {e.unit: e for e in out.events if isinstance(e, TrappedEvent)}
+    assert set(trapped) == {"wheels", "careful"} and "slope>17deg" in trapped["wheels"].reason
     # the preview of each unit plans round its own barriers
     wheels, foot = w.view("wheels").zones.ids, w.view("foot").zones.ids
     assert any(z.startswith("slope>17deg") for z in wheels)
@@ -98,7 +100,13 @@ def test_an_unknown_class_is_refused_naming_its_field_and_the_other_units_carry_
     assert err.value.path == "$.mobility.class"
     ok = goal_kind.decode(json.dumps({**body, "mobility": {"class": "tracked"}}).encode(), None, None)
     assert ok.mobility == GoalMobility(kind="tracked")
-    for bad in ({"class": "foot", "max_slope_deg": 90}, {"class": "Foot!"}, {"max_slope_deg": 20}):
+    too_gentle = {"class": "foot", "max_slope_deg": 10}  # below every class's limit: no barriers held for it
+    for bad in (
+        {"class": "foot", "max_slope_deg": 90},
+        {"class": "Foot!"},
+        {"max_slope_deg": 20},
+        too_gentle,
+    ):
         with pytest.raises(InputError) as err:
             goal_kind.decode(json.dumps({**body, "mobility": bad}).encode(), None, None)
         assert err.value.path.startswith("$.mobility")

@@ -164,7 +164,8 @@ class GoalMobility(_Message, frozen=True, kw_only=True):
     Attributes:
         kind: the class, ``foot``, ``wheeled`` or ``tracked`` (JSON ``class``); a name the
             planner does not know is refused on the goal's key (field ``$.mobility.class``).
-        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's;
+        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's (the
+            planner plans it at the steepest class limit not above it, and refuses one below them all);
             planned to the whole degree.
     """
 
