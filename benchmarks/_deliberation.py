@@ -17,7 +17,7 @@ starts a process or opens a session:
   directions (the node publishes them before it sends any job,
   ``Job.detach``), then the collection it held off (``gcpause``), timed at
   the first allocation after it, and the ticks that follow until the world
-  owes nothing (their points and jobs, a bounded share a tick): the median
+  has no wave pending (their points and jobs, a bounded share a tick): the median
   and the largest.
 """
 
@@ -98,7 +98,9 @@ def storm_and_wave(units: int = STORM_UNITS, repeat: int = 5, seed: int = 2023) 
         waves.append((t1 - t0) * 1e3)
         follow: list[Outputs] = []
         now = 5.0
-        while world.owes() or not follow:  # a big wave's points and jobs follow, a bounded share a tick
+        while (
+            world.wave_pending() or not follow
+        ):  # a big wave's points and jobs follow, a bounded share a tick
             now += 0.002
             t0 = time.perf_counter()
             with gcpause.paused():

@@ -8,7 +8,7 @@ Two questions, each measured in one run against our code:
   but its workers come from ``multiprocessing`` contexts: ``fork`` is unsafe
   in a process holding a Zenoh session, and ``forkserver``/``spawn`` start a
   fresh interpreter that must load the numba kernels again (``initializer``).
-  Ours forks a warm zygote and keeps a warm spare.  The figure: from a task
+  Ours forks a warm fork server and keeps a warm spare.  The figure: from a task
   killed at its deadline to the next task's answer, each pool with one worker.
 * **The NMEA parser** (``clients/pfp_clients/nmea.py``).  A handheld fed a
   hostile or broken receiver must never be placed at a wrong fix.  The
@@ -68,15 +68,15 @@ def _ours(rounds: int) -> list[float]:
     import gc
 
     from pfp_service.core.plan import plan
-    from pfp_service.node.desk import warm_up
     from pfp_service.node.forkserver import ForkServer, install_fork_server
+    from pfp_service.node.previews import warm_up
     from pfp_service.node.tasks import Outcome, Task
     from pfp_service.node.workers import KILL_GRACE_S, WorkerPool
 
-    warm_up(None)  # as pfp serve starts: warm, frozen, the zygote forked before any thread
+    warm_up(None)  # as pfp serve starts: warm, frozen, the fork server forked before any thread
     gc.freeze()
     install_fork_server(ForkServer.start())
-    pool = WorkerPool("bench", 1, warm="pfp_service.node.desk:_warm_worker", spare=True)
+    pool = WorkerPool("bench", 1, warm="pfp_service.node.previews:_warm_worker", spare=True)
     try:
         pool.wait_ready(120)
         out = []
@@ -109,7 +109,7 @@ def _pebble(rounds: int) -> list[float] | str:
     except ImportError:
         return "pebble is not installed (pip install pebble)"
     from pfp_service.core.plan import plan
-    from pfp_service.node.desk import _warm_worker
+    from pfp_service.node.previews import _warm_worker
 
     pool = ProcessPool(max_workers=1, context=mp.get_context("forkserver"), initializer=_warm_worker)
     try:
@@ -174,7 +174,7 @@ def _nmea() -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     load = os.getloadavg()
-    nmea = _nmea()  # first: the pool's zygote must fork before any thread
+    nmea = _nmea()  # first: the pool's fork server must fork before any thread
     ours = _ours(args.rounds)
     pebble = _pebble(args.rounds)
     doc: dict[str, Any] = {
@@ -190,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"pfp bench libraries (load average before {load[0]:.2f}, after {doc['load_after'][0]:.2f})\n")
     print("worker pool: from a task killed at its deadline to the next task's answer (one worker)")
     print(
-        f"  ours (warm zygote, warm spare): median {statistics.median(ours) * 1e3:.0f} ms, max {max(ours) * 1e3:.0f} ms"
+        f"  ours (warm fork server, warm spare): median {statistics.median(ours) * 1e3:.0f} ms, max {max(ours) * 1e3:.0f} ms"
     )
     if isinstance(pebble, str):
         print(f"  pebble: {pebble}")

@@ -150,7 +150,7 @@ class _Probe:
         self._sub.undeclare()
 
 
-def _ask(session: Any, unit: str, body: bytes | None, timeout_s: float) -> tuple[float, str, str]:
+def _query(session: Any, unit: str, body: bytes | None, timeout_s: float) -> tuple[float, str, str]:
     """One preview query: ``(seconds, kind, detail)``, kind ``plan``, ``error``, ``timeout`` or ``none``."""
     t0 = time.monotonic()
     replies = list(session.get(keys.preview(MISSION, unit), payload=body, timeout=timeout_s))
@@ -177,7 +177,7 @@ def _burst(session: Any, bodies: list[bytes | None], timeout_s: float) -> list[t
 
     def one(body: bytes | None) -> None:
         go.wait()
-        got = _ask(session, PROBE, body, timeout_s)
+        got = _query(session, PROBE, body, timeout_s)
         with lock:
             out.append(got)
 
@@ -274,7 +274,7 @@ def bombs(args: argparse.Namespace) -> dict[str, Any]:
             time.sleep(1.0)
             probe.phase = "before"
             time.sleep(3.0)  # the probe's baseline, and the field shipped to the workers
-            _ask(session, PROBE, None, 10.0)  # the plain preview warm: what follows is the bombs' cost
+            _query(session, PROBE, None, 10.0)  # the plain preview warm: what follows is the bombs' cost
             pss_before = tree_pss_mb(server.proc.pid)
             probe.phase = "during"
             t0 = time.monotonic()
@@ -284,7 +284,7 @@ def bombs(args: argparse.Namespace) -> dict[str, Any]:
                 peak = max(peak, tree_pss_mb(server.proc.pid))
                 time.sleep(0.25)
             pss_after = tree_pss_mb(server.proc.pid)
-            plain = _ask(session, PROBE, None, 10.0)
+            plain = _query(session, PROBE, None, 10.0)
         finally:
             probe.close()
         return {
@@ -396,7 +396,7 @@ def storm(args: argparse.Namespace) -> dict[str, Any]:
                     if not todo:
                         return
                     k = todo.pop()
-                got = _ask(session, PROBE, bodies[k % len(bodies)], args.timeout_s)
+                got = _query(session, PROBE, bodies[k % len(bodies)], args.timeout_s)
                 with lock:
                     answers.append(got)
 

@@ -27,11 +27,11 @@ def signatures() -> dict[str, int]:
 
 
 def main() -> None:
-    import pfp_service.node.desk as desk
+    import pfp_service.node.previews as previews
 
     if "--no-wide" in sys.argv:
-        desk.warm_wide = lambda base: None  # type: ignore[assignment]
-    desk.warm_up(None)
+        previews.warm_wide = lambda base: None  # type: ignore[assignment]
+    previews.warm_up(None)
     before = signatures()
 
     from pfp_service.terrain.grid import TerrainGrid

@@ -41,7 +41,7 @@ def status_line(st: Any) -> str:
     )
 
 
-def twin_warnings(statuses: list[Any]) -> list[str]:
+def duplicate_warnings(statuses: list[Any]) -> list[str]:
     """A WARNING line per planner that answers the same units as another (``PlannerStatus.twins``).
 
     Planners sharing an id from several sessions count too, as their replies show them (a planner too old
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         for st in found:
             print(status_line(st))
-    twins = twin_warnings(found)
+    twins = duplicate_warnings(found)
     for line in twins:
         print(f"pfp health: {line}", file=sys.stderr)
     return 1 if twins else 0

@@ -240,7 +240,7 @@ def run(args: argparse.Namespace) -> int:
     import msgspec
     import zenoh
 
-    from pfp_service.cli.health import twin_warnings
+    from pfp_service.cli.health import duplicate_warnings
     from pfp_service.errors import InputError, Unreachable, map_zenoh_errors
     from pfp_service.wire import decode_planner_status, decode_world_snapshot, keys
 
@@ -280,7 +280,7 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    for line in twin_warnings(statuses):  # on stderr: a --json reader still gets JSON alone
+    for line in duplicate_warnings(statuses):  # on stderr: a --json reader still gets JSON alone
         print(f"pfp status: {line}", file=sys.stderr)
     if not args.json:
         if statuses:

@@ -278,7 +278,7 @@ def plan(
             (a live unit's last direction): the first step takes it without
             advising again, as the live unit does (``Stepper.step_along``).
         field: the field of every threat in ``schedule`` (all from step 0),
-            already built and shared (a preview desk's, per world); ignored
+            already built and shared (a preview service's, per world); ignored
             when it does not match them or the intensity.
         zones: the keep-out zones in force throughout (default: ``field``'s,
             if given); no step enters one (``steprule.judge_zoned``).

@@ -68,7 +68,7 @@ def _acked_write(mission: str, *key_exprs: str) -> list[Grant]:
     them, and watch for planners starting."""
     return [
         *_publish(*key_exprs, delete=True),
-        *_ask(*key_exprs),
+        *_query_grants(*key_exprs),
         *_watch_tokens(keys.alive_planners(mission)),
     ]
 
@@ -91,7 +91,7 @@ def _subscribe(*key_exprs: str) -> list[Grant]:
     ]
 
 
-def _ask(*key_exprs: str) -> list[Grant]:
+def _query_grants(*key_exprs: str) -> list[Grant]:
     return [Grant(INGRESS, ("query",), key_exprs), Grant(EGRESS, ("reply",), key_exprs)]
 
 
@@ -117,7 +117,7 @@ def unit_grants(mission: str, unit: str, own_goal: bool = True) -> list[Grant]:
         *_publish(keys.unit_state(mission, unit), keys.shard_state(mission, unit)),
         *_token(keys.alive_unit(mission, unit)),
         *_subscribe(keys.unit_direction(mission, unit)),
-        *_ask(keys.preview(mission, unit)),
+        *_query_grants(keys.preview(mission, unit)),
     ]
     if own_goal:  # the write kinds a unit may write on its own key (its goal)
         out += _acked_write(mission, *(k.key_of(mission, unit) for k in WRITES if k.own_unit))
@@ -152,7 +152,7 @@ def planner_grants(mission: str, planner: str) -> list[Grant]:
         Grant(EGRESS, ("query",), (*previews, *every, *writes)),
         *_token(keys.alive_planner(mission, planner)),
         # other planners' status and world: conflict detection, `pfp health` with the planner's identity
-        *_ask(*every),
+        *_query_grants(*every),
     ]
 
 
@@ -163,7 +163,7 @@ def reporter_grants(mission: str) -> list[Grant]:
 def commander_grants(mission: str) -> list[Grant]:
     return [
         *_acked_write(mission, *_written_by("commander", mission)),
-        *_ask(keys.previews(mission), keys.team_previews(mission)),
+        *_query_grants(keys.previews(mission), keys.team_previews(mission)),
     ]
 
 
@@ -171,7 +171,7 @@ def observer_grants(mission: str) -> list[Grant]:
     return [
         *_subscribe(keys.mission_all(mission)),
         *_watch_tokens(keys.alive_units(mission), keys.alive_planners(mission)),
-        *_ask(keys.planner_statuses(mission), keys.worlds(mission)),
+        *_query_grants(keys.planner_statuses(mission), keys.worlds(mission)),
     ]
 
 

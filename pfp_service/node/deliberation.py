@@ -26,7 +26,7 @@ Zenoh callbacks and the publishing (measured: with the deliberation thread
 busy, the loop held the GIL 46 % of the time and the deliberation 30 %, and
 the planner answered 30 % of 10,000 states/s).  In its own process it
 shares only the machine's cores.  The processes are a ``WorkerPool``
-(``workers.py``, shared with the preview desk): a chunk still running
+(``workers.py``, shared with the preview service): a chunk still running
 ``CHUNK_RUN_S`` after it started is killed with its worker (its jobs are
 asked again later), and each worker's memory is bounded.
 
@@ -223,6 +223,6 @@ def _run_chunk(
 
 
 def _warm_worker() -> None:
-    from pfp_service.node.desk import warm_up
+    from pfp_service.node.previews import warm_up
 
     warm_up(None)

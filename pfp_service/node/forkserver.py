@@ -1,6 +1,6 @@
-"""Starting a worker process cheaply: the zygote (``ForkServer``) and the workers it forks (``Forked``).
+"""Starting a worker process cheaply: the fork server (``ForkServer``) and the workers it forks (``Forked``).
 
-``run`` forks the zygote from the warm planner before its Zenoh session opens and installs it
+``run`` forks the fork server from the warm planner before its Zenoh session opens and installs it
 (``install_fork_server``); every ``workers.WorkerPool`` made afterwards asks it for its workers,
 and starts fresh interpreters where there is none or it has gone.  Apart from the pool because
 it is how a process starts, not how tasks are run.
@@ -18,30 +18,30 @@ import subprocess
 import threading
 
 from pfp_service.node.log import get_logger
-from pfp_service.node.workerproc import zygote
+from pfp_service.node.workerproc import serve_forks
 
 __all__ = ["ForkServer", "Forked", "install_fork_server", "installed_fork_server"]
 
-log = get_logger("workers")  # the pool's log: a zygote gone is the pool's news
+log = get_logger("workers")  # the pool's log: a fork server gone is the pool's news
 
 
 class ForkServer:
-    """A zygote: a copy of the warm planner, forked before any thread or Zenoh session, that forks workers.
+    """A fork server: a copy of the warm planner, forked before any thread or Zenoh session, that forks workers.
 
     ``start`` forks it from the planner once the heavy libraries are imported
-    and the numba kernels loaded (``desk.warm_up``), and only while the process
+    and the numba kernels loaded (``previews.warm_up``), and only while the process
     has no other Python thread (forking a process with Zenoh's threads is
     unsafe; OpenBLAS stops its own pool around a fork).  Each worker is then a
-    fork of the zygote: it shares the loaded libraries, the compiled kernels
-    and the interpreter's heap copy-on-write with the zygote, its siblings and
+    fork of the fork server: it shares the loaded libraries, the compiled kernels
+    and the interpreter's heap copy-on-write with the fork server, its siblings and
     the planner, so it costs only the pages it writes, and starts in
     milliseconds instead of seconds.  The caller should ``gc.freeze()`` first,
     so the collector's passes in any of them do not write (and so copy) every
     object's header.
 
-    A worker's socket end comes to the zygote by ``send_fds``; its process id
+    A worker's socket end comes to the fork server by ``send_fds``; its process id
     comes back.  A worker is not the planner's child: the pool watches and
-    kills it through a pidfd (``Forked``).  Every worker and the zygote hold the
+    kills it through a pidfd (``Forked``).  Every worker and the fork server hold the
     read end of a lifeline pipe whose only write end is the planner's, so the
     moment the planner dies, even by ``SIGKILL``, each of them reads its end
     of file and exits.
@@ -56,7 +56,7 @@ class ForkServer:
 
     @classmethod
     def start(cls) -> ForkServer | None:
-        """Fork the zygote from this process; ``None`` where it would be unsafe (other threads) or unsupported."""
+        """Fork the fork server from this process; ``None`` where it would be unsafe (other threads) or unsupported."""
         if threading.active_count() > 1 or not hasattr(os, "pidfd_open") or not hasattr(socket, "send_fds"):
             return None
         ours, theirs = socket.socketpair()
@@ -69,12 +69,12 @@ class ForkServer:
             ours.close()
             theirs.close()
             return None
-        if pid == 0:  # the zygote: it never returns into the planner's code
+        if pid == 0:  # the fork server: it never returns into the planner's code
             code = 1
             try:
                 ours.close()
                 os.close(life_w)
-                zygote(theirs, life_r)
+                serve_forks(theirs, life_r)
                 code = 0
             finally:
                 os._exit(code)
@@ -83,7 +83,7 @@ class ForkServer:
         return cls(pid, ours, life_w)
 
     def spawn(self, fd: int, memory_mb: float | None, nice: int) -> Forked | None:
-        """A worker forked by the zygote on the socket end ``fd``; ``None`` if the zygote is gone."""
+        """A worker forked by the fork server on the socket end ``fd``; ``None`` if the fork server is gone."""
         with self._lock:
             if self._dead:
                 return None
@@ -92,7 +92,7 @@ class ForkServer:
                 reply = self._sock.recv(32)
             except OSError:
                 reply = b""
-            if not reply:  # the zygote died (the OOM killer, say): the pool starts fresh interpreters
+            if not reply:  # the fork server died (the OOM killer, say): the pool starts fresh interpreters
                 self._dead = True
                 log.warning("the worker fork server is gone; workers start as new interpreters")
                 return None
@@ -102,7 +102,7 @@ class ForkServer:
             return None
 
     def close(self) -> None:
-        """Stop the zygote (its workers stop with their pools, or with the planner)."""
+        """Stop the fork server (its workers stop with their pools, or with the planner)."""
         with self._lock:
             self._dead = True
             with contextlib.suppress(OSError):
@@ -129,7 +129,7 @@ def installed_fork_server() -> ForkServer | None:
 
 
 class Forked:
-    """A worker the zygote forked (not our child): ``subprocess.Popen``'s ``poll``/``kill``/``wait``, on a pidfd."""
+    """A worker the fork server forked (not our child): ``subprocess.Popen``'s ``poll``/``kill``/``wait``, on a pidfd."""
 
     def __init__(self, pid: int) -> None:
         self.pid = pid
@@ -158,7 +158,7 @@ class Forked:
             if self._fd is not None:
                 os.close(self._fd)
                 self._fd = None
-                self.returncode = -1  # gone; its status went to the zygote, which reaps it
+                self.returncode = -1  # gone; its status went to the fork server, which reaps it
         return self.returncode
 
     def kill(self) -> None:

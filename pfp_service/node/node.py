@@ -43,16 +43,16 @@ from pfp_service.errors import InputError
 from pfp_service.node import gcpause
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.deliberation import Deliberators
-from pfp_service.node.desk import PreviewDesk, preview_desk, warm_up
+from pfp_service.node.duplicates import Peers, watch_duplicates
 from pfp_service.node.log import get_logger, log_changes
 from pfp_service.node.loopstats import Latency, LoopTrace, Trim, demote_native_threads
+from pfp_service.node.previews import PreviewService, preview_service, warm_up
 from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
 from pfp_service.node.startup import join, restore, restored_event
 from pfp_service.node.status import planner_status
 from pfp_service.node.store import Store
 from pfp_service.node.terrain import Sights, terrain_info
-from pfp_service.node.twins import Peers, watch_twins
 from pfp_service.node.worldpages import answer_world
 from pfp_service.node.writes import Writes
 from pfp_service.wire import (
@@ -110,7 +110,7 @@ class PlannerNode:
         clock: monotonic seconds; the world sees only this.
         store: durable state (``Store``); goals and threats are committed to it
             before they are applied, and restored from it at ``start``.
-        desk: the preview desk made by ``preview_desk`` before the session opened, so its
+        previews: the preview service made by ``preview_service`` before the session opened, so its
             worker processes warm up while a client-mode planner waits for its router; the
             node shuts it down.  A new one when not given.
     """
@@ -121,7 +121,7 @@ class PlannerNode:
         cfg: ServeConfig,
         clock: Callable[[], float] = time.monotonic,
         store: Store | None = None,
-        desk: PreviewDesk | None = None,
+        previews: PreviewService | None = None,
     ) -> None:
         self.session = session
         self.store = store
@@ -157,7 +157,7 @@ class PlannerNode:
         self._direction_of: dict[str, zenoh.KeyExpr] = {}
         self._deliberators = Deliberators(cfg.deliberation_workers, clock, self._push)
         self._sights = Sights(self.world.settings.terrain, self._push)  # threats' windows, off the loop
-        self._desk = desk if desk is not None else preview_desk(cfg, clock)
+        self._previews = previews if previews is not None else preview_service(cfg, clock)
 
     # -- lifecycle --------------------------------------------------------------
     def start(self) -> None:
@@ -177,7 +177,7 @@ class PlannerNode:
         # the loop's p99 pays (docs/operations.md, "Figures behind the code's choices").
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         warm_up(self.world.settings)
-        self._desk.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them
+        self._previews.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them
         restored = restore(self.world, self.store, self._writes, self.cfg, self.clock)
         join(s, self.world, self.cfg, self.clock)
         if self.cfg.cluster:  # the peers named before the first direction, so no unit is guided twice
@@ -187,9 +187,11 @@ class PlannerNode:
             self._out.event(restored_event(restored, p), collections.Counter())
         self._loop_thread = threading.Thread(target=self._loop, name="pfp-plan", daemon=True)
         self._loop_thread.start()
-        twins = (s, m, p, self.zid, self._stop, self._peers.on_twin, self._peers.on_terrain)
-        self._twins_thread = threading.Thread(target=watch_twins, args=twins, name="pfp-twins", daemon=True)
-        self._twins_thread.start()
+        twins = (s, m, p, self.zid, self._stop, self._peers.on_duplicate, self._peers.on_terrain)
+        self._duplicates_thread = threading.Thread(
+            target=watch_duplicates, args=twins, name="pfp-duplicates", daemon=True
+        )
+        self._duplicates_thread.start()
         log.info("planner ready", extra={"fields": {"mission": m, "planner": p, "session": self.zid}})
 
     def _listen(self, s: zenoh.Session) -> None:
@@ -246,11 +248,11 @@ class PlannerNode:
             self._loop_thread.join(timeout=2.0)
         for name in self._rings.names():
             self._states(self._rings.remove(name), self.clock())
-        twins = getattr(self, "_twins_thread", None)
+        twins = getattr(self, "_duplicates_thread", None)
         if twins is not None:
             twins.join(timeout=2.0)
         self._deliberators.shutdown()
-        self._desk.shutdown()
+        self._previews.shutdown()
         self._trace.close()
         for d in self._declared:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
@@ -372,7 +374,7 @@ class PlannerNode:
     def _due(self, last: float) -> float | None:
         """When to tick if nothing comes: the world's deadline, or ``tick_s`` on while the node's work waits."""
         due = self.world.next_deadline()
-        if self._desk.waiting() or self._deliberators.waiting() or self._trim.waiting():
+        if self._previews.waiting() or self._deliberators.waiting() or self._trim.waiting():
             return last + self.cfg.tick_s if due is None else min(due, last + self.cfg.tick_s)
         return due
 
@@ -419,7 +421,7 @@ class PlannerNode:
                 for d in out.directions:
                     self._out.put(self._direction_key(d.unit), encode(d), direction=True)
         t_put = self.clock()
-        if self.world.owes():  # a wave went out first: its points and jobs in the next tick, at once
+        if self.world.wave_pending():  # a wave went out first: its points and jobs in the next tick, at once
             self._wake.set()
         logged: collections.Counter[str] = collections.Counter()
         for ev in out.events:
@@ -444,7 +446,7 @@ class PlannerNode:
             self.latency.add(done - t_recv)
         for kind, query, t_recv in queries:
             self._answer(kind, query, t_recv)
-        self._desk.expire(self.clock())
+        self._previews.expire(self.clock())
         if tr.on:
             end = self.clock()
             tr.part("intake", t_apply - now)
@@ -465,21 +467,21 @@ class PlannerNode:
             answer_world(query, self.world, self.clock(), m, p)
             query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
         elif kind == "team":
-            self._desk.team(query, self.world, t_recv)
+            self._previews.team(query, self.world, t_recv)
         else:
             key = str(query.key_expr)
             try:
                 uid = keys.parse(key).id
             except InputError as err:
-                self._desk.refuse(query, ErrorReply.of(err))
+                self._previews.refuse(query, ErrorReply.of(err))
                 return
             view = self.world.preview(uid)  # None: another planner answers (scale-out: the owner, once)
             if view is None:
                 query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
                 return
-            self._desk.submit(query, key, view, t_recv)
+            self._previews.submit(query, key, view, t_recv)
 
     def _status(self) -> PlannerStatus:
         uptime_s = max(self.clock() - self.started, 0.0)
-        counts, twins = self.world.counts(), self._peers.twins()
+        counts, twins = self.world.counts(), self._peers.duplicates()
         return planner_status(self.cfg, counts, self.latency, self.counters, uptime_s, self.zid, twins)

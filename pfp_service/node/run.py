@@ -50,15 +50,15 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
 def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Event, log: Any) -> int:
     import zenoh
 
-    from pfp_service.node.desk import preview_desk
     from pfp_service.node.node import PlannerNode  # noqa: F401 -- imported before the router listens: the
+    from pfp_service.node.previews import preview_service
     from pfp_service.node.store import Store  # node subscribes the moment the session opens (issue 34)
 
-    zygote: Any = contextlib.nullcontext()
+    fork_server: Any = contextlib.nullcontext()
     if threading.current_thread() is threading.main_thread():
         _few_arenas()
-        zygote = _fork_server(cfg)
-    with zygote:
+        fork_server = _fork_server(cfg)
+    with fork_server:
         store = None if cfg.state_dir in ("none", "auto") else Store(cfg.state_dir)
         conf = zenoh_config(cfg)
         if cfg.mode == "client":  # a router that is down (or restarting) is waited for, not an exit
@@ -67,18 +67,18 @@ def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Even
         with contextlib.closing(store) if store is not None else contextlib.nullcontext():
             # the preview workers boot while the session opens: a client-mode planner waiting for its
             # router is ready to answer the moment the router comes, not seconds later
-            desk = preview_desk(cfg)
+            previews = preview_service(cfg)
             try:
                 session = _open(zenoh, conf, cfg, stop, log)
             except BaseException:
-                desk.shutdown()
+                previews.shutdown()
                 raise
             if session is None:  # stopped while waiting for the router
-                desk.shutdown()
+                previews.shutdown()
                 log.info("stopped")
                 return 0
             with session:
-                _run(session, cfg, store, desk, ready, stop, log)
+                _run(session, cfg, store, previews, ready, stop, log)
     log.info("stopped")
     return 0
 
@@ -104,7 +104,7 @@ def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: A
             log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
             next_log = time.monotonic() + WAITING_LOG_S
         if not warmed:  # the kernels load while the router is away, not once it has come
-            from pfp_service.node.desk import warm_up
+            from pfp_service.node.previews import warm_up
 
             warm_up(cfg.world_settings())
             warmed = True
@@ -122,14 +122,14 @@ def _run(
     session: Any,
     cfg: ServeConfig,
     store: Any,
-    desk: Any,
+    previews: Any,
     ready: threading.Event | None,
     stop: threading.Event,
     log: Any,
 ) -> None:
     from pfp_service.node.node import PlannerNode
 
-    node = PlannerNode(session, cfg, store=store, desk=desk)
+    node = PlannerNode(session, cfg, store=store, previews=previews)
     node.start()
     try:
         endpoints = cfg.listen
@@ -167,19 +167,19 @@ ARENAS = 2
 
 @contextlib.contextmanager
 def _fork_server(cfg: ServeConfig) -> Iterator[None]:
-    """Warm this process, then fork the zygote its worker pools fork their workers from (``ForkServer``).
+    """Warm this process, then fork the fork server its worker pools fork their workers from (``ForkServer``).
 
     Before the session opens and before any thread starts, so the fork is safe; the kernels are
     loaded first (for the defaults and for ``cfg``'s settings), so every worker is warm the moment
     it is forked, and ``gc.freeze`` keeps the collector from copying the shared pages.  Measured
     in one run (load 6-10): an idle planner's tree, summed PSS, fell from 214 MB in 2 processes
-    (planner, one preview worker) to 130 MB in 3 (planner, zygote, that worker), and a worker
+    (planner, one preview worker) to 130 MB in 3 (planner, fork server, that worker), and a worker
     starts in milliseconds, not seconds.
     """
     import gc
 
-    from pfp_service.node.desk import warm_up
     from pfp_service.node.forkserver import ForkServer, install_fork_server
+    from pfp_service.node.previews import warm_up
 
     warm_up(None)
     warm_up(cfg.world_settings())

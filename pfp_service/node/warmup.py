@@ -1,6 +1,6 @@
 """The wide warm-up: a big tick run once before serving, so that no numba kernel compiles in the live loop.
 
-``desk.warm_up`` runs the small cases (one threat, none, a keep-out zone);
+``previews.warm_up`` runs the small cases (one threat, none, a keep-out zone);
 ``warm_wide`` runs what only a big world reaches, each through the path the
 live loop takes:
 

@@ -3,7 +3,7 @@
 ``workers.WorkerPool`` starts ``python -c "...; boot(ARG)"``, so this module is
 what a worker imports first; nothing in the planner's process imports it but
 the tasks that run in workers (``world_field``, ``retire``).  Where the planner
-forked a zygote (``forkserver.ForkServer``), ``zygote`` is its loop, and each
+forked a fork server (``forkserver.ForkServer``), ``serve_forks`` is its loop, and each
 worker it forks enters ``_worker_main`` from there, already warm.
 """
 
@@ -26,7 +26,7 @@ from typing import Any
 
 from pfp_service.node.log import get_logger
 
-__all__ = ["ORPHAN_POLL_S", "boot", "forget_fields", "retire", "world_field", "world_threats", "zygote"]
+__all__ = ["ORPHAN_POLL_S", "boot", "forget_fields", "retire", "serve_forks", "world_field", "world_threats"]
 
 log = get_logger("workers")
 ORPHAN_POLL_S = 0.5  # a fresh-interpreter worker checks its parent this often
@@ -77,7 +77,7 @@ def boot(arg: str) -> None:
     _worker_main(Connection(fd), parent, memory_mb, nice, fn)
 
 
-def zygote(sock: socket.socket, lifeline: int) -> None:
+def serve_forks(sock: socket.socket, lifeline: int) -> None:
     """The fork server's loop (``forkserver.ForkServer``): fork one worker per request, until the planner goes.
 
     A request is ``[memory_mb, nice]`` with the worker's socket end; the reply is its process id.
@@ -101,7 +101,7 @@ def zygote(sock: socket.socket, lifeline: int) -> None:
             pid = os.fork()
         except OSError:  # answered "x": the pool starts this one as a fresh interpreter
             pid = -1
-        if pid == 0:  # the worker: it never returns into the zygote's loop
+        if pid == 0:  # the worker: it never returns into the fork server's loop
             code = 1
             try:
                 sock.close()
@@ -130,7 +130,7 @@ def _watch_lifeline(fd: int) -> None:
 def _worker_main(
     conn: Connection, parent: int | None, memory_mb: float | None, nice: int, warm: Callable[[], None] | None
 ) -> None:
-    if parent is not None:  # a forked worker watches the lifeline instead (``zygote``)
+    if parent is not None:  # a forked worker watches the lifeline instead (``serve_forks``)
         threading.Thread(target=_watch_parent, args=(parent,), name="pfp-orphan-watch", daemon=True).start()
     if warm is not None:
         warm()  # at the planner's priority: a killed worker's successor is wanted soon

@@ -1,6 +1,6 @@
 """Worker processes for the planner's off-loop work (previews, deliberation): one small pool both use.
 
-A ``WorkerPool`` runs each worker as a fork of the zygote ``pfp serve``
+A ``WorkerPool`` runs each worker as a fork of the fork server ``pfp serve``
 forked before its Zenoh session opened (``forkserver.ForkServer``; a fork of a process
 holding a Zenoh session is unsafe), or where there is none as its own fresh
 interpreter, with its own socket pipe, driven by one parent thread per slot.  The slot thread takes the next task, sends it,
@@ -379,7 +379,7 @@ class WorkerPool:
     def _start_worker(self, slot: _Slot | None) -> tuple[Any, Connection, int] | None:
         """A new worker, warm (``slot`` shows it meanwhile, so a shutdown can kill it); ``None`` if it failed.
 
-        Forked by the zygote where there is one (``ForkServer``), else a fresh interpreter."""
+        Forked by the fork server where there is one (``ForkServer``), else a fresh interpreter."""
         ours_sock, theirs_sock = socket.socketpair()
         ours = Connection(ours_sock.detach())
         theirs = theirs_sock.detach()

@@ -16,7 +16,7 @@ in latitude and longitude, resolution.
 
 Passed by name, not by value.  A ``LiveTerrain`` is pickled as the arguments
 it was loaded with; a process that has loaded them (the planner, and every
-worker forked from its warm zygote) gets the same object back from
+worker forked from its warm fork server) gets the same object back from
 ``_LOADED``, and any other loads the file again.  A preview's view or a
 deliberation chunk then ships a few hundred bytes, never the grid.
 """

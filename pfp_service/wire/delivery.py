@@ -358,7 +358,7 @@ class Deliverer:
             if probing and not kicked:
                 batch = batch[:1]
             try:
-                acked = self._ask(batch)
+                acked = self._query_acks(batch)
             except Exception as exc:  # the session closed under us, or Zenoh refused: try again later
                 if self._stop.is_set():
                     return
@@ -369,7 +369,7 @@ class Deliverer:
             probing = acked == 0
             self._note_waiting()
 
-    def _ask(self, batch: list[tuple[str, _Pending]]) -> int:
+    def _query_acks(self, batch: list[tuple[str, _Pending]]) -> int:
         """Ask a planner to take each write of ``batch``; returns how many some planner answered."""
         z = self._zenoh
         asked = []

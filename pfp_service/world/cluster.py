@@ -43,7 +43,7 @@ class Cluster:
     ) -> None:
         self.settings = settings
         self.own = Ownership(settings.planner_id, settings.cluster)
-        self._book, self._timers, self._start, self._tell = book, timers, start, tell
+        self._book, self._timers, self._start, self._direct = book, timers, start, tell
 
     def peer(self, inp: PeerPlanner, b: Batch) -> None:
         """A planner's token came or went (``PeerPlanner``): units move, or a conflict is said."""
@@ -96,7 +96,7 @@ class Cluster:
                 rec.goal is not None and rec.position is not None and not rec.stale
             ):  # stale: at its next report
                 self._start(rec, b)
-            self._tell(rec, b)
+            self._direct(rec, b)
 
 
 def terrain_conflict(

@@ -232,7 +232,7 @@ class PeerPlanner:
 @dataclass(frozen=True, slots=True)
 class PeerTerrain:
     """Planner ``planner`` of this mission plans over ``theirs`` (``None``: no terrain), this one over ``mine``,
-    as their statuses say (``node.twins.watch_twins``): the world decides whether they can share units."""
+    as their statuses say (``node.duplicates.watch_duplicates``): the world decides whether they can share units."""
 
     planner: str
     theirs: TerrainInfo | None

@@ -43,13 +43,13 @@ class Liveness:
         if rec.stale and self.settings.unit_forget_s is not None:
             self.timers.set(now + self.settings.unit_forget_s, "forget", rec.id)
 
-    def heard(self, rec: UnitRecord, state: UnitState, now: float) -> None:
+    def reported(self, rec: UnitRecord, state: UnitState, now: float) -> None:
         """A report: the unit is fresh, and is stale again if it falls silent."""
         kind = state.kind.value if state.kind is not None else None
         told_to_move = rec.last_vector is not None and rec.last_status in _MOVING
         x, y = state.position[0], state.position[1]
         rec.progress.report(x, y, state.t, now, state.speed_mps, told_to_move)
-        self.book.heard(rec, (x, y), state.seq, kind, now, rec.progress.speed_mps)
+        self.book.reported(rec, (x, y), state.seq, kind, now, rec.progress.speed_mps)
         if not rec.silence_timer:
             rec.silence_timer = True
             self.timers.set(now + self.settings.unit_stale_s, "silence", rec.id)

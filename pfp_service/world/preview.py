@@ -8,7 +8,7 @@ touches the live world, so a what-if leaves the live stream untouched.
 its geometry needs at its step, its what-if count, and the escape route a
 what-if threat as wide as it asks could make the stepper resample.  Each
 refusal is an ``InputError`` naming the field; what passes is given a
-``Cost``, which the desk uses to order the work (light before heavy).
+``Cost``, which the preview service uses to order the work (light before heavy).
 
 A plain preview drives the unit's own stepper copy from its reported
 position, mid-escape included: its first step is the direction the unit was

@@ -52,7 +52,7 @@ class Step(StrEnum):
     """What can happen to a unit: each is one method of ``Units``."""
 
     MADE = "made"  # its record made, by a report or anything else (``add``)
-    HEARD = "heard"  # a report
+    REPORTED = "reported"  # a report
     WENT_STALE = "went_stale"  # silent, or its token gone for the debounce
     FORGOTTEN = "forgotten"  # stale for ``unit_forget_s``: its record goes
     GOAL_SET = "goal_set"  # a goal set or a mission restored: a new epoch
@@ -84,9 +84,9 @@ def _same(*phases: Phase) -> dict[Phase, frozenset[Phase]]:
 TRANSITIONS: dict[tuple[Phase, Step], frozenset[Phase]] = {
     (P.UNKNOWN, Step.MADE): frozenset({P.UNKNOWN, P.PEER}),
     # a report of a fresh unit changes nothing that decides its phase, and is not looked up here
-    (P.PEER, Step.HEARD): frozenset({P.PEER}),
-    (P.UNKNOWN, Step.HEARD): frozenset({P.NO_GOAL, P.GUIDED}),
-    (P.STALE, Step.HEARD): _FRESH,  # as it was: its verdict and its job are kept while it is silent
+    (P.PEER, Step.REPORTED): frozenset({P.PEER}),
+    (P.UNKNOWN, Step.REPORTED): frozenset({P.NO_GOAL, P.GUIDED}),
+    (P.STALE, Step.REPORTED): _FRESH,  # as it was: its verdict and its job are kept while it is silent
     **{(p, Step.WENT_STALE): frozenset({P.STALE}) for p in _FRESH},
     (P.PEER, Step.WENT_STALE): frozenset({P.PEER}),
     **{(p, Step.FORGOTTEN): GONE for p in (P.UNKNOWN, P.STALE, P.PEER)},
@@ -222,7 +222,7 @@ class Units:
         self._to(rec, Step.MADE)
         return rec
 
-    def heard(
+    def reported(
         self,
         rec: UnitRecord,
         position: tuple[float, float],
@@ -246,7 +246,7 @@ class Units:
         if rec.stepper is not None:
             rec.stepper.pace(speed_mps)
         if moved:
-            self._to(rec, Step.HEARD)
+            self._to(rec, Step.REPORTED)
 
     def go_stale(self, rec: UnitRecord, now: float) -> bool:
         """Mark a unit that has reported stale; whether it was fresh until now."""

@@ -56,7 +56,7 @@ __all__ = ["World", *ev.__all__]
 
 K = keys.KeyKind
 # A contingency that re-directs more guided units than this sends their directions first, and their
-# look-ahead points in the next ``apply`` (``World.owes``; figures: docs/operations.md, "The wave first")
+# look-ahead points in the next ``apply`` (``World.wave_pending``; figures: docs/operations.md, "The wave first")
 WAVE_FIRST = 64
 # ... and those points (and their jobs) follow at most this many units an ``apply``, the rest owed on
 OWED_PER_TICK = 128
@@ -74,7 +74,7 @@ class World:
         self._threats = self._rec.threats
         self._timers = Timers()
         self._live = Liveness(s, self._book, self._timers)
-        self._cluster = Cluster(s, self._book, self._timers, self._start, self._tell)
+        self._cluster = Cluster(s, self._book, self._timers, self._start, self._direct)
         self.limits = Limits()
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
         self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
@@ -97,7 +97,7 @@ class World:
     def view(self, unit_id: str) -> UnitView:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec, s = self._units.get(unit_id), self.settings
-        threats = self.field.threats  # the same tuple while the field stands: a desk can cache it
+        threats = self.field.threats  # the same tuple while the field stands: a preview service can cache it
         zones = self._rec.zones_of(rec.goal if rec else None)  # the same set while the zones stand
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
@@ -130,7 +130,7 @@ class World:
         In the manner of aioquic's ``get_timer()``: the earliest of its timers
         (staleness, token debounce, push re-sends, forgetting, expiry, a peer
         gone), or at once -- the ``now`` of the last ``apply`` -- while it
-        ``owes`` a wave's points.  ``None``: nothing is due until an input
+        ``wave_pending`` a wave's points.  ``None``: nothing is due until an input
         comes.  A timer may find nothing left to do when due (a unit heard
         since): it is a reminder, not a verdict (``timers``).
         """
@@ -138,10 +138,10 @@ class World:
             return self._now
         return self._timers.next_due()
 
-    def owes(self) -> bool:
+    def wave_pending(self) -> bool:
         """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon.
 
-        Each ``apply`` pays at most ``OWED_PER_TICK`` units of them; ``owes`` stays true until the last.
+        Each ``apply`` pays at most ``OWED_PER_TICK`` units of them; ``wave_pending`` stays true until the last.
         """
         return bool(self._owed)
 
@@ -197,7 +197,7 @@ class World:
                 rec = self._units.get(unit)
                 if rec is not None and rec.goal is not None:
                     self._rec.drop_mission(rec)
-                    self._tell(rec, b)
+                    self._direct(rec, b)
             case ev.ThreatPut(tid, update):
                 self._puts.put(tid, update, b)
             case ev.ThreatRemoved(tid):
@@ -260,7 +260,7 @@ class World:
                 said = "; the unit's goal was dropped" if rec.goal is not None else ""
                 if rec.goal is not None or rec.shared is not None:
                     self._book.drop_mission(rec)
-                self._tell(rec, b)
+                self._direct(rec, b)
             except Exception:  # a record too broken to reset: forget it (a report makes it afresh)
                 self._book.discard(rec)
         name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], ev.where(exc))
@@ -296,7 +296,7 @@ class World:
             self._live.made(rec, b.now)
         return rec
 
-    def _tell(self, rec: UnitRecord, b: Batch) -> None:
+    def _direct(self, rec: UnitRecord, b: Batch) -> None:
         """The unit is to get a fresh direction in this batch, if it has reported and is not stale."""
         if rec.position is not None and not rec.stale:
             b.dirty.add(rec.id)
@@ -305,7 +305,7 @@ class World:
         rec = self._unit(unit_id, b, K.UNIT_STATE, reported=True)
         if rec is None:
             return
-        self._live.heard(rec, state, b.now)
+        self._live.reported(rec, state, b.now)
         if rec.owned:  # else another planner guides it; its report keeps it fresh here too
             if rec.goal is not None and rec.stepper is None:
                 self._start(rec, b)
@@ -323,7 +323,7 @@ class World:
             self._start(rec, b, record=False)
         elif rec.position is not None and rec.owned:
             self._start(rec, b)
-            self._tell(rec, b)
+            self._direct(rec, b)
 
     def _zone_put(self, zid: str, msg: ZoneUpdate, b: Batch) -> None:
         s = self.settings
@@ -352,7 +352,7 @@ class World:
         if err is not None:
             self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
         for rec in filter(None, map(self._units.get, units)):
-            self._tell(rec, b)
+            self._direct(rec, b)
         for unit, goal in self.teams.placed(self._units):  # a team goal: each member's place, its goal
             self._adopt(unit, goal, None, b)
 
@@ -366,7 +366,7 @@ class World:
         if answer is Answer.FAILED and rec is not None and done.error is not None:  # as a fault here would
             self._unit_fault(b, rec, RuntimeError(done.error[1]), done.error)
         elif answer is Answer.TELL and rec is not None:
-            self._tell(rec, b)  # a route or a verdict: told at once, not at its next report
+            self._direct(rec, b)  # a route or a verdict: told at once, not at its next report
 
     # -- timers ---------------------------------------------------------------------
     def _run_timers(self, now: float, b: Batch) -> None:
@@ -416,7 +416,7 @@ class World:
         reached = steering.reached(
             guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight, wide
         )
-        rejudge, tell = self._book.rejudge, self._tell  # per unit of a wave: looked up once
+        rejudge, tell = self._book.rejudge, self._direct  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
                 if hit:
@@ -471,7 +471,7 @@ class World:
                 if job is None and rec.id not in wave:  # a wave's jobs are asked with its points
                     st = rec.stepper
                     if st is not None and st.pending is not None:
-                        self._ask(rec, self._rec.field_of(rec), b)
+                        self._deliberate(rec, self._rec.field_of(rec), b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
                 failed.append((rec, exc))
@@ -491,7 +491,7 @@ class World:
         self._book.steered(rec, steering.NO_GOAL)
         return steering.no_goal(rec, self.settings.planner_id)
 
-    def _ask(self, rec: UnitRecord, fld: ThreatField, b: Batch) -> None:
+    def _deliberate(self, rec: UnitRecord, fld: ThreatField, b: Batch) -> None:
         assert rec.stepper is not None and rec.stepper.pending is not None
         kind, deadline = rec.stepper.pending.kind, b.now + self.settings.deliberation_budget_s
         job = ev.Job(rec.id, rec.token(), kind, rec.stepper, fld, deadline, live=True)  # Job.detach copies

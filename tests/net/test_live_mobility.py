@@ -75,10 +75,10 @@ def _until(q: queue.Queue, want, timeout: float):
 def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_a_bad_class_is_refused(
     tmp_path, monkeypatch
 ):
-    from pfp_service.node.desk import PreviewDesk
+    from pfp_service.node.previews import PreviewService
 
-    real_wait = PreviewDesk.wait_ready  # previews are not under test: the node waits for no worker
-    monkeypatch.setattr(PreviewDesk, "wait_ready", lambda self, timeout_s=0.0: real_wait(self, 0.0))
+    real_wait = PreviewService.wait_ready  # previews are not under test: the node waits for no worker
+    monkeypatch.setattr(PreviewService, "wait_ready", lambda self, timeout_s=0.0: real_wait(self, 0.0))
     dem = str(write_geographic(tmp_path / "jacksboro.tif"))
     ep = f"tcp/127.0.0.1:{free_port()}"
     cfg = placed(ServeConfig(mission=MISSION, listen=[ep], terrain=dem, lookahead=0, unit_stale_s=120.0))

@@ -102,11 +102,11 @@ def _until(q: queue.Queue, want, timeout: float):
 def test_a_threat_put_over_real_terrain_redirects_the_unit_it_sees_and_not_the_hidden_one(
     tmp_path, monkeypatch
 ):
-    from pfp_service.node.desk import PreviewDesk
+    from pfp_service.node.previews import PreviewService
 
     # previews are not under test, and a net-tier test starts no worker process: the node waits for none
-    real_wait = PreviewDesk.wait_ready
-    monkeypatch.setattr(PreviewDesk, "wait_ready", lambda self, timeout_s=0.0: real_wait(self, 0.0))
+    real_wait = PreviewService.wait_ready
+    monkeypatch.setattr(PreviewService, "wait_ready", lambda self, timeout_s=0.0: real_wait(self, 0.0))
     dem = str(write_geographic(tmp_path / "jacksboro.tif"))
     ep = f"tcp/127.0.0.1:{free_port()}"
     cfg = placed(ServeConfig(mission=MISSION, listen=[ep], terrain=dem, lookahead=0, unit_stale_s=120.0))

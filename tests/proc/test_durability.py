@@ -300,10 +300,12 @@ def test_a_planner_killed_takes_its_worker_processes_with_it():
             )
         deadline = time.monotonic() + 60
         workers: set[int] = set()
-        while time.monotonic() < deadline and len(workers) < 4:  # the zygote, 2 preview workers, the spare
+        while (
+            time.monotonic() < deadline and len(workers) < 4
+        ):  # the fork server, 2 preview workers, the spare
             workers = (
                 set()
-            )  # the workers are the zygote's children (forkserver.ForkServer), not the planner's
+            )  # the workers are the fork server's children (forkserver.ForkServer), not the planner's
             todo = [proc.pid]
             while todo:
                 todo += (kids := _children(todo.pop()))

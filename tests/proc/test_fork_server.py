@@ -1,4 +1,4 @@
-"""Workers forked from a zygote (``forkserver.ForkServer``): cheap in memory, quick to start, still contained."""
+"""Workers forked from a fork server (``forkserver.ForkServer``): cheap in memory, quick to start, still contained."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from tests.zenoh_util import client, planner_process
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
-# a planner stand-in: it forks the zygote, runs a pool on it, reports, then waits to be killed
+# a planner stand-in: it forks the fork server, runs a pool on it, reports, then waits to be killed
 _SCRIPT = r"""
 import gc, json, math, queue, sys, time
 from pfp_service.node.forkserver import ForkServer, install_fork_server
@@ -38,7 +38,7 @@ def run(fn, args, budget_s=5.0):
     out = got.get(timeout=60)
     return out.kind, out.value, time.monotonic() - t0
 
-report = {"zygote": server.pid, "first": run(math.hypot, (3.0, 4.0))}
+report = {"fork_server": server.pid, "first": run(math.hypot, (3.0, 4.0))}
 deadline = time.monotonic() + 30
 while len(pool.pids()) < 3 and time.monotonic() < deadline:  # the second slot and the spare
     time.sleep(0.02)
@@ -101,14 +101,14 @@ def test_forked_workers_keep_their_limits_are_replaced_and_die_with_their_planne
         line = proc.stdout.readline()
         assert line, f"the script ended: {proc.wait(timeout=10)}"
         report = json.loads(line)
-        zygote = report["zygote"]
+        fork_server = report["serve_forks"]
         kind, value, _ = report["first"]
         assert (kind, value) == ("done", 5.0)
         assert len(report["pids"]) == 3, report
         for pid in report[
             "live"
-        ]:  # forked by the zygote (the replacements too), at the pool's priority and address-space cap
-            assert int(_stat(pid)[1]) == zygote
+        ]:  # forked by the fork server (the replacements too), at the pool's priority and address-space cap
+            assert int(_stat(pid)[1]) == fork_server
             assert int(_stat(pid)[16]) == 3  # nice
             limits = pathlib.Path(f"/proc/{pid}/limits").read_text()
             cap = next(x for x in limits.splitlines() if x.startswith("Max address space"))
@@ -116,7 +116,7 @@ def test_forked_workers_keep_their_limits_are_replaced_and_die_with_their_planne
         assert report["killed"] == "killed" and report["memory"] == "memory"
         assert report["after"][:2] == ["done", 10.0] and report["replaced"] == 2
         tree = _descendants(proc.pid)
-        assert zygote in tree and set(report["live"]) <= tree
+        assert fork_server in tree and set(report["live"]) <= tree
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
         took, left = _gone_within(tree, 10.0)
@@ -129,20 +129,24 @@ def test_forked_workers_keep_their_limits_are_replaced_and_die_with_their_planne
 
 
 @pytest.mark.proc
-def test_pfp_serve_forks_its_workers_from_a_zygote_and_they_die_with_it():
+def test_pfp_serve_forks_its_workers_from_a_fork_server_and_they_die_with_it():
     from pfp_service.wire import keys
 
-    with planner_process("--state-dir", "none", mission="zygote") as (endpoint, proc):
+    with planner_process("--state-dir", "none", mission="forkserver") as (endpoint, proc):
         kids = _descendants(proc.pid)
         direct = {p for p in kids if int(_stat(p)[1]) == proc.pid}
-        assert len(direct) == 1, kids  # the zygote only: no worker is a fresh interpreter
-        (zygote,) = direct
-        assert b"workerproc" not in pathlib.Path(f"/proc/{zygote}/cmdline").read_bytes()
+        assert len(direct) == 1, kids  # the fork server only: no worker is a fresh interpreter
+        (fork_server,) = direct
+        assert b"workerproc" not in pathlib.Path(f"/proc/{fork_server}/cmdline").read_bytes()
         assert len(kids - direct) == 1, kids  # the one eager preview worker, forked by it
         with client(endpoint) as s:
             t0 = time.monotonic()
             replies = list(
-                s.get(keys.preview("zygote", "u1"), payload=b'{"start": [0, 0], "goal": [50, 0]}', timeout=20)
+                s.get(
+                    keys.preview("serve_forks", "u1"),
+                    payload=b'{"start": [0, 0], "goal": [50, 0]}',
+                    timeout=20,
+                )
             )
             took = time.monotonic() - t0
         assert replies and replies[0].ok is not None

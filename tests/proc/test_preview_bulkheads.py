@@ -192,7 +192,7 @@ def test_workers_ignore_sigint_and_die_with_the_pool():
 
 
 # -- a real planner (proc) -----------------------------------------------------------------------
-def _ask(session: Any, body: bytes | None, timeout_s: float = 10.0) -> tuple[float, Any]:
+def _query(session: Any, body: bytes | None, timeout_s: float = 10.0) -> tuple[float, Any]:
     t0 = time.monotonic()
     replies = list(session.get(keys.preview("default", "u1"), payload=body, timeout=timeout_s))
     took = time.monotonic() - t0
@@ -215,7 +215,7 @@ def test_pfp_serve_answers_the_preview_bombs_at_once_and_plans_after_them():
     with planner_process() as (endpoint, _proc), client(endpoint) as s:
         answers: list[tuple[float, Any]] = []
         threads = [
-            threading.Thread(target=lambda: answers.append(_ask(s, json.dumps(bomb).encode())))
+            threading.Thread(target=lambda: answers.append(_query(s, json.dumps(bomb).encode())))
             for _ in range(3)
         ]
         for t in threads:
@@ -225,7 +225,7 @@ def test_pfp_serve_answers_the_preview_bombs_at_once_and_plans_after_them():
         assert len(answers) == 3
         for took, reply in answers:
             assert took < 5.0 and reply["field"] in ("$.step", "$.threats"), reply
-        took, plan = _ask(s, json.dumps({"start": [0, 0], "goal": [100, 100]}).encode())
+        took, plan = _query(s, json.dumps({"start": [0, 0], "goal": [100, 100]}).encode())
         assert took < 3.0 and plan["status"] == "reached"
 
 
@@ -233,10 +233,10 @@ def test_pfp_serve_answers_the_preview_bombs_at_once_and_plans_after_them():
 def test_a_long_walk_ends_at_its_budget_and_the_next_preview_is_served():
     with planner_process("--preview-budget-ms", "300") as (endpoint, _proc), client(endpoint) as s:
         body = {"start": [0, 0], "goal": [134, 134], "step": 1e-3, "max_iter": 10_000_000}  # 190,000 steps
-        took, reply = _ask(s, json.dumps(body).encode())
+        took, reply = _query(s, json.dumps(body).encode())
         assert took < 5.0, reply  # its budget, the alarm past it, the kill past that: well within 5 s
         assert reply.get("status") == "max_iter" or reply.get("error", "").startswith("expired"), reply
-        took, plan = _ask(s, json.dumps({"start": [0, 0], "goal": [100, 100]}).encode())
+        took, plan = _query(s, json.dumps({"start": [0, 0], "goal": [100, 100]}).encode())
         assert took < 3.0 and plan.get("status") == "reached", plan
 
 
@@ -256,7 +256,7 @@ def test_ctrl_c_to_the_process_group_prints_no_traceback_from_any_worker():
         try:
             wait_for_planner(endpoint, "default")
             with client(endpoint) as s:  # a worker killed and replaced: its successor starts meanwhile
-                _ask(s, json.dumps({"start": [0, 0], "goal": [134, 134], "step": 1e-3}).encode())
+                _query(s, json.dumps({"start": [0, 0], "goal": [134, 134], "step": 1e-3}).encode())
             os.killpg(proc.pid, signal.SIGINT)
             assert proc.wait(timeout=30) == 130
         finally:
@@ -299,7 +299,7 @@ def test_a_burst_past_what_the_workers_can_start_is_answered_busy_at_once_not_qu
         lock = threading.Lock()
 
         def one(body: bytes) -> None:
-            got = _ask(s, body)
+            got = _query(s, body)
             with lock:
                 answers.append(got)
 

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from pfp_service.node.twins import Peers
+from pfp_service.node.duplicates import Peers
 from pfp_service.wire import ConflictEvent
 from pfp_service.wire.messages import TerrainInfo
 from pfp_service.world.events import PeerTerrain, WorldSettings

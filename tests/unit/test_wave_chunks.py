@@ -46,7 +46,7 @@ def _put(tid: str = "c", y: float = 40.0) -> ThreatPut:
 
 def _follow(w: World, now: float, limit: int = 100) -> list[Outputs]:
     outs: list[Outputs] = []
-    while w.owes():
+    while w.wave_pending():
         assert len(outs) < limit, "the follow-up never ends"
         now += 0.002
         outs.append(w.apply([Tick(now, 0)], now))
@@ -67,7 +67,7 @@ def test_the_follow_up_goes_in_chunks_and_gives_what_one_pass_gives(chunked, mon
     assert units == sorted(units)  # in the wave's order
     monkeypatch.setattr(world_mod, "WAVE_FIRST", 10 * n)
     ref = one_pass.apply([_put()], 1.0)
-    assert not one_pass.owes()
+    assert not one_pass.wave_pending()
     by_unit = {d.unit: d for o in follow for d in o.directions}
     for r in ref.directions:
         d = by_unit[r.unit]
@@ -103,7 +103,7 @@ def test_a_second_wave_while_a_follow_up_is_owed_leaves_no_unit_without_its_poin
     w = _fleet(n)
     w.apply([_put()], 1.0)
     w.apply([Tick(1.002, 0)], 1.002)  # one chunk paid, the rest owed
-    assert w.owes()
+    assert w.wave_pending()
     second = w.apply([ThreatRemoved("c")], 1.004)  # reaches them all again
     assert len(second.directions) == n
     latest = {d.unit: d for d in second.directions}
@@ -112,7 +112,7 @@ def test_a_second_wave_while_a_follow_up_is_owed_leaves_no_unit_without_its_poin
             assert d.vector == latest[d.unit].vector and not latest[d.unit].lookahead  # the second's advice
             latest[d.unit] = d
     assert all(d.lookahead for d in latest.values())
-    assert not w.owes()
+    assert not w.wave_pending()
 
 
 def test_the_bench_times_every_follow_up_apply(monkeypatch):

@@ -33,10 +33,10 @@ def test_a_wave_sends_directions_first_and_their_points_and_jobs_in_the_next_app
     w = _fleet(n)
     one_pass = copy.deepcopy(w)
     wave = w.apply([_contingency()], 1.0)
-    assert len(wave.directions) == n and w.owes()
+    assert len(wave.directions) == n and w.wave_pending()
     assert all(d.lookahead == [] for d in wave.directions) and wave.jobs == []
     after = w.apply([Tick(1.002, 0)], 1.002)
-    assert not w.owes()
+    assert not w.wave_pending()
     assert sorted(d.unit for d in after.directions) == sorted(d.unit for d in wave.directions)
     # the same directions as one pass would give, now with their points; the jobs asked now
     monkeypatch.setattr(world_mod, "WAVE_FIRST", 10 * n)
@@ -63,5 +63,5 @@ def test_a_unit_heard_between_the_wave_and_its_points_is_answered_once():
 def test_a_small_change_goes_out_in_one_pass():
     w = _fleet(8)
     out = w.apply([_contingency()], 1.0)
-    assert len(out.directions) == 8 and not w.owes()
+    assert len(out.directions) == 8 and not w.wave_pending()
     assert all(d.lookahead for d in out.directions)

@@ -70,8 +70,8 @@ def test_a_wave_owed_its_points_is_due_at_once():
     w.apply([*(GoalSet(u, Goal(position=(100.0, float(i)))) for i, u in enumerate(units))], 0.0)
     w.apply([_state(u, 0.0, float(i)) for i, u in enumerate(units)], 0.0)
     w.apply([ThreatPut("t", ThreatUpdate(position=(50.0, 50.0), sigma_range=5, sigma_lateral=5))], 0.5)
-    assert w.owes() and w.next_deadline() == 0.5  # the last apply's clock: due now
-    while w.owes():
+    assert w.wave_pending() and w.next_deadline() == 0.5  # the last apply's clock: due now
+    while w.wave_pending():
         w.apply([Tick(0.6)], 0.6)
     due = w.next_deadline()
     assert due is not None and due > 0.6  # paid: the push re-sends' timers and the silence timers again

@@ -30,7 +30,7 @@ def _run(live: Liveness, timers: Timers, recs: Units, now: float) -> Outputs:
 
 def _report(live: Liveness, recs: Units, uid: str, now: float) -> None:
     rec = recs.records.get(uid) or recs.add(uid, True, now, reported=True)
-    live.heard(rec, UnitState(position=(1.0, 2.0), seq=1), now)
+    live.reported(rec, UnitState(position=(1.0, 2.0), seq=1), now)
 
 
 def test_a_silent_unit_goes_stale_once_and_a_unit_that_reports_never_does():

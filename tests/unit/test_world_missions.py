@@ -47,7 +47,7 @@ def test_a_goal_closer_than_the_planner_resolves_is_planned_as_arrived():
 def test_start_gives_the_unit_a_stepper_and_names_what_durable_state_keeps():
     book = Units()
     rec = book.add("u", True, 0.0, reported=True)
-    book.heard(rec, (0.0, 0.0), 1, None, 0.0, 0.0)
+    book.reported(rec, (0.0, 0.0), 1, None, 0.0, 0.0)
     book.set_goal(rec, Goal(position=(100.0, 0.0)), None)
     out = missions.start(rec, S, EMPTY, None)
     assert not isinstance(out, InputError)

@@ -37,7 +37,7 @@ FIELD = ThreatField(
 
 def _unit(recs: Records, uid: str, at: tuple[float, float], goal: tuple[float, float]) -> UnitRecord:
     rec = recs.book.add(uid, True, 0.0, reported=True)
-    recs.book.heard(rec, at, 1, None, 0.0, 0.0)
+    recs.book.reported(rec, at, 1, None, 0.0, 0.0)
     recs.book.set_goal(rec, Goal(position=goal), None)
     stepper = Stepper(at, goal, resolve(P, at, goal, FIELD.threats))
     recs.book.started(rec, Started((Goal(position=goal), at, stepper.params), stepper))

@@ -51,7 +51,7 @@ def _resolved():
 
 def _guided(book: Units, unit: str = "a") -> Stepper:
     rec = book.add(unit, True, 0.0, reported=True)
-    book.heard(rec, (0.0, 0.0), 1, None, 0.0, 0.0)
+    book.reported(rec, (0.0, 0.0), 1, None, 0.0, 0.0)
     book.set_goal(rec, Goal(position=(5.0, 5.0)), None)
     stepper = Stepper((0.0, 0.0), (5.0, 5.0), _resolved())
     book.started(rec, Started((Goal(position=(5.0, 5.0)), (0.0, 0.0), _resolved()), stepper))
@@ -70,7 +70,7 @@ def test_a_unit_made_by_anything_but_a_report_is_stale_until_it_reports():
     heard, told = book.add("a", True, 0.0, reported=True), book.add("b", True, 0.0, reported=False)
     assert not heard.stale and told.stale and told.stale_since == 0.0 and book.stale == 1
     assert not told.live() and told.phase is Phase.UNKNOWN  # never reported: no position, no direction
-    book.heard(told, (1.0, 2.0), 7, "ugv", 3.0, 0.0)
+    book.reported(told, (1.0, 2.0), 7, "ugv", 3.0, 0.0)
     assert not told.stale and book.stale == 0 and told.live() and told.kind == "ugv" and told.seq == 7
     assert told.phase is Phase.NO_GOAL
 
@@ -79,7 +79,7 @@ def test_stale_and_forgotten_keep_the_count():
     book = Units()
     rec = book.add("a", True, 0.0, reported=True)
     assert not book.go_stale(rec, 1.0)  # never reported where it is: nothing to mark
-    book.heard(rec, (0.0, 0.0), 1, None, 1.0, 0.0)
+    book.reported(rec, (0.0, 0.0), 1, None, 1.0, 0.0)
     assert book.go_stale(rec, 5.0) and not book.go_stale(rec, 6.0) and book.stale == 1
     assert rec.phase is Phase.STALE
     book.forget(rec)
@@ -90,7 +90,7 @@ def test_a_report_answers_the_push_and_clears_the_token_gone():
     book = Units()
     rec = book.add("a", True, 0.0, reported=True)
     rec.token_gone_since, rec.push = 1.0, object()  # type: ignore[assignment]
-    book.heard(rec, (0.0, 0.0), None, None, 2.0, 0.0)
+    book.reported(rec, (0.0, 0.0), None, None, 2.0, 0.0)
     assert rec.token_gone_since is None and rec.push is None and rec.last_seen == 2.0
 
 
@@ -131,7 +131,7 @@ def test_a_step_the_table_does_not_allow_is_refused_loudly():
     rec = book.add("a", True, 0.0, reported=False)  # never heard from: unknown
     with pytest.raises(PhaseError, match="asked from unknown"):
         book.asked(rec, Job("a", rec.token(), "foresee", None, None, 0.0))  # type: ignore[arg-type]
-    book.heard(rec, (0.0, 0.0), 1, None, 1.0, 0.0)
+    book.reported(rec, (0.0, 0.0), 1, None, 1.0, 0.0)
     assert rec.phase is Phase.NO_GOAL
     with pytest.raises(PhaseError, match="forgotten from no_goal"):
         book.forget(rec)  # a fresh unit is never forgotten
@@ -278,9 +278,9 @@ BUILD: dict[Phase, Callable[[], At]] = {
 # (phase, step) -> how to get there (default: ``BUILD[phase]``) and the inputs that take the step
 DRIVE: dict[tuple[Phase, Step], tuple[Callable[[], At] | None, Callable[[At], list[Input]]]] = {
     (Phase.UNKNOWN, Step.MADE): (lambda: At(_world(), 0.0), lambda at: [GoalSet(U, FAR)]),
-    (Phase.PEER, Step.HEARD): (peer(heard=False), REPORT),
-    (Phase.UNKNOWN, Step.HEARD): (None, REPORT),
-    (Phase.STALE, Step.HEARD): (None, REPORT),
+    (Phase.PEER, Step.REPORTED): (peer(heard=False), REPORT),
+    (Phase.UNKNOWN, Step.REPORTED): (None, REPORT),
+    (Phase.STALE, Step.REPORTED): (None, REPORT),
     **{(p, Step.WENT_STALE): (None, STALE) for p in (Phase.NO_GOAL, Phase.GUIDED, Phase.ARRIVED)},
     **{(p, Step.WENT_STALE): (None, STALE) for p in (Phase.TRAPPED, Phase.DELIBERATING, Phase.PEER)},
     (Phase.UNKNOWN, Step.FORGOTTEN): (None, _tick(FORGET_S + 1.0)),  # type: ignore[operator]

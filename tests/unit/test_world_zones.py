@@ -174,7 +174,9 @@ def test_a_zone_change_keeps_the_threats_field_and_a_threat_change_keeps_the_zon
     before = w.field
     w.apply([ZonePut("wall", WALL)], 1.0)
     after = w.field
-    assert after is not before and after.threats is before.threats  # the desk's cached blob still holds
+    assert (
+        after is not before and after.threats is before.threats
+    )  # the preview service's cached blob still holds
     assert after.packed is before.packed and after.zones.ids == ("wall",)
     w.apply([ThreatPut("t2", threat)], 2.0)
     assert w.field.zones.ids == ("wall",) and len(w.field) == 2

@@ -174,13 +174,13 @@ class Feed:
         self._declared = []
 
     # -- blocking Zenoh calls, run on the executor ----------------------------------
-    def _ask(self, selector: str) -> list[Any]:
+    def _query(self, selector: str) -> list[Any]:
         return list(self.session.get(selector, timeout=self.query_timeout_s))
 
     def ask_world(self) -> int:
         """Ask every planner what it holds, and enqueue the answers; returns how many answered."""
         n = 0
-        for reply in self._ask(keys.worlds(self.mission)):
+        for reply in self._query(keys.worlds(self.mission)):
             if reply.ok is None:
                 continue
             try:
@@ -192,7 +192,7 @@ class Feed:
 
     def ask_status(self) -> None:
         """Ask every planner's status, and enqueue the answers."""
-        for reply in self._ask(keys.planner_statuses(self.mission)):
+        for reply in self._query(keys.planner_statuses(self.mission)):
             if reply.ok is None:
                 continue
             with contextlib.suppress(InputError):
@@ -204,7 +204,7 @@ class Feed:
         Raises:
             InputError: ``unit`` is not a key chunk, or the reply is not a ``PlanResult``.
         """
-        replies = self._ask(keys.preview(self.mission, unit))
+        replies = self._query(keys.preview(self.mission, unit))
         for reply in replies:
             if reply.ok is not None:
                 return decode_plan_result(reply.ok.payload.to_bytes())

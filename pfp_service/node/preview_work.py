@@ -1,4 +1,4 @@
-"""The preview desk's work in its worker processes: one preview or team preview, under an alarm past its budget.
+"""The preview service's work in its worker processes: one preview or team preview, under an alarm past its budget.
 
 ``compute`` walks one unit's preview (``world.preview``), ``compute_team``
 replays a team (``world.team_preview``); both run under ``_armed``: an alarm

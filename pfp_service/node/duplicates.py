@@ -1,7 +1,7 @@
 """Twins: another planner session serving this mission under this planner's own id.
 
 Both hold the same ``alive/planner/{id}`` token, so liveliness cannot tell
-them apart, but each status names its session.  ``watch_twins`` asks every
+them apart, but each status names its session.  ``watch_duplicates`` asks every
 planner of the mission for its status each ``PEERS_EVERY_S`` on its own
 thread (it blocks on queries, which no callback may) and says when a twin
 appears (``alive``) and when one has missed ``PEER_MISSES`` asks in a row.
@@ -21,14 +21,14 @@ from pfp_service.wire import keys
 from pfp_service.wire.messages import TerrainInfo, decode_planner_status
 from pfp_service.world.events import Input, PeerPlanner, PeerTerrain
 
-__all__ = ["PEERS_EVERY_S", "PEERS_KNOWN_S", "PEER_MISSES", "Peers", "watch_twins"]
+__all__ = ["PEERS_EVERY_S", "PEERS_KNOWN_S", "PEER_MISSES", "Peers", "watch_duplicates"]
 
 PEERS_EVERY_S = 1.0  # every planner of the mission is asked for its status this often (same-id peers)
 PEER_MISSES = 5  # a same-id peer that missed this many asks in a row is gone (a busy loop answers late)
 PEERS_KNOWN_S = 2.0  # under --cluster, start-up waits this long at most for the live planners' tokens
 
 
-def watch_twins(
+def watch_duplicates(
     session: zenoh.Session,
     mission: str,
     planner_id: str,
@@ -76,7 +76,7 @@ class Peers:
 
     Their liveliness tokens become ``PeerPlanner`` inputs (the world shares units by them under
     ``--cluster``), and so do twins: a planner answering this one's units too (another id without
-    ``--cluster``, or this id from another session: ``watch_twins``, its ``PeerPlanner`` naming
+    ``--cluster``, or this id from another session: ``watch_duplicates``, its ``PeerPlanner`` naming
     the session).  Twins are listed in the status (``twins``); whether one is a conflict is the
     world's to decide (``world.cluster``).  Called from Zenoh's threads and the twins' watcher;
     the node's ``lock`` guards what they share with the loop.
@@ -95,7 +95,7 @@ class Peers:
         self._cluster = cluster
         self._lock = lock
         self._push = push
-        self._twins: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
+        self._duplicates: set[str] = set()  # planners answering this one's units too (PlannerStatus.twins)
         self.terrain: TerrainInfo | None = None  # this planner's (``node.terrain.terrain_info``)
         self._grounds: dict[str, str | None] = {}  # peers' terrain hashes, as last told to the world
 
@@ -107,7 +107,7 @@ class Peers:
             return
         alive = sample.kind == zenoh.SampleKind.PUT
         if not self._cluster and pid != self._planner_id:  # not a peer but a twin: both guide every unit
-            self._twinned(pid, alive)
+            self._duplicated(pid, alive)
         self._push(PeerPlanner(pid, alive))
 
     def ask(self, session: zenoh.Session) -> None:
@@ -125,14 +125,14 @@ class Peers:
         except Exception as exc:  # the session is closing under us: the subscriber names them in time
             log.warning("peers not asked", extra={"fields": {"reason": str(exc)[:200]}})
 
-    def on_twin(self, zid: str, alive: bool) -> None:
-        """``watch_twins``: a session serving this planner's id appeared or went."""
+    def on_duplicate(self, zid: str, alive: bool) -> None:
+        """``watch_duplicates``: a session serving this planner's id appeared or went."""
         name = f"{self._planner_id[:50]}-{zid[:12]}"
-        self._twinned(name, alive)
+        self._duplicated(name, alive)
         self._push(PeerPlanner(name, alive, session=zid))
 
     def on_terrain(self, planner: str, theirs: TerrainInfo | None) -> None:
-        """``watch_twins``: planner ``planner`` of the mission plans over ``theirs``: the world is told
+        """``watch_duplicates``: planner ``planner`` of the mission plans over ``theirs``: the world is told
         (``PeerTerrain``) each time it changes, and decides whether it is a conflict."""
         its = theirs.sha256 if theirs is not None else None
         if self._grounds.get(planner, "") == its:
@@ -140,14 +140,14 @@ class Peers:
         self._grounds[planner] = its
         self._push(PeerTerrain(planner, theirs, self.terrain))
 
-    def twins(self) -> tuple[str, ...]:
+    def duplicates(self) -> tuple[str, ...]:
         """The twins now, sorted, at most 64 (``PlannerStatus.twins``)."""
         with self._lock:  # the callbacks' threads change them
-            return tuple(sorted(self._twins))[:64]
+            return tuple(sorted(self._duplicates))[:64]
 
-    def _twinned(self, name: str, alive: bool) -> None:
+    def _duplicated(self, name: str, alive: bool) -> None:
         with self._lock:
             if alive:
-                self._twins.add(name)
+                self._duplicates.add(name)
             else:
-                self._twins.discard(name)
+                self._duplicates.discard(name)

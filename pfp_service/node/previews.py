@@ -1,4 +1,4 @@
-"""The preview desk: previews admitted, ordered and answered by worker processes, each exactly once and in time.
+"""The preview service: previews admitted, ordered and answered by worker processes, each exactly once and in time.
 
 The loop hands each preview query here with the unit's detached view
 (``World.view``).  In the loop thread, before any work:
@@ -36,7 +36,7 @@ idle planner held 5 processes and ~520 MB (PSS), two of them preview
 workers and one their warm spare.  One warm worker still answers the first
 preview within its budget (warmed on the world's field, as ever); the
 second and the spare start when the first preview arrives.  Under
-``pfp serve`` every worker is forked from the warm zygote
+``pfp serve`` every worker is forked from the warm fork server
 (``forkserver.ForkServer``): it starts in 10-90 ms instead of 3-7 s (load
 average 8) and costs about 2 MB of its own while idle, so the eager one
 costs little and the first preview waits for no start at all.
@@ -59,8 +59,8 @@ from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
 from pfp_service.node.config import ServeConfig
-from pfp_service.node.desk_work import ALARM_GRACE_S, compute, compute_team
 from pfp_service.node.log import get_logger
+from pfp_service.node.preview_work import ALARM_GRACE_S, compute, compute_team
 from pfp_service.node.tasks import Blobs, Outcome, Task
 from pfp_service.node.warmup import warm_wide
 from pfp_service.node.workers import WorkerPool
@@ -81,7 +81,7 @@ from pfp_service.world.team_preview import TeamSeed
 from pfp_service.world.team_preview import seed as team_seed
 from pfp_service.world.world import World
 
-__all__ = ["EXPIRY_GRACE_S", "WORKER_MEMORY_MB", "WORKER_NICE", "PreviewDesk", "warm_up"]
+__all__ = ["EXPIRY_GRACE_S", "WORKER_MEMORY_MB", "WORKER_NICE", "PreviewService", "warm_up"]
 
 log = get_logger("previews")
 _JSON = zenoh.Encoding.APPLICATION_JSON
@@ -100,7 +100,7 @@ class _Answer:
 
     def __init__(self, query: zenoh.Query, last: float) -> None:
         self.query = query
-        self.last = last  # on the desk's clock: answered by then, whatever happens
+        self.last = last  # on the preview service's clock: answered by then, whatever happens
         self.done = False
         self._lock = threading.Lock()
 
@@ -124,7 +124,7 @@ class _Answer:
                 self.query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
 
 
-class PreviewDesk:
+class PreviewService:
     """Previews on ``workers`` processes, at most ``queue`` in flight, each started within ``wait_s``
     and computed within ``budget_s``.
 
@@ -171,7 +171,7 @@ class PreviewDesk:
             memory_mb=memory_mb,
             nice=WORKER_NICE,
             lane_caps={HEAVY: max(1, workers - 1)},
-            warm="pfp_service.node.desk:_warm_worker",
+            warm="pfp_service.node.previews:_warm_worker",
             on_replaced=self._replaced,
             spare=True,
             eager=1,  # one worker waits warm; the others and the spare start with the first preview
@@ -416,9 +416,9 @@ def warm_up(settings: WorldSettings | None) -> None:
     warm_wide(base)  # and what only a big world reaches: many threats, shared routes, storms, terrain
 
 
-def preview_desk(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewDesk:
-    """The preview desk of a planner of ``cfg``: its worker processes start warming up now."""
-    return PreviewDesk(
+def preview_service(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewService:
+    """The preview service of a planner of ``cfg``: its worker processes start warming up now."""
+    return PreviewService(
         cfg.preview_workers,
         cfg.preview_queue,
         cfg.preview_budget_ms / 1e3,
