@@ -81,11 +81,13 @@ def _dist(a: Point, b: Point) -> float:
 class _Line:
     """A polyline as arrays, its segments' lengths and cumulated length: made once, walked many times."""
 
-    __slots__ = ("cum", "pts", "seg")
+    __slots__ = ("ab", "cum", "pts", "seg", "sq")
 
     def __init__(self, line: Sequence[Point]) -> None:
         self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
-        self.seg = np.hypot(*np.diff(self.pts, axis=0).T) if len(self.pts) > 1 else np.zeros(0)
+        self.ab = np.diff(self.pts, axis=0)  # each segment, start to end: made once for every walk
+        self.seg = np.hypot(self.ab[:, 0], self.ab[:, 1]) if len(self.pts) > 1 else np.zeros(0)
+        self.sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg)])
 
     @property
@@ -97,10 +99,9 @@ class _Line:
         pts = self.pts
         if len(pts) == 1:
             return np.array([_dist(at, (float(pts[0, 0]), float(pts[0, 1])))])
-        a, ab = pts[:-1], np.diff(pts, axis=0)
+        a, ab = pts[:-1], self.ab
         px, py = at
-        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
         return np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
 
     def project(self, at: Point) -> tuple[float, float]:
@@ -109,10 +110,9 @@ class _Line:
             return 0.0, math.inf
         if len(pts) == 1:
             return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
-        a, ab = pts[:-1], np.diff(pts, axis=0)
+        a, ab = pts[:-1], self.ab
         px, py = at
-        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
         off = np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
         i = int(np.argmin(off))
         return float(self.cum[i] + t[i] * self.seg[i]), float(off[i])
