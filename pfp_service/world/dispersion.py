@@ -246,11 +246,11 @@ class Dispersion:
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
         vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
-        i, j = index.near(rows)
+        i, j, pair_s = index.near_seps(rows)
         n = at[i]
         rel = index.points[j] - index.points[i]
         along = (rel * vec[n]).sum(axis=1)
-        keep_m = KEEP * index.pair_seps(i, j)
+        keep_m = KEEP * pair_s
         across2 = (rel * rel).sum(axis=1) - along * along
         hit = (along > 0.0) & (across2 < keep_m * keep_m)
         enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
@@ -347,11 +347,11 @@ class Dispersion:
         vec = np.array([d.vector for d in moving], dtype=float).reshape(-1, 2)
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
-        i, j = index.near(rows)
+        i, j, pair_s = index.near_seps(rows)
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
         along = (rel * vec[at[i]]).sum(axis=1)
-        close = (along > 0.0) & (gap < YIELD_AT * index.pair_seps(i, j))  # closing, and near
+        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # closing, and near
         i, j, gap, along = i[close], j[close], gap[close], along[close]
         # the order of right of way among the units of the pairs left (0 first): compared only within
         # them, it is the total order's, at the cost of the tick's reports, not of the fleet
