@@ -27,7 +27,7 @@ from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
-from pfp_service.world.teams import Point, Sight, Verdict
+from pfp_service.world.teams import Point, Polyline, Sight, Verdict
 from pfp_service.world.world_records import UnitRecord
 
 __all__ = ["MAX_TRACK_POINTS", "TeamBook"]
@@ -55,7 +55,7 @@ class TeamBook:
         self._looked: dict[str, object] = {}
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
         # afresh when the track is another list (trimmed, a new lead, a preview's)
-        self._lines: dict[str, tuple[list[Point], roles.Polyline]] = {}
+        self._lines: dict[str, tuple[list[Point], Polyline]] = {}
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -207,14 +207,14 @@ class TeamBook:
         track = track[start:]
         self.tracks[tid] = track if len(track) <= MAX_TRACK_POINTS else track[::2] + track[-1:]
 
-    def _line(self, tid: str) -> roles.Polyline:
+    def _line(self, tid: str) -> Polyline:
         """The team's track as a polyline, made once for all its followers and grown with the track."""
         track = self.tracks.get(tid, [])
         kept = self._lines.get(tid)
         if kept is not None and kept[0] is track and len(kept[1]) <= len(track):
             line = kept[1].extended(track[len(kept[1]) :])
         else:
-            line = roles.Polyline(track)
+            line = Polyline(track)
         self._lines[tid] = (track, line)
         return line
 
