@@ -160,6 +160,7 @@ class NeighbourIndex:
         self.radius = REACH * widest if len(self.seps) else 0.0
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
+        self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
 
     def pair_seps(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """The separation of each pair ``(i, j)`` (``pair_separation``) in metres."""
@@ -185,10 +186,28 @@ class NeighbourIndex:
         those of the last query (the tick's moving units after its advised
         ones) take that query's pairs.
         """
+        i, j, _keep = self._near_rows(rows)
+        return i, j
+
+    def near_seps(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``near``'s pairs with their separations (``pair_seps``): those of the last query's pairs
+        computed once for the tick's later callers (elementwise, so a subset's are the same numbers)."""
+        i, j, keep = self._near_rows(rows)
+        if self._near_s is None:
+            last = self._near
+            assert last is not None
+            self._near_s = self.pair_seps(last[1], last[2])
+        return i, j, self._near_s if keep is None else self._near_s[keep]
+
+    def _near_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``near``'s pairs, and which of the last query's they are (``None``: all, a new query)."""
         rows = np.unique(np.asarray(rows, dtype=np.intp))
         last = self._near
         if last is not None and np.isin(rows, last[0], assume_unique=True).all():
-            return _kept(last[1], last[2], rows, len(self.points))
+            wanted = np.zeros(len(self.points), dtype=bool)
+            wanted[rows] = True
+            keep = wanted[last[1]]
+            return last[1][keep], last[2][keep], keep
         if self.tree is None or len(rows) * FEW_ROWS >= len(self.points):
             i, j = _kept(*self.pairs(), rows, len(self.points))
         else:
@@ -198,14 +217,14 @@ class NeighbourIndex:
             i = np.repeat(rows, counts)
             other = i != j
             i, j = i[other], j[other]
-        self._near = (rows, i, j)
-        return i, j
+        self._near, self._near_s = (rows, i, j), None
+        return i, j, None
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
         rows = np.asarray(rows, dtype=np.intp)
-        i, j = self.near(rows)
-        gx, gy = _pair_terms(self.points, self.pair_seps(i, j), i, j, len(self.points))
+        i, j, pair_s = self.near_seps(rows)
+        gx, gy = _pair_terms(self.points, pair_s, i, j, len(self.points))
         return np.column_stack([gx[rows], gy[rows]])
 
 

@@ -178,11 +178,15 @@ class Dispersion:
         for k in moving:  # who is coming nearer its goal, before anyone is judged by it
             d = directions[k]
             locks.progressed(d.unit, d.distance_to_goal, float(index.seps[self._row[d.unit]]), now)
-        blocker = self._blockers([directions[k] for k in moving])
+        rows = np.array([self._row[directions[k].unit] for k in moving], dtype=np.intp)
+        found, gaps = self._blockers([directions[k] for k in moving], rows)
+        # each blocked unit's pair separation, all in one pass (elementwise: as one pair's alone)
+        pairs = np.zeros(len(moving))
+        blocked = found >= 0
+        pairs[blocked] = index.pair_seps(rows[blocked], found[blocked])
         events: list[Event] = []
-        for k, j in zip(moving, blocker):
+        for k, i, j, gap, pair in zip(moving, rows.tolist(), found.tolist(), gaps.tolist(), pairs.tolist()):
             d = directions[k]
-            i = self._row[d.unit]
             hold = self._held.get(d.unit)
             if hold is not None and hold.until > -math.inf:  # a deadlock's resolution
                 if hold.until > now and hold.other in self._row and not self._passed(hold, i):
@@ -201,8 +205,6 @@ class Dispersion:
                         directions[k] = self._resolve(d, i, self._row[hold.other], hold)
                 continue
             other = self._recs[j].id
-            gap = float(np.hypot(*(index.points[i] - index.points[j])))
-            pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
             if hold is None:
                 hold = self._held[d.unit] = Hold(other, now, gap, began=now)
             elif now - hold.began >= deadlocks.STARVED * s.deadlock_s:  # a stream that never ends: its turn
@@ -244,11 +246,11 @@ class Dispersion:
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
         vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
-        i, j = index.near(rows)
+        i, j, pair_s = index.near_seps(rows)
         n = at[i]
         rel = index.points[j] - index.points[i]
         along = (rel * vec[n]).sum(axis=1)
-        keep_m = KEEP * index.pair_seps(i, j)
+        keep_m = KEEP * pair_s
         across2 = (rel * rel).sum(axis=1) - along * along
         hit = (along > 0.0) & (across2 < keep_m * keep_m)
         enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
@@ -336,21 +338,20 @@ class Dispersion:
         rx, ry = (index.points[j] - index.points[i]).tolist()
         return bool(rx * tx + ry * ty <= 0.0)
 
-    def _blockers(self, moving: list[Direction]) -> list[int]:
-        """For each direction, the row of the nearest unit it must yield to, or -1: one vectorised pass."""
+    def _blockers(self, moving: list[Direction], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each direction, the row of the nearest unit it must yield to (or -1) and how far it is: one vectorised pass."""
         index, s = self._index, self.settings
         assert index is not None
         if not moving:
-            return []
-        rows = np.array([self._row[d.unit] for d in moving], dtype=np.intp)
+            return np.zeros(0, dtype=np.intp), np.zeros(0)
         vec = np.array([d.vector for d in moving], dtype=float).reshape(-1, 2)
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
-        i, j = index.near(rows)
+        i, j, pair_s = index.near_seps(rows)
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
         along = (rel * vec[at[i]]).sum(axis=1)
-        close = (along > 0.0) & (gap < YIELD_AT * index.pair_seps(i, j))  # closing, and near
+        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # closing, and near
         i, j, gap, along = i[close], j[close], gap[close], along[close]
         # the order of right of way among the units of the pairs left (0 first): compared only within
         # them, it is the total order's, at the cost of the tick's reports, not of the fleet
@@ -368,12 +369,14 @@ class Dispersion:
         ahead = along > AHEAD * gap
         behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
         keep = (rank[j] < rank[i]) & goes[j] & ~behind
+        # each direction's nearest (the first of equals, in the pairs' order): one sort, not a loop
+        k, j, gap = k[keep], j[keep], gap[keep]
+        order = np.lexsort((np.arange(len(k)), gap, k))
+        first_of = order[np.unique(k[order], return_index=True)[1]]
         best = np.full(len(moving), -1, dtype=np.intp)
         near = np.full(len(moving), np.inf)
-        for kk, jj, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
-            if g < near[kk]:
-                near[kk], best[kk] = g, jj
-        return best.tolist()
+        best[k[first_of]], near[k[first_of]] = j[first_of], gap[first_of]
+        return best, near
 
     def _goes(self, rec: UnitRecord) -> bool:
         """Whether a unit is moving under its own right of way (not holding, not still)."""

@@ -27,7 +27,7 @@ from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
-from pfp_service.world.teams import Point, Sight, Verdict
+from pfp_service.world.teams import Point, Polyline, Sight, Verdict
 from pfp_service.world.world_records import UnitRecord
 
 __all__ = ["MAX_TRACK_POINTS", "TeamBook"]
@@ -53,6 +53,9 @@ class TeamBook:
         ] = {}  # member -> its direction as last judged (a team preview's first move)
         # team -> its lead's position ``_track`` last looked at: unmoved, a tick looks no further
         self._looked: dict[str, object] = {}
+        # team -> its track as a polyline and the list it was made of: grown as that list grows, made
+        # afresh when the track is another list (trimmed, a new lead, a preview's)
+        self._lines: dict[str, tuple[list[Point], Polyline]] = {}
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -103,6 +106,7 @@ class TeamBook:
             return False
         self.tracks.pop(tid, None)
         self._looked.pop(tid, None)
+        self._lines.pop(tid, None)
         self._checks = _index_of(self.teams)
         self._index()
         self.said = {u: why for u, why in self.said.items() if u in self._of}
@@ -203,8 +207,19 @@ class TeamBook:
         track = track[start:]
         self.tracks[tid] = track if len(track) <= MAX_TRACK_POINTS else track[::2] + track[-1:]
 
+    def _line(self, tid: str) -> Polyline:
+        """The team's track as a polyline, made once for all its followers and grown with the track."""
+        track = self.tracks.get(tid, [])
+        kept = self._lines.get(tid)
+        if kept is not None and kept[0] is track and len(kept[1]) <= len(track):
+            line = kept[1].extended(track[len(kept[1]) :])
+        else:
+            line = Polyline(track)
+        self._lines[tid] = (track, line)
+        return line
+
     def _lost(
-        self, unit: str | None, units: Mapping[str, UnitRecord], held: set[str], moved: bool = True
+        self, unit: str | None, units: Mapping[str, UnitRecord], held: _Either, moved: bool = True
     ) -> str:
         """Why ``unit`` cannot be kept to: ``"is lost (...)"``, ``"has stopped"`` (``"has not moved yet"``
         when it is not known to have moved), or ``""``."""
@@ -231,7 +246,7 @@ class TeamBook:
         if d.reach_m is None or not (d.vector[0] or d.vector[1]):
             return d  # not moving (arrived, trapped, no goal): nothing to judge
         to = (at[0] + d.vector[0] * d.reach_m, at[1] + d.vector[1] * d.reach_m)
-        held = held_before | self.held
+        held = _Either(held_before, self.held)  # not their union: a copy per member is quadratic in the holds
         reasons: list[str] = []
         for tid in self._of[rec.id]:
             team = self.teams[tid]
@@ -258,7 +273,7 @@ class TeamBook:
         at: Point,
         to: Point,
         units: Mapping[str, UnitRecord],
-        held: set[str],
+        held: _Either,
         sight: Sight | None,
     ) -> list[Verdict]:
         """The verdicts of ``unit``'s roles in ``team``, in the order they apply: lead, follow, robot.
@@ -275,10 +290,9 @@ class TeamBook:
             to = _end(out, to)
         if unit in team.follow and _moving(out):
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
-            track = self.tracks.get(tid, [])
             me = units.get(unit)
             goal = me.goal.position if me is not None and me.goal is not None else None
-            out.append(roles.follow(at, to, track, team.corridor_m, str(team.lead), lost, goal))
+            out.append(roles.follow(at, to, self._line(tid), team.corridor_m, str(team.lead), lost, goal))
             to = _end(out, to)
         if unit in team.robots and _moving(out):
             ctl = units.get(team.controller) if team.controller is not None else None
@@ -286,6 +300,18 @@ class TeamBook:
             c_at = ctl.position if ctl is not None else None
             out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
         return out
+
+
+class _Either:
+    """Membership in either of two sets, without building their union."""
+
+    __slots__ = ("a", "b")
+
+    def __init__(self, a: set[str], b: set[str]) -> None:
+        self.a, self.b = a, b
+
+    def __contains__(self, unit: object) -> bool:
+        return unit in self.a or unit in self.b
 
 
 def _placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:

@@ -23,6 +23,7 @@ __all__ = [
     "GO",
     "SIGHT_CLEARANCE_M",
     "STANDOFF_TOLERANCE",
+    "Polyline",
     "Sight",
     "Verdict",
     "follow",
@@ -78,15 +79,39 @@ def _dist(a: Point, b: Point) -> float:
     return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
-class _Line:
+class Polyline:
     """A polyline as arrays, its segments' lengths and cumulated length: made once, walked many times."""
 
-    __slots__ = ("cum", "pts", "seg")
+    __slots__ = ("ab", "cum", "pts", "seg", "sq")
 
     def __init__(self, line: Sequence[Point]) -> None:
         self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
-        self.seg = np.hypot(*np.diff(self.pts, axis=0).T) if len(self.pts) > 1 else np.zeros(0)
+        self.ab = np.diff(self.pts, axis=0)  # each segment, start to end: made once for every walk
+        self.seg = np.hypot(self.ab[:, 0], self.ab[:, 1]) if len(self.pts) > 1 else np.zeros(0)
+        self.sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg)])
+
+    def __len__(self) -> int:
+        return len(self.pts)
+
+    def extended(self, more: Sequence[Point]) -> Polyline:
+        """This line with ``more`` points after its last: the very numbers a line of them all has,
+        at the cost of the new points (a lead's track grows by a point at a time)."""
+        if not more:
+            return self
+        if len(self.pts) == 0:
+            return Polyline(more)
+        out = Polyline.__new__(Polyline)
+        add = np.asarray(more, dtype=float).reshape(-1, 2)
+        out.pts = np.concatenate([self.pts, add])
+        ab = np.diff(out.pts[len(self.pts) - 1 :], axis=0)
+        seg = np.hypot(ab[:, 0], ab[:, 1])
+        out.ab = np.concatenate([self.ab, ab])
+        out.seg = np.concatenate([self.seg, seg])
+        out.sq = np.concatenate([self.sq, np.where(seg > 0.0, seg * seg, 1.0)])
+        # cumulated from the last total on, one addition at a time: as the whole line's cumsum adds
+        out.cum = np.concatenate([self.cum, np.cumsum(np.concatenate([self.cum[-1:], seg]))[1:]])
+        return out
 
     @property
     def length(self) -> float:
@@ -97,10 +122,9 @@ class _Line:
         pts = self.pts
         if len(pts) == 1:
             return np.array([_dist(at, (float(pts[0, 0]), float(pts[0, 1])))])
-        a, ab = pts[:-1], np.diff(pts, axis=0)
+        a, ab = pts[:-1], self.ab
         px, py = at
-        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
         return np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
 
     def project(self, at: Point) -> tuple[float, float]:
@@ -109,10 +133,9 @@ class _Line:
             return 0.0, math.inf
         if len(pts) == 1:
             return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
-        a, ab = pts[:-1], np.diff(pts, axis=0)
+        a, ab = pts[:-1], self.ab
         px, py = at
-        sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / sq, 0.0, 1.0)
+        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
         off = np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
         i = int(np.argmin(off))
         return float(self.cum[i] + t[i] * self.seg[i]), float(off[i])
@@ -137,17 +160,17 @@ def project(at: Point, line: Sequence[Point]) -> tuple[float, float]:
 
     One point is a line of no length; no point puts ``at`` infinitely far off.
     """
-    return _Line(line).project(at)
+    return Polyline(line).project(at)
 
 
 def point_at(line: Sequence[Point], s: float) -> Point:
     """The point ``s`` metres along ``line`` from its start (its ends beyond them)."""
-    return _Line(line).point_at(s)
+    return Polyline(line).point_at(s)
 
 
 def length(line: Sequence[Point]) -> float:
     """The length of a polyline, metres."""
-    return _Line(line).length
+    return Polyline(line).length
 
 
 def _kept(at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float) -> float:
@@ -189,7 +212,7 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
     """
     if not route:
         return _hold(f"no route of {main} to lead along")
-    line = _Line(route)
+    line = Polyline(route)
     if line.length <= standoff_m:  # the lead has cleared it all
         return GO  # ... so it goes its own way, not onto the main element's goal
     s, _off = line.project(at)
@@ -204,7 +227,7 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
 def follow(
     at: Point,
     to: Point,
-    track: Sequence[Point],
+    track: Sequence[Point] | Polyline,
     corridor_m: float,
     lead_id: str,
     lost: str,
@@ -215,7 +238,7 @@ def follow(
     Args:
         at: where the follower is.
         to: where its planned step ends.
-        track: the lead's track, oldest first.
+        track: the lead's track, oldest first (or made a ``Polyline`` once, for all its followers).
         corridor_m: the cleared corridor's width.
         lead_id: the lead's id, for the reasons.
         lost: why the lead cannot be followed (lost, stopped), or ``""`` when it can.
@@ -232,21 +255,21 @@ def follow(
     if not track:
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
     half = corridor_m / 2.0 * (1.0 - _EDGE_SHARE)
-    line = _Line(track)
+    line = track if isinstance(track, Polyline) else Polyline(track)
     s_at, off_at = line.project(at)
     if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
     if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
         return GO  # both ends within one segment's stadium, which is convex: the whole step is
-    room = _corridor_near(track, half, at, max(_dist(at, to), _CLOSE_M))
+    room = _corridor_near(line.pts, half, at, max(_dist(at, to), _CLOSE_M))
     kept = _kept_in(room, at, to)
     if kept >= 1.0:
         return GO
     s_goal, off_goal = line.project(goal) if goal is not None else (0.0, 0.0)
     # its goal off the cleared ground, and the lead's track past it (not heading there): to the nearest of it
     if off_goal > half + _CLOSE_M and s_goal < line.length - _CLOSE_M:
-        return _nearest_goal(line, track, half, at, s_at, s_goal, _dist(at, to), lead_id, off_goal - half)
+        return _nearest_goal(line, half, at, s_at, s_goal, _dist(at, to), lead_id, off_goal - half)
     cut = (at[0] + (to[0] - at[0]) * kept, at[1] + (to[1] - at[1]) * kept)
     # a step cut short that would take it back along the track is not taken: pressed against the
     # corridor's edge by its planner (a threat beside the track), it would go back and forth
@@ -266,7 +289,7 @@ def follow(
     return _at_end(line, half, lead_id, goal)
 
 
-def _at_end(line: _Line, half: float, lead_id: str, goal: Point | None) -> Verdict:
+def _at_end(line: Polyline, half: float, lead_id: str, goal: Point | None) -> Verdict:
     """The hold at the end of the cleared ground (naming its goal, when that lies off the ground)."""
     off = line.project(goal)[1] - half if goal is not None else 0.0
     if off > _CLOSE_M:
@@ -279,8 +302,7 @@ def _off_goal(lead_id: str, off: float) -> str:
 
 
 def _nearest_goal(
-    line: _Line,
-    track: Sequence[Point],
+    line: Polyline,
     half: float,
     at: Point,
     s_at: float,
@@ -298,7 +320,7 @@ def _nearest_goal(
         return _hold(f"at the cleared ground nearest its goal: {why}")
     sign = 1.0 if s_goal > s_at else -1.0
     ahead = max(min(step, abs(s_goal - s_at)), _CLOSE_M)
-    room = _corridor_near(track, half, at, ahead + _CLOSE_M)
+    room = _corridor_near(line.pts, half, at, ahead + _CLOSE_M)
     while ahead >= _CLOSE_M:
         p = line.point_at(s_at + sign * ahead)
         if _dist(at, p) >= _CLOSE_M and _kept_in(room, at, p) >= 1.0:
@@ -307,7 +329,9 @@ def _nearest_goal(
     return _hold(f"at the cleared ground nearest its goal: {why}")
 
 
-def _corridor_near(track: Sequence[Point], half: float, at: Point, reach: float) -> shapely.Geometry:
+def _corridor_near(
+    track: Sequence[Point] | np.ndarray, half: float, at: Point, reach: float
+) -> shapely.Geometry:
     """The corridor (``track`` buffered by ``half``) where a step of ``reach`` from ``at`` can go.
 
     Only the track's segments within that reach are buffered, so the cost is the step's, not the
