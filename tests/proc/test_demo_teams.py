@@ -12,7 +12,9 @@ pytestmark = pytest.mark.proc
 
 def test_the_teaming_demo_gives_each_team_one_goal_and_every_expectation_holds(tmp_path):
     out = tmp_path / "demo.png"
-    r = run_pfp("demo", "--teams", "--speed-up", "30", "--out", str(out), timeout=240)
+    r = run_pfp(
+        "demo", "--teams", "--speed-up", "10", "--out", str(out), timeout=300
+    )  # x10: a neighbour's load moves a x30 run's timing
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     text = r.stdout
     assert "add team alpha: r1 m1, its goal (200, 0)" in text and "add team bravo: u1 u2 u3" in text

@@ -101,7 +101,7 @@ def test_forked_workers_keep_their_limits_are_replaced_and_die_with_their_planne
         line = proc.stdout.readline()
         assert line, f"the script ended: {proc.wait(timeout=10)}"
         report = json.loads(line)
-        fork_server = report["serve_forks"]
+        fork_server = report["fork_server"]
         kind, value, _ = report["first"]
         assert (kind, value) == ("done", 5.0)
         assert len(report["pids"]) == 3, report
@@ -143,7 +143,7 @@ def test_pfp_serve_forks_its_workers_from_a_fork_server_and_they_die_with_it():
             t0 = time.monotonic()
             replies = list(
                 s.get(
-                    keys.preview("serve_forks", "u1"),
+                    keys.preview("forkserver", "u1"),
                     payload=b'{"start": [0, 0], "goal": [50, 0]}',
                     timeout=20,
                 )
