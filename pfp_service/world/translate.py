@@ -26,12 +26,12 @@ from pfp_service.errors import InputError
 from pfp_service.wire import MAX_PAYLOAD_BYTES, ThreatUpdate, decode, encode
 from pfp_service.wire.messages import ZoneUpdate
 from pfp_service.wire.messages.structs import DEFAULT_SHAPE
-from pfp_service.wire.schema import Supplied
 
 if TYPE_CHECKING:
     from pfp_service.core.plan import PlanResult
     from pfp_service.core.threat import Threat
     from pfp_service.core.zones import Zone
+    from pfp_service.wire.schema import Supplied  # the contract builds its examples (shapely) on import
 
 __all__ = [
     "ShapeError",
@@ -155,6 +155,7 @@ def fit_reply(result: PlanResult, limit: int = MAX_PAYLOAD_BYTES) -> bytes:
 def supplied() -> dict[str, Supplied]:
     """The contract's messages whose type is the core's, for ``wire.schema.render``: the preview reply."""
     from pfp_service.core.plan import PlanResult, PlanStatus, UsedParams
+    from pfp_service.wire.schema import Supplied
 
     example = PlanResult(
         status=PlanStatus.REACHED,
