@@ -6,6 +6,10 @@ a team (the lead scouting for the followers, the first follower controlling the 
 robot), and each tick's ``World.apply`` is timed with the process's CPU clock.  The figure is the
 ratio, rounds alternating so both share the machine's noise; the issue's target (1.2x) is for
 ``pfp bench service``, whose CPU per state also pays for decoding and Zenoh.
+
+``--terrain``: the controller's link over the Jacksboro DEM in seeded runs instead
+(``benchmarks/_teams_terrain.py``): each robot's link as a share of the mission, every outage
+with its cause, and whether each team arrived.
 """
 
 from __future__ import annotations
@@ -30,6 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--rounds", type=positive_int, default=3, help="runs of each, alternating (default 3)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument(
+        "--terrain",
+        action="store_true",
+        help="instead: the controller's link over the Jacksboro DEM in seeded runs (link %%, outages, arrivals)",
+    )
+    p.add_argument("--seeds", type=positive_int, default=10, help="--terrain: seeded runs (default 10)")
 
 
 def measure(units: int, ticks: int, teams: bool, seed: int = 7) -> dict[str, float]:
@@ -82,6 +92,15 @@ def measure(units: int, ticks: int, teams: bool, seed: int = 7) -> dict[str, flo
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.terrain:
+        from benchmarks._teams_terrain import measure_terrain, print_terrain
+
+        fig_t = measure_terrain(args.seeds)
+        if args.json:
+            print(json.dumps(fig_t))
+        else:
+            print_terrain(fig_t)
+        return 0
     units = max(4, args.units // 4 * 4)
     measure(units, 2, False)  # warm: the compiled kernels, the caches
     measure(units, 2, True)
