@@ -74,10 +74,15 @@ def _update(threat: Any) -> Any:
     alpha = np.asarray(threat.alpha, dtype=float)
     if float(alpha @ pull) < 0.0:
         d, pull = -d, -pull
-    skew = float(np.linalg.norm(alpha) / max(np.linalg.norm(pull), 1e-12))
+    skew = float(np.linalg.norm(alpha)) / max(float(np.linalg.norm(pull)), 1e-12)
     facing = math.degrees(math.atan2(d[0], d[1])) % 360.0
     return ThreatUpdate(
-        position=threat.xi, facing_deg=facing, sigma_range=sr, sigma_lateral=sl, skew=skew, weight=threat.weight
+        position=threat.xi,
+        facing_deg=facing,
+        sigma_range=sr,
+        sigma_lateral=sl,
+        skew=skew,
+        weight=threat.weight,
     )
 
 

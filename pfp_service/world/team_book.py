@@ -76,6 +76,14 @@ class TeamBook:
         self._placing = {}
         return out
 
+    def columns(self, unit: str) -> list[TeamUpdate]:
+        """The teams with followers ``unit`` leads or follows in: its route is priced for them (``team_route``)."""
+        return [
+            t
+            for tid in self._of.get(unit, ())
+            if (t := self.teams[tid]).follow and (t.lead == unit or unit in t.follow)
+        ]
+
     def put(self, tid: str, team: TeamUpdate) -> InputError | None:
         """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is.
 

@@ -27,16 +27,10 @@ import copy
 from pfp_service.core import ThreatField
 from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
-from pfp_service.wire import (
-    Direction,
-    Goal,
-    ThreatUpdate,  # noqa: F401 -- named from here by its callers
-    UnitState,
-    WorldSnapshot,
-    keys,
-)
+from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
+from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
-from pfp_service.world import dispersion, kinds, missions, mobility, steering, translate
+from pfp_service.world import dispersion, kinds, missions, steering, team_route, translate
 from pfp_service.world import events as ev
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
@@ -78,6 +72,7 @@ class World:
         self.limits = Limits()
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
         self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
+        self._route = team_route.RouteKeys(self._rec, self.teams, s.terrain)  # a lead's, for its followers
         self._disp = dispersion.Dispersion(
             s.dispersion, self._units, self._book.yielded, self.teams.dispersed
         )  # off unless enabled; a team's separation_m among its members
@@ -98,7 +93,7 @@ class World:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec, s = self._units.get(unit_id), self.settings
         threats = self.field.threats  # the same tuple while the field stands: a preview service can cache it
-        zones = self._rec.zones_of(rec.goal if rec else None)  # the same set while the zones stand
+        zones = self._rec.zone_set_for(*self._route(rec))  # the same set while the zones stand
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
@@ -352,6 +347,8 @@ class World:
         if err is not None:
             self._reject(self._key(K.TEAM, inp.team), err, b, K.TEAM)
         for rec in filter(None, map(self._units.get, units)):
+            if rec.stepper is not None:  # a lead's route is priced for its followers (``team_route``)
+                self._book.rejudge(rec)
             self._direct(rec, b)
         for unit, goal in self.teams.placed(self._units):  # a team goal: each member's place, its goal
             self._adopt(unit, goal, None, b)
@@ -394,7 +391,7 @@ class World:
     # -- planning -------------------------------------------------------------------
     def _start(self, rec: UnitRecord, b: Batch, record: bool = True) -> None:
         """Fix the unit's mission and give it a stepper (``missions.start``); a mission refused drops the goal."""
-        fld = self._rec.field_of(rec)  # builds the stats with it
+        fld = self._rec.field_for(*self._route(rec))  # builds the stats with it
         started = missions.start(rec, self.settings, fld, self._rec.stats)
         if isinstance(started, InputError):
             self._reject(self._key(K.UNIT_GOAL, rec.id), started, b, K.UNIT_GOAL)
@@ -439,9 +436,9 @@ class World:
         steered: steering.Steered = []
         failed: steering.Failed = []
         wave_first = (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0
-        groups = mobility.by_limit(guided, later, self._rec.ground is not None)  # a field per slope limit
-        for slope, (group, owed) in groups.items():
-            fld = field_for(slope)
+        groups = team_route.groups(guided, later, self._route)  # a field per slope limit and corridor
+        for key, (group, owed) in groups.items():
+            fld = field_for(*key)
             lost: steering.Failed = []
             if group and wave_first:  # the wave first
                 advised, lost = steering.advise(group, fld, cull, self._disp)
@@ -471,7 +468,7 @@ class World:
                 if job is None and rec.id not in wave:  # a wave's jobs are asked with its points
                     st = rec.stepper
                     if st is not None and st.pending is not None:
-                        self._deliberate(rec, self._rec.field_of(rec), b)
+                        self._deliberate(rec, field_for(*self._route(rec)), b)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
                 failed.append((rec, exc))

@@ -22,7 +22,9 @@ from pfp_service.core.visibility import Window, reach_box
 from pfp_service.core.zones import Zone, ZoneSet
 from pfp_service.wire import Goal, Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
+from pfp_service.world import team_route
 from pfp_service.world.mobility import slope_limit
+from pfp_service.world.team_route import RouteKey
 from pfp_service.world.terrain import Ground, Looks, SightAsk, SightKey, ground_zones, sight_key
 from pfp_service.world.units import UnitRecord, Units
 
@@ -68,8 +70,9 @@ class Records:
         self.sight: Looks | None = Looks() if ground is not None else None
         self.held: dict[str, tuple[ThreatRecord, float]] = {}
         # per slope limit a goal names (``world.mobility``): its zone set and field, while the world's stand
-        self._sets: tuple[ZoneSet | None, dict[int, ZoneSet]] = (None, {})
-        self._fields: tuple[ThreatField | None, dict[int, ThreatField]] = (None, {})
+        # and per lead's route key (``team_route``): its zones grown by its followers' corridor
+        self._sets: tuple[ZoneSet | None, dict[RouteKey, ZoneSet]] = (None, {})
+        self._fields: tuple[ThreatField | None, dict[RouteKey, ThreatField]] = (None, {})
 
     @property
     def field(self) -> ThreatField:
@@ -102,40 +105,51 @@ class Records:
             self._zone_set = ZoneSet([*self._barriers, *(self.zones[k].zone for k in sorted(self.zones))])
         return self._zone_set
 
-    def zone_set_for(self, slope: int | None) -> ZoneSet:
+    def zone_set_for(self, slope: int | None, margin_m: float = 0.0, keep: tuple[str, ...] = ()) -> ZoneSet:
         """The zones in force for a unit climbing ``slope`` whole degrees: its barriers, then the keep-out zones
-        (``None``, or no terrain: ``zone_set``)."""
+        (``None``, or no terrain: ``zone_set``); with ``margin_m``, each grown by it but those in ``keep``
+        (a lead's, for its followers' corridor: ``team_route``)."""
         base = self.zone_set
-        if slope is None or self.ground is None:
+        if (slope is None or self.ground is None) and margin_m <= 0.0:
             return base
         of, sets = self._sets
         if of is not base:
             sets = {}
             self._sets = (base, sets)
-        got = sets.get(slope)
+        key = (slope, margin_m, keep)
+        got = sets.get(key)
         if got is None:
             if len(sets) >= MAX_SLOPE_SETS:
                 sets.clear()
-            got = sets[slope] = ZoneSet(
-                [*self.ground.barriers(slope), *(self.zones[k].zone for k in sorted(self.zones))]
-            )
+            if margin_m > 0.0:
+                plain = self.zone_set_for(slope)
+                grown = self.zone_set_for(slope, margin_m) if keep else team_route.grown_set(plain, margin_m)
+                got = grown.plus(z for z in plain if z.id in keep) if keep else grown
+            else:
+                assert self.ground is not None and slope is not None
+                got = ZoneSet(
+                    [*self.ground.barriers(slope), *(self.zones[k].zone for k in sorted(self.zones))]
+                )
+            sets[key] = got
         return got
 
-    def field_for(self, slope: int | None) -> ThreatField:
-        """``field`` with the zones in force for a unit climbing ``slope`` whole degrees (``zone_set_for``)."""
+    def field_for(self, slope: int | None, margin_m: float = 0.0, keep: tuple[str, ...] = ()) -> ThreatField:
+        """``field`` with the zones in force for a unit climbing ``slope`` whole degrees, grown by ``margin_m``
+        but ``keep`` (``zone_set_for``)."""
         base = self.field
-        if slope is None or self.ground is None:
+        if (slope is None or self.ground is None) and margin_m <= 0.0:
             return base
         of, fields = self._fields
         if of is not base:
             fields = {}
             self._fields = (base, fields)
-        got = fields.get(slope)
+        key = (slope, margin_m, keep)
+        got = fields.get(key)
         if got is None:
             if len(fields) >= MAX_SLOPE_SETS:
                 fields.clear()
             assert self._bare is not None  # built with ``field``
-            got = fields[slope] = self._bare.with_zones(self.zone_set_for(slope))
+            got = fields[key] = self._bare.with_zones(self.zone_set_for(slope, margin_m, keep))
         return got
 
     @property
