@@ -86,6 +86,17 @@ def _update(threat: Any) -> Any:
     )
 
 
+def _mover(before: dict[str, Any], at: dict[str, Any], robot: str, blocked_at: Any) -> str:
+    """Which move hid the robot: the controller's (its old place still sees the robot's new one), the robot's, or both."""
+    if blocked_at(before["m1"], before[robot]) is not None:
+        return "already hidden"
+    if blocked_at(before["m1"], at[robot]) is None:
+        return "after the controller's step"
+    if blocked_at(at["m1"], before[robot]) is None:
+        return "after the robot's step"
+    return "after both steps"
+
+
 def _team_run(ground: Any, start: Any, goal: Any, sched: Any, seed: int, blocked_at: Any) -> dict[str, Any]:
     from pfp_service.core import PlannerParams
     from pfp_service.wire import Goal, UnitState
@@ -132,6 +143,7 @@ def _team_run(ground: Any, start: Any, goal: Any, sched: Any, seed: int, blocked
     for tick in range(1, cap + 1):
         ticks = tick
         t = tick * DT_S
+        before = dict(at)
         for u, p in at.items():
             d = last.get(u)
             run = 0.0 if d is None or d.reach_m is None else min(SPEED_MPS[u] * DT_S, d.reach_m)
@@ -153,7 +165,7 @@ def _team_run(ground: Any, start: Any, goal: Any, sched: Any, seed: int, blocked
             if far_m > RADIO_RANGE_M:
                 cause = f"range: {far_m:,.0f} m"
             elif (hit := blocked_at(c, p)) is not None:
-                cause = f"sight: ground at ({hit[0]:,.0f}, {hit[1]:,.0f}) above the line"
+                cause = f"sight: ground at ({hit[0]:,.0f}, {hit[1]:,.0f}) above the line, {_mover(before, at, r, blocked_at)}"
             if cause is None:
                 linked[r] += 1
                 if r in open_:

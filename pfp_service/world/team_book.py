@@ -46,6 +46,14 @@ class TeamBook:
         self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
         self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
+        # robots whose controller the last ``judge`` held for their link, and controllers a robot's link
+        # held: each closes on the other, or both would hold for ever (``_closing``)
+        self.waits: set[str] = set()
+        self.pulls: dict[str, str] = {}  # controller -> the robot its link held
+        self._pulled: dict[str, str] = {}
+        self._waited: set[str] = (
+            set()
+        )  # ... and the ``judge`` before it (a robot judged before its controller)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
         self._placing: dict[str, Goal] = {}  # a team goal just put: each member's place, for the world to set
         self.sent: dict[
@@ -173,6 +181,8 @@ class TeamBook:
             return list(directions)
         self._track(units)
         held_before, self.held = self.held, set()
+        self._waited, self.waits = self.waits, set()
+        self._pulled, self.pulls = self.pulls, {}
         out = []
         for d in directions:
             rec = units.get(d.unit)
@@ -289,6 +299,17 @@ class TeamBook:
         Each is judged on the step the one before left (a lead's place is then checked against the link).
         """
         out: list[Verdict] = []
+        if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
+            ctl = units.get(team.controller) if team.controller is not None else None
+            if ctl is not None and ctl.position is not None and math.dist(at, ctl.position) > 1.0:
+                c, why = ctl.position, f"closing on {team.controller}, which holds for its link"
+                v = roles.link(at, c, c, team.radio_range_m, str(team.controller), "", sight)
+                if v.kind == "hold":  # the way to it leaves its sight at once: it closes on this robot too,
+                    self.pulls[str(team.controller)] = unit  # and this robot goes on, or both hold for ever
+                    v = Verdict("to", c, f"through {team.controller}'s shadow")
+                return [
+                    Verdict("to", c, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
+                ]
         if unit == team.lead and team.follow:
             main = _rearmost(team.follow, units)
             if main is None:
@@ -307,7 +328,43 @@ class TeamBook:
             lost = self._lost(team.controller, units, held)
             c_at = ctl.position if ctl is not None else None
             out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
+            if out[-1].kind == "hold" and not lost:
+                self.pulls[str(team.controller)] = unit
+        if unit == team.controller and _moving(out):
+            robots = [
+                (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
+            ]
+            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight)
+            out.append(verdict)
+            if verdict.kind == "hold":
+                self.waits.add(robot)
+        if unit == team.controller and not _moving(out) and (unit in self._pulled or unit in self.pulls):
+            return self._closing(tid, team, unit, at, units, held, sight) or out
         return out
+
+    def _closing(
+        self,
+        tid: str,
+        team: TeamUpdate,
+        unit: str,
+        at: Point,
+        units: Mapping[str, UnitRecord],
+        held: _Either,
+        sight: Sight | None,
+    ) -> list[Verdict] | None:
+        """A controller held while a robot's link holds the robot: a step towards that robot (a follower's on
+        the ground its lead cleared), or ``None`` when none is needed."""
+        for r in (self.pulls.get(unit), self._pulled.get(unit)):
+            rec = units.get(r) if r in team.robots else None
+            if rec is None or rec.position is None or not _guided(rec) or math.dist(at, rec.position) <= 1.0:
+                continue
+            p, why = rec.position, f"closing on {r}, whose link holds it"
+            if unit not in team.follow:
+                return [Verdict("to", p, why)]
+            lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
+            v = roles.follow(at, p, self._line(tid), team.corridor_m, str(team.lead), lost, p)
+            return [Verdict("to", p, why) if v.kind == "go" else Verdict(v.kind, v.to, f"{why}; {v.reason}")]
+        return None
 
 
 class _Either:
@@ -342,6 +399,12 @@ def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:
     for tid, team in teams.items():
         index.add(tid, team)
     return index
+
+
+def _guided(rec: UnitRecord) -> bool:
+    """Whether a robot is live and on its way: one arrived, trapped or without a goal cannot close on its controller."""
+    done = rec.last_status in (DirectionStatus.ARRIVED, DirectionStatus.TRAPPED)
+    return rec.position is not None and not rec.stale and rec.goal is not None and not done
 
 
 def _moving(verdicts: list[Verdict]) -> bool:

@@ -26,6 +26,7 @@ __all__ = [
     "Polyline",
     "Sight",
     "Verdict",
+    "control",
     "follow",
     "lead",
     "length",
@@ -422,3 +423,53 @@ def link(
         else f"out of {controller}'s line of sight"
     )
     return _shortened(at, to, kept, f"the step would break the link to {controller} ({beyond})")
+
+
+def control(
+    at: Point,
+    to: Point,
+    robots: Sequence[tuple[str, Point]],
+    radio_range_m: float,
+    sight: Sight | None = None,
+) -> tuple[Verdict, str]:
+    """A controller's step: it keeps each of its robots it is linked to in range and, over terrain, in sight.
+
+    A robot's own step keeps its sight line ``SIGHT_CLEARANCE_M`` clear (``link``); the controller's is
+    judged with none, so a robot stopped at the edge of its sight does not stop its controller at once.
+
+    Args:
+        at: where the controller is.
+        to: where its planned step ends.
+        robots: ``(id, where)`` of each robot it keeps a link to (those it has lost turn back on their own).
+        radio_range_m: its radio's reach.
+        sight: whether two points see each other over the ground; ``None`` without terrain.
+
+    Returns:
+        ``(verdict, robot)``: go; the step cut short where it would break a robot's link (``robot`` that
+        one); hold when it would at once.
+    """
+
+    def linked(p: Point, r: Point) -> bool:
+        return _dist(p, r) <= radio_range_m and (sight is None or sight(p, r))
+
+    kept = [(rid, r) for rid, r in robots if linked(at, r)]
+    if not kept:
+        return GO, ""
+    spacing = (
+        max(radio_range_m / 16.0, _CLOSE_M)
+        if sight is None
+        else max(_dist(at, to) / _SAMPLES_MAX, getattr(sight, "resolution_m", 0.0) / 2.0)
+    )
+    broken = [""]
+
+    def ok(p: Point) -> bool:
+        for rid, r in kept:
+            if not linked(p, r):
+                broken[0] = rid
+                return False
+        return True
+
+    got = _kept(at, to, ok, spacing)
+    if got >= 1.0:
+        return GO, ""
+    return _shortened(at, to, got, f"the step would break {broken[0]}'s link"), broken[0]
