@@ -98,3 +98,31 @@ def test_a_robot_keeps_its_controllers_line_of_sight_over_a_ridge_then_holds_whe
     (d,) = [d for d in out.directions if d.unit == "r1"]
     assert d.vector == (0.0, 0.0) and d.reach_m == 0.0
     assert d.reason == "team alpha: lost link: controller m1 has stopped"
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_line_of_sight_off_grid_agrees_with_the_bilinear_ground_sampled_finely(seed: int) -> None:
+    """Between grid points the ground is bilinear, a parabola along a line within a cell: a crest between
+    two half-cell samples hides as much as one on them (a half-cell sampling missed some)."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    rng = np.random.default_rng(seed)
+    z = 100.0 + rng.normal(0.0, 2.0, (101, 101))  # rough ground: crests everywhere between samples
+    grid = TerrainGrid(-1000.0, -1000.0, CELL_M, z)
+    ground = RegularGridInterpolator((XS, XS), z)
+    mast = 2.0
+    wrong = seen = hidden = 0
+    for _ in range(300):
+        a = rng.uniform(-800.0, 800.0, 2)
+        b = a + rng.uniform(-120.0, 120.0, 2)
+        f = np.linspace(0.0, 1.0, int(np.hypot(*(b - a)) / CELL_M * 200) + 2)
+        pts = a + (b - a) * f[:, None]
+        zz = ground(pts[:, ::-1])
+        over = zz[1:-1] - ((zz[0] + mast) + (zz[-1] - zz[0]) * f[1:-1])
+        if abs(over.max()) < 0.01:
+            continue  # grazing: the fine sampling itself is not that sure
+        truth = over.max() < 0.0
+        wrong += sees(grid, (a[0], a[1]), (b[0], b[1]), mast) != truth
+        seen += truth
+        hidden += not truth
+    assert wrong == 0 and seen >= 10 and hidden >= 10, (wrong, seen, hidden)
