@@ -49,8 +49,8 @@ class TeamBook:
         # robots whose controller the last ``judge`` held for their link, and controllers a robot's link
         # held: each closes on the other, or both would hold for ever (``_closing``)
         self.waits: set[str] = set()
-        self.pulls: dict[str, str] = {}  # controller -> the robot its link held
-        self._pulled: dict[str, str] = {}
+        self.pulls: dict[str, set[str]] = {}  # controller -> the robots their link held
+        self._pulled: dict[str, set[str]] = {}
         self._waited: set[str] = (
             set()
         )  # ... and the ``judge`` before it (a robot judged before its controller)
@@ -305,7 +305,7 @@ class TeamBook:
                 c, why = ctl.position, f"closing on {team.controller}, which holds for its link"
                 v = roles.link(at, c, c, team.radio_range_m, str(team.controller), "", sight)
                 if v.kind == "hold":  # the way to it leaves its sight at once: it closes on this robot too,
-                    self.pulls[str(team.controller)] = unit  # and this robot goes on, or both hold for ever
+                    self.pulls.setdefault(str(team.controller), set()).add(unit)  # and this robot goes on
                     v = Verdict("to", c, f"through {team.controller}'s shadow")
                 return [
                     Verdict("to", c, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
@@ -328,8 +328,12 @@ class TeamBook:
             lost = self._lost(team.controller, units, held)
             c_at = ctl.position if ctl is not None else None
             out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
-            if out[-1].kind == "hold" and not lost:
-                self.pulls[str(team.controller)] = unit
+            if out[-1].kind == "hold" and not lost and c_at is not None:
+                if math.dist(at, c_at) <= team.corridor_m:  # beside it already: it follows at once
+                    why = f"out of {team.controller}'s sight over the crest beside it: it follows"
+                    out[-1] = Verdict("to", to, f"{out[-1].reason}; {why}")
+                else:
+                    self.pulls.setdefault(str(team.controller), set()).add(unit)
         if unit == team.controller and _moving(out):
             robots = [
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
@@ -338,8 +342,11 @@ class TeamBook:
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
-        if unit == team.controller and not _moving(out) and (unit in self._pulled or unit in self.pulls):
-            return self._closing(tid, team, unit, at, units, held, sight) or out
+        pulling = (
+            self.pulls.get(unit, set()) | self._pulled.get(unit, set()) if unit == team.controller else set()
+        )
+        if pulling and (not _moving(out) or team.lead in pulling):  # its lead waits for it: it goes to it
+            return self._closing(tid, team, unit, at, pulling, units, held) or out
         return out
 
     def _closing(
@@ -348,13 +355,13 @@ class TeamBook:
         team: TeamUpdate,
         unit: str,
         at: Point,
+        pulling: set[str],
         units: Mapping[str, UnitRecord],
         held: _Either,
-        sight: Sight | None,
     ) -> list[Verdict] | None:
         """A controller held while a robot's link holds the robot: a step towards that robot (a follower's on
         the ground its lead cleared), or ``None`` when none is needed."""
-        for r in (self.pulls.get(unit), self._pulled.get(unit)):
+        for r in sorted(pulling, key=lambda r: (r != team.lead, r)):  # its lead first: cleared ground to it
             rec = units.get(r) if r in team.robots else None
             if rec is None or rec.position is None or not _guided(rec) or math.dist(at, rec.position) <= 1.0:
                 continue
@@ -363,7 +370,10 @@ class TeamBook:
                 return [Verdict("to", p, why)]
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
             v = roles.follow(at, p, self._line(tid), team.corridor_m, str(team.lead), lost, p)
-            return [Verdict("to", p, why) if v.kind == "go" else Verdict(v.kind, v.to, f"{why}; {v.reason}")]
+            if v.kind != "hold":
+                return [
+                    Verdict("to", p, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
+                ]
         return None
 
 
