@@ -105,8 +105,8 @@ class RouteKeys:
             ):
                 slope = own  # its goal lies past the others' limit: it goes there on its own
         margin = max(t.corridor_m for t in led) / 2.0
-        if margin <= 0.0 or not math.isfinite(margin):
-            return (slope, 0.0, ())
+        if margin <= 0.0 or not math.isfinite(margin) or not self._rec.zone_set_for(slope):
+            return (slope, 0.0, ())  # nothing to keep the corridor clear of: the field of the unit's class
         keep = (
             kept_for(self._rec.zone_set_for(slope, margin), self._rec.zone_set_for(slope), rec.goal.position)
             if rec.goal is not None
