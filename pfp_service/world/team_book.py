@@ -346,7 +346,7 @@ class TeamBook:
             self.pulls.get(unit, set()) | self._pulled.get(unit, set()) if unit == team.controller else set()
         )
         if pulling and (not _moving(out) or team.lead in pulling):  # its lead waits for it: it goes to it
-            return self._closing(tid, team, unit, at, pulling, units, held) or out
+            return self._closing(tid, team, unit, at, pulling, units, held, sight) or out
         return out
 
     def _closing(
@@ -358,18 +358,28 @@ class TeamBook:
         pulling: set[str],
         units: Mapping[str, UnitRecord],
         held: _Either,
+        sight: Sight | None,
     ) -> list[Verdict] | None:
         """A controller held while a robot's link holds the robot: a step towards that robot (a follower's on
-        the ground its lead cleared), or ``None`` when none is needed."""
+        the ground its lead cleared, cut where it would break another robot's link), or ``None`` when none
+        is needed or none can be taken."""
         for r in sorted(pulling, key=lambda r: (r != team.lead, r)):  # its lead first: cleared ground to it
             rec = units.get(r) if r in team.robots else None
             if rec is None or rec.position is None or not _guided(rec) or math.dist(at, rec.position) <= 1.0:
                 continue
             p, why = rec.position, f"closing on {r}, whose link holds it"
-            if unit not in team.follow:
-                return [Verdict("to", p, why)]
-            lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
-            v = roles.follow(at, p, self._line(tid), team.corridor_m, str(team.lead), lost, p)
+            if unit in team.follow:
+                lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
+                v = roles.follow(at, p, self._line(tid), team.corridor_m, str(team.lead), lost, p)
+                if v.kind == "hold":
+                    continue
+                p, why = (v.to, f"{why}; {v.reason}") if v.kind == "to" and v.to is not None else (p, why)
+            others = [
+                (o, q)
+                for o in team.robots
+                if o != r and (oo := units.get(o)) and (q := oo.position) and _guided(oo)
+            ]
+            v, _ = roles.control(at, p, others, team.radio_range_m, sight)
             if v.kind != "hold":
                 return [
                     Verdict("to", p, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
