@@ -1,0 +1,145 @@
+"""Which units outside a team a team preview replays with it: those whose reach comes near the team's.
+
+Dispersion and right of way are the only rules by which a unit outside a
+team changes a member's direction, and both act within ``REACH`` of a
+pair's separation (``core.dispersion``; right of way within ``YIELD_AT``,
+fewer).  So, with dispersion on, an outsider is relevant when its reach over
+the preview's horizon comes within ``REACH`` times the pair's separation of
+a member's: a reach is the straight segment from where the unit is toward
+its goal, as far as its speed takes it within the horizon (the whole way
+when it reports none), or the point where it is for a unit the planner does
+not guide.  The relevant ones are taken nearest first, at most
+``MAX_PREVIEW_OUTSIDERS``; the rest are counted, so a reader knows the bound.
+With dispersion off no outsider can change a member's track: none is taken.
+
+Not judged: routes that bend round a threat or a zone (a reach is the
+straight line), timing (two reaches that meet at different times still
+count, which only costs replay steps), and chains (an outsider that only
+pushes another outsider into the team's way).
+
+Cost, on the planner's loop: one pass over the world's unit records and a
+few vectorised operations over those inside the team's reaches' bounding
+box; no record is copied but the ones taken (``team_preview.seed``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from pfp_service.core.dispersion import REACH
+from pfp_service.wire.messages import MAX_PREVIEW_OUTSIDERS
+from pfp_service.world.separations import DispersionSettings
+from pfp_service.world.units import UnitRecord
+
+__all__ = ["Reach", "guided", "nearby", "reach"]
+
+Point = tuple[float, float]
+Reach = tuple[Point, Point]  # a segment: where the unit is, and how far toward its goal it may get
+
+
+def guided(rec: UnitRecord) -> bool:
+    """Whether the replay moves ``rec`` toward its goal (else it holds where it is)."""
+    return rec.goal is not None and rec.stepper is not None and rec.progress.speed_mps > 0.0
+
+
+def reach(at: Point, goal: Point | None, speed_mps: float, horizon_s: float) -> Reach:
+    """The straight segment from ``at`` toward ``goal``, cut at ``speed_mps * horizon_s`` (0: the whole way)."""
+    if goal is None:
+        return (at, at)
+    dx, dy = goal[0] - at[0], goal[1] - at[1]
+    far = math.hypot(dx, dy)
+    go = far if speed_mps <= 0.0 else min(far, speed_mps * horizon_s)
+    if not far > 0.0 or not math.isfinite(go):
+        return (at, at) if not far > 0.0 else (at, goal)
+    return (at, (at[0] + dx * go / far, at[1] + dy * go / far))
+
+
+def nearby(
+    units: Mapping[str, UnitRecord],
+    team: frozenset[str],
+    reaches: Sequence[Reach],
+    settings: DispersionSettings,
+    horizon_s: float,
+    cap: int = MAX_PREVIEW_OUTSIDERS,
+) -> tuple[list[str], int]:
+    """The units outside ``team`` whose reach comes near one of ``reaches``, nearest first, and how many more did.
+
+    Args:
+        units: the world's unit records (read, never written).
+        team: the team's members.
+        reaches: the members' reaches (``reach``).
+        settings: the mission's dispersion (off: no outsider is taken).
+        horizon_s: the preview's horizon.
+        cap: at most this many are taken.
+
+    Returns:
+        The ids taken (at most ``cap``) and how many more were near but left out.
+    """
+    if not settings.enabled or not reaches or cap < 0:
+        return [], 0
+    sep = settings.separation
+    widest_member = max(sep(u) for u in team)
+    widest = max(max(settings.separation_m.values()), widest_member)
+    members = np.array(reaches, dtype=float).reshape(-1, 4)  # x0 y0 x1 y1
+    lo = np.minimum(members[:, :2], members[:, 2:]).min(axis=0) - REACH * widest
+    hi = np.maximum(members[:, :2], members[:, 2:]).max(axis=0) + REACH * widest
+    recs = [r for r in units.values() if r.position is not None and not r.stale and r.id not in team]
+    if not recs:
+        return [], 0
+    # a reach reaches at most speed * horizon beyond where the unit is: those too far for that go first
+    at = np.array([r.position for r in recs], dtype=float).reshape(-1, 2)
+    run = np.array([r.progress.speed_mps if guided(r) else 0.0 for r in recs], dtype=float) * horizon_s
+    box = np.all((at + run[:, None] >= lo) & (at - run[:, None] <= hi), axis=1)
+    rows = np.flatnonzero(box).tolist()
+    if not rows:
+        return [], 0
+    near = [recs[k] for k in rows]
+    outs = np.array(
+        [
+            [*p, *q]
+            for p, q in (
+                reach(r.position, r.goal.position if guided(r) else None, r.progress.speed_mps, horizon_s)  # type: ignore[arg-type, union-attr]
+                for r in near
+            )
+        ],
+        dtype=float,
+    ).reshape(-1, 4)
+    gap = _segment_gaps(outs, members).min(axis=1)
+    within = REACH * np.maximum(np.array([sep(r.id) for r in near], dtype=float), widest_member)
+    hit = np.flatnonzero(gap < within)
+    order = sorted(hit.tolist(), key=lambda k: (float(gap[k]), near[k].id))
+    return [near[k].id for k in order[:cap]], max(0, len(order) - cap)
+
+
+def _segment_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(len(a), len(b))``: the least distance between each segment of ``a`` and each of ``b`` (rows x0 y0 x1 y1)."""
+    p0, p1 = a[:, None, :2], a[:, None, 2:]
+    q0, q1 = b[None, :, :2], b[None, :, 2:]
+    ends = np.minimum(
+        np.minimum(_point_gaps(p0, q0, q1), _point_gaps(p1, q0, q1)),
+        np.minimum(_point_gaps(q0, p0, p1), _point_gaps(q1, p0, p1)),
+    )
+    # segments that cross: each one's ends on either side of the other's line
+    d1, d2 = _cross(q0, q1, p0), _cross(q0, q1, p1)
+    d3, d4 = _cross(p0, p1, q0), _cross(p0, p1, q1)
+    crossing = (d1 * d2 < 0.0) & (d3 * d4 < 0.0)
+    return np.where(crossing, 0.0, ends)
+
+
+def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
+        b[..., 0] - o[..., 0]
+    )
+
+
+def _point_gaps(p: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """The distance from each point ``p`` to the segment ``q0 q1`` (broadcast)."""
+    d = q1 - q0
+    dd = (d * d).sum(axis=-1)
+    t = np.where(dd > 0.0, ((p - q0) * d).sum(axis=-1) / np.where(dd > 0.0, dd, 1.0), 0.0)
+    t = np.clip(t, 0.0, 1.0)
+    c = q0 + t[..., None] * d
+    return np.hypot(p[..., 0] - c[..., 0], p[..., 1] - c[..., 1])
