@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from itertools import chain
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from pfp_service.wire.messages import MAX_PREVIEW_OUTSIDERS
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord
 
-__all__ = ["Reach", "guided", "nearby", "reach"]
+__all__ = ["Reach", "guided", "nearby", "reach", "segment_gaps"]
 
 Point = tuple[float, float]
 Reach = tuple[Point, Point]  # a segment: where the unit is, and how far toward its goal it may get
@@ -82,39 +83,54 @@ def nearby(
         return [], 0
     sep = settings.separation
     widest_member = max(sep(u) for u in team)
-    widest = max(max(settings.separation_m.values()), widest_member)
     members = np.array(reaches, dtype=float).reshape(-1, 4)  # x0 y0 x1 y1
-    lo = np.minimum(members[:, :2], members[:, 2:]).min(axis=0) - REACH * widest
-    hi = np.maximum(members[:, :2], members[:, 2:]).max(axis=0) + REACH * widest
+    # one pass over the records, in the loop: what a reach needs, and nothing copied
+    nan = (math.nan, math.nan)
     recs = [r for r in units.values() if r.position is not None and not r.stale and r.id not in team]
     if not recs:
         return [], 0
-    # a reach reaches at most speed * horizon beyond where the unit is: those too far for that go first
-    at = np.array([r.position for r in recs], dtype=float).reshape(-1, 2)
-    run = np.array([r.progress.speed_mps if guided(r) else 0.0 for r in recs], dtype=float) * horizon_s
-    box = np.all((at + run[:, None] >= lo) & (at - run[:, None] <= hi), axis=1)
-    rows = np.flatnonzero(box).tolist()
-    if not rows:
-        return [], 0
-    near = [recs[k] for k in rows]
-    outs = np.array(
-        [
-            [*p, *q]
-            for p, q in (
-                reach(r.position, r.goal.position if guided(r) else None, r.progress.speed_mps, horizon_s)  # type: ignore[arg-type, union-attr]
-                for r in near
-            )
-        ],
+    rows = np.fromiter(
+        chain.from_iterable(
+            [
+                (
+                    *r.position,  # type: ignore[misc]
+                    *(r.goal.position if r.goal is not None and r.stepper is not None else nan),
+                    r.progress.speed_mps,
+                )
+                for r in recs
+            ]
+        ),
         dtype=float,
-    ).reshape(-1, 4)
-    gap = _segment_gaps(outs, members).min(axis=1)
-    within = REACH * np.maximum(np.array([sep(r.id) for r in near], dtype=float), widest_member)
-    hit = np.flatnonzero(gap < within)
-    order = sorted(hit.tolist(), key=lambda k: (float(gap[k]), near[k].id))
-    return [near[k].id for k in order[:cap]], max(0, len(order) - cap)
+        count=5 * len(recs),
+    ).reshape(-1, 5)
+    at, goal = rows[:, :2], rows[:, 2:4]
+    stands = np.isnan(goal[:, 0])
+    run = np.where(stands, 0.0, rows[:, 4]) * horizon_s  # 0: it stands (``guided``)
+    way = np.where(stands[:, None], 0.0, goal - at)
+    far = np.hypot(way[:, 0], way[:, 1])
+    go = np.where(run > 0.0, np.minimum(far, run), 0.0)
+    step = np.divide(go, far, out=np.zeros_like(far), where=far > 0.0)
+    outs = np.concatenate([at, at + way * step[:, None]], axis=1)
+    # the reaches whose box meets the members' box grown by the widest reach, then the exact gaps
+    widest = REACH * max(max(settings.separation_m.values()), widest_member)
+    lo = np.minimum(members[:, :2], members[:, 2:]).min(axis=0) - widest
+    hi = np.maximum(members[:, :2], members[:, 2:]).max(axis=0) + widest
+    box = np.flatnonzero(
+        np.all(
+            (np.minimum(outs[:, :2], outs[:, 2:]) <= hi) & (np.maximum(outs[:, :2], outs[:, 2:]) >= lo),
+            axis=1,
+        )
+    )
+    if not len(box):
+        return [], 0
+    gap = segment_gaps(outs[box], members).min(axis=1)
+    maybe = np.flatnonzero(gap < widest).tolist()  # the exact separations of these alone
+    hits = [(float(gap[k]), recs[box[k]].id) for k in maybe]
+    order = sorted(g for g in hits if g[0] < REACH * max(sep(g[1]), widest_member))
+    return [u for _, u in order[:cap]], max(0, len(order) - cap)
 
 
-def _segment_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def segment_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``(len(a), len(b))``: the least distance between each segment of ``a`` and each of ``b`` (rows x0 y0 x1 y1)."""
     p0, p1 = a[:, None, :2], a[:, None, 2:]
     q0, q1 = b[None, :, :2], b[None, :, 2:]

@@ -104,6 +104,9 @@ class MemberSeed:
     stepper: Stepper | None = None
     status: DirectionStatus | None = None  # its last direction's
     direction: Direction | None = None  # as the team book last judged it: what it moves on now
+    # an outsider's mission: its stepper starts afresh in the replay (copying 64 on the loop costs more
+    # than all the rest of a seed)
+    params: Resolved | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,7 +150,7 @@ def seed(
         if r is None:
             members.append(MemberSeed(u, None, 0.0))
             continue
-        members.append(_member(r, r.stepper is not None and r.goal is not None, sent.get(u)))
+        members.append(_member(r, r.stepper is not None and r.goal is not None, sent.get(u), True))
     req = request or TeamPreviewRequest()
     reaches = [
         reach(m.position, m.goal.position if m.goal is not None else None, _speed(m, req), req.horizon_s)  # type: ignore[arg-type]
@@ -155,7 +158,7 @@ def seed(
         if m.position is not None
     ]
     near, left_out = nearby(rec.units, frozenset(units), reaches, world.settings.dispersion, req.horizon_s)
-    outsiders = tuple(_member(rec.units[u], outsider_guided(rec.units[u]), None) for u in near)
+    outsiders = tuple(_member(rec.units[u], outsider_guided(rec.units[u]), None, False) for u in near)
     threats = tuple((tid, _left(t.update, t.expires_at, now)) for tid, t in sorted(rec.threats.items()))
     zones = tuple((zid, _left(z.update, z.expires_at, now)) for zid, z in sorted(rec.zones.items()))
     return TeamSeed(
@@ -172,13 +175,23 @@ def seed(
     )
 
 
-def _member(r: UnitRecord, moves: bool, direction: Direction | None) -> MemberSeed:
-    """A detached copy of what the replay needs of ``r``; its mission only if it ``moves`` (else it stands)."""
+def _member(r: UnitRecord, moves: bool, direction: Direction | None, stepper: bool) -> MemberSeed:
+    """What the replay needs of ``r``: its mission only if it ``moves`` (else it stands), with a copy of its ``stepper``."""
     if not moves:
         return MemberSeed(r.id, r.position, r.progress.speed_mps, r.kind, status=r.last_status)
-    stepper = copy.deepcopy(r.stepper)
+    assert r.stepper is not None
+    copied = copy.deepcopy(r.stepper) if stepper else None
     return MemberSeed(
-        r.id, r.position, r.progress.speed_mps, r.kind, r.goal, r.origin, stepper, r.last_status, direction
+        r.id,
+        r.position,
+        r.progress.speed_mps,
+        r.kind,
+        r.goal,
+        r.origin,
+        copied,
+        r.last_status,
+        direction,
+        None if stepper else r.stepper.params,
     )
 
 
@@ -268,14 +281,16 @@ def replay(
     ids = {m.unit for m in guided}
     cars = [_Vehicle(m, _speed(m, req), m.position, m.status) for m in s.members if m.position is not None]
     others = [
-        _Vehicle(m, m.speed_mps if m.goal is not None else 0.0, m.position, m.status) for m in s.outsiders
-    ]  # type: ignore[arg-type]
-    guided += [m for m in s.outsiders if m.goal is not None]
+        _Vehicle(m, m.speed_mps if m.params is not None else 0.0, m.position, m.status)  # type: ignore[arg-type]
+        for m in s.outsiders
+    ]
+    afresh = [m for m in s.outsiders if m.params is not None]
     first: list[Input] = [ThreatPut(i, t) for i, t in s.threats]
     first += [ZonePut(i, z) for i, z in s.zones]
     first.append(TeamPut(s.team_id, s.team))
     first += [car.report(0.0) for car in cars + others]
     first += [MissionRestored(m.unit, m.goal, m.origin or m.position, _params(m.stepper)) for m in guided]  # type: ignore[arg-type]
+    first += [MissionRestored(m.unit, m.goal, m.origin or m.position, m.params) for m in afresh]  # type: ignore[arg-type]
     refused = [e for e in w.apply(first, 0.0).events if isinstance(e, RejectedEvent)]
     if refused:  # the live world took these: a replay that cannot is a fault, not a track
         raise RuntimeError(f"the replay refused {refused[0].key}: {refused[0].reason}")

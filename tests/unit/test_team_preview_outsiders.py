@@ -10,6 +10,7 @@ import dataclasses
 import math
 import time
 
+import numpy as np
 import pytest
 from pfp_clients.sim import SimUnit
 
@@ -19,6 +20,7 @@ from pfp_service.wire import Goal, UnitKind, UnitState
 from pfp_service.wire.messages import MAX_PREVIEW_OUTSIDERS, TeamPreviewRequest, TeamUpdate
 from pfp_service.world import team_preview
 from pfp_service.world.separations import DispersionSettings
+from pfp_service.world.team_outsiders import segment_gaps
 from pfp_service.world.world import GoalSet, StateReported, TeamPut, World, WorldSettings
 
 pytestmark = pytest.mark.unit
@@ -129,3 +131,18 @@ def test_outsiders_are_taken_nearest_first_up_to_the_cap_and_the_rest_counted() 
     off.apply([StateReported(u.id, u.state(0.0)) for u in fleet.values()], 0.0)
     plain = team_preview.seed(off, "alpha", 0.0)
     assert plain is not None and plain.outsiders == () and plain.left_out == 0
+
+
+def test_the_gap_between_two_segments_is_shapelys() -> None:
+    shapely = pytest.importorskip("shapely")
+    rng = np.random.default_rng(33)
+    print("seed 33")
+    a = rng.uniform(-50.0, 50.0, (200, 4))
+    a[:20, 2:] = a[:20, :2]  # points: a unit that stands
+    b = rng.uniform(-50.0, 50.0, (3, 4))
+    got = segment_gaps(a, b)
+    for i in range(len(a)):
+        p = shapely.LineString([a[i, :2], a[i, 2:]]) if i >= 20 else shapely.Point(a[i, :2])
+        for j in range(len(b)):
+            want = p.distance(shapely.LineString([b[j, :2], b[j, 2:]]))
+            assert got[i, j] == pytest.approx(want, abs=1e-9), (i, j)
