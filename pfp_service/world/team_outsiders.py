@@ -100,7 +100,7 @@ def nearby(
                 for r in recs
             ]
         ),
-        dtype=float,
+        dtype=np.float64,
         count=5 * len(recs),
     ).reshape(-1, 5)
     at, goal = rows[:, :2], rows[:, 2:4]
@@ -142,13 +142,20 @@ def segment_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d1, d2 = _cross(q0, q1, p0), _cross(q0, q1, p1)
     d3, d4 = _cross(p0, p1, q0), _cross(p0, p1, q1)
     crossing = (d1 * d2 < 0.0) & (d3 * d4 < 0.0)
-    return np.where(crossing, 0.0, ends)
+    gaps: np.ndarray = np.where(crossing, 0.0, ends)
+    return gaps
 
 
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (
-        b[..., 0] - o[..., 0]
+    """The cross product of ``o a`` and ``o b``: which side of the line ``o a`` ``b`` is on."""
+    ax, ay, bx, by = (
+        a[..., 0] - o[..., 0],
+        a[..., 1] - o[..., 1],
+        b[..., 0] - o[..., 0],
+        b[..., 1] - o[..., 1],
     )
+    side: np.ndarray = ax * by - ay * bx
+    return side
 
 
 def _point_gaps(p: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
@@ -158,4 +165,5 @@ def _point_gaps(p: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     t = np.where(dd > 0.0, ((p - q0) * d).sum(axis=-1) / np.where(dd > 0.0, dd, 1.0), 0.0)
     t = np.clip(t, 0.0, 1.0)
     c = q0 + t[..., None] * d
-    return np.hypot(p[..., 0] - c[..., 0], p[..., 1] - c[..., 1])
+    gaps: np.ndarray = np.hypot(p[..., 0] - c[..., 0], p[..., 1] - c[..., 1])
+    return gaps

@@ -17,8 +17,9 @@ would drive for vehicles moving at their reported speeds.
 Units outside the team whose reach comes within dispersion distance of the
 team's (``team_outsiders``: at most ``MAX_PREVIEW_OUTSIDERS``, nearest first)
 are replayed with it by the same rules: one the planner guides and that
-reports a speed moves toward its own goal on its own stepper, as the members
-do; any other stands where it is.  The reply names them and counts those
+reports a speed moves toward its own goal, on a stepper started afresh where
+it is (a copy of each live one would cost the loop more than the rest of the
+seed); any other stands where it is.  The reply names them and counts those
 left out.
 
 What the replay does not hold: a deliberation's latency (its escape searches
@@ -153,7 +154,7 @@ def seed(
         members.append(_member(r, r.stepper is not None and r.goal is not None, sent.get(u), True))
     req = request or TeamPreviewRequest()
     reaches = [
-        reach(m.position, m.goal.position if m.goal is not None else None, _speed(m, req), req.horizon_s)  # type: ignore[arg-type]
+        reach(m.position, m.goal.position if m.goal is not None else None, _speed(m, req), req.horizon_s)
         for m in members
         if m.position is not None
     ]
