@@ -224,6 +224,10 @@ class PreviewService:
         except InputError as err:
             self.refuse(query, ErrorReply.of(err))
             return
+        except Exception as exc:  # a bulkhead: this preview fails, the loop and every other answer go on
+            log.exception("team preview seed failed", extra={"fields": {"key": key}})
+            self.refuse(query, ErrorReply(error=f"the planner could not seed this team preview: {exc}"[:512]))
+            return
         self.submit_team(query, key, seed, request, received)
 
     def submit_team(

@@ -81,6 +81,18 @@ def nearby(
     """
     if not settings.enabled or not reaches or cap < 0:
         return [], 0
+    with np.errstate(all="ignore"):  # a far-off or absurd position gives no gap (NaN), not a warning
+        return _nearby(units, team, reaches, settings, horizon_s, cap)
+
+
+def _nearby(
+    units: Mapping[str, UnitRecord],
+    team: frozenset[str],
+    reaches: Sequence[Reach],
+    settings: DispersionSettings,
+    horizon_s: float,
+    cap: int,
+) -> tuple[list[str], int]:
     sep = settings.separation
     widest_member = max(sep(u) for u in team)
     members = np.array(reaches, dtype=float).reshape(-1, 4)  # x0 y0 x1 y1
