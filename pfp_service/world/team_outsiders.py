@@ -124,7 +124,9 @@ def _nearby(
     step = np.divide(go, far, out=np.zeros_like(far), where=far > 0.0)
     outs = np.concatenate([at, at + way * step[:, None]], axis=1)
     # the reaches whose box meets the members' box grown by the widest reach, then the exact gaps
-    widest = REACH * max(max(settings.separation_m.values()), widest_member)
+    classes = {settings.default_class, *settings.classes.values()}  # the classes in the mission
+    closest = REACH * widest_member  # within it, an outsider of any class is near
+    widest = REACH * max(max(settings.separation_m[c] for c in classes), widest_member)
     lo = np.minimum(members[:, :2], members[:, 2:]).min(axis=0) - widest
     hi = np.maximum(members[:, :2], members[:, 2:]).max(axis=0) + widest
     box = np.flatnonzero(
@@ -136,10 +138,13 @@ def _nearby(
     if not len(box):
         return [], 0
     gap = segment_gaps(outs[box], members).min(axis=1)
-    maybe = np.flatnonzero(gap < widest).tolist()  # the exact separations of these alone
-    hits = [(float(gap[k]), recs[box[k]].id) for k in maybe]
-    order = sorted(g for g in hits if g[0] < REACH * max(sep(g[1]), widest_member))
-    return [u for _, u in order[:cap]], max(0, len(order) - cap)
+    near = np.full(len(box), closest)
+    for k in np.flatnonzero((gap >= closest) & (gap < widest)).tolist():  # wider than every member
+        near[k] = REACH * max(sep(recs[box[k]].id), widest_member)
+    hit = np.flatnonzero(gap < near)
+    first = hit[np.argsort(gap[hit], kind="stable")[:cap]]
+    taken = sorted((float(gap[k]), recs[box[k]].id) for k in first.tolist())
+    return [u for _, u in taken], len(hit) - len(first)
 
 
 def segment_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
