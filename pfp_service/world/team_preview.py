@@ -153,8 +153,8 @@ def seed(
             continue
         members.append(_member(r, r.stepper is not None and r.goal is not None, sent.get(u), True))
     req = request or TeamPreviewRequest()
-    reaches = [
-        reach(m.position, m.goal.position if m.goal is not None else None, _speed(m, req), req.horizon_s)
+    reaches = [  # a member the replay does not move stands
+        reach(m.position, m.goal.position if m.stepper is not None else None, _speed(m, req), req.horizon_s)  # type: ignore[union-attr]
         for m in members
         if m.position is not None
     ]
@@ -179,7 +179,8 @@ def seed(
 def _member(r: UnitRecord, moves: bool, direction: Direction | None, stepper: bool) -> MemberSeed:
     """What the replay needs of ``r``: its mission only if it ``moves`` (else it stands), with a copy of its ``stepper``."""
     if not moves:
-        return MemberSeed(r.id, r.position, r.progress.speed_mps, r.kind, status=r.last_status)
+        goal, origin = (r.goal, r.origin) if stepper else (None, None)  # a member keeps its mission (it stands)
+        return MemberSeed(r.id, r.position, r.progress.speed_mps, r.kind, goal, origin, status=r.last_status)
     assert r.stepper is not None
     copied = copy.deepcopy(r.stepper) if stepper else None
     return MemberSeed(
