@@ -146,3 +146,18 @@ def test_the_gap_between_two_segments_is_shapelys() -> None:
         for j in range(len(b)):
             want = p.distance(shapely.LineString([b[j, :2], b[j, 2:]]))
             assert got[i, j] == pytest.approx(want, abs=1e-9), (i, j)
+
+
+def test_an_outsider_is_taken_when_its_reach_over_the_horizon_comes_near_the_teams() -> None:
+    fleet = _fleet(crossing=False)
+    far = UnitSpec(id="b2", start=(100.0, 300.0), goal=(100.0, -300.0), speed_mps=2.0)
+    fleet["b2"] = SimUnit(far, rate_hz=1.0 / DT)
+    w = _started(fleet)
+    _drive(w, fleet, DT, 2.0)  # every unit has reported moving: its speed is known
+    speeds = {"r1": 3.0, "m1": 2.0}
+    soon = team_preview.seed(w, "alpha", 2.0, TeamPreviewRequest(horizon_s=60.0, speeds=speeds))
+    later = team_preview.seed(w, "alpha", 2.0, TeamPreviewRequest(horizon_s=200.0, speeds=speeds))
+    assert soon is not None and later is not None
+    assert [m.unit for m in soon.outsiders] == []  # 120 m in 60 s: still 180 m off the team's way
+    (b2,) = later.outsiders  # 400 m in 200 s: across it
+    assert b2.unit == "b2" and b2.params is not None and b2.stepper is None and b2.speed_mps == 2.0
