@@ -179,9 +179,8 @@ def seed(
 def _member(r: UnitRecord, moves: bool, direction: Direction | None, stepper: bool) -> MemberSeed:
     """What the replay needs of ``r``: its mission only if it ``moves`` (else it stands), with a copy of its ``stepper``."""
     if not moves:
-        goal, origin = (
-            (r.goal, r.origin) if stepper else (None, None)
-        )  # a member keeps its mission (it stands)
+        # a member keeps its mission (it stands); an outsider stands without one
+        goal, origin = (r.goal, r.origin) if stepper else (None, None)
         return MemberSeed(r.id, r.position, r.progress.speed_mps, r.kind, goal, origin, status=r.last_status)
     assert r.stepper is not None
     copied = copy.deepcopy(r.stepper) if stepper else None
