@@ -295,6 +295,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
                         )
                     ],
                     simulated_s=95.5,
+                    outsiders=["a1"],
                 ),
             ),
         ),

@@ -214,7 +214,10 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     # added with teams
     "TeamSummary": ({"id", "team"}, {"notes"}),
     "TeamPreviewRequest": (set(), {"horizon_s", "dt_s", "speeds"}),
-    "TeamPreview": ({"team"}, {"eta_s", "members", "simulated_s", "stopped"}),
+    "TeamPreview": (
+        {"team"},
+        {"eta_s", "members", "simulated_s", "stopped", "outsiders", "outsiders_left_out"},
+    ),
     "MemberTrack": ({"unit"}, {"speed_mps", "points", "statuses", "arrived_s"}),
     "StatusChange": ({"t_s", "status"}, {"reason"}),
     "TeamUpdate": (
