@@ -33,7 +33,15 @@ import msgspec
 from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.wire import Goal, decode_goal, decode_mission, decode_threat, decode_unit_state, keys
+from pfp_service.wire import (
+    Goal,
+    UnitState,
+    decode_goal,
+    decode_mission,
+    decode_threat,
+    decode_unit_state,
+    keys,
+)
 from pfp_service.wire.messages import decode_team, decode_zone
 from pfp_service.wire.messages.structs import Bounds, ThreatUpdate
 from pfp_service.wire.messages.world import WorldSnapshot
@@ -72,6 +80,7 @@ __all__ = [
     "LogLine",
     "Stored",
     "blame",
+    "decode_state",
     "held",
     "ident",
     "inputs_from_snapshot",
@@ -208,6 +217,12 @@ def _decode_goal(data: bytes, bounds: Bounds | None, origin: Origin | None) -> G
     return mobility.check(decode_goal(data, bounds, origin))
 
 
+def decode_state(data: bytes, bounds: Bounds | None, origin: Origin | None) -> UnitState:
+    """The wire's decoder, then its mobility class's check (``world.mobility``): a state naming an unknown
+    class is refused whole, as a goal is (a state without one pays one attribute read)."""
+    return mobility.check(decode_unit_state(data, bounds, origin))
+
+
 _FIELDS: dict[type[Any], tuple[str, ...]] = {}  # an input class's field names, looked up once
 
 
@@ -326,7 +341,7 @@ KINDS: tuple[Kind, ...] = (
         (StateReported,),
         blames_unit=True,
         schema="unit_state",
-        decode=decode_unit_state,
+        decode=decode_state,
         own_unit=True,
     ),
     Kind("unit token", K.ALIVE_UNIT, "token", (TokenChanged,), own_unit=True),

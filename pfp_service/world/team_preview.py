@@ -51,6 +51,7 @@ from pfp_service.wire import (
     Direction,
     DirectionStatus,
     Goal,
+    GoalMobility,
     RejectedEvent,
     ThreatUpdate,
     UnitKind,
@@ -108,6 +109,7 @@ class MemberSeed:
     # an outsider's mission: its stepper starts afresh in the replay (copying 64 on the loop costs more
     # than all the rest of a seed)
     params: Resolved | None = None
+    mobility: GoalMobility | None = None  # the class its states name (``world.mobility``): replayed with it
 
 
 @dataclasses.dataclass(frozen=True)
@@ -181,7 +183,16 @@ def _member(r: UnitRecord, moves: bool, direction: Direction | None, stepper: bo
     if not moves:
         # a member keeps its mission (it stands); an outsider stands without one
         goal, origin = (r.goal, r.origin) if stepper else (None, None)
-        return MemberSeed(r.id, r.position, r.progress.speed_mps, r.kind, goal, origin, status=r.last_status)
+        return MemberSeed(
+            r.id,
+            r.position,
+            r.progress.speed_mps,
+            r.kind,
+            goal,
+            origin,
+            status=r.last_status,
+            mobility=r.mobility,
+        )
     assert r.stepper is not None
     copied = copy.deepcopy(r.stepper) if stepper else None
     return MemberSeed(
@@ -195,6 +206,7 @@ def _member(r: UnitRecord, moves: bool, direction: Direction | None, stepper: bo
         r.last_status,
         direction,
         None if stepper else r.stepper.params,
+        r.mobility,
     )
 
 
@@ -254,7 +266,10 @@ class _Vehicle:
 
     def report(self, t_s: float) -> StateReported:
         speed = self.speed_mps if self.status in _MOVING else 0.0  # as ``SimUnit.state`` says it
-        return StateReported(self.seed.unit, UnitState(position=self.at, speed_mps=speed, kind=self.kind))
+        return StateReported(
+            self.seed.unit,
+            UnitState(position=self.at, speed_mps=speed, kind=self.kind, mobility=self.seed.mobility),
+        )
 
 
 def _speed(m: MemberSeed, request: TeamPreviewRequest) -> float:

@@ -98,7 +98,7 @@ class World:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec, s = self._units.get(unit_id), self.settings
         threats = self.field.threats  # the same tuple while the field stands: a preview service can cache it
-        zones = self._rec.zones_of(rec.goal if rec else None)  # the same set while the zones stand
+        zones = self._rec.zones_of(rec)  # the same set while the zones stand
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
