@@ -56,7 +56,8 @@ def check(msg: M) -> M:
     Raises:
         InputError: as ``refusal`` says.
     """
-    if msg.mobility is None:  # the states' hot path: one attribute read
+    mob = msg.mobility
+    if mob is None or (mob.max_slope_deg is None and mob.kind in CLASSES):  # the states' hot path
         return msg
     refused = refusal(msg)
     if refused is not None:
