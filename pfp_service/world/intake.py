@@ -3,8 +3,9 @@
 Inputs keep their order; unit states are latest-wins per unit (a unit
 reporting again keeps its place in line, its newest state replacing the
 older; a class it named, ``mobility``, is kept on the newest if that names
-none, since a state without one changes nothing, ``world.mobility``).  A tick takes a bounded slice of each, the longest waiting first, so
-a storm is spread over ticks and no tick holds up the rest.  Past
+none, since a state without one changes nothing, ``world.mobility``).  A
+tick takes a bounded slice of each, the longest waiting first, so a storm is
+spread over ticks and no tick holds up the rest.  Past
 ``inputs_max`` an input is refused and counted, except a deliberation's
 answer (the unit's job would stand forever; they are bounded by the jobs
 asked, one per unit).  What was refused here, or at the node's other queues
@@ -46,9 +47,8 @@ class Intake:
         self.units_per_tick = units_per_tick
         self._inputs: collections.deque[Input] = collections.deque()
         self._states: dict[str, tuple[UnitState, float]] = {}
-        self._named: dict[
-            str, GoalMobility
-        ] = {}  # the class a waiting state named: kept if a newer names none
+        # the class a waiting state named: kept if a newer state of its unit names none
+        self._named: dict[str, GoalMobility] = {}
         self._shed = 0
 
     def __len__(self) -> int:
