@@ -42,7 +42,7 @@ from pfp_service.wire import (
     decode_unit_state,
     keys,
 )
-from pfp_service.wire.messages import decode_team, decode_zone
+from pfp_service.wire.messages import TeamUpdate, decode_team, decode_zone
 from pfp_service.wire.messages.structs import Bounds, ThreatUpdate
 from pfp_service.wire.messages.world import WorldSnapshot
 from pfp_service.world import mobility, translate
@@ -223,6 +223,16 @@ def decode_state(data: bytes, bounds: Bounds | None, origin: Origin | None) -> U
     return mobility.check(decode_unit_state(data, bounds, origin))
 
 
+def _decode_team(data: bytes, bounds: Bounds | None, origin: Origin | None) -> TeamUpdate:
+    """The wire's decoder, then its goal's mobility class's check: refused on ``$.goal.mobility...`` whole,
+    not once per member when each is given its place."""
+    team = decode_team(data, bounds, origin)
+    refused = mobility.refusal(team.goal) if team.goal is not None else None
+    if refused is not None:
+        raise InputError("$.goal" + refused.path[1:], refused.reason)
+    return team
+
+
 _FIELDS: dict[type[Any], tuple[str, ...]] = {}  # an input class's field names, looked up once
 
 
@@ -327,7 +337,7 @@ KINDS: tuple[Kind, ...] = (
         "write",
         (TeamPut, TeamRemoved),
         schema="team",
-        decode=decode_team,
+        decode=_decode_team,
         writers=("commander",),
         store=Stored("teams", "id"),
         log_put=_team_put,

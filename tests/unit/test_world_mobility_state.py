@@ -162,3 +162,17 @@ def test_a_state_naming_an_unknown_class_is_refused_on_its_field_and_the_others_
         2.0,
     )
     assert _status(out, "good")[0] == "en_route"
+
+
+def test_a_team_goal_naming_an_unknown_class_is_refused_whole_on_its_field():
+    team = BY_NAME["team"]
+    body = {"members": ["a", "b"], "goal": {"position": [0.0, 0.0], "mobility": {"class": "hovercraft"}}}
+    with pytest.raises(InputError) as err:
+        team.decode(json.dumps(body).encode(), None, None)
+    assert err.value.path == "$.goal.mobility.class" and "hovercraft" in err.value.reason
+    body["goal"]["mobility"] = {"class": "foot", "max_slope_deg": 10}
+    with pytest.raises(InputError) as err:
+        team.decode(json.dumps(body).encode(), None, None)
+    assert err.value.path == "$.goal.mobility.max_slope_deg"
+    body["goal"]["mobility"] = {"class": "tracked"}
+    assert team.decode(json.dumps(body).encode(), None, None).goal.mobility == GoalMobility(kind="tracked")
