@@ -176,3 +176,33 @@ def test_a_team_goal_naming_an_unknown_class_is_refused_whole_on_its_field():
     assert err.value.path == "$.goal.mobility.max_slope_deg"
     body["goal"]["mobility"] = {"class": "tracked"}
     assert team.decode(json.dumps(body).encode(), None, None).goal.mobility == GoalMobility(kind="tracked")
+
+
+def test_a_team_preview_replays_each_member_with_its_class(ground):
+    import time
+
+    from pfp_service.wire.messages import TeamPreviewRequest
+    from pfp_service.world import team_preview
+
+    w = _world(ground)
+    classes = {"rifle": "foot", "tank": "tracked"}
+    w.apply(
+        [
+            StateReported(
+                u,
+                UnitState(position=(60.0 * k, -2000.0), seq=1, speed_mps=5.0, mobility=GoalMobility(kind=c)),
+            )
+            for k, (u, c) in enumerate(classes.items())
+        ],
+        0.0,
+    )
+    team = TeamUpdate(members=list(classes), goal=Goal(position=ON_THE_WALL), offsets={"tank": (0.0, 10.0)})
+    w.apply([TeamPut("alpha", team)], 0.0)
+    seed = team_preview.seed(w, "alpha", 0.0)
+    assert seed is not None
+    assert {m.unit: m.mobility for m in seed.members} == {u: GoalMobility(kind=c) for u, c in classes.items()}
+    got = team_preview.replay(seed, TeamPreviewRequest(horizon_s=5.0, dt_s=1.0), time.monotonic, 60.0)
+    assert {m.unit: m.statuses[0].status.value for m in got.members} == {
+        "rifle": "en_route",
+        "tank": "en_route",
+    }
