@@ -77,7 +77,7 @@ from pfp_service.world.events import (
 )
 from pfp_service.world.team_outsiders import guided as outsider_guided
 from pfp_service.world.team_outsiders import nearby, reach
-from pfp_service.world.units import Started, UnitRecord
+from pfp_service.world.units import TRANSITIONS, Started, Step, UnitRecord
 from pfp_service.world.world import World
 
 __all__ = ["MAX_REPLY_POINTS", "MemberSeed", "TeamSeed", "replay", "seed"]
@@ -315,6 +315,8 @@ def replay(
     for m in guided:  # the live steppers, mid-escape included: the replay is their stream
         assert m.stepper is not None and m.origin is not None
         rec = w.records.units[m.unit]
+        if (rec.phase, Step.STARTED) not in TRANSITIONS:  # judged arrived or trapped where it stands: as live
+            continue
         w.records.book.started(rec, Started((m.goal, m.origin, m.stepper.params), copy.deepcopy(m.stepper)))  # type: ignore[arg-type]
     for c in others:  # an outsider's statuses and track are not in the reply
         c.max_changes = 0
