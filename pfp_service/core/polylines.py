@@ -315,7 +315,7 @@ def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores:
             direct = segment_costs(field, np.repeat(pts[i : i + 1], len(js), axis=0), pts[js], lam, spacing)
             ok = direct <= (prefix[js] - prefix[i]) * (1.0 + 1e-12)
             for j in js[ok]:
-                if cores is None or not cores.first_hit(pts[[i, j]]):
+                if cores is None or _segment_clear(cores, pts[[i, j]]):
                     best = int(j)
                     break
             if best > i + 1:
@@ -323,6 +323,23 @@ def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores:
         keep.append(best)
         i = best
     return np.array(keep)
+
+
+def _segment_clear(cores: Cores, seg: np.ndarray) -> bool:
+    """``not cores.first_hit(seg)`` for one segment: the zones exactly, then the cores compiled (``_clear``).
+
+    The same verdict, sooner: a segment that touches a zone is answered by
+    the zone, and the cores are sampled as ``Cores.densify`` samples them.
+    """
+    if cores.zones:
+        where, zone = cores.zones.first_hit(seg, cores.zone_margin_m)
+        if where >= 0:
+            return not zone and not cores.first_hit(seg)  # a zone with no name: as first_hit words it
+    if not len(cores.packed):
+        return True
+    h = cores.min_spread_m / 4.0
+    (ax, ay), (bx, by) = seg.tolist()
+    return bool(_clear(cores.packed, cores.boxes, float(cores.fraction), ax, ay, bx, by, float(h)))
 
 
 def pieces(pts: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
