@@ -379,7 +379,9 @@ def _wide(
         for j, threat in enumerate(touched):
             w = np.flatnonzero(meet[:, j] & ~hit)
             if len(w):
-                hit[w] = True if sight is None else _seen_in_boxes(threat, boxes[j], units[w], intensity, sight)
+                hit[w] = (
+                    True if sight is None else _seen_in_boxes(threat, boxes[j], units[w], intensity, sight)
+                )
     return hit
 
 
@@ -443,13 +445,16 @@ def replan(
     changes: list[ThreatChange],
     directions: list[Direction],
     zones: Sequence[tuple[str, str]] = (),
+    owed: Sequence[str] = (),
 ) -> ReplanEvent:
     """The event of a batch that changed the threats or zones: what changed, and the units guided afresh.
 
     ``zones`` are ``(zone id, change)``; they are named in the reason (``zone Z put``)
-    before the threats, since ``changes`` lists threats only.
+    before the threats, since ``changes`` lists threats only.  ``owed``: a wave's units
+    to be told in the next applies (``world.wave``), named with those told in this one.
     """
-    guided = sorted(d.unit for d in directions if d.status is not DirectionStatus.NO_GOAL)
+    told = {d.unit for d in directions if d.status is not DirectionStatus.NO_GOAL}
+    guided = sorted(told.union(owed))
     shown = changes[:MAX_EVENT_ITEMS]
     said = [f"zone {z} {c}" for z, c in zones] + [f"threat {c.threat} {c.change}" for c in shown]
     reason = "; ".join(said[:4])
