@@ -59,7 +59,7 @@ K = keys.KeyKind
 # look-ahead points in the next ``apply`` (``World.wave_pending``; figures: docs/operations.md, "The wave first")
 WAVE_FIRST = 64
 # ... and those points (and their jobs) follow at most this many units an ``apply``, the rest owed on
-OWED_PER_TICK = 128
+OWED_PER_TICK = 64
 # the key a timer's fault is rejected on (a unit's goal for the rest)
 TIMER_KEYS = {"expire": K.THREAT, "sight": K.THREAT, "zone_expire": K.ZONE, "peer": K.ALIVE_PLANNER}
 
