@@ -79,6 +79,7 @@ ZONE_REACH = 0.25  # a zone's box is widened by this share of its diagonal: its 
 # path): its corridor is then the box of its position and goal, widened by this share of their distance
 WIDE_REACH = 0.5
 WIDE_SAMPLES = 24  # over terrain, that box is looked at on this many points a side for a threat's sight
+WIDE_BLOCK = 256  # ... this many units' points at once (4.7 MB of points and levels)
 Failed = list[tuple[UnitRecord, BaseException]]
 
 
@@ -405,18 +406,21 @@ def _seen_in_boxes(
     re-judges hundreds of deliberating units, and a field a unit cost a
     millisecond each.
     """
+    blind_f = ThreatField([threat], intensity)  # type: ignore[arg-type]
+    masked_f = ThreatField([threat], intensity, sight=sight)  # type: ignore[arg-type]
     lo = np.maximum(units[:, :2], box[None, :2])  # (n, 2): x0, y0 of each part
     hi = np.minimum(units[:, 2:], box[None, 2:])
     t = np.linspace(0.0, 1.0, WIDE_SAMPLES)
     xs = lo[:, None, 0] + t[None, :] * (hi[:, 0] - lo[:, 0])[:, None]  # (n, k)
     ys = lo[:, None, 1] + t[None, :] * (hi[:, 1] - lo[:, 1])[:, None]
-    k = WIDE_SAMPLES
-    pts = np.empty((len(units), k, k, 2))
-    pts[..., 0] = xs[:, None, :]
-    pts[..., 1] = ys[:, :, None]
-    blind = ThreatField([threat], intensity).level(pts)  # type: ignore[arg-type]
-    masked = ThreatField([threat], intensity, sight=sight).level(pts)  # type: ignore[arg-type]
-    return np.asarray(((blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any(axis=(1, 2)))
+    k, out = WIDE_SAMPLES, np.zeros(len(units), dtype=bool)
+    for a in range(0, len(units), WIDE_BLOCK):  # the points' memory bounded, whatever the fleet
+        pts = np.empty((len(units[a : a + WIDE_BLOCK]), k, k, 2))
+        pts[..., 0] = xs[a : a + WIDE_BLOCK, None, :]
+        pts[..., 1] = ys[a : a + WIDE_BLOCK, :, None]
+        blind, masked = blind_f.level(pts), masked_f.level(pts)
+        out[a : a + WIDE_BLOCK] = ((blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any(axis=(1, 2))
+    return out
 
 
 def _seen(

@@ -85,8 +85,9 @@ def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
     assert masked.level(front).min() > 0.5 * ThreatField([behind], "peak").level(front).min()
 
 
-def test_over_terrain_each_wide_unit_is_reached_as_its_own_box_says():
+def test_over_terrain_each_wide_unit_is_reached_as_its_own_box_says(monkeypatch):
     """A wave's deliberating units, judged all at once, each as the threat's sight over its own widened box says."""
+    monkeypatch.setattr(steering, "WIDE_BLOCK", 7)  # several blocks, the last one short
     from pfp_service.core import Threat
     from pfp_service.terrain.grid import TerrainGrid
     from pfp_service.terrain.threat_sight import TerrainSight
