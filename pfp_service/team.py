@@ -10,6 +10,10 @@ A team file is YAML::
          stops: [{at_s: 10, for_s: 15}]}
 
 ``goal`` may be left out (the unit waits for one, e.g. from ``pfp inject``).
+``mobility: {class: wheeled, max_slope_deg: 20}`` names the unit's mobility
+class (``core.mobility.CLASSES``), which ``pfp fleet`` sends on every state
+(the planner plans it round its class's slope barriers over terrain);
+absent, ``pfp fleet --mobility``'s, else none (the planner's own class).
 A unit never says a planner step: it drives at ``speed_mps`` and reports at
 ``rate_hz``, with its fix off by ``gps_sigma_m`` and its ``stops``, as a real
 vehicle does (``core.tracking``).
@@ -42,16 +46,18 @@ import msgspec
 from msgspec import Meta
 
 from pfp_service.constraints import Id, Point
+from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, MobilityClass
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin, localise_document
 from pfp_service.scenario import TeamSpec, ZoneSpec, check_teams
-from pfp_service.wire import UnitKind
+from pfp_service.wire import GoalMobility, UnitKind
 from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone
 from pfp_service.yamlio import load_yaml
 
 __all__ = [
     "CHOICES",
     "SPEEDS_MPS",
+    "MobilitySpec",
     "Stop",
     "Team",
     "UnitSpec",
@@ -65,7 +71,9 @@ Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
 RateHz = Annotated[float, Meta(gt=0.0, le=50.0)]
 SigmaM = Annotated[float, Meta(ge=0.0, le=100.0)]
 Seconds = Annotated[float, Meta(ge=0.0, le=1e7)]
-CHOICES: dict[str, tuple[str, ...]] = {"kind": tuple(k.value for k in UnitKind)}
+# a slope limit the planner plans at: none gentler than the gentlest class's (``core.mobility.planned_limit``)
+PlannedSlope = Annotated[float, Meta(ge=CLASS_LIMITS[0], le=89.0)]
+CHOICES: dict[str, tuple[str, ...]] = {"kind": tuple(k.value for k in UnitKind), "class": tuple(CLASSES)}
 # Typical ground speeds used by generated teams: a soldier walking, a small robot driving.
 SPEEDS_MPS: dict[UnitKind, tuple[float, float]] = {
     UnitKind.MANNED: (1.2, 1.6),
@@ -78,6 +86,16 @@ class Stop(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True
 
     at_s: Seconds
     for_s: Annotated[float, Meta(gt=0.0, le=1e7)]
+
+
+class MobilitySpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
+    """A unit's mobility class in a team file, as its states carry it (``wire.GoalMobility``)."""
+
+    kind: MobilityClass = msgspec.field(name="class")
+    max_slope_deg: PlannedSlope | None = None
+
+    def wire(self) -> GoalMobility:
+        return GoalMobility(kind=self.kind, max_slope_deg=self.max_slope_deg)
 
 
 class UnitSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):
@@ -96,6 +114,7 @@ class UnitSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=
     rate_hz: RateHz | None = None
     stops: Annotated[list[Stop], Meta(max_length=1_000)] | None = None
     gps_sigma_m: SigmaM | None = None
+    mobility: MobilitySpec | None = None
 
 
 class Team(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):

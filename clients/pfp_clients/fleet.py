@@ -52,6 +52,7 @@ from pfp_service.wire import (
     Direction,
     DirectionStatus,
     Goal,
+    GoalMobility,
     TeamUpdate,
     decode_direction,
     encode,
@@ -79,6 +80,7 @@ class FleetOptions:
             when an origin is known, else metres).
         gps_sigma_m: each unit's fix error (metres per axis), unless its spec says.
         stops: ``(at_s, for_s)`` halts of each unit, unless its spec says.
+        mobility: the mobility class each unit's states carry, unless its spec says (None: none).
         seed: seeds the GPS noise (with each unit's id).
     """
 
@@ -93,11 +95,17 @@ class FleetOptions:
     gps_sigma_m: float = 0.0
     stops: tuple[tuple[float, float], ...] = ()
     seed: int = 0
+    mobility: GoalMobility | None = None
 
     def unit(self, spec: UnitSpec) -> SimUnit:
         """The simulated vehicle of ``spec``, with the fleet's defaults where the spec says nothing."""
         return SimUnit(
-            spec, rate_hz=self.rate_hz, gps_sigma_m=self.gps_sigma_m, stops=self.stops, seed=self.seed
+            spec,
+            rate_hz=self.rate_hz,
+            gps_sigma_m=self.gps_sigma_m,
+            stops=self.stops,
+            seed=self.seed,
+            mobility=self.mobility,
         )
 
 

@@ -17,10 +17,11 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Final
 
-from pfp_service.wire import Direction, DirectionStatus, Goal, Progress, UnitKind, UnitState
+from pfp_service.wire import Direction, DirectionStatus, Goal, GoalMobility, Progress, UnitKind, UnitState
 
 __all__ = [
     "CARDINALS",
+    "ON_FOOT",
     "STATUS_LABELS",
     "HandheldModel",
     "Settings",
@@ -50,6 +51,7 @@ STATUS_LABELS: Final = {
     DirectionStatus.YIELDING: "YIELDING",
 }
 WAITING_LABEL: Final = "WAITING FOR PLANNER"
+ON_FOOT: Final = GoalMobility(kind="foot")  # a handheld is a soldier's: planned round a soldier's slopes
 _MOVING: Final = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 
 
@@ -416,6 +418,7 @@ class HandheldModel:
             kind=UnitKind.MANNED,
             speed_mps=round(self.speed_mps, 6),
             heading_deg=self.heading_deg,
+            mobility=ON_FOOT,
         )
 
     def goal_to_send(self, now: float) -> Goal | None:

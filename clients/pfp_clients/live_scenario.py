@@ -10,7 +10,8 @@
   delta the plan resolves, and the expectations that the unit arrives and
   never enters a zone;
 * one simulated unit at ``start`` (the fleet's sim), moving one plan step per
-  tick, so the live stream walks the same steps the plan does;
+  tick, so the live stream walks the same steps the plan does, its states
+  naming the ``unit:`` block's mobility class (and slope limit, if given);
 * the plan itself, computed here with the same engine, to judge the live
   track against: every live point within ``tolerance`` (the goal's arrival
   tolerance) of the planned path, and every planned point of the live track.
@@ -30,10 +31,11 @@ from typing import Any
 import numpy as np
 
 from pfp_clients.script import AddThreat, AddZone, Expect, Script, SetGoal, Step
+from pfp_service.core.mobility import CLASS_LIMITS, planned_limit
 from pfp_service.errors import InputError
 from pfp_service.files import read_text
 from pfp_service.scenario import Scenario, load_scenario
-from pfp_service.team import Team, UnitSpec
+from pfp_service.team import MobilitySpec, Team, UnitSpec
 from pfp_service.yamlio import load
 
 __all__ = [
@@ -141,10 +143,19 @@ def live_scenario(path: str | Path, unit: str = "u1", rate_hz: float = 5.0) -> L
             *(Expect(unit=unit, never_enters=z.zone) for z in zones),
         ],
     )
+    slope = sc.unit.max_slope_deg
+    if slope is not None and planned_limit(slope) is None:
+        raise InputError(
+            f"{p.name}, unit.max_slope_deg",
+            f"{slope:g} is below {CLASS_LIMITS[0]}, the gentlest slope limit a live planner plans",
+        )
+    mobility = MobilitySpec(kind=sc.unit.kind, max_slope_deg=slope)
     team = Team(
         name=sc.name,
         origin=sc.origin,
-        units=[UnitSpec(id=unit, start=sc.start, goal=sc.goal, speed_mps=r.step * rate_hz)],
+        units=[
+            UnitSpec(id=unit, start=sc.start, goal=sc.goal, speed_mps=r.step * rate_hz, mobility=mobility)
+        ],
     )
     return LiveScenario(sc, script, team, unit, rate_hz, path_xy, str(result.status), r.tolerance)
 

@@ -9,8 +9,8 @@ never further from where it reported than the direction's ``reach_m`` --
 unless the planner said it is arrived, trapped or has no goal, or it is in
 one of its ``stops``.  It behaves as a real vehicle does, not as the
 planner's step: its own speed and report rate, its stops (reported as
-``speed_mps`` 0), and a fix off by a seeded Gaussian ``gps_sigma_m`` per
-axis.  Arrival is only ever what the planner reported (status ``arrived``
+``speed_mps`` 0), a fix off by a seeded Gaussian ``gps_sigma_m`` per
+axis, and its mobility class on every state.  Arrival is only ever what the planner reported (status ``arrived``
 within its tolerance).
 """
 
@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from pfp_service.team import UnitSpec
-from pfp_service.wire import Direction, DirectionStatus, UnitState
+from pfp_service.wire import Direction, DirectionStatus, GoalMobility, UnitState
 
 __all__ = ["SimUnit", "TrackPoint"]
 
@@ -55,6 +55,7 @@ class SimUnit:
     rate_hz: float = 5.0  # its reports per simulated second (the spec's, else the fleet's)
     gps_sigma_m: float = 0.0  # its fix's error, metres per axis (the spec's, else the fleet's)
     stops: tuple[tuple[float, float], ...] = ()  # (at_s, for_s): halts (the spec's, else the fleet's)
+    mobility: GoalMobility | None = None  # its class on every state (the spec's, else the fleet's)
     seed: int = 0
     next_report_s: float = 0.0
     reported_at: tuple[float, float] | None = None  # the true position when it last reported
@@ -69,6 +70,8 @@ class SimUnit:
             self.gps_sigma_m = self.spec.gps_sigma_m
         if self.spec.stops is not None:
             self.stops = tuple((s.at_s, s.for_s) for s in self.spec.stops)
+        if self.spec.mobility is not None:
+            self.mobility = self.spec.mobility.wire()
         self._rng = random.Random(zlib.crc32(self.spec.id.encode()) ^ (self.seed * 0x9E3779B1))
 
     def stopped(self, t_s: float) -> bool:
@@ -120,6 +123,7 @@ class SimUnit:
             kind=self.spec.kind,
             speed_mps=self.spec.speed_mps if moving else 0.0,
             heading_deg=heading,
+            mobility=self.mobility,
         )
 
     def on_direction(

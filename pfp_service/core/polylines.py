@@ -15,7 +15,7 @@ import math
 import numba
 import numpy as np
 
-from pfp_service.core import kernels
+from pfp_service.core import kernels, zone_kernels
 from pfp_service.core.cores import Cores
 from pfp_service.core.cull import cell_level, index_of, point_level
 from pfp_service.core.threat import ThreatField
@@ -299,11 +299,80 @@ def shortcut_kept(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores 
     return _shortcut_kept_numpy(field, pts, lam, cores)
 
 
-def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None) -> np.ndarray:
-    """``shortcut_kept`` with every candidate of a window evaluated at once (any field, zones included)."""
+@numba.njit(cache=True, nogil=True)
+def _chunked_kept(  # type: ignore[no-untyped-def]
+    pts, prefix, lam, packed, growing, sampling, cpacked, boxes, fraction, spacing, edges, offsets, circles, zboxes, margin
+):  # fmt: skip
+    """``_shortcut_kept_numpy`` compiled, for a field with no cull index: the same chunks, counts and tests.
+
+    A chunk's candidates are priced on the interval count its longest needs
+    (``segment_costs``' rule), each sample's level by ``kernels.point_level``
+    at the point ``numpy.linspace`` gives; a candidate's clearance is the
+    zones' exact test (``zone_kernels.first_hit``), then the cores' sampling
+    (``_clear``).  With ``growing`` (no threat's weight below zero, and
+    ``lam >= 0``) a candidate's sum stops once it is past its limit.
+    """
+    n = pts.shape[0]
+    keep = np.empty(n, dtype=np.int64)
+    keep[0] = 0
+    m = 1
+    i = 0
+    seg = np.empty((2, 2))
+    while i < n - 1:
+        best = i + 1
+        ax, ay = pts[i, 0], pts[i, 1]
+        for top in range(min(n - 1, i + _WINDOW), i + 1, -_CHUNK):
+            low = max(i + 1, top - _CHUNK)
+            longest = 0.0
+            for j in range(top, low, -1):
+                longest = max(longest, math.hypot(pts[j, 0] - ax, pts[j, 1] - ay))
+            k = _intervals(longest, sampling)
+            step = 1.0 / k
+            for j in range(top, low, -1):
+                dx, dy = pts[j, 0] - ax, pts[j, 1] - ay
+                length = math.hypot(dx, dy)
+                limit = (prefix[j] - prefix[i]) * (1.0 + 1e-12)
+                acc = 0.0
+                for r in range(k + 1):
+                    t = 1.0 if r == k else r * step
+                    w = 1.0 if r == 0 or r == k else (4.0 if r % 2 == 1 else 2.0)
+                    acc += kernels.point_level(packed, ax + t * dx, ay + t * dy) * w
+                    # no term is negative and rounding is monotone: past the limit now, past it in the end
+                    if growing and length + lam * length * acc / (3.0 * k) > limit:
+                        break
+                if not length + lam * length * acc / (3.0 * k) <= limit:
+                    continue
+                if zboxes.shape[0]:  # a zone in force (a circle has no edges)
+                    seg[0, 0], seg[0, 1], seg[1, 0], seg[1, 1] = ax, ay, pts[j, 0], pts[j, 1]
+                    if zone_kernels.first_hit(edges, offsets, circles, zboxes, seg, margin)[1] >= 0:
+                        continue
+                if cpacked.shape[0] and not _clear(
+                    cpacked, boxes, fraction, ax, ay, pts[j, 0], pts[j, 1], spacing
+                ):
+                    continue
+                best = j
+                break
+            if best > i + 1:
+                break
+        keep[m] = best
+        m += 1
+        i = best
+    return keep[:m].copy()
+
+
+def _shortcut_kept_numpy(
+    field: ThreatField, pts: np.ndarray, lam: float, cores: Cores | None, compiled: bool = True
+) -> np.ndarray:
+    """``shortcut_kept`` with every candidate of a window evaluated at once (any field, zones included).
+
+    Without a cull index (and with named zones) the same loop runs compiled
+    (``_chunked_kept``) unless ``compiled`` is false.
+    """
     spacing = sample_spacing(field)
     seg = segment_costs(field, pts[:-1], pts[1:], lam, spacing)
     prefix = np.concatenate([[0.0], np.cumsum(seg)])
+    if compiled and index_of(field) is None and (cores is None or all(cores.zones.ids)):
+        return _chunked(field, pts, prefix, lam, cores, spacing)
     keep = [0]
     i = 0
     n = len(pts)
@@ -315,7 +384,7 @@ def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores:
             direct = segment_costs(field, np.repeat(pts[i : i + 1], len(js), axis=0), pts[js], lam, spacing)
             ok = direct <= (prefix[js] - prefix[i]) * (1.0 + 1e-12)
             for j in js[ok]:
-                if cores is None or not cores.first_hit(pts[[i, j]]):
+                if cores is None or _segment_clear(cores, pts[[i, j]]):
                     best = int(j)
                     break
             if best > i + 1:
@@ -323,6 +392,52 @@ def _shortcut_kept_numpy(field: ThreatField, pts: np.ndarray, lam: float, cores:
         keep.append(best)
         i = best
     return np.array(keep)
+
+
+def _chunked(
+    field: ThreatField, pts: np.ndarray, prefix: np.ndarray, lam: float, cores: Cores | None, sampling: float
+) -> np.ndarray:
+    """``_chunked_kept`` on ``field``'s rows and ``cores``' (the zones' and the threat cores')."""
+    none = np.zeros((0, 4))
+    zones = cores.zones if cores is not None else None
+    check = cores is not None and len(cores.packed) > 0
+    out: np.ndarray = _chunked_kept(
+        np.ascontiguousarray(pts, dtype=np.float64),
+        np.ascontiguousarray(prefix, dtype=np.float64),
+        float(lam),
+        np.ascontiguousarray(field.packed),
+        bool(lam >= 0 and (field.packed[:, kernels.SCALE] >= 0).all()),
+        float(sampling),
+        np.ascontiguousarray(cores.packed)
+        if check and cores is not None
+        else np.zeros((0, len(kernels.PACKED_COLUMNS))),
+        np.ascontiguousarray(cores.boxes) if check and cores is not None else none,
+        float(cores.fraction) if cores is not None else 1.0,
+        float(cores.min_spread_m / 4.0) if cores is not None else math.inf,
+        zones.edges if zones else none,
+        zones.offsets if zones else np.zeros(1, dtype=np.int64),
+        zones.circles if zones else np.zeros((0, 3)),
+        zones.boxes if zones else none,
+        float(cores.zone_margin_m) if cores is not None else 0.0,
+    )
+    return out
+
+
+def _segment_clear(cores: Cores, seg: np.ndarray) -> bool:
+    """``not cores.first_hit(seg)`` for one segment: the zones exactly, then the cores compiled (``_clear``).
+
+    The same verdict, sooner: a segment that touches a zone is answered by
+    the zone, and the cores are sampled as ``Cores.densify`` samples them.
+    """
+    if cores.zones:
+        where, zone = cores.zones.first_hit(seg, cores.zone_margin_m)
+        if where >= 0:
+            return not zone and not cores.first_hit(seg)  # a zone with no name: as first_hit words it
+    if not len(cores.packed):
+        return True
+    h = cores.min_spread_m / 4.0
+    (ax, ay), (bx, by) = seg.tolist()
+    return bool(_clear(cores.packed, cores.boxes, float(cores.fraction), ax, ay, bx, by, float(h)))
 
 
 def pieces(pts: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:

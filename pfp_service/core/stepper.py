@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import copy
 import math
+import weakref
 
 from pfp_service.core import foresight, steprule, tracking, zones
 from pfp_service.core.advice import Advice, Need, StepStatus
@@ -54,6 +55,25 @@ from pfp_service.core.threat import ThreatField
 from pfp_service.core.tracking import Route
 
 __all__ = ["Advice", "Bounds", "Need", "StepStatus", "Stepper"]
+
+
+_GOAL_ZONES: weakref.WeakKeyDictionary[zones.ZoneSet, dict[tuple[float, float], str]] = (
+    weakref.WeakKeyDictionary()
+)
+_GOALS_PER_ZONES = 4096  # goals remembered per zone set (forgotten all at once past it)
+
+
+def _zone_at_goal(zs: zones.ZoneSet, goal: tuple[float, float]) -> str:
+    """``zs.zone_at(*goal)``, asked once per zone set and goal: every step asks it (a zone set is immutable)."""
+    per = _GOAL_ZONES.get(zs)
+    if per is None:
+        per = _GOAL_ZONES[zs] = {}
+    got = per.get(goal)
+    if got is None:
+        if len(per) >= _GOALS_PER_ZONES:
+            per.clear()
+        got = per[goal] = zs.zone_at(*goal)
+    return got
 
 
 class Stepper(DescentStepper):
@@ -222,7 +242,7 @@ class Stepper(DescentStepper):
         zone Z``), or is ``trapped`` when there is none.  ``None``: descend.
         """
         zones = field.zones
-        goal_in = zones.zone_at(*self.goal)
+        goal_in = _zone_at_goal(zones, self.goal)
         if goal_in:
             return self._walled(field, x, y, f"the goal lies in zone {goal_in}")
         if self._run is not None:

@@ -359,10 +359,29 @@ class ZoneSet:
         if least > 0.0 and len(pts) > 1:
             # a segment's closest approach lies between its vertices: ask GEOS, once
             line = shapely.LineString(pts)
-            least = min(least, min(float(z.geometry.distance(line)) for z in self.zones))
+            lower = self._box_gaps(pts)
+            for z in np.argsort(lower, kind="stable").tolist():
+                if lower[z] > least:  # this zone and every later one are farther than the least so far
+                    break
+                least = min(least, float(self.zones[z].geometry.distance(line)))
             if self.first_hit(pts)[0] >= 0:
                 least = min(least, 0.0)
         return least
+
+    def _box_gaps(self, pts: np.ndarray) -> np.ndarray:
+        """Per zone, at most its distance from the polyline ``pts``: the least gap between its box and a segment's.
+
+        A zone's geometry lies in its box (a circle's polygon is inscribed in
+        the circle).  Shaved by a hair, so rounding never makes it exceed the
+        true distance.
+        """
+        lo = np.minimum(pts[:-1], pts[1:])
+        hi = np.maximum(pts[:-1], pts[1:])
+        b = self.boxes
+        gx = np.maximum(np.maximum(b[:, None, 0] - hi[None, :, 0], lo[None, :, 0] - b[:, None, 2]), 0.0)
+        gy = np.maximum(np.maximum(b[:, None, 1] - hi[None, :, 1], lo[None, :, 1] - b[:, None, 3]), 0.0)
+        gap: np.ndarray = np.hypot(gx, gy).min(axis=1)
+        return gap * (1.0 - 1e-9) - 1e-9 * float(np.abs(b).max())
 
     def raster(
         self,

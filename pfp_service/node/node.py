@@ -60,7 +60,6 @@ from pfp_service.wire import (
     ForgottenEvent,
     PlannerStatus,
     UnitState,
-    decode_unit_state,
     encode,
     keys,
 )
@@ -72,7 +71,7 @@ from pfp_service.world.events import (
     mission_message,
 )
 from pfp_service.world.intake import Intake
-from pfp_service.world.kinds import KINDS, Kind
+from pfp_service.world.kinds import KINDS, Kind, decode_state
 from pfp_service.world.world import World
 
 __all__ = ["PlannerNode"]
@@ -272,7 +271,7 @@ class PlannerNode:
         try:
             uid = _remembered(self._uid_of, key, self._state_keys.id)
             kind = keys.KeyKind.UNIT_STATE
-            return uid, decode_unit_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
+            return uid, decode_state(sample.payload.to_bytes(), self.cfg.bounds, self._origin)
         except InputError as err:
             self._push(InputRejected(key, err, kind))
             return None

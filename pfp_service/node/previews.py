@@ -216,23 +216,25 @@ class PreviewService:
             if team is not None and not world.owns(team.lead or min(team.units(), default=tid)):
                 query.drop()  # type: ignore[no-untyped-call]  # zenoh stub
                 return
-            seed = team_seed(world, tid, self._clock())
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            request = decode(TeamPreviewRequest, payload) if payload else TeamPreviewRequest()
+            seed = team_seed(world, tid, self._clock(), request)  # its horizon bounds the outsiders taken
             if seed is None:
                 raise InputError("key", f"no team {tid!r} in force")
         except InputError as err:
             self.refuse(query, ErrorReply.of(err))
             return
-        self.submit_team(query, key, seed, received)
-
-    def submit_team(self, query: zenoh.Query, key: str, seed: TeamSeed, received: float) -> None:
-        """Admit one team preview (``world.team_preview``) and queue it: heavy, a replay of every member."""
-        payload = query.payload.to_bytes() if query.payload is not None else b""
-        try:
-            request = decode(TeamPreviewRequest, payload) if payload else TeamPreviewRequest()
-        except InputError as err:
-            self.refuse(query, ErrorReply.of(err))
+        except Exception as exc:  # a bulkhead: this preview fails, the loop and every other answer go on
+            log.exception("team preview seed failed", extra={"fields": {"key": key}})
+            self.refuse(query, ErrorReply(error=f"the planner could not seed this team preview: {exc}"[:512]))
             return
-        steps = len(seed.members) * request.horizon_s / request.dt_s
+        self.submit_team(query, key, seed, request, received)
+
+    def submit_team(
+        self, query: zenoh.Query, key: str, seed: TeamSeed, request: TeamPreviewRequest, received: float
+    ) -> None:
+        """Admit one team preview (``world.team_preview``) and queue it: heavy, a replay of every member and outsider."""
+        steps = (len(seed.members) + len(seed.outsiders)) * request.horizon_s / request.dt_s
         job = (seed, request, self._team_budget_s)
         self._queue(query, key, compute_team, job, HEAVY, steps, received, None, self._team_budget_s)
 

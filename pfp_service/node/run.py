@@ -50,6 +50,12 @@ def serve(cfg: ServeConfig, ready: threading.Event | None = None, stop: threadin
 def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Event, log: Any) -> int:
     import zenoh
 
+    # the configuration first: a bad --zenoh-config is refused before the planner's code is imported
+    conf = zenoh_config(cfg)
+    if cfg.mode == "client":  # a router that is down (or restarting) is waited for, not an exit
+        conf.insert_json5("connect/timeout_ms", "-1")
+        conf.insert_json5("connect/exit_on_failure", "false")
+
     from pfp_service.node.node import PlannerNode  # noqa: F401 -- imported before the router listens: the
     from pfp_service.node.previews import preview_service
     from pfp_service.node.store import Store  # node subscribes the moment the session opens (issue 34)
@@ -60,10 +66,6 @@ def _serve(cfg: ServeConfig, ready: threading.Event | None, stop: threading.Even
         fork_server = _fork_server(cfg)
     with fork_server:
         store = None if cfg.state_dir in ("none", "auto") else Store(cfg.state_dir)
-        conf = zenoh_config(cfg)
-        if cfg.mode == "client":  # a router that is down (or restarting) is waited for, not an exit
-            conf.insert_json5("connect/timeout_ms", "-1")
-            conf.insert_json5("connect/exit_on_failure", "false")
         with contextlib.closing(store) if store is not None else contextlib.nullcontext():
             # the preview workers boot while the session opens: a client-mode planner waiting for its
             # router is ready to answer the moment the router comes, not seconds later

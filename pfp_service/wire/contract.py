@@ -62,7 +62,11 @@ MESSAGES: tuple[MessageSpec, ...] = (
                         speed_mps=1.2,
                         heading_deg=45.0,
                     ),
-                )
+                ),
+                (
+                    "unit_state.mobility",
+                    m.UnitState(position=(1.5, 2.25), seq=43, mobility=m.GoalMobility(kind="tracked")),
+                ),
             ]
         ),
     ),
@@ -295,6 +299,7 @@ MESSAGES: tuple[MessageSpec, ...] = (
                         )
                     ],
                     simulated_s=95.5,
+                    outsiders=["a1"],
                 ),
             ),
         ),

@@ -2,8 +2,10 @@
 
 Inputs keep their order; unit states are latest-wins per unit (a unit
 reporting again keeps its place in line, its newest state replacing the
-older).  A tick takes a bounded slice of each, the longest waiting first, so
-a storm is spread over ticks and no tick holds up the rest.  Past
+older; a class it named, ``mobility``, is kept on the newest if that names
+none, since a state without one changes nothing, ``world.mobility``).  A
+tick takes a bounded slice of each, the longest waiting first, so a storm is
+spread over ticks and no tick holds up the rest.  Past
 ``inputs_max`` an input is refused and counted, except a deliberation's
 answer (the unit's job would stand forever; they are bounded by the jobs
 asked, one per unit).  What was refused here, or at the node's other queues
@@ -18,7 +20,9 @@ import collections
 import itertools
 from dataclasses import dataclass, field
 
-from pfp_service.wire import UnitState
+import msgspec
+
+from pfp_service.wire import GoalMobility, UnitState
 from pfp_service.world.events import Deliberated, Input
 
 __all__ = ["Intake", "Slice"]
@@ -43,6 +47,8 @@ class Intake:
         self.units_per_tick = units_per_tick
         self._inputs: collections.deque[Input] = collections.deque()
         self._states: dict[str, tuple[UnitState, float]] = {}
+        # the class a waiting state named: kept if a newer state of its unit names none
+        self._named: dict[str, GoalMobility] = {}
         self._shed = 0
 
     def __len__(self) -> int:
@@ -58,6 +64,8 @@ class Intake:
 
     def state(self, unit: str, msg: UnitState, received: float) -> None:
         """A unit's newest state; an older one still waiting is replaced, in its place in line."""
+        if msg.mobility is not None:  # rare: a state without a class pays this one read
+            self._named[unit] = msg.mobility
         self._states[unit] = (msg, received)
 
     def refused(self, n: int = 1) -> None:
@@ -77,5 +85,15 @@ class Intake:
         else:  # the longest waiting first (a unit reporting again keeps its place: latest wins)
             first = list(itertools.islice(self._states, self.units_per_tick))
             got.states = {u: self._states.pop(u) for u in first}
+        if self._named:
+            self._carry(got.states)
         got.more = bool(self._inputs or self._states)
         return got
+
+    def _carry(self, states: dict[str, tuple[UnitState, float]]) -> None:
+        """The class a replaced state named, onto the newest state taken that names none."""
+        for unit in [u for u in self._named if u in states]:
+            mob = self._named.pop(unit)
+            msg, received = states[unit]
+            if msg.mobility is None:
+                states[unit] = (msgspec.structs.replace(msg, mobility=mob), received)

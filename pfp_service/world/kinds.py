@@ -33,8 +33,16 @@ import msgspec
 from pfp_service.core.params import Resolved
 from pfp_service.errors import InputError
 from pfp_service.geo import Origin
-from pfp_service.wire import Goal, decode_goal, decode_mission, decode_threat, decode_unit_state, keys
-from pfp_service.wire.messages import decode_team, decode_zone
+from pfp_service.wire import (
+    Goal,
+    UnitState,
+    decode_goal,
+    decode_mission,
+    decode_threat,
+    decode_unit_state,
+    keys,
+)
+from pfp_service.wire.messages import TeamUpdate, decode_team, decode_zone
 from pfp_service.wire.messages.structs import Bounds, ThreatUpdate
 from pfp_service.wire.messages.world import WorldSnapshot
 from pfp_service.world import mobility, translate
@@ -72,6 +80,7 @@ __all__ = [
     "LogLine",
     "Stored",
     "blame",
+    "decode_state",
     "held",
     "ident",
     "inputs_from_snapshot",
@@ -208,6 +217,22 @@ def _decode_goal(data: bytes, bounds: Bounds | None, origin: Origin | None) -> G
     return mobility.check(decode_goal(data, bounds, origin))
 
 
+def decode_state(data: bytes, bounds: Bounds | None, origin: Origin | None) -> UnitState:
+    """The wire's decoder, then its mobility class's check (``world.mobility``): a state naming an unknown
+    class is refused whole, as a goal is (a state without one pays one attribute read)."""
+    return mobility.check(decode_unit_state(data, bounds, origin))
+
+
+def _decode_team(data: bytes, bounds: Bounds | None, origin: Origin | None) -> TeamUpdate:
+    """The wire's decoder, then its goal's mobility class's check: refused on ``$.goal.mobility...`` whole,
+    not once per member when each is given its place."""
+    team = decode_team(data, bounds, origin)
+    refused = mobility.refusal(team.goal) if team.goal is not None else None
+    if refused is not None:
+        raise InputError("$.goal" + refused.path[1:], refused.reason)
+    return team
+
+
 _FIELDS: dict[type[Any], tuple[str, ...]] = {}  # an input class's field names, looked up once
 
 
@@ -312,7 +337,7 @@ KINDS: tuple[Kind, ...] = (
         "write",
         (TeamPut, TeamRemoved),
         schema="team",
-        decode=decode_team,
+        decode=_decode_team,
         writers=("commander",),
         store=Stored("teams", "id"),
         log_put=_team_put,
@@ -326,7 +351,7 @@ KINDS: tuple[Kind, ...] = (
         (StateReported,),
         blames_unit=True,
         schema="unit_state",
-        decode=decode_unit_state,
+        decode=decode_state,
         own_unit=True,
     ),
     Kind("unit token", K.ALIVE_UNIT, "token", (TokenChanged,), own_unit=True),

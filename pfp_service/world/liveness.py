@@ -50,6 +50,8 @@ class Liveness:
         x, y = state.position[0], state.position[1]
         rec.progress.report(x, y, state.t, now, state.speed_mps, told_to_move)
         self.book.reported(rec, (x, y), state.seq, kind, now, rec.progress.speed_mps)
+        if state.mobility is not None and state.mobility != rec.mobility:  # a class named anew: kept
+            self.book.classed(rec, state.mobility)
         if not rec.silence_timer:
             rec.silence_timer = True
             self.timers.set(now + self.settings.unit_stale_s, "silence", rec.id)

@@ -1,36 +1,48 @@
-"""A unit's mobility class, as its goal names it: the slope limit its barriers are made for.
+"""A unit's mobility class, as its state and its goal name it: the slope limit its barriers are made for.
 
-A goal may carry a ``mobility`` (``wire.GoalMobility``): a class of
-``core.mobility.CLASSES`` and optionally its ``max_slope_deg`` overridden.
-Over terrain the unit then plans around the ground steeper than that limit
-(``terrain.live.LiveTerrain.barriers``) instead of the planner's class's
-(``--terrain-unit``); without terrain it changes nothing.  The limit is
-planned at a class's limit (``core.mobility.CLASS_LIMITS``): an override at
-the steepest of them not above it, the safe side, since a barrier set for a
-new limit takes seconds to build over a large DEM and none is built on the
-live loop; an override below every class's limit is refused.  Sight stays the planner's class's:
-a threat's line of sight is computed once for every unit, at that height.
+A unit's state may carry a ``mobility`` (``wire.GoalMobility``): its standing
+class, kept on its record until a state names another (a state without one
+changes nothing, so the 5,000 states a second pay nothing for it).  A goal
+may carry one too: it overrides the standing class for that goal (a team's
+goal with one overrides each member's; without one each member keeps its
+own).  Absent both, the planner's class (``--terrain-unit``).  A class is a
+class of ``core.mobility.CLASSES`` and optionally its ``max_slope_deg``
+overridden.  Over terrain the unit then plans around the ground steeper than
+that limit (``terrain.live.LiveTerrain.barriers``) instead of the planner's
+class's; without terrain it changes nothing.  The limit is planned at a
+class's limit (``core.mobility.CLASS_LIMITS``): an override at the steepest
+of them not above it, the safe side, since a barrier set for a new limit
+takes seconds to build over a large DEM and none is built on the live loop;
+an override below every class's limit is refused.  A state that changes the
+limit a unit is planned at re-judges it at once (``units.Units.classed``).
+Sight stays the planner's class's: a threat's line of sight is computed once
+for every unit, at that height.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, planned_limit
 from pfp_service.errors import InputError
-from pfp_service.wire import Goal
+from pfp_service.wire import Goal, GoalMobility, UnitState
 
-__all__ = ["by_limit", "check", "refusal", "slope_limit"]
+__all__ = ["by_limit", "check", "limit_of", "refusal", "slope_limit"]
+
+M = TypeVar("M", Goal, UnitState)
 
 
-def refusal(goal: Goal) -> InputError | None:
-    """Why ``goal`` is refused for its mobility class (``$.mobility.class``: not one of ``CLASSES``), or ``None``."""
-    mob = goal.mobility
-    if mob is not None and mob.kind not in CLASSES:
+def refusal(msg: Goal | UnitState) -> InputError | None:
+    """Why ``msg`` (a goal or a state) is refused for its mobility class (``$.mobility.class``: not one of
+    ``CLASSES``; ``$.mobility.max_slope_deg``: below every class limit), or ``None``."""
+    mob = msg.mobility
+    if mob is None:
+        return None
+    if mob.kind not in CLASSES:
         return InputError(
             "$.mobility.class", f"unknown mobility class {mob.kind!r} (one of {', '.join(CLASSES)})"
         )
-    if mob is not None and mob.max_slope_deg is not None and planned_limit(mob.max_slope_deg) is None:
+    if mob.max_slope_deg is not None and planned_limit(mob.max_slope_deg) is None:
         return InputError(
             "$.mobility.max_slope_deg",
             f"{mob.max_slope_deg:g} is below {CLASS_LIMITS[0]}, the gentlest class limit the planner holds barriers for",
@@ -38,26 +50,34 @@ def refusal(goal: Goal) -> InputError | None:
     return None
 
 
-def check(goal: Goal) -> Goal:
-    """``goal``, if its mobility class is one the planner knows.
+def check(msg: M) -> M:
+    """``msg`` (a goal or a state), if its mobility class is one the planner knows.
 
     Raises:
         InputError: as ``refusal`` says.
     """
-    refused = refusal(goal)
+    mob = msg.mobility
+    if mob is None or (mob.max_slope_deg is None and mob.kind in CLASSES):  # the states' hot path
+        return msg
+    refused = refusal(msg)
     if refused is not None:
         raise refused
-    return goal
+    return msg
 
 
-def slope_limit(goal: Goal | None) -> int | None:
-    """The whole degrees of slope the goal's unit climbs, or ``None``: the planner's class's (a class
-    unknown too: its goal is refused, ``refusal``)."""
-    mob = goal.mobility if goal is not None else None
+def slope_limit(goal: Goal | None, standing: GoalMobility | None = None) -> int | None:
+    """The whole degrees of slope a unit climbs toward ``goal``: its goal's class, else its ``standing`` one
+    (its states'), else ``None``: the planner's class's (a class unknown too: refused, ``refusal``)."""
+    mob = goal.mobility if goal is not None and goal.mobility is not None else standing
     if mob is None or mob.kind not in CLASSES:
         return None
     limit = mob.max_slope_deg if mob.max_slope_deg is not None else CLASSES[mob.kind].max_slope_deg
     return planned_limit(limit)
+
+
+def limit_of(rec: Any) -> int | None:
+    """``slope_limit`` of a unit's record (``units.UnitRecord``): its goal's class over its states'."""
+    return slope_limit(rec.goal, rec.mobility)
 
 
 def by_limit(
@@ -70,7 +90,7 @@ def by_limit(
         return {None: (guided, owed)}
     groups: dict[int | None, tuple[list[Any], list[Any]]] = {}
     for rec in guided:
-        groups.setdefault(slope_limit(rec.goal), ([], []))[0].append(rec)
+        groups.setdefault(limit_of(rec), ([], []))[0].append(rec)
     for item in owed:
-        groups.setdefault(slope_limit(item[0].goal), ([], []))[1].append(item)
+        groups.setdefault(limit_of(item[0]), ([], []))[1].append(item)
     return groups

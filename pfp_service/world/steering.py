@@ -79,6 +79,7 @@ ZONE_REACH = 0.25  # a zone's box is widened by this share of its diagonal: its 
 # path): its corridor is then the box of its position and goal, widened by this share of their distance
 WIDE_REACH = 0.5
 WIDE_SAMPLES = 24  # over terrain, that box is looked at on this many points a side for a threat's sight
+WIDE_BLOCK = 256  # ... this many units' points at once (4.7 MB of points and levels)
 Failed = list[tuple[UnitRecord, BaseException]]
 
 
@@ -323,7 +324,7 @@ def reached(
     leave its corridor) is reached when a touched threat or zone meets the
     box of its position and goal widened by ``WIDE_REACH`` of their
     distance, and over terrain when the threat sees somewhere in that box
-    (``_seen_in_box``).  If the vectorised test fails, every unit counts as
+    (``_seen_in_boxes``).  If the vectorised test fails, every unit counts as
     reached: dearer, never wrong.
     """
     if not guided:
@@ -377,8 +378,11 @@ def _wide(
         boxes = influence_boxes(ThreatField(touched, intensity).packed)  # type: ignore[arg-type]
         meet = _boxes_meet(units, boxes)  # (n, threats)
         for j, threat in enumerate(touched):
-            for i in np.flatnonzero(meet[:, j] & ~hit):
-                hit[i] = sight is None or _seen_in_box(threat, boxes[j], units[i], intensity, sight)
+            w = np.flatnonzero(meet[:, j] & ~hit)
+            if len(w):
+                hit[w] = (
+                    True if sight is None else _seen_in_boxes(threat, boxes[j], units[w], intensity, sight)
+                )
     return hit
 
 
@@ -392,15 +396,31 @@ def _boxes_meet(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def _seen_in_box(threat: Threat, box: np.ndarray, unit: np.ndarray, intensity: str, sight: Sight) -> bool:
-    """Whether ``threat`` sees anywhere in the part of ``unit``'s box within its own ``box`` (``_seen``'s bound)."""
-    x0, y0 = max(box[0], unit[0]), max(box[1], unit[1])
-    x1, y1 = min(box[2], unit[2]), min(box[3], unit[3])
-    gx, gy = np.meshgrid(np.linspace(x0, x1, WIDE_SAMPLES), np.linspace(y0, y1, WIDE_SAMPLES))
-    pts = np.column_stack([gx.ravel(), gy.ravel()])
-    blind = ThreatField([threat], intensity).level(pts)  # type: ignore[arg-type]
-    masked = ThreatField([threat], intensity, sight=sight).level(pts)  # type: ignore[arg-type]
-    return bool(((blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any())
+def _seen_in_boxes(
+    threat: Threat, box: np.ndarray, units: np.ndarray, intensity: str, sight: Sight
+) -> np.ndarray:
+    """Whether ``threat`` sees anywhere in the part of each unit's box (``(n, 4)``) within its own ``box``.
+
+    Each part is looked at on ``WIDE_SAMPLES`` points a side, all units' at
+    once under one field blind and one masked (``_seen``'s bound): a wave
+    re-judges hundreds of deliberating units, and a field a unit cost a
+    millisecond each.
+    """
+    blind_f = ThreatField([threat], intensity)  # type: ignore[arg-type]
+    masked_f = ThreatField([threat], intensity, sight=sight)  # type: ignore[arg-type]
+    lo = np.maximum(units[:, :2], box[None, :2])  # (n, 2): x0, y0 of each part
+    hi = np.minimum(units[:, 2:], box[None, 2:])
+    t = np.linspace(0.0, 1.0, WIDE_SAMPLES)
+    xs = lo[:, None, 0] + t[None, :] * (hi[:, 0] - lo[:, 0])[:, None]  # (n, k)
+    ys = lo[:, None, 1] + t[None, :] * (hi[:, 1] - lo[:, 1])[:, None]
+    k, out = WIDE_SAMPLES, np.zeros(len(units), dtype=bool)
+    for a in range(0, len(units), WIDE_BLOCK):  # the points' memory bounded, whatever the fleet
+        pts = np.empty((len(units[a : a + WIDE_BLOCK]), k, k, 2))
+        pts[..., 0] = xs[a : a + WIDE_BLOCK, None, :]
+        pts[..., 1] = ys[a : a + WIDE_BLOCK, :, None]
+        blind, masked = blind_f.level(pts), masked_f.level(pts)
+        out[a : a + WIDE_BLOCK] = ((blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any(axis=(1, 2))
+    return out
 
 
 def _seen(
@@ -429,13 +449,16 @@ def replan(
     changes: list[ThreatChange],
     directions: list[Direction],
     zones: Sequence[tuple[str, str]] = (),
+    owed: Sequence[str] = (),
 ) -> ReplanEvent:
     """The event of a batch that changed the threats or zones: what changed, and the units guided afresh.
 
     ``zones`` are ``(zone id, change)``; they are named in the reason (``zone Z put``)
-    before the threats, since ``changes`` lists threats only.
+    before the threats, since ``changes`` lists threats only.  ``owed``: a wave's units
+    to be told in the next applies (``world.wave``), named with those told in this one.
     """
-    guided = sorted(d.unit for d in directions if d.status is not DirectionStatus.NO_GOAL)
+    told = {d.unit for d in directions if d.status is not DirectionStatus.NO_GOAL}
+    guided = sorted(told.union(owed))
     shown = changes[:MAX_EVENT_ITEMS]
     said = [f"zone {z} {c}" for z, c in zones] + [f"threat {c.threat} {c.change}" for c in shown]
     reason = "; ".join(said[:4])

@@ -14,11 +14,20 @@ waiting, the follower's cleared corridor, the controller's link) and its
 dispersion between the members.  So the tracks are what the live stream
 would drive for vehicles moving at their reported speeds.
 
-What the replay does not hold: units outside the team (dispersion from them
-is not replayed), a deliberation's latency (its escape searches land at once,
-``deliberation="inline"``), each member's progress watch, which starts afresh
-(its first replayed reports judge whether it moves), and under ``--cluster``
-the missions of members another planner guides (they stand where they are).
+Units outside the team whose reach comes within dispersion distance of the
+team's (``team_outsiders``: at most ``MAX_PREVIEW_OUTSIDERS``, nearest first)
+are replayed with it by the same rules: one the planner guides and that
+reports a speed moves toward its own goal, on a stepper started afresh where
+it is (a copy of each live one would cost the loop more than the rest of the
+seed); any other stands where it is.  The reply names them and counts those
+left out.
+
+What the replay does not hold: a deliberation's latency (its escape searches
+land at once, ``deliberation="inline"``), each unit's progress watch and
+right-of-way holds, which start afresh (its first replayed reports judge
+whether it moves), an outsider's own team (it is replayed as a lone unit),
+and under ``--cluster`` the missions of units another planner guides (they
+stand where they are).
 
 Sans-I/O: ``seed`` reads the live world; ``replay`` takes a seed, a clock and
 a budget (checked at every step) and returns a ``TeamPreview``.
@@ -42,6 +51,7 @@ from pfp_service.wire import (
     Direction,
     DirectionStatus,
     Goal,
+    GoalMobility,
     RejectedEvent,
     ThreatUpdate,
     UnitKind,
@@ -65,7 +75,9 @@ from pfp_service.world.events import (
     WorldSettings,
     ZonePut,
 )
-from pfp_service.world.units import Started
+from pfp_service.world.team_outsiders import guided as outsider_guided
+from pfp_service.world.team_outsiders import nearby, reach
+from pfp_service.world.units import TRANSITIONS, Started, Step, UnitRecord
 from pfp_service.world.world import World
 
 __all__ = ["MAX_REPLY_POINTS", "MemberSeed", "TeamSeed", "replay", "seed"]
@@ -94,6 +106,10 @@ class MemberSeed:
     stepper: Stepper | None = None
     status: DirectionStatus | None = None  # its last direction's
     direction: Direction | None = None  # as the team book last judged it: what it moves on now
+    # an outsider's mission: its stepper starts afresh in the replay (copying 64 on the loop costs more
+    # than all the rest of a seed)
+    params: Resolved | None = None
+    mobility: GoalMobility | None = None  # the class its states name (``world.mobility``): replayed with it
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,10 +124,16 @@ class TeamSeed:
     settings: WorldSettings
     threats: tuple[tuple[str, ThreatUpdate], ...]  # each with ``ttl_s`` the time it has left
     zones: tuple[tuple[str, ZoneUpdate], ...]
+    outsiders: tuple[MemberSeed, ...] = ()  # units outside the team near its reach, nearest first
+    left_out: int = 0  # how many more were near but past ``MAX_PREVIEW_OUTSIDERS``
 
 
-def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
-    """What the live ``world`` holds of team ``team_id`` at ``now``; ``None``: no such team in force.
+def seed(
+    world: World, team_id: str, now: float, request: TeamPreviewRequest | None = None
+) -> TeamSeed | None:
+    """What the live ``world`` holds of team ``team_id`` at ``now``, and of the units near it; ``None``: no such team.
+
+    ``request``'s horizon and speeds bound the members' reaches (``team_outsiders``).
 
     Raises:
         InputError: the team has more members than a preview replays (``MAX_PREVIEW_MEMBERS``).
@@ -131,20 +153,15 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
         if r is None:
             members.append(MemberSeed(u, None, 0.0))
             continue
-        stepper = copy.deepcopy(r.stepper) if r.stepper is not None and r.goal is not None else None
-        members.append(
-            MemberSeed(
-                u,
-                r.position,
-                r.progress.speed_mps,
-                r.kind,
-                r.goal,
-                r.origin,
-                stepper,
-                r.last_status,
-                sent.get(u),
-            )
-        )
+        members.append(_member(r, r.stepper is not None and r.goal is not None, sent.get(u), True))
+    req = request or TeamPreviewRequest()
+    reaches = [  # a member the replay does not move stands
+        reach(m.position, m.goal.position if m.stepper is not None else None, _speed(m, req), req.horizon_s)  # type: ignore[union-attr]
+        for m in members
+        if m.position is not None
+    ]
+    near, left_out = nearby(rec.units, frozenset(units), reaches, world.settings.dispersion, req.horizon_s)
+    outsiders = tuple(_member(rec.units[u], outsider_guided(rec.units[u]), None, False) for u in near)
     threats = tuple((tid, _left(t.update, t.expires_at, now)) for tid, t in sorted(rec.threats.items()))
     zones = tuple((zid, _left(z.update, z.expires_at, now)) for zid, z in sorted(rec.zones.items()))
     return TeamSeed(
@@ -156,6 +173,40 @@ def seed(world: World, team_id: str, now: float) -> TeamSeed | None:
         world.settings,
         tuple((i, t) for i, t in threats if t is not None),
         tuple((i, z) for i, z in zones if z is not None),
+        outsiders,
+        left_out,
+    )
+
+
+def _member(r: UnitRecord, moves: bool, direction: Direction | None, stepper: bool) -> MemberSeed:
+    """What the replay needs of ``r``: its mission only if it ``moves`` (else it stands), with a copy of its ``stepper``."""
+    if not moves:
+        # a member keeps its mission (it stands); an outsider stands without one
+        goal, origin = (r.goal, r.origin) if stepper else (None, None)
+        return MemberSeed(
+            r.id,
+            r.position,
+            r.progress.speed_mps,
+            r.kind,
+            goal,
+            origin,
+            status=r.last_status,
+            mobility=r.mobility,
+        )
+    assert r.stepper is not None
+    copied = copy.deepcopy(r.stepper) if stepper else None
+    return MemberSeed(
+        r.id,
+        r.position,
+        r.progress.speed_mps,
+        r.kind,
+        r.goal,
+        r.origin,
+        copied,
+        r.last_status,
+        direction,
+        None if stepper else r.stepper.params,
+        r.mobility,
     )
 
 
@@ -215,7 +266,10 @@ class _Vehicle:
 
     def report(self, t_s: float) -> StateReported:
         speed = self.speed_mps if self.status in _MOVING else 0.0  # as ``SimUnit.state`` says it
-        return StateReported(self.seed.unit, UnitState(position=self.at, speed_mps=speed, kind=self.kind))
+        return StateReported(
+            self.seed.unit,
+            UnitState(position=self.at, speed_mps=speed, kind=self.kind, mobility=self.seed.mobility),
+        )
 
 
 def _speed(m: MemberSeed, request: TeamPreviewRequest) -> float:
@@ -244,22 +298,35 @@ def replay(
     w = World(settings)
     ids = {m.unit for m in guided}
     cars = [_Vehicle(m, _speed(m, req), m.position, m.status) for m in s.members if m.position is not None]
+    others = [
+        _Vehicle(m, m.speed_mps if m.params is not None else 0.0, m.position, m.status)  # type: ignore[arg-type]
+        for m in s.outsiders
+    ]
+    afresh = [m for m in s.outsiders if m.params is not None]
     first: list[Input] = [ThreatPut(i, t) for i, t in s.threats]
     first += [ZonePut(i, z) for i, z in s.zones]
     first.append(TeamPut(s.team_id, s.team))
-    first += [car.report(0.0) for car in cars]
+    first += [car.report(0.0) for car in cars + others]
     first += [MissionRestored(m.unit, m.goal, m.origin or m.position, _params(m.stepper)) for m in guided]  # type: ignore[arg-type]
+    first += [MissionRestored(m.unit, m.goal, m.origin or m.position, m.params) for m in afresh]  # type: ignore[arg-type]
     refused = [e for e in w.apply(first, 0.0).events if isinstance(e, RejectedEvent)]
     if refused:  # the live world took these: a replay that cannot is a fault, not a track
         raise RuntimeError(f"the replay refused {refused[0].key}: {refused[0].reason}")
     for m in guided:  # the live steppers, mid-escape included: the replay is their stream
         assert m.stepper is not None and m.origin is not None
         rec = w.records.units[m.unit]
+        if (rec.phase, Step.STARTED) not in TRANSITIONS:  # judged arrived or trapped where it stands: as live
+            continue
         w.records.book.started(rec, Started((m.goal, m.origin, m.stepper.params), copy.deepcopy(m.stepper)))  # type: ignore[arg-type]
+    for c in others:  # an outsider's statuses and track are not in the reply
+        c.max_changes = 0
     unsent = [c for c in cars if c.seed.direction is None]
-    if unsent:  # a member not yet judged in the team: the direction its next report would get
-        again = {d.unit: d for d in w.apply([c.report(0.0) for c in cars], 0.0).directions}
-        for c in unsent:
+    if unsent or others:  # not judged in the team (outsiders never are): the direction its next report gets
+        again = {
+            d.unit: d
+            for d in w.apply([c.report(0.0) for c in (cars if unsent else []) + others], 0.0).directions
+        }
+        for c in unsent + others:
             c.take(again.get(c.seed.unit), 0.0)
     for c in cars:
         c.max_changes = max(8, MAX_STATUS_CHANGES // len(cars))
@@ -272,11 +339,15 @@ def replay(
         t = k * req.dt_s  # each member moves on the direction it holds, then reports, as the fleet's do
         for car in cars:
             car.advance(req.dt_s)
-        out = w.apply([car.report(t) for car in cars], t)
+        for car in others:
+            car.advance(req.dt_s)
+        out = w.apply([car.report(t) for car in cars + others], t)
         by_unit = {d.unit: d for d in out.directions}
         for car in cars:
             car.take(by_unit.get(car.seed.unit), t)
             car.track.append((t, *car.at))
+        for car in others:
+            car.take(by_unit.get(car.seed.unit), t)
         if all(c.arrived_s is not None for c in cars if c.seed.unit in ids):
             stopped = "arrived"
             break
@@ -291,6 +362,8 @@ def replay(
         members=_thinned(cars, s.members),
         simulated_s=t,
         stopped=stopped,
+        outsiders=[m.unit for m in s.outsiders],
+        outsiders_left_out=s.left_out,
     )
 
 

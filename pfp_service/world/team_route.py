@@ -23,7 +23,7 @@ import shapely
 
 from pfp_service.core.mobility import planned_limit
 from pfp_service.core.zones import MAX_VERTICES, Zone, ZoneSet
-from pfp_service.world.mobility import slope_limit
+from pfp_service.world.mobility import limit_of
 
 if TYPE_CHECKING:
     from pfp_service.world.team_book import TeamBook
@@ -86,7 +86,7 @@ class RouteKeys:
     def __call__(self, rec: UnitRecord | None) -> RouteKey:
         if rec is None:
             return PLAIN
-        own = slope_limit(rec.goal) if self._terrain else None
+        own = limit_of(rec) if self._terrain else None
         led = self._teams.columns(rec.id)
         if not led:
             return (own, 0.0, ())
@@ -95,7 +95,7 @@ class RouteKeys:
         if self._terrain and self._planner is not None:  # the strictest limit of the lead and its followers
             mine = self._planner if own is None else own
             column = {u for t in led for u in (t.lead, *t.follow) if u is not None and u != rec.id}
-            theirs = [slope_limit(r.goal) for u in sorted(column) if (r := units.get(u)) is not None]
+            theirs = [limit_of(r) for u in sorted(column) if (r := units.get(u)) is not None]
             strictest = min([mine, *(self._planner if lim is None else lim for lim in theirs)])
             slope = own if strictest == mine else strictest
             if (

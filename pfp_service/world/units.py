@@ -28,8 +28,9 @@ from typing import NamedTuple
 import msgspec
 
 from pfp_service.core import Resolved, Stepper
-from pfp_service.wire import Direction, DirectionStatus, Goal, Mission, UnitPhase
+from pfp_service.wire import Direction, DirectionStatus, Goal, GoalMobility, Mission, UnitPhase
 from pfp_service.world.events import Deliberated, Job, unit_key
+from pfp_service.world.mobility import slope_limit
 from pfp_service.world.progress import ProgressWatch
 
 __all__ = [
@@ -114,6 +115,7 @@ class UnitRecord:
     position: tuple[float, float] | None = None
     seq: int | None = None
     kind: str | None = None
+    mobility: GoalMobility | None = None  # the class its states name (``world.mobility``): kept till another
     last_seen: float = -math.inf
     goal: Goal | None = None
     origin: tuple[float, float] | None = None  # x0: where the unit was when its goal was set
@@ -351,6 +353,14 @@ class Units:
             answer = Answer.TELL
         self._to(rec, Step.ANSWERED)
         return answer
+
+    def classed(self, rec: UnitRecord, mobility: GoalMobility) -> None:
+        """A state names the unit's class: kept, and a guided unit whose planned slope limit it changes is
+        re-judged (``rejudge``) under its new barriers, built when the terrain loaded (``world.mobility``)."""
+        before = slope_limit(rec.goal, rec.mobility)
+        rec.mobility = mobility
+        if rec.owned and rec.stepper is not None and slope_limit(rec.goal, mobility) != before:
+            self.rejudge(rec)
 
     def rejudge(self, rec: UnitRecord) -> None:
         """Judge the unit's progress afresh under a new field; its job (asked under the old one) is superseded."""

@@ -25,7 +25,6 @@ from __future__ import annotations
 import copy
 
 from pfp_service.core import ThreatField
-from pfp_service.core.stepper import Advice, Stepper
 from pfp_service.errors import InputError
 from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
 from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
@@ -37,13 +36,14 @@ from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and o
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
 from pfp_service.world.limits import Limits
 from pfp_service.world.liveness import UNIT_TIMERS, Liveness
-from pfp_service.world.lookahead import owed_share
+from pfp_service.world.lookahead import Owed, owed_share
 from pfp_service.world.snapshot import page as snapshot_page
 from pfp_service.world.team_book import TeamBook
 from pfp_service.world.terrain import link_sight
 from pfp_service.world.threat_puts import ThreatPuts
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
+from pfp_service.world.wave import WAVE_PER_TICK, Wave, split
 from pfp_service.world.world_records import Records, ZoneRecord
 
 __all__ = ["World", *ev.__all__]
@@ -53,7 +53,9 @@ K = keys.KeyKind
 # look-ahead points in the next ``apply`` (``World.wave_pending``; figures: docs/operations.md, "The wave first")
 WAVE_FIRST = 64
 # ... and those points (and their jobs) follow at most this many units an ``apply``, the rest owed on
-OWED_PER_TICK = 128
+OWED_PER_TICK = 64
+# the key a timer's fault is rejected on (a unit's goal for the rest)
+TIMER_KEYS = {"expire": K.THREAT, "sight": K.THREAT, "zone_expire": K.ZONE, "peer": K.ALIVE_PLANNER}
 
 
 class World:
@@ -76,8 +78,8 @@ class World:
         self._disp = dispersion.Dispersion(
             s.dispersion, self._units, self._book.yielded, self.teams.dispersed
         )  # off unless enabled; a team's separation_m among its members
-        # a wave's units sent without look-ahead points: (unit, its advice, stepper, its version, seq)
-        self._owed: list[tuple[UnitRecord, Advice, Stepper, int, int | None]] = []
+        self._owed: list[Owed] = []  # a wave's units sent without look-ahead points (``lookahead.Owed``)
+        self._wave = Wave()  # a wave's units owed their very direction (``wave``): before any points
         self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once
 
     # -- queries (read-only) ------------------------------------------------------
@@ -125,20 +127,18 @@ class World:
         In the manner of aioquic's ``get_timer()``: the earliest of its timers
         (staleness, token debounce, push re-sends, forgetting, expiry, a peer
         gone), or at once -- the ``now`` of the last ``apply`` -- while it
-        ``wave_pending`` a wave's points.  ``None``: nothing is due until an input
+        ``wave_pending``.  ``None``: nothing is due until an input
         comes.  A timer may find nothing left to do when due (a unit heard
         since): it is a reminder, not a verdict (``timers``).
         """
-        if self._owed:
+        if self._owed or self._wave:
             return self._now
         return self._timers.next_due()
 
     def wave_pending(self) -> bool:
-        """Whether a wave's look-ahead points wait for the next ``apply`` (a ``Tick`` will do): call it soon.
-
-        Each ``apply`` pays at most ``OWED_PER_TICK`` units of them; ``wave_pending`` stays true until the last.
-        """
-        return bool(self._owed)
+        """Whether a wave's directions (``wave.WAVE_PER_TICK`` an ``apply``), then its look-ahead points
+        (``OWED_PER_TICK``), wait for the next ``apply`` (a ``Tick`` will do): call it soon."""
+        return bool(self._owed) or bool(self._wave)
 
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
@@ -176,7 +176,8 @@ class World:
         self._live.pushed(pushed, now)
         if b.changes or b.zones:
             zones = [(z, c) for z, c, _ in b.zones if c]
-            b.out.events.append(steering.replan(self.settings.planner_id, b.changes, b.out.directions, zones))
+            p, later = self.settings.planner_id, self._wave.ids()  # a wave's units owed: named now, told soon
+            b.out.events.append(steering.replan(p, b.changes, b.out.directions, zones, later))
         b.out.cancelled, self._book.superseded = self._book.superseded, []
         return b.out
 
@@ -380,12 +381,7 @@ class World:
                 elif kind in UNIT_TIMERS and (rec := self._units.get(ident)) is not None:
                     self._live.due(kind, rec, now, b.out)
             except Exception as exc:  # the bulkhead: this timer alone fails
-                on = {
-                    "expire": K.THREAT,
-                    "sight": K.THREAT,
-                    "zone_expire": K.ZONE,
-                    "peer": K.ALIVE_PLANNER,
-                }.get(kind, K.UNIT_GOAL)
+                on = TIMER_KEYS.get(kind, K.UNIT_GOAL)
                 self._fault(b, self._key(on, ident), ident if on is K.UNIT_GOAL else None, on, exc)
 
     # -- planning -------------------------------------------------------------------
@@ -404,38 +400,43 @@ class World:
     def _world_changed(self, b: Batch) -> None:
         """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
 
-        A unit out of reach keeps its direction (one escaping or deliberating
-        out of its wider reach, its job too): a contingency costs what it
-        touches, not the whole fleet.
+        A unit out of reach keeps its direction (one escaping or deliberating out of its wider reach, its
+        job too): a contingency costs what it touches.  A wave's units past ``WAVE_PER_TICK`` are owed (``wave``).
         """
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
         wide = [r.stepper.escaping or r.job is not None or r.stepper.pending is not None for r in guided]  # type: ignore[union-attr]
         reached = steering.reached(
             guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight, wide
         )
-        rejudge, tell = self._book.rejudge, self._direct  # per unit of a wave: looked up once
+        rejudge, hits = self._book.rejudge, []  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
                 if hit:
                     rejudge(rec)
-                    tell(rec, b)
+                    hits.append(rec)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
+        now, later = split(hits, b.touched, [z[2] for z in b.zones], b.dirty, WAVE_PER_TICK)
+        self._wave.owe(later)  # told in the next applies, a share each (``wave``)
+        b.dirty.update(r.id for r in now if r.position is not None and not r.stale)  # as ``_direct``
 
     def _directions(self, b: Batch) -> None:
         """A fresh direction for each live unit of the batch (``steering.steer``); one whose step fails loses its goal."""
         p, out = self.settings.planner_id, b.out
+        drew = self._wave.take(b.dirty, self._units, WAVE_PER_TICK) if not (b.changes or b.zones) else []
+        b.dirty.update(drew)  # a wave's next share, owed since its change (none in the change's own apply)
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
         out.directions += [self._no_goal(r) for r in live if r.stepper is None]
         guided = [r for r in live if r.stepper is not None]
-        # a wave's units owed their points: the next share of them, the rest owed on
-        later, self._owed = owed_share(self._owed, b.dirty, self._units, OWED_PER_TICK)
+        limit = 0 if self._wave else OWED_PER_TICK  # a wave's points: once its directions are all out
+        later, self._owed = owed_share(self._owed, b.dirty, self._units, limit)
         if not guided and not later:
             return
         field_for, n, cull = self._rec.field_for, self.settings.lookahead, self._rec.cull_index
         steered: steering.Steered = []
         failed: steering.Failed = []
-        wave_first = (b.changes or b.zones) and len(guided) > WAVE_FIRST and n > 0
+        big = (b.changes or b.zones) and (len(guided) > WAVE_FIRST or self._wave)  # a wave, large or owed
+        wave_first = n > 0 and bool(drew or big)
         groups = team_route.groups(guided, later, self._route)  # a field per slope limit and corridor
         for key, (group, owed) in groups.items():
             fld = field_for(*key)

@@ -20,10 +20,10 @@ from pfp_service.core.cull import MIN_THREATS, CullIndex
 from pfp_service.core.params import FieldStats, field_stats
 from pfp_service.core.visibility import Window, reach_box
 from pfp_service.core.zones import Zone, ZoneSet
-from pfp_service.wire import Goal, Mission, ThreatUpdate
+from pfp_service.wire import Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
 from pfp_service.world import team_route
-from pfp_service.world.mobility import slope_limit
+from pfp_service.world.mobility import limit_of
 from pfp_service.world.team_route import RouteKey
 from pfp_service.world.terrain import Ground, Looks, SightAsk, SightKey, ground_zones, sight_key
 from pfp_service.world.units import UnitRecord, Units
@@ -157,13 +157,14 @@ class Records:
         """The cull index of the threats in force (``cull``), the field built first."""
         return self.cull if self.field is not None else None
 
-    def zones_of(self, goal: Goal | None) -> ZoneSet:
-        """The zones in force for a unit with ``goal``: the barriers of its mobility class (``world.mobility``)."""
-        return self.zone_set_for(slope_limit(goal))
+    def zones_of(self, rec: UnitRecord | None) -> ZoneSet:
+        """The zones in force for ``rec``: the barriers of its mobility class, its goal's over its states'
+        (``world.mobility``); no record, the planner's class's."""
+        return self.zone_set_for(limit_of(rec) if rec is not None else None)
 
     def field_of(self, rec: UnitRecord) -> ThreatField:
-        """The field in force for ``rec``: with the barriers of its goal's mobility class (``world.mobility``)."""
-        return self.field_for(slope_limit(rec.goal))
+        """The field in force for ``rec``: with the barriers of its mobility class (``world.mobility``)."""
+        return self.field_for(limit_of(rec))
 
     # the world's input handlers name these two here; the writes are the units' owner's
     def drop_mission(self, rec: UnitRecord) -> None:

@@ -5,11 +5,15 @@ over the Jacksboro DEM on a loopback Zenoh router.  Two units are sent to the
 same goal on ground steeper than a wheeled vehicle climbs (17 degrees) and
 gentler than a soldier's limit (30): the soldier is guided, the wheeled unit
 is ``trapped`` with a reason naming the slope.  A third goal naming an unknown
-class is rejected on ``$.mobility.class`` and the others carry on.
+class is rejected on ``$.mobility.class`` and the others carry on.  The same
+with the classes named on the units' states instead: a state naming an
+unknown class is rejected on the state's key, and a truck whose state turns
+``tracked`` mid-route (31 degrees) is guided on at once.
 """
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import time
 
@@ -72,9 +76,10 @@ def _until(q: queue.Queue, want, timeout: float):
             return got
 
 
-def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_a_bad_class_is_refused(
-    tmp_path, monkeypatch
-):
+@contextlib.contextmanager
+def _planner(tmp_path, monkeypatch):
+    """A planner over the Jacksboro DEM on a loopback router, and a client's queues of directions and rejections:
+    ``(client, directions, rejected, (goal, start))``."""
     from pfp_service.node.previews import PreviewService
 
     real_wait = PreviewService.wait_ready  # previews are not under test: the node waits for no worker
@@ -84,7 +89,7 @@ def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_
     cfg = placed(ServeConfig(mission=MISSION, listen=[ep], terrain=dem, lookahead=0, unit_stale_s=120.0))
     ground = load(dem, cfg.origin, cfg.bounds_tuple(), cfg.terrain_unit)
     assert ground.barriers(30) is ground.zones  # a soldier's goal over a foot planner: its own barriers
-    goal, start = _places(ground)
+    places = _places(ground)
     session = zenoh.open(zenoh_config(cfg))
     node = PlannerNode(session, cfg)
     try:
@@ -102,22 +107,56 @@ def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_
                     lambda s: rejected.put(decode_event(s.payload.to_bytes())),
                 ),
             ]
-            classes = {"soldier": "foot", "truck": "wheeled", "bad": "hovercraft"}
-            for uid, kind in classes.items():
-                body = Goal(position=goal, tolerance=1.0, mobility=GoalMobility(kind=kind))
-                c.put(keys.unit_goal(MISSION, uid), encode(body))
-                c.put(keys.unit_state(MISSION, uid), encode(UnitState(position=start, seq=1)))
-            refused = _until(rejected, lambda e: isinstance(e, RejectedEvent), 60.0)
-            assert refused.key == keys.unit_goal(MISSION, "bad") and refused.field == "$.mobility.class"
-            seen: dict[str, Direction] = {}
-            while set(seen) != {"soldier", "truck"}:
-                d = _until(directions, lambda d: d.status.value != "no_goal", 120.0)
-                seen[d.unit] = d
-            assert seen["soldier"].status.value == "en_route", seen["soldier"]
-            assert seen["truck"].status.value == "trapped", seen["truck"]
-            assert "slope>17deg" in (seen["truck"].reason or "")
-            for s in subs:
-                s.undeclare()
+            try:
+                yield c, directions, rejected, places
+            finally:
+                for s in subs:
+                    s.undeclare()
     finally:
         node.stop()
         session.close()
+
+
+def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_a_bad_class_is_refused(
+    tmp_path, monkeypatch
+):
+    with _planner(tmp_path, monkeypatch) as (c, directions, rejected, (goal, start)):
+        classes = {"soldier": "foot", "truck": "wheeled", "bad": "hovercraft"}
+        for uid, kind in classes.items():
+            body = Goal(position=goal, tolerance=1.0, mobility=GoalMobility(kind=kind))
+            c.put(keys.unit_goal(MISSION, uid), encode(body))
+            c.put(keys.unit_state(MISSION, uid), encode(UnitState(position=start, seq=1)))
+        refused = _until(rejected, lambda e: isinstance(e, RejectedEvent), 60.0)
+        assert refused.key == keys.unit_goal(MISSION, "bad") and refused.field == "$.mobility.class"
+        seen: dict[str, Direction] = {}
+        while set(seen) != {"soldier", "truck"}:
+            d = _until(directions, lambda d: d.status.value != "no_goal", 120.0)
+            seen[d.unit] = d
+        assert seen["soldier"].status.value == "en_route", seen["soldier"]
+        assert seen["truck"].status.value == "trapped", seen["truck"]
+        assert "slope>17deg" in (seen["truck"].reason or "")
+
+
+def test_classes_named_on_the_states_plan_each_unit_and_a_class_changed_mid_route_replans_it(
+    tmp_path, monkeypatch
+):
+    with _planner(tmp_path, monkeypatch) as (c, directions, rejected, (goal, start)):
+        classes = {"soldier": "foot", "truck": "wheeled", "bad": "hovercraft"}
+        for uid, kind in classes.items():
+            state = UnitState(position=start, seq=1, mobility=GoalMobility(kind=kind))
+            c.put(keys.unit_state(MISSION, uid), encode(state))
+            c.put(keys.unit_goal(MISSION, uid), encode(Goal(position=goal, tolerance=1.0)))
+        refused = _until(rejected, lambda e: isinstance(e, RejectedEvent), 60.0)
+        assert refused.key == keys.unit_state(MISSION, "bad") and refused.field == "$.mobility.class"
+        assert "hovercraft" in refused.reason
+        seen: dict[str, Direction] = {}
+        while set(seen) != {"soldier", "truck"}:
+            d = _until(directions, lambda d: d.status.value != "no_goal" and d.unit != "bad", 120.0)
+            seen[d.unit] = d
+        assert seen["soldier"].status.value == "en_route", seen["soldier"]
+        assert seen["truck"].status.value == "trapped", seen["truck"]
+        assert "slope>17deg" in (seen["truck"].reason or "")
+        tracked = UnitState(position=start, seq=2, mobility=GoalMobility(kind="tracked"))
+        c.put(keys.unit_state(MISSION, "truck"), encode(tracked))
+        d = _until(directions, lambda d: d.unit == "truck" and d.seq == 2, 60.0)
+        assert d.status.value == "en_route", d

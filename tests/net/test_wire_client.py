@@ -175,6 +175,8 @@ BUILT: dict[str, list[dict[str, Any]]] = {
             ],
             "simulated_s": 95.5,
             "stopped": "arrived",
+            "outsiders": ["a1", "x7"],
+            "outsiders_left_out": 2,
         },
     ],
     "preview_request": [

@@ -70,6 +70,7 @@ HOSTILE = {
         ["plan"],
     ),
     "bomb.mcap": (None, ["report"]),
+    "zenoh.json5": ("{ listen: ", ["serve", "--zenoh-config"]),  # refused before the planner is imported
 }
 
 

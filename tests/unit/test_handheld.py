@@ -26,7 +26,7 @@ from pfp_clients.handheld_model import (
 from pfp_clients.nmea import LocalFrame
 from pfp_clients.nmea_feed import NmeaReader, open_nmea
 
-from pfp_service.wire import Direction, DirectionStatus, keys
+from pfp_service.wire import Direction, DirectionStatus, GoalMobility, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, free_port, planner_process, put_json
 
@@ -187,6 +187,7 @@ def test_states_carry_seq_kind_speed_heading():
     assert (s1.seq, s2.seq) == (1, 2)
     assert s1.position == (1.0, 1.0) and s1.kind == "manned" and s1.heading_deg == pytest.approx(180.0)
     assert s1.t == 1e9 and s1.speed_mps == 0.0
+    assert s1.mobility == s2.mobility == GoalMobility(kind="foot")  # a soldier's slopes, on every state
     assert HandheldModel(Settings(unit="u1"), None, now=0.0).next_state() is None
 
 

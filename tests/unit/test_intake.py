@@ -45,3 +45,23 @@ def test_past_its_bound_an_input_is_refused_and_counted_but_never_a_deliberation
     got = i.take()
     assert got.shed == 4 and len(got.inputs) == 3
     assert i.take().shed == 0  # said once
+
+
+def test_a_class_named_by_a_replaced_state_is_kept_on_the_newest_that_names_none():
+    from pfp_service.wire import GoalMobility
+
+    wheeled, tracked = GoalMobility(kind="wheeled"), GoalMobility(kind="tracked")
+    i = Intake(100, 10, 2)
+    i.state("a", UnitState(position=(0.0, 0.0), seq=1, mobility=wheeled), 0.1)
+    i.state("b", UnitState(position=(0.0, 0.0), seq=1, mobility=wheeled), 0.1)
+    i.state("c", UnitState(position=(0.0, 0.0), seq=1, mobility=wheeled), 0.1)
+    i.state("a", _s(2), 0.2)  # names none: a's class stays with it
+    i.state("b", UnitState(position=(0.0, 0.0), seq=2, mobility=tracked), 0.2)  # names another: the newest's
+    got = i.take()
+    assert got.states["a"][0].mobility == wheeled and got.states["a"][0].seq == 2
+    assert got.states["b"][0].mobility == tracked
+    i.state("c", _s(3), 0.3)  # c still waits (2 units a tick): its class is kept for the next
+    got = i.take()
+    assert got.states["c"][0].mobility == wheeled and got.states["c"][0].seq == 3
+    i.state("a", _s(4), 0.4)  # taken already: nothing left to carry
+    assert i.take().states["a"][0].mobility is None

@@ -148,7 +148,7 @@ def test_every_example_decodes_and_re_encodes_identically(name: str) -> None:
 # The contract as first published (version 1).  Schemas only grow: every field
 # here stays, and no field is ever required that was not required then.
 V1: dict[str, tuple[set[str], set[str]]] = {
-    "UnitState": ({"position"}, {"t", "seq", "kind", "speed_mps", "heading_deg"}),
+    "UnitState": ({"position"}, {"t", "seq", "kind", "speed_mps", "heading_deg", "mobility"}),
     "Goal": ({"position"}, {"delta", "tolerance", "step", "mobility"}),
     "GoalMobility": ({"class"}, {"max_slope_deg"}),
     "ThreatUpdate": (
@@ -214,7 +214,10 @@ V1: dict[str, tuple[set[str], set[str]]] = {
     # added with teams
     "TeamSummary": ({"id", "team"}, {"notes"}),
     "TeamPreviewRequest": (set(), {"horizon_s", "dt_s", "speeds"}),
-    "TeamPreview": ({"team"}, {"eta_s", "members", "simulated_s", "stopped"}),
+    "TeamPreview": (
+        {"team"},
+        {"eta_s", "members", "simulated_s", "stopped", "outsiders", "outsiders_left_out"},
+    ),
     "MemberTrack": ({"unit"}, {"speed_mps", "points", "statuses", "arrived_s"}),
     "StatusChange": ({"t_s", "status"}, {"reason"}),
     "TeamUpdate": (

@@ -15,7 +15,7 @@ from pfp_clients.sim import SimUnit
 from pfp_service.core import PlannerParams
 from pfp_service.errors import InputError
 from pfp_service.team import UnitSpec
-from pfp_service.wire import DirectionStatus, Goal, ThreatUpdate, UnitKind
+from pfp_service.wire import DirectionStatus, Goal, ThreatUpdate, UnitKind, UnitState
 from pfp_service.wire.messages import TeamPreviewRequest, TeamUpdate
 from pfp_service.world import team_preview
 from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut, World, WorldSettings
@@ -133,3 +133,30 @@ def test_a_team_preview_is_bounded_by_its_budget_and_refuses_a_member_without_sp
     given = TeamPreviewRequest(horizon_s=5.0, speeds={"m1": 2.0, "r1": 3.0})
     assert team_preview.replay(frozen, given, time.monotonic, 5.0).stopped == "horizon"
     assert team_preview.seed(w, "nobody", 0.0) is None
+
+
+def test_a_team_preview_of_members_already_on_their_places_is_their_arrival() -> None:
+    """Members the live world judged arrived are replayed as arrived (not restarted: a defect once)."""
+    w = World(WorldSettings(planner=PlannerParams(), deliberation="inline", lookahead=0))
+    w.apply(
+        [
+            StateReported(u, UnitState(position=p, seq=1, speed_mps=1.0))
+            for u, p in (("a", (0.0, 0.0)), ("b", (100.0, 0.0)))
+        ],
+        0.0,
+    )
+    team = TeamUpdate(
+        members=["a", "b"], goal=Goal(position=(100.0, 0.0), tolerance=1.0), offsets={"a": (-100.0, 0.0)}
+    )
+    out = w.apply([TeamPut("t", team)], 0.0)
+    assert {(d.unit, d.status) for d in out.directions} == {
+        ("a", DirectionStatus.ARRIVED),
+        ("b", DirectionStatus.ARRIVED),
+    }
+    seeded = team_preview.seed(w, "t", 0.0)
+    assert seeded is not None
+    got = team_preview.replay(seeded, TeamPreviewRequest(horizon_s=5.0, dt_s=1.0), time.monotonic, 60.0)
+    assert {m.unit: [s.status for s in m.statuses] for m in got.members} == {
+        "a": [DirectionStatus.ARRIVED],
+        "b": [DirectionStatus.ARRIVED],
+    }

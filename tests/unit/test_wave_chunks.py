@@ -30,6 +30,9 @@ CHUNK = 16
 @pytest.fixture
 def chunked(monkeypatch):
     monkeypatch.setattr(world_mod, "OWED_PER_TICK", CHUNK)
+    monkeypatch.setattr(
+        world_mod, "WAVE_PER_TICK", 10**6
+    )  # the directions in one apply: ``test_wave_shares``
 
 
 def _fleet(n: int) -> World:

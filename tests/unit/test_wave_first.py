@@ -16,6 +16,13 @@ pytestmark = pytest.mark.unit
 T = dict(facing_deg=270.0, sigma_range=4.0, sigma_lateral=3.0, skew=2.0)
 
 
+@pytest.fixture(autouse=True)
+def one_share(monkeypatch):
+    """The directions, then the points, each in one apply (their shares: test_wave_shares, test_wave_chunks)."""
+    monkeypatch.setattr(world_mod, "WAVE_PER_TICK", 10**6)
+    monkeypatch.setattr(world_mod, "OWED_PER_TICK", 10**6)
+
+
 def _fleet(n: int) -> World:
     w = World(WorldSettings(planner=PlannerParams(escape="auto"), deliberation="deferred"))
     ids = [f"u{i:03d}" for i in range(n)]

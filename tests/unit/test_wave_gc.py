@@ -12,9 +12,12 @@ import pytest
 from pfp_service.core import PlannerParams
 from pfp_service.node import gcpause
 from pfp_service.wire import Goal, ThreatUpdate, UnitState
+from pfp_service.world.wave import WAVE_PER_TICK
 from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
 
 pytestmark = pytest.mark.unit
+
+FIRST_SHARE = min(80, WAVE_PER_TICK)  # the wave's directions in its first apply (``world.wave``)
 
 
 @pytest.fixture
@@ -52,7 +55,7 @@ def test_no_collection_runs_inside_apply_and_one_runs_at_the_first_allocation_af
     collections.clear()
     with gcpause.paused():
         out = w.apply([put], 1.0)
-    assert len(out.directions) == 80
+    assert len(out.directions) == FIRST_SHARE
     assert collections == [] and gc.isenabled()
     assert gc.get_count()[0] > 50  # what apply made is counted, and owed to the collector
     types.SimpleNamespace()  # an allocation the collector counts

@@ -83,3 +83,38 @@ def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
     masked = ThreatField([behind], "peak", sight=sight)
     assert masked.level(valley).max() < 1e-6 * ThreatField([behind], "peak").level(valley).max()
     assert masked.level(front).min() > 0.5 * ThreatField([behind], "peak").level(front).min()
+
+
+def test_over_terrain_each_wide_unit_is_reached_as_its_own_box_says(monkeypatch):
+    """A wave's deliberating units, judged all at once, each as the threat's sight over its own widened box says."""
+    monkeypatch.setattr(steering, "WIDE_BLOCK", 7)  # several blocks, the last one short
+    from pfp_service.core import Threat
+    from pfp_service.terrain.grid import TerrainGrid
+    from pfp_service.terrain.threat_sight import TerrainSight
+
+    xs = np.arange(-3000.0, 3000.0 + 10.0, 20.0)
+    gx, gy = np.meshgrid(xs, xs)
+    hills = 40.0 * np.sin(gx / 310.0) * np.cos(gy / 420.0) + 25.0 * np.sin((gx + gy) / 230.0)  # no symmetry
+    sight = TerrainSight(TerrainGrid(-3000.0, -3000.0, 20.0, hills + 100.0), 1.8)
+    behind = Threat.from_facing((-1000.0, 0.0), 90.0, 800.0, 800.0, 0.0, 1.0, "t", observer_height_m=2.0)
+    guided = _fleet(5, 120)
+    for rec in guided:  # spread over the hills, short corridors
+        x, y = rec.position[0] * 5.0, rec.position[1] * 5.0
+        rec.position, rec.stepper.goal = (x, y), (x + 100.0, y + 60.0)
+    got = steering.reached(guided, [behind], "peak", (), sight, [True] * len(guided))
+    box = influence_boxes(ThreatField([behind], "peak").packed)[0]
+    blind_f, masked_f = ThreatField([behind], "peak"), ThreatField([behind], "peak", sight=sight)
+    want = []
+    for rec in guided:  # one unit at a time, as the box is read point by point
+        s, g = np.array(rec.position), np.array(rec.stepper.goal)
+        pad = steering.WIDE_REACH * float(np.hypot(*(g - s)))
+        lo, hi = np.maximum(np.minimum(s, g) - pad, box[:2]), np.minimum(np.maximum(s, g) + pad, box[2:])
+        if (lo > hi).any():
+            want.append(False)
+            continue
+        k = steering.WIDE_SAMPLES
+        px, py = np.meshgrid(np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k))
+        pts = np.column_stack([px.ravel(), py.ravel()])
+        blind, masked = blind_f.level(pts), masked_f.level(pts)
+        want.append(bool(((blind > 0.0) & (masked >= steering.RELATIVE_BOUND * blind)).any()))
+    assert got == want and any(got) and not all(got)

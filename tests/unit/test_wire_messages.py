@@ -272,6 +272,7 @@ FIELDS: dict[str, dict[str, tuple[str, str]]] = {
         "kind": ("unit_kind", OPT),
         "speed_mps": ("speed", OPT),
         "heading_deg": ("angle", OPT),
+        "mobility": ("mobility", OPT),
     },
     "goal": {
         "position": ("point", REQ),

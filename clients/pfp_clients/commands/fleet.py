@@ -13,6 +13,7 @@ from pfp_service.cli._common import (
     positive_int,
     session_config,
 )
+from pfp_service.core.mobility import CLASSES
 from pfp_service.signals import SignalStop
 
 # Each unit costs a publisher, a token and a Python object per tick: past this one fleet process
@@ -97,6 +98,12 @@ def register(sub: Any) -> None:
         metavar="AT:FOR[,AT:FOR...]",
         help="every unit without its own stops halts AT simulated seconds in, for FOR seconds",
     )
+    p.add_argument(
+        "--mobility",
+        choices=tuple(CLASSES),
+        help="the mobility class every unit without its own (a team file's mobility:) names on its states; "
+        "over terrain the planner plans it round that class's slope barriers (default: none, the planner's)",
+    )
     p.add_argument("--speed-up", type=positive_float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
         "--duration-s",
@@ -126,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.fleet import FleetOptions, main
     from pfp_service.errors import InputError
     from pfp_service.team import generate_team, load_team
+    from pfp_service.wire import GoalMobility
 
     for flag, value in (("--seed", args.seed), ("--area", args.area)):
         if args.team and value is not None:
@@ -145,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
         coords=args.coords,
         gps_sigma_m=args.gps_sigma_m,
         stops=args.stops,
+        mobility=None if args.mobility is None else GoalMobility(kind=args.mobility),
     )
     conf = session_config(args)
     with SignalStop() as stopping:  # 0 after SIGTERM, 130 after SIGINT, once the fleet has closed

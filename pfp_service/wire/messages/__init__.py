@@ -84,6 +84,7 @@ from pfp_service.wire.messages.structs import (
 )
 from pfp_service.wire.messages.team_preview import (
     MAX_PREVIEW_MEMBERS,
+    MAX_PREVIEW_OUTSIDERS,
     MAX_REPLAY_HORIZON_S,
     MemberTrack,
     StatusChange,
@@ -119,6 +120,7 @@ __all__ = [
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",
     "MAX_PREVIEW_MEMBERS",
+    "MAX_PREVIEW_OUTSIDERS",
     "MAX_REPLAY_HORIZON_S",
     "MAX_SNAPSHOT_ITEMS",
     "MAX_TEAM_MEMBERS",

@@ -133,6 +133,25 @@ class _Message(msgspec.Struct, frozen=True, kw_only=True):
 
 
 # -- unit -> planner ------------------------------------------------------------
+MobilityName = Annotated[str, Meta(pattern="^[a-z][a-z0-9_]{0,31}$")]
+SlopeDeg = Annotated[float, Meta(ge=1.0, le=89.0)]
+
+
+class GoalMobility(_Message, frozen=True, kw_only=True):
+    """A unit's mobility class, on its goal or its state: the ground it can cross (``core.mobility.CLASSES``).
+
+    Attributes:
+        kind: the class, ``foot``, ``wheeled`` or ``tracked`` (JSON ``class``); a name the
+            planner does not know is refused on the goal's or the state's key (field ``$.mobility.class``).
+        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's (the
+            planner plans it at the steepest class limit not above it, and refuses one below them all);
+            planned to the whole degree.
+    """
+
+    kind: MobilityName = msgspec.field(name="class")
+    max_slope_deg: SlopeDeg | None = None
+
+
 class UnitState(_Message, frozen=True, kw_only=True):
     """Where a unit is; published on ``mumt/{m}/unit/{u}/state``.
 
@@ -144,6 +163,10 @@ class UnitState(_Message, frozen=True, kw_only=True):
         kind: ``manned`` or ``unmanned``.
         speed_mps: ground speed in metres per second.
         heading_deg: compass heading in degrees, clockwise from north.
+        mobility: the unit's standing mobility class over terrain (``GoalMobility``), kept until
+            a state names another (a state without it changes nothing); a goal's own ``mobility``
+            overrides it for that goal.  A class the planner does not know refuses the state
+            (field ``$.mobility.class``).
     """
 
     position: Point
@@ -152,25 +175,7 @@ class UnitState(_Message, frozen=True, kw_only=True):
     kind: UnitKind | None = None
     speed_mps: Speed | None = None
     heading_deg: Angle | None = None
-
-
-MobilityName = Annotated[str, Meta(pattern="^[a-z][a-z0-9_]{0,31}$")]
-SlopeDeg = Annotated[float, Meta(ge=1.0, le=89.0)]
-
-
-class GoalMobility(_Message, frozen=True, kw_only=True):
-    """A goal's mobility class: the ground its unit can cross (``core.mobility.CLASSES``).
-
-    Attributes:
-        kind: the class, ``foot``, ``wheeled`` or ``tracked`` (JSON ``class``); a name the
-            planner does not know is refused on the goal's key (field ``$.mobility.class``).
-        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's (the
-            planner plans it at the steepest class limit not above it, and refuses one below them all);
-            planned to the whole degree.
-    """
-
-    kind: MobilityName = msgspec.field(name="class")
-    max_slope_deg: SlopeDeg | None = None
+    mobility: GoalMobility | None = None
 
 
 class Goal(_Message, frozen=True, kw_only=True):
@@ -187,8 +192,9 @@ class Goal(_Message, frozen=True, kw_only=True):
             more than ``max_iter`` steps to reach the goal from where the unit is
             is refused when the mission is fixed (a ``rejected`` event on the
             goal's key, field ``$.step``).
-        mobility: the unit's mobility class over terrain (``GoalMobility``): its slope limit
-            makes the barriers it plans around; absent, the planner's ``--terrain-unit``.
+        mobility: the unit's mobility class over terrain for this goal (``GoalMobility``): its slope
+            limit makes the barriers it plans around; absent, the class its states name, else the
+            planner's ``--terrain-unit``.
     """
 
     position: Point

@@ -16,6 +16,7 @@ from pfp_service.wire.messages.structs import DirectionStatus, _Message
 
 __all__ = [
     "MAX_PREVIEW_MEMBERS",
+    "MAX_PREVIEW_OUTSIDERS",
     "MAX_REPLAY_HORIZON_S",
     "MemberTrack",
     "StatusChange",
@@ -24,6 +25,9 @@ __all__ = [
 ]
 
 MAX_PREVIEW_MEMBERS = 64  # members one team preview replays: a platoon's vehicles, each a stepper per step
+# units outside the team one team preview replays with it, nearest first (``world.team_outsiders``):
+# each is a stepper per step, as a member is, so together at most twice a full team
+MAX_PREVIEW_OUTSIDERS = 64
 MAX_REPLAY_HORIZON_S = 3600.0  # simulated seconds one team preview may look ahead
 Speed = Annotated[float, Meta(gt=0.0, le=1000.0)]
 
@@ -81,6 +85,10 @@ class TeamPreview(_Message, frozen=True, kw_only=True):
         simulated_s: how far the replay got.
         stopped: why it stopped: ``arrived`` (every member with a goal), ``horizon`` or ``budget``
             (the preview's time ran out first: the tracks are as far as it got).
+        outsiders: the units outside the team replayed with it (their reach comes within dispersion
+            distance of a member's), nearest first; empty with dispersion off.
+        outsiders_left_out: how many more were that near but not replayed (past
+            ``MAX_PREVIEW_OUTSIDERS``).
     """
 
     team: Id
@@ -88,3 +96,5 @@ class TeamPreview(_Message, frozen=True, kw_only=True):
     members: list[MemberTrack] = []
     simulated_s: float = 0.0
     stopped: str = "arrived"
+    outsiders: Annotated[list[Id], Meta(max_length=MAX_PREVIEW_OUTSIDERS)] = []
+    outsiders_left_out: int = 0
