@@ -420,3 +420,12 @@ def track_enters(
     zs = zones if isinstance(zones, ZoneSet) else ZoneSet(zones)
     _, zid = zs.first_hit(np.asarray(points, dtype=np.float64))
     return zid or None
+
+
+def clear_run(zs: ZoneSet, x: float, y: float, dx: float, dy: float, reach: float, clear_m: float) -> float:
+    """How far from ``(x, y)`` along the unit vector ``(dx, dy)``, at most ``reach``, a unit may go and
+    end ``clear_m`` short of every zone of ``zs`` (0 when its way touches one at once)."""
+    if not zs.zones or reach <= 0.0:
+        return reach
+    t, z = segment_hit(*zs.packed(), x, y, x + dx * reach, y + dy * reach)
+    return reach if z < 0 else max(t * reach - clear_m, 0.0)

@@ -17,14 +17,14 @@ term between friendly units to read; this book applies no separation itself.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
-import msgspec
-
+from pfp_service.core.zones import ZoneSet
 from pfp_service.errors import InputError
 from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
+from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
 from pfp_service.world.teams import Point, Polyline, Sight, Verdict
@@ -166,7 +166,11 @@ class TeamBook:
 
     # -- the roles, applied ----------------------------------------------------------
     def judge(
-        self, directions: Sequence[Direction], units: Mapping[str, UnitRecord], sight: Sight | None = None
+        self,
+        directions: Sequence[Direction],
+        units: Mapping[str, UnitRecord],
+        sight: Sight | None = None,
+        zones_of: Callable[[UnitRecord], ZoneSet] | None = None,
     ) -> list[Direction]:
         """``directions`` with each team member's rewritten by its roles (the rest as they are).
 
@@ -175,6 +179,8 @@ class TeamBook:
             units: the world's records, for positions, goals, staleness and progress.
             sight: line of sight between two points over the terrain, where there is terrain
                 (default: the book's own, the world's terrain's).
+            zones_of: the keep-out zones and slope barriers a unit plans round: a role's step goes
+                straight to its point, so it is cut short of them (``team_steps.kept_clear``).
         """
         sight = sight if sight is not None else self.sight
         if not self.teams:
@@ -189,8 +195,11 @@ class TeamBook:
             if d.unit not in self._of or rec is None or rec.position is None:
                 out.append(d)
                 continue
-            out.append(self._judged(d, rec, units, held_before, sight))
-            self.sent[d.unit] = out[-1]
+            judged = self._judged(d, rec, units, held_before, sight)
+            if judged is not d and zones_of is not None and (judged.reach_m or 0.0) > 0.0:
+                judged = steps.kept_clear(judged, rec, zones_of(rec))
+            out.append(judged)
+            self.sent[d.unit] = judged
         return out
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
@@ -275,13 +284,13 @@ class TeamBook:
                 if verdict.kind == "hold" or verdict.to is None:
                     self.held.add(rec.id)
                     self.said[rec.id] = "; ".join(reasons)
-                    return _held(d, self.said[rec.id])
+                    return steps.held(d, self.said[rec.id])
                 to = verdict.to
         if not reasons:
             self.said.pop(rec.id, None)
             return d
         self.said[rec.id] = "; ".join(reasons)
-        return _towards(d, at, to, self.said[rec.id])
+        return steps.towards(d, at, to, self.said[rec.id])
 
     def _verdicts(
         self,
@@ -454,30 +463,3 @@ def _route(main: UnitRecord) -> list[Point]:
     if main.goal is not None:
         route.append(main.goal.position)
     return route
-
-
-def _held(d: Direction, reason: str) -> Direction:
-    return msgspec.structs.replace(
-        d,
-        vector=(0.0, 0.0),
-        heading_deg=None,
-        reach_m=0.0,
-        lookahead=[],
-        reason=reason[:1024],
-    )
-
-
-def _towards(d: Direction, at: Point, to: Point, reason: str) -> Direction:
-    dx, dy = to[0] - at[0], to[1] - at[1]
-    far = math.hypot(dx, dy)
-    if far <= 0.0:
-        return _held(d, reason)
-    heading = math.degrees(math.atan2(dx, dy)) % 360.0
-    return msgspec.structs.replace(
-        d,
-        vector=(dx / far, dy / far),
-        heading_deg=0.0 if heading >= 360.0 else heading,
-        reach_m=far,
-        lookahead=[],
-        reason=reason[:1024],
-    )

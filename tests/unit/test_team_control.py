@@ -46,3 +46,27 @@ def test_a_controller_walking_away_keeps_its_robot_and_the_robot_closes_on_it() 
     assert "team alpha: the step would break r1's link" in reasons
     assert "team alpha: closing on m1, which holds for its link" in reasons
     assert tracks["m1"][-1][0] < -60.0  # the pair got on: the controller's way, the robot in tow
+
+
+def test_a_robot_closing_on_its_controller_keeps_out_of_a_keep_out_zone_between_them() -> None:
+    """A role's step goes straight to its point: it is cut short of a zone on the way, as the planner's are."""
+    from shapely.geometry import LineString, box
+
+    from pfp_service.wire.messages import ZoneUpdate
+    from pfp_service.world.world import ZonePut
+
+    w = World(WorldSettings(planner=PlannerParams(intensity="density", step=0.5)))
+    ring = [(20.0, -10.0), (40.0, -10.0), (40.0, 10.0), (20.0, 10.0), (20.0, -10.0)]
+    w.apply([ZonePut("pit", ZoneUpdate(polygon=[ring]))], 0.0)
+    w.apply([TeamPut("alpha", TeamUpdate(controller="m1", robots=["r1"], radio_range_m=100.0))], 0.0)
+    tracks, said = _drive(
+        w,
+        start={"m1": (0.0, 0.0), "r1": (60.0, 0.0)},
+        goal={"m1": (-300.0, 0.0), "r1": (300.0, 0.0)},
+        speed={"m1": 2.0, "r1": 2.0},
+        seconds=60.0,
+    )
+    told = {d.reason for d in said if d.unit == "r1"}
+    assert any("closing on m1" in r or "turning back" in r for r in told), told  # the roles pulled it west
+    pit = box(20.0, -10.0, 40.0, 10.0)
+    assert not LineString(tracks["r1"]).intersects(pit), "the robot drove into the keep-out zone"
