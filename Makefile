@@ -21,11 +21,19 @@ install: $(STAMP)
 # test-fast run's CPU, and every `pfp` a test starts compiles the package again.
 test test-fast test-proc: export PYTHONDONTWRITEBYTECODE =
 
-# Every tier (tests/conftest.py names them): what CI runs, after `make check`.
+# Every tier (tests/conftest.py names them): what CI runs, after `make check`.  Three runs, cheapest
+# first: the in-process tiers in one process (they also fill a fresh clone's kernel cache before any
+# planner starts); then the proc tier two at a time, as its tests mostly wait on the processes they
+# start (tests/conftest.py keeps a module's shared planner on one worker, tests/zenoh_util.py gives
+# each worker its own ports); then the multi and browser tiers one at a time, as each test already
+# runs several processes at once.
+PROC_WORKERS ?= 2
 test: $(STAMP)
 	@sh .ci/ensure-chromium
 	@sh .ci/ensure-gdal
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "unit or net"
+	$(BIN)/python -m pytest -q -m proc -n $(PROC_WORKERS) --dist loadgroup
+	$(BIN)/python -m pytest -q -m "multi or browser"
 
 # The in-process tiers (unit and net): about a minute on 2 cores; run it on every change.
 test-fast: $(STAMP)
@@ -34,7 +42,8 @@ test-fast: $(STAMP)
 # The tiers that start processes but no browser: run before a commit that touches the service or a client.
 test-proc: $(STAMP)
 	@sh .ci/ensure-gdal
-	$(BIN)/python -m pytest -q -m "proc or multi"
+	$(BIN)/python -m pytest -q -m proc -n $(PROC_WORKERS) --dist loadgroup
+	$(BIN)/python -m pytest -q -m multi
 
 check: $(STAMP)
 	$(BIN)/ruff format --check .

@@ -59,6 +59,25 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     # compile the numba kernels into the cache before the first planner process starts and warms up
     rank = {name: i for i, name in enumerate(TIERS)}
     items.sort(key=lambda item: rank[_tier_of(item) or "unit"])
+    for item in items:
+        if _shares_a_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
+
+
+def _shares_a_fixture(item: pytest.Item) -> bool:
+    """Whether a test uses a module- or class-scoped fixture (a planner shared by a module, say).
+
+    Under ``-n 2 --dist loadgroup`` (``make test``'s proc tier) such a test runs on the worker that
+    holds the rest of its module, so the shared planner starts once, not once per worker; every other
+    test goes to whichever worker is free, so one long module (test_cli_edges' 58 commands) does not
+    keep the other worker idle.  A session fixture is set up once per worker whatever is grouped.
+    """
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return False
+    return any(
+        d.scope in ("module", "class", "package") for chain in info.name2fixturedefs.values() for d in chain
+    )
 
 
 class TierViolation(AssertionError):

@@ -19,10 +19,37 @@ import zenoh
 ROOT = Path(__file__).resolve().parent.parent
 
 
+# Ports come from a block of this process's own, below Linux's ephemeral range (32768-60999), not from
+# the kernel's port 0: a port is free only until something binds it, so a kernel-picked port handed to a
+# planner could meanwhile go to another xdist worker's planner, or to any outgoing connection on the
+# machine.  Each worker (PYTEST_XDIST_WORKER gwN) owns block N, so two workers never pick one port, and
+# a run starts at an offset of its own within its block, so two runs at once on one machine seldom meet.
+_PORT_BASE, _PORT_BLOCK, _PORT_BLOCKS = 20000, 1500, 8
+
+
+def _port_block() -> range:
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+    start = _PORT_BASE + (int(worker) % _PORT_BLOCKS if worker.isdigit() else 0) * _PORT_BLOCK
+    return range(start, start + _PORT_BLOCK)
+
+
+_ports = _port_block()
+_next_port = [os.getpid() * 7919 % _PORT_BLOCK]
+
+
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A loopback port no other worker of this run hands out, and free (TCP and UDP) when asked."""
+    for _ in range(len(_ports)):
+        port = _ports[_next_port[0] % len(_ports)]
+        _next_port[0] += 1
+        try:
+            with socket.socket() as tcp, socket.socket(type=socket.SOCK_DGRAM) as udp:
+                tcp.bind(("127.0.0.1", port))
+                udp.bind(("127.0.0.1", port))
+        except OSError:
+            continue
+        return port
+    raise RuntimeError(f"no free port in {_ports}")
 
 
 def client_config(endpoint: str) -> zenoh.Config:

@@ -13,13 +13,14 @@ import json
 import math
 import queue
 import re
-import socket
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 import zenoh
+
+from tests.zenoh_util import free_port
 
 pytestmark = pytest.mark.net
 
@@ -251,12 +252,6 @@ def all_messages() -> Iterator[tuple[str, dict[str, Any]]]:
 
 
 # ============================ the planner side and the sessions ============================
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def _config(mode: str, endpoints_key: str, endpoint: str) -> zenoh.Config:
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
@@ -267,7 +262,7 @@ def _config(mode: str, endpoints_key: str, endpoint: str) -> zenoh.Config:
 
 @pytest.fixture(scope="module")
 def sessions() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = zenoh.open(_config("router", "listen/endpoints", endpoint))
     try:
         client = zenoh.open(_config("client", "connect/endpoints", endpoint))
