@@ -28,7 +28,7 @@ from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
 from pfp_service.world.teams import Point, Polyline, Sight, Verdict
-from pfp_service.world.world_records import UnitRecord
+from pfp_service.world.units import UnitRecord
 
 __all__ = ["MAX_TRACK_POINTS", "TeamBook"]
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import shapely
 
@@ -28,7 +28,7 @@ from pfp_service.world.mobility import limit_of
 if TYPE_CHECKING:
     from pfp_service.world.team_book import TeamBook
     from pfp_service.world.terrain import Ground
-    from pfp_service.world.world_records import Records, UnitRecord
+    from pfp_service.world.units import UnitRecord
 
 __all__ = ["RouteKey", "RouteKeys", "groups", "widened"]
 
@@ -74,10 +74,20 @@ def kept_for(grown: ZoneSet, plain: ZoneSet, goal: tuple[float, float]) -> tuple
     return tuple(sorted(keep))
 
 
+class _Records(Protocol):
+    """What a key needs of the world's records (``world_records.Records``, which builds on this module)."""
+
+    units: dict[str, UnitRecord]
+
+    def zone_set_for(
+        self, slope: int | None, margin_m: float = 0.0, keep: tuple[str, ...] = ()
+    ) -> ZoneSet: ...
+
+
 class RouteKeys:
     """Each unit's ``RouteKey``: its own slope limit, or, leading followers, theirs and the corridor's margin."""
 
-    def __init__(self, records: Records, teams: TeamBook, ground: Ground | None) -> None:
+    def __init__(self, records: _Records, teams: TeamBook, ground: Ground | None) -> None:
         self._rec, self._teams = records, teams
         unit = getattr(ground, "unit", None)  # the planner's class: a goal naming none plans as it
         self._planner = planned_limit(unit.max_slope_deg) if unit is not None else None
