@@ -351,8 +351,8 @@ class Dispersion:
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
         along = (rel * vec[at[i]]).sum(axis=1)
-        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # closing, and near
-        i, j, gap, along = i[close], j[close], gap[close], along[close]
+        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # ahead, and near
+        i, j, gap, along, rel, pair_s = i[close], j[close], gap[close], along[close], rel[close], pair_s[close]
         # the order of right of way among the units of the pairs left (0 first): compared only within
         # them, it is the total order's, at the cost of the tick's reports, not of the fleet
         n = len(self._recs)
@@ -368,7 +368,7 @@ class Dispersion:
         k = at[i]
         ahead = along > AHEAD * gap
         behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = (rank[j] < rank[i]) & goes[j] & ~behind
+        keep = (rank[j] < rank[i]) & goes[j] & ~behind & _meet(rel, way[j] - vec[k], pair_s)
         # each direction's nearest (the first of equals, in the pairs' order): one sort, not a loop
         k, j, gap = k[keep], j[keep], gap[keep]
         order = np.lexsort((np.arange(len(k)), gap, k))
@@ -415,6 +415,19 @@ class Dispersion:
         reason = deadlocks.resolving(hold, self._recs[j].last_status)
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
         return _held(d, vec, pair, reason)
+
+
+def _meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarray:
+    """Whether each pair's paths meet: the gap ``rel`` (to the other) shrinks under the other's way less
+    one's own (``closing``, both at one speed), and at its closest it is within the pair's separation.
+
+    Right of way is for units that would meet in a gap, not for neighbours going side by side (their
+    gap holds; the push and ``_short`` keep it), nor for two whose paths pass wide of each other.
+    """
+    rate = (rel * closing).sum(axis=1)
+    w2 = (closing * closing).sum(axis=1)
+    least2 = (rel * rel).sum(axis=1) - rate * rate / np.where(w2 > 0.0, w2, 1.0)
+    return (rate < 0.0) & (least2 < pair_s * pair_s)
 
 
 def _held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:
