@@ -18,6 +18,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from pfp_service.core import polyline_kernels as kernels
 from pfp_service.world import corridor
 
 __all__ = [
@@ -118,15 +119,13 @@ class Polyline:
     def length(self) -> float:
         return float(self.cum[-1])
 
-    def offs(self, at: Point) -> np.ndarray:
-        """How far ``at`` is from each segment (from the one point, for a line of one)."""
+    def shared(self, at: Point, to: Point, half: float) -> bool:
+        """Whether ``at`` and ``to`` both lie within ``half`` of one segment (of the one point, for a line of one)."""
         pts = self.pts
         if len(pts) == 1:
-            return np.array([_dist(at, (float(pts[0, 0]), float(pts[0, 1])))])
-        a, ab = pts[:-1], self.ab
-        px, py = at
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
-        return np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
+            c = (float(pts[0, 0]), float(pts[0, 1]))
+            return _dist(at, c) <= half and _dist(to, c) <= half
+        return bool(kernels.shared(pts, self.ab, self.sq, at[0], at[1], to[0], to[1], half))
 
     def project(self, at: Point) -> tuple[float, float]:
         pts = self.pts
@@ -134,12 +133,8 @@ class Polyline:
             return 0.0, math.inf
         if len(pts) == 1:
             return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
-        a, ab = pts[:-1], self.ab
-        px, py = at
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
-        off = np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
-        i = int(np.argmin(off))
-        return float(self.cum[i] + t[i] * self.seg[i]), float(off[i])
+        s, off = kernels.project(pts, self.ab, self.sq, self.seg, self.cum, at[0], at[1])
+        return float(s), float(off)
 
     def point_at(self, s: float) -> Point:
         pts, cum = self.pts, self.cum
@@ -261,7 +256,7 @@ def follow(
     if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
-    if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
+    if line.shared(at, to, half):
         return GO  # both ends within one segment's stadium, which is convex: the whole step is
     room = corridor.near(line.pts, half, at, max(_dist(at, to), _CLOSE_M))
     kept = room.kept(at, to)

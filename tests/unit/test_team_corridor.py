@@ -43,6 +43,27 @@ def _geos_kept(pts: np.ndarray, half: float, at: tuple[float, float], to: tuple[
     return 0.0
 
 
+def _off(pts: np.ndarray, p: tuple[float, float]) -> float:
+    """How far ``p`` is from the polyline ``pts``: every segment's nearest point, by NumPy."""
+    if len(pts) == 1:
+        return math.dist(p, pts[0])
+    a, ab = pts[:-1], np.diff(pts, axis=0)
+    sq = np.where((ab * ab).sum(axis=1) > 0.0, (ab * ab).sum(axis=1), 1.0)
+    t = np.clip(((p - a) * ab).sum(axis=1) / sq, 0.0, 1.0)
+    return float(np.hypot(*(a + ab * t[:, None] - p).T).min())
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_a_projection_is_numpys_over_every_segment(seed: int) -> None:
+    pts, _half, at, to = _case(seed)
+    line = Polyline(pts)
+    for p in (at, to):
+        assert line.project(p)[1] == pytest.approx(_off(pts, p), abs=1e-9), f"seed {seed}"
+        assert line.shared(at, to, _half) == any(
+            _off(pts[k : k + 2], at) <= _half and _off(pts[k : k + 2], to) <= _half for k in range(max(len(pts) - 1, 1))
+        ), f"seed {seed}"
+
+
 def _case(seed: int) -> tuple[np.ndarray, float, tuple[float, float], tuple[float, float]]:
     rng = random.Random(seed)
     n = rng.randint(1, 12)
@@ -74,10 +95,10 @@ def test_the_part_kept_lies_between_geos_inner_and_outer_buffers(seed: int) -> N
 def test_every_point_kept_is_within_the_half_width_and_the_next_is_not(seed: int) -> None:
     pts, half, at, to = _case(seed)
     got = corridor.near(pts, half, at, max(math.dist(at, to), 1.0)).kept(at, to)
-    line, far = Polyline(pts), math.dist(at, to)
+    far = math.dist(at, to)
 
     def off(t: float) -> float:
-        return float(line.offs((at[0] + (to[0] - at[0]) * t, at[1] + (to[1] - at[1]) * t)).min())
+        return _off(pts, (at[0] + (to[0] - at[0]) * t, at[1] + (to[1] - at[1]) * t))
 
     if got > 0.0:
         assert all(off(got * k / 64) <= half + 1e-7 for k in range(65)), f"seed {seed}"
