@@ -20,7 +20,9 @@ __all__ = ["kept", "project", "shared"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _off(pts: np.ndarray, ab: np.ndarray, sq: np.ndarray, i: int, px: float, py: float) -> tuple[float, float]:
+def _off(
+    pts: np.ndarray, ab: np.ndarray, sq: np.ndarray, i: int, px: float, py: float
+) -> tuple[float, float]:
     """Where along segment ``i`` (0 to 1) ``(px, py)``'s nearest point lies, and how far off it is."""
     t = ((px - pts[i, 0]) * ab[i, 0] + (py - pts[i, 1]) * ab[i, 1]) / sq[i]
     t = min(max(t, 0.0), 1.0)
@@ -77,7 +79,9 @@ def _disc(px: float, py: float, dx: float, dy: float, cx: float, cy: float, r: f
 
 
 @numba.njit(cache=True, nogil=True)
-def kept(a: np.ndarray, b: np.ndarray, half: float, px: float, py: float, dx: float, dy: float, eps: float) -> float:
+def kept(
+    a: np.ndarray, b: np.ndarray, half: float, px: float, py: float, dx: float, dy: float, eps: float
+) -> float:
     """How much (0 to 1) of the step ``p + t d`` (``t`` in 0 to 1) stays in the capsules round the segments
     ``a[k]``-``b[k]`` from its start; intervals ``eps`` apart (a share of the step) join."""
     m = a.shape[0]

@@ -53,5 +53,7 @@ def near(track: Sequence[Point] | np.ndarray, half: float, at: Point, reach: flo
     a, b = pts[:-1], pts[1:]
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     r = reach + half
-    keep = (lo[:, 0] <= at[0] + r) & (hi[:, 0] >= at[0] - r) & (lo[:, 1] <= at[1] + r) & (hi[:, 1] >= at[1] - r)
+    keep = (
+        (lo[:, 0] <= at[0] + r) & (hi[:, 0] >= at[0] - r) & (lo[:, 1] <= at[1] + r) & (hi[:, 1] >= at[1] - r)
+    )
     return Room(a[keep], b[keep], half)

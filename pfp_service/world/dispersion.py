@@ -354,7 +354,14 @@ class Dispersion:
         gap = np.hypot(rel[:, 0], rel[:, 1])
         along = (rel * vec[at[i]]).sum(axis=1)
         close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # ahead, and near
-        i, j, gap, along, rel, pair_s = i[close], j[close], gap[close], along[close], rel[close], pair_s[close]
+        i, j, gap, along, rel, pair_s = (
+            i[close],
+            j[close],
+            gap[close],
+            along[close],
+            rel[close],
+            pair_s[close],
+        )
         # the order of right of way among the units of the pairs left (0 first): compared only within
         # them, it is the total order's, at the cost of the tick's reports, not of the fleet
         n = len(self._recs)
@@ -450,7 +457,8 @@ def _meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarra
     rate = (rel * closing).sum(axis=1)
     w2 = (closing * closing).sum(axis=1)
     least2 = (rel * rel).sum(axis=1) - rate * rate / np.where(w2 > 0.0, w2, 1.0)
-    return (rate < 0.0) & (least2 < pair_s * pair_s)
+    meet: np.ndarray = (rate < 0.0) & (least2 < pair_s * pair_s)
+    return meet
 
 
 def _held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:

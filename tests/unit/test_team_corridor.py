@@ -29,7 +29,11 @@ def _geos_kept(pts: np.ndarray, half: float, at: tuple[float, float], to: tuple[
     room = (
         shapely.Point(pts[0]).buffer(half, quad_segs=_QUAD)
         if len(pts) == 1
-        else shapely.buffer(shapely.MultiLineString([[tuple(a), tuple(b)] for a, b in zip(pts[:-1], pts[1:])]), half, quad_segs=_QUAD)
+        else shapely.buffer(
+            shapely.MultiLineString([[tuple(a), tuple(b)] for a, b in zip(pts[:-1], pts[1:])]),
+            half,
+            quad_segs=_QUAD,
+        )
     )
     far = math.dist(at, to)
     if far <= 0.0:
@@ -60,7 +64,8 @@ def test_a_projection_is_numpys_over_every_segment(seed: int) -> None:
     for p in (at, to):
         assert line.project(p)[1] == pytest.approx(_off(pts, p), abs=1e-9), f"seed {seed}"
         assert line.shared(at, to, _half) == any(
-            _off(pts[k : k + 2], at) <= _half and _off(pts[k : k + 2], to) <= _half for k in range(max(len(pts) - 1, 1))
+            _off(pts[k : k + 2], at) <= _half and _off(pts[k : k + 2], to) <= _half
+            for k in range(max(len(pts) - 1, 1))
         ), f"seed {seed}"
 
 
@@ -69,7 +74,7 @@ def _case(seed: int) -> tuple[np.ndarray, float, tuple[float, float], tuple[floa
     n = rng.randint(1, 12)
     pts = [(0.0, 0.0)]
     for _ in range(n - 1):
-        last = pts[-1] if rng.random() > 0.1 else pts[-1]  # now and then a point reported twice
+        last = pts[-1]
         pts.append((last[0] + rng.uniform(-3.0, 12.0), last[1] + rng.uniform(-8.0, 8.0)))
         if rng.random() < 0.1:
             pts.append(pts[-1])
@@ -103,7 +108,9 @@ def test_every_point_kept_is_within_the_half_width_and_the_next_is_not(seed: int
     if got > 0.0:
         assert all(off(got * k / 64) <= half + 1e-7 for k in range(65)), f"seed {seed}"
     if got < 1.0 and far > 0.0:
-        assert off(min(1.0, got + 1e-3 / far)) > half - 1e-3 or got == 0.0 and off(0.0) > half - 1e-6, f"seed {seed}"
+        assert off(min(1.0, got + 1e-3 / far)) > half - 1e-3 or (got == 0.0 and off(0.0) > half - 1e-6), (
+            f"seed {seed}"
+        )
 
 
 def test_a_room_of_nothing_keeps_nothing_and_a_point_is_a_disc() -> None:
