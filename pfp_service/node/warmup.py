@@ -17,6 +17,8 @@ live loop takes:
   ``cull._culled_descent_parallel``, ``cull._predict_parallel``,
   ``kernels.batch_descent``, and past ``PARALLEL_MIN_PAIRS_LEVEL``
   ``kernels._parallel_level``;
+* a team's follower stepping out of its corridor: ``polyline_kernels.project``,
+  ``shared`` and ``kept``;
 * a threat over terrain (a synthetic hill): the viewshed sweep
   (``terrain.viewshed._sweep``) and every kernel on rows that carry a
   visibility window.
@@ -62,7 +64,16 @@ def warm_wide(base: WorldSettings) -> None:
     # a batch's unit in plain descent among zones, its gradient given (``advise_many``): judged from Python
     lone = Stepper((0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0)), None, 0)
     lone.follow(-30.0, 0.0, 1.0, 0.0, 0.0, 1.0, world.field)
+    _team()
     _terrain(settings)
+
+
+def _team() -> None:
+    """A follower's step leaving its corridor at a bend: the compiled walks of its lead's track
+    (``core.polyline_kernels``: projection, shared stadium, capsule run), which only teams reach."""
+    from pfp_service.world import teams
+
+    teams.follow((5.0, 0.0), (15.0, 5.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 4.0, "lead", "")
 
 
 def _crowd() -> list[Input]:

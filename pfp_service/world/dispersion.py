@@ -100,6 +100,7 @@ class Dispersion:
         self._row: dict[str, int] = {}
         self._pushed: dict[str, list[float]] = {}  # each unit advised in this ``apply``: its push
         self._seps: dict[str, float] = {}  # each unit's separation, by its class: fixed by the settings
+        self._resolving: dict[tuple[int, int], float] = {}  # this tick's resolutions' pair separations
 
     def holding(self) -> int:
         """How many units hold (yield, back off or go round) now."""
@@ -184,6 +185,7 @@ class Dispersion:
         pairs = np.zeros(len(moving))
         blocked = found >= 0
         pairs[blocked] = index.pair_seps(rows[blocked], found[blocked])
+        self._resolving = self._resolution_seps(directions, moving, rows)
         events: list[Event] = []
         for k, i, j, gap, pair in zip(moving, rows.tolist(), found.tolist(), gaps.tolist(), pairs.tolist()):
             d = directions[k]
@@ -351,8 +353,15 @@ class Dispersion:
         rel = index.points[j] - index.points[i]
         gap = np.hypot(rel[:, 0], rel[:, 1])
         along = (rel * vec[at[i]]).sum(axis=1)
-        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # closing, and near
-        i, j, gap, along = i[close], j[close], gap[close], along[close]
+        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # ahead, and near
+        i, j, gap, along, rel, pair_s = (
+            i[close],
+            j[close],
+            gap[close],
+            along[close],
+            rel[close],
+            pair_s[close],
+        )
         # the order of right of way among the units of the pairs left (0 first): compared only within
         # them, it is the total order's, at the cost of the tick's reports, not of the fleet
         n = len(self._recs)
@@ -368,7 +377,7 @@ class Dispersion:
         k = at[i]
         ahead = along > AHEAD * gap
         behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = (rank[j] < rank[i]) & goes[j] & ~behind
+        keep = (rank[j] < rank[i]) & goes[j] & ~behind & _meet(rel, way[j] - vec[k], pair_s)
         # each direction's nearest (the first of equals, in the pairs' order): one sort, not a loop
         k, j, gap = k[keep], j[keep], gap[keep]
         order = np.lexsort((np.arange(len(k)), gap, k))
@@ -401,11 +410,32 @@ class Dispersion:
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, None))
         return _held(d, (0.0, 0.0), 0.0, reason)
 
+    def _resolution_seps(
+        self, directions: list[Direction], moving: list[int], rows: np.ndarray
+    ) -> dict[tuple[int, int], float]:
+        """The pair separation of each resolution in force among ``moving``, all in one pass (elementwise:
+        as one pair's alone), for ``_resolve``; a resolution begun in this tick asks for its own."""
+        index = self._index
+        assert index is not None
+        pairs = [
+            (i, self._row[h.other])
+            for k, i in zip(moving, rows.tolist())
+            if (h := self._held.get(directions[k].unit)) is not None
+            and h.until > -math.inf
+            and h.other in self._row
+        ]
+        if not pairs:
+            return {}
+        ii, jj = np.array(pairs, dtype=np.intp).T
+        return dict(zip(pairs, index.pair_seps(ii, jj).tolist()))
+
     def _resolve(self, d: Direction, i: int, j: int, hold: Hold) -> Direction:
         """The direction of a unit resolving a deadlock: round the unit at rest, or backing off from it."""
         index = self._index
         assert index is not None
-        pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+        pair = self._resolving.get((i, j))
+        if pair is None:
+            pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
         rel = index.points[i] - index.points[j]
         if hold.round:
             vec = deadlocks.round_vector(rel, self._towards(i, d.vector), pair)
@@ -415,6 +445,20 @@ class Dispersion:
         reason = deadlocks.resolving(hold, self._recs[j].last_status)
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
         return _held(d, vec, pair, reason)
+
+
+def _meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarray:
+    """Whether each pair's paths meet: the gap ``rel`` (to the other) shrinks under the other's way less
+    one's own (``closing``, both at one speed), and at its closest it is within the pair's separation.
+
+    Right of way is for units that would meet in a gap, not for neighbours going side by side (their
+    gap holds; the push and ``_short`` keep it), nor for two whose paths pass wide of each other.
+    """
+    rate = (rel * closing).sum(axis=1)
+    w2 = (closing * closing).sum(axis=1)
+    least2 = (rel * rel).sum(axis=1) - rate * rate / np.where(w2 > 0.0, w2, 1.0)
+    meet: np.ndarray = (rate < 0.0) & (least2 < pair_s * pair_s)
+    return meet
 
 
 def _held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:

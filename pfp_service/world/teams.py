@@ -17,7 +17,9 @@ from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
-import shapely
+
+from pfp_service.core import polyline_kernels as kernels
+from pfp_service.world import corridor
 
 __all__ = [
     "GO",
@@ -118,15 +120,13 @@ class Polyline:
     def length(self) -> float:
         return float(self.cum[-1])
 
-    def offs(self, at: Point) -> np.ndarray:
-        """How far ``at`` is from each segment (from the one point, for a line of one)."""
+    def shared(self, at: Point, to: Point, half: float) -> bool:
+        """Whether ``at`` and ``to`` both lie within ``half`` of one segment (of the one point, for a line of one)."""
         pts = self.pts
         if len(pts) == 1:
-            return np.array([_dist(at, (float(pts[0, 0]), float(pts[0, 1])))])
-        a, ab = pts[:-1], self.ab
-        px, py = at
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
-        return np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
+            c = (float(pts[0, 0]), float(pts[0, 1]))
+            return _dist(at, c) <= half and _dist(to, c) <= half
+        return bool(kernels.shared(pts, self.ab, self.sq, at[0], at[1], to[0], to[1], half))
 
     def project(self, at: Point) -> tuple[float, float]:
         pts = self.pts
@@ -134,12 +134,8 @@ class Polyline:
             return 0.0, math.inf
         if len(pts) == 1:
             return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
-        a, ab = pts[:-1], self.ab
-        px, py = at
-        t = np.clip(((px - a[:, 0]) * ab[:, 0] + (py - a[:, 1]) * ab[:, 1]) / self.sq, 0.0, 1.0)
-        off = np.hypot(a[:, 0] + ab[:, 0] * t - px, a[:, 1] + ab[:, 1] * t - py)
-        i = int(np.argmin(off))
-        return float(self.cum[i] + t[i] * self.seg[i]), float(off[i])
+        s, off = kernels.project(pts, self.ab, self.sq, self.seg, self.cum, at[0], at[1])
+        return float(s), float(off)
 
     def point_at(self, s: float) -> Point:
         pts, cum = self.pts, self.cum
@@ -261,10 +257,10 @@ def follow(
     if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
-    if bool(np.any((line.offs(at) <= half) & (line.offs(to) <= half))):
+    if line.shared(at, to, half):
         return GO  # both ends within one segment's stadium, which is convex: the whole step is
-    room = _corridor_near(line.pts, half, at, max(_dist(at, to), _CLOSE_M))
-    kept = _kept_in(room, at, to)
+    room = corridor.near(line.pts, half, at, max(_dist(at, to), _CLOSE_M))
+    kept = room.kept(at, to)
     if kept >= 1.0:
         return GO
     s_goal, off_goal = line.project(goal) if goal is not None else (0.0, 0.0)
@@ -284,7 +280,7 @@ def follow(
         ahead >= _CLOSE_M
     ):  # a point of the track ahead, the straight way to it inside (a bend's chord is not)
         along = line.point_at(s_at + ahead)
-        if _dist(at, along) >= _CLOSE_M and _kept_in(room, at, along) >= 1.0:
+        if _dist(at, along) >= _CLOSE_M and room.kept(at, along) >= 1.0:
             return Verdict("to", along, f"along the corridor {lead_id} cleared")
         ahead /= 2.0
     return _at_end(line, half, lead_id, goal)
@@ -321,53 +317,13 @@ def _nearest_goal(
         return _hold(f"at the cleared ground nearest its goal: {why}")
     sign = 1.0 if s_goal > s_at else -1.0
     ahead = max(min(step, abs(s_goal - s_at)), _CLOSE_M)
-    room = _corridor_near(line.pts, half, at, ahead + _CLOSE_M)
+    room = corridor.near(line.pts, half, at, ahead + _CLOSE_M)
     while ahead >= _CLOSE_M:
         p = line.point_at(s_at + sign * ahead)
-        if _dist(at, p) >= _CLOSE_M and _kept_in(room, at, p) >= 1.0:
+        if _dist(at, p) >= _CLOSE_M and room.kept(at, p) >= 1.0:
             return Verdict("to", p, f"to the cleared ground nearest its goal: {why}")
         ahead /= 2.0
     return _hold(f"at the cleared ground nearest its goal: {why}")
-
-
-def _corridor_near(
-    track: Sequence[Point] | np.ndarray, half: float, at: Point, reach: float
-) -> shapely.Geometry:
-    """The corridor (``track`` buffered by ``half``) where a step of ``reach`` from ``at`` can go.
-
-    Only the track's segments within that reach are buffered, so the cost is the step's, not the
-    track's.  GEOS's buffer is inscribed in the true one (its arcs are chords): what it contains is cleared.
-    """
-    pts = np.asarray(track, dtype=float).reshape(-1, 2)
-    if len(pts) == 1:
-        return shapely.Point(pts[0]).buffer(half)
-    a, b = pts[:-1], pts[1:]
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    r = reach + half
-    near = np.flatnonzero(
-        (lo[:, 0] <= at[0] + r) & (hi[:, 0] >= at[0] - r) & (lo[:, 1] <= at[1] + r) & (hi[:, 1] >= at[1] - r)
-    )
-    if len(near) == 0:
-        return shapely.Polygon()
-    lines = shapely.MultiLineString([[tuple(a[i]), tuple(b[i])] for i in near])
-    return shapely.buffer(lines, half)
-
-
-def _kept_in(room: shapely.Geometry, at: Point, to: Point) -> float:
-    """How much (0 to 1) of the straight step from ``at`` to ``to`` stays in ``room`` from its start: exact."""
-    far = _dist(at, to)
-    if far <= 0.0:
-        return 1.0 if room.covers(shapely.Point(at)) else 0.0
-    step = shapely.LineString([at, to])
-    if room.covers(step):
-        return 1.0
-    start = shapely.Point(at)
-    parts = shapely.get_parts(step.intersection(room))
-    for part in parts:
-        if isinstance(part, shapely.LineString) and part.distance(start) < 1e-9:
-            reached = max(_dist(at, (float(c[0]), float(c[1]))) for c in part.coords)
-            return min(1.0, reached / far)
-    return 0.0
 
 
 def link(

@@ -66,3 +66,43 @@ def test_a_crowded_yield_encodes() -> None:
     assert any("making room" in d.reason and d.reach_m for d in seen)
     for d in seen:
         encode(d)  # plain floats throughout
+
+
+def _yields(m1: tuple[float, float], m1_goal: tuple[float, float], r1_goal: tuple[float, float]) -> list[str]:
+    """What unmanned ``r1`` at the origin is told over a few reports near manned ``m1`` (neither moves)."""
+    from pfp_service.wire import Goal, UnitKind, UnitState
+    from pfp_service.world import events as ev
+    from pfp_service.world.separations import DispersionSettings
+    from pfp_service.world.world import World, WorldSettings
+
+    w = World(WorldSettings(deliberation="deferred", dispersion=DispersionSettings(enabled=True)))
+    w.apply([ev.GoalSet("m1", Goal(position=m1_goal)), ev.GoalSet("r1", Goal(position=r1_goal))], 0.0)
+    said = []
+    for t in range(4):
+        states = [
+            ev.StateReported("m1", UnitState(position=m1, kind=UnitKind.MANNED)),
+            ev.StateReported("r1", UnitState(position=(0.0, 0.0), kind=UnitKind.UNMANNED)),
+        ]
+        said += [d.reason for d in w.apply(states, float(t)).directions if d.unit == "r1"]
+    return said
+
+
+def test_right_of_way_is_for_paths_that_meet_not_for_neighbours_going_side_by_side() -> None:
+    import numpy as np
+
+    from pfp_service.world.dispersion import _meet
+
+    # the other 60 m off ahead-left: (its way, one's own) -> whether their paths meet, separation 50 m
+    cases = {
+        ((1.0, 0.0), (1.0, 0.0)): False,  # side by side, one way: the gap holds
+        ((0.0, -1.0), (1.0, 0.0)): True,  # it crosses one's way: they meet
+        ((0.0, 1.0), (1.0, 0.0)): False,  # it draws away across: the paths pass wide
+        ((-1.0, 0.0), (1.0, 0.0)): True,  # head on along lines 45 m apart: within the separation
+        ((-1.0, 0.0), (0.0, -1.0)): False,  # it goes west as one goes south: the gap opens
+    }
+    rel = np.array([[40.0, 45.0]] * len(cases))
+    closing = np.array([np.subtract(other, mine) for other, mine in cases], dtype=float)
+    got = _meet(rel, closing, np.full(len(cases), 50.0)).tolist()
+    assert got == list(cases.values())
+    # in the world: m1 70 m ahead, head on, r1 yields to it
+    assert any(r.startswith("yielding to m1") for r in _yields((0.0, 70.0), (0.0, -600.0), (0.0, 600.0)))

@@ -1,0 +1,119 @@
+"""Compiled walks of a polyline for the team roles: a point's projection, a shared stadium, a capsule run.
+
+A team's follower is judged against its lead's track, which grows a point
+every few metres the lead drives (thousands of points): one loop over its
+segments a question, with no temporary array per question, where NumPy made
+a dozen arrays of the track's length for each.  The arrays are a
+``world.teams.Polyline``'s: points ``pts``, segments ``ab``, their squared
+lengths ``sq`` (1 for a segment of no length), lengths ``seg``, cumulated
+``cum``.  ``kept`` is ``world.corridor.Room``'s closed form.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+__all__ = ["kept", "project", "shared"]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _off(
+    pts: np.ndarray, ab: np.ndarray, sq: np.ndarray, i: int, px: float, py: float
+) -> tuple[float, float]:
+    """Where along segment ``i`` (0 to 1) ``(px, py)``'s nearest point lies, and how far off it is."""
+    t = ((px - pts[i, 0]) * ab[i, 0] + (py - pts[i, 1]) * ab[i, 1]) / sq[i]
+    t = min(max(t, 0.0), 1.0)
+    return t, math.hypot(pts[i, 0] + ab[i, 0] * t - px, pts[i, 1] + ab[i, 1] * t - py)
+
+
+@numba.njit(cache=True, nogil=True)
+def project(
+    pts: np.ndarray, ab: np.ndarray, sq: np.ndarray, seg: np.ndarray, cum: np.ndarray, px: float, py: float
+) -> tuple[float, float]:
+    """``(s, d)`` of ``(px, py)`` on a line of two points or more: the first nearest segment's."""
+    best, bi, bt = math.inf, 0, 0.0
+    for i in range(pts.shape[0] - 1):
+        t, off = _off(pts, ab, sq, i, px, py)
+        if off < best:
+            best, bi, bt = off, i, t
+    return cum[bi] + bt * seg[bi], best
+
+
+@numba.njit(cache=True, nogil=True)
+def shared(
+    pts: np.ndarray, ab: np.ndarray, sq: np.ndarray, ax: float, ay: float, bx: float, by: float, half: float
+) -> bool:
+    """Whether both points lie within ``half`` of one segment (its stadium, convex, then holds the step)."""
+    for i in range(pts.shape[0] - 1):
+        if _off(pts, ab, sq, i, ax, ay)[1] <= half and _off(pts, ab, sq, i, bx, by)[1] <= half:
+            return True
+    return False
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _line_in(v0: float, v1: float, lo: float, hi: float) -> tuple[float, float]:
+    """The interval of ``t`` where ``v0 + t v1`` lies in ``[lo, hi]`` (empty: ``lo > hi``)."""
+    if v1 == 0.0:
+        return (-math.inf, math.inf) if lo <= v0 <= hi else (math.inf, -math.inf)
+    ta, tb = (lo - v0) / v1, (hi - v0) / v1
+    return min(ta, tb), max(ta, tb)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _disc(px: float, py: float, dx: float, dy: float, cx: float, cy: float, r: float) -> tuple[float, float]:
+    """The interval of ``t`` where ``p + t d`` is within ``r`` of ``c`` (empty: ``lo > hi``)."""
+    wx, wy = px - cx, py - cy
+    dd = dx * dx + dy * dy
+    ww = wx * wx + wy * wy - r * r
+    if dd == 0.0:
+        return (-math.inf, math.inf) if ww <= 0.0 else (math.inf, -math.inf)
+    bh = wx * dx + wy * dy
+    disc = bh * bh - dd * ww
+    if disc < 0.0:
+        return math.inf, -math.inf
+    root = math.sqrt(disc)
+    return (-bh - root) / dd, (-bh + root) / dd
+
+
+@numba.njit(cache=True, nogil=True)
+def kept(
+    a: np.ndarray, b: np.ndarray, half: float, px: float, py: float, dx: float, dy: float, eps: float
+) -> float:
+    """How much (0 to 1) of the step ``p + t d`` (``t`` in 0 to 1) stays in the capsules round the segments
+    ``a[k]``-``b[k]`` from its start; intervals ``eps`` apart (a share of the step) join."""
+    m = a.shape[0]
+    lo = np.empty(m)
+    hi = np.empty(m)
+    for k in range(m):
+        l1, h1 = _disc(px, py, dx, dy, a[k, 0], a[k, 1], half)
+        l2, h2 = _disc(px, py, dx, dy, b[k, 0], b[k, 1], half)
+        l3, h3 = math.inf, -math.inf
+        ex, ey = b[k, 0] - a[k, 0], b[k, 1] - a[k, 1]
+        n = math.hypot(ex, ey)
+        if n > 0.0:
+            ex, ey = ex / n, ey / n
+            wx, wy = px - a[k, 0], py - a[k, 1]
+            sa, sb = _line_in(wx * ex + wy * ey, dx * ex + dy * ey, 0.0, n)
+            ha, hb = _line_in(ex * wy - ey * wx, ex * dy - ey * dx, -half, half)
+            l3, h3 = max(sa, ha), min(sb, hb)
+        lo_k, hi_k = math.inf, -math.inf  # the union of the pieces the line meets: one interval (convex)
+        for s, e in ((l1, h1), (l2, h2), (l3, h3)):
+            if s <= e:
+                lo_k, hi_k = min(lo_k, s), max(hi_k, e)
+        lo[k], hi[k] = lo_k, hi_k
+    reach = -math.inf
+    for k in range(m):
+        if lo[k] <= hi[k] and lo[k] <= eps and hi[k] >= -eps:
+            reach = max(reach, hi[k])
+    if reach == -math.inf:
+        return 0.0  # its start is outside
+    order = np.argsort(lo)
+    for k in order:
+        if reach >= 1.0 or lo[k] > reach + eps:
+            break  # past the step's end, or a gap after the run that covers its start
+        if lo[k] <= hi[k]:
+            reach = max(reach, hi[k])
+    return min(reach, 1.0)
