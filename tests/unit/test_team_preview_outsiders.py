@@ -41,7 +41,7 @@ def _fleet(crossing: bool) -> dict[str, SimUnit]:
     ]
     if crossing:  # manned, and first by id: the members give way to it where their ways cross
         specs.append(
-            UnitSpec(id="a1", start=(80.0, -60.0), goal=(80.0, 90.0), speed_mps=2.5, kind=UnitKind.MANNED)
+            UnitSpec(id="a1", start=(80.0, -72.0), goal=(80.0, 90.0), speed_mps=2.5, kind=UnitKind.MANNED)
         )
     return {s.id: SimUnit(s, rate_hz=1.0 / DT) for s in specs}
 
