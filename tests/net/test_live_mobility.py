@@ -117,6 +117,17 @@ def _planner(tmp_path, monkeypatch):
         session.close()
 
 
+def _foot_goes_and_wheeled_is_trapped(directions: queue.Queue) -> None:
+    """The first verdicts of the soldier and the truck sent up the one slope: each by its own class."""
+    seen: dict[str, Direction] = {}
+    while set(seen) != {"soldier", "truck"}:
+        d = _until(directions, lambda d: d.status.value != "no_goal" and d.unit != "bad", 120.0)
+        seen[d.unit] = d
+    assert seen["soldier"].status.value == "en_route", seen["soldier"]
+    assert seen["truck"].status.value == "trapped", seen["truck"]
+    assert "slope>17deg" in (seen["truck"].reason or "")
+
+
 def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_a_bad_class_is_refused(
     tmp_path, monkeypatch
 ):
@@ -128,13 +139,7 @@ def test_a_foot_and_a_wheeled_unit_sent_up_one_slope_get_their_own_verdicts_and_
             c.put(keys.unit_state(MISSION, uid), encode(UnitState(position=start, seq=1)))
         refused = _until(rejected, lambda e: isinstance(e, RejectedEvent), 60.0)
         assert refused.key == keys.unit_goal(MISSION, "bad") and refused.field == "$.mobility.class"
-        seen: dict[str, Direction] = {}
-        while set(seen) != {"soldier", "truck"}:
-            d = _until(directions, lambda d: d.status.value != "no_goal", 120.0)
-            seen[d.unit] = d
-        assert seen["soldier"].status.value == "en_route", seen["soldier"]
-        assert seen["truck"].status.value == "trapped", seen["truck"]
-        assert "slope>17deg" in (seen["truck"].reason or "")
+        _foot_goes_and_wheeled_is_trapped(directions)
 
 
 def test_classes_named_on_the_states_plan_each_unit_and_a_class_changed_mid_route_replans_it(
@@ -149,13 +154,7 @@ def test_classes_named_on_the_states_plan_each_unit_and_a_class_changed_mid_rout
         refused = _until(rejected, lambda e: isinstance(e, RejectedEvent), 60.0)
         assert refused.key == keys.unit_state(MISSION, "bad") and refused.field == "$.mobility.class"
         assert "hovercraft" in refused.reason
-        seen: dict[str, Direction] = {}
-        while set(seen) != {"soldier", "truck"}:
-            d = _until(directions, lambda d: d.status.value != "no_goal" and d.unit != "bad", 120.0)
-            seen[d.unit] = d
-        assert seen["soldier"].status.value == "en_route", seen["soldier"]
-        assert seen["truck"].status.value == "trapped", seen["truck"]
-        assert "slope>17deg" in (seen["truck"].reason or "")
+        _foot_goes_and_wheeled_is_trapped(directions)
         tracked = UnitState(position=start, seq=2, mobility=GoalMobility(kind="tracked"))
         c.put(keys.unit_state(MISSION, "truck"), encode(tracked))
         d = _until(directions, lambda d: d.unit == "truck" and d.seq == 2, 60.0)

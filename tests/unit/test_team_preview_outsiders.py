@@ -22,11 +22,11 @@ from pfp_service.world import team_preview
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.team_outsiders import segment_gaps
 from pfp_service.world.world import GoalSet, StateReported, TeamPut, World, WorldSettings
+from tests.unit.test_team_preview import DT, _live
 
 pytestmark = pytest.mark.unit
 
 TEAM = TeamUpdate(lead="r1", follow=["m1"], standoff_m=30.0, corridor_m=6.0)
-DT = 0.5
 FOOT = DispersionSettings(
     enabled=True, default_class="foot"
 )  # 5 m apart: a pair feels each other within 10 m
@@ -46,23 +46,6 @@ def _fleet(crossing: bool) -> dict[str, SimUnit]:
     return {s.id: SimUnit(s, rate_hz=1.0 / DT) for s in specs}
 
 
-def _drive(
-    w: World, fleet: dict[str, SimUnit], t0: float, t1: float
-) -> dict[str, dict[float, tuple[float, float]]]:
-    tracks: dict[str, dict[float, tuple[float, float]]] = {u: {} for u in fleet}
-    t = t0
-    while t <= t1 + 1e-9:
-        for u in fleet.values():
-            u.advance(DT, t, 0.0)
-        out = w.apply([StateReported(u.id, u.state(t)) for u in fleet.values()], t)
-        for d in out.directions:
-            fleet[d.unit].on_direction(d, t)
-        for u in fleet.values():
-            tracks[u.id][round(t, 6)] = u.position
-        t = round(t + DT, 9)
-    return tracks
-
-
 def _started(fleet: dict[str, SimUnit]) -> World:
     w = World(WorldSettings(planner=PlannerParams(intensity="density", step=0.5), dispersion=FOOT))
     w.apply([TeamPut("alpha", TEAM)], 0.0)
@@ -79,7 +62,7 @@ def test_an_outsider_crossing_the_teams_way_is_replayed_and_the_preview_is_what_
     fleet = _fleet(crossing=True)
     w = _started(fleet)
     at_s = 5.0
-    _drive(w, fleet, DT, at_s)
+    _live(w, fleet, DT, at_s)
     request = TeamPreviewRequest(horizon_s=200.0, dt_s=DT)
     seeded = team_preview.seed(w, "alpha", at_s, request)
     assert seeded is not None and [m.unit for m in seeded.outsiders] == ["a1"] and seeded.left_out == 0
@@ -87,10 +70,10 @@ def test_an_outsider_crossing_the_teams_way_is_replayed_and_the_preview_is_what_
     assert got.stopped == "arrived" and got.outsiders == ["a1"] and got.outsiders_left_out == 0
     alone = team_preview.replay(dataclasses.replace(seeded, outsiders=()), request, time.monotonic, 60.0)
     assert alone.outsiders == []
-    live = _drive(w, fleet, round(at_s + DT, 9), at_s + 200.0)
+    live = _live(w, fleet, round(at_s + DT, 9), at_s + 200.0)
     changed = 0.0
     for m, a in zip(got.members, alone.members, strict=True):
-        by_t = {round(t - at_s, 6): p for t, p in live[m.unit].items()}
+        by_t = {round(t - at_s, 6): (x, y) for t, x, y in live[m.unit]}
         gaps = [math.dist((x, y), by_t[round(t, 6)]) for t, x, y in m.points if round(t, 6) in by_t]
         assert len(gaps) >= len(m.points) - 1
         assert max(gaps) <= 0.01, (m.unit, max(gaps))  # the same code on the same inputs: the same track
@@ -153,7 +136,7 @@ def test_an_outsider_is_taken_when_its_reach_over_the_horizon_comes_near_the_tea
     far = UnitSpec(id="b2", start=(100.0, 300.0), goal=(100.0, -300.0), speed_mps=2.0)
     fleet["b2"] = SimUnit(far, rate_hz=1.0 / DT)
     w = _started(fleet)
-    _drive(w, fleet, DT, 2.0)  # every unit has reported moving: its speed is known
+    _live(w, fleet, DT, 2.0)  # every unit has reported moving: its speed is known
     speeds = {"r1": 3.0, "m1": 2.0}
     soon = team_preview.seed(w, "alpha", 2.0, TeamPreviewRequest(horizon_s=60.0, speeds=speeds))
     later = team_preview.seed(w, "alpha", 2.0, TeamPreviewRequest(horizon_s=200.0, speeds=speeds))
