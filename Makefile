@@ -21,29 +21,33 @@ install: $(STAMP)
 # test-fast run's CPU, and every `pfp` a test starts compiles the package again.
 test test-fast test-proc: export PYTHONDONTWRITEBYTECODE =
 
-# Every tier (tests/conftest.py names them): what CI runs, after `make check`.  Three runs, cheapest
-# first: the in-process tiers in one process (they also fill a fresh clone's kernel cache before any
-# planner starts); then the proc tier two at a time, as its tests mostly wait on the processes they
-# start (tests/conftest.py keeps a module's shared planner on one worker, tests/zenoh_util.py gives
-# each worker its own ports); then the multi and browser tiers one at a time, as each test already
-# runs several processes at once.
-PROC_WORKERS ?= 2
+# Every tier (tests/conftest.py names them): what CI runs, after `make check`.  Cheapest first, two
+# tests at a time (WORKERS, one per core): the in-process tiers (they also fill a fresh clone's kernel
+# cache before any planner starts); then the proc tier, whose tests mostly wait on the processes they
+# start; then the multi and browser tiers; last, one at a time, the tests marked `alone`, which assert
+# a wall-clock bound of the product that a test beside them could break.  tests/conftest.py keeps a
+# module's shared fixture (a planner, say) on one worker, and tests/zenoh_util.py gives each worker its
+# own ports.  Each run names its slowest tests, so a CI log shows where the time went.
+WORKERS ?= 2
+XDIST = -n $(WORKERS) --dist loadgroup
 test: $(STAMP)
 	@sh .ci/ensure-chromium
 	@sh .ci/ensure-gdal
-	$(BIN)/python -m pytest -q -m "unit or net"
-	$(BIN)/python -m pytest -q -m proc -n $(PROC_WORKERS) --dist loadgroup
-	$(BIN)/python -m pytest -q -m "multi or browser"
+	$(BIN)/python -m pytest -q -m "(unit or net) and not alone" $(XDIST) --durations=10
+	$(BIN)/python -m pytest -q -m "proc and not alone" $(XDIST) --durations=10
+	$(BIN)/python -m pytest -q -m "(multi or browser) and not alone" $(XDIST) --durations=10
+	$(BIN)/python -m pytest -q -m alone --durations=10
 
-# The in-process tiers (unit and net): about a minute on 2 cores; run it on every change.
+# The in-process tiers (unit and net): under a minute on 2 cores; run it on every change.
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -m "unit or net"
+	$(BIN)/python -m pytest -q -m "unit or net" $(XDIST)
 
 # The tiers that start processes but no browser: run before a commit that touches the service or a client.
 test-proc: $(STAMP)
 	@sh .ci/ensure-gdal
-	$(BIN)/python -m pytest -q -m proc -n $(PROC_WORKERS) --dist loadgroup
-	$(BIN)/python -m pytest -q -m multi
+	$(BIN)/python -m pytest -q -m "proc and not alone" $(XDIST)
+	$(BIN)/python -m pytest -q -m "multi and not alone" $(XDIST)
+	$(BIN)/python -m pytest -q -m "(proc or multi) and alone"
 
 check: $(STAMP)
 	$(BIN)/ruff format --check .

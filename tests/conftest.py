@@ -28,9 +28,24 @@ TIERS: dict[str, str] = {
 }
 
 
+# How a test runs beside others under ``make test``'s two workers (``-n 2 --dist loadgroup``).
+PLACEMENT: dict[str, str] = {
+    "alone": (
+        "asserts a wall-clock bound of the product (a reconnect within 1.5 s, a page within 3 s) that a "
+        "test running beside it could break: make test runs these one at a time, after the rest"
+    ),
+    "spread": (
+        "its module's shared fixtures are cheap enough to set up once per worker: its tests are "
+        "spread over the workers instead of kept on one"
+    ),
+}
+
+
 def pytest_configure(config: pytest.Config) -> None:
     for name, what in TIERS.items():
         config.addinivalue_line("markers", f"{name}: test tier: {what}")
+    for name, what in PLACEMENT.items():
+        config.addinivalue_line("markers", f"{name}: {what}")
 
 
 def _tiers_of(item: pytest.Item) -> set[str]:
@@ -60,7 +75,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     rank = {name: i for i, name in enumerate(TIERS)}
     items.sort(key=lambda item: rank[_tier_of(item) or "unit"])
     for item in items:
-        if _shares_a_fixture(item):
+        if _shares_a_fixture(item) and item.get_closest_marker("spread") is None:
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
 
 

@@ -34,7 +34,7 @@ from pfp_service.wire import keys
 from tests.conftest import ROOT
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 CHROMIUM = os.environ.get("PFP_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_ARGS = [

@@ -14,7 +14,7 @@ from pfp_service.wire import keys
 from tests.browser.test_map_browser import map_process, mission, page_at, playwright  # noqa: F401 - fixtures
 from tests.zenoh_util import client, planner_process, put_json
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 
 # -- the lat/lon frame over offline tiles ---------------------------------------------------------

@@ -19,7 +19,7 @@ import zenoh
 from tests.browser.test_map_browser import CHROMIUM_ARGS, map_process, playwright  # noqa: F401 (a fixture)
 from tests.zenoh_util import free_port
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 # Opens the WebSocket and says what came: "open", the size of each message, and the close code.
 _PROBE = """(url) => new Promise((resolve) => {

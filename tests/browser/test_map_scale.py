@@ -24,7 +24,7 @@ from tests.browser.test_map_browser import map_process, page_at, playwright  # n
 from tests.conftest import ROOT
 from tests.proc.test_map_cli import router  # noqa: F401 (fixture)
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 UNITS = int(os.environ.get("PFP_MAP_SCALE_UNITS", "250"))
 RATE_HZ = 10.0

@@ -12,7 +12,7 @@ from pfp_service.wire import keys
 from tests.browser.test_map_browser import map_process, mission, page_at, playwright  # noqa: F401 - fixtures
 from tests.zenoh_util import client, planner_process, put_json
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 
 def test_the_map_draws_a_team_s_link_radio_circle_and_cleared_corridor(playwright, mission) -> None:  # noqa: F811

@@ -25,7 +25,7 @@ import zenoh
 from pfp_service.wire import WorldQuery, decode_world_snapshot
 from tests.zenoh_util import ROOT, client, free_port, put_json
 
-pytestmark = pytest.mark.multi
+pytestmark = [pytest.mark.multi, pytest.mark.alone]
 
 N_UNITS = 300
 LEASE_MS = 2000  # the router's lease, short: a planner that freezes is gone within 2 s

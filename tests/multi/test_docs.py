@@ -479,6 +479,7 @@ SH_BLOCKS = [b for b in sh_blocks() if any(runnable(ln) for ln in session_lines(
 
 
 @pytest.mark.multi
+@pytest.mark.spread  # each block is whole in itself: the two workers each start their own shared planner
 @pytest.mark.timeout(1200)
 @pytest.mark.parametrize("block", SH_BLOCKS, ids=[b.name for b in SH_BLOCKS])
 def test_every_command_the_docs_show_runs(

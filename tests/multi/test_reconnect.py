@@ -22,7 +22,7 @@ import zenoh
 
 from tests.zenoh_util import ROOT, client_config, free_port
 
-pytestmark = pytest.mark.multi
+pytestmark = [pytest.mark.multi, pytest.mark.alone]
 
 M = "reconnect"
 ANSWER_WITHIN_S = 1.5

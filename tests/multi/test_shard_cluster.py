@@ -22,7 +22,7 @@ from pfp_service.wire import keys
 from tests.multi.test_cluster import _planner, _put_reliably, _router, _wait_status, _world
 from tests.zenoh_util import client, free_port, put_json
 
-pytestmark = pytest.mark.multi
+pytestmark = [pytest.mark.multi, pytest.mark.alone]
 
 UNITS = [f"s{i:03d}" for i in range(200)]
 PLAIN = "outside-1"  # publishes on mumt/{m}/unit/{u}/state

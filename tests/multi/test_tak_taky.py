@@ -308,6 +308,7 @@ def _no_put(inbox: Inbox, seconds: float) -> None:
         raise AssertionError(f"a threat came back: {got}")
 
 
+@pytest.mark.alone
 def test_a_10_mb_marker_the_server_keeps_costs_the_bridge_that_one_event(planner, tmp_path):
     def fresh_threat(bridge: Bridge, i: int) -> float:
         """A fresh marker from the device; returns how long until it is a threat on Zenoh."""

@@ -21,6 +21,7 @@ from tests.zenoh_util import Inbox, client, planner_process, wait_for_planner
 pytestmark = pytest.mark.multi
 
 
+@pytest.mark.alone
 def test_a_second_planner_with_the_default_id_is_a_conflict_for_both_within_5s_and_status_lists_both():
     mission = "w" + uuid.uuid4().hex[:8]
     with planner_process("--state-dir", "none", mission=mission) as (endpoint, _first), client(endpoint) as s:
@@ -96,6 +97,7 @@ def test_two_planner_ids_without_cluster_are_twins_a_warning_in_log_status_and_h
         assert first.poll() is None
 
 
+@pytest.mark.alone
 def test_twins_under_cluster_cannot_share_by_id_and_say_so_within_5s():
     """``--cluster`` shares units by planner id: two planners under one id would both own every unit."""
     mission = "w" + uuid.uuid4().hex[:8]

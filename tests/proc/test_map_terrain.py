@@ -55,6 +55,7 @@ def test_a_bad_dem_is_one_line_exit_2(tmp_path, content, fragment):
 
 
 @pytest.mark.browser
+@pytest.mark.alone
 def test_the_map_shades_the_ground_and_shows_a_clicked_threats_viewshed(playwright, router, tmp_path):  # noqa: F811
     from pfp_service.geo import Origin
     from pfp_service.terrain.viewshed import exact_lowest_visible_height

@@ -107,6 +107,7 @@ def _validate(path: Path) -> dict[str, int]:
 
 
 @pytest.mark.multi
+@pytest.mark.alone
 def test_record_replay_report_a_mission(tmp_path):
     mission = "r" + uuid.uuid4().hex[:10]
     team, script, rec = tmp_path / "team.yaml", tmp_path / "script.yaml", tmp_path / "m.mcap"

@@ -161,6 +161,7 @@ units:
 
 
 @pytest.mark.multi
+@pytest.mark.alone
 def test_inject_and_fleet_started_before_pfp_serve_are_in_force_within_2s_of_its_first_status(tmp_path):
     """``pfp serve`` is the router here, so inject and fleet also wait for the router itself."""
     mission = "e" + uuid.uuid4().hex[:8]

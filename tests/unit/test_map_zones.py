@@ -47,6 +47,7 @@ def test_the_model_shows_zones_put_from_the_world_and_removed_and_expired():
 
 
 @pytest.mark.browser
+@pytest.mark.alone
 def test_a_zone_drawn_on_the_map_with_allow_edit_reaches_the_planner(playwright, tmp_path, mission):  # noqa: F811
     from tests.browser.test_map_browser import map_process, page_at, running
     from tests.zenoh_util import Inbox, client, planner_process, put_json

@@ -160,6 +160,7 @@ def test_zones_a_planner_held_before_the_bridge_started_are_shown_unless_heard_s
 
 
 @pytest.mark.multi
+@pytest.mark.alone
 def test_a_polygon_drawn_on_a_device_is_a_zone_within_a_second_and_its_delete_removes_it(tmp_path):
     pytest.importorskip("taky")
     from tests.multi.test_tak_taky import MISSION, device, running, taky_server
