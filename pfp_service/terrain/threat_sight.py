@@ -32,23 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.core.visibility import Window
+from pfp_service.core.visibility import Window, softness_for
 from pfp_service.terrain.grid import TerrainGrid
 from pfp_service.terrain.viewshed import lowest_visible_height
 
 __all__ = ["WINDOW_SIDE", "TerrainSight", "coarsen", "softness_for"]
 
 WINDOW_SIDE = 200  # a window's heights a side at most: 100 threats' rows are then 32 MB (docs/terrain.md)
-
-
-def softness_for(height_m: float) -> float:
-    """The sigmoid's width for a unit ``height_m`` tall: a sixth of it.
-
-    A unit in the open (lowest visible height 0) is then seen at
-    ``sigmoid(6) = 99.75 %``, one whose ground hides it to half its height at
-    50 %, and one hidden by its full height at 0.25 %.
-    """
-    return height_m / 6.0
 
 
 class TerrainSight:
@@ -61,7 +51,7 @@ class TerrainSight:
             raise ValueError(f"a unit's height must be metres >= 0, not {height_m}")
         self.grid = grid
         self.height_m = float(height_m)
-        self.softness_m = softness_for(max(self.height_m, 0.06))
+        self.softness_m = softness_for(self.height_m)
         self.curvature = float(curvature)
         self._cache: OrderedDict[tuple[float, ...], Window | None] = OrderedDict()
         self._cache_size = cache_size
