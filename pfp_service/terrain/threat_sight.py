@@ -8,6 +8,8 @@ box, from the grid point nearest the threat, at the threat's
 sees only cells in the box: a sight line from inside a convex box to a point
 inside it stays inside it.  A window is computed once per threat position,
 eye and reach, and kept (``cache_size`` of them, least recently used out).
+The heights do not depend on the target: a unit of another height takes the
+same window at its own (``core.visibility.Window.at``), never a second sweep.
 
 A threat off the grid, or standing on unknown ground, gets no window: it sees
 everywhere (the safe side, as unknown ground hides nothing in a viewshed).

@@ -99,8 +99,8 @@ class RouteKeys:
     def height(self, rec: UnitRecord) -> float | None:
         """The height a threat sees ``rec`` at: its class's, ``None`` when that is the planner's class's
         (or without terrain), so that every unit of one height shares one field."""
-        if not self._terrain:
-            return None
+        if not self._terrain or (rec.mobility is None and (rec.goal is None or rec.goal.mobility is None)):
+            return None  # no class named (every tick's common case, asked per unit): the planner's
         own = height_of(rec)
         return None if own is None or own == self._height else own
 

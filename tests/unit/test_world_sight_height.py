@@ -185,3 +185,25 @@ def test_a_preview_of_a_vehicle_replays_its_live_track_at_its_own_height():
     n = min(len(wrong.path), len(pv.path))
     gap = np.max(np.hypot(*(np.array(wrong.path[:n]) - np.array(pv.path[:n])).T))
     assert gap > 1.0, gap
+
+
+def test_a_preview_worker_builds_the_vehicles_field_at_its_height(monkeypatch):
+    """What a preview worker runs (``node.preview_work.compute``): its shared field keyed by the unit's sight."""
+    import json
+
+    from pfp_service.node import preview_work, workerproc
+    from pfp_service.wire import PreviewRequest
+
+    w = _world(of_grid(_ground(0.0), "foot"))
+    w.apply([ThreatPut("t", THREAT), StateReported("tall", _state(START, "wheeled"))], 0.0)
+    w.apply([GoalSet("tall", GOAL)], 0.0)
+    view = w.view("tall")
+    monkeypatch.setitem(workerproc._WORLD, "threats", view.threats)
+    monkeypatch.setitem(workerproc._WORLD, "fields", {})
+    kind, body = preview_work.compute((view, PreviewRequest(), None, 60.0, 100_000))
+    assert kind == "reply", body
+    got = json.loads(body)["path"]
+    pv = preview(w.view("tall"), None, lambda: 0.0, 60.0, 100_000)
+    assert np.max(np.abs(np.array(got) - np.array(pv.path))) <= 1e-9
+    (key,) = workerproc._WORLD["fields"]
+    assert key[1] == AtHeight(w.settings.terrain, 2.5)
