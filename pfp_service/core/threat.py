@@ -25,7 +25,7 @@ from scipy.special import ndtr
 
 from pfp_service.core import kernels
 from pfp_service.core.options import Intensity
-from pfp_service.core.visibility import Sight, concat, reach_box, stack_rows, widen
+from pfp_service.core.visibility import AtHeight, Sight, at_height, concat, reach_box, stack_rows, widen
 from pfp_service.core.zones import ZoneSet
 
 __all__ = ["LEVEL_FLOOR", "PACKED_COLUMNS", "Intensity", "Threat", "ThreatField", "skew_normal_mode"]
@@ -285,6 +285,15 @@ class ThreatField:
         out._reach = self._reach
         out.zones = zones
         out.sight = self.sight
+        return out
+
+    def seen_at(self, height_m: float) -> ThreatField:
+        """These threats and zones, each threat seeing a unit ``height_m`` tall: its window's heights kept
+        (``visibility.at_height``), its sight's windows at that height for the threats added (``plus``)."""
+        out = self.with_zones(self.zones)
+        out.packed = at_height(self.packed, height_m)
+        inner = self.sight.sight if isinstance(self.sight, AtHeight) else self.sight
+        out.sight = AtHeight(inner, height_m) if inner is not None else None
         return out
 
     def plus(self, extra: Iterable[Threat], replacing: Container[str] = ()) -> ThreatField:

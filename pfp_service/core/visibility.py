@@ -13,25 +13,35 @@ A ``Sight`` is what a field asks for a threat's window: a callable, given the
 threat and the box of its reach, that returns its ``Window`` or ``None``
 (no terrain under it: it sees everywhere).  Rows of different widths are
 padded with zeros to the widest: a window's own size is in its row.
+
+A unit's height.  ``L`` does not depend on the target, so one window serves
+every height: ``Window.at`` is the same ``low_m`` (shared, not copied) under
+another ``height_m`` and ``softness_m``; ``AtHeight`` is a sight whose
+windows are its inner sight's at one height; ``at_height`` re-heights a
+packed field's rows, no window swept again.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pfp_service.core import kernels
 
 __all__ = [
+    "MIN_HEIGHT_M",
     "REACH_FLOOR",
+    "AtHeight",
     "Sight",
     "Window",
+    "at_height",
     "concat",
     "finest_cell",
     "reach_box",
+    "softness_for",
     "stack_rows",
     "unmasked",
     "widen",
@@ -40,6 +50,18 @@ __all__ = [
 # A threat's window covers where its own term is at least this share of its
 # peak: beyond, the mask multiplies almost nothing, and the window is clamped.
 REACH_FLOOR = 1e-9
+# the least height a softness is made for: a unit flat on the ground still gets a sigmoid of finite slope
+MIN_HEIGHT_M = 0.06
+
+
+def softness_for(height_m: float) -> float:
+    """The sigmoid's width for a unit ``height_m`` tall: a sixth of it (of ``MIN_HEIGHT_M`` at least).
+
+    A unit in the open (lowest visible height 0) is then seen at
+    ``sigmoid(6) = 99.75 %``, one whose ground hides it to half its height at
+    50 %, and one hidden by its full height at 0.25 %.
+    """
+    return max(height_m, MIN_HEIGHT_M) / 6.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,8 +92,49 @@ class Window:
         gy = np.abs(np.diff(low, axis=0)).max() if low.shape[0] > 1 else 0.0
         return float(math.hypot(gx, gy) / self.cell_m / (4.0 * self.softness_m))
 
+    def at(self, height_m: float) -> Window:
+        """This window for a unit ``height_m`` tall: the same ``low_m`` array (not copied), the sigmoid's
+        height and width that unit's (``softness_for``)."""
+        if height_m == self.height_m:
+            return self
+        return replace(self, height_m=float(height_m), softness_m=softness_for(height_m))
+
 
 Sight = Callable[[object, tuple[float, float, float, float]], "Window | None"]
+
+
+@dataclass(frozen=True)
+class AtHeight:
+    """``sight``'s windows for a unit ``height_m`` tall (``Window.at``): no window swept again.
+
+    Equal, and hashed alike, for the same sight and height, so a worker's
+    fields (``node.workerproc.world_field``) are shared by every unit of one
+    height; it pickles as its sight does (a live terrain by name).
+    """
+
+    sight: Sight
+    height_m: float
+
+    def __call__(self, threat: object, box: tuple[float, float, float, float]) -> Window | None:
+        got = self.sight(threat, box)
+        return got.at(self.height_m) if got is not None else None
+
+
+def at_height(packed: np.ndarray, height_m: float) -> np.ndarray:
+    """A copy of ``packed`` whose masked rows see a unit ``height_m`` tall (their windows' heights kept).
+
+    The bound on ``|grad v|`` (``VIS_DV``, ``Window.max_dv``) is inversely
+    proportional to the softness, so it is scaled, not computed again.
+    """
+    out = packed.copy()
+    if not len(out) or out.shape[1] <= kernels.VIS_DV:
+        return out
+    masked = out[:, kernels.VIS_NX] > 0
+    soft = softness_for(height_m)
+    out[masked, kernels.VIS_DV] *= out[masked, kernels.VIS_SOFT] / soft
+    out[masked, kernels.VIS_HEIGHT] = float(height_m)
+    out[masked, kernels.VIS_SOFT] = soft
+    return out
 
 
 def reach_box(row: np.ndarray, floor: float = REACH_FLOOR) -> tuple[float, float, float, float]:

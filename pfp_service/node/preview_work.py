@@ -21,6 +21,7 @@ from pfp_service.node.workerproc import forget_fields, retire, world_field, worl
 from pfp_service.wire import ErrorReply, encode
 from pfp_service.world.preview import preview
 from pfp_service.world.team_preview import replay
+from pfp_service.world.terrain import sight_of
 from pfp_service.world.translate import fit_reply
 
 __all__ = ["ALARM_GRACE_S", "TEAM_SHARE", "WALK_SHARE", "compute", "compute_team"]
@@ -60,7 +61,7 @@ def compute(job: tuple[Any, ...]) -> tuple[str, bytes]:
     view = dataclasses.replace(view, threats=threats)
 
     def work() -> tuple[str, bytes]:
-        field = world_field(view.settings.planner.intensity, view.settings.terrain)
+        field = world_field(view.settings.planner.intensity, sight_of(view.settings.terrain, view.height_m))
         result = preview(view, request, time.monotonic, WALK_SHARE * budget_s, max_iter, field)
         _ARMED[0] = False
         if request.geojson:

@@ -7,7 +7,8 @@ that every corner lies within it), and with no origin given places the plane
 at the DEM's centre (``LiveTerrain.centred``, which the status says).
 
 A ``LiveTerrain`` is what the world's ``settings.terrain`` holds: its
-``sight`` (each threat's line of sight at the unit class's height) and its
+``sight`` (each threat's line of sight, swept at the unit class's height;
+a unit of another class sees the same windows at its own, ``core.visibility.AtHeight``) and its
 ``zones`` (ground steeper than the class's limit, and unknown ground, as
 keep-out zones), its ``barriers`` for any other slope limit (a unit whose goal
 names another class, ``world.mobility``: made when first asked, at most

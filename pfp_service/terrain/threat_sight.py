@@ -8,6 +8,8 @@ box, from the grid point nearest the threat, at the threat's
 sees only cells in the box: a sight line from inside a convex box to a point
 inside it stays inside it.  A window is computed once per threat position,
 eye and reach, and kept (``cache_size`` of them, least recently used out).
+The heights do not depend on the target: a unit of another height takes the
+same window at its own (``core.visibility.Window.at``), never a second sweep.
 
 A threat off the grid, or standing on unknown ground, gets no window: it sees
 everywhere (the safe side, as unknown ground hides nothing in a viewshed).
@@ -32,23 +34,13 @@ from typing import Any
 
 import numpy as np
 
-from pfp_service.core.visibility import Window
+from pfp_service.core.visibility import Window, softness_for
 from pfp_service.terrain.grid import TerrainGrid
 from pfp_service.terrain.viewshed import lowest_visible_height
 
 __all__ = ["WINDOW_SIDE", "TerrainSight", "coarsen", "softness_for"]
 
 WINDOW_SIDE = 200  # a window's heights a side at most: 100 threats' rows are then 32 MB (docs/terrain.md)
-
-
-def softness_for(height_m: float) -> float:
-    """The sigmoid's width for a unit ``height_m`` tall: a sixth of it.
-
-    A unit in the open (lowest visible height 0) is then seen at
-    ``sigmoid(6) = 99.75 %``, one whose ground hides it to half its height at
-    50 %, and one hidden by its full height at 0.25 %.
-    """
-    return height_m / 6.0
 
 
 class TerrainSight:
@@ -61,7 +53,7 @@ class TerrainSight:
             raise ValueError(f"a unit's height must be metres >= 0, not {height_m}")
         self.grid = grid
         self.height_m = float(height_m)
-        self.softness_m = softness_for(max(self.height_m, 0.06))
+        self.softness_m = softness_for(self.height_m)
         self.curvature = float(curvature)
         self._cache: OrderedDict[tuple[float, ...], Window | None] = OrderedDict()
         self._cache_size = cache_size

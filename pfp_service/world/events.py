@@ -410,6 +410,9 @@ class UnitView:
     zones: ZoneSet = field(
         default_factory=_no_zones
     )  # the keep-out zones in force: a preview never enters one
+    height_m: float | None = (
+        None  # over terrain, the height threats see the unit at (None: the planner's class's)
+    )
 
     def params_for(self, goal: Goal) -> PlannerParams:
         return self.settings.params_for(goal)

@@ -15,8 +15,9 @@ of them not above it, the safe side, since a barrier set for a new limit
 takes seconds to build over a large DEM and none is built on the live loop;
 an override below every class's limit is refused.  A state that changes the
 limit a unit is planned at re-judges it at once (``units.Units.classed``).
-Sight stays the planner's class's: a threat's line of sight is computed once
-for every unit, at that height.
+A threat's window is swept once, at the planner's class's height, and serves
+every unit: a unit is seen at its own class's height (``height_of``), its
+field the world's re-heighted (``world_records.Records.field_for``).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, planned_limit
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, GoalMobility, UnitState
 
-__all__ = ["by_limit", "check", "limit_of", "refusal", "slope_limit"]
+__all__ = ["by_limit", "check", "height_of", "limit_of", "refusal", "sight_height", "slope_limit"]
 
 M = TypeVar("M", Goal, UnitState)
 
@@ -78,6 +79,21 @@ def slope_limit(goal: Goal | None, standing: GoalMobility | None = None) -> int 
 def limit_of(rec: Any) -> int | None:
     """``slope_limit`` of a unit's record (``units.UnitRecord``): its goal's class over its states'."""
     return slope_limit(rec.goal, rec.mobility)
+
+
+def sight_height(goal: Goal | None, standing: GoalMobility | None = None) -> float | None:
+    """How tall a unit heading for ``goal`` stands, metres: what a threat must see of it
+    (``core.mobility.Mobility.height_m``), its goal's class over its ``standing`` one (its states');
+    ``None``: the planner's class's."""
+    mob = goal.mobility if goal is not None and goal.mobility is not None else standing
+    if mob is None or mob.kind not in CLASSES:
+        return None
+    return CLASSES[mob.kind].height_m
+
+
+def height_of(rec: Any) -> float | None:
+    """``sight_height`` of a unit's record (``units.UnitRecord``): its goal's class over its states'."""
+    return sight_height(rec.goal, rec.mobility)
 
 
 def by_limit(

@@ -182,7 +182,8 @@ def preview(
     if field is not None and extra:  # the world's field, its rows reused: only the what-ifs are packed
         shared = field.plus(extra, replaced)
     if shared is None and view.settings.terrain is not None:  # over terrain: each threat masked by its sight
-        shared = ThreatField(threats, view.settings.planner.intensity, sight=sight_of(view.settings.terrain))
+        sight = sight_of(view.settings.terrain, view.height_m)  # the unit seen at its own class's height
+        shared = ThreatField(threats, view.settings.planner.intensity, sight=sight)
     if view.zones:  # the keep-out zones in force: the preview respects them as the live unit does
         base = shared if shared is not None else ThreatField(threats, view.settings.planner.intensity)
         shared = base.with_zones(view.zones)

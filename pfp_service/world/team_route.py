@@ -8,7 +8,8 @@ a column (a team's lead and its followers) plans under one key (``RouteKeys``): 
 limit of the column (``world.mobility``), and every zone and barrier grown by half the widest
 corridor (``widened``), so that the whole corridor round the track stays clear of them.  A zone
 grown over a unit's goal keeps its own shape, and a unit whose goal lies past the column's slope
-limit plans at its own.  The key picks the field (``Records.field_for``); the live steering, a
+limit plans at its own.  The key ends with the unit's own height over terrain (``world.mobility.height_of``;
+``None``, the planner's class's): a threat sees each unit at its own, whatever its column.  The key picks the field (``Records.field_for``); the live steering, a
 mission's start, deliberation and a unit's preview (``World.view``) all take it from there, so a
 preview shows the route the unit takes.  Pure: records and teams in, a key out.
 """
@@ -23,7 +24,7 @@ import shapely
 
 from pfp_service.core.mobility import planned_limit
 from pfp_service.core.zones import MAX_VERTICES, Zone, ZoneSet
-from pfp_service.world.mobility import limit_of
+from pfp_service.world.mobility import height_of, limit_of
 
 if TYPE_CHECKING:
     from pfp_service.world.team_book import TeamBook
@@ -32,9 +33,9 @@ if TYPE_CHECKING:
 
 __all__ = ["RouteKey", "RouteKeys", "groups", "widened"]
 
-# (slope limit, zones grown by, ids of zones left as they are): what picks a unit's field
-RouteKey = tuple[int | None, float, tuple[str, ...]]
-PLAIN: RouteKey = (None, 0.0, ())
+# (slope limit, zones grown by, ids of zones left as they are, height seen at): what picks a unit's field
+RouteKey = tuple[int | None, float, tuple[str, ...], float | None]
+PLAIN: RouteKey = (None, 0.0, (), None)
 _SIMPLIFY_SHARE = 0.1  # of the margin: how far a grown outline too detailed for a zone may be simplified
 
 
@@ -85,21 +86,32 @@ class _Records(Protocol):
 
 
 class RouteKeys:
-    """Each unit's ``RouteKey``: its own slope limit, or, leading followers, theirs and the corridor's margin."""
+    """Each unit's ``RouteKey``: its own slope limit, or, leading followers, theirs and the corridor's margin;
+    and its own height."""
 
     def __init__(self, records: _Records, teams: TeamBook, ground: Ground | None) -> None:
         self._rec, self._teams = records, teams
         unit = getattr(ground, "unit", None)  # the planner's class: a goal naming none plans as it
         self._planner = planned_limit(unit.max_slope_deg) if unit is not None else None
+        self._height = unit.height_m if unit is not None else None
         self._terrain = ground is not None
+
+    def height(self, rec: UnitRecord) -> float | None:
+        """The height a threat sees ``rec`` at: its class's, ``None`` when that is the planner's class's
+        (or without terrain), so that every unit of one height shares one field."""
+        if not self._terrain or (rec.mobility is None and (rec.goal is None or rec.goal.mobility is None)):
+            return None  # no class named (every tick's common case, asked per unit): the planner's
+        own = height_of(rec)
+        return None if own is None or own == self._height else own
 
     def __call__(self, rec: UnitRecord | None) -> RouteKey:
         if rec is None:
             return PLAIN
         own = limit_of(rec) if self._terrain else None
+        tall = self.height(rec)
         led = self._teams.columns(rec.id)
         if not led:
-            return (own, 0.0, ())
+            return (own, 0.0, (), tall)
         units: Mapping[str, UnitRecord] = self._rec.units
         slope = own
         if self._terrain and self._planner is not None:  # the strictest limit of the lead and its followers
@@ -116,13 +128,18 @@ class RouteKeys:
                 slope = own  # its goal lies past the others' limit: it goes there on its own
         margin = max(t.corridor_m for t in led) / 2.0
         if margin <= 0.0 or not math.isfinite(margin) or not self._rec.zone_set_for(slope):
-            return (slope, 0.0, ())  # nothing to keep the corridor clear of: the field of the unit's class
+            return (
+                slope,
+                0.0,
+                (),
+                tall,
+            )  # nothing to keep the corridor clear of: the field of the unit's class
         keep = (
             kept_for(self._rec.zone_set_for(slope, margin), self._rec.zone_set_for(slope), rec.goal.position)
             if rec.goal is not None
             else ()
         )
-        return (slope, margin, keep)
+        return (slope, margin, keep, tall)
 
 
 def groups(

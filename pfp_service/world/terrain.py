@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:  # the compiled core's types: the world's inputs (``events``) import this module
+    from pfp_service.core.visibility import Sight as ThreatSight
     from pfp_service.core.visibility import Window
     from pfp_service.core.zones import Zone
     from pfp_service.world.teams import Sight
@@ -134,9 +135,16 @@ class Looks:
             self._windows.popitem(last=False)
 
 
-def sight_of(ground: Ground | None) -> Ground | None:
-    """The sight a field of the world's threats is built with off the loop (the ground itself), or ``None``."""
-    return ground
+def sight_of(ground: Ground | None, height_m: float | None = None) -> ThreatSight | None:
+    """The sight a field of the world's threats is built with off the loop, or ``None``: the ground itself,
+    or its windows for a unit ``height_m`` tall (``core.visibility.AtHeight``: no sweep again)."""
+    if ground is None or height_m is None:
+        return ground
+    from pfp_service.core.visibility import (
+        AtHeight,
+    )  # the compiled core's: the world's inputs import this module
+
+    return AtHeight(ground, height_m)
 
 
 def ground_zones(ground: Ground | None) -> list[Zone]:

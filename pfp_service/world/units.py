@@ -30,7 +30,7 @@ import msgspec
 from pfp_service.core import Resolved, Stepper
 from pfp_service.wire import Direction, DirectionStatus, Goal, GoalMobility, Mission, UnitPhase
 from pfp_service.world.events import Deliberated, Job, unit_key
-from pfp_service.world.mobility import slope_limit
+from pfp_service.world.mobility import sight_height, slope_limit
 from pfp_service.world.progress import ProgressWatch
 
 __all__ = [
@@ -355,11 +355,13 @@ class Units:
         return answer
 
     def classed(self, rec: UnitRecord, mobility: GoalMobility) -> None:
-        """A state names the unit's class: kept, and a guided unit whose planned slope limit it changes is
-        re-judged (``rejudge``) under its new barriers, built when the terrain loaded (``world.mobility``)."""
-        before = slope_limit(rec.goal, rec.mobility)
+        """A state names the unit's class: kept, and a guided unit whose planned slope limit or height it
+        changes is re-judged (``rejudge``) under its new barriers, built when the terrain loaded, and its
+        new sight (``world.mobility``)."""
+        before = slope_limit(rec.goal, rec.mobility), sight_height(rec.goal, rec.mobility)
         rec.mobility = mobility
-        if rec.owned and rec.stepper is not None and slope_limit(rec.goal, mobility) != before:
+        now = slope_limit(rec.goal, mobility), sight_height(rec.goal, mobility)
+        if rec.owned and rec.stepper is not None and now != before:
             self.rejudge(rec)
 
     def rejudge(self, rec: UnitRecord) -> None:

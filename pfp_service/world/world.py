@@ -29,7 +29,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
 from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
-from pfp_service.world import dispersion, kinds, missions, steering, team_route, translate
+from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, translate
 from pfp_service.world import events as ev
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
@@ -95,12 +95,13 @@ class World:
         """A detached copy of one unit and the threats in force (a preview runs on it, off the loop)."""
         rec, s = self._units.get(unit_id), self.settings
         threats = self.field.threats  # the same tuple while the field stands: a preview service can cache it
-        zones = self._rec.zone_set_for(*self._route(rec))  # the same set while the zones stand
+        key = self._route(rec)  # its zones (the same set while they stand) and the height it is seen at
+        zones, tall = self._rec.zone_set_for(*key[:3]), key[3]
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
         return UnitView(
-            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector, zones
+            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector, zones, tall
         )
 
     def snapshot(
@@ -405,9 +406,9 @@ class World:
         """
         guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
         wide = [r.stepper.escaping or r.job is not None or r.stepper.pending is not None for r in guided]  # type: ignore[union-attr]
-        reached = steering.reached(
-            guided, b.touched, self.settings.planner.intensity, [z[2] for z in b.zones], self._rec.sight, wide
-        )
+        tall = [self._route.height(r) for r in guided]  # each seen at its own class's height (``heights``)
+        zb, intensity = [z[2] for z in b.zones], self.settings.planner.intensity
+        reached = heights.reached_seen(guided, tall, b.touched, intensity, zb, self._rec.sight, wide)
         rejudge, hits = self._book.rejudge, []  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:
@@ -432,14 +433,14 @@ class World:
         later, self._owed = owed_share(self._owed, b.dirty, self._units, limit)
         if not guided and not later:
             return
-        field_for, n, cull = self._rec.field_for, self.settings.lookahead, self._rec.cull_index
+        field_for, n, cull_for = self._rec.field_for, self.settings.lookahead, self._rec.cull_for
         steered: steering.Steered = []
         failed: steering.Failed = []
         big = (b.changes or b.zones) and (len(guided) > WAVE_FIRST or self._wave)  # a wave, large or owed
         wave_first = n > 0 and bool(drew or big)
-        groups = team_route.groups(guided, later, self._route)  # a field per slope limit and corridor
+        groups = team_route.groups(guided, later, self._route)  # a field per slope limit, corridor, height
         for key, (group, owed) in groups.items():
-            fld = field_for(*key)
+            fld, cull = field_for(*key), cull_for(key[3])
             lost: steering.Failed = []
             if group and wave_first:  # the wave first
                 advised, lost = steering.advise(group, fld, cull, self._disp)

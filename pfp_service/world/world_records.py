@@ -28,9 +28,11 @@ from pfp_service.world.team_route import RouteKey
 from pfp_service.world.terrain import Ground, Looks, SightAsk, SightKey, ground_zones, sight_key
 from pfp_service.world.units import UnitRecord, Units
 
-__all__ = ["MAX_SLOPE_SETS", "Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
+__all__ = ["MAX_HEIGHTS", "MAX_SLOPE_SETS", "Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
 
 MAX_SLOPE_SETS = 8  # slope limits whose zone sets and fields are kept at once (classes and a few overrides)
+# heights other than the planner's class's whose threats' fields (each a copy of the packed rows) are kept
+MAX_HEIGHTS = 4
 
 
 @dataclass(slots=True)
@@ -71,8 +73,14 @@ class Records:
         self.held: dict[str, tuple[ThreatRecord, float]] = {}
         # per slope limit a goal names (``world.mobility``): its zone set and field, while the world's stand
         # and per lead's route key (``team_route``): its zones grown by its followers' corridor
-        self._sets: tuple[ZoneSet | None, dict[RouteKey, ZoneSet]] = (None, {})
+        self._sets: tuple[ZoneSet | None, dict[tuple[int | None, float, tuple[str, ...]], ZoneSet]] = (
+            None,
+            {},
+        )
         self._fields: tuple[ThreatField | None, dict[RouteKey, ThreatField]] = (None, {})
+        # per height a unit is seen at, other than the planner's class's (``world.mobility.height_of``): the
+        # threats' field with their windows re-heighted (``ThreatField.seen_at``: no sweep) and its cull index
+        self._tall: tuple[ThreatField | None, dict[float, tuple[ThreatField, CullIndex | None]]] = (None, {})
 
     @property
     def field(self) -> ThreatField:
@@ -133,23 +141,56 @@ class Records:
             sets[key] = got
         return got
 
-    def field_for(self, slope: int | None, margin_m: float = 0.0, keep: tuple[str, ...] = ()) -> ThreatField:
+    def field_for(
+        self,
+        slope: int | None,
+        margin_m: float = 0.0,
+        keep: tuple[str, ...] = (),
+        height_m: float | None = None,
+    ) -> ThreatField:
         """``field`` with the zones in force for a unit climbing ``slope`` whole degrees, grown by ``margin_m``
-        but ``keep`` (``zone_set_for``)."""
+        but ``keep`` (``zone_set_for``), its threats seeing a unit ``height_m`` tall (``None``: the planner's
+        class's height, as the windows landed)."""
         base = self.field
-        if (slope is None or self.ground is None) and margin_m <= 0.0:
+        if (slope is None or self.ground is None) and margin_m <= 0.0 and height_m is None:
             return base
         of, fields = self._fields
         if of is not base:
             fields = {}
             self._fields = (base, fields)
-        key = (slope, margin_m, keep)
+        key = (slope, margin_m, keep, height_m)
         got = fields.get(key)
         if got is None:
             if len(fields) >= MAX_SLOPE_SETS:
                 fields.clear()
-            assert self._bare is not None  # built with ``field``
-            got = fields[key] = self._bare.with_zones(self.zone_set_for(slope, margin_m, keep))
+            zones = self.zone_set_for(slope, margin_m, keep)
+            bare = self._seen_at(height_m)[0]
+            got = fields[key] = bare.with_zones(zones) if len(zones) else bare
+        return got
+
+    def cull_for(self, height_m: float | None) -> CullIndex | None:
+        """The cull index of the threats in force as they see a unit ``height_m`` tall (``None``: ``cull``):
+        the bound on a masked term's gradient is the height's (``core.cull``)."""
+        return self.cull_index if height_m is None or self.ground is None else self._seen_at(height_m)[1]
+
+    def _seen_at(self, height_m: float | None) -> tuple[ThreatField, CullIndex | None]:
+        """The threats' field seeing a unit ``height_m`` tall, and its cull index: one per height while the
+        threats stand, shared by every unit of that height; at most ``MAX_HEIGHTS`` kept."""
+        self.field  # noqa: B018 -- builds the threats' field and its cull index
+        assert self._bare is not None
+        if height_m is None or self.ground is None:
+            return self._bare, self.cull
+        of, heights = self._tall
+        if of is not self._bare:
+            heights = {}
+            self._tall = (self._bare, heights)
+        got = heights.get(height_m)
+        if got is None:
+            if len(heights) >= MAX_HEIGHTS:
+                heights.clear()
+            seen = self._bare.seen_at(height_m)
+            cull = CullIndex(seen.packed) if self.cull is not None else None
+            got = heights[height_m] = (seen, cull)
         return got
 
     @property

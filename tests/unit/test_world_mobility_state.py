@@ -88,10 +88,13 @@ def test_a_class_changed_mid_route_replans_the_unit_at_once(ground):
     assert stepper.version == version and _status(out, "u")[0] == "trapped"
     out = w.apply([StateReported("u", _state(seq=3, kind="tracked"))], 2.0)  # now it climbs 31 degrees
     assert stepper.version == version + 1 and _status(out, "u")[0] == "en_route"
-    out = w.apply([StateReported("u", _state(seq=4, kind="foot", slope=31.0))], 3.0)  # planned at 31 still
+    out = w.apply([StateReported("u", _state(seq=4, kind="tracked", slope=31.4))], 3.0)  # planned at 31 still
     assert stepper.version == version + 1 and _status(out, "u")[0] == "en_route"
-    out = w.apply([StateReported("u", _state(seq=5, kind="foot", slope=20.0))], 4.0)  # planned at 17: trapped
-    assert stepper.version == version + 2 and _status(out, "u")[0] == "trapped"
+    # planned at 31 still, but seen at a soldier's 1.8 m instead of a vehicle's 2.5: judged afresh
+    out = w.apply([StateReported("u", _state(seq=5, kind="foot", slope=31.0))], 4.0)
+    assert stepper.version == version + 2 and _status(out, "u")[0] == "en_route"
+    out = w.apply([StateReported("u", _state(seq=6, kind="foot", slope=20.0))], 5.0)  # planned at 17: trapped
+    assert stepper.version == version + 3 and _status(out, "u")[0] == "trapped"
 
 
 def test_a_class_changes_nothing_without_terrain():
