@@ -30,9 +30,13 @@ test test-fast test-proc: export PYTHONDONTWRITEBYTECODE =
 # own ports.  Each run names its slowest tests, so a CI log shows where the time went.
 WORKERS ?= 2
 XDIST = -n $(WORKERS) --dist loadgroup
+# The planner's own warm-up, once, before the workers start: on a fresh clone it compiles the shared
+# numba kernels into the cache in one process, not in both workers at once (seconds when they are cached).
+WARM_KERNELS = $(BIN)/python -c "from pfp_service.node.previews import warm_up; warm_up(None)"
 test: $(STAMP)
 	@sh .ci/ensure-chromium
 	@sh .ci/ensure-gdal
+	$(WARM_KERNELS)
 	$(BIN)/python -m pytest -q -m "(unit or net) and not alone" $(XDIST) --durations=10
 	$(BIN)/python -m pytest -q -m "proc and not alone" $(XDIST) --durations=10
 	$(BIN)/python -m pytest -q -m "(multi or browser) and not alone" $(XDIST) --durations=10
