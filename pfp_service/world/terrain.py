@@ -24,7 +24,7 @@ landed ``WorldSettings.sight_wait_s`` after the put, the threat takes force
 blind -- seeing everywhere, the conservative stand-in -- and the window, when
 it lands, masks it then.  A world that deliberates inline (tests, the
 warm-up) computes the window in ``apply``.  ``Looks`` is the world's
-book of windows landed; the world's rows and ``steering.reached`` read it,
+book of windows landed; the world's rows and ``reach.reached`` read it,
 never the ground.
 """
 
