@@ -11,7 +11,7 @@ import copy
 import traceback
 import zlib
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Union
+from typing import TYPE_CHECKING, Any, Literal, Union
 
 from pfp_service.core.params import PlannerParams, Resolved
 from pfp_service.errors import InputError
@@ -387,6 +387,9 @@ class Batch:
     wave: set[str] = field(
         default_factory=set
     )  # units sent their direction first, the rest in the next apply
+    judged: list[Any] = field(
+        default_factory=list
+    )  # ``wave.Judged``: threats landed, their reach judged off the loop
 
 
 def _no_zones() -> ZoneSet:

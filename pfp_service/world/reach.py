@@ -74,7 +74,8 @@ def reached(
     if not guided:
         return []
     try:
-        return reached_at(corridor_ends(guided), touched, intensity, zones, sight, wide).tolist()
+        hit: list[bool] = reached_at(corridor_ends(guided), touched, intensity, zones, sight, wide).tolist()
+        return hit
     except Exception:
         return [True] * len(guided)
 

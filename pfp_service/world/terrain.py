@@ -81,6 +81,7 @@ class SightAsk:
     key: SightKey
     target: Any  # the ``core.Threat``
     box: tuple[float, float, float, float]
+    corridors: Any = None  # ``wave.Corridors``: the units its landing re-judges, judged with the window
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,6 +91,7 @@ class SightLanded:
     threat: str
     key: SightKey
     window: Window | None
+    judged: Any = None  # ``wave.Judged``: which of the ask's corridors it reaches, judged off the loop
 
 
 def sight_key(threat: Any, box: tuple[float, float, float, float]) -> SightKey:
