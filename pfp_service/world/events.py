@@ -387,9 +387,10 @@ class Batch:
     wave: set[str] = field(
         default_factory=set
     )  # units sent their direction first, the rest in the next apply
-    judged: list[Any] = field(
-        default_factory=list
-    )  # ``wave.Judged``: threats landed, their reach judged off the loop
+    # ``wave.Judged``: threats landed, their reach judged off the loop; ``wave.Corridors``: the units'
+    # corridors, taken at the batch's first sight asked (a storm of puts shares them)
+    judged: list[Any] = field(default_factory=list)
+    corridors: Any = None
 
 
 def _no_zones() -> ZoneSet:

@@ -63,7 +63,7 @@ class ThreatPuts:
         if ask is not None and s.deliberation == "inline" and s.terrain is not None:  # no loop to keep
             self.landed(answer(s.terrain, ask), b)
         elif ask is not None:  # with the corridors its landing re-judges, judged with the window off the loop
-            b.out.sights.append(dataclasses.replace(ask, corridors=self._corridors(tid)))
+            b.out.sights.append(dataclasses.replace(ask, corridors=self._corridors(tid, b)))
             self._timers.set(b.now + s.sight_wait_s, "sight", tid)
         if not held:
             self._in_force(tid, new, b)
@@ -94,15 +94,20 @@ class ThreatPuts:
             b.touched.append(t.threat)
             b.changes.append(ThreatChange(threat=tid, change=change, position=t.update.position))
 
-    def _corridors(self, tid: str) -> wave.Corridors:
-        """The units' corridors as they stand, and the threat ``tid`` in force now with its window."""
+    def _corridors(self, tid: str, b: Batch) -> wave.Corridors:
+        """The units' corridors as they stand (taken once a batch: a storm of puts shares them), and the
+        threat ``tid`` in force now with its window."""
+        if b.corridors is None:
+            b.corridors = wave.corridors(self._rec.units, self.settings.planner.intensity)
+        taken: wave.Corridors = b.corridors
         now_in = self._rec.threats.get(tid)
-        before = now_in.threat if now_in is not None else None
+        if now_in is None:
+            return taken
         window = None
-        if now_in is not None and now_in.seen is not None and self._rec.sight is not None:
+        if now_in.seen is not None and self._rec.sight is not None:
             x0, y0, x1, y1 = now_in.seen[3:]  # its key ends with its box
             window = self._rec.sight(now_in.threat, (x0, y0, x1, y1))
-        return wave.corridors(self._rec.units, self.settings.planner.intensity, before, window)
+        return dataclasses.replace(taken, before=now_in.threat, before_window=window)
 
     def _in_force(self, tid: str, new: ThreatRecord, b: Batch) -> None:
         old = self._rec.put_threat(tid, new)

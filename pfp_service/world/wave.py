@@ -156,14 +156,11 @@ class Corridors:
     before_window: Window | None = None
 
 
-def corridors(
-    units: Mapping[str, UnitRecord], intensity: str, before: Threat | None, before_window: Window | None
-) -> Corridors:
-    """``Corridors`` of ``units`` as they stand (built on the loop, in the put's ``apply``)."""
+def corridors(units: Mapping[str, UnitRecord], intensity: str) -> Corridors:
+    """``Corridors`` of ``units`` as they stand (built on the loop, in the put's ``apply``), replacing no threat."""
     recs, wide = guided(units)
     ends = reach.corridor_ends(recs) if recs else np.zeros((0, 4))
-    ids = tuple(r.id for r in recs)
-    return Corridors(ids, ends, np.array(wide, dtype=bool), intensity, before, before_window)
+    return Corridors(tuple(r.id for r in recs), ends, np.array(wide, dtype=bool), intensity)
 
 
 @dataclass(frozen=True, eq=False)

@@ -107,3 +107,16 @@ def test_a_judge_that_fails_lands_no_verdict_and_a_test_that_fails_on_landing_re
     monkeypatch.setattr(reach, "reached_at", broken)
     assert wave.answered(GROUND, ask).judged is None  # the world's landing tests every unit then
     assert _told(off.apply([landed], 1.02))[0] == [f"u{i}" for i in range(len(XS))]  # dearer, never wrong
+
+
+def test_a_storm_of_puts_takes_the_corridors_once_and_each_ask_names_the_threat_it_replaces():
+    w = _world()
+    (first,) = w.apply([ThreatPut("t", BEHIND)], 1.0).sights
+    w.apply([wave.answered(GROUND, first)], 1.01)
+    moved = ThreatUpdate(position=(-1000.0, 50.0), facing_deg=90.0, sigma_range=800.0, sigma_lateral=800.0)
+    other = ThreatUpdate(position=(-1000.0, -50.0), facing_deg=90.0, sigma_range=800.0, sigma_lateral=800.0)
+    asks = w.apply([ThreatPut("t", moved), ThreatPut("o", other)], 1.02).sights
+    assert [a.threat for a in asks] == ["t", "o"]
+    assert asks[0].corridors.ends is asks[1].corridors.ends  # one snapshot for the batch
+    assert asks[0].corridors.before is w.records.threats["t"].threat and asks[1].corridors.before is None
+    assert asks[0].corridors.before_window is not None  # the window it is seen through now
