@@ -28,7 +28,8 @@ import msgspec
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.log import get_logger
 from pfp_service.wire.messages import TerrainInfo
-from pfp_service.world.terrain import Ground, SightAsk, SightLanded, answer
+from pfp_service.world.terrain import Ground, SightAsk, SightLanded
+from pfp_service.world.wave import answered
 
 __all__ = ["Sights", "placed", "terrain_info"]
 
@@ -105,7 +106,7 @@ class Sights:
                     return
                 ask = self._waiting.pop(next(iter(self._waiting)))
             try:
-                landed = answer(self._ground, ask)
+                landed = answered(self._ground, ask)  # and the reach of its landing (``wave.judge``)
             except Exception as exc:  # never lands: the world's timer puts the threat in force blind
                 if time.monotonic() - self._logged_at >= 1.0:
                     self._logged_at = time.monotonic()

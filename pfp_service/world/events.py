@@ -11,7 +11,7 @@ import copy
 import traceback
 import zlib
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Union
+from typing import TYPE_CHECKING, Any, Literal, Union
 
 from pfp_service.core.params import PlannerParams, Resolved
 from pfp_service.errors import InputError
@@ -387,6 +387,10 @@ class Batch:
     wave: set[str] = field(
         default_factory=set
     )  # units sent their direction first, the rest in the next apply
+    # ``wave.Judged``: threats landed, their reach judged off the loop; ``wave.Corridors``: the units'
+    # corridors, taken at the batch's first sight asked (a storm of puts shares them)
+    judged: list[Any] = field(default_factory=list)
+    corridors: Any = None
 
 
 def _no_zones() -> ZoneSet:

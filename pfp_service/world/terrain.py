@@ -24,7 +24,7 @@ landed ``WorldSettings.sight_wait_s`` after the put, the threat takes force
 blind -- seeing everywhere, the conservative stand-in -- and the window, when
 it lands, masks it then.  A world that deliberates inline (tests, the
 warm-up) computes the window in ``apply``.  ``Looks`` is the world's
-book of windows landed; the world's rows and ``steering.reached`` read it,
+book of windows landed; the world's rows and ``reach.reached`` read it,
 never the ground.
 """
 
@@ -82,6 +82,7 @@ class SightAsk:
     key: SightKey
     target: Any  # the ``core.Threat``
     box: tuple[float, float, float, float]
+    corridors: Any = None  # ``wave.Corridors``: the units its landing re-judges, judged with the window
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +92,7 @@ class SightLanded:
     threat: str
     key: SightKey
     window: Window | None
+    judged: Any = None  # ``wave.Judged``: which of the ask's corridors it reaches, judged off the loop
 
 
 def sight_key(threat: Any, box: tuple[float, float, float, float]) -> SightKey:

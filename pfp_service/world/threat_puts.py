@@ -7,17 +7,20 @@ heights has not landed (``world.terrain``).  It is then held
 (``Records.hold``): its window is asked off the loop (``Outputs.sights``),
 and it takes force when the window lands (``landed``) or, blind, when
 ``WorldSettings.sight_wait_s`` has passed (``give_up``, the world's ``sight``
-timer).  A world that deliberates inline (tests, the warm-up) has no loop
-to keep and computes the window at once.  Pure values: ``now`` is the batch's.
+timer).  The ask carries the units' corridors as they stand
+(``wave.Corridors``), so the landing's reach is judged with the window off
+the loop too (``wave.answered``).  A world that deliberates inline (tests,
+the warm-up) has no loop to keep and computes the window at once.  Pure values: ``now`` is the batch's.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 from pfp_service.errors import InputError
 from pfp_service.wire import ThreatChange, ThreatUpdate, keys
-from pfp_service.world import translate
+from pfp_service.world import translate, wave
 from pfp_service.world.events import Batch, WorldSettings
 from pfp_service.world.limits import Limits
 from pfp_service.world.terrain import SightLanded, answer
@@ -59,8 +62,8 @@ class ThreatPuts:
         held, ask = self._rec.hold(tid, new, b.now + s.sight_wait_s)
         if ask is not None and s.deliberation == "inline" and s.terrain is not None:  # no loop to keep
             self.landed(answer(s.terrain, ask), b)
-        elif ask is not None:
-            b.out.sights.append(ask)
+        elif ask is not None:  # with the corridors its landing re-judges, judged with the window off the loop
+            b.out.sights.append(dataclasses.replace(ask, corridors=self._corridors(tid, b)))
             self._timers.set(b.now + s.sight_wait_s, "sight", tid)
         if not held:
             self._in_force(tid, new, b)
@@ -71,6 +74,8 @@ class ThreatPuts:
         if got is None:  # for a threat since moved or removed
             return
         change, rec = got
+        if done.judged is not None:
+            b.judged.append(done.judged)
         if change == "put":
             self._in_force(done.threat, rec, b)
         else:  # masked now: the units it reaches are re-judged, as for a put
@@ -88,6 +93,21 @@ class ThreatPuts:
         if t is not None:
             b.touched.append(t.threat)
             b.changes.append(ThreatChange(threat=tid, change=change, position=t.update.position))
+
+    def _corridors(self, tid: str, b: Batch) -> wave.Corridors:
+        """The units' corridors as they stand (taken once a batch: a storm of puts shares them), and the
+        threat ``tid`` in force now with its window."""
+        if b.corridors is None:
+            b.corridors = wave.corridors(self._rec.units, self.settings.planner.intensity)
+        taken: wave.Corridors = b.corridors
+        now_in = self._rec.threats.get(tid)
+        if now_in is None:
+            return taken
+        window = None
+        if now_in.seen is not None and self._rec.sight is not None:
+            x0, y0, x1, y1 = now_in.seen[3:]  # its key ends with its box
+            window = self._rec.sight(now_in.threat, (x0, y0, x1, y1))
+        return dataclasses.replace(taken, before=now_in.threat, before_window=window)
 
     def _in_force(self, tid: str, new: ThreatRecord, b: Batch) -> None:
         old = self._rec.put_threat(tid, new)

@@ -29,7 +29,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
 from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
-from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, translate
+from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, translate, wave
 from pfp_service.world import events as ev
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
@@ -399,16 +399,17 @@ class World:
             b.out.missions.append(started[1])
 
     def _world_changed(self, b: Batch) -> None:
-        """The threats or zones changed: re-judge and re-direct the units the change can reach (``steering.reached``).
+        """The threats or zones changed: re-judge and re-direct the units the change can reach (``reach.reached``; over terrain judged off the loop, ``wave.reached_with``).
 
         A unit out of reach keeps its direction (one escaping or deliberating out of its wider reach, its
         job too): a contingency costs what it touches.  A wave's units past ``WAVE_PER_TICK`` are owed (``wave``).
         """
-        guided = [r for r in self._units.values() if r.stepper is not None and r.position is not None]
-        wide = [r.stepper.escaping or r.job is not None or r.stepper.pending is not None for r in guided]  # type: ignore[union-attr]
+        guided, wide = wave.guided(self._units)
         tall = [self._route.height(r) for r in guided]  # each seen at its own class's height (``heights``)
-        zb, intensity = [z[2] for z in b.zones], self.settings.planner.intensity
-        reached = heights.reached_seen(guided, tall, b.touched, intensity, zb, self._rec.sight, wide)
+        zones, intensity = [z[2] for z in b.zones], self.settings.planner.intensity
+        reached = heights.reached_seen(
+            guided, tall, b.touched, intensity, zones, self._rec.sight, wide, b.judged
+        )
         rejudge, hits = self._book.rejudge, []  # per unit of a wave: looked up once
         for rec, hit in zip(guided, reached):
             try:

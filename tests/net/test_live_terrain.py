@@ -35,7 +35,7 @@ from pfp_service.wire import (
     encode,
     keys,
 )
-from pfp_service.world.steering import WIDE_REACH
+from pfp_service.world.reach import WIDE_REACH
 from tests.terrain_data import write_geographic
 from tests.zenoh_util import client, free_port
 
@@ -52,7 +52,7 @@ def _pick(ground) -> dict[str, tuple[float, float]]:
     """A unit the threat at (0, 0) sees all along its corridor north, and one it sees nowhere near (exact rays).
 
     Nowhere near: not on the box a deliberating unit is judged by either
-    (``steering.WIDE_REACH`` of its corridor's length round it), since in
+    (``reach.WIDE_REACH`` of its corridor's length round it), since in
     this tier no worker runs its jobs.
     """
     g = ground.grid

@@ -22,7 +22,7 @@ from pfp_service.world.world import (
 
 pytestmark = pytest.mark.unit
 
-# wide across: it reaches every unit's corridor, deliberating or not (``steering.reached``), so the wave is all n
+# wide across: it reaches every unit's corridor, deliberating or not (``reach.reached``), so the wave is all n
 T = dict(facing_deg=270.0, sigma_range=4.0, sigma_lateral=40.0, skew=2.0)
 CHUNK = 16
 

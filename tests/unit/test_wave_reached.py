@@ -1,4 +1,4 @@
-"""``steering.reached`` over a fleet: each unit as its own corridor test says, and every unit when one cannot be read."""
+"""``reach.reached`` over a fleet: each unit as its own corridor test says, and every unit when one cannot be read."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from pfp_service.core import PlannerParams, Stepper, resolve
-from pfp_service.core.cull import corridors_meet, influence_boxes
+from pfp_service.core.cull import RELATIVE_BOUND, corridors_meet, influence_boxes
 from pfp_service.core.threat import ThreatField
 from pfp_service.wire import ThreatUpdate
-from pfp_service.world import steering, translate
+from pfp_service.world import reach, translate
 from pfp_service.world.world_records import Records
 
 pytestmark = pytest.mark.unit
@@ -34,10 +34,10 @@ def test_each_unit_is_reached_as_its_own_corridor_says(seed):
     guided = _fleet(seed, 200)
     touched = [translate.threat(ThreatUpdate(position=(0.0, 0.0), sigma_range=30.0, sigma_lateral=20.0), "t")]
     zones = [(100.0, 100.0, 140.0, 180.0)]
-    got = steering.reached(guided, touched, "peak", zones)
+    got = reach.reached(guided, touched, "peak", zones)
     boxes = influence_boxes(ThreatField(touched, "peak").packed)
     zb = np.array(zones)
-    pad = steering.ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
+    pad = reach.ZONE_REACH * np.hypot(zb[:, 2] - zb[:, 0], zb[:, 3] - zb[:, 1])[:, None]
     boxes = np.concatenate([boxes, zb + np.hstack([-pad, -pad, pad, pad])])
     want = [
         bool(corridors_meet(np.array([r.position]), np.array([r.stepper.goal]), boxes)[0]) for r in guided
@@ -52,7 +52,7 @@ def test_a_unit_that_cannot_be_read_makes_every_unit_reached():
     touched = [
         translate.threat(ThreatUpdate(position=(5000.0, 5000.0), sigma_range=1.0, sigma_lateral=1.0), "t")
     ]
-    assert steering.reached(guided, touched, "peak") == [True] * 20
+    assert reach.reached(guided, touched, "peak") == [True] * 20
 
 
 def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
@@ -75,8 +75,8 @@ def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
             rec.position, (x, 300.0), resolve(PlannerParams(), rec.position, (x, 300.0), ())
         )
         fleet.append(rec)
-    assert steering.reached(fleet, [behind], "peak") == [True, True]  # blind: both corridors meet its box
-    assert steering.reached(fleet, [behind], "peak", (), sight) == [False, True]
+    assert reach.reached(fleet, [behind], "peak") == [True, True]  # blind: both corridors meet its box
+    assert reach.reached(fleet, [behind], "peak", (), sight) == [False, True]
     # the cause, measured apart: the masked field is nil along the valley's corridor, not in front
     valley = np.column_stack([np.full(7, 600.0), np.linspace(-300.0, 300.0, 7)])
     front = np.column_stack([np.full(7, -500.0), np.linspace(-300.0, 300.0, 7)])
@@ -87,7 +87,7 @@ def test_over_terrain_a_threat_reaches_only_the_units_it_can_see():
 
 def test_over_terrain_each_wide_unit_is_reached_as_its_own_box_says(monkeypatch):
     """A wave's deliberating units, judged all at once, each as the threat's sight over its own widened box says."""
-    monkeypatch.setattr(steering, "WIDE_BLOCK", 7)  # several blocks, the last one short
+    monkeypatch.setattr(reach, "WIDE_BLOCK", 7)  # several blocks, the last one short
     from pfp_service.core import Threat
     from pfp_service.terrain.grid import TerrainGrid
     from pfp_service.terrain.threat_sight import TerrainSight
@@ -101,20 +101,20 @@ def test_over_terrain_each_wide_unit_is_reached_as_its_own_box_says(monkeypatch)
     for rec in guided:  # spread over the hills, short corridors
         x, y = rec.position[0] * 5.0, rec.position[1] * 5.0
         rec.position, rec.stepper.goal = (x, y), (x + 100.0, y + 60.0)
-    got = steering.reached(guided, [behind], "peak", (), sight, [True] * len(guided))
+    got = reach.reached(guided, [behind], "peak", (), sight, [True] * len(guided))
     box = influence_boxes(ThreatField([behind], "peak").packed)[0]
     blind_f, masked_f = ThreatField([behind], "peak"), ThreatField([behind], "peak", sight=sight)
     want = []
     for rec in guided:  # one unit at a time, as the box is read point by point
         s, g = np.array(rec.position), np.array(rec.stepper.goal)
-        pad = steering.WIDE_REACH * float(np.hypot(*(g - s)))
+        pad = reach.WIDE_REACH * float(np.hypot(*(g - s)))
         lo, hi = np.maximum(np.minimum(s, g) - pad, box[:2]), np.minimum(np.maximum(s, g) + pad, box[2:])
         if (lo > hi).any():
             want.append(False)
             continue
-        k = steering.WIDE_SAMPLES
+        k = reach.WIDE_SAMPLES
         px, py = np.meshgrid(np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k))
         pts = np.column_stack([px.ravel(), py.ravel()])
         blind, masked = blind_f.level(pts), masked_f.level(pts)
-        want.append(bool(((blind > 0.0) & (masked >= steering.RELATIVE_BOUND * blind)).any()))
+        want.append(bool(((blind > 0.0) & (masked >= RELATIVE_BOUND * blind)).any()))
     assert got == want and any(got) and not all(got)

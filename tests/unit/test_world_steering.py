@@ -21,7 +21,7 @@ from pfp_service.wire import (
     TrappedEvent,
     UnitPhase,
 )
-from pfp_service.world import steering, translate
+from pfp_service.world import reach, steering, translate
 from pfp_service.world.lookahead import lookahead, within_map
 from pfp_service.world.units import Started, UnitRecord
 from pfp_service.world.world_records import Records
@@ -142,8 +142,8 @@ def test_a_change_is_seen_by_the_units_whose_corridor_it_meets():
     crossing = _unit(recs, "x", (0.0, 0.0), (100.0, 0.0))
     far = _unit(recs, "far", (0.0, 5000.0), (100.0, 5000.0))
     touched = [translate.threat(ThreatUpdate(position=(50.0, 0.0), sigma_range=5.0, sigma_lateral=5.0), "n")]
-    assert steering.reached([crossing, far], touched, "density") == [True, False]
-    assert steering.reached([], touched, "density") == []
+    assert reach.reached([crossing, far], touched, "density") == [True, False]
+    assert reach.reached([], touched, "density") == []
 
 
 def test_a_replan_names_the_first_changes_and_counts_the_rest():
