@@ -33,7 +33,10 @@ def test_a_march_team_is_a_column_heading_for_goals_as_far_apart_as_its_starts()
         ids = [f"u{i}" for i in group]
         assert [team.lead, *team.follow] == ids[:3] and team.robots == [ids[0], ids[3]]
         assert team.controller == ids[1] and team.standoff_m == 2 * SPACING_M
-        starts, goals = np.array([lay["starts"][i] for i in group]), np.array([lay["goals"][i] for i in group])
+        starts, goals = (
+            np.array([lay["starts"][i] for i in group]),
+            np.array([lay["goals"][i] for i in group]),
+        )
         assert np.all(np.diff(starts[:, 0]) == -SPACING_M)  # lead in front, robot at the rear
         shift = goals - starts
         assert np.allclose(shift, shift[0]) and shift[0, 0] > 1000.0  # the column marches east, whole
