@@ -2,10 +2,15 @@
 
 Two planners run at once, each a router in its own process on a free loopback
 port: one as ``pfp bench service`` starts it, and one with ``--dispersion`` to
-which a team is put for every four units (``teams``: neighbours along the
-west edge, a lead scouting for two followers, the first follower controlling
-the lead and a robot).  Both get the same threats and goals (put plainly, no
-storm), their deliberations land, and then they take the same steady load in
+which a team is put for every four units (``teams``: a lead scouting for two
+followers, the first follower controlling the lead and a robot).  The scene is
+a tactical march (``march``): the teams in columns, every unit 1.5 wheeled
+separations from its neighbours, marching east, one team in eight wheeling
+across its neighbours' way so that teams meet now and then.  ``--dense`` keeps
+the service bench's own fleet instead (``_layout.layout``: 1,000 units about
+19 m apart on the west edge, where no arrangement keeps the wheeled class's
+50 m): a crowding stress test, not the steady cost.  Both planners get the same
+threats and goals (put plainly, no storm), their deliberations land, and then they take the same steady load in
 turn, ``--teams-rounds`` times each, at the rate CPU per state is compared
 at (``TARGETS["cpu_rate_per_s"]``, where neither saturates), so the two share
 the machine's noise.  A round's figure is the planner's CPU (its process
@@ -15,8 +20,11 @@ tree, workers counted) over the states answered; the target is their ratio.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 from typing import Any
+
+import numpy as np
 
 from benchmarks._load import MISSION, LoadGen, Server, connected, start_server
 from benchmarks._phases import STEP_M, Bar, deliberations_landed, register, steady
@@ -26,6 +34,16 @@ __all__ = ["TEAM_SIZE", "add_teams_arguments", "print_teams", "teams", "teams_co
 TEAM_SIZE = 4
 RATIO_MAX = 1.2  # issue 33: with teams and dispersion, CPU per state within 1.2x of without
 KINDS = {"plain": (), "teams": ("--dispersion",)}
+# the march: every unit this far from its neighbours (1.5 of the wheeled class's 50 m: each still feels its
+# neighbours' push, which reaches 2 separations, and none yields unless their ways meet), in columns of a
+# team (robot, follower, follower, lead from the rear) side by side, the ranks of columns one behind another
+SPACING_M = 75.0
+ROWS_Y_M = (100.0, 1900.0)  # the columns side by side across the field's west edge
+WHEEL_EVERY, WHEEL_DEG = 8, 35.0  # one team in eight marches this far off east: across its neighbours' way
+# a team's figures, for the march (its units spaced, so the standoff and corridor a column keeps) and the
+# dense scene (the figures it was first measured with)
+MARCH_TEAM = {"standoff_m": 2 * SPACING_M, "corridor_m": 30.0, "radio_range_m": 1500.0}
+DENSE_TEAM = {"standoff_m": 40.0, "corridor_m": 8.0, "radio_range_m": 300.0}
 
 
 def add_teams_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,24 +56,59 @@ def add_teams_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--teams-rounds", type=int, default=3, help="with --teams: steady loads of each, in turn (default 3)"
     )
+    p.add_argument(
+        "--dense",
+        action="store_true",
+        help="with --teams: the service bench's own fleet (1,000 units about 19 m apart, closer than their "
+        "50 m separation: a crowding stress test) instead of a march spaced at 1.5 separations",
+    )
 
 
-def teams(starts: list[tuple[float, float]], units: int) -> dict[str, Any]:
-    """A team for every ``TEAM_SIZE`` units, neighbours along the edge (sorted by ``y``): id -> ``TeamUpdate``."""
+def march(units: int, threats: list[Any], seed: int) -> dict[str, Any]:
+    """A tactical march: ``units // 4`` teams in columns heading east, every unit ``SPACING_M`` from the next.
+
+    Returns the service bench's layout (``starts``, ``goals`` with the bystander's last, ``threats``)
+    and ``teams``: each team's units, lead first, then its followers and its robot.
+    """
+    rng = np.random.default_rng(seed)
+    rows = int((ROWS_Y_M[1] - ROWS_Y_M[0]) // SPACING_M) + 1
+    depth = TEAM_SIZE * SPACING_M  # a column and the gap to the lead of the rank behind it
+    starts: list[tuple[float, float]] = []
+    goals: list[tuple[float, float]] = []
+    groups: list[list[int]] = []
+    for k in range(units // TEAM_SIZE):
+        rank, row = divmod(k, rows)
+        y = ROWS_Y_M[0] + row * SPACING_M
+        front = -rank * depth  # the lead's x: the first rank's on the field's west edge
+        off = rng.uniform(-5.0, 5.0) if k % WHEEL_EVERY else rng.choice((-1.0, 1.0)) * WHEEL_DEG
+        far = 2000.0 - front + rng.uniform(-100.0, 0.0)  # its lead's goal on the east edge, or about as far
+        shift = (far * math.cos(math.radians(off)), far * math.sin(math.radians(off)))
+        groups.append(list(range(len(starts), len(starts) + TEAM_SIZE)))
+        for m in range(TEAM_SIZE):  # lead, follower, follower, robot: front to rear
+            p = (front - m * SPACING_M, y)
+            starts.append(p)
+            goals.append((p[0] + shift[0], p[1] + shift[1]))
+    while len(starts) <= units:  # units not in a team of 4, and the bystander: behind the last rank
+        p = (-(units // TEAM_SIZE // rows + 1) * depth, ROWS_Y_M[0] + SPACING_M * (len(starts) % rows))
+        starts.append(p)
+        goals.append((2000.0, p[1]))
+    return {"starts": starts, "goals": goals, "threats": threats, "teams": groups, "team": MARCH_TEAM}
+
+
+def teams(lay: dict[str, Any], units: int) -> dict[str, Any]:
+    """A team for every ``TEAM_SIZE`` units: the march's columns, or (the dense scene) neighbours along the
+    edge, sorted by ``y``: id -> ``TeamUpdate``."""
     from pfp_service.wire import TeamUpdate
 
-    order = sorted(range(units), key=lambda i: starts[i][1])
+    groups = lay.get("teams")
+    if groups is None:
+        order = sorted(range(units), key=lambda i: lay["starts"][i][1])
+        groups = [order[TEAM_SIZE * k : TEAM_SIZE * (k + 1)] for k in range(units // TEAM_SIZE)]
     out: dict[str, Any] = {}
-    for k in range(units // TEAM_SIZE):
-        lead, a, b, robot = (f"u{i}" for i in order[TEAM_SIZE * k : TEAM_SIZE * (k + 1)])
+    for k, group in enumerate(groups):
+        lead, a, b, robot = (f"u{i}" for i in group)
         out[f"g{k}"] = TeamUpdate(
-            lead=lead,
-            follow=[a, b],
-            standoff_m=40.0,
-            corridor_m=8.0,
-            controller=a,
-            robots=[lead, robot],
-            radio_range_m=300.0,
+            lead=lead, follow=[a, b], controller=a, robots=[lead, robot], **lay.get("team", DENSE_TEAM)
         )
     return out
 
@@ -67,7 +120,7 @@ def _prepare(kind: str, g: LoadGen, lay: dict[str, Any], n: int) -> dict[str, An
         g.put_json(keys.threat(MISSION, tid), t)
     res: dict[str, Any] = {"registered": register(g, n)}
     if kind == "teams":
-        made = teams(lay["starts"], n)
+        made = teams(lay, n)
         for tid, team in made.items():
             g.put_json(keys.team(MISSION, tid), team)
         res["teams"] = len(made)
@@ -81,9 +134,15 @@ def _prepare(kind: str, g: LoadGen, lay: dict[str, Any], n: int) -> dict[str, An
 def teams_cost(args: argparse.Namespace, lay: dict[str, Any], bar: Bar, rate_per_s: float) -> dict[str, Any]:
     """Both planners up at once, their steady loads at ``rate_per_s`` in turn; CPU per state of each round."""
     n = args.units
+    if not args.dense:
+        lay = march(n, lay["threats"], args.seed)
     servers: dict[str, Server] = {}
     gens: dict[str, LoadGen] = {}
-    res: dict[str, Any] = {"rate_per_s": rate_per_s, "rounds": []}
+    res: dict[str, Any] = {
+        "rate_per_s": rate_per_s,
+        "rounds": [],
+        "scene": "dense" if args.dense else "march",
+    }
     try:
         for kind, flags in KINDS.items():
             servers[kind] = start_server("planner", args.escape, extra=flags)
@@ -134,7 +193,7 @@ def print_teams(t: dict[str, Any]) -> None:
     """The rounds as text."""
     print(
         f"\n[teams] {t['teams'].get('teams', 0)} teams of {TEAM_SIZE} and --dispersion against a plain planner, "
-        f"{t['rate_per_s']:.0f} states/s each in turn:"
+        f"{t['rate_per_s']:.0f} states/s each in turn, {t.get('scene', 'dense')} scene:"
     )
     for i, r in enumerate(t["rounds"]):
         a, b = r["plain"], r["teams"]

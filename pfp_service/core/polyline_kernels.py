@@ -6,7 +6,9 @@ segments a question, with no temporary array per question, where NumPy made
 a dozen arrays of the track's length for each.  The arrays are a
 ``world.teams.Polyline``'s: points ``pts``, segments ``ab``, their squared
 lengths ``sq`` (1 for a segment of no length), lengths ``seg``, cumulated
-``cum``.  ``kept`` is ``world.corridor.Room``'s closed form.
+``cum``.  ``kept`` is ``world.corridor.Room``'s closed form.  ``places`` is every lead's
+place on its main element's route in one call (``world.teams.leads``): the same numbers a
+``Polyline`` of each route gives, without making one per lead per tick.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["kept", "project", "shared"]
+__all__ = ["kept", "places", "project", "shared"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -117,3 +119,47 @@ def kept(
         if lo[k] <= hi[k]:
             reach = max(reach, hi[k])
     return min(reach, 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def places(
+    pts: np.ndarray, first: np.ndarray, ats: np.ndarray, standoffs: np.ndarray, out: np.ndarray
+) -> None:
+    """For each route ``k`` (the points ``pts[first[k]:first[k + 1]]``, two or more): its length, where
+    ``ats[k]`` projects onto it (``project``'s ``s``) and the point ``standoffs[k]`` along it
+    (``Polyline.point_at``), into ``out[k]``; a route no longer than its standoff gets its length alone.
+
+    The arithmetic is ``Polyline``'s, in its order (segments, cumulated lengths, the first nearest
+    segment, the segment the standoff ends on), so the numbers are the same.
+    """
+    for k in range(first.shape[0] - 1):
+        a, n = first[k], first[k + 1] - first[k]
+        seg = np.empty(n - 1)
+        cum = np.empty(n)
+        cum[0] = 0.0
+        for i in range(n - 1):
+            seg[i] = math.hypot(pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1])
+            cum[i + 1] = cum[i] + seg[i]
+        out[k, 0] = cum[n - 1]
+        out[k, 1:] = math.nan
+        stand = standoffs[k]
+        if cum[n - 1] <= stand:
+            continue
+        px, py = ats[k, 0], ats[k, 1]
+        best, bi, bt = math.inf, 0, 0.0
+        for i in range(n - 1):
+            abx, aby = pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1]
+            sq = seg[i] * seg[i] if seg[i] > 0.0 else 1.0
+            t = ((px - pts[a + i, 0]) * abx + (py - pts[a + i, 1]) * aby) / sq
+            t = min(max(t, 0.0), 1.0)
+            off = math.hypot(pts[a + i, 0] + abx * t - px, pts[a + i, 1] + aby * t - py)
+            if off < best:
+                best, bi, bt = off, i, t
+        out[k, 1] = cum[bi] + bt * seg[bi]
+        if stand <= 0.0:
+            out[k, 2], out[k, 3] = pts[a, 0], pts[a, 1]
+            continue
+        i = np.searchsorted(cum, stand, side="right") - 1  # cum[i] <= stand < cum[i + 1]
+        f = (stand - cum[i]) / (cum[i + 1] - cum[i])
+        out[k, 2] = pts[a + i, 0] + (pts[a + i + 1, 0] - pts[a + i, 0]) * f
+        out[k, 3] = pts[a + i, 1] + (pts[a + i + 1, 1] - pts[a + i, 1]) * f

@@ -18,7 +18,7 @@ live loop takes:
   ``kernels.batch_descent``, and past ``PARALLEL_MIN_PAIRS_LEVEL``
   ``kernels._parallel_level``;
 * a team's follower stepping out of its corridor: ``polyline_kernels.project``,
-  ``shared`` and ``kept``;
+  ``shared`` and ``kept``; its lead making for its place: ``places``;
 * a threat over terrain (a synthetic hill): the viewshed sweep
   (``terrain.viewshed._sweep``) and every kernel on rows that carry a
   visibility window.
@@ -69,11 +69,13 @@ def warm_wide(base: WorldSettings) -> None:
 
 
 def _team() -> None:
-    """A follower's step leaving its corridor at a bend: the compiled walks of its lead's track
-    (``core.polyline_kernels``: projection, shared stadium, capsule run), which only teams reach."""
+    """A follower's step leaving its corridor at a bend, and a lead making for its place: the compiled
+    walks of a team's polylines (``core.polyline_kernels``: projection, shared stadium, capsule run,
+    the leads' places), which only teams reach."""
     from pfp_service.world import teams
 
     teams.follow((5.0, 0.0), (15.0, 5.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 4.0, "lead", "")
+    teams.lead((0.0, 1.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 5.0, "main")
 
 
 def _crowd() -> list[Input]:

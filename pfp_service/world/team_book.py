@@ -64,6 +64,8 @@ class TeamBook:
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
+        self._columns: dict[str, list[TeamUpdate]] = {}  # unit -> ``columns``, until the teams change
+        self._leading: dict[str, Verdict] = {}  # team -> its lead's verdict in this ``judge`` (``_leads``)
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -86,11 +88,14 @@ class TeamBook:
 
     def columns(self, unit: str) -> list[TeamUpdate]:
         """The teams with followers ``unit`` leads or follows in: its route is priced for them (``team_route``)."""
-        return [
-            t
-            for tid in self._of.get(unit, ())
-            if (t := self.teams[tid]).follow and (t.lead == unit or unit in t.follow)
-        ]
+        got = self._columns.get(unit)
+        if got is None:  # asked per unit and report (``team_route``): kept until a team is put or removed
+            got = self._columns[unit] = [
+                t
+                for tid in self._of.get(unit, ())
+                if (t := self.teams[tid]).follow and (t.lead == unit or unit in t.follow)
+            ]
+        return got
 
     def put(self, tid: str, team: TeamUpdate) -> InputError | None:
         """Take a team (new, or replacing its earlier self); the reason it is refused, with the field, if it is.
@@ -106,6 +111,7 @@ class TeamBook:
         index.add(tid, team)
         self._checks = index
         self.teams[tid] = team
+        self._columns = {}
         self._looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
@@ -120,6 +126,7 @@ class TeamBook:
         """Dissolve a team; whether there was one."""
         if self.teams.pop(tid, None) is None:
             return False
+        self._columns = {}
         self.tracks.pop(tid, None)
         self._looked.pop(tid, None)
         self._lines.pop(tid, None)
@@ -189,6 +196,7 @@ class TeamBook:
         held_before, self.held = self.held, set()
         self._waited, self.waits = self.waits, set()
         self._pulled, self.pulls = self.pulls, {}
+        self._leading = self._leads(directions, units)
         out = []
         for d in directions:
             rec = units.get(d.unit)
@@ -201,6 +209,26 @@ class TeamBook:
             out.append(judged)
             self.sent[d.unit] = judged
         return out
+
+    def _leads(self, directions: Sequence[Direction], units: Mapping[str, UnitRecord]) -> dict[str, Verdict]:
+        """The ``lead`` verdict of each team whose lead moves in ``directions``, all in one call
+        (``teams.leads``): team -> verdict, for ``_verdicts``."""
+        asks: list[tuple[Point, Sequence[Point], float, str]] = []
+        tids: list[str] = []
+        for d in directions:
+            rec = units.get(d.unit)
+            if d.reach_m is None or not (d.vector[0] or d.vector[1]) or rec is None or rec.position is None:
+                continue  # not judged (``_judged``)
+            for tid in self._of.get(d.unit, ()):
+                team = self.teams[tid]
+                if (
+                    team.lead == d.unit
+                    and team.follow
+                    and (main := _rearmost(team.follow, units)) is not None
+                ):
+                    asks.append((rec.position, _route(main), team.standoff_m, main.id))
+                    tids.append(tid)
+        return dict(zip(tids, roles.leads(asks)))
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
@@ -324,7 +352,8 @@ class TeamBook:
             if main is None:
                 out.append(Verdict("hold", None, "waiting: no follower has reported"))
             else:
-                out.append(roles.lead(at, _route(main), team.standoff_m, main.id))
+                got = self._leading.get(tid)
+                out.append(got if got is not None else roles.lead(at, _route(main), team.standoff_m, main.id))
             to = _end(out, to)
         if unit in team.follow and _moving(out):
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)

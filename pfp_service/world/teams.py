@@ -31,6 +31,7 @@ __all__ = [
     "control",
     "follow",
     "lead",
+    "leads",
     "length",
     "link",
     "point_at",
@@ -207,15 +208,43 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
         more than ``STANDOFF_TOLERANCE`` further ahead than asked); else ``to`` its place on the route;
         go (its own way) once the main element's route left is no longer than the standoff.
     """
-    if not route:
-        return _hold(f"no route of {main} to lead along")
-    line = Polyline(route)
-    if line.length <= standoff_m:  # the lead has cleared it all
+    return leads([(at, route, standoff_m, main)])[0]
+
+
+def leads(asks: Sequence[tuple[Point, Sequence[Point], float, str]]) -> list[Verdict]:
+    """``lead`` for each ``(at, route, standoff_m, main)``: every route's numbers in one compiled call
+    (``polyline_kernels.places``), not a polyline made per lead."""
+    out: list[Verdict] = [GO] * len(asks)
+    many = [k for k, ask in enumerate(asks) if len(ask[1]) > 1]
+    if many:
+        pts = np.array([p for k in many for p in asks[k][1]], dtype=float).reshape(-1, 2)
+        first = np.zeros(len(many) + 1, dtype=np.intp)
+        first[1:] = np.cumsum([len(asks[k][1]) for k in many])
+        ats = np.array([asks[k][0] for k in many], dtype=float).reshape(-1, 2)
+        standoffs = np.array([asks[k][2] for k in many], dtype=float)
+        got = np.empty((len(many), 4))
+        kernels.places(pts, first, ats, standoffs, got)
+        for k, (length, s, px, py) in zip(many, got.tolist()):
+            at, _, standoff_m, main = asks[k]
+            out[k] = _lead(at, standoff_m, main, length, s, (px, py))
+    for k, (at, route, standoff_m, main) in enumerate(asks):
+        if len(route) > 1:
+            continue
+        if not route:
+            out[k] = _hold(f"no route of {main} to lead along")
+            continue
+        line = Polyline(route)  # one point: a line of no length
+        out[k] = _lead(at, standoff_m, main, line.length, line.project(at)[0], line.point_at(standoff_m))
+    return out
+
+
+def _lead(at: Point, standoff_m: float, main: str, length: float, s: float, place: Point) -> Verdict:
+    """``lead``'s verdict from its route's length, how far along it the lead projects (``s``) and its place
+    (both read only when the route is longer than the standoff)."""
+    if length <= standoff_m:  # the lead has cleared it all
         return GO  # ... so it goes its own way, not onto the main element's goal
-    s, _off = line.project(at)
     if s > standoff_m * (1.0 + STANDOFF_TOLERANCE):
         return _hold(f"waiting for {main}: {s:,.0f} m ahead along its route, standoff {standoff_m:,.0f} m")
-    place = line.point_at(standoff_m)
     if s >= standoff_m - _CLOSE_M or _dist(at, place) < _CLOSE_M:  # at or past its place: never back
         return _hold(f"at its standoff {standoff_m:,.0f} m ahead of {main}")
     return Verdict("to", place, f"leading {main} by {standoff_m:,.0f} m along its route")

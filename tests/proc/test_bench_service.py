@@ -118,6 +118,7 @@ def test_bench_service_teams_compares_teams_and_dispersion_with_a_plain_planner(
     assert r.returncode == 0, r.stderr
     t = json.loads(r.stdout)["teams"]
     assert t["teams"]["teams"] == 4  # a team for every four units
+    assert t["scene"] == "march"  # spaced at the separation by default (--dense: the crowd)
     assert len(t["rounds"]) == 2
     for row in t["rounds"]:
         for kind in ("plain", "teams"):  # CPU is read in clock ticks: a second of a light load may read 0

@@ -128,3 +128,37 @@ def test_link_over_terrain_stops_short_of_the_ridge_shadow() -> None:
 
 def test_lead_goes_its_own_way_once_the_main_element_s_route_left_is_within_its_standoff() -> None:
     assert roles.lead((20.0, 0.0), [(0.0, 0.0), (60.0, 0.0)], 100.0, "m1") == roles.GO
+
+
+_coord = st.floats(-500.0, 500.0, allow_nan=False)
+
+
+@given(
+    st.lists(
+        st.tuples(
+            st.tuples(_coord, _coord),
+            st.lists(st.tuples(_coord, _coord), min_size=0, max_size=12),
+            st.floats(0.0, 400.0, allow_nan=False),
+        ),
+        min_size=1,
+        max_size=8,
+    )
+)
+def test_the_leads_judged_in_one_call_are_each_lead_judged_on_a_polyline_of_its_route(asks) -> None:
+    """``leads`` (one compiled call over every route) says what a ``Polyline`` of each route says."""
+    got = roles.leads([(at, route, standoff, f"m{k}") for k, (at, route, standoff) in enumerate(asks)])
+    for k, ((at, route, standoff), verdict) in enumerate(zip(asks, got)):
+        if not route:
+            assert verdict.kind == "hold" and "no route" in verdict.reason
+            continue
+        line = roles.Polyline(route)
+        if line.length <= standoff:
+            assert verdict == roles.GO
+            continue
+        s, place = line.project(at)[0], line.point_at(standoff)
+        if verdict.kind == "to":
+            assert verdict.to == place and s < standoff - 1.0, (verdict, s, place)  # the very numbers
+        else:
+            assert verdict.kind == "hold" and f"m{k}" in verdict.reason
+            assert s >= standoff - 1.0 or math.dist(at, place) < 1.0
+            assert ("waiting for" in verdict.reason) == (s > standoff * (1.0 + roles.STANDOFF_TOLERANCE))
