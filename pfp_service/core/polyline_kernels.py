@@ -149,7 +149,9 @@ def places(
         best, bi, bt = math.inf, 0, 0.0
         for i in range(n - 1):
             abx, aby = pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1]
-            sq = seg[i] * seg[i] if seg[i] > 0.0 else 1.0
+            sq = seg[i] * seg[i]
+            if not sq > 0.0:  # a segment too short for its square (below 1e-154 m): as a point's
+                sq = 1.0
             t = ((px - pts[a + i, 0]) * abx + (py - pts[a + i, 1]) * aby) / sq
             t = min(max(t, 0.0), 1.0)
             off = math.hypot(pts[a + i, 0] + abx * t - px, pts[a + i, 1] + aby * t - py)

@@ -83,6 +83,12 @@ def _dist(a: Point, b: Point) -> float:
     return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
+def _squares(seg: np.ndarray) -> np.ndarray:
+    """Each segment's squared length, 1 where it is 0 (a segment under 1e-154 m squares to 0): a divisor."""
+    sq = seg * seg
+    return np.where(sq > 0.0, sq, 1.0)
+
+
 class Polyline:
     """A polyline as arrays, its segments' lengths and cumulated length: made once, walked many times."""
 
@@ -92,7 +98,7 @@ class Polyline:
         self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
         self.ab = np.diff(self.pts, axis=0)  # each segment, start to end: made once for every walk
         self.seg = np.hypot(self.ab[:, 0], self.ab[:, 1]) if len(self.pts) > 1 else np.zeros(0)
-        self.sq = np.where(self.seg > 0.0, self.seg * self.seg, 1.0)
+        self.sq = _squares(self.seg)
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg)])
 
     def __len__(self) -> int:
@@ -112,7 +118,7 @@ class Polyline:
         seg = np.hypot(ab[:, 0], ab[:, 1])
         out.ab = np.concatenate([self.ab, ab])
         out.seg = np.concatenate([self.seg, seg])
-        out.sq = np.concatenate([self.sq, np.where(seg > 0.0, seg * seg, 1.0)])
+        out.sq = np.concatenate([self.sq, _squares(seg)])
         # cumulated from the last total on, one addition at a time: as the whole line's cumsum adds
         out.cum = np.concatenate([self.cum, np.cumsum(np.concatenate([self.cum[-1:], seg]))[1:]])
         return out

@@ -480,9 +480,7 @@ class World:
                 events.append(event)
             directions.append(d)
             sent.append(rec.position)
-        # a role's step is kept clear of its own limit's zones (not a column's margin), if there are any
-        bare = self._rec.ground is None and not self._rec.zone_set.zones
-        zones_of = None if bare else (lambda r: field_for(self._route(r)[0]).zones)
+        zones_of = self._rec.step_zones(self._route)  # a role's step is kept clear of them
         out.directions[first:] = self.teams.judge(out.directions[first:], self._units, zones_of=zones_of)
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)

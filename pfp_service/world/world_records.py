@@ -11,6 +11,7 @@ what goes out.  Pure values: ``now`` is a parameter.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -167,6 +168,13 @@ class Records:
             bare = self._seen_at(height_m)[0]
             got = fields[key] = bare.with_zones(zones) if len(zones) else bare
         return got
+
+    def step_zones(self, route: Callable[[UnitRecord], RouteKey]) -> Callable[[UnitRecord], ZoneSet] | None:
+        """Per unit, the zones its step is kept clear of: its own limit's, not a column's margin (``route``
+        gives its key); ``None`` when no zone or ground is in force."""
+        if self.ground is None and not self.zone_set.zones:
+            return None
+        return lambda rec: self.field_for(route(rec)[0]).zones
 
     def cull_for(self, height_m: float | None) -> CullIndex | None:
         """The cull index of the threats in force as they see a unit ``height_m`` tall (``None``: ``cull``):
