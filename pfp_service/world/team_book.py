@@ -24,6 +24,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
+from pfp_service.world import team_link as link_memory
 from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
@@ -64,6 +65,10 @@ class TeamBook:
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
+        # the robots' breadcrumbs, and the runs between reports of the units in a link
+        self.trails = link_memory.Trails()
+        self._links: set[str] = set()  # the units in a link: robots and their controllers
+        self._now: float | None = None  # the time of the ``judge`` under way
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -112,6 +117,7 @@ class TeamBook:
         if old is None:
             for u in team.units():
                 self._of.setdefault(u, []).append(tid)
+            self._links |= _linked(team)
         else:
             self._index()
         return None
@@ -131,10 +137,14 @@ class TeamBook:
 
     def _index(self) -> None:
         of: dict[str, list[str]] = {}
+        links: set[str] = set()
         for tid, team in self.teams.items():
             for u in team.units():
                 of.setdefault(u, []).append(tid)
+            links |= _linked(team)
         self._of = of
+        self.trails.forget(self._links - links)
+        self._links = links
 
     def roles(self, unit: str) -> list[tuple[str, tuple[str, ...]]]:
         """``(team, roles)`` of each team ``unit`` is in."""
@@ -171,6 +181,7 @@ class TeamBook:
         units: Mapping[str, UnitRecord],
         sight: Sight | None = None,
         zones_of: Callable[[UnitRecord], ZoneSet] | None = None,
+        now: float | None = None,
     ) -> list[Direction]:
         """``directions`` with each team member's rewritten by its roles (the rest as they are).
 
@@ -181,6 +192,8 @@ class TeamBook:
                 (default: the book's own, the world's terrain's).
             zones_of: the keep-out zones and slope barriers a unit plans round: a role's step goes
                 straight to its point, so it is cut short of them (``team_steps.kept_clear``).
+            now: the world's time, for how long a robot has held for its link (``team_link.LINK_WAIT_S``);
+                ``None``: no wait, a robot crosses a shadow its controller closes on at once.
         """
         sight = sight if sight is not None else self.sight
         if not self.teams:
@@ -189,12 +202,15 @@ class TeamBook:
         held_before, self.held = self.held, set()
         self._waited, self.waits = self.waits, set()
         self._pulled, self.pulls = self.pulls, {}
+        self._now = now
         out = []
         for d in directions:
             rec = units.get(d.unit)
             if d.unit not in self._of or rec is None or rec.position is None:
                 out.append(d)
                 continue
+            if d.unit in self._links:
+                self.trails.moved(d.unit, rec.position)
             judged = self._judged(d, rec, units, held_before, sight)
             if judged is not d and zones_of is not None and (judged.reach_m or 0.0) > 0.0:
                 judged = steps.kept_clear(judged, rec, zones_of(rec))
@@ -311,14 +327,10 @@ class TeamBook:
         if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
             ctl = units.get(team.controller) if team.controller is not None else None
             if ctl is not None and ctl.position is not None and math.dist(at, ctl.position) > 1.0:
-                c, why = ctl.position, f"closing on {team.controller}, which holds for its link"
-                v = roles.link(at, c, c, team.radio_range_m, str(team.controller), "", sight)
-                if v.kind == "hold":  # the way to it leaves its sight at once: it closes on this robot too,
-                    self.pulls.setdefault(str(team.controller), set()).add(unit)  # and this robot goes on
-                    v = Verdict("to", c, f"through {team.controller}'s shadow")
-                return [
-                    Verdict("to", c, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
-                ]
+                v, pull = link_memory.closing_on(self.trails, unit, at, ctl.position, team, sight, self._now)
+                if pull:
+                    self.pulls.setdefault(str(team.controller), set()).add(unit)
+                return [v]
         if unit == team.lead and team.follow:
             main = _rearmost(team.follow, units)
             if main is None:
@@ -336,18 +348,18 @@ class TeamBook:
             ctl = units.get(team.controller) if team.controller is not None else None
             lost = self._lost(team.controller, units, held)
             c_at = ctl.position if ctl is not None else None
-            out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
-            if out[-1].kind == "hold" and not lost and c_at is not None:
-                if math.dist(at, c_at) <= team.corridor_m:  # beside it already: it follows at once
-                    why = f"out of {team.controller}'s sight over the crest beside it: it follows"
-                    out[-1] = Verdict("to", to, f"{out[-1].reason}; {why}")
-                else:
-                    self.pulls.setdefault(str(team.controller), set()).add(unit)
+            c_dir = self.sent.get(str(team.controller))
+            v, pull = link_memory.robot_step(
+                self.trails, unit, at, to, team, c_at, lost, sight, c_dir, self._now
+            )
+            out.append(v)
+            if pull:
+                self.pulls.setdefault(str(team.controller), set()).add(unit)
         if unit == team.controller and _moving(out):
             robots = [
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
             ]
-            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight)
+            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight, self._ahead(robots))
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
@@ -388,12 +400,18 @@ class TeamBook:
                 for o in team.robots
                 if o != r and (oo := units.get(o)) and (q := oo.position) and _guided(oo)
             ]
-            v, _ = roles.control(at, p, others, team.radio_range_m, sight)
-            if v.kind != "hold":
+            v, blocking = roles.control(at, p, others, team.radio_range_m, sight, self._ahead(others))
+            if v.kind == "hold":
+                self.waits.add(blocking)  # the robot whose link keeps it from this one closes on it
+            else:
                 return [
                     Verdict("to", p, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
                 ]
         return None
+
+    def _ahead(self, robots: Sequence[tuple[str, Point]]) -> dict[str, Point]:
+        """Where each robot's direction takes it by its next report, where that is known."""
+        return {r: n for r, p in robots if (n := self.trails.ahead(r, p, self.sent.get(r))) is not None}
 
 
 class _Either:
@@ -428,6 +446,11 @@ def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:
     for tid, team in teams.items():
         index.add(tid, team)
     return index
+
+
+def _linked(team: TeamUpdate) -> set[str]:
+    """The units of ``team`` in a controller's link: its robots and their controller."""
+    return {team.controller, *team.robots} if team.controller is not None and team.robots else set()
 
 
 def _guided(rec: UnitRecord) -> bool:

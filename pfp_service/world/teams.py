@@ -12,7 +12,7 @@ they say.  A verdict is never an exception: a step too short to judge goes.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -30,6 +30,7 @@ __all__ = [
     "Verdict",
     "control",
     "follow",
+    "in_link",
     "lead",
     "length",
     "link",
@@ -326,6 +327,13 @@ def _nearest_goal(
     return _hold(f"at the cleared ground nearest its goal: {why}")
 
 
+def in_link(
+    a: Point, b: Point, radio_range_m: float, sight: Sight | None = None, clearance_m: float = 0.0
+) -> bool:
+    """Whether units at ``a`` and ``b`` are linked: within ``radio_range_m``, and in sight where there is terrain."""
+    return _dist(a, b) <= radio_range_m and (sight is None or sight(a, b, clearance_m))
+
+
 def link(
     at: Point,
     to: Point,
@@ -334,6 +342,8 @@ def link(
     controller: str,
     lost: str,
     sight: Sight | None = None,
+    controller_next: Point | None = None,
+    back: Sequence[Point] = (),
 ) -> Verdict:
     """A robot's step: within ``radio_range_m`` of its controller, and in its sight where there is terrain.
 
@@ -345,17 +355,24 @@ def link(
         controller: the controller's id, for the reasons.
         lost: why the controller cannot be kept to (lost, stopped), or ``""``.
         sight: whether two points see each other over the ground; ``None`` without terrain.
+        controller_next: where the controller's own direction takes it by the next report, if known:
+            both move at once, so a step is judged against it too, when holding keeps the link to it
+            (when it does not, the controller's step is its own to judge: ``control``).
+        back: the breadcrumbs, the robot's own track back to where its link last held (that point
+            first): a robot out of link retraces it, newest first, rather than cut across unknown
+            ground straight at its controller.
 
     Returns:
         hold when the controller is lost or stopped, or the step would break the link at once; the step
-        cut short where it would; ``to`` the controller (turning back) when the link is already broken.
+        cut short where it would; when the link is already broken, ``to`` the newest breadcrumb (back
+        along its track), or to the controller (turning back) when it has none.
     """
     if lost or controller_at is None:
         return _hold(f"lost link: controller {controller} {lost or 'has no position'}")
     c = controller_at
 
     def linked(p: Point, clearance_m: float = 0.0) -> bool:
-        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p, clearance_m))
+        return in_link(c, p, radio_range_m, sight, clearance_m)
 
     if not linked(at):
         far = _dist(at, c)
@@ -364,7 +381,21 @@ def link(
             if far > radio_range_m
             else f"out of {controller}'s line of sight"
         )
+        crumb = next((p for p in reversed(back) if _dist(at, p) >= _CLOSE_M), None)
+        if crumb is not None:
+            return Verdict("to", crumb, f"lost link ({why}): back along its track to where the link held")
         return Verdict("to", c, f"lost link ({why}): turning back")
+    n = controller_next
+    if n is not None and (
+        _dist(n, c) < _CLOSE_M or not in_link(n, at, radio_range_m, sight, SIGHT_CLEARANCE_M)
+    ):
+        n = None  # not moving, or out of its sight however the robot holds: judged where it is
+
+    def kept_by_both(p: Point) -> bool:
+        return linked(p, SIGHT_CLEARANCE_M) and (
+            n is None or in_link(n, p, radio_range_m, sight, SIGHT_CLEARANCE_M)
+        )
+
     # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
     # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
     spacing = (
@@ -372,12 +403,14 @@ def link(
         if sight is None
         else max(_dist(at, to) / _SAMPLES_MAX, getattr(sight, "resolution_m", 0.0) / 2.0)
     )
-    kept = _kept(at, to, lambda p: linked(p, SIGHT_CLEARANCE_M), spacing)
+    kept = _kept(at, to, kept_by_both, spacing)
     beyond = (
         f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
         if _dist(to, c) > radio_range_m
         else f"out of {controller}'s line of sight"
     )
+    if n is not None and linked(to, SIGHT_CLEARANCE_M):
+        beyond = f"out of link with where {controller}'s own step takes it"
     return _shortened(at, to, kept, f"the step would break the link to {controller} ({beyond})")
 
 
@@ -387,6 +420,7 @@ def control(
     robots: Sequence[tuple[str, Point]],
     radio_range_m: float,
     sight: Sight | None = None,
+    next_of: Mapping[str, Point] | None = None,
 ) -> tuple[Verdict, str]:
     """A controller's step: it keeps each of its robots it is linked to in range and, over terrain, in sight.
 
@@ -399,6 +433,8 @@ def control(
         robots: ``(id, where)`` of each robot it keeps a link to (those it has lost turn back on their own).
         radio_range_m: its radio's reach.
         sight: whether two points see each other over the ground; ``None`` without terrain.
+        next_of: where a robot's own direction takes it by the next report, if known: both move at once,
+            so the step keeps that point linked too, when holding does.
 
     Returns:
         ``(verdict, robot)``: go; the step cut short where it would break a robot's link (``robot`` that
@@ -406,9 +442,15 @@ def control(
     """
 
     def linked(p: Point, r: Point) -> bool:
-        return _dist(p, r) <= radio_range_m and (sight is None or sight(p, r))
+        return in_link(p, r, radio_range_m, sight)
 
     kept = [(rid, r) for rid, r in robots if linked(at, r)]
+    ahead = next_of or {}
+    kept += [
+        (rid, n)
+        for rid, r in kept
+        if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, n)
+    ]
     if not kept:
         return GO, ""
     spacing = (

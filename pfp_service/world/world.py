@@ -479,7 +479,9 @@ class World:
             directions.append(d)
             sent.append(rec.position)
         zones_of = lambda r: field_for(self._route(r)[0]).zones  # its own limit, not a column's margin
-        out.directions[first:] = self.teams.judge(out.directions[first:], self._units, zones_of=zones_of)
+        out.directions[first:] = self.teams.judge(
+            out.directions[first:], self._units, zones_of=zones_of, now=b.now
+        )
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
