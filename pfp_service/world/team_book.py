@@ -359,7 +359,8 @@ class TeamBook:
             robots = [
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
             ]
-            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight, self._ahead(robots))
+            ahead, run = self._ahead(robots), self.trails.run(unit)
+            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight, ahead, run)
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
@@ -400,7 +401,9 @@ class TeamBook:
                 for o in team.robots
                 if o != r and (oo := units.get(o)) and (q := oo.position) and _guided(oo)
             ]
-            v, blocking = roles.control(at, p, others, team.radio_range_m, sight, self._ahead(others))
+            v, blocking = roles.control(
+                at, p, others, team.radio_range_m, sight, self._ahead(others), self.trails.run(unit)
+            )
             if v.kind == "hold":
                 self.waits.add(blocking)  # the robot whose link keeps it from this one closes on it
             else:

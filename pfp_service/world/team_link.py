@@ -61,6 +61,11 @@ class Trails:
             self._runs.setdefault(unit, deque(maxlen=_RUNS)).append(run)
         self._was[unit] = at
 
+    def run(self, unit: str) -> float | None:
+        """How far ``unit`` goes between reports (the longest of its last runs), if known."""
+        runs = self._runs.get(unit)
+        return max(runs) if runs else None
+
     def ahead(self, unit: str, at: Point, d: Direction | None) -> Point | None:
         """Where ``d`` takes ``unit`` from ``at`` by its next report: ``at`` when it holds, ``None`` when
         how far it goes between reports is not known yet."""
@@ -122,11 +127,15 @@ def robot_step(
     ctl = str(team.controller)
     if c_at is None or lost:
         return roles.link(at, to, c_at, team.radio_range_m, ctl, lost, sight), False
-    back = trails.trail(robot, at, roles.in_link(c_at, at, team.radio_range_m, sight))
-    c_next = trails.ahead(ctl, c_at, c_dir)
-    v = roles.link(at, to, c_at, team.radio_range_m, ctl, lost, sight, c_next, back)
+    here = roles.in_link(c_at, at, team.radio_range_m, sight)
+    back = trails.trail(robot, at, here)
+    c_next, run = trails.ahead(ctl, c_at, c_dir), trails.run(robot)
+    v = roles.link(at, to, c_at, team.radio_range_m, ctl, lost, sight, c_next, back, run)
     if v.kind != "hold":
-        trails.moving(robot)
+        # its wait is over once its link lets it go its way as far as a report takes it (not while it
+        # retraces, closes on its controller or creeps: a team that shuffles is still held)
+        if here and (v.kind == "go" or (v.to is not None and math.dist(at, v.to) >= (run or 0.0))):
+            trails.moving(robot)
         return v, False
     waited = trails.waiting(robot, now)
     if math.dist(at, c_at) <= team.corridor_m and waited >= LINK_WAIT_S:
@@ -148,10 +157,8 @@ def closing_on(
     trails.trail(robot, at, roles.in_link(c, at, team.radio_range_m, sight))  # linked: its crumbs start here
     v = roles.link(at, c, c, team.radio_range_m, ctl, "", sight)
     if v.kind == "go":
-        trails.moving(robot)
         return Verdict("to", c, why), False
     if v.kind == "to" and v.to is not None:
-        trails.moving(robot)
         if v.to == c:  # out of its link already, on its way to it
             trails.went_on(robot, at)
         return Verdict("to", v.to, f"{why}; {v.reason}"), False

@@ -171,13 +171,18 @@ def length(line: Sequence[Point]) -> float:
     return Polyline(line).length
 
 
-def _kept(at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float) -> float:
-    """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``."""
+def _kept(
+    at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float, run_m: float | None = None
+) -> float:
+    """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``
+    and where the unit stands at its next report (``run_m`` along it), wherever the samples fall."""
     far = _dist(at, to)
     n = min(_SAMPLES_MAX, max(1, math.ceil(far / spacing_m))) if spacing_m > 0.0 else 1
+    fs = [k / n for k in range(1, n + 1)]
+    if run_m is not None and 0.0 < run_m < far:
+        fs = sorted({*fs, run_m / far})
     good = 0.0
-    for k in range(1, n + 1):
-        f = k / n
+    for f in fs:
         if not ok((at[0] + (to[0] - at[0]) * f, at[1] + (to[1] - at[1]) * f)):
             return good
         good = f
@@ -344,6 +349,7 @@ def link(
     sight: Sight | None = None,
     controller_next: Point | None = None,
     back: Sequence[Point] = (),
+    run_m: float | None = None,
 ) -> Verdict:
     """A robot's step: within ``radio_range_m`` of its controller, and in its sight where there is terrain.
 
@@ -361,6 +367,8 @@ def link(
         back: the breadcrumbs, the robot's own track back to where its link last held (that point
             first): a robot out of link retraces it, newest first, rather than cut across unknown
             ground straight at its controller.
+        run_m: how far along its step the robot will be at its next report, if known: that point is
+            judged too (the samples along a long step are half a cell apart).
 
     Returns:
         hold when the controller is lost or stopped, or the step would break the link at once; the step
@@ -403,7 +411,7 @@ def link(
         if sight is None
         else max(_dist(at, to) / _SAMPLES_MAX, getattr(sight, "resolution_m", 0.0) / 2.0)
     )
-    kept = _kept(at, to, kept_by_both, spacing)
+    kept = _kept(at, to, kept_by_both, spacing, run_m)
     beyond = (
         f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
         if _dist(to, c) > radio_range_m
@@ -421,6 +429,7 @@ def control(
     radio_range_m: float,
     sight: Sight | None = None,
     next_of: Mapping[str, Point] | None = None,
+    run_m: float | None = None,
 ) -> tuple[Verdict, str]:
     """A controller's step: it keeps each of its robots it is linked to in range and, over terrain, in sight.
 
@@ -435,6 +444,7 @@ def control(
         sight: whether two points see each other over the ground; ``None`` without terrain.
         next_of: where a robot's own direction takes it by the next report, if known: both move at once,
             so the step keeps that point linked too, when holding does.
+        run_m: how far along its step the controller will be at its next report, if known: judged too.
 
     Returns:
         ``(verdict, robot)``: go; the step cut short where it would break a robot's link (``robot`` that
@@ -467,7 +477,7 @@ def control(
                 return False
         return True
 
-    got = _kept(at, to, ok, spacing)
+    got = _kept(at, to, ok, spacing, run_m)
     if got >= 1.0:
         return GO, ""
     return _shortened(at, to, got, f"the step would break {broken[0]}'s link"), broken[0]

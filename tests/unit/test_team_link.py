@@ -157,3 +157,43 @@ def test_a_robot_whose_way_to_its_controller_leaves_its_sight_holds_a_while_then
     v, pull = team_link.closing_on(t, "r1", at, c, team, pit_sight, LINK_WAIT_S)
     assert v.kind == "to" and v.to == c and pull and v.reason.endswith("through m1's shadow after 60 s")
     assert t.crumbs["r1"] == [at]  # where its link held: it retraces to here if m1 goes on without it
+
+
+class _CoarseSight:
+    """Sight over ground of 100 m cells (asked every half cell along a step), hidden from x = 20 to 30 m."""
+
+    resolution_m = 100.0
+
+    def __call__(self, a: Point, b: Point, clearance_m: float = 0.0) -> bool:
+        return not any(20.0 < p[0] < 30.0 for p in (a, b))
+
+
+def test_where_the_robot_stands_at_its_next_report_is_judged_wherever_the_samples_fall() -> None:
+    sight = _CoarseSight()
+    assert roles.link((0.0, 0.0), (100.0, 0.0), (-10.0, 0.0), 500.0, "m1", "", sight) == roles.GO
+    v = roles.link((0.0, 0.0), (100.0, 0.0), (-10.0, 0.0), 500.0, "m1", "", sight, run_m=25.0)
+    assert v.kind == "hold" and v.reason.startswith("the step would break the link to m1")
+    assert roles.link((0.0, 0.0), (100.0, 0.0), (-10.0, 0.0), 500.0, "m1", "", sight, run_m=40.0) == roles.GO
+    # the controller's own step alike
+    v, robot = roles.control((0.0, 0.0), (100.0, 0.0), [("r1", (-10.0, 0.0))], 500.0, sight, run_m=25.0)
+    assert v.kind == "hold" and robot == "r1"
+
+
+def test_a_robot_that_shuffles_while_held_for_its_link_is_still_waiting() -> None:
+    """Held at a crest, closing on its controller for a report and held again: the wait runs on, so a
+    team that shuffles between the two is not held for good."""
+    team = TeamUpdate(controller="m1", robots=["r1"], radio_range_m=500.0, corridor_m=40.0)
+    t = Trails()
+    at, to, c = (50.0, 0.0), (80.0, 0.0), (30.0, 0.0)
+    assert team_link.robot_step(t, "r1", at, to, team, c, "", _ridge_sight, None, 0.0)[0].kind == "hold"
+    v, _ = team_link.closing_on(t, "r1", at, c, team, _ridge_sight, 20.0)
+    assert v.kind == "to" and v.to == c
+    assert team_link.robot_step(t, "r1", at, to, team, c, "", _ridge_sight, None, 40.0)[0].kind == "hold"
+    v, _ = team_link.robot_step(t, "r1", at, to, team, c, "", _ridge_sight, None, LINK_WAIT_S)
+    assert v.kind == "to" and v.to == to  # 60 s from its first hold
+    # once its link lets it go its way, its next hold waits afresh
+    assert (
+        team_link.robot_step(t, "r1", (40.0, 0.0), (45.0, 0.0), team, c, "", _ridge_sight, None, 70.0)[0]
+        == roles.GO
+    )
+    assert team_link.robot_step(t, "r1", at, to, team, c, "", _ridge_sight, None, 75.0)[0].kind == "hold"
