@@ -68,6 +68,7 @@ class TeamBook:
         # the robots' breadcrumbs, and the runs between reports of the units in a link
         self.trails = link_memory.Trails()
         self._links: set[str] = set()  # the units in a link: robots and their controllers
+        self._controls: set[str] = set()  # the controllers with robots
         self._now: float | None = None  # the time of the ``judge`` under way
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
@@ -118,6 +119,7 @@ class TeamBook:
             for u in team.units():
                 self._of.setdefault(u, []).append(tid)
             self._links |= _linked(team)
+            self._controls |= _linked(team) & {team.controller}
         else:
             self._index()
         return None
@@ -138,11 +140,13 @@ class TeamBook:
     def _index(self) -> None:
         of: dict[str, list[str]] = {}
         links: set[str] = set()
+        controls: set[str] = set()
         for tid, team in self.teams.items():
             for u in team.units():
                 of.setdefault(u, []).append(tid)
             links |= _linked(team)
-        self._of = of
+            controls |= _linked(team) & {team.controller}
+        self._of, self._controls = of, controls
         self.trails.forget(self._links - links)
         self._links = links
 
@@ -203,18 +207,21 @@ class TeamBook:
         self._waited, self.waits = self.waits, set()
         self._pulled, self.pulls = self.pulls, {}
         self._now = now
-        out = []
-        for d in directions:
+        out = list(directions)
+        # controllers first: a robot is then judged against where its controller's step of this batch
+        # takes it, not its last one (the two move at once)
+        first = [i for i, d in enumerate(directions) if d.unit in self._controls]
+        for i in first + [i for i, d in enumerate(directions) if d.unit not in self._controls]:
+            d = directions[i]
             rec = units.get(d.unit)
             if d.unit not in self._of or rec is None or rec.position is None:
-                out.append(d)
                 continue
             if d.unit in self._links:
                 self.trails.moved(d.unit, rec.position)
             judged = self._judged(d, rec, units, held_before, sight)
             if judged is not d and zones_of is not None and (judged.reach_m or 0.0) > 0.0:
                 judged = steps.kept_clear(judged, rec, zones_of(rec))
-            out.append(judged)
+            out[i] = judged
             self.sent[d.unit] = judged
         return out
 

@@ -197,3 +197,31 @@ def test_a_robot_that_shuffles_while_held_for_its_link_is_still_waiting() -> Non
         == roles.GO
     )
     assert team_link.robot_step(t, "r1", at, to, team, c, "", _ridge_sight, None, 75.0)[0].kind == "hold"
+
+
+def test_a_robot_reported_before_its_controller_is_judged_against_the_controllers_step_of_the_same_batch() -> (
+    None
+):
+    """Controllers are judged first: the robot's step keeps where the controller goes this report."""
+    from pfp_service.wire import Goal
+    from pfp_service.world.team_book import TeamBook
+    from pfp_service.world.units import UnitRecord
+
+    book = TeamBook()
+    book.put("alpha", TeamUpdate(controller="m1", robots=["r1"], radio_range_m=500.0))
+    m1 = UnitRecord("m1", 1, position=(0.0, -60.0), goal=Goal(position=(0.0, 500.0)))
+    r1 = UnitRecord("r1", 2, position=(60.0, -10.0), goal=Goal(position=(500.0, -10.0)))
+    units = {"m1": m1, "r1": r1}
+    north, east = _direction("m1", (0.0, 1.0), 20.0), _direction("r1", (1.0, 0.0), 40.0)
+    book.judge([east, north], units, _spur_sight, now=0.0)
+    m1.position = (0.0, -40.0)  # it went 20 m: its run between reports
+    book.judge([east, _direction("m1", (0.0, 0.0), 0.0)], units, _spur_sight, now=5.0)  # then it held
+    m1.position = (0.0, 0.0)  # north again; its step of this batch takes it to y = 20
+    out = book.judge(
+        [_direction("r1", (1.0, 0.0), 40.0), _direction("m1", (0.0, 1.0), 20.0)], units, _spur_sight, now=10.0
+    )
+    robot = out[0]
+    assert robot.unit == "r1" and robot.reach_m is not None and robot.reach_m <= 15.0 + 1e-6, robot
+    end = (60.0 + robot.reach_m, -10.0)
+    assert _spur_sight((0.0, 20.0), end)  # still seen from where m1 will be
+    assert not _spur_sight((0.0, 20.0), (100.0, -10.0))  # where its own step would have taken it
