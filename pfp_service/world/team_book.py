@@ -24,6 +24,8 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
+from pfp_service.world import team_leads as leads
+from pfp_service.world import team_link as link_memory
 from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
@@ -33,7 +35,6 @@ from pfp_service.world.units import UnitRecord
 __all__ = ["MAX_TRACK_POINTS", "TeamBook"]
 
 MAX_TRACK_POINTS = 4096  # a lead's track kept at most: the part behind every follower goes first
-_ROUTE_STEPS = 16  # the main element's route ahead, in planner steps, before straight on to its goal
 
 
 class TeamBook:
@@ -65,7 +66,14 @@ class TeamBook:
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
         self._columns: dict[str, list[TeamUpdate]] = {}  # unit -> ``columns``, until the teams change
-        self._leading: dict[str, Verdict] = {}  # team -> its lead's verdict in this ``judge`` (``_leads``)
+        self._leading: dict[
+            str, Verdict
+        ] = {}  # team -> its lead's verdict in this ``judge`` (``team_leads``)
+        # the robots' breadcrumbs, and the runs between reports of the units in a link
+        self.trails = link_memory.Trails()
+        self._links: set[str] = set()  # the units in a link: robots and their controllers
+        self._controls: set[str] = set()  # the controllers with robots
+        self._now: float | None = None  # the time of the ``judge`` under way
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -118,6 +126,8 @@ class TeamBook:
         if old is None:
             for u in team.units():
                 self._of.setdefault(u, []).append(tid)
+            self._links |= _linked(team)
+            self._controls |= _linked(team) & {team.controller}
         else:
             self._index()
         return None
@@ -138,10 +148,16 @@ class TeamBook:
 
     def _index(self) -> None:
         of: dict[str, list[str]] = {}
+        links: set[str] = set()
+        controls: set[str] = set()
         for tid, team in self.teams.items():
             for u in team.units():
                 of.setdefault(u, []).append(tid)
-        self._of = of
+            links |= _linked(team)
+            controls |= _linked(team) & {team.controller}
+        self._of, self._controls = of, controls
+        self.trails.forget(self._links - links)
+        self._links = links
 
     def roles(self, unit: str) -> list[tuple[str, tuple[str, ...]]]:
         """``(team, roles)`` of each team ``unit`` is in."""
@@ -178,6 +194,7 @@ class TeamBook:
         units: Mapping[str, UnitRecord],
         sight: Sight | None = None,
         zones_of: Callable[[UnitRecord], ZoneSet] | None = None,
+        now: float | None = None,
     ) -> list[Direction]:
         """``directions`` with each team member's rewritten by its roles (the rest as they are).
 
@@ -188,6 +205,8 @@ class TeamBook:
                 (default: the book's own, the world's terrain's).
             zones_of: the keep-out zones and slope barriers a unit plans round: a role's step goes
                 straight to its point, so it is cut short of them (``team_steps.kept_clear``).
+            now: the world's time, for how long a robot has held for its link (``team_link.LINK_WAIT_S``);
+                ``None``: no wait, a robot crosses a shadow its controller closes on at once.
         """
         sight = sight if sight is not None else self.sight
         if not self.teams:
@@ -196,39 +215,25 @@ class TeamBook:
         held_before, self.held = self.held, set()
         self._waited, self.waits = self.waits, set()
         self._pulled, self.pulls = self.pulls, {}
-        self._leading = self._leads(directions, units)
-        out = []
-        for d in directions:
+        self._leading = leads.verdicts(self.teams, self._of, directions, units)
+        self._now = now
+        out = list(directions)
+        # controllers first: a robot is then judged against where its controller's step of this batch
+        # takes it, not its last one (the two move at once)
+        first = [i for i, d in enumerate(directions) if d.unit in self._controls]
+        for i in first + [i for i, d in enumerate(directions) if d.unit not in self._controls]:
+            d = directions[i]
             rec = units.get(d.unit)
             if d.unit not in self._of or rec is None or rec.position is None:
-                out.append(d)
                 continue
+            if d.unit in self._links:
+                self.trails.moved(d.unit, rec.position)
             judged = self._judged(d, rec, units, held_before, sight)
             if judged is not d and zones_of is not None and (judged.reach_m or 0.0) > 0.0:
                 judged = steps.kept_clear(judged, rec, zones_of(rec))
-            out.append(judged)
+            out[i] = judged
             self.sent[d.unit] = judged
         return out
-
-    def _leads(self, directions: Sequence[Direction], units: Mapping[str, UnitRecord]) -> dict[str, Verdict]:
-        """The ``lead`` verdict of each team whose lead moves in ``directions``, all in one call
-        (``teams.leads``): team -> verdict, for ``_verdicts``."""
-        asks: list[tuple[Point, Sequence[Point], float, str]] = []
-        tids: list[str] = []
-        for d in directions:
-            rec = units.get(d.unit)
-            if d.reach_m is None or not (d.vector[0] or d.vector[1]) or rec is None or rec.position is None:
-                continue  # not judged (``_judged``)
-            for tid in self._of.get(d.unit, ()):
-                team = self.teams[tid]
-                if (
-                    team.lead == d.unit
-                    and team.follow
-                    and (main := _rearmost(team.follow, units)) is not None
-                ):
-                    asks.append((rec.position, _route(main), team.standoff_m, main.id))
-                    tids.append(tid)
-        return dict(zip(tids, roles.leads(asks)))
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
@@ -339,21 +344,21 @@ class TeamBook:
         if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
             ctl = units.get(team.controller) if team.controller is not None else None
             if ctl is not None and ctl.position is not None and math.dist(at, ctl.position) > 1.0:
-                c, why = ctl.position, f"closing on {team.controller}, which holds for its link"
-                v = roles.link(at, c, c, team.radio_range_m, str(team.controller), "", sight)
-                if v.kind == "hold":  # the way to it leaves its sight at once: it closes on this robot too,
-                    self.pulls.setdefault(str(team.controller), set()).add(unit)  # and this robot goes on
-                    v = Verdict("to", c, f"through {team.controller}'s shadow")
-                return [
-                    Verdict("to", c, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
-                ]
+                v, pull = link_memory.closing_on(self.trails, unit, at, ctl.position, team, sight, self._now)
+                if pull:
+                    self.pulls.setdefault(str(team.controller), set()).add(unit)
+                return [v]
         if unit == team.lead and team.follow:
-            main = _rearmost(team.follow, units)
+            main = leads.rearmost(team.follow, units)
             if main is None:
                 out.append(Verdict("hold", None, "waiting: no follower has reported"))
             else:
                 got = self._leading.get(tid)
-                out.append(got if got is not None else roles.lead(at, _route(main), team.standoff_m, main.id))
+                out.append(
+                    got
+                    if got is not None
+                    else roles.lead(at, leads.main_route(main), team.standoff_m, main.id)
+                )
             to = _end(out, to)
         if unit in team.follow and _moving(out):
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
@@ -365,18 +370,19 @@ class TeamBook:
             ctl = units.get(team.controller) if team.controller is not None else None
             lost = self._lost(team.controller, units, held)
             c_at = ctl.position if ctl is not None else None
-            out.append(roles.link(at, to, c_at, team.radio_range_m, str(team.controller), lost, sight))
-            if out[-1].kind == "hold" and not lost and c_at is not None:
-                if math.dist(at, c_at) <= team.corridor_m:  # beside it already: it follows at once
-                    why = f"out of {team.controller}'s sight over the crest beside it: it follows"
-                    out[-1] = Verdict("to", to, f"{out[-1].reason}; {why}")
-                else:
-                    self.pulls.setdefault(str(team.controller), set()).add(unit)
+            c_dir = self.sent.get(str(team.controller))
+            v, pull = link_memory.robot_step(
+                self.trails, unit, at, to, team, c_at, lost, sight, c_dir, self._now
+            )
+            out.append(v)
+            if pull:
+                self.pulls.setdefault(str(team.controller), set()).add(unit)
         if unit == team.controller and _moving(out):
             robots = [
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
             ]
-            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight)
+            ahead, run = self._ahead(robots), self.trails.run(unit)
+            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight, ahead, run)
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
@@ -417,12 +423,20 @@ class TeamBook:
                 for o in team.robots
                 if o != r and (oo := units.get(o)) and (q := oo.position) and _guided(oo)
             ]
-            v, _ = roles.control(at, p, others, team.radio_range_m, sight)
-            if v.kind != "hold":
+            v, blocking = roles.control(
+                at, p, others, team.radio_range_m, sight, self._ahead(others), self.trails.run(unit)
+            )
+            if v.kind == "hold":
+                self.waits.add(blocking)  # the robot whose link keeps it from this one closes on it
+            else:
                 return [
                     Verdict("to", p, why) if v.kind == "go" else Verdict("to", v.to, f"{why}; {v.reason}")
                 ]
         return None
+
+    def _ahead(self, robots: Sequence[tuple[str, Point]]) -> dict[str, Point]:
+        """Where each robot's direction takes it by its next report, where that is known."""
+        return {r: n for r, p in robots if (n := self.trails.ahead(r, p, self.sent.get(r))) is not None}
 
 
 class _Either:
@@ -459,6 +473,11 @@ def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:
     return index
 
 
+def _linked(team: TeamUpdate) -> set[str]:
+    """The units of ``team`` in a controller's link: its robots and their controller."""
+    return {team.controller, *team.robots} if team.controller is not None and team.robots else set()
+
+
 def _guided(rec: UnitRecord) -> bool:
     """Whether a robot is live and on its way: one arrived, trapped or without a goal cannot close on its controller."""
     done = rec.last_status in (DirectionStatus.ARRIVED, DirectionStatus.TRAPPED)
@@ -472,23 +491,3 @@ def _moving(verdicts: list[Verdict]) -> bool:
 def _end(verdicts: list[Verdict], to: Point) -> Point:
     last = verdicts[-1] if verdicts else None
     return last.to if last is not None and last.kind == "to" and last.to is not None else to
-
-
-def _rearmost(follow: Sequence[str], units: Mapping[str, UnitRecord]) -> UnitRecord | None:
-    """The follower furthest from its goal, of those live and with a goal: the one the lead must not lose."""
-    live = [r for f in follow if (r := units.get(f)) is not None and r.position is not None and not r.stale]
-    if not live:
-        return None
-    return max(live, key=lambda r: (r.goal is not None, r.last_distance or 0.0))
-
-
-def _route(main: UnitRecord) -> list[Point]:
-    """The main element's route from where it is: its committed route ahead, if any, then straight to its goal."""
-    assert main.position is not None
-    route = [main.position]
-    if main.stepper is not None:
-        ahead = main.stepper.route_ahead(main.position[0], main.position[1], _ROUTE_STEPS)
-        route += ahead or []
-    if main.goal is not None:
-        route.append(main.goal.position)
-    return route

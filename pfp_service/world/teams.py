@@ -12,7 +12,7 @@ they say.  A verdict is never an exception: a step too short to judge goes.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -20,6 +20,7 @@ import numpy as np
 
 from pfp_service.core import polyline_kernels as kernels
 from pfp_service.world import corridor
+from pfp_service.world.polyline import Polyline, length, point_at, project
 
 __all__ = [
     "GO",
@@ -30,6 +31,7 @@ __all__ = [
     "Verdict",
     "control",
     "follow",
+    "in_link",
     "lead",
     "leads",
     "length",
@@ -83,107 +85,18 @@ def _dist(a: Point, b: Point) -> float:
     return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
-def _squares(seg: np.ndarray) -> np.ndarray:
-    """Each segment's squared length, 1 where it is 0 (a segment under 1e-154 m squares to 0): a divisor."""
-    sq = seg * seg
-    return np.where(sq > 0.0, sq, 1.0)
-
-
-class Polyline:
-    """A polyline as arrays, its segments' lengths and cumulated length: made once, walked many times."""
-
-    __slots__ = ("ab", "cum", "pts", "seg", "sq")
-
-    def __init__(self, line: Sequence[Point]) -> None:
-        self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
-        self.ab = np.diff(self.pts, axis=0)  # each segment, start to end: made once for every walk
-        self.seg = np.hypot(self.ab[:, 0], self.ab[:, 1]) if len(self.pts) > 1 else np.zeros(0)
-        self.sq = _squares(self.seg)
-        self.cum = np.concatenate([[0.0], np.cumsum(self.seg)])
-
-    def __len__(self) -> int:
-        return len(self.pts)
-
-    def extended(self, more: Sequence[Point]) -> Polyline:
-        """This line with ``more`` points after its last: the very numbers a line of them all has,
-        at the cost of the new points (a lead's track grows by a point at a time)."""
-        if not more:
-            return self
-        if len(self.pts) == 0:
-            return Polyline(more)
-        out = Polyline.__new__(Polyline)
-        add = np.asarray(more, dtype=float).reshape(-1, 2)
-        out.pts = np.concatenate([self.pts, add])
-        ab = np.diff(out.pts[len(self.pts) - 1 :], axis=0)
-        seg = np.hypot(ab[:, 0], ab[:, 1])
-        out.ab = np.concatenate([self.ab, ab])
-        out.seg = np.concatenate([self.seg, seg])
-        out.sq = np.concatenate([self.sq, _squares(seg)])
-        # cumulated from the last total on, one addition at a time: as the whole line's cumsum adds
-        out.cum = np.concatenate([self.cum, np.cumsum(np.concatenate([self.cum[-1:], seg]))[1:]])
-        return out
-
-    @property
-    def length(self) -> float:
-        return float(self.cum[-1])
-
-    def shared(self, at: Point, to: Point, half: float) -> bool:
-        """Whether ``at`` and ``to`` both lie within ``half`` of one segment (of the one point, for a line of one)."""
-        pts = self.pts
-        if len(pts) == 1:
-            c = (float(pts[0, 0]), float(pts[0, 1]))
-            return _dist(at, c) <= half and _dist(to, c) <= half
-        return bool(kernels.shared(pts, self.ab, self.sq, at[0], at[1], to[0], to[1], half))
-
-    def project(self, at: Point) -> tuple[float, float]:
-        pts = self.pts
-        if len(pts) == 0:
-            return 0.0, math.inf
-        if len(pts) == 1:
-            return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
-        s, off = kernels.project(pts, self.ab, self.sq, self.seg, self.cum, at[0], at[1])
-        return float(s), float(off)
-
-    def point_at(self, s: float) -> Point:
-        pts, cum = self.pts, self.cum
-        if len(pts) == 0:
-            raise ValueError("point_at: an empty line")
-        if s <= 0.0 or len(pts) == 1:
-            return float(pts[0, 0]), float(pts[0, 1])
-        if s >= cum[-1]:
-            return float(pts[-1, 0]), float(pts[-1, 1])
-        i = int(np.searchsorted(cum, s, side="right")) - 1  # the segment s ends on: cum[i] <= s < cum[i + 1]
-        f = (s - cum[i]) / (cum[i + 1] - cum[i])
-        return float(pts[i, 0] + (pts[i + 1, 0] - pts[i, 0]) * f), float(
-            pts[i, 1] + (pts[i + 1, 1] - pts[i, 1]) * f
-        )
-
-
-def project(at: Point, line: Sequence[Point]) -> tuple[float, float]:
-    """``(s, d)``: how far along ``line`` (a polyline, metres from its start) ``at``'s nearest point lies, and how far off it is.
-
-    One point is a line of no length; no point puts ``at`` infinitely far off.
-    """
-    return Polyline(line).project(at)
-
-
-def point_at(line: Sequence[Point], s: float) -> Point:
-    """The point ``s`` metres along ``line`` from its start (its ends beyond them)."""
-    return Polyline(line).point_at(s)
-
-
-def length(line: Sequence[Point]) -> float:
-    """The length of a polyline, metres."""
-    return Polyline(line).length
-
-
-def _kept(at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float) -> float:
-    """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``."""
+def _kept(
+    at: Point, to: Point, ok: Callable[[Point], bool], spacing_m: float, run_m: float | None = None
+) -> float:
+    """How much (0 to 1) of the step from ``at`` to ``to`` keeps ``ok`` from its start, judged every ``spacing_m``
+    and where the unit stands at its next report (``run_m`` along it), wherever the samples fall."""
     far = _dist(at, to)
     n = min(_SAMPLES_MAX, max(1, math.ceil(far / spacing_m))) if spacing_m > 0.0 else 1
+    fs = [k / n for k in range(1, n + 1)]
+    if run_m is not None and 0.0 < run_m < far:
+        fs = sorted({*fs, run_m / far})
     good = 0.0
-    for k in range(1, n + 1):
-        f = k / n
+    for f in fs:
         if not ok((at[0] + (to[0] - at[0]) * f, at[1] + (to[1] - at[1]) * f)):
             return good
         good = f
@@ -361,6 +274,13 @@ def _nearest_goal(
     return _hold(f"at the cleared ground nearest its goal: {why}")
 
 
+def in_link(
+    a: Point, b: Point, radio_range_m: float, sight: Sight | None = None, clearance_m: float = 0.0
+) -> bool:
+    """Whether units at ``a`` and ``b`` are linked: within ``radio_range_m``, and in sight where there is terrain."""
+    return _dist(a, b) <= radio_range_m and (sight is None or sight(a, b, clearance_m))
+
+
 def link(
     at: Point,
     to: Point,
@@ -369,6 +289,9 @@ def link(
     controller: str,
     lost: str,
     sight: Sight | None = None,
+    controller_next: Point | None = None,
+    back: Sequence[Point] = (),
+    run_m: float | None = None,
 ) -> Verdict:
     """A robot's step: within ``radio_range_m`` of its controller, and in its sight where there is terrain.
 
@@ -380,17 +303,26 @@ def link(
         controller: the controller's id, for the reasons.
         lost: why the controller cannot be kept to (lost, stopped), or ``""``.
         sight: whether two points see each other over the ground; ``None`` without terrain.
+        controller_next: where the controller's own direction takes it by the next report, if known:
+            both move at once, so a step is judged against it too, when holding keeps the link to it
+            (when it does not, the controller's step is its own to judge: ``control``).
+        back: the breadcrumbs, the robot's own track back to where its link last held (that point
+            first): a robot out of link retraces it, newest first, rather than cut across unknown
+            ground straight at its controller.
+        run_m: how far along its step the robot will be at its next report, if known: that point is
+            judged too (the samples along a long step are half a cell apart).
 
     Returns:
         hold when the controller is lost or stopped, or the step would break the link at once; the step
-        cut short where it would; ``to`` the controller (turning back) when the link is already broken.
+        cut short where it would; when the link is already broken, ``to`` the newest breadcrumb (back
+        along its track), or to the controller (turning back) when it has none.
     """
     if lost or controller_at is None:
         return _hold(f"lost link: controller {controller} {lost or 'has no position'}")
     c = controller_at
 
     def linked(p: Point, clearance_m: float = 0.0) -> bool:
-        return _dist(p, c) <= radio_range_m and (sight is None or sight(c, p, clearance_m))
+        return in_link(c, p, radio_range_m, sight, clearance_m)
 
     if not linked(at):
         far = _dist(at, c)
@@ -399,7 +331,21 @@ def link(
             if far > radio_range_m
             else f"out of {controller}'s line of sight"
         )
+        crumb = next((p for p in reversed(back) if _dist(at, p) >= _CLOSE_M), None)
+        if crumb is not None:
+            return Verdict("to", crumb, f"lost link ({why}): back along its track to where the link held")
         return Verdict("to", c, f"lost link ({why}): turning back")
+    n = controller_next
+    if n is not None and (
+        _dist(n, c) < _CLOSE_M or not in_link(n, at, radio_range_m, sight, SIGHT_CLEARANCE_M)
+    ):
+        n = None  # not moving, or out of its sight however the robot holds: judged where it is
+
+    def kept_by_both(p: Point) -> bool:
+        return linked(p, SIGHT_CLEARANCE_M) and (
+            n is None or in_link(n, p, radio_range_m, sight, SIGHT_CLEARANCE_M)
+        )
+
     # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
     # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
     spacing = (
@@ -407,12 +353,14 @@ def link(
         if sight is None
         else max(_dist(at, to) / _SAMPLES_MAX, getattr(sight, "resolution_m", 0.0) / 2.0)
     )
-    kept = _kept(at, to, lambda p: linked(p, SIGHT_CLEARANCE_M), spacing)
+    kept = _kept(at, to, kept_by_both, spacing, run_m)
     beyond = (
         f"{_dist(to, c):,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
         if _dist(to, c) > radio_range_m
         else f"out of {controller}'s line of sight"
     )
+    if n is not None and linked(to, SIGHT_CLEARANCE_M):
+        beyond = f"out of link with where {controller}'s own step takes it"
     return _shortened(at, to, kept, f"the step would break the link to {controller} ({beyond})")
 
 
@@ -422,6 +370,8 @@ def control(
     robots: Sequence[tuple[str, Point]],
     radio_range_m: float,
     sight: Sight | None = None,
+    next_of: Mapping[str, Point] | None = None,
+    run_m: float | None = None,
 ) -> tuple[Verdict, str]:
     """A controller's step: it keeps each of its robots it is linked to in range and, over terrain, in sight.
 
@@ -434,6 +384,9 @@ def control(
         robots: ``(id, where)`` of each robot it keeps a link to (those it has lost turn back on their own).
         radio_range_m: its radio's reach.
         sight: whether two points see each other over the ground; ``None`` without terrain.
+        next_of: where a robot's own direction takes it by the next report, if known: both move at once,
+            so the step keeps that point linked too, when holding does.
+        run_m: how far along its step the controller will be at its next report, if known: judged too.
 
     Returns:
         ``(verdict, robot)``: go; the step cut short where it would break a robot's link (``robot`` that
@@ -441,9 +394,15 @@ def control(
     """
 
     def linked(p: Point, r: Point) -> bool:
-        return _dist(p, r) <= radio_range_m and (sight is None or sight(p, r))
+        return in_link(p, r, radio_range_m, sight)
 
     kept = [(rid, r) for rid, r in robots if linked(at, r)]
+    ahead = next_of or {}
+    kept += [
+        (rid, n)
+        for rid, r in kept
+        if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, n)
+    ]
     if not kept:
         return GO, ""
     spacing = (
@@ -460,7 +419,7 @@ def control(
                 return False
         return True
 
-    got = _kept(at, to, ok, spacing)
+    got = _kept(at, to, ok, spacing, run_m)
     if got >= 1.0:
         return GO, ""
     return _shortened(at, to, got, f"the step would break {broken[0]}'s link"), broken[0]

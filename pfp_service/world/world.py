@@ -10,14 +10,13 @@ status transitions, expiry, limits, who answers a preview.
 ``World`` decides; its parts keep the books, each plain data in and out with
 its own tests: the records and the threats' field (``world_records``), the
 timer heap (``timers``), staleness, forgetting and push re-sends
-(``liveness``), cluster ownership (``ownership``), the limits on rejections
-and fault lines (``limits``), a unit's mission (``missions``), the reactive
-step, its look-ahead and dispersion (``steering``, ``lookahead``, ``dispersion``), the snapshot's
-pages (``snapshot.page``).  Unbounded work (look-ahead, escape searches) is
-deliberation: a ``Job`` whose result is adopted only for the goal and world
-still in force.  Bulkheads: ``apply`` is total; a failure belongs to the
-input, timer or unit that caused it (rejected on its key, its goal dropped,
-a ``Fault`` logged at most once a minute per key); the rest goes out.
+(``liveness``), cluster ownership (``ownership``), the limits on rejections and fault lines
+(``limits``), a unit's mission (``missions``), the reactive step, its look-ahead and dispersion
+(``steering``, ``lookahead``, ``dispersion``), the snapshot's pages (``snapshot.page``).  Unbounded
+work (look-ahead, escape searches) is deliberation: a ``Job`` whose result is adopted only for the
+goal and world still in force.  Bulkheads: ``apply`` is total; a failure belongs to the input, timer
+or unit that caused it (rejected on its key, its goal dropped, a ``Fault`` logged at most once a
+minute per key); the rest goes out.
 """
 
 from __future__ import annotations
@@ -480,8 +479,8 @@ class World:
                 events.append(event)
             directions.append(d)
             sent.append(rec.position)
-        zones_of = self._rec.step_zones(self._route)  # a role's step is kept clear of them
-        out.directions[first:] = self.teams.judge(out.directions[first:], self._units, zones_of=zones_of)
+        told, kept_clear = out.directions[first:], self._rec.step_zones(self._route)  # roles keep clear
+        out.directions[first:] = self.teams.judge(told, self._units, zones_of=kept_clear, now=b.now)
         if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
             out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
         out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
