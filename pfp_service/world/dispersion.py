@@ -28,8 +28,7 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    one, ``_short`` still keeps it apart), so no unit yields for longer than
    ``deadlock_s`` plus its resolution with a deadlock in it.
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
-   separations of another; its reach is cut at that disc's edge, or, on
-   the edge and leaning into it, it slides along it (``keep_apart``).
+   separations of another; its reach is cut at that disc's edge.
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -236,7 +235,7 @@ class Dispersion:
         return events
 
     def _short(self, directions: list[Direction], moving: list[int]) -> None:
-        """Cut (or slide) each moving direction where it would enter a neighbour's ``KEEP`` separations (``keep_apart``)."""
+        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations (``keep_apart``)."""
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]

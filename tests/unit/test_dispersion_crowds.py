@@ -1,9 +1,9 @@
 """Dispersion in crowds (issue 33): what the full ``pfp bench dispersion`` rows found, each in a small case.
 
-A unit on a neighbour's disc of ``KEEP`` separations whose way leans into it slides along it (a
-jam of units abreast at that distance held still for 80 s in the 200-unit gaps crowd, seed 4);
-two units head on, on one line, are a deadlock (the manned one pushed the other back before it
-for its whole route); and one deadlock found from both its units in one tick is resolved once.
+Two units head on, on one line, are a deadlock (the manned one pushed the other back before it
+for its whole route, and it never arrived); one deadlock found from both its units in one tick is
+resolved once (both backed off, the second as escalation's, met again and locked again); and the
+cut, now in its own module, stops a unit at a neighbour's disc as before.
 The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
 and measured on the tracks.
 """
@@ -39,29 +39,7 @@ def _cut(points: list[tuple[float, float]], way: tuple[float, float], reach_m: f
     return dirs[0]
 
 
-@pytest.mark.parametrize("lean_deg", [2.0, 20.0, 55.0])
-def test_a_unit_on_a_neighbours_disc_leaning_into_it_slides_along_it(lean_deg):
-    lean = math.radians(lean_deg)
-    d = _cut(
-        [(0.0, 0.0), (-DISC, 0.0)], (-math.sin(lean), math.cos(lean))
-    )  # north, leaning towards it (west)
-    assert d.reach_m is not None and d.reach_m > 0.0, "held still on the disc's edge"
-    assert d.vector == pytest.approx((0.0, 1.0), abs=1e-9)  # along the disc, on its way's side
-    assert d.heading_deg == pytest.approx(0.0, abs=1e-6) or d.heading_deg == pytest.approx(360.0)
-    for step in np.linspace(0.0, min(d.reach_m, 5.0), 11):  # driven along it, never nearer the other
-        assert math.hypot(d.vector[0] * step + DISC, d.vector[1] * step) >= DISC - 1e-9
-
-
-def test_a_unit_heading_nearly_straight_at_its_neighbour_or_boxed_in_holds():
-    steep = math.radians(75.0)  # the slide would keep less than half its way: a queue, not a slide
-    d = _cut([(0.0, 0.0), (-DISC, 0.0)], (-math.sin(steep), math.cos(steep)))
-    assert d.reach_m == 0.0 and d.vector == pytest.approx((-math.sin(steep), math.cos(steep)))
-    boxed = (DISC / math.sqrt(2.0), DISC / math.sqrt(2.0))  # a third on the disc where the slide would go
-    d = _cut([(0.0, 0.0), (-DISC, 0.0), boxed], (-math.sin(0.3), math.cos(0.3)))
-    assert d.reach_m == 0.0
-
-
-def test_a_unit_clear_of_every_disc_is_cut_as_before():
+def test_the_cut_stops_a_unit_at_its_neighbours_disc_and_only_there():
     d = _cut(
         [(0.0, 0.0), (0.0, 90.0)], (0.0, 1.0), reach_m=80.0
     )  # straight at a unit ahead: stops at its disc
