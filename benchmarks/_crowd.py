@@ -43,6 +43,7 @@ __all__ = [
     "crowded_goal",
     "gaps",
     "head_on",
+    "near_its_goal",
     "one_gap",
     "pinned",
     "simulate",
@@ -340,15 +341,31 @@ def one_gap() -> Crowd:
     )
 
 
-def head_on() -> Crowd:
-    """Two vehicles on one line, head on, 70 m apart: manned ``u0000`` north-bound, unmanned ``u0001`` south-bound."""
+def head_on(gap_m: float = 70.0) -> Crowd:
+    """Two vehicles on one line, head on, ``gap_m`` apart: manned ``u0000`` north-bound, unmanned ``u0001`` south-bound."""
     return Crowd(
         "two units, head on",
-        starts=[(0.0, 0.0), (0.0, 70.0)],
-        goals=[(0.0, 600.0), (0.0, -530.0)],
+        starts=[(0.0, 0.0), (0.0, gap_m)],
+        goals=[(0.0, 600.0), (0.0, gap_m - 600.0)],
         kinds=["manned", "unmanned"],
         threats={},
         limit_s=600.0,
+    )
+
+
+def near_its_goal() -> Crowd:
+    """Manned ``u0001`` 46 m short of its goal, unmanned ``u0000`` 57 m behind it, whose way north is through it.
+
+    Each is stopped by the other: ``u0000`` yields to ``u0001``, which cannot
+    come nearer its goal past ``u0000``'s disc, and both find it in one tick.
+    """
+    return Crowd(
+        "one unit near its goal, another behind it",
+        starts=[(0.0, 0.0), (10.0, 56.0)],
+        goals=[(0.0, 600.0), (5.0, 10.0)],
+        kinds=["unmanned", "manned"],
+        threats={},
+        limit_s=300.0,
     )
 
 

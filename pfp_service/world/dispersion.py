@@ -27,8 +27,8 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    ends goes under its own right of way for ``deadlock_s`` (it yields to no
    one, ``_short`` still keeps it apart), so no unit yields for longer than
    ``deadlock_s`` plus its resolution with a deadlock in it.
-4. ``_short``: no direction takes a unit within ``KEEP`` separations of
-   another; its reach is cut at that disc's edge.
+4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
+   separations of another; its reach is cut at that disc's edge.
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -47,22 +47,25 @@ import numpy as np
 
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
 from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus, Event
-from pfp_service.world import deadlocks
+from pfp_service.world import deadlocks, keep_apart
 from pfp_service.world.deadlocks import Hold
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord, Verdict
 
-__all__ = ["YIELD_AT", "Dispersion", "TeamOf", "priority"]
+__all__ = ["STRAIGHT_AT", "YIELD_AT", "Dispersion", "TeamOf", "priority"]
 
 YIELD_AT = 1.5  # a lower-priority unit closing on a higher one within this many separations holds
 # a yielding unit pushed this hard (a neighbour within about its separation: PUSH (1 - 1 / REACH) is
 # one at exactly the separation) moves away along its push instead of holding still
 CROWDED = PUSH * (1.0 - 1.0 / REACH)
-KEEP = 1.1  # no direction drives a unit within this many separations of another (``_short``)
 # a unit with another straight ahead (within 45 degrees) going its way (within 60) follows it, kept back
 # by ``_short``, rather than yielding: right of way is for paths that meet, and a queue that holds still
 # at every gap never flows
 AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
+# a unit whose way to its goal points this straight at another (within a degree) comes at it head on: its
+# push on the other is along their line, with nothing to turn either aside (off the line by half a metre
+# in 60 m, the push turns them, and they pass)
+STRAIGHT_AT = math.cos(math.radians(1.0))
 # a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
 # reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
 TEAM_WIDEST = 4.0
@@ -218,51 +221,27 @@ class Dispersion:
             elif (
                 now - hold.since >= s.deadlock_s
                 and gap <= hold.gap + _DRAWN_AWAY * pair
-                and not locks.progressing(other, now)
-            ):  # held for a unit neither passing nor coming nearer its goal
-                events.append(self._lock(i, j, now - hold.since, now))
+                and not self._queue(i, j, now)
+            ):  # held for a unit neither passing nor coming nearer its goal (past this one)
+                if (lock := self._lock(i, j, now - hold.since, now)) is not None:
+                    events.append(lock)
                 if (mine := self._held.get(d.unit)) is not None and mine.until > now:
                     directions[k] = self._resolve(d, i, j, mine)
                     continue
-            elif gap > hold.gap + _DRAWN_AWAY * pair or locks.progressing(other, now):
+            elif gap > hold.gap + _DRAWN_AWAY * pair or self._queue(i, j, now):
                 hold.since, hold.gap = now, gap  # it is passing, or a queue that moves: no deadlock yet
             directions[k] = self._yield(d, i, j, gap, pair)
         self._short(directions, moving)
         return events
 
     def _short(self, directions: list[Direction], moving: list[int]) -> None:
-        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations, in place.
-
-        A direction's ray against every neighbour's disc of ``KEEP`` times the
-        pair's separation, in one vectorised pass: the unit goes no further
-        than the disc's edge (0, holding, when it is inside one and closing),
-        so no direction ever drives a unit into another's separation, whatever
-        pushes it.  The margin is for the other unit, which moves meanwhile.
-        """
+        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations (``keep_apart``)."""
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
-        if not go:
-            return
-        rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
-        at = np.full(len(self._recs), -1, dtype=np.intp)
-        at[rows] = np.arange(len(rows))
-        vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
-        i, j, pair_s = index.near_seps(rows)
-        n = at[i]
-        rel = index.points[j] - index.points[i]
-        along = (rel * vec[n]).sum(axis=1)
-        keep_m = KEEP * pair_s
-        across2 = (rel * rel).sum(axis=1) - along * along
-        hit = (along > 0.0) & (across2 < keep_m * keep_m)
-        enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
-        safe = np.full(len(go), np.inf)
-        np.minimum.at(safe, n[hit], enter)
-        for m in np.flatnonzero(np.isfinite(safe)).tolist():
-            k, cut = go[m], float(safe[m])
-            d = directions[k]
-            if d.reach_m is None or cut < d.reach_m:
-                directions[k] = msgspec.structs.replace(d, reach_m=cut)
+        if go:
+            rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
+            keep_apart.cut(index, rows, directions, go)
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
@@ -287,17 +266,43 @@ class Dispersion:
         ahead = (rel @ np.array(self._towards(i, d.vector))) > 0.0
         j = int(jj[int(np.where(ahead, gaps, gaps + 1e9).argmin())])
         self._locks.forget(d.unit)
-        if self._locks.progressing(
-            self._recs[j].id, now
-        ):  # behind a unit that comes nearer its goal: a queue
+        if self._queue(i, j, now):  # behind a unit that comes nearer its goal: a queue
             return None
         return self._lock(i, j, stuck, now)
 
-    def _lock(self, i: int, j: int, held_s: float, now: float) -> DeadlockEvent:
-        """A deadlock between the units at rows ``i`` (found blocked) and ``j``: who resolves it, how, and its event."""
+    def _queue(self, i: int, j: int, now: float) -> bool:
+        """Whether the unit at row ``i``, held or stopped by the one at ``j``, is in a queue that moves.
+
+        It is when ``j`` comes nearer its goal, unless that goal lies straight
+        through ``i`` (``STRAIGHT_AT``): head on, on one line, the push has no
+        side to it, and ``j``'s progress is ``i`` pushed back before it for
+        as long as ``j`` goes.
+        """
+        if not self._locks.progressing(self._recs[j].id, now):
+            return False
+        index = self._index
+        assert index is not None
+        rx, ry = (index.points[i] - index.points[j]).tolist()
+        r = math.hypot(rx, ry)
+        tx, ty = self._towards(j, (0.0, 0.0))
+        return r == 0.0 or (rx * tx + ry * ty) <= STRAIGHT_AT * r
+
+    def _lock(self, i: int, j: int, held_s: float, now: float) -> DeadlockEvent | None:
+        """A deadlock between the units at rows ``i`` (found blocked) and ``j``: who resolves it, how, and its event.
+
+        ``None`` when ``j`` already resolves a deadlock with ``i``: the same
+        one, found from its other side (two units head on are each blocked by
+        the other in one tick). A second resolution would be escalation's,
+        and both would back off, meet again and lock again.
+        """
         index, s = self._index, self.settings
         assert index is not None
         me, other = self._recs[i], self._recs[j]
+        theirs = self._held.get(other.id)
+        if theirs is not None and theirs.until > now and theirs.other == me.id:
+            if (mine := self._held.get(me.id)) is not None:
+                mine.since = mine.began = now  # the other makes way: this one holds on, its clocks from now
+            return None
         at_rest = not (other.last_status in _MOVING or other.last_status is DirectionStatus.YIELDING)
         if at_rest:  # it will not move: go round it
             mover, blocker, round_ = me, other, True

@@ -1,0 +1,52 @@
+"""Dispersion's last word on a moving direction: it never takes a unit within ``KEEP`` separations of another.
+
+Apart from ``dispersion`` (the right of way and deadlocks), which calls it
+last in each ``apply``.
+"""
+
+from __future__ import annotations
+
+import msgspec
+import numpy as np
+
+from pfp_service.core.dispersion import NeighbourIndex
+from pfp_service.wire import Direction
+
+__all__ = ["KEEP", "cut"]
+
+KEEP = 1.1  # no direction drives a unit within this many separations of another
+
+
+def cut(index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go: list[int]) -> None:
+    """Cut each of ``directions[go]`` (the units at ``index`` rows ``rows``) where it would enter a neighbour's disc.
+
+    A direction's ray against every neighbour's disc of ``KEEP`` times the
+    pair's separation, in one vectorised pass: the unit goes no further
+    than the disc's edge (0, holding, when it is inside one and closing),
+    so no direction ever drives a unit into another's separation, whatever
+    pushes it.  The margin is for the other unit, which moves meanwhile.
+
+    Args:
+        index: this tick's neighbour index.
+        rows: each moving direction's row in ``index``.
+        directions: the tick's directions, cut in place; those at ``go`` have a non-zero vector.
+        go: the positions in ``directions`` of the moving ones, in the order of ``rows``.
+    """
+    at = np.full(len(index.points), -1, dtype=np.intp)
+    at[rows] = np.arange(len(rows))
+    vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
+    i, j, pair_s = index.near_seps(rows)
+    n = at[i]
+    rel = index.points[j] - index.points[i]
+    along = (rel * vec[n]).sum(axis=1)
+    keep_m = KEEP * pair_s
+    across2 = (rel * rel).sum(axis=1) - along * along
+    hit = (along > 0.0) & (across2 < keep_m * keep_m)
+    enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+    safe = np.full(len(go), np.inf)
+    np.minimum.at(safe, n[hit], enter)
+    for m in np.flatnonzero(np.isfinite(safe)).tolist():
+        k, reach = go[m], float(safe[m])
+        d = directions[k]
+        if d.reach_m is None or reach < d.reach_m:
+            directions[k] = msgspec.structs.replace(d, reach_m=reach)

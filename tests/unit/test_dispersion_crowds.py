@@ -1,0 +1,71 @@
+"""Dispersion in crowds (issue 33): what the full ``pfp bench dispersion`` rows found, each in a small case.
+
+Two units head on, on one line, are a deadlock (the manned one pushed the other back before it
+for its whole route, and it never arrived); one deadlock found from both its units in one tick is
+resolved once (both backed off, the second as escalation's, met again and locked again); and the
+cut, now in its own module, stops a unit at a neighbour's disc as before.
+The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
+and measured on the tracks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import _crowd
+from pfp_service.core.dispersion import NeighbourIndex
+from pfp_service.wire import Direction, DirectionStatus
+from pfp_service.world import keep_apart
+from pfp_service.world.separations import DispersionSettings
+
+pytestmark = pytest.mark.unit
+
+ON = DispersionSettings(enabled=True)
+SEP = 50.0  # the wheeled class's separation, every unit here
+DISC = 1.1 * SEP  # the documented cut: no direction takes a unit within 1.1 separations of another
+
+
+def _cut(points: list[tuple[float, float]], way: tuple[float, float], reach_m: float = 40.0) -> Direction:
+    """The first unit's direction along ``way`` after the cut, the others standing at ``points[1:]``."""
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    heading = math.degrees(math.atan2(way[0], way[1])) % 360.0
+    dirs = [
+        Direction(unit="a", status=DirectionStatus.EN_ROUTE, vector=way, heading_deg=heading, reach_m=reach_m)
+    ]
+    keep_apart.cut(index, np.array([0]), dirs, [0])
+    return dirs[0]
+
+
+def test_the_cut_stops_a_unit_at_its_neighbours_disc_and_only_there():
+    d = _cut(
+        [(0.0, 0.0), (0.0, 90.0)], (0.0, 1.0), reach_m=80.0
+    )  # straight at a unit ahead: stops at its disc
+    assert d.vector == (0.0, 1.0) and d.reach_m == pytest.approx(90.0 - DISC)
+    d = _cut([(0.0, 0.0), (90.0, 0.0)], (0.0, 1.0))  # beside it, going past: untouched
+    assert d.vector == (0.0, 1.0) and d.reach_m == 40.0
+
+
+@pytest.mark.parametrize("gap_m", [60.0, 68.0])
+def test_two_units_head_on_on_one_line_both_arrive_and_the_deadlock_clears_within_30_s(gap_m):
+    crowd = _crowd.head_on(gap_m)
+    locks: list = []
+    tracks: list = []
+    out = _crowd.simulate(crowd, ON, locks=locks, tracks=tracks)
+    assert set(out.arrived_s) == set(crowd.ids()), f"arrived: {out.arrived_s}"
+    assert locks and locks[0][1].unit == "u0001"  # the unmanned one gives way
+    assert out.not_cleared == 0 and out.longest_clearing_s <= 30.0
+    assert min(float(np.hypot(*(p[0] - p[1]))) for p in tracks) >= 0.9 * SEP
+
+
+def test_a_deadlock_found_from_both_its_units_in_one_tick_is_resolved_once():
+    """Each resolving it, both backed off (the second as escalation's): they met again, and locked again."""
+    crowd = _crowd.near_its_goal()
+    locks: list = []
+    out = _crowd.simulate(crowd, ON, locks=locks)
+    assert locks and all(t == locks[0][0] for t, _ in locks[:1]), "the case is a real one: a deadlock arises"
+    first = [(e.unit, e.other) for t, e in locks if t == locks[0][0]]
+    assert first == [("u0000", "u0001")], f"one resolution, the unmanned one's: {first}"
+    assert set(out.arrived_s) == set(crowd.ids()) and out.not_cleared == 0 and out.longest_clearing_s <= 30.0
