@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.multi.test_docs import (
+from tests.doc_blocks import (
     DOCS,
     PYTHON,
     README,
