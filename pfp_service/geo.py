@@ -316,5 +316,33 @@ def lookahead_geodetic(origin: Origin, points: Iterable[tuple[float, float]]) ->
     pts = np.array(list(points), dtype=float).reshape(-1, 2)
     if len(pts) == 0:
         return []
-    ll = origin.to_geodetic_many(pts)
-    return [LatLon(lat=round(float(a), 7), lon=round(float(b), 7)) for a, b in ll]
+    ll = round_many(origin.to_geodetic_many(pts), 7)
+    return [LatLon(lat=a, lon=b) for a, b in ll]
+
+
+# |x * 10**places - (k + 1/2)| below this: ``round`` itself decides (the product may be off by an ulp)
+_NEAR_HALF = 1e-4
+
+
+def round_many(values: np.ndarray, places: int) -> list[Any]:
+    """``round(v, places)`` for each of ``values`` (nested lists, as ``tolist``): the same floats, bit for bit.
+
+    ``round`` costs most of a look-ahead's lat/lon (a share of a wave is
+    hundreds of points).  ``rint(v * 10**places) / 10**places`` is the same
+    float whenever the product is not within an ulp of a half (the division
+    of two exact numbers is correctly rounded, as ``round``'s decimal is), so
+    only those near a half, too big or not finite go through ``round``.
+    """
+    import numpy as np
+
+    v = np.asarray(values, dtype=float)
+    scale = 10.0**places
+    scaled = v * scale
+    frac = scaled - np.floor(scaled)
+    safe = (np.abs(frac - 0.5) > _NEAR_HALF) & (np.abs(scaled) < 2.0**52)  # NaN and inf: not safe
+    out = np.rint(scaled) / scale
+    if not safe.all():
+        flat, bad = out.reshape(-1), np.flatnonzero(~safe.reshape(-1))
+        flat[bad] = [round(float(x), places) for x in v.reshape(-1)[bad]]
+    got: list[Any] = out.tolist()
+    return got

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import msgspec
 
-from pfp_service.geo import LatLon, Origin
+from pfp_service.geo import LatLon, Origin, round_many
 from pfp_service.wire.messages import Direction
 
 __all__ = ["with_geodetic", "with_geodetic_many"]
@@ -63,9 +63,12 @@ def with_geodetic_many(
         e, n, _up = pymap3d.uvw2enu(u, v, w, ll[at_rows, 0], ll[at_rows, 1])
         b = np.degrees(np.arctan2(e, n)) % 360.0
         bearing[ask] = np.where(b >= 360.0, 0.0, b)  # a tiny negative angle rounds to 360.0
-    flat = ll.tolist()
-    out = []
-    for d, (_h, first, count), br in zip(directions, spans, bearing.tolist()):
-        geo = [LatLon(lat=round(a, 7), lon=round(b, 7)) for a, b in flat[first : first + count]]
+    look = np.ones(len(ll), dtype=bool)
+    look[where[where >= 0]] = False  # the units' own positions: bearings only
+    # the look-ahead points, direction by direction
+    points = [LatLon(lat=a, lon=b) for a, b in round_many(ll[look], 7)]
+    out, taken = [], 0
+    for d, (_h, _first, count), br in zip(directions, spans, bearing.tolist()):
+        geo, taken = points[taken : taken + count], taken + count
         out.append(msgspec.structs.replace(d, true_bearing_deg=None if br != br else br, lookahead_geo=geo))
     return out
