@@ -7,7 +7,8 @@ between two reports, so each one's step is judged against where the other is and
 other's direction takes it by the next report (``Trails.ahead``): as far along it as the other went
 between its last reports that moved it, no further than the direction's reach.  Pure: positions in,
 points out; the team book (``team_book``) feeds it and hands what it says to ``teams.link`` and
-``teams.control``.
+``teams.control``.  A robot gone through its controller's shadow to close on it keeps on to it until
+linked (``Trails.crossing``): back along its track would lose it as long again.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ class Trails:
         self._was: dict[str, Point] = {}  # member -> where it was at the last judge
         self._runs: dict[str, deque[float]] = {}  # member -> its last runs between reports that moved it
         self._held_since: dict[str, float] = {}  # robot -> when its link began to hold it, while it does
+        self.crossing: set[str] = set()  # robots going through their controller's shadow to it, until linked
 
     def waiting(self, robot: str, now: float | None) -> float:
         """How long ``robot`` has been held for its link, its hold going on at ``now`` (``None``: no
@@ -99,6 +101,7 @@ class Trails:
     def forget(self, units: set[str]) -> None:
         """Drop what is kept of units no longer in a team."""
         for u in units:
+            self.crossing.discard(u)
             self.crumbs.pop(u, None)
             self._was.pop(u, None)
             self._runs.pop(u, None)
@@ -128,6 +131,11 @@ def robot_step(
     if c_at is None or lost:
         return roles.link(at, to, c_at, team.radio_range_m, ctl, lost, sight), False
     here = roles.in_link(c_at, at, team.radio_range_m, sight)
+    if robot in trails.crossing:
+        if not here:  # half way through the shadow: back along its track would lose it as long again
+            trails.went_on(robot, at)
+            return Verdict("to", c_at, f"closing on {ctl} through its shadow"), False
+        trails.crossing.discard(robot)
     back = trails.trail(robot, at, here)
     c_next, run = trails.ahead(ctl, c_at, c_dir), trails.run(robot)
     v = roles.link(at, to, c_at, team.radio_range_m, ctl, lost, sight, c_next, back, run)
@@ -166,6 +174,7 @@ def closing_on(
     if waited < LINK_WAIT_S:
         return Verdict("hold", None, f"{why}: its way leaves {ctl}'s sight, so {ctl} closes on it"), True
     trails.went_on(robot, at)
+    trails.crossing.add(robot)
     return Verdict("to", c, f"{why}; through {ctl}'s shadow{_after(waited)}"), True
 
 

@@ -225,3 +225,24 @@ def test_a_robot_reported_before_its_controller_is_judged_against_the_controller
     end = (60.0 + robot.reach_m, -10.0)
     assert _spur_sight((0.0, 20.0), end)  # still seen from where m1 will be
     assert not _spur_sight((0.0, 20.0), (100.0, -10.0))  # where its own step would have taken it
+
+
+def test_a_robot_going_through_its_controllers_shadow_keeps_on_to_it_until_linked_not_back_out() -> None:
+    """Seed 1's r2 (issue 33): half way through the shadow, back along its track would lose it as long again."""
+    team = TeamUpdate(controller="m1", robots=["r1"], radio_range_m=500.0)
+    t = Trails()
+
+    def pit_sight(a: Point, b: Point, clearance_m: float = 0.0) -> bool:
+        """A hollow 20 m round (50, -30) too deep to see out of, the ground round it level."""
+        return math.dist(a, (50.0, -30.0)) > 20.0 and math.dist(b, (50.0, -30.0)) > 20.0
+
+    at, c = (35.0, -15.0), (90.0, -70.0)
+    team_link.closing_on(t, "r1", at, c, team, pit_sight, 0.0)
+    v, _ = team_link.closing_on(t, "r1", at, c, team, pit_sight, LINK_WAIT_S)
+    assert v.kind == "to" and v.to == c  # through the shadow, its crumbs kept
+    inside, c2 = (50.0, -30.0), (95.0, -70.0)  # in the hollow; m1 no longer holds for it, and went on
+    v, pull = team_link.robot_step(t, "r1", inside, (60.0, -30.0), team, c2, "", pit_sight, None, 65.0)
+    assert v.kind == "to" and v.to == c2 and not pull, v  # on to m1, not back to (35, -15)
+    out_of_it = (70.0, -50.0)  # out of the hollow, linked: its own step is judged again
+    v, _ = team_link.robot_step(t, "r1", out_of_it, (80.0, -50.0), team, c2, "", pit_sight, None, 70.0)
+    assert v == roles.GO and "r1" not in t.crossing
