@@ -15,12 +15,13 @@ import numpy as np
 
 from pfp_service.core import polyline_kernels as kernels
 
-__all__ = ["Point", "Polyline", "length", "point_at", "project"]
+__all__ = ["Point", "Polyline", "dist", "length", "point_at", "project"]
 
 Point = tuple[float, float]
 
 
-def _dist(a: Point, b: Point) -> float:
+def dist(a: Point, b: Point) -> float:
+    """The distance between two points, metres."""
     return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
@@ -73,7 +74,7 @@ class Polyline:
         pts = self.pts
         if len(pts) == 1:
             c = (float(pts[0, 0]), float(pts[0, 1]))
-            return _dist(at, c) <= half and _dist(to, c) <= half
+            return dist(at, c) <= half and dist(to, c) <= half
         return bool(kernels.shared(pts, self.ab, self.sq, at[0], at[1], to[0], to[1], half))
 
     def project(self, at: Point) -> tuple[float, float]:
@@ -81,7 +82,7 @@ class Polyline:
         if len(pts) == 0:
             return 0.0, math.inf
         if len(pts) == 1:
-            return 0.0, _dist(at, (float(pts[0, 0]), float(pts[0, 1])))
+            return 0.0, dist(at, (float(pts[0, 0]), float(pts[0, 1])))
         s, off = kernels.project(pts, self.ab, self.sq, self.seg, self.cum, at[0], at[1])
         return float(s), float(off)
 

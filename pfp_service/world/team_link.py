@@ -37,9 +37,8 @@ class Trails:
     """Each robot's breadcrumbs back to where its link last held, and each member's run between reports."""
 
     def __init__(self) -> None:
-        self.crumbs: dict[
-            str, list[Point]
-        ] = {}  # robot -> its track since its link last held (that point first)
+        # robot -> its track since its link last held (that point first)
+        self.crumbs: dict[str, list[Point]] = {}
         self._was: dict[str, Point] = {}  # member -> where it was at the last judge
         self._runs: dict[str, deque[float]] = {}  # member -> its last runs between reports that moved it
         self._held_since: dict[str, float] = {}  # robot -> when its link began to hold it, while it does
@@ -73,10 +72,10 @@ class Trails:
         how far it goes between reports is not known yet."""
         if d is None or not d.reach_m or not (d.vector[0] or d.vector[1]):
             return at
-        runs = self._runs.get(unit)
-        if not runs:
+        run = self.run(unit)
+        if run is None:
             return None
-        run = min(max(runs), d.reach_m)
+        run = min(run, d.reach_m)
         return at[0] + d.vector[0] * run, at[1] + d.vector[1] * run
 
     def trail(self, robot: str, at: Point, linked: bool) -> list[Point]:

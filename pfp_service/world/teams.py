@@ -21,6 +21,7 @@ import numpy as np
 from pfp_service.core import polyline_kernels as kernels
 from pfp_service.world import corridor
 from pfp_service.world.polyline import Polyline, length, point_at, project
+from pfp_service.world.polyline import dist as _dist
 
 __all__ = [
     "GO",
@@ -79,10 +80,6 @@ GO = Verdict("go")
 
 def _hold(reason: str) -> Verdict:
     return Verdict("hold", None, reason)
-
-
-def _dist(a: Point, b: Point) -> float:
-    return math.hypot(b[0] - a[0], b[1] - a[1])
 
 
 def _kept(
