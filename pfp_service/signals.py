@@ -30,7 +30,7 @@ import sys
 import threading
 from collections.abc import Callable
 from types import FrameType, TracebackType
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 __all__ = ["EXIT_CODES", "SIGNALS", "SignalStop", "interruptible"]
 
@@ -96,6 +96,18 @@ class SignalStop:
         return EXIT_CODES.get(signal.Signals(self.signum), code)
 
 
+def leave_now(code: int) -> NoReturn:
+    """Flush the output and end the process with ``code``, without finalising the interpreter.
+
+    For a process with a thread that cannot be stopped (a compiled kernel, a
+    ``zenoh.open`` in progress): finalising under it is not safe.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # a closed pipe: nothing left to say
+            stream.flush()
+    os._exit(code)
+
+
 def interruptible(work: Callable[[], _T]) -> _T:
     """``work()``, on a worker thread while the main thread waits; Ctrl-C ends the process with 130 at once.
 
@@ -130,10 +142,7 @@ def interruptible(work: Callable[[], _T]) -> _T:
         while worker.is_alive():
             worker.join(WAIT_SLICE_S)
     except KeyboardInterrupt:
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(Exception):  # a closed pipe: nothing left to say
-                stream.flush()
-        os._exit(EXIT_CODES[signal.SIGINT])
+        leave_now(EXIT_CODES[signal.SIGINT])
     if "error" in box:
         raise box["error"]
     return box["value"]  # type: ignore[no-any-return]

@@ -1,8 +1,12 @@
 """A big tick after the warm-up, in a fresh interpreter: prints the numba kernels that gained a signature.
 
-Run by tests/proc/test_warmup.py as ``python tests/warm_big_tick.py [--no-wide]``;
+Run by tests/proc/test_warmup.py as ``python tests/warm_big_tick.py [--no-wide] [--units=N]``;
 ``--no-wide`` skips ``warmup.warm_wide``, to show that the tick does reach
-kernels only the wide warm-up loads (the test can fail).
+kernels only the wide warm-up loads (the test can fail).  ``--units`` (600 by
+default) sets the crowd: each size is a different random probe of the tick's
+paths (150 reaches the zoned step rule and the clearance kernel, which 600
+does not; 600 reaches the culled point level, which 150 does not), and its
+cost grows faster than the count.
 """
 
 from __future__ import annotations
@@ -54,7 +58,7 @@ def main() -> None:
     box = [(-60.0, 60.0), (60.0, 60.0), (60.0, -60.0), (-60.0, -60.0), (-60.0, -55.0)]
     box += [(55.0, -55.0), (55.0, 55.0), (-60.0, 55.0), (-60.0, 60.0)]
     inputs.append(ZonePut("box", ZoneUpdate(polygon=[box])))
-    n = 600
+    n = int(next((a.split("=", 1)[1] for a in sys.argv if a.startswith("--units=")), "600"))
 
     def far() -> tuple[float, float]:
         return float(rng.uniform(-1100, -700)), float(rng.uniform(-1100, -700))

@@ -376,12 +376,20 @@ class RetryingLink:
         if self._link is not None:
             self._link.put_goal(goal)
 
-    def close(self) -> None:
-        """Stop trying (and checking); close the link if it is up."""
+    def close(self, wait_s: float = 5.0) -> bool:
+        """Stop trying (and checking); close the link if it is up.
+
+        The link closes first, so that a planner query in flight on the
+        connecting thread ends with it.  Returns whether that thread ended: a
+        thread still inside ``zenoh.open`` (a loaded machine, a slow router)
+        must not outlive the interpreter's finalisation, which aborts the
+        process ("FATAL: exception not rethrown") when the thread comes back.
+        """
         self._stop.set()
         self._recheck.set()
-        self._thread.join(timeout=5.0)
         with self._lock:
             if self._link is not None:
                 self._link.close()
                 self._link = None
+        self._thread.join(timeout=wait_s)
+        return not self._thread.is_alive()

@@ -2,8 +2,9 @@
 
 Each case runs ``tests/warm_big_tick.py`` in a fresh interpreter (kernels
 another test loaded would hide a gap): the warm-up, then a tick of 48
-threats masked over a ridge, 600 units, and three units trapped in a box of
-keep-out zone with one goal.  No numba dispatcher of pfp_service may gain a
+threats masked over a ridge, 150 units (``UNITS``: the script's 600 cost
+90 s a run on a loaded 2-core machine and probe no more kernels, only
+others), and three units trapped in a box of keep-out zone with one goal.  No numba dispatcher of pfp_service may gain a
 signature in that tick; without the wide warm-up several do.
 """
 
@@ -20,11 +21,16 @@ pytestmark = pytest.mark.proc
 
 SCRIPT = Path(__file__).resolve().parents[1] / "warm_big_tick.py"
 ROOT = SCRIPT.parent.parent
+UNITS = 150
 
 
 def _tick(*flags: str) -> dict[str, object]:
     r = subprocess.run(
-        [sys.executable, str(SCRIPT), *flags], capture_output=True, text=True, timeout=900, cwd=ROOT
+        [sys.executable, str(SCRIPT), f"--units={UNITS}", *flags],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        cwd=ROOT,
     )
     assert r.returncode == 0, r.stderr[-2000:]
     return json.loads(r.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]

@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
     from pfp_clients.nmea import LocalFrame
     from pfp_clients.nmea_feed import NmeaReader, open_nmea
     from pfp_service.node.config import DEFAULT_CONNECT
-    from pfp_service.signals import SignalStop
+    from pfp_service.signals import SignalStop, leave_now
 
     gps = args.nmea is not None
     settings = Settings(
@@ -201,5 +201,8 @@ def run(args: argparse.Namespace) -> int:
             if reader is not None:
                 reader.stop()
         finally:
-            link.close()
-    return stopping.exit_code(0)
+            ended = link.close()
+    code = stopping.exit_code(0)
+    if not ended:  # its connecting thread is still inside zenoh.open: finalising under it aborts
+        leave_now(code)
+    return code
