@@ -5,18 +5,19 @@ holds that one, is pulled by each in turn: between its lead and its second robot
 stepped toward each and back, and one of them went through its shadow (issue 33, seed 1 of
 ``pfp bench teams --terrain``).  Instead, ``control`` tries a small fixed set of places round it
 with the world's own link test (range, and the exact sight line): ``HEADINGS`` headings at a
-report's run and half of it (one of them its own way), the way to each robot and to their middle,
-and the step as ``teams.control`` judged it.  It steps to the place that links the most of its
-robots, keeping every link it has along the way and its next report's point (``teams.control``),
-on ground it may enter (a follower's cleared corridor); of those, the one nearest the end of its own
-step.  The place must be better than the step as judged (more robots linked at its end, or at
-least ``_BETTER_M`` nearer its own way), or the verdict stands, with its holds and waits.  Bounded:
-at most ``HEADINGS * 2 + robots + 2`` places per controller and report, and only when its step
-is held, cut, or ends with a robot out of link; no search.  Pure, as ``teams`` is.
+report's run and at half of it (its own way first), and the way to each robot and to their middle.
+It steps to the place that links the most of its robots, keeping every link it has along the way
+and at its next report's point (as ``teams.control`` judges a step), on ground it may enter (a
+follower's cleared corridor); of those, the one nearest the end of its own step.  A place must be
+better than the step as judged (more robots linked at its end, or at least ``_BETTER_M`` nearer its
+own way), or the verdict stands, with its holds and waits.  Bounded: ``HEADINGS * 2 + robots + 1``
+places per controller and report at most, tried only when its step is held, cut, or ends with a
+robot out of link; no search.  Pure, as ``teams`` is.
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Mapping, Sequence
 
@@ -87,31 +88,37 @@ def place(
     def linked(p: Point) -> int:
         return sum(roles.in_link(p, q, radio_range_m, sight) for _, q in robots)
 
+    pts_of = [q for _, q in robots]
     base = (linked(end), -_dist(end, to))
     if judged.kind == "go" and base[0] == len(robots):
         return None  # its own step keeps them all
     pts = np.array([p for _, p in robots], dtype=float)
-    cs = np.array(_places(at, to, pts, run_m))
-    # each place's distance to each robot at once; the sight lines only of the pairs in range
-    near = np.hypot(cs[:, None, 0] - pts[None, :, 0], cs[:, None, 1] - pts[None, :, 1]) <= radio_range_m
-    tried = []
-    for k, c in enumerate(map(tuple, cs.tolist())):
-        if _dist(at, c) < _CLOSE_M or _dist(c, end) < _CLOSE_M:
+    cs = [(float(x), float(y)) for x, y in _places(at, to, pts, run_m)]
+    # each place's distance to each robot at once: its robots in range bound its robots linked, so the
+    # places are taken best first and a place's sight lines are asked only when it may be the best
+    xy = np.array(cs)
+    near = np.hypot(xy[:, None, 0] - pts[None, :, 0], xy[:, None, 1] - pts[None, :, 1]) <= radio_range_m
+    heap = [
+        (-int(near[k].sum()), _dist(c, to), k, False)
+        for k, c in enumerate(cs)
+        if _dist(at, c) >= _CLOSE_M and _dist(c, end) >= _CLOSE_M
+    ]
+    heapq.heapify(heap)
+    while heap:
+        neg, far, k, asked = heapq.heappop(heap)
+        if -neg < base[0] or (-neg == base[0] and -far <= base[1] + _BETTER_M):
+            return None  # no place left is better than the step as judged
+        c = cs[k]
+        if not asked:
+            if ground is None or _on(ground, at, c):
+                linked_here = sum(
+                    1 for j in np.flatnonzero(near[k]).tolist() if sight is None or sight(c, pts_of[j])
+                )
+                heapq.heappush(heap, (-linked_here, far, k, True))
             continue
-        if ground is not None and not _on(ground, at, c):
-            continue
-        n = sum(1 for j in np.flatnonzero(near[k]).tolist() if sight is None or sight(c, robots[j][1]))
-        score = (n, -_dist(c, to))
-        if score[0] > base[0] or (score[0] == base[0] and score[1] > base[1] + _BETTER_M):
-            tried.append((score, c))
-    for score, c in sorted(tried, key=lambda t: t[0], reverse=True):
         if roles.control(at, c, robots, radio_range_m, sight, next_of, run_m)[0] == GO:
-            ids = [rid for rid, _ in robots]
-            what = (
-                f"{', '.join(ids)} linked"
-                if score[0] == len(robots)
-                else f"{score[0]} of {', '.join(ids)} linked"
-            )
+            ids = ", ".join(rid for rid, _ in robots)
+            what = f"{ids} linked" if -neg == len(robots) else f"{-neg} of {ids} linked"
             why = f"to a place that keeps {what}"
             return Verdict("to", c, f"{judged.reason}; {why}" if judged.reason else why)
     return None

@@ -98,3 +98,18 @@ def test_a_follower_controller_keeps_to_its_cleared_ground() -> None:
     cut = roles.control(M1, (-40.0, 0.0), robots, 1500.0, ground.sees)
     got = team_place.control(M1, (-40.0, 0.0), robots, 1500.0, ground.sees, ground=(track, 10.0))
     assert got == cut
+
+
+def test_a_controller_closing_on_one_robot_goes_round_by_the_crest_that_keeps_the_other() -> None:
+    """Closing on r1 (its link holds it) down the far flank would lose r2: the crest keeps both and is nearer r1."""
+    ground = _crest()
+    r1 = (-300.0, -100.0)  # west-south-west, below the crest
+    others = [("r2", R2)]
+    cut, robot = roles.control(M1, r1, others, 1500.0, ground.sees, None, 15.0)  # a report's run: 15 m
+    assert cut.kind == "to" and cut.to is not None and robot == "r2"
+    v, robot = team_place.control(M1, r1, others, 1500.0, ground.sees, None, 15.0, closing=("r1", r1))
+    assert v.kind == "to" and v.to is not None and robot == "", v
+    assert math.dist(M1, v.to) <= 15.0 + 1e-9
+    assert ground.sees(v.to, r1) and ground.sees(v.to, R2), v
+    assert math.dist(v.to, r1) < math.dist(cut.to, r1) - 3.0, (v, cut)  # nearer r1 than the cut step
+    assert v.reason == "the step would break r2's link; to a place that keeps r2, r1 linked"
