@@ -26,6 +26,7 @@ from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
 from pfp_service.world import team_leads as leads
 from pfp_service.world import team_link as link_memory
+from pfp_service.world import team_place as places
 from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
@@ -382,7 +383,10 @@ class TeamBook:
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
             ]
             ahead, run = self._ahead(robots), self.trails.run(unit)
-            verdict, robot = roles.control(at, to, robots, team.radio_range_m, sight, ahead, run)
+            ground = (self._line(tid), team.corridor_m) if unit in team.follow else None
+            verdict, robot = places.control(
+                at, to, robots, team.radio_range_m, sight, ahead, run, None, ground
+            )
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
@@ -423,9 +427,11 @@ class TeamBook:
                 for o in team.robots
                 if o != r and (oo := units.get(o)) and (q := oo.position) and _guided(oo)
             ]
-            v, blocking = roles.control(
-                at, p, others, team.radio_range_m, sight, self._ahead(others), self.trails.run(unit)
-            )
+            ground = (self._line(tid), team.corridor_m) if unit in team.follow else None
+            v, blocking = places.control(
+                at, p, others, team.radio_range_m, sight, self._ahead(others), self.trails.run(unit),
+                (r, rec.position), ground,
+            )  # fmt: skip
             if v.kind == "hold":
                 self.waits.add(blocking)  # the robot whose link keeps it from this one closes on it
             else:
