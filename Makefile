@@ -21,13 +21,13 @@ install: $(STAMP)
 # test-fast run's CPU, and every `pfp` a test starts compiles the package again.
 test test-fast test-proc: export PYTHONDONTWRITEBYTECODE =
 
-# Every tier (tests/conftest.py names them): what CI runs, after `make check`.  Cheapest first, two
-# tests at a time (WORKERS, one per core): the in-process tiers (they also fill a fresh clone's kernel
-# cache before any planner starts); then the proc tier, whose tests mostly wait on the processes they
-# start; then the multi and browser tiers; last, one at a time, the tests marked `alone`, which assert
-# a wall-clock bound of the product that a test beside them could break.  tests/conftest.py keeps a
-# module's shared fixture (a planner, say) on one worker, and tests/zenoh_util.py gives each worker its
-# own ports.  Each run names its slowest tests, so a CI log shows where the time went.
+# Every tier (tests/conftest.py names them): what CI runs, after `make check`.  One run of every tier
+# but the `alone` tests, two tests at a time (WORKERS, one per core), dearest tier first (tests/conftest.py
+# orders them) so that the short in-process tests fill the end; then, one at a time, the tests marked
+# `alone`, which assert a wall-clock bound of the product that a test beside them could break.
+# tests/conftest.py keeps a module's shared fixture (a planner, say) on one worker, and
+# tests/zenoh_util.py gives each worker its own ports.  Each run names its slowest tests, so a CI log
+# shows where the time went.
 WORKERS ?= 2
 XDIST = -n $(WORKERS) --dist loadgroup
 # The planner's own warm-up, once, before the workers start: on a fresh clone it compiles the shared
@@ -37,9 +37,7 @@ test: $(STAMP)
 	@sh .ci/ensure-chromium
 	@sh .ci/ensure-gdal
 	$(WARM_KERNELS)
-	$(BIN)/python -m pytest -q -m "(unit or net) and not alone" $(XDIST) --durations=10
-	$(BIN)/python -m pytest -q -m "proc and not alone" $(XDIST) --durations=10
-	$(BIN)/python -m pytest -q -m "(multi or browser) and not alone" $(XDIST) --durations=10
+	$(BIN)/python -m pytest -q -m "not alone" $(XDIST) --durations=20
 	$(BIN)/python -m pytest -q -m alone --durations=10
 
 # The in-process tiers (unit and net): under a minute on 2 cores; run it on every change.

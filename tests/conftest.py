@@ -70,10 +70,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             "tests with more than one tier (mark each test of a mixed module, not the module): "
             + ", ".join(mixed[:10])
         )
-    # cheapest tier first (TIERS' order), each in its collected order: a fresh clone's in-process tests
-    # compile the numba kernels into the cache before the first planner process starts and warms up
+    # dearest tier first (TIERS' order reversed), each in its collected order: under ``make test``'s two
+    # workers the long tests start early and the thousands of short in-process ones fill the end, so
+    # neither worker waits idle for the other's last long test (make test warms the planner's kernels
+    # into the cache before the workers start, so no planner compiles them)
     rank = {name: i for i, name in enumerate(TIERS)}
-    items.sort(key=lambda item: rank[_tier_of(item) or "unit"])
+    items.sort(key=lambda item: -rank[_tier_of(item) or "unit"])
     for item in items:
         if _shares_a_fixture(item) and item.get_closest_marker("spread") is None:
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
