@@ -15,6 +15,9 @@ turn, ``--teams-rounds`` times each, at the rate CPU per state is compared
 at (``TARGETS["cpu_rate_per_s"]``, where neither saturates), so the two share
 the machine's noise.  A round's figure is the planner's CPU (its process
 tree, workers counted) over the states answered; the target is their ratio.
+Then (unless ``--no-fanout``) each takes the contingency fan-out in turn on
+the same scene: a threat put ahead of the units' centre, every unit it reaches
+re-directed within ``FANOUT_MAX_MS`` (the issue's wave) on the teams planner.
 """
 
 from __future__ import annotations
@@ -27,12 +30,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks._load import MISSION, LoadGen, Server, connected, start_server
-from benchmarks._phases import STEP_M, Bar, deliberations_landed, register, steady
+from benchmarks._phases import STEP_M, Bar, deliberations_landed, fanout, register, steady
 
-__all__ = ["TEAM_SIZE", "add_teams_arguments", "print_teams", "teams", "teams_cost", "teams_target"]
+__all__ = ["TEAM_SIZE", "add_teams_arguments", "print_teams", "teams", "teams_cost", "teams_targets"]
 
 TEAM_SIZE = 4
 RATIO_MAX = 1.2  # issue 33: with teams and dispersion, CPU per state within 1.2x of without
+FANOUT_MAX_MS = 50.0  # issue 33: with teams and dispersion, the wave still within its 50 ms
 KINDS = {"plain": (), "teams": ("--dispersion",)}
 # the march: every unit this far from its neighbours (1.5 of the wheeled class's 50 m: each still feels its
 # neighbours' push, which reaches 2 separations, and none yields unless their ways meet), in columns of a
@@ -168,6 +172,8 @@ def teams_cost(args: argparse.Namespace, lay: dict[str, Any], bar: Bar, rate_per
             a, b = row["plain"]["us_per_state"], row["teams"]["us_per_state"]
             row["ratio"] = None if a is None or b is None or not a else b / a
             res["rounds"].append(row)
+        if not args.no_fanout:  # after the rounds, so that the threat it puts does not change their load
+            res["fanout"] = {kind: fanout(gens[kind], servers[kind], n, bar) for kind in KINDS}
     finally:
         for g in gens.values():
             g.close()
@@ -178,15 +184,29 @@ def teams_cost(args: argparse.Namespace, lay: dict[str, Any], bar: Bar, rate_per
     return res
 
 
-def teams_target(t: dict[str, Any]) -> dict[str, Any]:
-    """The issue's row: the median ratio of CPU per state, with teams and dispersion over without."""
+def teams_targets(t: dict[str, Any]) -> list[dict[str, Any]]:
+    """The issue's rows: the teams planner's wave (when measured), and the median ratio of CPU per state."""
+    rows = []
+    if "fanout" in t:
+        ms = t["fanout"]["teams"]["all_redirected_ms"]
+        rows.append(
+            {
+                "target": f"teams + dispersion: fan-out, every affected unit re-directed within {FANOUT_MAX_MS:g} ms",
+                "measured": ms,
+                "limit": FANOUT_MAX_MS,
+                "met": None if ms is None else ms <= FANOUT_MAX_MS,
+            }
+        )
     m = t["ratio_median"]
-    return {
-        "target": f"teams + dispersion: CPU per state <= {RATIO_MAX:g}x without (median of rounds)",
-        "measured": m,
-        "limit": RATIO_MAX,
-        "met": None if m is None else m <= RATIO_MAX,
-    }
+    rows.append(
+        {
+            "target": f"teams + dispersion: CPU per state <= {RATIO_MAX:g}x without (median of rounds)",
+            "measured": m,
+            "limit": RATIO_MAX,
+            "met": None if m is None else m <= RATIO_MAX,
+        }
+    )
+    return rows
 
 
 def print_teams(t: dict[str, Any]) -> None:
@@ -205,6 +225,12 @@ def print_teams(t: dict[str, Any]) -> None:
         )
     last = t["rounds"][-1]["teams"]["statuses"] if t["rounds"] else {}
     print(f"  median x{_us(t['ratio_median'], '.2f')}; with teams, the last statuses: {last}")
+    for kind, f in t.get("fanout", {}).items():
+        print(
+            f"  fan-out, {kind}: {f['redirected']}/{f['affected']} re-directed, all in "
+            f"{_us(f['all_redirected_ms'])} ms (p50 {_us(f['redirected_p50_ms'])} ms), "
+            f"deliberated in {_us(f['all_deliberated_s'], '.2f')} s"
+        )
 
 
 def _us(v: float | None, fmt: str = ".1f") -> str:

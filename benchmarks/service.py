@@ -58,7 +58,7 @@ from benchmarks._phases import (
     steady,
     storm,
 )
-from benchmarks._service_teams import add_teams_arguments, teams_cost, teams_target
+from benchmarks._service_teams import add_teams_arguments, teams_cost, teams_targets
 from benchmarks._service_text import print_doc
 from pfp_service.argtypes import positive_float, positive_int
 from pfp_service.core.params import ESCAPES
@@ -470,7 +470,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
             doc["teams"] = teams_cost(args, lay, bar, min(TARGETS["cpu_rate_per_s"], args.units * args.rate))
     doc["echo"] = runs.get("echo")
     doc["planner"] = runs["planner"]
-    doc["targets"] = targets(doc) + ([teams_target(doc["teams"])] if "teams" in doc else [])
+    doc["targets"] = targets(doc) + (teams_targets(doc["teams"]) if "teams" in doc else [])
     return doc
 
 

@@ -112,8 +112,8 @@ def test_bench_service_state_keys_gives_a_row_per_key_in_one_run():
 def test_bench_service_teams_compares_teams_and_dispersion_with_a_plain_planner():
     r = run_pfp(
         "bench", "service", "--units", "16", "--rate", "4", "--threats", "3", "--duration", "2",
-        "--no-storm", "--no-fanout", "--teams", "--teams-rounds", "2", "--json",
-        timeout=240,
+        "--no-storm", "--teams", "--teams-rounds", "2", "--json",
+        timeout=300,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
     t = json.loads(r.stdout)["teams"]
@@ -128,5 +128,13 @@ def test_bench_service_teams_compares_teams_and_dispersion_with_a_plain_planner(
         assert "ratio" in row
     for kind in ("plain", "teams"):  # a tick that fails to publish logs an error: none did
         assert t[kind]["exit"]["exit_code"] == 0 and t[kind]["exit"]["error_lines"] == 0, t[kind]["exit"]
-    target = json.loads(r.stdout)["targets"][-1]
-    assert target["target"].startswith("teams + dispersion") and target["measured"] == t["ratio_median"]
+    for kind in ("plain", "teams"):  # the wave on the same march, the teams planner's beside the plain one's
+        assert t["fanout"][kind].keys() >= FANOUT, kind
+        assert t["fanout"][kind]["affected"] is not None, kind  # the planner's replan event arrived
+    rows = {
+        row["target"]: row for row in json.loads(r.stdout)["targets"] if row["target"].startswith("teams")
+    }
+    ratio = next(row for name, row in rows.items() if "CPU per state" in name)
+    wave = next(row for name, row in rows.items() if "fan-out" in name)
+    assert ratio["measured"] == t["ratio_median"]
+    assert wave["measured"] == t["fanout"]["teams"]["all_redirected_ms"] and wave["limit"] == 50.0

@@ -1,0 +1,144 @@
+"""The teams world in process on ``pfp bench service --teams``' march: CPU per state, and a hash of its directions.
+
+No Zenoh: ``World.apply`` (inline deliberation, the planner's own settings, with
+``--dispersion`` and a team for every four units, or plain) is driven on the
+march of ``benchmarks/_service_teams.py`` as the bench's load generator drives
+the live planner: every unit reports in turn, ``TICK`` reports a tick at
+``RATE_PER_S`` (so a tick is ``TICK / RATE_PER_S`` s of the world's time), and
+each unit moves ``STEP_M`` along the last vector it was given while moving.
+After ``WARM`` ticks, each tick's ``World.apply`` is timed with the thread's CPU
+clock.  The hash covers every direction (every field, the reason included) and
+event of every tick, warm ones included: two trees that give the same hash on
+the same seed made the same decisions.
+
+Run as ``python -m benchmarks._march_world [--plain] [--ticks N] [--rounds R] [--profile FILE]``;
+``--rounds`` alternates plain and teams worlds in one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import hashlib
+import json
+import os
+import time
+from typing import Any
+
+import msgspec
+
+__all__ = ["drive"]
+
+UNITS = 1000
+TICK = 256  # reports a tick: the live planner's ticks when it is busy at this rate
+RATE_PER_S = 5000.0  # TARGETS["cpu_rate_per_s"]
+WARM = 60
+MISSION = "bench"
+
+
+def _world(teams: bool) -> Any:
+    """The world ``pfp serve`` (with ``--dispersion`` for teams) makes, deliberating inline."""
+    import dataclasses
+
+    from pfp_service.node.config import ServeConfig
+    from pfp_service.world.world import World
+
+    settings = ServeConfig(mission=MISSION, dispersion=teams).world_settings()
+    return World(dataclasses.replace(settings, deliberation="inline"))
+
+
+def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None) -> dict[str, Any]:
+    """One world: ``WARM`` ticks, then ``ticks`` timed; CPU us per state and the hash of every output."""
+    from benchmarks._layout import layout
+    from benchmarks._phases import STEP_M
+    from benchmarks._service_teams import march
+    from benchmarks._service_teams import teams as make_teams
+    from pfp_service.wire import Goal, UnitState
+    from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut
+
+    lay = march(UNITS, layout(UNITS, 100, seed)["threats"], seed)
+    ids = [f"u{i}" for i in range(UNITS + 1)]
+    pos = [list(p) for p in lay["starts"]]
+    vec: dict[str, tuple[float, float]] = {}
+    w = _world(teams)
+    digest = hashlib.sha256()
+
+    def take(out: Any) -> None:
+        for d in out.directions:
+            digest.update(msgspec.json.encode(d))
+            vec[d.unit] = d.vector if d.status in ("en_route", "escaping") else (0.0, 0.0)
+        for e in out.events:
+            digest.update(msgspec.json.encode(e))
+
+    now = 0.0
+    take(w.apply([ThreatPut(t, u) for t, u in lay["threats"]], now))
+    take(
+        w.apply([StateReported(u, UnitState(position=tuple(pos[i]), seq=0)) for i, u in enumerate(ids)], now)
+    )
+    if teams:
+        take(w.apply([TeamPut(t, u) for t, u in make_teams(lay, UNITS).items()], now))
+    take(w.apply([GoalSet(u, Goal(position=lay["goals"][i], step=STEP_M)) for i, u in enumerate(ids)], now))
+    nxt, seq, cpu, states = 0, 1, 0.0, 0
+    prof = None
+    gc_s, gc_at = [0.0], [0.0]
+
+    def collected(phase: str, info: dict[str, int]) -> None:  # the collector's CPU, inside the timed ticks
+        if phase == "start":
+            gc_at[0] = time.thread_time()
+        else:
+            gc_s[0] += time.thread_time() - gc_at[0]
+
+    gc.callbacks.append(collected)
+    for t in range(WARM + ticks):
+        batch = []
+        for _ in range(TICK):
+            i, nxt = nxt, (nxt + 1) % len(ids)
+            vx, vy = vec.get(ids[i], (0.0, 0.0))
+            pos[i][0] += STEP_M * vx
+            pos[i][1] += STEP_M * vy
+            batch.append(StateReported(ids[i], UnitState(position=(pos[i][0], pos[i][1]), seq=seq)))
+            seq += 1
+        now += TICK / RATE_PER_S
+        if t == WARM and profile:
+            import cProfile
+
+            prof = cProfile.Profile()
+            prof.enable()
+        if t == WARM:
+            gc_s[0] = 0.0
+        c0 = time.thread_time()
+        out = w.apply(batch, now)
+        if t >= WARM:
+            cpu += time.thread_time() - c0
+            states += len(batch)
+        else:
+            gc_s[0] = 0.0
+        take(out)
+    gc.callbacks.remove(collected)
+    if prof is not None:
+        prof.disable()
+        prof.dump_stats(profile)  # type: ignore[arg-type]
+    return {
+        "us_per_state": 1e6 * cpu / max(states, 1),
+        "gc_us_per_state": 1e6 * gc_s[0] / max(states, 1),  # the collector's share (also outside ``apply``)
+        "hash": digest.hexdigest()[:16],
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(prog="python -m benchmarks._march_world")
+    p.add_argument("--ticks", type=int, default=60, help="timed ticks after the warm ones (default 60)")
+    p.add_argument("--rounds", type=int, default=1, help="plain and teams worlds alternating (default 1)")
+    p.add_argument("--teams-only", action="store_true", help="only the teams world")
+    p.add_argument("--seed", type=int, default=2023)
+    p.add_argument("--profile", help="with --teams-only: cProfile the timed ticks into this file")
+    a = p.parse_args()
+    for r in range(a.rounds):
+        row: dict[str, Any] = {"round": r + 1, "loadavg": os.getloadavg()[0]}
+        for kind in ("teams",) if a.teams_only else ("plain", "teams"):
+            row[kind] = drive(kind == "teams", a.ticks, a.seed, a.profile if a.teams_only else None)
+        print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()
