@@ -67,6 +67,7 @@ class TeamBook:
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
         self._columns: dict[str, list[TeamUpdate]] = {}  # unit -> ``columns``, until the teams change
+        self._dispersed: dict[str, tuple[str, float] | None] = {}  # unit -> ``dispersed``, likewise
         self._leading: dict[
             str, Verdict
         ] = {}  # team -> its lead's verdict in this ``judge`` (``team_leads``)
@@ -120,7 +121,7 @@ class TeamBook:
         index.add(tid, team)
         self._checks = index
         self.teams[tid] = team
-        self._columns = {}
+        self._columns, self._dispersed = {}, {}
         self._looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
@@ -137,7 +138,7 @@ class TeamBook:
         """Dissolve a team; whether there was one."""
         if self.teams.pop(tid, None) is None:
             return False
-        self._columns = {}
+        self._columns, self._dispersed = {}, {}
         self.tracks.pop(tid, None)
         self._looked.pop(tid, None)
         self._lines.pop(tid, None)
@@ -182,11 +183,15 @@ class TeamBook:
         return None
 
     def dispersed(self, unit: str) -> tuple[str, float] | None:
-        """The team ``unit`` is in that sets ``separation_m``, and that separation (dispersion keeps it among its members)."""
-        for tid in self._of.get(unit, ()):
-            if (sep := self.teams[tid].separation_m) is not None:
-                return tid, sep
-        return None
+        """The team ``unit`` is in that sets ``separation_m``, and that separation (dispersion keeps it among
+        its members); asked for the whole fleet each tick (the push), so kept until the teams change."""
+        kept = self._dispersed
+        if unit not in kept:
+            if len(kept) > 4096 + 2 * len(self._of):  # units gone since the teams changed: bounded
+                kept.clear()
+            of = self._of.get(unit, ())
+            kept[unit] = next(((t, sep) for t in of if (sep := self.teams[t].separation_m) is not None), None)
+        return kept[unit]
 
     # -- the roles, applied ----------------------------------------------------------
     def judge(
@@ -218,6 +223,7 @@ class TeamBook:
         self._pulled, self.pulls = self.pulls, {}
         self._leading = leads.verdicts(self.teams, self._of, directions, units)
         self._now = now
+        held = _Either(held_before, self.held)  # not their union: a copy per member is quadratic in the holds
         out = list(directions)
         # controllers first: a robot is then judged against where its controller's step of this batch
         # takes it, not its last one (the two move at once)
@@ -229,7 +235,7 @@ class TeamBook:
                 continue
             if d.unit in self._links:
                 self.trails.moved(d.unit, rec.position)
-            judged = self._judged(d, rec, units, held_before, sight)
+            judged = self._judged(d, rec, units, held, sight)
             if judged is not d and zones_of is not None and (judged.reach_m or 0.0) > 0.0:
                 judged = steps.kept_clear(judged, rec, zones_of(rec))
             out[i] = judged
@@ -272,6 +278,8 @@ class TeamBook:
         """The team's track as a polyline, made once for all its followers and grown with the track."""
         track = self.tracks.get(tid, [])
         kept = self._lines.get(tid)
+        if kept is not None and kept[0] is track and len(kept[1]) == len(track):
+            return kept[1]  # not grown since (its other followers, or no report of its lead)
         if kept is not None and kept[0] is track and len(kept[1]) <= len(track):
             line = kept[1].extended(track[len(kept[1]) :])
         else:
@@ -299,7 +307,7 @@ class TeamBook:
         d: Direction,
         rec: UnitRecord,
         units: Mapping[str, UnitRecord],
-        held_before: set[str],
+        held: _Either,
         sight: Sight | None,
     ) -> Direction:
         at = rec.position
@@ -307,7 +315,6 @@ class TeamBook:
         if d.reach_m is None or not (d.vector[0] or d.vector[1]):
             return d  # not moving (arrived, trapped, no goal): nothing to judge
         to = (at[0] + d.vector[0] * d.reach_m, at[1] + d.vector[1] * d.reach_m)
-        held = _Either(held_before, self.held)  # not their union: a copy per member is quadratic in the holds
         reasons: list[str] = []
         for tid in self._of[rec.id]:
             team = self.teams[tid]
@@ -350,16 +357,14 @@ class TeamBook:
                     self.pulls.setdefault(str(team.controller), set()).add(unit)
                 return [v]
         if unit == team.lead and team.follow:
-            main = leads.rearmost(team.follow, units)
-            if main is None:
-                out.append(Verdict("hold", None, "waiting: no follower has reported"))
-            else:
-                got = self._leading.get(tid)
-                out.append(
-                    got
-                    if got is not None
-                    else roles.lead(at, leads.main_route(main), team.standoff_m, main.id)
-                )
+            got = self._leading.get(tid)  # asked in this judge's one call, which found its main element
+            if got is None:
+                main = leads.rearmost(team.follow, units)
+                if main is None:
+                    got = Verdict("hold", None, "waiting: no follower has reported")
+                else:
+                    got = roles.lead(at, leads.main_route(main), team.standoff_m, main.id)
+            out.append(got)
             to = _end(out, to)
         if unit in team.follow and _moving(out):
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)

@@ -46,10 +46,15 @@ def verdicts(
 
 def rearmost(follow: Sequence[str], units: Mapping[str, UnitRecord]) -> UnitRecord | None:
     """The follower furthest from its goal, of those live and with a goal: the one the lead must not lose."""
-    live = [r for f in follow if (r := units.get(f)) is not None and r.position is not None and not r.stale]
-    if not live:
-        return None
-    return max(live, key=lambda r: (r.goal is not None, r.last_distance or 0.0))
+    best, most = None, (False, 0.0)
+    for f in follow:  # ``max`` by that key, the first of equals, without a list and a key call per member
+        r = units.get(f)
+        if r is None or r.position is None or r.stale:
+            continue
+        key = (r.goal is not None, r.last_distance or 0.0)
+        if best is None or key > most:
+            best, most = r, key
+    return best
 
 
 def main_route(main: UnitRecord) -> list[Point]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from itertools import chain
 from typing import Literal, Protocol
 
 import numpy as np
@@ -132,12 +133,15 @@ def leads(asks: Sequence[tuple[Point, Sequence[Point], float, str]]) -> list[Ver
     (``polyline_kernels.places``), not a polyline made per lead."""
     out: list[Verdict] = [GO] * len(asks)
     many = [k for k, ask in enumerate(asks) if len(ask[1]) > 1]
-    if many:
-        pts = np.array([p for k in many for p in asks[k][1]], dtype=float).reshape(-1, 2)
+    if many:  # flat iterators: a list of tuples made an array is NumPy's slow, general path
+        counts = [len(asks[k][1]) for k in many]
+        flat = chain.from_iterable(p for k in many for p in asks[k][1])
+        pts = np.fromiter(flat, dtype=float, count=2 * sum(counts)).reshape(-1, 2)
         first = np.zeros(len(many) + 1, dtype=np.intp)
-        first[1:] = np.cumsum([len(asks[k][1]) for k in many])
-        ats = np.array([asks[k][0] for k in many], dtype=float).reshape(-1, 2)
-        standoffs = np.array([asks[k][2] for k in many], dtype=float)
+        first[1:] = np.cumsum(counts)
+        ats = np.fromiter(chain.from_iterable(asks[k][0] for k in many), dtype=float, count=2 * len(many))
+        ats = ats.reshape(-1, 2)
+        standoffs = np.fromiter((asks[k][2] for k in many), dtype=float, count=len(many))
         got = np.empty((len(many), 4))
         kernels.places(pts, first, ats, standoffs, got)
         for k, (length, s, px, py) in zip(many, got.tolist()):
