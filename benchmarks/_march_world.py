@@ -7,21 +7,24 @@ the live planner: every unit reports in turn, ``TICK`` reports a tick at
 ``RATE_PER_S`` (so a tick is ``TICK / RATE_PER_S`` s of the world's time), and
 each unit moves ``STEP_M`` along the last vector it was given while moving.
 After ``WARM`` ticks, each tick's ``World.apply`` is timed with the thread's CPU
-clock.  The hash covers every direction (every field, the reason included) and
+clock; then the contingency wave (``pfp bench service``'s fan-out: a threat put
+just ahead of the units' centre) is one ``World.apply``, timed alike.  The hash covers every direction (every field, the reason included) and
 event of every tick, warm ones included: two trees that give the same hash on
 the same seed made the same decisions.
 
-Run as ``python -m benchmarks._march_world [--plain] [--ticks N] [--rounds R] [--profile FILE]``;
+Run as ``python -m benchmarks._march_world [--teams-only] [--ticks N] [--rounds R] [--profile FILE]``;
 ``--rounds`` alternates plain and teams worlds in one run.
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import gc
 import hashlib
 import json
 import os
+import statistics
 import time
 from typing import Any
 
@@ -54,6 +57,7 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
     from benchmarks._service_teams import march
     from benchmarks._service_teams import teams as make_teams
     from pfp_service.wire import Goal, UnitState
+    from pfp_service.world.events import Tick
     from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut
 
     lay = march(UNITS, layout(UNITS, 100, seed)["threats"], seed)
@@ -100,8 +104,6 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
             seq += 1
         now += TICK / RATE_PER_S
         if t == WARM and profile:
-            import cProfile
-
             prof = cProfile.Profile()
             prof.enable()
         if t == WARM:
@@ -115,12 +117,42 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
             gc_s[0] = 0.0
         take(out)
     gc.callbacks.remove(collected)
+    # the contingency wave, as ``pfp bench service``'s fan-out puts it: one threat just ahead of the centre
+    from pfp_service.wire import ThreatUpdate
+
+    at = (statistics.median(p[0] for p in pos) + 60.0, statistics.median(p[1] for p in pos))
+    threat = ThreatUpdate(position=at, facing_deg=270.0, sigma_range=40.0, sigma_lateral=28.0, skew=2.0)
+    for r in w._units.values():  # deliberation deferred, as in the live planner: the wave, not its searches
+        if r.stepper is not None:
+            r.stepper.defer = True
+    if prof is not None:
+        prof.disable()
+        prof.dump_stats(profile)  # type: ignore[arg-type]
+        prof = cProfile.Profile()
+        prof.enable()
+        profile = f"{profile}.wave"
+    told: set[str] = set()
+    c0 = time.thread_time()
+    out = w.apply([ThreatPut("contingency", threat)], now)
+    wave_s = time.thread_time() - c0
+    take(out)
+    told.update(d.unit for d in out.directions)
+    for _ in range(1000):  # the wave's later shares, each the next ``apply`` (a Tick, as the node's wake)
+        if not w.wave_pending():
+            break
+        c0 = time.thread_time()
+        out = w.apply([Tick(now)], now)
+        wave_s += time.thread_time() - c0
+        take(out)
+        told.update(d.unit for d in out.directions)
     if prof is not None:
         prof.disable()
         prof.dump_stats(profile)  # type: ignore[arg-type]
     return {
         "us_per_state": 1e6 * cpu / max(states, 1),
         "gc_us_per_state": 1e6 * gc_s[0] / max(states, 1),  # the collector's share (also outside ``apply``)
+        "wave_ms": 1e3 * wave_s,
+        "wave_units": len(told),
         "hash": digest.hexdigest()[:16],
     }
 
@@ -131,7 +163,10 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=1, help="plain and teams worlds alternating (default 1)")
     p.add_argument("--teams-only", action="store_true", help="only the teams world")
     p.add_argument("--seed", type=int, default=2023)
-    p.add_argument("--profile", help="with --teams-only: cProfile the timed ticks into this file")
+    p.add_argument(
+        "--profile",
+        help="with --teams-only: cProfile the timed ticks into this file, the wave into FILE.wave",
+    )
     a = p.parse_args()
     for r in range(a.rounds):
         row: dict[str, Any] = {"round": r + 1, "loadavg": os.getloadavg()[0]}
