@@ -66,6 +66,17 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
     vec: dict[str, tuple[float, float]] = {}
     w = _world(teams)
     digest = hashlib.sha256()
+    judge_s = [0.0]
+    judge = w.teams.judge
+
+    def judged(*args: Any, **kw: Any) -> Any:  # the roles' share of the ticks: the team book's judge alone
+        c0 = time.thread_time()
+        try:
+            return judge(*args, **kw)
+        finally:
+            judge_s[0] += time.thread_time() - c0
+
+    w.teams.judge = judged
 
     def take(out: Any) -> None:
         for d in out.directions:
@@ -107,7 +118,7 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
             prof = cProfile.Profile()
             prof.enable()
         if t == WARM:
-            gc_s[0] = 0.0
+            gc_s[0] = judge_s[0] = 0.0
         c0 = time.thread_time()
         out = w.apply(batch, now)
         if t >= WARM:
@@ -116,7 +127,6 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
         else:
             gc_s[0] = 0.0
         take(out)
-    gc.callbacks.remove(collected)
     # the contingency wave, as ``pfp bench service``'s fan-out puts it: one threat just ahead of the centre
     from pfp_service.wire import ThreatUpdate
 
@@ -132,6 +142,8 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
         prof.enable()
         profile = f"{profile}.wave"
     told: set[str] = set()
+    tick_gc_s, gc_s[0] = gc_s[0], 0.0
+    tick_judge_s = judge_s[0]
     c0 = time.thread_time()
     out = w.apply([ThreatPut("contingency", threat)], now)
     wave_s = time.thread_time() - c0
@@ -145,13 +157,16 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
         wave_s += time.thread_time() - c0
         take(out)
         told.update(d.unit for d in out.directions)
+    gc.callbacks.remove(collected)
     if prof is not None:
         prof.disable()
         prof.dump_stats(profile)  # type: ignore[arg-type]
     return {
         "us_per_state": 1e6 * cpu / max(states, 1),
-        "gc_us_per_state": 1e6 * gc_s[0] / max(states, 1),  # the collector's share (also outside ``apply``)
+        "judge_us_per_state": 1e6 * tick_judge_s / max(states, 1),
+        "gc_us_per_state": 1e6 * tick_gc_s / max(states, 1),  # the collector's share (also outside ``apply``)
         "wave_ms": 1e3 * wave_s,
+        "wave_gc_ms": 1e3 * gc_s[0],  # a full collection (~0.1 s) lands in a wave or not: the wave less it
         "wave_units": len(told),
         "hash": digest.hexdigest()[:16],
     }

@@ -53,14 +53,10 @@ class TeamBook:
         self.waits: set[str] = set()
         self.pulls: dict[str, set[str]] = {}  # controller -> the robots their link held
         self._pulled: dict[str, set[str]] = {}
-        self._waited: set[str] = (
-            set()
-        )  # ... and the ``judge`` before it (a robot judged before its controller)
+        self._waited: set[str] = set()  # ... and the ``judge`` before it (a robot before its controller)
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
         self._placing: dict[str, Goal] = {}  # a team goal just put: each member's place, for the world to set
-        self.sent: dict[
-            str, Direction
-        ] = {}  # member -> its direction as last judged (a team preview's first move)
+        self.sent: dict[str, Direction] = {}  # member -> its direction last judged (a preview's first move)
         # team -> its lead's position ``_track`` last looked at: unmoved, a tick looks no further
         self._looked: dict[str, object] = {}
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
@@ -68,9 +64,7 @@ class TeamBook:
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
         self._columns: dict[str, list[TeamUpdate]] = {}  # unit -> ``columns``, until the teams change
         self._dispersed: dict[str, tuple[str, float] | None] = {}  # unit -> ``dispersed``, likewise
-        self._leading: dict[
-            str, Verdict
-        ] = {}  # team -> its lead's verdict in this ``judge`` (``team_leads``)
+        self._leading: dict[str, Verdict] = {}  # team -> its lead's verdict in this ``judge`` (team_leads)
         # the robots' breadcrumbs, and the runs between reports of the units in a link
         self.trails = link_memory.Trails()
         self._links: set[str] = set()  # the units in a link: robots and their controllers
