@@ -12,6 +12,14 @@ grace (``Locks.in_grace``): it yields to no one meanwhile, so it gets a
 chance to go, and no stretch of yielding with a deadlock in it outlasts
 ``deadlock_s`` plus one resolution.
 
+Two units each cut to nothing by the other's disc (``keep_apart.cut``) hold
+each other, whatever each was doing (``Facing``): two going round units at
+rest towards each other, in the one lane between them, stopped each other
+for as long as their resolutions lasted, then found their units at rest
+again and went round them again, for ever.  That is one deadlock between
+the two, resolved by right of way: the one that backs off
+(``Locks.who_backs_off``) gives way for ``backoff_s``, the other passes.
+
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation
 within ``deadlock_s`` is coming nearer it, and a unit yielding to it (or
@@ -27,9 +35,10 @@ import math
 from collections.abc import Container
 from dataclasses import dataclass
 
+import msgspec
 import numpy as np
 
-from pfp_service.wire import DeadlockEvent, DirectionStatus
+from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus
 from pfp_service.world.separations import DispersionSettings
 
 __all__ = [
@@ -38,10 +47,13 @@ __all__ = [
     "ROUND_AT",
     "ROUND_BACKOFFS",
     "STARVED",
+    "Facing",
     "Hold",
     "Locks",
     "back_off_vector",
     "event",
+    "held",
+    "meet",
     "resolving",
     "round_vector",
 ]
@@ -71,6 +83,7 @@ class Locks:
     def __init__(self, settings: DispersionSettings) -> None:
         self.settings = settings
         self._best: dict[str, tuple[float, float]] = {}  # unit -> (its best distance to goal, since when)
+        self._fresh: set[str] = set()  # units counted afresh, that have not come nearer their goal since
         self._grace: dict[str, float] = {}  # unit -> until when it yields to no one
         self._pairs: dict[tuple[str, str], tuple[float, str]] = {}  # pair -> (when it locked, who backed off)
 
@@ -82,15 +95,26 @@ class Locks:
         """Note the unit's distance to its goal (``None``: no goal) in this ``apply``."""
         if distance is None:
             self._best.pop(unit, None)
+            self._fresh.discard(unit)
             return
         best = self._best.get(unit)
-        if best is None or distance < best[0] - PROGRESS * sep_m:
+        if best is None:
             self._best[unit] = (distance, now)
+            self._fresh.add(unit)
+        elif distance < best[0] - PROGRESS * sep_m:
+            self._best[unit] = (distance, now)
+            self._fresh.discard(unit)
 
     def progressing(self, unit: str, now: float) -> bool:
-        """Whether the unit came nearer its goal within the last ``deadlock_s``."""
+        """Whether the unit came nearer its goal within the last ``deadlock_s``.
+
+        A unit counted afresh (``forget``) has not, until it does: two units
+        stopping each other by turns, each found stuck one tick after the
+        other, would otherwise each see the other, just counted afresh, as a
+        queue that moves, and neither would ever be a deadlock.
+        """
         best = self._best.get(unit)
-        return best is not None and now - best[1] < self.settings.deadlock_s
+        return best is not None and unit not in self._fresh and now - best[1] < self.settings.deadlock_s
 
     def stuck_for(self, unit: str, now: float) -> float:
         """How long the unit has come no nearer its goal, in seconds (0 when unknown)."""
@@ -131,7 +155,29 @@ class Locks:
     def keep(self, units: Container[str]) -> None:
         """Forget every unit not in ``units`` (the world forgot them): the memory stays bounded."""
         self._best = {u: b for u, b in self._best.items() if u in units}
+        self._fresh = {u for u in self._fresh if u in units}
         self._grace = {u: g for u, g in self._grace.items() if u in units}
+
+
+class Facing:
+    """Pairs of units each cut to nothing by the other, and since when (``keep_apart.cut``'s stopped pairs)."""
+
+    def __init__(self) -> None:
+        self._since: dict[tuple[str, str], float] = {}  # (a, b), a < b -> since when each stops the other
+
+    def pairs(self, stopped: list[tuple[str, str]], now: float) -> list[tuple[str, str, float]]:
+        """Each pair in ``stopped`` (unit, the unit whose disc stops it) both ways, with how long it has held.
+
+        Only the pairs seen in this ``apply`` are kept: a pair that parts and
+        meets again starts afresh, and the memory is this tick's pairs.
+        """
+        cut = set(stopped)
+        since = {}
+        for a, b in sorted(cut):
+            if a < b and (b, a) in cut:
+                since[(a, b)] = self._since.get((a, b), now)
+        self._since = since
+        return [(a, b, now - t) for (a, b), t in since.items()]
 
 
 def round_vector(away: np.ndarray, towards: tuple[float, float], pair_m: float) -> tuple[float, float]:
@@ -176,6 +222,38 @@ def back_off_vector(away: np.ndarray, push: tuple[float, float] | list[float]) -
     vx, vy = ax - ay - px, ay + ax - py
     v = math.hypot(vx, vy)
     return (vx / v, vy / v) if v > 0.0 else (0.0, 0.0)
+
+
+def meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarray:
+    """Whether each pair's paths meet: the gap ``rel`` (to the other) shrinks under the other's way less
+    one's own (``closing``, both at one speed), and at its closest it is within the pair's separation.
+
+    Right of way is for units that would meet in a gap, not for neighbours going side by side (their
+    gap holds; the push and ``_short`` keep it), nor for two whose paths pass wide of each other.
+    """
+    rate = (rel * closing).sum(axis=1)
+    w2 = (closing * closing).sum(axis=1)
+    least2 = (rel * rel).sum(axis=1) - rate * rate / np.where(w2 > 0.0, w2, 1.0)
+    meet: np.ndarray = (rate < 0.0) & (least2 < pair_s * pair_s)
+    return meet
+
+
+def held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:
+    """``d`` as a yielding unit's direction: along ``vec`` (``(0, 0)``: holding) for at most ``reach_m``."""
+    heading = None
+    if vec != (0.0, 0.0):
+        heading = math.degrees(math.atan2(vec[0], vec[1])) % 360.0
+    return msgspec.structs.replace(
+        d,
+        status=DirectionStatus.YIELDING,
+        vector=vec,
+        heading_deg=heading,
+        true_bearing_deg=None,
+        lookahead=[],
+        lookahead_geo=[],
+        reach_m=reach_m,
+        reason=reason,
+    )
 
 
 def resolving(hold: Hold, status: DirectionStatus | None) -> str:
