@@ -12,11 +12,11 @@ grace (``Locks.in_grace``): it yields to no one meanwhile, so it gets a
 chance to go, and no stretch of yielding with a deadlock in it outlasts
 ``deadlock_s`` plus one resolution.
 
-Two units each cut to nothing by the other's disc (``keep_apart.cut``) hold
-each other, whatever each was doing (``Facing``): two going round units at
-rest towards each other, in the one lane between them, stopped each other
-for as long as their resolutions lasted, then found their units at rest
-again and went round them again, for ever.  That is one deadlock between
+Two units going round units at rest, each cut to nothing by the other's
+disc (``keep_apart.cut``, ``Facing``), hold each other: towards each other
+in the one lane between the units at rest, they stopped each other for as
+long as their rounds lasted, then found their units at rest again and went
+round them again, for ever.  The two resolutions are one deadlock, between
 the two, resolved by right of way: the one that backs off
 (``Locks.who_backs_off``) gives way for ``backoff_s``, the other passes.
 
@@ -83,7 +83,6 @@ class Locks:
     def __init__(self, settings: DispersionSettings) -> None:
         self.settings = settings
         self._best: dict[str, tuple[float, float]] = {}  # unit -> (its best distance to goal, since when)
-        self._fresh: set[str] = set()  # units counted afresh, that have not come nearer their goal since
         self._grace: dict[str, float] = {}  # unit -> until when it yields to no one
         self._pairs: dict[tuple[str, str], tuple[float, str]] = {}  # pair -> (when it locked, who backed off)
 
@@ -95,26 +94,15 @@ class Locks:
         """Note the unit's distance to its goal (``None``: no goal) in this ``apply``."""
         if distance is None:
             self._best.pop(unit, None)
-            self._fresh.discard(unit)
             return
         best = self._best.get(unit)
-        if best is None:
+        if best is None or distance < best[0] - PROGRESS * sep_m:
             self._best[unit] = (distance, now)
-            self._fresh.add(unit)
-        elif distance < best[0] - PROGRESS * sep_m:
-            self._best[unit] = (distance, now)
-            self._fresh.discard(unit)
 
     def progressing(self, unit: str, now: float) -> bool:
-        """Whether the unit came nearer its goal within the last ``deadlock_s``.
-
-        A unit counted afresh (``forget``) has not, until it does: two units
-        stopping each other by turns, each found stuck one tick after the
-        other, would otherwise each see the other, just counted afresh, as a
-        queue that moves, and neither would ever be a deadlock.
-        """
+        """Whether the unit came nearer its goal within the last ``deadlock_s``."""
         best = self._best.get(unit)
-        return best is not None and unit not in self._fresh and now - best[1] < self.settings.deadlock_s
+        return best is not None and now - best[1] < self.settings.deadlock_s
 
     def stuck_for(self, unit: str, now: float) -> float:
         """How long the unit has come no nearer its goal, in seconds (0 when unknown)."""
@@ -155,7 +143,6 @@ class Locks:
     def keep(self, units: Container[str]) -> None:
         """Forget every unit not in ``units`` (the world forgot them): the memory stays bounded."""
         self._best = {u: b for u, b in self._best.items() if u in units}
-        self._fresh = {u for u in self._fresh if u in units}
         self._grace = {u: g for u, g in self._grace.items() if u in units}
 
 
@@ -275,14 +262,20 @@ def event(
     for_s: float,
     round_: bool,
     status: DirectionStatus | None,
+    facing: bool = False,
 ) -> DeadlockEvent:
-    """The deadlock's event: who resolves it (``unit``), with whom, and how long at most (``backoff_s``)."""
+    """The deadlock's event: who resolves it (``unit``), with whom, and how long at most (``backoff_s``).
+
+    ``facing``: two units going round units at rest that stop each other (``Facing``).
+    """
     x, y = at.tolist()
     if round_:
         what = status.value if status is not None else "at rest"
         why = f"{mover} came no nearer its goal for {held_s:.0f} s against {blocker} ({what}): goes round it"
     else:
         why = f"held {held_s:.0f} s, {blocker} not drawing away: {mover} backs off"
+    if facing:
+        why = f"{mover} and {blocker}, each going round a unit at rest, stop each other: {mover} gives way"
     why += f" for at most {for_s:g} s"
     return DeadlockEvent(
         unit=mover, other=blocker, position=(x, y), held_s=held_s, backoff_s=for_s, reason=why

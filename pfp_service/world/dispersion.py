@@ -30,7 +30,8 @@ bit for bit.  On, each ``apply`` that advises units does four things:
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
    separations of another; its reach is cut at that disc's edge, or, on
    the edge and leaning into it, it slides along it (``keep_apart``).  Two
-   units each cut to nothing by the other are one deadlock (``_facing_lock``).
+   units going round units at rest, each cut to nothing by the other, are
+   one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -237,7 +238,7 @@ class Dispersion:
 
     def _short(self, directions: list[Direction], moving: list[int], now: float) -> list[Event]:
         """Cut (or slide) each moving direction where it would enter a neighbour's ``KEEP`` separations
-        (``keep_apart``); two units each cut to nothing by the other are one deadlock (``_facing``)."""
+        (``keep_apart``); two going round units at rest that stop each other are one deadlock (``_facing_lock``)."""
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
@@ -259,19 +260,16 @@ class Dispersion:
         return events
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
-        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: one deadlock, once.
+        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: when both are going
+        round units at rest, their two resolutions are one deadlock (``deadlocks.Facing``), found once.
 
-        At once when either resolves a deadlock (with a third unit: the two
-        resolutions hold each other); otherwise after ``deadlock_s``.  The one
-        that backs off (right of way, ``Locks.who_backs_off``) gives way.
+        The one that backs off (right of way, ``Locks.who_backs_off``) gives
+        way, backing off from the other for ``backoff_s``; the other passes.
         """
         s, index = self.settings, self._index
         assert index is not None
-        ha, hb = self._held.get(a), self._held.get(b)
-        live = [h for h in (ha, hb) if h is not None and h.until > now]
-        if any(h.other in (a, b) for h in live):  # already this deadlock's resolution
-            return None
-        if not live and held_s < s.deadlock_s:
+        live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.round and h.until > now]
+        if len(live) < 2 or any(h.other in (a, b) for h in live):  # not two going round, or this one's
             return None
         first = s.manned_first
         ra, rb = self._units[a], self._units[b]
@@ -280,9 +278,7 @@ class Dispersion:
         g, p = self._row[giver], self._row[passer]
         gap = float(np.hypot(*(index.points[g] - index.points[p])))
         self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
-        return deadlocks.event(
-            giver, passer, index.points[g], held_s, s.backoff_s, False, self._units[passer].last_status
-        )
+        return deadlocks.event(giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True)
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
@@ -306,9 +302,12 @@ class Dispersion:
         gaps = np.hypot(rel[:, 0], rel[:, 1])
         ahead = (rel @ np.array(self._towards(i, d.vector))) > 0.0
         j = int(jj[int(np.where(ahead, gaps, gaps + 1e9).argmin())])
-        self._locks.forget(d.unit)
-        if self._queue(i, j, now):  # behind a unit that comes nearer its goal: a queue
+        # behind a unit that comes nearer its goal: a queue, and this unit still stuck (counted afresh,
+        # it would look to that unit like a queue that moves: two stopping each other by turns, each
+        # found stuck a tick after the other, would each see the other so, and never be a deadlock)
+        if self._queue(i, j, now):
             return None
+        self._locks.forget(d.unit)
         return self._lock(i, j, stuck, now)
 
     def _queue(self, i: int, j: int, now: float) -> bool:

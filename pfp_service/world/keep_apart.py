@@ -11,8 +11,8 @@ component into it), which takes it no nearer that neighbour, when that
 slide is at least ``SLIDE`` of its direction and enters no other disc.
 
 ``cut`` also says which units it left cut to nothing, and by whom: two units
-each stopped by the other's disc hold each other, whatever they were doing
-(``dispersion`` makes that one deadlock).
+each stopped by the other's disc hold each other (``dispersion`` makes two
+going round units at rest so one deadlock).
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@ Two units head on, on one line, are a deadlock (the manned one pushed the other 
 for its whole route, and it never arrived); one deadlock found from both its units in one tick is
 resolved once (both backed off, the second as escalation's, met again and locked again); the cut
 stops a unit at a neighbour's disc, and a unit on a disc's edge leaning into it slides along it (a
-row abreast at 1.1 separations held still: seed 4's jam at the middle gap); and two units each
-cut to nothing by the other are one deadlock (two going round units at rest towards each other, in
-the one lane between them, held each other for good: seed 3 with the slide).
+row abreast at 1.1 separations held still: seed 4's jam at the middle gap); and two units going
+round units at rest, each cut to nothing by the other, are one deadlock (towards each other in the
+one lane between them, they held each other for good: seed 3 with the slide).
 The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
 and measured on the tracks.
 """
@@ -82,6 +82,7 @@ def test_two_units_going_round_units_at_rest_towards_each_other_are_one_deadlock
     assert {"u0002", "u0003"} <= set(out.arrived_s), f"arrived: {sorted(out.arrived_s)}"
     between = [e for _, e in locks if {e.unit, e.other} == {"u0002", "u0003"}]
     assert len(between) == 1 and between[0].unit == "u0003", "one deadlock, the lower by id gives way"
+    assert "u0003 and u0002, each going round a unit at rest, stop each other" in between[0].reason
     assert out.closest_share >= 0.9 and out.not_cleared == 0
 
 
