@@ -39,7 +39,6 @@ from pfp_service.world.world import World, WorldSettings
 __all__ = [
     "Crowd",
     "Outcome",
-    "abreast",
     "converging",
     "crowded_goal",
     "gaps",
@@ -392,24 +391,6 @@ def crowded_goal(n: int = 8, radius_m: float = 20.0) -> Crowd:
         goals.append((radius_m * math.sin(a), radius_m * math.cos(a)))
     kinds = ["manned" if k % 3 == 0 else "unmanned" for k in range(n)]
     return Crowd(f"{n} units, one crowded goal area", starts, goals, kinds, {}, limit_s=900.0)
-
-
-def abreast(n: int = 7) -> Crowd:
-    """``n`` unmanned vehicles abreast at exactly 1.1 separations (55 m), 300 m short of one 240 m gap.
-
-    The row is wider than the gap, so the field leans each unit towards the
-    middle, into its neighbour's disc of 1.1 separations; their goals, 130 m
-    apart, lie 700 m beyond the gap.
-    """
-    xs = [(k - (n - 1) / 2) for k in range(n)]
-    return Crowd(
-        f"{n} units abreast at one gap",
-        starts=[(55.0 * x, -300.0) for x in xs],
-        goals=[(130.0 * x, 700.0) for x in xs],
-        kinds=["unmanned"] * n,
-        threats=wall((0.0,), 240.0, span=1500.0),
-        limit_s=600.0,
-    )
 
 
 def lane(c_start: tuple[float, float] = (-85.0, 0.0), d_start: tuple[float, float] = (85.0, -10.0)) -> Crowd:

@@ -28,10 +28,9 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    one, ``_short`` still keeps it apart), so no unit yields for longer than
    ``deadlock_s`` plus its resolution with a deadlock in it.
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
-   separations of another; its reach is cut at that disc's edge, or, on
-   the edge and leaning into it, it slides along it (``keep_apart``).  Two
-   units going round units at rest, each cut to nothing by the other, are
-   one deadlock (``_facing_lock``).
+   separations of another; its reach is cut at that disc's edge
+   (``keep_apart``).  Two units going round units at rest, each cut to
+   nothing by the other, are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -237,7 +236,7 @@ class Dispersion:
         return events + self._short(directions, moving, now)
 
     def _short(self, directions: list[Direction], moving: list[int], now: float) -> list[Event]:
-        """Cut (or slide) each moving direction where it would enter a neighbour's ``KEEP`` separations
+        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations
         (``keep_apart``); two going round units at rest that stop each other are one deadlock (``_facing_lock``)."""
         index = self._index
         assert index is not None
@@ -302,12 +301,9 @@ class Dispersion:
         gaps = np.hypot(rel[:, 0], rel[:, 1])
         ahead = (rel @ np.array(self._towards(i, d.vector))) > 0.0
         j = int(jj[int(np.where(ahead, gaps, gaps + 1e9).argmin())])
-        # behind a unit that comes nearer its goal: a queue, and this unit still stuck (counted afresh,
-        # it would look to that unit like a queue that moves: two stopping each other by turns, each
-        # found stuck a tick after the other, would each see the other so, and never be a deadlock)
-        if self._queue(i, j, now):
-            return None
         self._locks.forget(d.unit)
+        if self._queue(i, j, now):  # behind a unit that comes nearer its goal: a queue
+            return None
         return self._lock(i, j, stuck, now)
 
     def _queue(self, i: int, j: int, now: float) -> bool:
