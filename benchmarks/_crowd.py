@@ -43,6 +43,7 @@ __all__ = [
     "crowded_goal",
     "gaps",
     "head_on",
+    "lane",
     "near_its_goal",
     "one_gap",
     "pinned",
@@ -390,3 +391,21 @@ def crowded_goal(n: int = 8, radius_m: float = 20.0) -> Crowd:
         goals.append((radius_m * math.sin(a), radius_m * math.cos(a)))
     kinds = ["manned" if k % 3 == 0 else "unmanned" for k in range(n)]
     return Crowd(f"{n} units, one crowded goal area", starts, goals, kinds, {}, limit_s=900.0)
+
+
+def lane(c_start: tuple[float, float] = (-85.0, 0.0), d_start: tuple[float, float] = (85.0, -10.0)) -> Crowd:
+    """Two units at rest on their goals 133 m apart (``u0000`` manned, north; ``u0001``), and two crossing between them.
+
+    ``u0002`` from the west to a goal north-east, ``u0003`` from the east to
+    one south-west: the one lane between the two at rest (2.66 separations)
+    is wide enough for one unit at a time, and each blocked by a unit at rest
+    goes round it, into that lane, towards the other.
+    """
+    return Crowd(
+        "two units crossing between two at rest",
+        starts=[(0.0, 66.5), (0.0, -66.5), c_start, d_start],
+        goals=[(0.0, 66.5), (0.0, -66.5), (154.0, 65.0), (-154.0, -65.0)],
+        kinds=["manned", "unmanned", "unmanned", "unmanned"],
+        threats={},
+        limit_s=400.0,
+    )

@@ -12,6 +12,14 @@ grace (``Locks.in_grace``): it yields to no one meanwhile, so it gets a
 chance to go, and no stretch of yielding with a deadlock in it outlasts
 ``deadlock_s`` plus one resolution.
 
+Two units going round units at rest, each cut to nothing by the other's
+disc (``keep_apart.cut``, ``Facing``), hold each other: towards each other
+in the one lane between the units at rest, they stopped each other for as
+long as their rounds lasted, then found their units at rest again and went
+round them again, for ever.  The two resolutions are one deadlock, between
+the two, resolved by right of way: the one that backs off
+(``Locks.who_backs_off``) gives way for ``backoff_s``, the other passes.
+
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation
 within ``deadlock_s`` is coming nearer it, and a unit yielding to it (or
@@ -27,9 +35,10 @@ import math
 from collections.abc import Container
 from dataclasses import dataclass
 
+import msgspec
 import numpy as np
 
-from pfp_service.wire import DeadlockEvent, DirectionStatus
+from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus
 from pfp_service.world.separations import DispersionSettings
 
 __all__ = [
@@ -38,10 +47,13 @@ __all__ = [
     "ROUND_AT",
     "ROUND_BACKOFFS",
     "STARVED",
+    "Facing",
     "Hold",
     "Locks",
     "back_off_vector",
     "event",
+    "held",
+    "meet",
     "resolving",
     "round_vector",
 ]
@@ -134,6 +146,27 @@ class Locks:
         self._grace = {u: g for u, g in self._grace.items() if u in units}
 
 
+class Facing:
+    """Pairs of units each cut to nothing by the other, and since when (``keep_apart.cut``'s stopped pairs)."""
+
+    def __init__(self) -> None:
+        self._since: dict[tuple[str, str], float] = {}  # (a, b), a < b -> since when each stops the other
+
+    def pairs(self, stopped: list[tuple[str, str]], now: float) -> list[tuple[str, str, float]]:
+        """Each pair in ``stopped`` (unit, the unit whose disc stops it) both ways, with how long it has held.
+
+        Only the pairs seen in this ``apply`` are kept: a pair that parts and
+        meets again starts afresh, and the memory is this tick's pairs.
+        """
+        cut = set(stopped)
+        since = {}
+        for a, b in sorted(cut):
+            if a < b and (b, a) in cut:
+                since[(a, b)] = self._since.get((a, b), now)
+        self._since = since
+        return [(a, b, now - t) for (a, b), t in since.items()]
+
+
 def round_vector(away: np.ndarray, towards: tuple[float, float], pair_m: float) -> tuple[float, float]:
     """Round a unit at rest on the side of the goal: the shortest way, grazing its disc of ``ROUND_AT`` separations.
 
@@ -178,6 +211,38 @@ def back_off_vector(away: np.ndarray, push: tuple[float, float] | list[float]) -
     return (vx / v, vy / v) if v > 0.0 else (0.0, 0.0)
 
 
+def meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarray:
+    """Whether each pair's paths meet: the gap ``rel`` (to the other) shrinks under the other's way less
+    one's own (``closing``, both at one speed), and at its closest it is within the pair's separation.
+
+    Right of way is for units that would meet in a gap, not for neighbours going side by side (their
+    gap holds; the push and ``_short`` keep it), nor for two whose paths pass wide of each other.
+    """
+    rate = (rel * closing).sum(axis=1)
+    w2 = (closing * closing).sum(axis=1)
+    least2 = (rel * rel).sum(axis=1) - rate * rate / np.where(w2 > 0.0, w2, 1.0)
+    meet: np.ndarray = (rate < 0.0) & (least2 < pair_s * pair_s)
+    return meet
+
+
+def held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:
+    """``d`` as a yielding unit's direction: along ``vec`` (``(0, 0)``: holding) for at most ``reach_m``."""
+    heading = None
+    if vec != (0.0, 0.0):
+        heading = math.degrees(math.atan2(vec[0], vec[1])) % 360.0
+    return msgspec.structs.replace(
+        d,
+        status=DirectionStatus.YIELDING,
+        vector=vec,
+        heading_deg=heading,
+        true_bearing_deg=None,
+        lookahead=[],
+        lookahead_geo=[],
+        reach_m=reach_m,
+        reason=reason,
+    )
+
+
 def resolving(hold: Hold, status: DirectionStatus | None) -> str:
     """The reason a resolving unit's direction gives."""
     if hold.round:
@@ -197,14 +262,20 @@ def event(
     for_s: float,
     round_: bool,
     status: DirectionStatus | None,
+    facing: bool = False,
 ) -> DeadlockEvent:
-    """The deadlock's event: who resolves it (``unit``), with whom, and how long at most (``backoff_s``)."""
+    """The deadlock's event: who resolves it (``unit``), with whom, and how long at most (``backoff_s``).
+
+    ``facing``: two units going round units at rest that stop each other (``Facing``).
+    """
     x, y = at.tolist()
     if round_:
         what = status.value if status is not None else "at rest"
         why = f"{mover} came no nearer its goal for {held_s:.0f} s against {blocker} ({what}): goes round it"
     else:
         why = f"held {held_s:.0f} s, {blocker} not drawing away: {mover} backs off"
+    if facing:
+        why = f"{mover} and {blocker}, each going round a unit at rest, stop each other: {mover} gives way"
     why += f" for at most {for_s:g} s"
     return DeadlockEvent(
         unit=mover, other=blocker, position=(x, y), held_s=held_s, backoff_s=for_s, reason=why

@@ -28,7 +28,9 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    one, ``_short`` still keeps it apart), so no unit yields for longer than
    ``deadlock_s`` plus its resolution with a deadlock in it.
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
-   separations of another; its reach is cut at that disc's edge.
+   separations of another; its reach is cut at that disc's edge
+   (``keep_apart``).  Two units going round units at rest, each cut to
+   nothing by the other, are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -42,7 +44,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
-import msgspec
 import numpy as np
 
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
@@ -98,6 +99,7 @@ class Dispersion:
         self._team_of = team_of
         self._held: dict[str, Hold] = {}
         self._locks = deadlocks.Locks(settings)
+        self._facing = deadlocks.Facing()
         self._index: NeighbourIndex | None = None
         self._recs: list[UnitRecord] = []
         self._row: dict[str, int] = {}
@@ -231,17 +233,51 @@ class Dispersion:
             elif gap > hold.gap + _DRAWN_AWAY * pair or self._queue(i, j, now):
                 hold.since, hold.gap = now, gap  # it is passing, or a queue that moves: no deadlock yet
             directions[k] = self._yield(d, i, j, gap, pair)
-        self._short(directions, moving)
-        return events
+        return events + self._short(directions, moving, now)
 
-    def _short(self, directions: list[Direction], moving: list[int]) -> None:
-        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations (``keep_apart``)."""
+    def _short(self, directions: list[Direction], moving: list[int], now: float) -> list[Event]:
+        """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations
+        (``keep_apart``); two going round units at rest that stop each other are one deadlock (``_facing_lock``)."""
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
-        if go:
-            rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
-            keep_apart.cut(index, rows, directions, go)
+        if not go:
+            return []
+        rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
+        stopped = keep_apart.cut(index, rows, directions, go)
+        at = {directions[k].unit: k for k, _ in stopped}
+        events: list[Event] = []
+        for a, b, held_s in self._facing.pairs(
+            [(directions[k].unit, self._recs[j].id) for k, j in stopped], now
+        ):
+            if (lock := self._facing_lock(a, b, held_s, now)) is not None:
+                events.append(lock)
+                k = at[lock.unit]
+                i, j = self._row[lock.unit], self._row[lock.other]
+                directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
+                keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k])
+        return events
+
+    def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
+        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: when both are going
+        round units at rest, their two resolutions are one deadlock (``deadlocks.Facing``), found once.
+
+        The one that backs off (right of way, ``Locks.who_backs_off``) gives
+        way, backing off from the other for ``backoff_s``; the other passes.
+        """
+        s, index = self.settings, self._index
+        assert index is not None
+        live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.round and h.until > now]
+        if len(live) < 2 or any(h.other in (a, b) for h in live):  # not two going round, or this one's
+            return None
+        first = s.manned_first
+        ra, rb = self._units[a], self._units[b]
+        lower, higher = (a, b) if priority(ra, first) > priority(rb, first) else (b, a)
+        giver, passer = (lower, higher) if self._locks.who_backs_off(lower, higher, now) else (higher, lower)
+        g, p = self._row[giver], self._row[passer]
+        gap = float(np.hypot(*(index.points[g] - index.points[p])))
+        self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
+        return deadlocks.event(giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True)
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
@@ -382,7 +418,7 @@ class Dispersion:
         k = at[i]
         ahead = along > AHEAD * gap
         behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = (rank[j] < rank[i]) & goes[j] & ~behind & _meet(rel, way[j] - vec[k], pair_s)
+        keep = (rank[j] < rank[i]) & goes[j] & ~behind & deadlocks.meet(rel, way[j] - vec[k], pair_s)
         # each direction's nearest (the first of equals, in the pairs' order): one sort, not a loop
         k, j, gap = k[keep], j[keep], gap[keep]
         order = np.lexsort((np.arange(len(k)), gap, k))
@@ -411,9 +447,9 @@ class Dispersion:
             vec = (-px / crowded, -py / crowded)
             reason = reason.replace("; goes when", "; making room, goes when")
             self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
-            return _held(d, vec, pair, reason)
+            return deadlocks.held(d, vec, pair, reason)
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, None))
-        return _held(d, (0.0, 0.0), 0.0, reason)
+        return deadlocks.held(d, (0.0, 0.0), 0.0, reason)
 
     def _resolution_seps(
         self, directions: list[Direction], moving: list[int], rows: np.ndarray
@@ -449,35 +485,4 @@ class Dispersion:
         rec = self._recs[i]
         reason = deadlocks.resolving(hold, self._recs[j].last_status)
         self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
-        return _held(d, vec, pair, reason)
-
-
-def _meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarray:
-    """Whether each pair's paths meet: the gap ``rel`` (to the other) shrinks under the other's way less
-    one's own (``closing``, both at one speed), and at its closest it is within the pair's separation.
-
-    Right of way is for units that would meet in a gap, not for neighbours going side by side (their
-    gap holds; the push and ``_short`` keep it), nor for two whose paths pass wide of each other.
-    """
-    rate = (rel * closing).sum(axis=1)
-    w2 = (closing * closing).sum(axis=1)
-    least2 = (rel * rel).sum(axis=1) - rate * rate / np.where(w2 > 0.0, w2, 1.0)
-    meet: np.ndarray = (rate < 0.0) & (least2 < pair_s * pair_s)
-    return meet
-
-
-def _held(d: Direction, vec: tuple[float, float], reach_m: float, reason: str) -> Direction:
-    heading = None
-    if vec != (0.0, 0.0):
-        heading = math.degrees(math.atan2(vec[0], vec[1])) % 360.0
-    return msgspec.structs.replace(
-        d,
-        status=DirectionStatus.YIELDING,
-        vector=vec,
-        heading_deg=heading,
-        true_bearing_deg=None,
-        lookahead=[],
-        lookahead_geo=[],
-        reach_m=reach_m,
-        reason=reason,
-    )
+        return deadlocks.held(d, vec, pair, reason)

@@ -1,7 +1,9 @@
 """Dispersion's last word on a moving direction: it never takes a unit within ``KEEP`` separations of another.
 
 Apart from ``dispersion`` (the right of way and deadlocks), which calls it
-last in each ``apply``.
+last in each ``apply``.  ``cut`` also says which units it left cut to
+nothing, and by whom: two units each stopped by the other's disc hold each
+other (``dispersion`` makes two going round units at rest so one deadlock).
 """
 
 from __future__ import annotations
@@ -15,9 +17,12 @@ from pfp_service.wire import Direction
 __all__ = ["KEEP", "cut"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
+_GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 
 
-def cut(index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go: list[int]) -> None:
+def cut(
+    index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go: list[int]
+) -> list[tuple[int, int]]:
     """Cut each of ``directions[go]`` (the units at ``index`` rows ``rows``) where it would enter a neighbour's disc.
 
     A direction's ray against every neighbour's disc of ``KEEP`` times the
@@ -31,6 +36,10 @@ def cut(index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go
         rows: each moving direction's row in ``index``.
         directions: the tick's directions, cut in place; those at ``go`` have a non-zero vector.
         go: the positions in ``directions`` of the moving ones, in the order of ``rows``.
+
+    Returns:
+        Each unit left cut to nothing (its position in ``directions``) with
+        the row of every neighbour whose disc stops it, one pair each.
     """
     at = np.full(len(index.points), -1, dtype=np.intp)
     at[rows] = np.arange(len(rows))
@@ -41,12 +50,15 @@ def cut(index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go
     along = (rel * vec[n]).sum(axis=1)
     keep_m = KEEP * pair_s
     across2 = (rel * rel).sum(axis=1) - along * along
-    hit = (along > 0.0) & (across2 < keep_m * keep_m)
-    enter = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+    hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
+    enter = np.full(len(rel), np.inf)
+    enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
     safe = np.full(len(go), np.inf)
-    np.minimum.at(safe, n[hit], enter)
+    np.minimum.at(safe, n[hit], enter[hit])
     for m in np.flatnonzero(np.isfinite(safe)).tolist():
         k, reach = go[m], float(safe[m])
         d = directions[k]
         if d.reach_m is None or reach < d.reach_m:
             directions[k] = msgspec.structs.replace(d, reach_m=reach)
+    held = (enter <= _GRAZE_M) & (safe[n] <= _GRAZE_M)
+    return [(go[m], jj) for m, jj in zip(n[held].tolist(), j[held].tolist())]

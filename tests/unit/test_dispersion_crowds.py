@@ -2,8 +2,10 @@
 
 Two units head on, on one line, are a deadlock (the manned one pushed the other back before it
 for its whole route, and it never arrived); one deadlock found from both its units in one tick is
-resolved once (both backed off, the second as escalation's, met again and locked again); and the
-cut, now in its own module, stops a unit at a neighbour's disc as before.
+resolved once (both backed off, the second as escalation's, met again and locked again); the cut
+stops a unit at a neighbour's disc; and two units going round units at rest, each cut to nothing by
+the other, are one deadlock (towards each other in the one lane between them, they held each other
+for good: seed 3 of the gaps crowd with a slide along the disc, tried and not kept).
 The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
 and measured on the tracks.
 """
@@ -37,6 +39,19 @@ def _cut(points: list[tuple[float, float]], way: tuple[float, float], reach_m: f
     ]
     keep_apart.cut(index, np.array([0]), dirs, [0])
     return dirs[0]
+
+
+def test_two_units_going_round_units_at_rest_towards_each_other_are_one_deadlock_and_both_arrive():
+    """Each cut to nothing by the other in the one lane, each resolving its own deadlock with a unit at
+    rest: on main they went round, stopped each other, and went round again every 31 s, for good."""
+    crowd = _crowd.lane()
+    locks: list = []
+    out = _crowd.simulate(crowd, ON, locks=locks)
+    assert {"u0002", "u0003"} <= set(out.arrived_s), f"arrived: {sorted(out.arrived_s)}"
+    between = [e for _, e in locks if {e.unit, e.other} == {"u0002", "u0003"}]
+    assert len(between) == 1 and between[0].unit == "u0003", "one deadlock, the lower by id gives way"
+    assert "u0003 and u0002, each going round a unit at rest, stop each other" in between[0].reason
+    assert out.closest_share >= 0.9 and out.not_cleared == 0
 
 
 def test_the_cut_stops_a_unit_at_its_neighbours_disc_and_only_there():

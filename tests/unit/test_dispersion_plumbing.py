@@ -90,7 +90,7 @@ def _yields(m1: tuple[float, float], m1_goal: tuple[float, float], r1_goal: tupl
 def test_right_of_way_is_for_paths_that_meet_not_for_neighbours_going_side_by_side() -> None:
     import numpy as np
 
-    from pfp_service.world.dispersion import _meet
+    from pfp_service.world.deadlocks import meet as _meet
 
     # the other 60 m off ahead-left: (its way, one's own) -> whether their paths meet, separation 50 m
     cases = {
