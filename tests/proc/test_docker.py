@@ -234,6 +234,7 @@ def test_the_compose_endpoints_carry_each_services_own_certificate(secrets_volum
     assert f"{SECRETS}/clients/planner-tls.json5" in _argv(SERVICES["planner"])
 
 
+@pytest.mark.alone  # its inject plays expectations on a sped-up clock (x10): see tests/conftest.py's PLACEMENT
 def test_the_compose_deployment_runs_as_processes(tmp_path):
     """Compose's own commands, run here: /etc/pfp is a temp dir, the router a Python session on a free port.
 

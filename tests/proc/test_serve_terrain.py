@@ -55,7 +55,10 @@ def test_serve_over_terrain_names_it_and_guides_a_unit_round_the_steep_ground(de
     from pfp_service.terrain.live import load
 
     m = "g" + uuid.uuid4().hex[:8]
+    # the live searches' budget as the preview's: a loaded machine (two workers beside a load of 6) ran a
+    # search past the default 5 s, the unit descended without it, and its track left the preview's
     args = ("--terrain", str(dem), "--state-dir", "none", "--preview-budget-ms", "20000")
+    args += ("--deliberation-budget-s", "20")
     with planner_process(*args, mission=m) as (ep, _proc), client(ep) as s:
         (reply,) = [r for r in s.get(keys.planner_statuses(m), timeout=10) if r.ok is not None]
         st = decode_planner_status(reply.ok.payload.to_bytes())
