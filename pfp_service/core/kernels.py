@@ -283,8 +283,8 @@ def add_term(
         return val, gx, gy
     e = packed[j, SCALE] * math.exp(-0.5 * q)
     if (
-        packed[j, VIS_NX] == 0.0
-        and _absorbed(e, val)
+        _absorbed(e, val)
+        and packed[j, VIS_NX] == 0.0
         and _absorbed(2.0 * e * (0.5 * abs(packed[j, A_X]) + abs(pzx)), gx)
         and _absorbed(2.0 * e * (0.5 * abs(packed[j, A_Y]) + abs(pzy)), gy)
     ):
