@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -142,7 +144,8 @@ def test_segment_hits_are_first_hit_per_segment():
 # -- add_term's skip (a term too small to change a bit of a sum) against the plain sum of threat_term --
 def _fleet(seed: int, masked: bool, box: float = 30_000.0, n: int = 400):
     """Threats spread as ``pfp bench engine``'s fleet case (most pairs far apart), some inactive, every
-    third masked by a random window when ``masked``; and ``n`` points, some far outside the box."""
+    third masked by a random window when ``masked``; and ``n`` points, some far outside the box, a few
+    not finite or extreme."""
     from pfp_service.core.visibility import Window
 
     rng = np.random.default_rng(seed)
@@ -163,7 +166,10 @@ def _fleet(seed: int, masked: bool, box: float = 30_000.0, n: int = 400):
 
     packed = ThreatField(threats, sight=sight).packed.copy()
     packed[rng.choice(len(threats), 5, replace=False), kernels.ACTIVE] = 0.0
-    pts = np.concatenate([rng.uniform(0, box, (n - 20, 2)), rng.uniform(-3 * box, 4 * box, (20, 2))])
+    odd = [(np.nan, 0.0), (np.inf, 5.0), (-np.inf, np.inf), (1e300, -1e300), (1e-300, 0.0), (0.0, -0.0)]
+    pts = np.concatenate(
+        [rng.uniform(0, box, (n - 20 - len(odd), 2)), rng.uniform(-3 * box, 4 * box, (20, 2)), odd]
+    )
     return packed, pts, rng.uniform(0, box, (n, 2)), rng.uniform(1e-7, 1e-5, n)
 
 
@@ -176,6 +182,7 @@ def _summed_terms(packed, x, y, listed=None):
     return val, gx, gy
 
 
+@np.errstate(over="ignore")  # an extreme point's norm overflows to inf, in the kernel too
 def _descent_rows(packed, pts, goals, gains, listed=lambda i: None):
     rows = []
     for i, (x, y) in enumerate(pts):
@@ -218,7 +225,11 @@ def test_culled_rows_are_the_summed_terms_of_their_cell(masked):
     grid = (index.origin[0], index.origin[1], index.cell, index.nx, index.ny)
 
     def listed(i):
-        ci, ck = np.floor((pts[i] - index.origin) / index.cell).astype(int)
+        x, y = (float(v) for v in pts[i])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return []
+        ci = math.floor((x - index.origin[0]) / index.cell)
+        ck = math.floor((y - index.origin[1]) / index.cell)
         if not (0 <= ci < index.nx and 0 <= ck < index.ny):
             return []
         c = ck * index.nx + ci
