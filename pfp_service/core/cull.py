@@ -205,10 +205,7 @@ def _culled_row(
         c = ck * nx + ci
         need = cell_need[c]
         for p in range(indptr[c], indptr[c + 1]):
-            v, dx, dy = kernels.threat_term(packed, indices[p], x, y, 0.0, True)
-            val += v
-            gx += dx
-            gy += dy
+            val, gx, gy = kernels.add_term(packed, indices[p], x, y, val, gx, gy)
     fx = gx - 2.0 * gains[i] * (goals[i, 0] - x)
     fy = gy - 2.0 * gains[i] * (goals[i, 1] - y)
     norm = math.sqrt(fx * fx + fy * fy)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -137,3 +139,104 @@ def test_segment_hits_are_first_hit_per_segment():
     hits = cores.segment_hits(path)
     assert hits.shape == (79,) and hits.any() and not hits.all()
     assert hits.tolist() == [bool(cores.first_hit(path[i : i + 2])) for i in range(79)]
+
+
+# -- add_term's skip (a term too small to change a bit of a sum) against the plain sum of threat_term --
+def _fleet(seed: int, masked: bool, box: float = 30_000.0, n: int = 400):
+    """Threats spread as ``pfp bench engine``'s fleet case (most pairs far apart), some inactive, every
+    third masked by a random window when ``masked``; and ``n`` points, some far outside the box, a few
+    not finite or extreme."""
+    from pfp_service.core.visibility import Window
+
+    rng = np.random.default_rng(seed)
+    sigmas = rng.uniform(200.0, 900.0, 60)
+    threats = [
+        Threat.from_facing(
+            tuple(rng.uniform(0, box, 2)), rng.uniform(0, 360), s, s * rng.uniform(0.3, 1), 2.0
+        )
+        for s in sigmas
+    ]
+    windows = {j: rng.uniform(0.0, 4.0, (9, 11)) for j in range(0, len(threats), 3)} if masked else {}
+    index = {id(t): j for j, t in enumerate(threats)}
+
+    def sight(t, reach):
+        low = windows.get(index[id(t)])
+        cell = max(reach[2] - reach[0], reach[3] - reach[1]) / 8.0
+        return None if low is None else Window(reach[0], reach[1], cell, low, 1.5, 0.25)
+
+    packed = ThreatField(threats, sight=sight).packed.copy()
+    packed[rng.choice(len(threats), 5, replace=False), kernels.ACTIVE] = 0.0
+    odd = [(np.nan, 0.0), (np.inf, 5.0), (-np.inf, np.inf), (1e300, -1e300), (1e-300, 0.0), (0.0, -0.0)]
+    pts = np.concatenate(
+        [rng.uniform(0, box, (n - 20 - len(odd), 2)), rng.uniform(-3 * box, 4 * box, (20, 2)), odd]
+    )
+    return packed, pts, rng.uniform(0, box, (n, 2)), rng.uniform(1e-7, 1e-5, n)
+
+
+def _summed_terms(packed, x, y, listed=None):
+    """The general path: every ``threat_term`` added in order, as a plain Python float sum."""
+    val = gx = gy = 0.0
+    for j in range(len(packed)) if listed is None else listed:
+        v, dx, dy = kernels.threat_term(packed, int(j), float(x), float(y), 0.0, True)
+        val, gx, gy = val + v, gx + dx, gy + dy
+    return val, gx, gy
+
+
+@np.errstate(over="ignore")  # an extreme point's norm overflows to inf, in the kernel too
+def _descent_rows(packed, pts, goals, gains, listed=lambda i: None):
+    rows = []
+    for i, (x, y) in enumerate(pts):
+        val, gx, gy = _summed_terms(packed, x, y, listed(i))
+        fx = gx - 2.0 * gains[i] * (goals[i, 0] - x)
+        fy = gy - 2.0 * gains[i] * (goals[i, 1] - y)
+        rows.append((fx, fy, val, np.sqrt(fx * fx + fy * fy)))
+    return np.array(rows)
+
+
+def _same_bits(a, b) -> bool:
+    return np.array_equal(np.asarray(a).view(np.int64), np.asarray(b).view(np.int64))
+
+
+@pytest.mark.parametrize("masked", [False, True])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_gradient_sums_skip_only_terms_that_change_no_bit(seed, masked):
+    packed, pts, goals, gains = _fleet(seed, masked)
+    assert (packed[:, kernels.VIS_NX] > 0).any() == masked
+    want = _descent_rows(packed, pts, goals, gains)
+    for name, kernel in (("batch", kernels.batch_descent), ("serial", kernels._serial_descent)):
+        out = np.empty((len(pts), 4))
+        kernel(packed, pts, goals, gains, out)
+        assert _same_bits(out, want), f"seed {seed}, masked {masked}: {name} differs from the summed terms"
+    for (x, y), row in zip(pts[:50], want[:50]):
+        assert _same_bits(kernels.point_level_grad(packed, x, y), _summed_terms(packed, x, y)), (seed, x, y)
+    # the inputs exercise the skip: many nonzero terms lie far below their sum's last place
+    x, y = pts[0]
+    terms = [kernels.threat_term(packed, j, x, y, 0.0, True)[0] for j in range(len(packed))]
+    val = np.cumsum(terms)
+    assert sum(0.0 < t < np.spacing(s) / 8 for t, s in zip(terms[1:], val[:-1])) >= 5, f"seed {seed}"
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_culled_rows_are_the_summed_terms_of_their_cell(masked):
+    from pfp_service.core import cull
+
+    packed, pts, goals, gains = _fleet(4, masked, box=10_000.0)
+    index = cull.CullIndex(packed)
+    grid = (index.origin[0], index.origin[1], index.cell, index.nx, index.ny)
+
+    def listed(i):
+        x, y = (float(v) for v in pts[i])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return []
+        ci = math.floor((x - index.origin[0]) / index.cell)
+        ck = math.floor((y - index.origin[1]) / index.cell)
+        if not (0 <= ci < index.nx and 0 <= ck < index.ny):
+            return []
+        c = ck * index.nx + ci
+        return index.indices[index.indptr[c] : index.indptr[c + 1]]
+
+    out, flags = np.empty((len(pts), 4)), np.zeros(len(pts), dtype=np.bool_)
+    cull._culled_descent(
+        packed, pts, goals, gains, grid, index.indptr, index.indices, index.cell_bound, 0.0, out, flags
+    )
+    assert _same_bits(out, _descent_rows(packed, pts, goals, gains, listed)), f"masked {masked}"
