@@ -70,6 +70,7 @@ class TeamBook:
         self._links: set[str] = set()  # the units in a link: robots and their controllers
         self._controls: set[str] = set()  # the controllers with robots
         self._now: float | None = None  # the time of the ``judge`` under way
+        self.version = 0  # bumped by every team put or removed: what a cache of ``dispersed`` keys on
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -115,7 +116,7 @@ class TeamBook:
         index.add(tid, team)
         self._checks = index
         self.teams[tid] = team
-        self._columns, self._dispersed = {}, {}
+        self._columns, self._dispersed, self.version = {}, {}, self.version + 1
         self._looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
@@ -132,7 +133,7 @@ class TeamBook:
         """Dissolve a team; whether there was one."""
         if self.teams.pop(tid, None) is None:
             return False
-        self._columns, self._dispersed = {}, {}
+        self._columns, self._dispersed, self.version = {}, {}, self.version + 1
         self.tracks.pop(tid, None)
         self._looked.pop(tid, None)
         self._lines.pop(tid, None)
