@@ -41,7 +41,7 @@ MAX_TRACK_POINTS = 4096  # a lead's track kept at most: the part behind every fo
 class TeamBook:
     """The teams in force, keyed by id, and what their roles need remembered: each lead's track."""
 
-    def __init__(self, sight: Sight | None = None) -> None:
+    def __init__(self, sight: Sight | None = None, seen: Callable[[], object] | None = None) -> None:
         self.sight = sight  # line of sight over the world's terrain, for the controllers' links (fixed)
         self.teams: dict[str, TeamUpdate] = {}
         self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
@@ -71,6 +71,9 @@ class TeamBook:
         self._controls: set[str] = set()  # the controllers with robots
         self._now: float | None = None  # the time of the ``judge`` under way
         self.version = 0  # bumped by every team put or removed: what a cache of ``dispersed`` keys on
+        # ``seen`` (the units' ``Units.version``) and the teams': while it stands, no lead moved (``_track``)
+        self.where: Callable[[], object] | None = None if seen is None else lambda: (seen(), self.version)
+        self._tracked: object = None
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -239,6 +242,9 @@ class TeamBook:
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
+        key = self.where() if self.where is not None else None
+        if key is not None and key == self._tracked:
+            return  # no unit reported, went stale or was dropped, no team changed: no lead has moved
         looked = self._looked
         for tid, team in self.teams.items():
             rec = units.get(team.lead) if team.lead is not None else None
@@ -250,6 +256,7 @@ class TeamBook:
                 track.append(rec.position)
             if len(track) > MAX_TRACK_POINTS:
                 self._trim(tid, team, units)
+        self._tracked = key
 
     def _trim(self, tid: str, team: TeamUpdate, units: Mapping[str, UnitRecord]) -> None:
         """Drop the track behind the rearmost follower; then every other point, if it is still too long."""
@@ -459,17 +466,10 @@ class _Either:
 
 def _placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:
     """Whether a team put gives its members new places: a goal new, moved, or placed otherwise."""
-    if new.goal is None:
-        return False
-    if old is None:
-        return True
-    return (old.goal, old.offsets, old.spacing_m, old.separation_m, team_goal.column(old)) != (
-        new.goal,
-        new.offsets,
-        new.spacing_m,
-        new.separation_m,
-        team_goal.column(new),
-    )
+    if new.goal is None or old is None:
+        return new.goal is not None
+    was, now = [(t.goal, t.offsets, t.spacing_m, t.separation_m, team_goal.column(t)) for t in (old, new)]
+    return was != now
 
 
 def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:
