@@ -71,9 +71,8 @@ class TeamBook:
         self._controls: set[str] = set()  # the controllers with robots
         self._now: float | None = None  # the time of the ``judge`` under way
         self.version = 0  # bumped by every team put or removed: what a cache of ``dispersed`` keys on
-        # ``seen`` (the units' ``Units.version``) and the teams': while it stands, no lead moved (``_track``)
-        self.where: Callable[[], object] | None = None if seen is None else lambda: (seen(), self.version)
-        self._tracked: object = None
+        self._seen = seen  # the units' ``Units.version``: ``where``
+        self._tracked: object = None  # ``where`` when ``_track`` last looked
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -83,7 +82,7 @@ class TeamBook:
             self.remove(inp.team)
             return None, units
         err = self.put(inp.team, inp.update)
-        if err is None and _placing_changed(old, inp.update):
+        if err is None and team_goal.placing_changed(old, inp.update):
             self._placing.update(team_goal.places(inp.update))
         return (err, set()) if err is not None else (None, units | set(inp.update.units()))
 
@@ -240,9 +239,14 @@ class TeamBook:
             self.sent[d.unit] = judged
         return out
 
+    def where(self) -> object:
+        """A key that changes whenever a unit's position, staleness, goal or record (``seen``) or a team may
+        have: while it stands, no lead has moved (``_track``) nor has dispersion's index; ``None``: unknown."""
+        return (self._seen(), self.version) if self._seen is not None else None
+
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
-        key = self.where() if self.where is not None else None
+        key = self.where()
         if key is not None and key == self._tracked:
             return  # no unit reported, went stale or was dropped, no team changed: no lead has moved
         looked = self._looked
@@ -462,14 +466,6 @@ class _Either:
 
     def __contains__(self, unit: object) -> bool:
         return unit in self.a or unit in self.b
-
-
-def _placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:
-    """Whether a team put gives its members new places: a goal new, moved, or placed otherwise."""
-    if new.goal is None or old is None:
-        return new.goal is not None
-    was, now = [(t.goal, t.offsets, t.spacing_m, t.separation_m, team_goal.column(t)) for t in (old, new)]
-    return was != now
 
 
 def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:

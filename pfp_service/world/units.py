@@ -206,6 +206,10 @@ class Units:
         # a reader's cache of where the units are (dispersion's neighbour index) stands while it does
         self.version = 0
 
+    def seen(self) -> int:
+        """``version``, for a cache to key on (a bound method: a copied world's caches read their own book)."""
+        return self.version
+
     def _to(self, rec: UnitRecord, step: Step, gone: bool = False) -> None:
         """Record the phase ``step`` left ``rec`` in (``gone``: its record goes), if ``TRANSITIONS`` allows it."""
         new = None if gone else phase_of(rec)

@@ -72,7 +72,7 @@ class World:
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._direct)
         self.limits = Limits()
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
-        self.teams = TeamBook(link_sight(s.terrain), lambda: self._book.version)  # links: range, sight
+        self.teams = TeamBook(link_sight(s.terrain), self._book.seen)  # a robot's link: range and sight
         self._route = team_route.RouteKeys(self._rec, self.teams, s.terrain)  # a lead's, for its followers
         self._disp = dispersion.Dispersion(  # off unless enabled; a team's separation_m among its members
             s.dispersion, self._units, self._book.yielded, self.teams.dispersed, self.teams.where

@@ -9,13 +9,18 @@ must keep the very tracks of a book without the key.
 
 from __future__ import annotations
 
+import copy
 import random
 
 import pytest
 
+from pfp_service.wire import UnitState
 from pfp_service.wire.messages import TeamUpdate
+from pfp_service.world.events import StateReported
+from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.team_book import TeamBook
 from pfp_service.world.units import PhaseError, Units
+from pfp_service.world.world import World, WorldSettings
 
 pytestmark = pytest.mark.unit
 
@@ -61,7 +66,7 @@ def test_a_keyed_book_tracks_as_one_that_looks_every_judge(seed: int) -> None:
             before = keyed._tracked
             keyed.judge([], book.records)
             plain.judge([], book.records)
-            skipped += keyed.where is not None and before == keyed._tracked and before is not None
+            skipped += before is not None and before == keyed._tracked
             assert keyed.tracks == plain.tracks
             longest = max([longest, *map(len, plain.tracks.values())])
     except AssertionError:
@@ -69,3 +74,14 @@ def test_a_keyed_book_tracks_as_one_that_looks_every_judge(seed: int) -> None:
         raise
     assert skipped > 50  # the key did skip the look, not only agree
     assert longest >= 3  # leads moved and were tracked
+
+
+def test_a_copied_world_keys_on_its_own_book() -> None:
+    """A world deep-copied (a one-pass comparison's twin) keys its caches on its own units, not the original's."""
+    w = World(WorldSettings(dispersion=DispersionSettings(enabled=True)))
+    w.apply([StateReported("a", UnitState(position=(0.0, 0.0), seq=0))], 0.0)
+    twin = copy.deepcopy(w)
+    key = w.teams.where()
+    twin.apply([StateReported("a", UnitState(position=(5.0, 0.0), seq=1))], 1.0)
+    assert w.teams.where() == key
+    assert twin.teams.where() != key
