@@ -162,6 +162,12 @@ class NeighbourIndex:
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
         self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
 
+    def unasked(self) -> NeighbourIndex:
+        """This index as new-built: no ``near`` query remembered, so the next is asked afresh (and its pairs
+        come in the order a new index would give them); the fleet's pairs, the same either way, are kept."""
+        self._near, self._near_s = None, None
+        return self
+
     def pair_seps(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """The separation of each pair ``(i, j)`` (``pair_separation``) in metres."""
         return pair_separation(self.points, self.seps, i, j, self.team, self.team_sep, self.goals)

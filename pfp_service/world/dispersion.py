@@ -5,7 +5,7 @@ bit for bit.  On, each ``apply`` that advises units does four things:
 
 1. ``Dispersion.push``: a k-d tree over every unit the world holds a fresh
    position for (guided, arrived, without a goal: a friendly unit is in the
-   way whatever it is doing), built once, and each advised unit's share of
+   way whatever it is doing), built once while they stand (``neighbours``), and each advised unit's share of
    the repulsive term (``core.dispersion``), which it descends with the
    field (``core.batch.advise_many``: a unit on another route turns by it).
 2. ``Dispersion.right_of_way``: a unit whose direction closes on a moving
@@ -50,10 +50,11 @@ from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
 from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus, Event
 from pfp_service.world import deadlocks, keep_apart
 from pfp_service.world.deadlocks import Hold
+from pfp_service.world.neighbours import TEAM_WIDEST, FleetIndex, TeamOf
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord, Verdict
 
-__all__ = ["STRAIGHT_AT", "YIELD_AT", "Dispersion", "TeamOf", "priority"]
+__all__ = ["STRAIGHT_AT", "TEAM_WIDEST", "YIELD_AT", "Dispersion", "TeamOf", "priority"]
 
 YIELD_AT = 1.5  # a lower-priority unit closing on a higher one within this many separations holds
 # a yielding unit pushed this hard (a neighbour within about its separation: PUSH (1 - 1 / REACH) is
@@ -67,14 +68,8 @@ AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
 # push on the other is along their line, with nothing to turn either aside (off the line by half a metre
 # in 60 m, the push turns them, and they pass)
 STRAIGHT_AT = math.cos(math.radians(1.0))
-# a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
-# reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
-TEAM_WIDEST = 4.0
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
-
-# the team a unit is in that sets a separation, and that separation (``TeamBook.dispersed``), or None
-TeamOf = Callable[[str], "tuple[str, float] | None"]
 
 
 def priority(rec: UnitRecord, manned_first: bool) -> tuple[int, str]:
@@ -91,12 +86,14 @@ class Dispersion:
         units: Mapping[str, UnitRecord],
         yielded: Callable[[UnitRecord, Verdict], None],
         team_of: TeamOf | None = None,
+        version: Callable[[], object] | None = None,
     ) -> None:
         self.settings = settings
         self._units = units  # the world's records, read (every unit with a fresh position is in the way)
         # what a held unit's record keeps is the units' owner's to write (``units.Units.yielded``)
         self._yielded = yielded
-        self._team_of = team_of
+        # the fleet's index, kept while ``version`` (where the units are, the teams) stands: a wave's shares
+        self._fleet = FleetIndex(settings, units, team_of, version)
         self._held: dict[str, Hold] = {}
         self._locks = deadlocks.Locks(settings)
         self._facing = deadlocks.Facing()
@@ -104,7 +101,6 @@ class Dispersion:
         self._recs: list[UnitRecord] = []
         self._row: dict[str, int] = {}
         self._pushed: dict[str, list[float]] = {}  # each unit advised in this ``apply``: its push
-        self._seps: dict[str, float] = {}  # each unit's separation, by its class: fixed by the settings
         self._resolving: dict[tuple[int, int], float] = {}  # this tick's resolutions' pair separations
 
     def holding(self) -> int:
@@ -127,38 +123,7 @@ class Dispersion:
             return None
 
     def _push(self, guided: list[UnitRecord]) -> np.ndarray:
-        recs = [r for r in self._units.values() if r.position is not None and not r.stale]
-        self._recs, self._row = recs, {r.id: k for k, r in enumerate(recs)}
-        n = len(recs)
-        seps, sep = self._seps, self.settings.separation
-        if len(seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
-            seps.clear()
-        team, team_sep = None, None
-        if self._team_of is not None:
-            teams = [self._team_of(r.id) for r in recs]
-            if any(t is not None for t in teams):
-                names = {t[0]: k for k, t in enumerate(sorted({t for t in teams if t is not None}))}
-                team = np.fromiter((-1 if t is None else names[t[0]] for t in teams), dtype=np.intp, count=n)
-                most = TEAM_WIDEST * max(
-                    self.settings.separation_m.values()
-                )  # the search's reach grows with it
-                team_sep = np.fromiter(
-                    (math.nan if t is None else min(t[1], most) for t in teams), dtype=float, count=n
-                )
-        goals = np.array(
-            [r.goal.position if r.goal is not None else (math.nan, math.nan) for r in recs], dtype=float
-        ).reshape(-1, 2)
-        self._index = NeighbourIndex(
-            np.array([r.position for r in recs], dtype=float).reshape(-1, 2),
-            np.fromiter(
-                (seps[u] if (u := r.id) in seps else seps.setdefault(u, sep(u)) for r in recs),
-                dtype=float,
-                count=n,
-            ),
-            team,
-            team_sep,
-            goals,
-        )
+        self._index, self._recs, self._row = self._fleet()
         push = PUSH * self._index.gradients(np.array([self._row[r.id] for r in guided], dtype=np.intp))
         self._pushed = dict(zip((r.id for r in guided), push.tolist()))
         return push

@@ -41,7 +41,7 @@ MAX_TRACK_POINTS = 4096  # a lead's track kept at most: the part behind every fo
 class TeamBook:
     """The teams in force, keyed by id, and what their roles need remembered: each lead's track."""
 
-    def __init__(self, sight: Sight | None = None) -> None:
+    def __init__(self, sight: Sight | None = None, seen: Callable[[], object] | None = None) -> None:
         self.sight = sight  # line of sight over the world's terrain, for the controllers' links (fixed)
         self.teams: dict[str, TeamUpdate] = {}
         self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
@@ -70,6 +70,9 @@ class TeamBook:
         self._links: set[str] = set()  # the units in a link: robots and their controllers
         self._controls: set[str] = set()  # the controllers with robots
         self._now: float | None = None  # the time of the ``judge`` under way
+        self.version = 0  # bumped by every team put or removed: what a cache of ``dispersed`` keys on
+        self._seen = seen  # the units' ``Units.version``: ``where``
+        self._tracked: object = None  # ``where`` when ``_track`` last looked
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -79,7 +82,7 @@ class TeamBook:
             self.remove(inp.team)
             return None, units
         err = self.put(inp.team, inp.update)
-        if err is None and _placing_changed(old, inp.update):
+        if err is None and team_goal.placing_changed(old, inp.update):
             self._placing.update(team_goal.places(inp.update))
         return (err, set()) if err is not None else (None, units | set(inp.update.units()))
 
@@ -115,7 +118,7 @@ class TeamBook:
         index.add(tid, team)
         self._checks = index
         self.teams[tid] = team
-        self._columns, self._dispersed = {}, {}
+        self._columns, self._dispersed, self.version = {}, {}, self.version + 1
         self._looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
@@ -132,7 +135,7 @@ class TeamBook:
         """Dissolve a team; whether there was one."""
         if self.teams.pop(tid, None) is None:
             return False
-        self._columns, self._dispersed = {}, {}
+        self._columns, self._dispersed, self.version = {}, {}, self.version + 1
         self.tracks.pop(tid, None)
         self._looked.pop(tid, None)
         self._lines.pop(tid, None)
@@ -236,8 +239,16 @@ class TeamBook:
             self.sent[d.unit] = judged
         return out
 
+    def where(self) -> object:
+        """A key that changes whenever a unit's position, staleness, goal or record (``seen``) or a team may
+        have: while it stands, no lead has moved (``_track``) nor has dispersion's index; ``None``: unknown."""
+        return (self._seen(), self.version) if self._seen is not None else None
+
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
+        key = self.where()
+        if key is not None and key == self._tracked:
+            return  # no unit reported, went stale or was dropped, no team changed: no lead has moved
         looked = self._looked
         for tid, team in self.teams.items():
             rec = units.get(team.lead) if team.lead is not None else None
@@ -249,6 +260,7 @@ class TeamBook:
                 track.append(rec.position)
             if len(track) > MAX_TRACK_POINTS:
                 self._trim(tid, team, units)
+        self._tracked = key
 
     def _trim(self, tid: str, team: TeamUpdate, units: Mapping[str, UnitRecord]) -> None:
         """Drop the track behind the rearmost follower; then every other point, if it is still too long."""
@@ -454,21 +466,6 @@ class _Either:
 
     def __contains__(self, unit: object) -> bool:
         return unit in self.a or unit in self.b
-
-
-def _placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:
-    """Whether a team put gives its members new places: a goal new, moved, or placed otherwise."""
-    if new.goal is None:
-        return False
-    if old is None:
-        return True
-    return (old.goal, old.offsets, old.spacing_m, old.separation_m, team_goal.column(old)) != (
-        new.goal,
-        new.offsets,
-        new.spacing_m,
-        new.separation_m,
-        team_goal.column(new),
-    )
 
 
 def _index_of(teams: Mapping[str, TeamUpdate]) -> TeamIndex:

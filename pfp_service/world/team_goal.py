@@ -27,7 +27,7 @@ from pfp_service.wire import DirectionStatus, Goal
 from pfp_service.wire.messages import TeamUpdate
 from pfp_service.world.units import UnitRecord
 
-__all__ = ["COLUMN_SPACING_M", "MOVING_MPS", "column", "eta", "places"]
+__all__ = ["COLUMN_SPACING_M", "MOVING_MPS", "column", "eta", "places", "placing_changed"]
 
 # The column's spacing when a team states neither spacing_m nor separation_m: the issue's
 # vehicles on a tactical march.
@@ -79,3 +79,11 @@ def eta(team: TeamUpdate, units: Mapping[str, UnitRecord]) -> tuple[float | None
         if worst is None or t > worst[0]:
             worst = (t, u)
     return (worst[0], worst[1]) if worst is not None else (None, None)
+
+
+def placing_changed(old: TeamUpdate | None, new: TeamUpdate) -> bool:
+    """Whether a team put gives its members new places: a goal new, moved, or placed otherwise."""
+    if new.goal is None or old is None:
+        return new.goal is not None
+    was, now = [(t.goal, t.offsets, t.spacing_m, t.separation_m, column(t)) for t in (old, new)]
+    return was != now

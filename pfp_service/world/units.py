@@ -202,6 +202,13 @@ class Units:
         self.stale = 0  # units stale
         self.deliberating = 0  # units with a job asked and not answered
         self.superseded: list[Job] = []  # jobs asked and no longer wanted, until the world says so
+        # bumped by every write of a unit's position, staleness or goal and by a record made or dropped:
+        # a reader's cache of where the units are (dispersion's neighbour index) stands while it does
+        self.version = 0
+
+    def seen(self) -> int:
+        """``version``, for a cache to key on (a bound method: a copied world's caches read their own book)."""
+        return self.version
 
     def _to(self, rec: UnitRecord, step: Step, gone: bool = False) -> None:
         """Record the phase ``step`` left ``rec`` in (``gone``: its record goes), if ``TRANSITIONS`` allows it."""
@@ -217,6 +224,7 @@ class Units:
     def add(self, unit_id: str, owned: bool, now: float, reported: bool) -> UnitRecord:
         """A new unit's record; one made by anything but a report is stale from the start."""
         rec = self.records[unit_id] = UnitRecord(unit_id, unit_key(unit_id), owned=owned)
+        self.version += 1
         if not reported:
             rec.stale = True
             rec.stale_since = now
@@ -235,6 +243,7 @@ class Units:
     ) -> None:
         """A report: where the unit is, and proof of life whatever its token says; its push is answered."""
         moved = rec.stale or rec.position is None  # else the phase is as it was: no look at the table
+        self.version += 1
         rec.position = position
         rec.seq = seq
         rec.kind = kind if kind is not None else rec.kind
@@ -257,12 +266,14 @@ class Units:
         rec.stale = True
         rec.stale_since = now
         self.stale += 1
+        self.version += 1
         self._to(rec, Step.WENT_STALE)
         return True
 
     def forget(self, rec: UnitRecord) -> None:
         """Drop a unit's record, and its job with it."""
         self._to(rec, Step.FORGOTTEN, gone=True)
+        self.version += 1
         self._supersede(rec)
         if self.records.pop(rec.id, None) is not None and rec.stale:
             self.stale -= 1
@@ -271,6 +282,7 @@ class Units:
         """A record too broken to reset (the world's last resort): gone, with no look at its phase."""
         if self.records.pop(rec.id, None) is not None:
             self.stale -= rec.stale
+            self.version += 1
             self.deliberating -= rec.job is not None
 
     # -- missions -----------------------------------------------------------------
@@ -280,6 +292,7 @@ class Units:
         """A goal set, or a mission restored (``shared``): a new epoch, its former mission and job gone."""
         self._drop(rec)
         rec.goal, rec.shared = goal, shared
+        self.version += 1
         self._to(rec, Step.GOAL_SET)
 
     def drop_mission(self, rec: UnitRecord) -> None:
@@ -374,6 +387,7 @@ class Units:
 
     # -- inside the steps ---------------------------------------------------------
     def _drop(self, rec: UnitRecord) -> None:
+        self.version += 1
         rec.goal = None
         rec.stepper = None
         rec.origin = None

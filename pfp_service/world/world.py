@@ -72,11 +72,11 @@ class World:
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._direct)
         self.limits = Limits()
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
-        self.teams = TeamBook(link_sight(s.terrain))  # the teams in force; a robot's link: range and sight
+        self.teams = TeamBook(link_sight(s.terrain), self._book.seen)  # a robot's link: range and sight
         self._route = team_route.RouteKeys(self._rec, self.teams, s.terrain)  # a lead's, for its followers
-        self._disp = dispersion.Dispersion(
-            s.dispersion, self._units, self._book.yielded, self.teams.dispersed
-        )  # off unless enabled; a team's separation_m among its members
+        self._disp = dispersion.Dispersion(  # off unless enabled; a team's separation_m among its members
+            s.dispersion, self._units, self._book.yielded, self.teams.dispersed, self.teams.where
+        )
         self._owed: list[Owed] = []  # a wave's units sent without look-ahead points (``lookahead.Owed``)
         self._wave = Wave()  # a wave's units owed their very direction (``wave``): before any points
         self._now = 0.0  # the last ``apply``'s: when a wave's points are owed, they are due at once

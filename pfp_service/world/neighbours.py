@@ -1,0 +1,128 @@
+"""Dispersion's neighbour index over the fleet: built once per change of where the units are, not per ``apply``.
+
+Every unit the world holds a fresh position for is in the index (guided,
+arrived, without a goal: a friendly unit is in the way whatever it is
+doing), with its separation by class, its team's separation and its goal
+(``core.dispersion.NeighbourIndex``).  A contingency's wave goes out a share
+an ``apply`` (``wave``), and each share's push asks for that index: arrays
+and a k-d tree the size of the fleet, for the share's 64 units.  Between two
+shares nothing it is built from need have changed -- the units' positions,
+staleness and goals and the records themselves (``units.Units.version``),
+and the teams that set a separation (``TeamBook.version``) -- so
+``FleetIndex`` keeps it while that key stands and hands it back as new
+(``NeighbourIndex.unasked``: the share's own queries are asked afresh, as on
+a new index, so a push and its right of way are the same numbers).
+``fleet_index`` is the plain computation it stands for.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+import numpy as np
+
+from pfp_service.core.dispersion import NeighbourIndex
+from pfp_service.world.separations import DispersionSettings
+from pfp_service.world.units import UnitRecord
+
+__all__ = ["TEAM_WIDEST", "Fleet", "FleetIndex", "TeamOf", "fleet_index"]
+
+# a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
+# reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
+TEAM_WIDEST = 4.0
+
+# the team a unit is in that sets a separation, and that separation (``TeamBook.dispersed``), or None
+TeamOf = Callable[[str], "tuple[str, float] | None"]
+# the index, the records of its rows in order, and each unit's row
+Fleet = tuple[NeighbourIndex, list[UnitRecord], dict[str, int]]
+
+
+def fleet_index(
+    units: Mapping[str, UnitRecord],
+    settings: DispersionSettings,
+    team_of: TeamOf | None = None,
+    seps: dict[str, float] | None = None,
+) -> Fleet:
+    """The neighbour index of every unit in ``units`` with a fresh position, built afresh.
+
+    Args:
+        units: the world's records, in their order (a row's number is its place among the fresh ones).
+        settings: the separations by class.
+        team_of: each unit's team that sets a separation (``None``: no teams).
+        seps: each unit's separation by class, kept between calls (the settings fix it); filled here.
+
+    Raises:
+        ValueError: a position the k-d tree refuses (the push then goes without dispersion).
+    """
+    recs = [r for r in units.values() if r.position is not None and not r.stale]
+    row = {r.id: k for k, r in enumerate(recs)}
+    n = len(recs)
+    seps = {} if seps is None else seps
+    sep = settings.separation
+    team, team_sep = None, None
+    if team_of is not None:
+        teams = [team_of(r.id) for r in recs]
+        if any(t is not None for t in teams):
+            names = {t[0]: k for k, t in enumerate(sorted({t for t in teams if t is not None}))}
+            team = np.fromiter((-1 if t is None else names[t[0]] for t in teams), dtype=np.intp, count=n)
+            most = TEAM_WIDEST * max(settings.separation_m.values())  # the search's reach grows with it
+            team_sep = np.fromiter(
+                (math.nan if t is None else min(t[1], most) for t in teams), dtype=float, count=n
+            )
+    goals = np.array(
+        [r.goal.position if r.goal is not None else (math.nan, math.nan) for r in recs], dtype=float
+    ).reshape(-1, 2)
+    index = NeighbourIndex(
+        np.array([r.position for r in recs], dtype=float).reshape(-1, 2),
+        np.fromiter(
+            (seps[u] if (u := r.id) in seps else seps.setdefault(u, sep(u)) for r in recs),
+            dtype=float,
+            count=n,
+        ),
+        team,
+        team_sep,
+        goals,
+    )
+    return index, recs, row
+
+
+class FleetIndex:
+    """``fleet_index``, kept while ``version`` gives the same key (``None``, or no ``version``: built each call).
+
+    Args:
+        settings: the separations by class.
+        units: the world's records.
+        team_of: as ``fleet_index``'s.
+        version: a key that changes whenever anything the index is built from may have: the units'
+            positions, staleness, goals or records, or the teams' separations.
+    """
+
+    def __init__(
+        self,
+        settings: DispersionSettings,
+        units: Mapping[str, UnitRecord],
+        team_of: TeamOf | None = None,
+        version: Callable[[], object] | None = None,
+    ) -> None:
+        self.settings = settings
+        self._units = units
+        self._team_of = team_of
+        self._version = version
+        self._seps: dict[str, float] = {}  # each unit's separation, by its class: fixed by the settings
+        self._kept: Fleet | None = None
+        self._key: object = None
+
+    def __call__(self) -> Fleet:
+        """The fleet's index as if new-built, its rows' records and each unit's row."""
+        key = self._version() if self._version is not None else None
+        kept = self._kept
+        if kept is not None and key is not None and key == self._key:
+            kept[0].unasked()
+            return kept
+        self._kept = None  # a build that raises keeps nothing
+        if len(self._seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
+            self._seps.clear()
+        self._kept = fleet_index(self._units, self.settings, self._team_of, self._seps)
+        self._key = key
+        return self._kept
