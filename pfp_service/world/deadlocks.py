@@ -269,13 +269,13 @@ def event(
     ``facing``: two units going round units at rest that stop each other (``Facing``).
     """
     x, y = at.tolist()
-    if round_:
+    if facing:
+        why = f"{mover} and {blocker}, each going round a unit at rest, stop each other: {mover} gives way"
+    elif round_:
         what = status.value if status is not None else "at rest"
         why = f"{mover} came no nearer its goal for {held_s:.0f} s against {blocker} ({what}): goes round it"
     else:
         why = f"held {held_s:.0f} s, {blocker} not drawing away: {mover} backs off"
-    if facing:
-        why = f"{mover} and {blocker}, each going round a unit at rest, stop each other: {mover} gives way"
     why += f" for at most {for_s:g} s"
     return DeadlockEvent(
         unit=mover, other=blocker, position=(x, y), held_s=held_s, backoff_s=for_s, reason=why

@@ -85,11 +85,7 @@ def place(
         return None
     end = at if judged.kind == "hold" else (judged.to if judged.to is not None else to)
 
-    def linked(p: Point) -> int:
-        return sum(roles.in_link(p, q, radio_range_m, sight) for _, q in robots)
-
-    pts_of = [q for _, q in robots]
-    base = (linked(end), -_dist(end, to))
+    base = (sum(roles.in_link(end, q, radio_range_m, sight) for _, q in robots), -_dist(end, to))
     if judged.kind == "go" and base[0] == len(robots):
         return None  # its own step keeps them all
     pts = np.array([p for _, p in robots], dtype=float)
@@ -112,7 +108,7 @@ def place(
         if not asked:
             if ground is None or _on(ground, at, c):
                 linked_here = sum(
-                    1 for j in np.flatnonzero(near[k]).tolist() if sight is None or sight(c, pts_of[j])
+                    1 for j in np.flatnonzero(near[k]).tolist() if sight is None or sight(c, robots[j][1])
                 )
                 heapq.heappush(heap, (-linked_here, far, k, True))
             continue
