@@ -181,6 +181,22 @@ def _closed_pipe(command: str) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``pfp``'s command line (``argv``, else ``sys.argv``); the exit code.
+
+    Run as the program (``argv`` is ``None``), it returns only once the threads
+    Zenoh started for callbacks have ended; when one has not, the process
+    ends here (``signals.settle_callback_threads``).
+    """
+    code = _run(argv)
+    if argv is None:
+        from pfp_service.signals import leave_now, settle_callback_threads
+
+        if not settle_callback_threads():
+            leave_now(code)
+    return code
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     words = list(sys.argv[1:] if argv is None else argv)
     command = next((w for w in words if not w.startswith("-")), "")
