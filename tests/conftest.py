@@ -212,3 +212,15 @@ def paper_scenario():
 
 # Hypothesis profiles (``--hypothesis-profile=long``) must be registered before the plugin reads the flag.
 import tests.hypothesis_profiles  # noqa: E402, F401
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """The test process, like ``pfp``, waits for Zenoh's callback threads before it finalises.
+
+    A test that declared callbacks on a daemon thread (a fleet, a handheld link)
+    and closed its session leaves threads that must take the GIL once more;
+    doing so during finalisation aborts the worker (``signals.settle_callback_threads``).
+    """
+    from pfp_service.signals import settle_callback_threads
+
+    settle_callback_threads()
