@@ -15,20 +15,33 @@ of them not above it, the safe side, since a barrier set for a new limit
 takes seconds to build over a large DEM and none is built on the live loop;
 an override below every class's limit is refused.  A state that changes the
 limit a unit is planned at re-judges it at once (``units.Units.classed``).
-A threat's window is swept once, at the planner's class's height, and serves
-every unit: a unit is seen at its own class's height (``height_of``), its
-field the world's re-heighted (``world_records.Records.field_for``).
+Its ``height_m`` and ``speed_mps`` override the class's too, as the
+scenario's ``unit:`` block's do (``core.mobility.Mobility.merged``;
+``mobility_of``).  A threat's window is swept once, at the planner's
+class's height, and serves every unit: a unit is seen at its own height
+(``height_of``: its class's, or its override), its field the world's
+re-heighted (``world_records.Records.field_for``); a controller's link is
+judged from the controller's own height to the robot's (``team_book``).
 """
 
 from __future__ import annotations
 
 from typing import Any, TypeVar
 
-from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, planned_limit
+from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, Mobility, planned_height, planned_limit
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, GoalMobility, UnitState
 
-__all__ = ["by_limit", "check", "height_of", "limit_of", "refusal", "sight_height", "slope_limit"]
+__all__ = [
+    "by_limit",
+    "check",
+    "height_of",
+    "limit_of",
+    "mobility_of",
+    "refusal",
+    "sight_height",
+    "slope_limit",
+]
 
 M = TypeVar("M", Goal, UnitState)
 
@@ -83,12 +96,22 @@ def limit_of(rec: Any) -> int | None:
 
 def sight_height(goal: Goal | None, standing: GoalMobility | None = None) -> float | None:
     """How tall a unit heading for ``goal`` stands, metres: what a threat must see of it
-    (``core.mobility.Mobility.height_m``), its goal's class over its ``standing`` one (its states');
-    ``None``: the planner's class's."""
+    (``core.mobility.Mobility.height_m``), its goal's mobility over its ``standing`` one (its states'),
+    its ``height_m`` over its class's (planned at ``core.mobility.planned_height``: near heights share a
+    field); ``None``: the planner's class's."""
     mob = goal.mobility if goal is not None and goal.mobility is not None else standing
     if mob is None or mob.kind not in CLASSES:
         return None
-    return CLASSES[mob.kind].height_m
+    return planned_height(mob.height_m) if mob.height_m is not None else CLASSES[mob.kind].height_m
+
+
+def mobility_of(goal: Goal | None, standing: GoalMobility | None = None) -> Mobility | None:
+    """The whole mobility of a unit heading for ``goal`` (``core.mobility.Mobility``): its goal's over its
+    ``standing`` one (its states'), each field given overriding its class's; ``None``: the planner's class."""
+    mob = goal.mobility if goal is not None and goal.mobility is not None else standing
+    if mob is None or mob.kind not in CLASSES:
+        return None
+    return CLASSES[mob.kind].merged(mob.max_slope_deg, mob.height_m, mob.speed_mps)
 
 
 def height_of(rec: Any) -> float | None:
