@@ -27,7 +27,7 @@ from pfp_service.wire import (
     UnitState,
     keys,
 )
-from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
+from pfp_service.wire.messages import GoalMobility, TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.terrain import SightAsk, SightLanded
 
@@ -414,9 +414,8 @@ class UnitView:
     zones: ZoneSet = field(
         default_factory=_no_zones
     )  # the keep-out zones in force: a preview never enters one
-    height_m: float | None = (
-        None  # over terrain, the height threats see the unit at (None: the planner's class's)
-    )
+    height_m: float | None = None  # over terrain, the height threats see it at (None: the planner's class's)
+    standing: GoalMobility | None = None  # the mobility its states name (``world.mobility``)
 
     def params_for(self, goal: Goal) -> PlannerParams:
         return self.settings.params_for(goal)

@@ -9,7 +9,9 @@ around its ``barriers`` for that class's slope instead) are in force with the ke
 stepper, deliberation and previews treat them alike, as ``pfp plan
 --terrain`` does; its ``sees`` is the line of sight a controller's link
 keeps to its robots (``team_book``), from the controller's own height to the
-robot's (``team_masts``).  None changes while the planner runs.  The world never
+robot's (``team_masts``); its ``over_ground`` measures a preview's path over
+it (elevations, climb, steepest ground, and the ETA at the unit's own
+mobility: ``world.preview``).  None changes while the planner runs.  The world never
 reads the DEM: it is handed what it needs.
 
 Sight off the loop.  A threat's window is a viewshed sweep over its reach
@@ -37,6 +39,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:  # the compiled core's types: the world's inputs (``events``) import this module
+    from pfp_service.core.mobility import Mobility
     from pfp_service.core.visibility import Sight as ThreatSight
     from pfp_service.core.visibility import Window
     from pfp_service.core.zones import Zone
@@ -79,6 +82,10 @@ class Ground(Protocol):
 
     @property
     def resolution_m(self) -> float: ...
+
+    def over_ground(
+        self, path: Sequence[tuple[float, float]], unit: Mobility | None
+    ) -> dict[str, object]: ...
 
 
 @dataclass(frozen=True, slots=True)

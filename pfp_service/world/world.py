@@ -99,9 +99,8 @@ class World:
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
-        return UnitView(
-            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector, zones, tall
-        )
+        where = (rec.position, rec.goal, rec.origin)
+        return UnitView(unit_id, *where, stepper, threats, s, rec.last_vector, zones, tall, rec.mobility)
 
     def snapshot(
         self,
