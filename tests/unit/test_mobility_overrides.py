@@ -259,3 +259,26 @@ def test_a_controllers_step_keeps_a_robot_it_sees_only_for_the_robots_own_mast(m
     else:
         d = out["m1"]
         assert d.reach_m is not None and 5.0 <= d.reach_m <= 12.5 and "r1" in d.reason, d  # sampled every 5 m
+
+
+@pytest.mark.parametrize(("mast_a", "mast_b"), [(1.5, 6.0), (6.0, 1.5), (1.8, 2.5)])
+def test_a_sight_line_between_two_masts_agrees_with_the_exact_ray_at_grid_points(mast_a, mast_b):
+    """``link_sight.sees`` with an end of each height: seen exactly where Franklin's exact ray from ``a``'s
+    eye finds ``b``'s lowest visible height at or under ``b``'s mast (``test_link_sight``'s ridge)."""
+    from pfp_service.terrain.link_sight import sees
+    from pfp_service.terrain.viewshed import exact_lowest_visible_height
+    from tests.unit.test_link_sight import CELL_M, XS, _ridge_grid
+
+    rng, grid = np.random.default_rng(7), _ridge_grid()
+    told = {True: 0, False: 0}
+    for _ in range(200):
+        (r0, c0), (r1, c1) = rng.integers(5, 96, size=(2, 2))
+        if (r0, c0) == (r1, c1):
+            continue
+        low = exact_lowest_visible_height(grid.z, (int(r0), int(c0)), mast_a, np.array([[r1, c1]]), CELL_M)[0]
+        if abs(low - mast_b) < 0.5:  # within half a metre of the mast: the two samplings may differ
+            continue
+        a, b = (float(XS[c0]), float(XS[r0])), (float(XS[c1]), float(XS[r1]))
+        assert sees(grid, a, b, mast_a, 0.0, mast_b) == (low <= mast_b), (a, b, low)
+        told[bool(low <= mast_b)] += 1
+    assert told[True] >= 10 and told[False] >= 10, told  # both answers were asked for
