@@ -3,8 +3,8 @@
 Over terrain the link needs a clear line of sight (``teams.link``), and whether a crest hides a robot
 depends on how tall each end stands: a controller on foot (1.8 m) and a robot with a 4 m mast see
 over a ridge a planner's class's 2.5 m at both ends does not.  Each end stands at its own unit's
-height (``world.mobility.mobility_of``: its goal's mobility over its states', an override of
-``height_m`` over its class's, to the centimetre: a sight line is a profile of the DEM, asked anew
+height (as ``world.mobility.mobility_of`` says it: its goal's mobility over its states', an override
+of ``height_m`` over its class's, to the centimetre: a sight line is a profile of the DEM, asked anew
 each time, so no height costs more than another), else at the planner's class's.  The sight a link
 is asked with (``teams.Sight``) takes the controller's point first and the robot's second; a sight
 that cannot set its ends' heights (a test's, or none without terrain) is used as it is.  Pure:
@@ -16,8 +16,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from pfp_service.core.mobility import CLASSES
 from pfp_service.wire.messages import TeamUpdate
-from pfp_service.world.mobility import mobility_of
 from pfp_service.world.teams import Point, Sight
 
 __all__ = ["height", "pair", "per_robot"]
@@ -28,8 +28,10 @@ def height(units: Mapping[str, Any], unit: str | None) -> float | None:
     rec = units.get(unit) if unit is not None else None
     if rec is None or (rec.mobility is None and (rec.goal is None or rec.goal.mobility is None)):
         return None  # no mobility named (the common case): the planner's class
-    own = mobility_of(rec.goal, rec.mobility)
-    return own.height_m if own is not None else None
+    mob = rec.goal.mobility if rec.goal is not None and rec.goal.mobility is not None else rec.mobility
+    if mob.kind not in CLASSES:
+        return None
+    return mob.height_m if mob.height_m is not None else CLASSES[mob.kind].height_m
 
 
 def pair(sight: Sight | None, units: Mapping[str, Any], team: TeamUpdate, robot: str) -> Sight | None:
