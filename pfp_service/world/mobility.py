@@ -19,7 +19,8 @@ Its ``height_m`` and ``speed_mps`` override the class's too, as the
 scenario's ``unit:`` block's do (``core.mobility.Mobility.merged``;
 ``mobility_of``).  A threat's window is swept once, at the planner's
 class's height, and serves every unit: a unit is seen at its own height
-(``height_of``: its class's, or its override), its field the world's
+(``height_of``: its class's, or its override at the next quarter metre
+up, ``core.mobility.planned_height``), its field the world's
 re-heighted (``world_records.Records.field_for``); a controller's link is
 judged from the controller's own height to the robot's (``team_book``).
 """

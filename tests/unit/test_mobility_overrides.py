@@ -282,3 +282,17 @@ def test_a_sight_line_between_two_masts_agrees_with_the_exact_ray_at_grid_points
         assert sees(grid, a, b, mast_a, 0.0, mast_b) == (low <= mast_b), (a, b, low)
         told[bool(low <= mast_b)] += 1
     assert told[True] >= 10 and told[False] >= 10, told  # both answers were asked for
+
+
+def test_pfp_inject_sends_a_scenarios_unit_overrides_and_refuses_one_the_wire_cannot_carry(tmp_path):
+    from pfp_clients.live_scenario import live_scenario
+
+    f = tmp_path / "s.yaml"
+    f.write_text("start: [0, 0]\ngoal: [100, 0]\nunit: {class: wheeled, height_m: 3.5, speed_mps: 6}\n")
+    (spec,) = live_scenario(f, rate_hz=5.0).team.units
+    assert spec.mobility is not None
+    assert spec.mobility.wire() == GoalMobility(kind="wheeled", height_m=3.5, speed_mps=6.0)
+    f.write_text("start: [0, 0]\ngoal: [100, 0]\nunit: {class: wheeled, height_m: 30}\n")
+    with pytest.raises(InputError) as err:
+        live_scenario(f)
+    assert str(err.value).startswith("s.yaml, unit") and "height_m" in str(err.value)
