@@ -32,6 +32,7 @@ from typing import Any, TypeVar
 from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, Mobility, planned_height, planned_limit
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, GoalMobility, UnitState
+from pfp_service.wire.messages.structs import FLAT_SPEED_MPS, UNIT_HEIGHT_M
 
 __all__ = [
     "by_limit",
@@ -39,6 +40,8 @@ __all__ = [
     "height_of",
     "limit_of",
     "mobility_of",
+    "own_height",
+    "own_speed",
     "refusal",
     "sight_height",
     "slope_limit",
@@ -103,7 +106,8 @@ def sight_height(goal: Goal | None, standing: GoalMobility | None = None) -> flo
     mob = goal.mobility if goal is not None and goal.mobility is not None else standing
     if mob is None or mob.kind not in CLASSES:
         return None
-    return planned_height(mob.height_m) if mob.height_m is not None else CLASSES[mob.kind].height_m
+    own = own_height(mob)
+    return planned_height(own) if own is not None else CLASSES[mob.kind].height_m
 
 
 def mobility_of(goal: Goal | None, standing: GoalMobility | None = None) -> Mobility | None:
@@ -112,7 +116,20 @@ def mobility_of(goal: Goal | None, standing: GoalMobility | None = None) -> Mobi
     mob = goal.mobility if goal is not None and goal.mobility is not None else standing
     if mob is None or mob.kind not in CLASSES:
         return None
-    return CLASSES[mob.kind].merged(mob.max_slope_deg, mob.height_m, mob.speed_mps)
+    return CLASSES[mob.kind].merged(mob.max_slope_deg, own_height(mob), own_speed(mob))
+
+
+def own_height(mob: GoalMobility) -> float | None:
+    """``mob``'s ``height_m`` override, or ``None``: none, or one the wire's bounds refuse (put in-process:
+    its class's then, never a NaN in a field)."""
+    h = mob.height_m
+    return h if h is not None and UNIT_HEIGHT_M[0] <= h <= UNIT_HEIGHT_M[1] else None
+
+
+def own_speed(mob: GoalMobility) -> float | None:
+    """``mob``'s ``speed_mps`` override, or ``None``: none, or one the wire's bounds refuse (as ``own_height``)."""
+    v = mob.speed_mps
+    return v if v is not None and FLAT_SPEED_MPS[0] <= v <= FLAT_SPEED_MPS[1] else None
 
 
 def height_of(rec: Any) -> float | None:

@@ -18,6 +18,7 @@ from typing import Any
 
 from pfp_service.core.mobility import CLASSES
 from pfp_service.wire.messages import TeamUpdate
+from pfp_service.world.mobility import own_height
 from pfp_service.world.teams import Point, Sight
 
 __all__ = ["height", "pair", "per_robot"]
@@ -31,7 +32,8 @@ def height(units: Mapping[str, Any], unit: str | None) -> float | None:
     mob = rec.goal.mobility if rec.goal is not None and rec.goal.mobility is not None else rec.mobility
     if mob.kind not in CLASSES:
         return None
-    return mob.height_m if mob.height_m is not None else CLASSES[mob.kind].height_m
+    own = own_height(mob)
+    return own if own is not None else CLASSES[mob.kind].height_m
 
 
 def pair(sight: Sight | None, units: Mapping[str, Any], team: TeamUpdate, robot: str) -> Sight | None:

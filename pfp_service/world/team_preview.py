@@ -76,6 +76,7 @@ from pfp_service.world.events import (
     WorldSettings,
     ZonePut,
 )
+from pfp_service.world.mobility import own_speed
 from pfp_service.world.team_outsiders import guided as outsider_guided
 from pfp_service.world.team_outsiders import nearby, reach
 from pfp_service.world.units import TRANSITIONS, Started, Step, UnitRecord
@@ -282,7 +283,8 @@ def _speed(m: MemberSeed, request: TeamPreviewRequest) -> float:
     if given is not None:
         return given
     mob = m.goal.mobility if m.goal is not None and m.goal.mobility is not None else m.mobility
-    return mob.speed_mps if mob is not None and mob.speed_mps is not None else 0.0
+    own = own_speed(mob) if mob is not None else None
+    return own if own is not None else 0.0
 
 
 def replay(

@@ -16,6 +16,8 @@ import time
 import msgspec
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from pfp_service.core import PlannerParams, ThreatField
 from pfp_service.core.mobility import planned_height
@@ -296,3 +298,31 @@ def test_pfp_inject_sends_a_scenarios_unit_overrides_and_refuses_one_the_wire_ca
     with pytest.raises(InputError) as err:
         live_scenario(f)
     assert str(err.value).startswith("s.yaml, unit") and "height_m" in str(err.value)
+
+
+_WILD = st.one_of(
+    st.none(),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, -1.0, 0.1, 20.0, 40.0, 1e308]),
+)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(height=_WILD, speed=_WILD)
+def test_an_in_process_override_of_any_float_never_raises_and_is_its_class_past_the_wires_bounds(
+    height, speed
+):
+    """A state put in-process (not decoded: no bounds checked) with any height and speed: the world never raises,
+    the unit is guided, its preview's ETA is finite, and an override the wire would refuse counts as none."""
+    w = _world(_flat())
+    mob = GoalMobility(kind="foot", height_m=height, speed_mps=speed)
+    w.apply([StateReported("odd", UnitState(position=(-500.0, 0.0), seq=1, mobility=mob))], 0.0)
+    out = w.apply([GoalSet("odd", Goal(position=(500.0, 0.0)))], 0.0)
+    assert [d.status.value for d in out.directions] == ["en_route"]
+    got = preview(w.view("odd"), None, time.monotonic, 5.0, 10_000)
+    wire_ok = speed is not None and 0.1 <= speed <= 40.0
+    assert got.eta_s == pytest.approx(got.length / (speed if wire_ok else 1.4), rel=1e-9)
+    book = TeamBook(link_sight(_wall(1.0)))
+    book.put("alpha", TeamUpdate(controller="m1", robots=["r1"], radio_range_m=1500.0))
+    units = _units(mob, mob, (-100.0, 0.0), (100.0, 0.0))
+    book.judge([_dir("m1", (0.0, 1.0), 20.0), _dir("r1", (0.0, 1.0), 20.0)], units, now=0.0)

@@ -135,8 +135,10 @@ class _Message(msgspec.Struct, frozen=True, kw_only=True):
 # -- unit -> planner ------------------------------------------------------------
 MobilityName = Annotated[str, Meta(pattern="^[a-z][a-z0-9_]{0,31}$")]
 SlopeDeg = Annotated[float, Meta(ge=1.0, le=89.0)]
-UnitHeight = Annotated[float, Meta(ge=0.1, le=20.0)]  # a person lying down to a mast on a vehicle
-FlatSpeed = Annotated[float, Meta(ge=0.1, le=40.0)]  # a crawl to a wheeled vehicle on a road
+UNIT_HEIGHT_M = (0.1, 20.0)  # a person lying down to a mast on a vehicle
+FLAT_SPEED_MPS = (0.1, 40.0)  # a crawl to a wheeled vehicle on a road
+UnitHeight = Annotated[float, Meta(ge=UNIT_HEIGHT_M[0], le=UNIT_HEIGHT_M[1])]
+FlatSpeed = Annotated[float, Meta(ge=FLAT_SPEED_MPS[0], le=FLAT_SPEED_MPS[1])]
 
 
 class GoalMobility(_Message, frozen=True, kw_only=True):
