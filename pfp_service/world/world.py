@@ -3,15 +3,17 @@
 In the manner of h11's connection: ``World.apply(inputs, now)`` takes a batch
 of frozen input events (``Input``) and returns ``Outputs``: the directions,
 events, deliberation jobs (and those cancelled), missions and faults that
-must go out.  It reads no clock, socket or file; ``now`` is a parameter.
+must go out.  It reads no socket or file and no clock of its own: ``now`` is
+a parameter, and the driver's clock, when passed, is read only to size a
+wave's share (``wave.Budget``).
 Every decision lives here -- who gets a direction, which event fires and why,
 status transitions, expiry, limits, who answers a preview.
 
 ``World`` decides; its parts keep the books, each plain data in and out with
 its own tests: the records and the threats' field (``world_records``), the
 timer heap (``timers``), staleness, forgetting and push re-sends
-(``liveness``), cluster ownership (``ownership``), the limits on rejections and fault lines
-(``limits``), a unit's mission (``missions``), the reactive step, its look-ahead and dispersion
+(``liveness``), cluster ownership (``ownership``), zones put and gone (``zone_puts``), the
+limits on rejections and fault lines (``limits``), a unit's mission (``missions``), the reactive step, its look-ahead and dispersion
 (``steering``, ``lookahead``, ``dispersion``), the snapshot's pages (``snapshot.page``).  Unbounded
 work (look-ahead, escape searches) is deliberation: a ``Job`` whose result is adopted only for the
 goal and world still in force.  Bulkheads: ``apply`` is total; a failure belongs to the input, timer
@@ -32,6 +34,7 @@ from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by 
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS
 from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, wave
 from pfp_service.world import events as ev
+from pfp_service.world.bulkheads import Bulkheads
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
@@ -74,6 +77,13 @@ class World:
         self._live = Liveness(s, self._book, self._timers)
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._direct)
         self.limits = Limits()
+        bulk = Bulkheads(s, self._units, self._book, self.limits)  # a failure is its input's or unit's alone
+        self._key, self._fault, self._unit_fault, self._reject = (
+            bulk.key,
+            bulk.fault,
+            bulk.unit_fault,
+            bulk.reject,
+        )
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
         self._zones = ZonePuts(s, self._rec, self._timers, self.limits, self._reject)  # zones' inputs
         self.teams = TeamBook(link_sight(s.terrain), self._book.seen)  # a robot's link: range and sight
@@ -237,53 +247,6 @@ class World:
                 self._run_timers(t, b)
             case _:  # a kind in the table without its case here: rejected on its key, never dropped unsaid
                 raise TypeError(f"no handler for {type(inp).__name__} in World._apply_one")
-
-    # -- bulkheads ------------------------------------------------------------------
-    def _key(self, kind: keys.KeyKind, ident: str) -> str:
-        """The key of ``kind`` for ``ident``, spelled even for an id ``keys`` would refuse."""
-        return keys.TEMPLATES[kind].format(mission=self.settings.mission, id=ident)
-
-    def _fault(
-        self,
-        b: Batch,
-        key: str,
-        unit: str | None,
-        kind: keys.KeyKind | None,
-        exc: BaseException,
-        error: tuple[str, str, str] | None = None,
-    ) -> None:
-        """Something failed inside the world on ``key``'s account: drop it, reject it, log it once a minute.
-
-        The unit named loses its goal (a goal it cannot be guided to is
-        refused, not retried at every report) and gets ``no_goal``.
-        """
-        rec = self._units.get(unit) if unit is not None else None
-        said = ""
-        if rec is not None:
-            try:
-                said = "; the unit's goal was dropped" if rec.goal is not None else ""
-                if rec.goal is not None or rec.shared is not None:
-                    self._book.drop_mission(rec)
-                self._direct(rec, b)
-            except Exception:  # a record too broken to reset: forget it (a report makes it afresh)
-                self._book.discard(rec)
-        name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], ev.where(exc))
-        reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
-        self._reject(key, InputError("$", reason), b, kind)
-        logged = self.limits.fault(key, b.now)  # the operator's log: once a minute per key, never a traceback
-        if logged is not None:
-            b.out.faults.append(ev.Fault(logged[0], name, detail, at, logged[1]))
-
-    def _unit_fault(
-        self, b: Batch, rec: UnitRecord, exc: BaseException, error: tuple[str, str, str] | None = None
-    ) -> None:
-        self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, K.UNIT_GOAL, exc, error)
-
-    def _reject(self, key: str, err: InputError, b: Batch, kind: keys.KeyKind | None) -> None:
-        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per ``kind`` of key."""
-        held = self.limits.reject(kind, b.now)
-        if held is not None:
-            b.out.events.append(steering.rejected(key, err, self.settings.planner_id, held))
 
     # -- inputs ---------------------------------------------------------------------
     def _unit(self, unit_id: str, b: Batch, kind: keys.KeyKind, reported: bool = False) -> UnitRecord | None:
