@@ -95,20 +95,21 @@ def split(
 
 
 class Budget:
-    """One timed ``apply``'s time for a wave's share: spent once its driver's ``clock`` passes ``now + WAVE_BUDGET_S``.
+    """One timed ``apply``'s time for a wave's share: spent ``WAVE_BUDGET_S`` after the apply began, on the driver's clock.
 
-    The clock is the driver's (the one ``now`` was read on), passed in as a
-    value: the world never reads one of its own.  The share is then what the
-    apply can afford after its batch's own units, not a count, so a state
-    that comes during a wave waits for about one budget, not one share.
+    The clock is the driver's, passed in as a value (the world never reads
+    one of its own): the node's loop passes its thread's CPU clock, so a
+    share is what the apply can afford after its batch's own units, not a
+    count, and a state that comes during a wave waits for about one budget,
+    not one share.
     """
 
-    def __init__(self, clock: Callable[[], float], now: float) -> None:
+    def __init__(self, clock: Callable[[], float]) -> None:
         self._clock = clock
-        self._until = now + WAVE_BUDGET_S
+        self._until = clock() + WAVE_BUDGET_S
 
     def spent(self) -> bool:
-        """Whether the apply's budget is gone (read on the driver's clock)."""
+        """Whether the apply's budget is gone."""
         return self._clock() >= self._until
 
 

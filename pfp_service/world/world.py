@@ -172,12 +172,13 @@ class World:
     ) -> Outputs:
         """Apply a batch of inputs at ``now``; return what must go out.
 
-        ``clock``: the driver's, on which ``now`` was read: a wave's share is then steered while the apply's
-        budget lasts (``wave.Budget``), not ``WAVE_PER_TICK`` units; the world reads it only for that.
+        ``clock``: the driver's (the node's loop passes its thread's CPU clock): a wave's share is then
+        steered while the apply's budget lasts (``wave.Budget``), not ``WAVE_PER_TICK`` units; the world
+        reads it for that alone.
         Its driver holds the cyclic collector off around the call (``gcpause``: the node's
         loop until the directions are out), not the world, which imports no collector.
         """
-        b = Batch(now)
+        b, budget = Batch(now), wave.Budget(clock) if clock is not None else None
         self._now = now
         for inp in inputs:
             try:
@@ -185,9 +186,9 @@ class World:
             except Exception as exc:  # the bulkhead: this input alone fails
                 self._fault(b, *kinds.blame(inp, self.settings.mission), exc)
         if b.changes or b.zones:
-            self._world_changed(b, WAVE_PER_TICK if clock is None else WAVE_CHUNK)
+            self._world_changed(b, WAVE_PER_TICK if budget is None else WAVE_CHUNK)
         first = len(b.out.directions)  # before: pushes sent again by the timers
-        self._directions(b, clock)
+        self._directions(b, budget)
         pushed = b.out.directions[first:]
         if b.wave:  # a wave's directions are pushes once they carry their points, in the next apply
             pushed = [d for d in pushed if d.unit not in b.wave]
@@ -368,11 +369,11 @@ class World:
         b.shared = len(now) if later else 0
         b.dirty.update(r.id for r in now if r.position is not None and not r.stale)  # as ``_direct``
 
-    def _directions(self, b: Batch, clock: Callable[[], float] | None = None) -> None:
+    def _directions(self, b: Batch, budget: wave.Budget | None = None) -> None:
         """A fresh direction for each live unit of the batch, and a wave's share; one whose step fails loses its goal.
         Untimed (no ``clock``) the share is the next ``WAVE_PER_TICK`` owed, steered with the batch; timed, the
         batch's own units go first (their directions first out), then the share while the budget lasts (``_shares``)."""
-        out, timed = b.out, clock is not None
+        out, timed = b.out, budget is not None
         drawing = not (
             timed or b.changes or b.zones
         )  # untimed, none in the change's own apply: ``split`` drew
@@ -389,8 +390,8 @@ class World:
         big = (b.changes or b.zones) and (len(guided) > WAVE_FIRST or self._wave)  # a wave, large or owed
         if guided or later:
             self._steer(b, guided, later, bool(drew or big), sent, failed)
-        if clock is not None:
-            self._shares(b, wave.Budget(clock, b.now), sent, failed)
+        if budget is not None:
+            self._shares(b, budget, sent, failed)
         if len(out.directions) == first and not failed:  # none steered: the roles are not judged
             return
         told, kept_clear = out.directions[first:], self._rec.step_zones(self._route)  # roles keep clear
