@@ -387,6 +387,7 @@ class Batch:
     wave: set[str] = field(
         default_factory=set
     )  # units sent their direction first, the rest in the next apply
+    shared: int = 0  # a wave's units drawn to be told in this apply (``World._shares``)
     # ``wave.Judged``: threats landed, their reach judged off the loop; ``wave.Corridors``: the units'
     # corridors, taken at the batch's first sight asked (a storm of puts shares them)
     judged: list[Any] = field(default_factory=list)
