@@ -39,6 +39,8 @@ TEAM_WIDEST = 4.0
 TeamOf = Callable[[str], "tuple[str, float] | None"]
 # the index, the records of its rows in order, and each unit's row
 Fleet = tuple[NeighbourIndex, list[UnitRecord], dict[str, int]]
+# what an index was built from: its rows' records, their positions, goals and teams (``_moved``)
+_Built = tuple[list[UnitRecord], list[object], list[object], "list[tuple[str, float] | None] | None"]
 
 
 def fleet_index(
@@ -132,7 +134,7 @@ class FleetIndex:
         self._kept: Fleet | None = None
         self._key: object = None
         # what the kept index was built from: its rows' records, positions, goals and teams (``_moved``)
-        self._from: tuple[list[UnitRecord], list[object], list[object], list[object] | None] | None = None
+        self._from: _Built | None = None
 
     def __call__(self) -> Fleet:
         """The fleet's index as if new-built, its rows' records and each unit's row."""
@@ -159,7 +161,7 @@ class FleetIndex:
 
 
 def _moved(
-    was: tuple[list[UnitRecord], list[object], list[object], list[object] | None] | None,
+    was: _Built | None,
     recs: list[UnitRecord],
     teams: list[tuple[str, float] | None] | None,
 ) -> list[int] | None:
