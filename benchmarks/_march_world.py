@@ -164,7 +164,8 @@ def drive(
         wave_s += time.thread_time() - c0
         take(out)
         told.update(d.unit for d in out.directions)
-    put_ms, removed_ms = [], []
+    put_ms: list[float] = []
+    removed_ms: list[float] = []
     for k in range(waves):  # more waves on the same world: a wave's CPU is noisy, a median of several is not
         for put in (True, False):
             now += 0.01
