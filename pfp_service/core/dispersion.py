@@ -161,9 +161,8 @@ class NeighbourIndex:
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
         self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
-        self._rows_found: dict[
-            int, list[int]
-        ] = {}  # row -> its neighbours, as ``query_ball_point`` found them
+        # row -> its neighbours, as ``query_ball_point`` found them (``_found``)
+        self._rows_found: dict[int, list[int]] = {}
 
     def unasked(self) -> NeighbourIndex:
         """This index as new-built: no ``near`` query remembered, so the next is asked afresh (and its pairs
