@@ -11,7 +11,8 @@ A team file is YAML::
 
 ``goal`` may be left out (the unit waits for one, e.g. from ``pfp inject``).
 ``mobility: {class: wheeled, max_slope_deg: 20}`` names the unit's mobility
-class (``core.mobility.CLASSES``), which ``pfp fleet`` sends on every state
+class (``core.mobility.CLASSES``), and may override its ``height_m`` and
+flat ``speed_mps`` as the wire does, which ``pfp fleet`` sends on every state
 (the planner plans it round its class's slope barriers over terrain);
 absent, ``pfp fleet --mobility``'s, else none (the planner's own class).
 A unit never says a planner step: it drives at ``speed_mps`` and reports at
@@ -52,6 +53,7 @@ from pfp_service.geo import Origin, localise_document
 from pfp_service.scenario import TeamSpec, ZoneSpec, check_teams
 from pfp_service.wire import GoalMobility, UnitKind
 from pfp_service.wire.messages import TeamUpdate, ZoneUpdate, localise_zone
+from pfp_service.wire.messages.structs import FlatSpeed, UnitHeight
 from pfp_service.yamlio import load_yaml
 
 __all__ = [
@@ -93,9 +95,13 @@ class MobilitySpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fie
 
     kind: MobilityClass = msgspec.field(name="class")
     max_slope_deg: PlannedSlope | None = None
+    height_m: UnitHeight | None = None
+    speed_mps: FlatSpeed | None = None
 
     def wire(self) -> GoalMobility:
-        return GoalMobility(kind=self.kind, max_slope_deg=self.max_slope_deg)
+        return GoalMobility(
+            kind=self.kind, max_slope_deg=self.max_slope_deg, height_m=self.height_m, speed_mps=self.speed_mps
+        )
 
 
 class UnitSpec(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fields=True):

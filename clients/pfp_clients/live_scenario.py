@@ -11,7 +11,8 @@
   never enters a zone;
 * one simulated unit at ``start`` (the fleet's sim), moving one plan step per
   tick, so the live stream walks the same steps the plan does, its states
-  naming the ``unit:`` block's mobility class (and slope limit, if given);
+  naming the ``unit:`` block's mobility class (and its slope limit, height
+  and speed, where given);
 * the plan itself, computed here with the same engine, to judge the live
   track against: every live point within ``tolerance`` (the goal's arrival
   tolerance) of the planned path, and every planned point of the live track.
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from pfp_clients.script import AddThreat, AddZone, Expect, Script, SetGoal, Step
@@ -149,7 +151,14 @@ def live_scenario(path: str | Path, unit: str = "u1", rate_hz: float = 5.0) -> L
             f"{p.name}, unit.max_slope_deg",
             f"{slope:g} is below {CLASS_LIMITS[0]}, the gentlest slope limit a live planner plans",
         )
-    mobility = MobilitySpec(kind=sc.unit.kind, max_slope_deg=slope)
+    u = sc.unit
+    try:  # the wire's bounds on the overrides, narrower than a plan's
+        mobility = msgspec.convert(
+            {"class": u.kind, "max_slope_deg": slope, "height_m": u.height_m, "speed_mps": u.speed_mps},
+            MobilitySpec,
+        )
+    except msgspec.ValidationError as exc:
+        raise InputError(f"{p.name}, unit", f"{exc} (a live planner's bounds)") from exc
     team = Team(
         name=sc.name,
         origin=sc.origin,

@@ -26,7 +26,16 @@ from typing import Literal
 
 import numpy as np
 
-__all__ = ["CLASSES", "CLASS_LIMITS", "Mobility", "MobilityClass", "planned_limit", "speed_mps"]
+__all__ = [
+    "CLASSES",
+    "CLASS_LIMITS",
+    "HEIGHT_STEP_M",
+    "Mobility",
+    "MobilityClass",
+    "planned_height",
+    "planned_limit",
+    "speed_mps",
+]
 
 MobilityClass = Literal["foot", "wheeled", "tracked"]
 
@@ -74,6 +83,21 @@ def planned_limit(max_slope_deg: float) -> int | None:
     ``CLASS_LIMITS`` not above it, the safe side (``None``: below every one of them)."""
     fit = [lim for lim in CLASS_LIMITS if lim <= round(max_slope_deg)]
     return fit[-1] if fit else None
+
+
+# A height override is seen by the threats at the next multiple of this up: each height in use costs the
+# world a re-heighted copy of the threats' field (docs/terrain.md), so near heights share one, on the
+# safe side (a taller unit is seen more).  The classes' own heights are seen as they are.
+HEIGHT_STEP_M = 0.25
+_CLASS_HEIGHTS = frozenset(c.height_m for c in CLASSES.values())
+
+
+def planned_height(height_m: float) -> float:
+    """The height a unit ``height_m`` tall is seen at by the threats: a class's own height as it is, any other
+    at the next multiple of ``HEIGHT_STEP_M`` up (the safe side)."""
+    if height_m in _CLASS_HEIGHTS:
+        return height_m
+    return math.ceil(round(height_m / HEIGHT_STEP_M, 9)) * HEIGHT_STEP_M
 
 
 def speed_mps(unit: Mobility, grade: np.ndarray) -> np.ndarray:

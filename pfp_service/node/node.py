@@ -401,7 +401,8 @@ class PlannerNode:
         tr = self._trace
         t_apply = self.clock()
         with gcpause.paused():  # the collector runs once the directions are out (gcpause)
-            out = self.world.apply(batch, now)
+            # a wave's share: what the apply affords in the loop thread's CPU (``wave.Budget``), preemption aside
+            out = self.world.apply(batch, now, time.thread_time)
             t_applied = self.clock()
             self._writes.acknowledge(acks, refused)
             forgotten = [e.unit for e in out.events if isinstance(e, ForgottenEvent)]

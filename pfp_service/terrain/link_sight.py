@@ -1,6 +1,7 @@
 """Line of sight between two units over the terrain grid: whether a controller's radio link has a clear path.
 
-Each end is a mast ``mast_m`` above the bilinear ground; the sight line
+Each end is a mast above the bilinear ground (a unit's own height: a
+controller's and its robot's may differ); the sight line
 between the two mast tops is clear when no ground along it stands above it
 (or within ``clearance_m`` of it: a robot's step keeps a margin,
 ``teams.SIGHT_CLEARANCE_M``).  Exact for the bilinear surface: within a cell
@@ -31,10 +32,15 @@ MAX_SAMPLES = 8192  # grid lines crossed along one sight line at most: a 4 km li
 
 
 def sees(
-    grid: TerrainGrid, a: tuple[float, float], b: tuple[float, float], mast_m: float, clearance_m: float = 0.0
+    grid: TerrainGrid,
+    a: tuple[float, float],
+    b: tuple[float, float],
+    mast_m: float,
+    clearance_m: float = 0.0,
+    mast_b_m: float | None = None,
 ) -> bool:
-    """Whether ``a`` and ``b`` (metres on the grid's plane), each ``mast_m`` above the ground, see each other
-    with the sight line at least ``clearance_m`` above the ground between them."""
+    """Whether ``a`` and ``b`` (metres on the grid's plane), ``mast_m`` and ``mast_b_m`` (``None``: ``mast_m``)
+    above the ground, see each other with the sight line at least ``clearance_m`` above the ground between them."""
     t = _crossings(grid, a, b)
     mid = (t[:-1] + t[1:]) / 2.0
     f = np.empty(len(t) + len(mid))
@@ -45,7 +51,8 @@ def sees(
         return True  # both ends on unknown ground: nothing known hides one from the other
     # an end on unknown ground stands as high as the other: the line is judged level from it
     za, zb = (za if math.isfinite(za) else zb), (zb if math.isfinite(zb) else za)
-    over = z + clearance_m - ((za + mast_m) + (zb - za) * f)  # ground above the line (> 0: hidden)
+    top_a, top_b = za + mast_m, zb + (mast_m if mast_b_m is None else mast_b_m)
+    over = z + clearance_m - (top_a + (top_b - top_a) * f)  # ground above the line (> 0: hidden)
     # between two crossings the ground is one cell's bilinear surface: along the line a parabola,
     # through its ends and middle; its highest point is at an end or at its vertex
     o0, om, o1 = over[0:-1:2], over[1::2], over[2::2]

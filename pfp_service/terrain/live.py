@@ -28,8 +28,11 @@ import hashlib
 import math
 import os
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, Mobility
 from pfp_service.core.zones import Zone
@@ -106,10 +109,26 @@ class LiveTerrain:
         for limit in CLASS_LIMITS:
             self.barriers(limit)
 
-    def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
-        """Whether two units at ``a`` and ``b`` see each other over the ground (a controller's link), each
-        as high as the unit class, the sight line ``clearance_m`` clear of it (``link_sight.sees``)."""
-        return sees(self.grid, a, b, self.unit.height_m, clearance_m)
+    def sees(
+        self,
+        a: tuple[float, float],
+        b: tuple[float, float],
+        clearance_m: float = 0.0,
+        masts: tuple[float | None, float | None] = (None, None),
+    ) -> bool:
+        """Whether two units at ``a`` and ``b`` see each other over the ground (a controller's link), each as
+        high as its ``masts`` entry (``None``: the unit class's height), the sight line ``clearance_m`` clear
+        of it (``link_sight.sees``)."""
+        own = self.unit.height_m
+        a_m, b_m = (own if m is None else m for m in masts)
+        return sees(self.grid, a, b, a_m, clearance_m, b_m)
+
+    def over_ground(self, path: Sequence[tuple[float, float]], unit: Mobility | None) -> dict[str, object]:
+        """A path's figures over the ground (``planning.over_ground``: elevations, climb, steepest ground and
+        the ETA) for a unit of ``unit``'s mobility (``None``: the class's)."""
+        from pfp_service.terrain.planning import over_ground
+
+        return over_ground(self.grid, np.asarray(path, dtype=float), self.unit if unit is None else unit)
 
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
         if not self.key:

@@ -16,7 +16,6 @@ path it sees, and the exposure the terrain-blind field would have priced.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,7 +36,7 @@ from pfp_service.terrain.grid import TerrainGrid, latlon_box, place
 from pfp_service.terrain.sight import cell_metres
 from pfp_service.terrain.threat_sight import TerrainSight
 
-__all__ = ["MAX_POINTS", "PlanTerrain", "prepare", "profile"]
+__all__ = ["MAX_POINTS", "PlanTerrain", "over_ground", "prepare", "profile"]
 
 MAX_POINTS = 1_000_000  # terrain grid points at most: a coarser cell than the DEM's beyond
 MARGIN_SHARE = 0.3  # of the start-goal distance, round the scenario's points
@@ -101,13 +100,51 @@ def prepare(
 
 def _samples(path: np.ndarray, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Points along ``path`` at most ``spacing_m`` apart (every vertex kept), and each piece's length."""
-    out = [path[:1]]
-    for a, b in itertools.pairwise(path):
-        n = max(1, math.ceil(math.dist(a, b) / spacing_m))
-        t = np.arange(1, n + 1)[:, None] / n
-        out.append(a + t * (b - a))
-    pts = np.concatenate(out)
+    seg = np.diff(path, axis=0)
+    n = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / spacing_m)).astype(np.int64)
+    idx = np.repeat(np.arange(len(seg)), n)
+    k = np.arange(len(idx)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n along each segment
+    pts = np.concatenate([path[:1], path[idx] + (k / n[idx])[:, None] * seg[idx]])
     return pts, np.hypot(*np.diff(pts, axis=0).T)
+
+
+@dataclass(frozen=True)
+class _Ground:
+    """A path sampled over the ground: its points every quarter cell, each piece's length and time."""
+
+    pts: np.ndarray
+    ds: np.ndarray
+    dt: np.ndarray
+    figures: dict[str, object]
+
+
+def _walked(grid: TerrainGrid, path: np.ndarray, unit: Mobility) -> _Ground:
+    path = np.asarray(path, dtype=float).reshape(-1, 2)
+    z = grid.elevation(path[:, 0], path[:, 1])
+    pts, ds = _samples(path, 0.25 * grid.cell_m)
+    zs = grid.elevation(pts[:, 0], pts[:, 1])
+    dz = np.diff(zs)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        grade = np.where(ds > 0, dz / np.where(ds > 0, ds, 1.0), 0.0)
+        speed = speed_mps(unit, grade)
+        dt = np.where(ds > 0, ds / speed, 0.0)
+    slope = grid.slope_deg(pts[:, 0], pts[:, 1])
+    eta = float(dt.sum())
+    figures: dict[str, object] = {
+        "path_elevation_m": [float(v) for v in z],
+        "climb_m": float(np.nansum(np.maximum(dz, 0.0))),
+        "max_slope_deg": float(np.nanmax(slope)) if np.isfinite(slope).any() else None,
+        "eta_s": eta if math.isfinite(eta) else None,
+    }
+    return _Ground(pts, ds, dt, figures)
+
+
+def over_ground(grid: TerrainGrid, path: np.ndarray, unit: Mobility) -> dict[str, object]:
+    """A path's figures over the ground for a unit of ``unit``'s mobility, for ``msgspec.structs.replace`` of
+    a ``PlanResult``: ``path_elevation_m`` at each point, ``climb_m``, ``max_slope_deg`` of the ground
+    crossed and ``eta_s`` (every quarter cell, its length over the unit's speed on that grade,
+    ``core.mobility.speed_mps``: its own flat speed scaled by its class's model)."""
+    return _walked(grid, path, unit).figures
 
 
 def exposure(
@@ -131,16 +168,8 @@ def profile(
 ) -> dict[str, object]:
     """The terrain fields of ``result`` (``PlanResult.path_elevation_m`` and the rest), for ``msgspec.structs.replace``."""
     path = np.asarray(result.path, dtype=float).reshape(-1, 2)
-    g = terrain.grid
-    z = g.elevation(path[:, 0], path[:, 1])
-    pts, ds = _samples(path, 0.25 * g.cell_m)
-    zs = g.elevation(pts[:, 0], pts[:, 1])
-    dz = np.diff(zs)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        grade = np.where(ds > 0, dz / np.where(ds > 0, ds, 1.0), 0.0)
-        speed = speed_mps(terrain.unit, grade)
-        dt = np.where(ds > 0, ds / speed, 0.0)
-    slope = g.slope_deg(pts[:, 0], pts[:, 1])
+    ground = _walked(terrain.grid, path, terrain.unit)
+    pts, ds, dt = ground.pts, ground.ds, ground.dt
     field = ThreatField([s.threat for s in schedule], intensity, sight=terrain.sight)
     mid = 0.5 * (pts[:-1] + pts[1:])
     views = []
@@ -154,12 +183,8 @@ def profile(
             for i in np.flatnonzero(near):
                 seen[i] = kernels.sight(packed, 0, float(mid[i, 0]), float(mid[i, 1]), False)[0] >= 0.5
         views.append(ThreatView(t.id, float(ds[seen].sum()), float(dt[seen].sum())))
-    eta = float(dt.sum())
     return {
-        "path_elevation_m": [float(v) for v in z],
-        "climb_m": float(np.nansum(np.maximum(dz, 0.0))),
-        "max_slope_deg": float(np.nanmax(slope)) if np.isfinite(slope).any() else None,
-        "eta_s": eta if math.isfinite(eta) else None,
+        **ground.figures,
         "in_view": views,
         "exposure_unmasked": exposure(path, schedule, intensity, None, result.planner == "pfp"),
     }

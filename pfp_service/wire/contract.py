@@ -65,7 +65,9 @@ MESSAGES: tuple[MessageSpec, ...] = (
                 ),
                 (
                     "unit_state.mobility",
-                    m.UnitState(position=(1.5, 2.25), seq=43, mobility=m.GoalMobility(kind="tracked")),
+                    m.UnitState(
+                        position=(1.5, 2.25), seq=43, mobility=m.GoalMobility(kind="tracked", height_m=3.5)
+                    ),
                 ),
             ]
         ),
@@ -84,7 +86,8 @@ MESSAGES: tuple[MessageSpec, ...] = (
                 (
                     "goal.mobility",
                     m.Goal(
-                        position=(10.0, 10.0), mobility=m.GoalMobility(kind="wheeled", max_slope_deg=20.0)
+                        position=(10.0, 10.0),
+                        mobility=m.GoalMobility(kind="wheeled", max_slope_deg=20.0, speed_mps=6.0),
                     ),
                 ),
             ]

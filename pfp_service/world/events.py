@@ -27,7 +27,7 @@ from pfp_service.wire import (
     UnitState,
     keys,
 )
-from pfp_service.wire.messages import TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
+from pfp_service.wire.messages import GoalMobility, TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.terrain import SightAsk, SightLanded
 
@@ -387,6 +387,7 @@ class Batch:
     wave: set[str] = field(
         default_factory=set
     )  # units sent their direction first, the rest in the next apply
+    shared: int = 0  # a wave's units drawn to be told in this apply (``World._shares``)
     # ``wave.Judged``: threats landed, their reach judged off the loop; ``wave.Corridors``: the units'
     # corridors, taken at the batch's first sight asked (a storm of puts shares them)
     judged: list[Any] = field(default_factory=list)
@@ -414,9 +415,8 @@ class UnitView:
     zones: ZoneSet = field(
         default_factory=_no_zones
     )  # the keep-out zones in force: a preview never enters one
-    height_m: float | None = (
-        None  # over terrain, the height threats see the unit at (None: the planner's class's)
-    )
+    height_m: float | None = None  # over terrain, the height threats see it at (None: the planner's class's)
+    standing: GoalMobility | None = None  # the mobility its states name (``world.mobility``)
 
     def params_for(self, goal: Goal) -> PlannerParams:
         return self.settings.params_for(goal)

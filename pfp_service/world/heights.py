@@ -2,8 +2,8 @@
 
 A threat's window is swept once, at the planner's class's height, and
 serves every unit (``core.visibility.Window.at``: the same heights under
-another target height); a unit is seen at its own class's height
-(``world.mobility.height_of``, ``team_route.RouteKeys.height``).  A threat
+another target height); a unit is seen at its own height, its class's or
+its override (``world.mobility.height_of``, ``team_route.RouteKeys.height``).  A threat
 put reaches a unit only where it sees it at that height
 (``reach.reached``), judged once per height, never per unit.
 """

@@ -15,20 +15,37 @@ of them not above it, the safe side, since a barrier set for a new limit
 takes seconds to build over a large DEM and none is built on the live loop;
 an override below every class's limit is refused.  A state that changes the
 limit a unit is planned at re-judges it at once (``units.Units.classed``).
-A threat's window is swept once, at the planner's class's height, and serves
-every unit: a unit is seen at its own class's height (``height_of``), its
-field the world's re-heighted (``world_records.Records.field_for``).
+Its ``height_m`` and ``speed_mps`` override the class's too, as the
+scenario's ``unit:`` block's do (``core.mobility.Mobility.merged``;
+``mobility_of``).  A threat's window is swept once, at the planner's
+class's height, and serves every unit: a unit is seen at its own height
+(``height_of``: its class's, or its override at the next quarter metre
+up, ``core.mobility.planned_height``), its field the world's
+re-heighted (``world_records.Records.field_for``); a controller's link is
+judged from the controller's own height to the robot's (``team_book``).
 """
 
 from __future__ import annotations
 
 from typing import Any, TypeVar
 
-from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, planned_limit
+from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, Mobility, planned_height, planned_limit
 from pfp_service.errors import InputError
 from pfp_service.wire import Goal, GoalMobility, UnitState
+from pfp_service.wire.messages.structs import FLAT_SPEED_MPS, UNIT_HEIGHT_M
 
-__all__ = ["by_limit", "check", "height_of", "limit_of", "refusal", "sight_height", "slope_limit"]
+__all__ = [
+    "by_limit",
+    "check",
+    "height_of",
+    "limit_of",
+    "mobility_of",
+    "own_height",
+    "own_speed",
+    "refusal",
+    "sight_height",
+    "slope_limit",
+]
 
 M = TypeVar("M", Goal, UnitState)
 
@@ -83,12 +100,36 @@ def limit_of(rec: Any) -> int | None:
 
 def sight_height(goal: Goal | None, standing: GoalMobility | None = None) -> float | None:
     """How tall a unit heading for ``goal`` stands, metres: what a threat must see of it
-    (``core.mobility.Mobility.height_m``), its goal's class over its ``standing`` one (its states');
-    ``None``: the planner's class's."""
+    (``core.mobility.Mobility.height_m``), its goal's mobility over its ``standing`` one (its states'),
+    its ``height_m`` over its class's (planned at ``core.mobility.planned_height``: near heights share a
+    field); ``None``: the planner's class's."""
     mob = goal.mobility if goal is not None and goal.mobility is not None else standing
     if mob is None or mob.kind not in CLASSES:
         return None
-    return CLASSES[mob.kind].height_m
+    own = own_height(mob)
+    return planned_height(own) if own is not None else CLASSES[mob.kind].height_m
+
+
+def mobility_of(goal: Goal | None, standing: GoalMobility | None = None) -> Mobility | None:
+    """The whole mobility of a unit heading for ``goal`` (``core.mobility.Mobility``): its goal's over its
+    ``standing`` one (its states'), each field given overriding its class's; ``None``: the planner's class."""
+    mob = goal.mobility if goal is not None and goal.mobility is not None else standing
+    if mob is None or mob.kind not in CLASSES:
+        return None
+    return CLASSES[mob.kind].merged(mob.max_slope_deg, own_height(mob), own_speed(mob))
+
+
+def own_height(mob: GoalMobility) -> float | None:
+    """``mob``'s ``height_m`` override, or ``None``: none, or one the wire's bounds refuse (put in-process:
+    its class's then, never a NaN in a field)."""
+    h = mob.height_m
+    return h if h is not None and UNIT_HEIGHT_M[0] <= h <= UNIT_HEIGHT_M[1] else None
+
+
+def own_speed(mob: GoalMobility) -> float | None:
+    """``mob``'s ``speed_mps`` override, or ``None``: none, or one the wire's bounds refuse (as ``own_height``)."""
+    v = mob.speed_mps
+    return v if v is not None and FLAT_SPEED_MPS[0] <= v <= FLAT_SPEED_MPS[1] else None
 
 
 def height_of(rec: Any) -> float | None:

@@ -18,6 +18,11 @@ each direction.  A what-if with extra
 threats drives the same copy after ``world_changed()``, as the live unit
 would if they appeared; a new start, goal or parameter starts afresh with the
 unit's own seed.
+
+Over terrain the path is measured over the ground (``Ground.over_ground``):
+its elevations, climb, steepest ground and ``eta_s`` at the unit's own
+mobility, its speed override included, as ``pfp plan --terrain`` measures a
+plan's.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Goal, PreviewRequest
 from pfp_service.wire.messages.structs import DEFAULT_SHAPE
 from pfp_service.world import translate
+from pfp_service.world.mobility import mobility_of
 from pfp_service.world.terrain import sight_of
 from pfp_service.world.world import UnitView, unit_key
 
@@ -196,7 +202,7 @@ def preview(
         if live.params.max_iter > max_iter_cap:
             live.params = dataclasses.replace(live.params, max_iter=max_iter_cap)
         first = view.last_vector if req.start is None and not extra else None
-        return plan(
+        walked = plan(
             start,
             goal,
             schedule,
@@ -206,6 +212,7 @@ def preview(
             first_move=first,
             field=shared,
         )
+        return _over_ground(view, goal_msg, walked)
     # the live stepper measures the goal term from where the goal was set; a new start or goal starts afresh
     origin = view.origin if view.origin is not None and req.start is None and req.goal is None else start
     params = view.params_for(goal_msg).merged(
@@ -215,4 +222,15 @@ def preview(
     if resolved.max_iter > max_iter_cap:
         resolved = dataclasses.replace(resolved, max_iter=max_iter_cap)
     fresh = Stepper(origin, goal, resolved, view.settings.bounds, unit_key(view.unit))
-    return plan(start, goal, schedule, clock=clock, budget_s=budget_s, stepper=fresh, field=shared)
+    walked = plan(start, goal, schedule, clock=clock, budget_s=budget_s, stepper=fresh, field=shared)
+    return _over_ground(view, goal_msg, walked)
+
+
+def _over_ground(view: UnitView, goal: Goal, result: PlanResult) -> PlanResult:
+    """``result`` measured over the terrain, if there is one: its elevations, climb, steepest ground and ETA
+    at the unit's own mobility (its goal's over its states', overrides included: ``world.mobility``)."""
+    ground = view.settings.terrain
+    if ground is None or not result.path:
+        return result
+    own = mobility_of(goal, view.standing)
+    return msgspec.structs.replace(result, **ground.over_ground(result.path, own))

@@ -26,6 +26,7 @@ from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
 from pfp_service.world import team_leads as leads
 from pfp_service.world import team_link as link_memory
+from pfp_service.world import team_masts as masts
 from pfp_service.world import team_place as places
 from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
@@ -355,10 +356,11 @@ class TeamBook:
         Each is judged on the step the one before left (a lead's place is then checked against the link).
         """
         out: list[Verdict] = []
+        linked = masts.pair(sight, units, team, unit)  # a robot's link: each end at its own height
         if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
             ctl = units.get(team.controller) if team.controller is not None else None
             if ctl is not None and ctl.position is not None and math.dist(at, ctl.position) > 1.0:
-                v, pull = link_memory.closing_on(self.trails, unit, at, ctl.position, team, sight, self._now)
+                v, pull = link_memory.closing_on(self.trails, unit, at, ctl.position, team, linked, self._now)
                 if pull:
                     self.pulls.setdefault(str(team.controller), set()).add(unit)
                 return [v]
@@ -384,7 +386,7 @@ class TeamBook:
             c_at = ctl.position if ctl is not None else None
             c_dir = self.sent.get(str(team.controller))
             v, pull = link_memory.robot_step(
-                self.trails, unit, at, to, team, c_at, lost, sight, c_dir, self._now
+                self.trails, unit, at, to, team, c_at, lost, linked, c_dir, self._now
             )
             out.append(v)
             if pull:
@@ -396,8 +398,9 @@ class TeamBook:
             ahead, run = self._ahead(robots), self.trails.run(unit)
             ground = (self._line(tid), team.corridor_m) if unit in team.follow else None
             verdict, robot = places.control(
-                at, to, robots, team.radio_range_m, sight, ahead, run, None, ground
-            )
+                at, to, robots, team.radio_range_m, sight, ahead, run, None, ground,
+                masts.per_robot(sight, units, unit, robots),
+            )  # fmt: skip
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
@@ -441,7 +444,7 @@ class TeamBook:
             ground = (self._line(tid), team.corridor_m) if unit in team.follow else None
             v, blocking = places.control(
                 at, p, others, team.radio_range_m, sight, self._ahead(others), self.trails.run(unit),
-                (r, rec.position), ground,
+                (r, rec.position), ground, masts.per_robot(sight, units, unit, [*others, (r, rec.position)]),
             )  # fmt: skip
             if v.kind == "hold":
                 self.waits.add(blocking)  # the robot whose link keeps it from this one closes on it

@@ -4,7 +4,7 @@ A controller of two robots that holds or cuts its step for one, or closes on one
 holds that one, is pulled by each in turn: between its lead and its second robot across a crest, it
 stepped toward each and back, and one of them went through its shadow (issue 33, seed 1 of
 ``pfp bench teams --terrain``).  Instead, ``control`` tries a small fixed set of places round it
-with the world's own link test (range, and the exact sight line): ``HEADINGS`` headings at a
+with the world's own link test (range, and the exact sight line from its own height to each robot's): ``HEADINGS`` headings at a
 report's run and at half of it (its own way first), and the way to each robot and to their middle.
 It steps to the place that links the most of its robots, keeping every link it has along the way
 and at its next report's point (as ``teams.control`` judges a step), on ground it may enter (a
@@ -46,6 +46,7 @@ def control(
     run_m: float | None = None,
     closing: tuple[str, Point] | None = None,
     ground: tuple[Polyline, float] | None = None,
+    sights: Mapping[str, Sight] | None = None,
 ) -> tuple[Verdict, str]:
     """``teams.control``'s verdict on the controller's step to ``to``, replaced by a step to a better place
     among its robots (``place``) where there is one.
@@ -54,13 +55,14 @@ def control(
         closing: the robot the controller closes on, when it does (its link holds it): judged with
             ``robots`` (the others) for the place, not for the step.
         ground: a follower's cleared corridor (its lead's track, its width): the places it may enter.
+        sights: a robot's own sight line, each end at its unit's height (``team_masts``), over ``sight``.
 
     Returns:
         ``(verdict, robot)`` as ``teams.control``'s, the robot ``""`` when a place was chosen.
     """
-    v, robot = roles.control(at, to, robots, radio_range_m, sight, next_of, run_m)
+    v, robot = roles.control(at, to, robots, radio_range_m, sight, next_of, run_m, sights)
     every = [*robots, closing] if closing is not None else list(robots)
-    better = place(at, to, v, every, radio_range_m, sight, next_of, run_m, ground)
+    better = place(at, to, v, every, radio_range_m, sight, next_of, run_m, ground, sights)
     return (v, robot) if better is None else (better, "")
 
 
@@ -74,18 +76,24 @@ def place(
     next_of: Mapping[str, Point] | None = None,
     run_m: float | None = None,
     ground: tuple[Polyline, float] | None = None,
+    sights: Mapping[str, Sight] | None = None,
 ) -> Verdict | None:
     """The step to the best place round ``at`` for a controller of two robots or more, or ``None`` when the
     step as ``judged`` (``teams.control``'s verdict on the step to ``to``) is as good.
 
     A place is taken only when the straight step to it keeps every robot linked at ``at`` linked (and
     its next point, ``next_of``: ``teams.control``), and it lies on ``ground`` where that is given.
+    Each robot's sight line is its own in ``sights`` (each end at its unit's height), else ``sight``.
     """
+
+    def seen_by(rid: str) -> Sight | None:
+        return sights.get(rid, sight) if sights else sight
+
     if len(robots) < 2:
         return None
     end = at if judged.kind == "hold" else (judged.to if judged.to is not None else to)
 
-    base = (sum(roles.in_link(end, q, radio_range_m, sight) for _, q in robots), -_dist(end, to))
+    base = (sum(roles.in_link(end, q, radio_range_m, seen_by(rid)) for rid, q in robots), -_dist(end, to))
     if judged.kind == "go" and base[0] == len(robots):
         return None  # its own step keeps them all
     pts = np.array([p for _, p in robots], dtype=float)
@@ -108,11 +116,13 @@ def place(
         if not asked:
             if ground is None or _on(ground, at, c):
                 linked_here = sum(
-                    1 for j in np.flatnonzero(near[k]).tolist() if sight is None or sight(c, robots[j][1])
+                    1
+                    for j in np.flatnonzero(near[k]).tolist()
+                    if (s := seen_by(robots[j][0])) is None or s(c, robots[j][1])
                 )
                 heapq.heappush(heap, (-linked_here, far, k, True))
             continue
-        if roles.control(at, c, robots, radio_range_m, sight, next_of, run_m)[0] == GO:
+        if roles.control(at, c, robots, radio_range_m, sight, next_of, run_m, sights)[0] == GO:
             ids = ", ".join(rid for rid, _ in robots)
             what = f"{ids} linked" if -neg == len(robots) else f"{-neg} of {ids} linked"
             why = f"to a place that keeps {what}"

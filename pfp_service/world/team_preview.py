@@ -12,7 +12,8 @@ and only while en route or escaping) and reports where it is; the world
 answers with the directions its team book judged (the lead's standoff and
 waiting, the follower's cleared corridor, the controller's link) and its
 dispersion between the members.  So the tracks are what the live stream
-would drive for vehicles moving at their reported speeds.
+would drive for vehicles moving at their reported speeds (a member that
+reports none: the request's ``speeds``, else its mobility's ``speed_mps``).
 
 Units outside the team whose reach comes within dispersion distance of the
 team's (``team_outsiders``: at most ``MAX_PREVIEW_OUTSIDERS``, nearest first)
@@ -75,6 +76,7 @@ from pfp_service.world.events import (
     WorldSettings,
     ZonePut,
 )
+from pfp_service.world.mobility import own_speed
 from pfp_service.world.team_outsiders import guided as outsider_guided
 from pfp_service.world.team_outsiders import nearby, reach
 from pfp_service.world.units import TRANSITIONS, Started, Step, UnitRecord
@@ -273,9 +275,16 @@ class _Vehicle:
 
 
 def _speed(m: MemberSeed, request: TeamPreviewRequest) -> float:
+    """A member's speed in the replay: as it reported or was measured, else as the request gives it, else its
+    mobility's own ``speed_mps`` (its goal's over its states': the speed it said it drives at), else 0."""
     if m.speed_mps > 0.0:
         return m.speed_mps
-    return request.speeds.get(m.unit, 0.0)
+    given = request.speeds.get(m.unit)
+    if given is not None:
+        return given
+    mob = m.goal.mobility if m.goal is not None and m.goal.mobility is not None else m.mobility
+    own = own_speed(mob) if mob is not None else None
+    return own if own is not None else 0.0
 
 
 def replay(
@@ -284,7 +293,7 @@ def replay(
     """Every member's track over time, as the live world would drive them, within ``budget_s`` on ``clock``.
 
     Raises:
-        InputError: a member with a goal has no speed, reported or given (``$.speeds``).
+        InputError: a member with a goal has no speed, reported, given or in its mobility (``$.speeds``).
     """
     req = request or TeamPreviewRequest()
     deadline = clock() + budget_s

@@ -48,7 +48,9 @@ Point = tuple[float, float]
 class Sight(Protocol):
     """Whether two points see each other over the ground (a mast at each end), the sight line clearing
     it by ``clearance_m``; ``None`` where there is no terrain.  One with a ``resolution_m`` (the ground's
-    cell) is asked along a step every half of it at most, not finer."""
+    cell) is asked along a step every half of it at most, not finer.  A link's is asked with the
+    controller's point first and the robot's second: each end stands at its own unit's height
+    (``team_masts``)."""
 
     def __call__(self, a: Point, b: Point, clearance_m: float = 0.0) -> bool: ...
 
@@ -387,6 +389,7 @@ def control(
     sight: Sight | None = None,
     next_of: Mapping[str, Point] | None = None,
     run_m: float | None = None,
+    sights: Mapping[str, Sight] | None = None,
 ) -> tuple[Verdict, str]:
     """A controller's step: it keeps each of its robots it is linked to in range and, over terrain, in sight.
 
@@ -402,24 +405,27 @@ def control(
         next_of: where a robot's own direction takes it by the next report, if known: both move at once,
             so the step keeps that point linked too, when holding does.
         run_m: how far along its step the controller will be at its next report, if known: judged too.
+        sights: a robot's own sight line (each end at its unit's height: ``team_masts``), over ``sight``.
 
     Returns:
         ``(verdict, robot)``: go; the step cut short where it would break a robot's link (``robot`` that
         one); hold when it would at once.
     """
 
-    def linked(p: Point, r: Point) -> bool:
-        return in_link(p, r, radio_range_m, sight)
+    def linked(p: Point, rid: str, r: Point) -> bool:
+        return in_link(p, r, radio_range_m, sights.get(rid, sight) if sights else sight)
 
-    kept = [(rid, r) for rid, r in robots if linked(at, r)]
+    kept = [(rid, r) for rid, r in robots if linked(at, rid, r)]
     ahead = next_of or {}
     kept += [
         (rid, n)
         for rid, r in kept
-        if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, n)
+        if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, rid, n)
     ]
-    if not kept or (sight is None and _within(radio_range_m, (at, to), [r for _, r in kept])):
-        return GO, ""  # no link to keep, or every sample of the step keeps them all (``_within``)
+    if not kept or (
+        sight is None and not sights and _within(radio_range_m, (at, to), [r for _, r in kept])
+    ):  # no link to keep, or (no sight line to ask) every sample of the step keeps them all (``_within``)
+        return GO, ""
     spacing = (
         max(radio_range_m / 16.0, _CLOSE_M)
         if sight is None
@@ -429,7 +435,7 @@ def control(
 
     def ok(p: Point) -> bool:
         for rid, r in kept:
-            if not linked(p, r):
+            if not linked(p, rid, r):
                 broken[0] = rid
                 return False
         return True

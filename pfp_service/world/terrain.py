@@ -8,7 +8,10 @@ ground; a unit whose goal names another class, ``world.mobility``, plans
 around its ``barriers`` for that class's slope instead) are in force with the keep-out zones put on the wire, so the
 stepper, deliberation and previews treat them alike, as ``pfp plan
 --terrain`` does; its ``sees`` is the line of sight a controller's link
-keeps to its robots (``team_book``).  None changes while the planner runs.  The world never
+keeps to its robots (``team_book``), from the controller's own height to the
+robot's (``team_masts``); its ``over_ground`` measures a preview's path over
+it (elevations, climb, steepest ground, and the ETA at the unit's own
+mobility: ``world.preview``).  None changes while the planner runs.  The world never
 reads the DEM: it is handed what it needs.
 
 Sight off the loop.  A threat's window is a viewshed sweep over its reach
@@ -36,6 +39,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:  # the compiled core's types: the world's inputs (``events``) import this module
+    from pfp_service.core.mobility import Mobility
     from pfp_service.core.visibility import Sight as ThreatSight
     from pfp_service.core.visibility import Window
     from pfp_service.core.zones import Zone
@@ -68,10 +72,20 @@ class Ground(Protocol):
 
     def barriers(self, max_slope_deg: int | None) -> Sequence[Zone]: ...
 
-    def sees(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool: ...
+    def sees(
+        self,
+        a: tuple[float, float],
+        b: tuple[float, float],
+        clearance_m: float = 0.0,
+        masts: tuple[float | None, float | None] = (None, None),
+    ) -> bool: ...
 
     @property
     def resolution_m(self) -> float: ...
+
+    def over_ground(
+        self, path: Sequence[tuple[float, float]], unit: Mobility | None
+    ) -> dict[str, object]: ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,13 +170,21 @@ def ground_zones(ground: Ground | None) -> list[Zone]:
 
 @dataclass(frozen=True, slots=True)
 class _GroundSight:
-    """A ground's line of sight between two units, with its resolution (``teams.Sight``)."""
+    """A ground's line of sight between two units, with its resolution (``teams.Sight``): each end at its
+    ``masts`` height (``None``: the planner's class's)."""
 
     ground: Ground
     resolution_m: float
+    masts: tuple[float | None, float | None] = (None, None)
 
     def __call__(self, a: tuple[float, float], b: tuple[float, float], clearance_m: float = 0.0) -> bool:
-        return self.ground.sees(a, b, clearance_m)
+        if self.masts == (None, None):
+            return self.ground.sees(a, b, clearance_m)
+        return self.ground.sees(a, b, clearance_m, self.masts)
+
+    def between(self, a_m: float | None, b_m: float | None) -> _GroundSight:
+        """This sight with its first end ``a_m`` tall and its second ``b_m`` (``None``: the class's)."""
+        return _GroundSight(self.ground, self.resolution_m, (a_m, b_m))
 
 
 def link_sight(ground: Ground | None) -> Sight | None:

@@ -140,15 +140,22 @@ def decode_plan_result(data: bytes | bytearray | memoryview | None) -> PlanResul
 
 
 def fit_reply(result: PlanResult, limit: int = MAX_PAYLOAD_BYTES) -> bytes:
-    """The reply bytes, within ``limit``: the path is thinned (ends kept) and marked if it must be."""
+    """The reply bytes, within ``limit``: the path (and its elevations, over terrain) is thinned (ends kept)
+    and marked if it must be."""
     data = encode(result)
-    path = result.path
+    path, heights = result.path, result.path_elevation_m
     keep = len(path)
     while len(data) > limit and keep > 2:
         keep = max(2, int(keep * 0.9 * limit / len(data)))
         stride = (len(path) - 1) / (keep - 1)
-        thinned = [path[round(i * stride)] for i in range(keep - 1)] + [path[-1]]
-        data = encode(msgspec.structs.replace(result, path=thinned, path_decimated=True))
+        idx = [round(i * stride) for i in range(keep - 1)] + [len(path) - 1]
+        thinned = [path[i] for i in idx]
+        elevations = (
+            [heights[i] for i in idx] if heights is not None and len(heights) == len(path) else heights
+        )
+        data = encode(
+            msgspec.structs.replace(result, path=thinned, path_elevation_m=elevations, path_decimated=True)
+        )
     return data
 
 

@@ -25,7 +25,7 @@ no I/O.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -41,7 +41,10 @@ if TYPE_CHECKING:
     from pfp_service.world.world_records import UnitRecord
 
 __all__ = [
+    "WAVE_BUDGET_S",
+    "WAVE_CHUNK",
     "WAVE_PER_TICK",
+    "Budget",
     "Corridors",
     "Judged",
     "Wave",
@@ -54,8 +57,12 @@ __all__ = [
     "split",
 ]
 
-# units of a wave steered an ``apply`` (figures: docs/operations.md, "The wave first")
+# units of a wave steered an ``apply`` (figures: docs/operations.md, "The wave first"); timed (``Budget``), at most
 WAVE_PER_TICK = 64
+# a timed apply's share is drawn this many units at a time while its budget lasts, one chunk at least
+WAVE_CHUNK = 16
+# what a timed apply may spend before it draws no more of a wave (figures: BENCHMARKS.md, "Shares by time")
+WAVE_BUDGET_S = 0.003
 
 
 def nearest_first(recs: Sequence[UnitRecord], centres: Sequence[tuple[float, float]]) -> list[UnitRecord]:
@@ -85,6 +92,25 @@ def split(
     ordered = nearest_first(hit, centres)
     now = ordered[:limit] + [r for r in ordered[limit:] if r.id in dirty]
     return now, [r for r in ordered[limit:] if r.id not in dirty]
+
+
+class Budget:
+    """One timed ``apply``'s time for a wave's share: spent ``WAVE_BUDGET_S`` after the apply began, on the driver's clock.
+
+    The clock is the driver's, passed in as a value (the world never reads
+    one of its own): the node's loop passes its thread's CPU clock, so a
+    share is what the apply can afford after its batch's own units, not a
+    count, and a state that comes during a wave waits for about one budget,
+    not one share.
+    """
+
+    def __init__(self, clock: Callable[[], float]) -> None:
+        self._clock = clock
+        self._until = clock() + WAVE_BUDGET_S
+
+    def spent(self) -> bool:
+        """Whether the apply's budget is gone."""
+        return self._clock() >= self._until
 
 
 class Wave:

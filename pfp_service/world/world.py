@@ -3,15 +3,17 @@
 In the manner of h11's connection: ``World.apply(inputs, now)`` takes a batch
 of frozen input events (``Input``) and returns ``Outputs``: the directions,
 events, deliberation jobs (and those cancelled), missions and faults that
-must go out.  It reads no clock, socket or file; ``now`` is a parameter.
+must go out.  It reads no socket or file and no clock of its own: ``now`` is
+a parameter, and the driver's clock, when passed, is read only to size a
+wave's share (``wave.Budget``).
 Every decision lives here -- who gets a direction, which event fires and why,
 status transitions, expiry, limits, who answers a preview.
 
 ``World`` decides; its parts keep the books, each plain data in and out with
 its own tests: the records and the threats' field (``world_records``), the
 timer heap (``timers``), staleness, forgetting and push re-sends
-(``liveness``), cluster ownership (``ownership``), the limits on rejections and fault lines
-(``limits``), a unit's mission (``missions``), the reactive step, its look-ahead and dispersion
+(``liveness``), cluster ownership (``ownership``), zones put and gone (``zone_puts``), the
+limits on rejections and fault lines (``limits``), a unit's mission (``missions``), the reactive step, its look-ahead and dispersion
 (``steering``, ``lookahead``, ``dispersion``), the snapshot's pages (``snapshot.page``).  Unbounded
 work (look-ahead, escape searches) is deliberation: a ``Job`` whose result is adopted only for the
 goal and world still in force.  Bulkheads: ``apply`` is total; a failure belongs to the input, timer
@@ -22,14 +24,17 @@ minute per key); the rest goes out.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 
 from pfp_service.core import ThreatField
+from pfp_service.core.advice import Advice
 from pfp_service.errors import InputError
 from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
 from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
-from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, ZoneUpdate
-from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, translate, wave
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS
+from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, wave
 from pfp_service.world import events as ev
+from pfp_service.world.bulkheads import Bulkheads
 from pfp_service.world.cluster import Cluster
 from pfp_service.world.events import *  # noqa: F403 -- the world's inputs and outputs, named from here too
 from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSettings
@@ -42,8 +47,9 @@ from pfp_service.world.terrain import link_sight
 from pfp_service.world.threat_puts import ThreatPuts
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
-from pfp_service.world.wave import WAVE_PER_TICK, Wave, split
-from pfp_service.world.world_records import Records, ZoneRecord
+from pfp_service.world.wave import WAVE_CHUNK, WAVE_PER_TICK, Wave, split
+from pfp_service.world.world_records import Records
+from pfp_service.world.zone_puts import ZonePuts
 
 __all__ = ["World", *ev.__all__]
 
@@ -71,7 +77,15 @@ class World:
         self._live = Liveness(s, self._book, self._timers)
         self._cluster = Cluster(s, self._book, self._timers, self._start, self._direct)
         self.limits = Limits()
+        bulk = Bulkheads(s, self._units, self._book, self.limits)  # a failure is its input's or unit's alone
+        self._key, self._fault, self._unit_fault, self._reject = (
+            bulk.key,
+            bulk.fault,
+            bulk.unit_fault,
+            bulk.reject,
+        )
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
+        self._zones = ZonePuts(s, self._rec, self._timers, self.limits, self._reject)  # zones' inputs
         self.teams = TeamBook(link_sight(s.terrain), self._book.seen)  # a robot's link: range and sight
         self._route = team_route.RouteKeys(self._rec, self.teams, s.terrain)  # a lead's, for its followers
         self._disp = dispersion.Dispersion(  # off unless enabled; a team's separation_m among its members
@@ -99,9 +113,8 @@ class World:
         if rec is None:
             return UnitView(unit_id, None, None, None, None, threats, s, zones=zones)
         stepper = copy.deepcopy(rec.stepper) if rec.stepper is not None else None
-        return UnitView(
-            unit_id, rec.position, rec.goal, rec.origin, stepper, threats, s, rec.last_vector, zones, tall
-        )
+        where = (rec.position, rec.goal, rec.origin)
+        return UnitView(unit_id, *where, stepper, threats, s, rec.last_vector, zones, tall, rec.mobility)
 
     def snapshot(
         self,
@@ -153,13 +166,18 @@ class World:
         return self.view(unit_id) if self.owns(unit_id) else None
 
     # -- the one way in -----------------------------------------------------------
-    def apply(self, inputs: list[Input] | tuple[Input, ...], now: float) -> Outputs:
+    def apply(
+        self, inputs: list[Input] | tuple[Input, ...], now: float, clock: Callable[[], float] | None = None
+    ) -> Outputs:
         """Apply a batch of inputs at ``now``; return what must go out.
 
+        ``clock``: the driver's (the node's loop passes its thread's CPU clock): a wave's share is then
+        steered while the apply's budget lasts (``wave.Budget``), not ``WAVE_PER_TICK`` units; the world
+        reads it for that alone.
         Its driver holds the cyclic collector off around the call (``gcpause``: the node's
         loop until the directions are out), not the world, which imports no collector.
         """
-        b = Batch(now)
+        b, budget = Batch(now), wave.Budget(clock) if clock is not None else None
         self._now = now
         for inp in inputs:
             try:
@@ -167,9 +185,9 @@ class World:
             except Exception as exc:  # the bulkhead: this input alone fails
                 self._fault(b, *kinds.blame(inp, self.settings.mission), exc)
         if b.changes or b.zones:
-            self._world_changed(b)
+            self._world_changed(b, WAVE_PER_TICK if budget is None else WAVE_CHUNK)
         first = len(b.out.directions)  # before: pushes sent again by the timers
-        self._directions(b)
+        self._directions(b, budget)
         pushed = b.out.directions[first:]
         if b.wave:  # a wave's directions are pushes once they carry their points, in the next apply
             pushed = [d for d in pushed if d.unit not in b.wave]
@@ -201,9 +219,9 @@ class World:
             case ev.SightLanded():
                 self._puts.landed(inp, b)
             case ev.ZonePut(zid, update):
-                self._zone_put(zid, update, b)
+                self._zones.put(zid, update, b)
             case ev.ZoneRemoved(zid):
-                self._zone_gone(self._rec.remove_zone(zid), zid, "removed", b)
+                self._zones.gone(self._rec.remove_zone(zid), zid, "removed", b)
             case ev.TeamPut() | ev.TeamRemoved():
                 self._team(inp, b)
             case ev.TokenChanged(unit, alive):
@@ -229,53 +247,6 @@ class World:
                 self._run_timers(t, b)
             case _:  # a kind in the table without its case here: rejected on its key, never dropped unsaid
                 raise TypeError(f"no handler for {type(inp).__name__} in World._apply_one")
-
-    # -- bulkheads ------------------------------------------------------------------
-    def _key(self, kind: keys.KeyKind, ident: str) -> str:
-        """The key of ``kind`` for ``ident``, spelled even for an id ``keys`` would refuse."""
-        return keys.TEMPLATES[kind].format(mission=self.settings.mission, id=ident)
-
-    def _fault(
-        self,
-        b: Batch,
-        key: str,
-        unit: str | None,
-        kind: keys.KeyKind | None,
-        exc: BaseException,
-        error: tuple[str, str, str] | None = None,
-    ) -> None:
-        """Something failed inside the world on ``key``'s account: drop it, reject it, log it once a minute.
-
-        The unit named loses its goal (a goal it cannot be guided to is
-        refused, not retried at every report) and gets ``no_goal``.
-        """
-        rec = self._units.get(unit) if unit is not None else None
-        said = ""
-        if rec is not None:
-            try:
-                said = "; the unit's goal was dropped" if rec.goal is not None else ""
-                if rec.goal is not None or rec.shared is not None:
-                    self._book.drop_mission(rec)
-                self._direct(rec, b)
-            except Exception:  # a record too broken to reset: forget it (a report makes it afresh)
-                self._book.discard(rec)
-        name, detail, at = error if error is not None else (type(exc).__name__, str(exc)[:200], ev.where(exc))
-        reason = f"not applied: {name} inside the planner ({detail}); this input alone was dropped{said}"
-        self._reject(key, InputError("$", reason), b, kind)
-        logged = self.limits.fault(key, b.now)  # the operator's log: once a minute per key, never a traceback
-        if logged is not None:
-            b.out.faults.append(ev.Fault(logged[0], name, detail, at, logged[1]))
-
-    def _unit_fault(
-        self, b: Batch, rec: UnitRecord, exc: BaseException, error: tuple[str, str, str] | None = None
-    ) -> None:
-        self._fault(b, self._key(K.UNIT_GOAL, rec.id), rec.id, K.UNIT_GOAL, exc, error)
-
-    def _reject(self, key: str, err: InputError, b: Batch, kind: keys.KeyKind | None) -> None:
-        """Count every rejection; send at most ``REJECTS_PER_S`` events a second per ``kind`` of key."""
-        held = self.limits.reject(kind, b.now)
-        if held is not None:
-            b.out.events.append(steering.rejected(key, err, self.settings.planner_id, held))
 
     # -- inputs ---------------------------------------------------------------------
     def _unit(self, unit_id: str, b: Batch, kind: keys.KeyKind, reported: bool = False) -> UnitRecord | None:
@@ -321,27 +292,6 @@ class World:
             self._start(rec, b)
             self._direct(rec, b)
 
-    def _zone_put(self, zid: str, msg: ZoneUpdate, b: Batch) -> None:
-        s = self.settings
-        if zid not in self._rec.zones and len(self._rec.zones) >= s.max_zones:
-            self.limits.overload += 1
-            self._reject(
-                keys.zone(s.mission, zid), InputError("$", f"planner at max_zones ({s.max_zones})"), b, K.ZONE
-            )
-            return
-        try:
-            zone = translate.zone(msg, zid)
-        except ValueError as exc:  # decoded, yet not a zone the engine takes: refused on its key
-            self._reject(keys.zone(s.mission, zid), InputError("$", str(exc)), b, K.ZONE)
-            return
-        new = ZoneRecord(msg, zone, None if msg.ttl_s is None else b.now + msg.ttl_s)
-        old = self._rec.put_zone(zid, new)
-        if old is not None:
-            b.zones.append((zid, "", old.zone.bounds()))
-        b.zones.append((zid, "put", zone.bounds()))
-        if new.expires_at is not None:
-            self._timers.set(new.expires_at, "zone_expire", zid)
-
     def _team(self, inp: ev.TeamPut | ev.TeamRemoved, b: Batch) -> None:
         """A team put (refused on its key when it clashes with the teams in force) or dissolved: its units re-told."""
         err, units = self.teams.apply(inp)
@@ -353,10 +303,6 @@ class World:
             self._direct(rec, b)
         for unit, goal in self.teams.placed(self._units):  # a team goal: each member's place, its goal
             self._adopt(unit, goal, None, b)
-
-    def _zone_gone(self, z: ZoneRecord | None, zid: str, change: str, b: Batch) -> None:
-        if z is not None:
-            b.zones.append((zid, change, z.zone.bounds()))
 
     def _deliberated(self, done: ev.Deliberated, b: Batch) -> None:
         rec = self._units.get(done.unit)
@@ -377,7 +323,7 @@ class World:
                 elif kind == "sight":  # a threat's window not landed in time: in force blind
                     self._puts.give_up(ident, b)
                 elif kind == "zone_expire":
-                    self._zone_gone(self._rec.expire_zone(ident, now), ident, "expired", b)
+                    self._zones.gone(self._rec.expire_zone(ident, now), ident, "expired", b)
                 elif kind in UNIT_TIMERS and (rec := self._units.get(ident)) is not None:
                     self._live.due(kind, rec, now, b.out)
             except Exception as exc:  # the bulkhead: this timer alone fails
@@ -397,11 +343,11 @@ class World:
         if record:
             b.out.missions.append(started[1])
 
-    def _world_changed(self, b: Batch) -> None:
+    def _world_changed(self, b: Batch, share: int) -> None:
         """The threats or zones changed: re-judge and re-direct the units the change can reach (``reach.reached``; over terrain judged off the loop, ``wave.reached_with``).
 
         A unit out of reach keeps its direction (one escaping or deliberating out of its wider reach, its
-        job too): a contingency costs what it touches.  A wave's units past ``WAVE_PER_TICK`` are owed (``wave``).
+        job too): a contingency costs what it touches.  A wave's units past ``share`` are owed (``wave``).
         """
         guided, wide = wave.guided(self._units)
         tall = [self._route.height(r) for r in guided]  # each seen at its own class's height (``heights``)
@@ -417,27 +363,72 @@ class World:
                     hits.append(rec)
             except Exception as exc:
                 self._unit_fault(b, rec, exc)
-        now, later = split(hits, b.touched, [z[2] for z in b.zones], b.dirty, WAVE_PER_TICK)
+        now, later = split(hits, b.touched, [z[2] for z in b.zones], b.dirty, share)
         self._wave.owe(later)  # told in the next applies, a share each (``wave``)
+        b.shared = len(now) if later else 0
         b.dirty.update(r.id for r in now if r.position is not None and not r.stale)  # as ``_direct``
 
-    def _directions(self, b: Batch) -> None:
-        """A fresh direction for each live unit of the batch (``steering.steer``); one whose step fails loses its goal."""
-        p, out = self.settings.planner_id, b.out
-        drew = self._wave.take(b.dirty, self._units, WAVE_PER_TICK) if not (b.changes or b.zones) else []
-        b.dirty.update(drew)  # a wave's next share, owed since its change (none in the change's own apply)
+    def _directions(self, b: Batch, budget: wave.Budget | None = None) -> None:
+        """A fresh direction for each live unit of the batch, and a wave's share; one whose step fails loses its goal.
+        Untimed (no ``clock``) the share is the next ``WAVE_PER_TICK`` owed, steered with the batch; timed, the
+        batch's own units go first (their directions first out), then the share while the budget lasts (``_shares``)."""
+        out, timed = b.out, budget is not None
+        drawing = not (
+            timed or b.changes or b.zones
+        )  # untimed, none in the change's own apply: ``split`` drew
+        drew = self._wave.take(b.dirty, self._units, WAVE_PER_TICK) if drawing else []
+        b.dirty.update(drew)  # a wave's next share, owed since its change
         live = [r for uid in sorted(b.dirty) if (r := self._units.get(uid)) is not None and r.live()]
         out.directions += [self._no_goal(r) for r in live if r.stepper is None]
         guided = [r for r in live if r.stepper is not None]
-        limit = 0 if self._wave else OWED_PER_TICK  # a wave's points: once its directions are all out
+        limit = (
+            0 if self._wave or timed else OWED_PER_TICK
+        )  # a wave's points: once its directions are all out
         later, self._owed = owed_share(self._owed, b.dirty, self._units, limit)
-        if not guided and not later:
+        first, sent, failed = len(out.directions), list[tuple[float, float] | None](), steering.Failed()
+        big = (b.changes or b.zones) and (len(guided) > WAVE_FIRST or self._wave)  # a wave, large or owed
+        if guided or later:
+            self._steer(b, guided, later, bool(drew or big), sent, failed)
+        if budget is not None:
+            self._shares(b, budget, sent, failed)
+        if len(out.directions) == first and not failed:  # none steered: the roles are not judged
             return
+        told, kept_clear = out.directions[first:], self._rec.step_zones(self._route)  # roles keep clear
+        out.directions[first:] = self.teams.judge(told, self._units, zones_of=kept_clear, now=b.now)
+        if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
+            out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
+        out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
+        # a unit whose step failed lost its goal: told so, once the rest are out
+        out.directions += [self._no_goal(r) for r, _ in failed if r.id in self._units and r.live()]
+
+    def _shares(
+        self, b: Batch, budget: wave.Budget, sent: list[tuple[float, float] | None], failed: steering.Failed
+    ) -> None:
+        """A timed apply's share of a wave: its next units, ``WAVE_CHUNK`` at a time while ``budget`` lasts (one chunk at
+        least, ``WAVE_PER_TICK`` at most; ``split`` drew one in the change's own apply); once every direction is out
+        and none went out in this apply, their points the same way (at most ``OWED_PER_TICK``)."""
+        while self._wave and b.shared < WAVE_PER_TICK and not (b.shared and budget.spent()):
+            drew = self._wave.take(b.dirty, self._units, WAVE_CHUNK)
+            b.dirty.update(drew)
+            b.shared += len(drew) or WAVE_PER_TICK
+            self._steer(b, [self._units[u] for u in drew], [], True, sent, failed)
+        if b.shared:  # no points in an apply that told a wave's directions: those go out first
+            return
+        drawn = 0
+        while self._owed and drawn < OWED_PER_TICK and not (drawn and budget.spent()):
+            later, self._owed = owed_share(self._owed, b.dirty, self._units, WAVE_CHUNK)
+            drawn += len(later) or OWED_PER_TICK
+            self._steer(b, [], later, False, sent, failed)
+
+    def _steer(self, b: Batch, guided: list[UnitRecord], later: list[tuple[UnitRecord, Advice]], first: bool,
+               sent: list[tuple[float, float] | None], failed: steering.Failed) -> None:  # fmt: skip
+        """Steer ``guided`` (``first``: a wave's, their directions now and their points owed) and compute the points of
+        ``later``; each direction appended to the batch's, its unit's position to ``sent``, each failure to ``failed``."""
+        p, out = self.settings.planner_id, b.out
         field_for, n, cull_for = self._rec.field_for, self.settings.lookahead, self._rec.cull_for
         steered: steering.Steered = []
-        failed: steering.Failed = []
-        big = (b.changes or b.zones) and (len(guided) > WAVE_FIRST or self._wave)  # a wave, large or owed
-        wave_first = n > 0 and bool(drew or big)
+        lost_all: steering.Failed = []
+        wave_first = n > 0 and first
         groups = team_route.groups(guided, later, self._route)  # a field per slope limit, corridor, height
         for key, (group, owed) in groups.items():
             fld, cull = field_for(*key), cull_for(key[3])
@@ -452,14 +443,14 @@ class World:
             elif group:
                 done, lost = steering.steer(group, fld, cull, n, self._disp)
                 steered += done
-            failed += lost
+            lost_all += lost
             if owed:
                 tracked, lost = steering.ahead(owed, fld, cull, n)
                 steered += tracked
-                failed += lost
-        for rec, exc in failed:
+                lost_all += lost
+        for rec, exc in lost_all:
             self._unit_fault(b, rec, exc)
-        first, sent = len(out.directions), []
+        failed += lost_all
         direction, wave, events, directions = steering.direction, b.wave, out.events, out.directions
         keep = self._book.steered
         for rec, adv, points in steered:  # per unit of a wave: names looked up once, above
@@ -479,13 +470,6 @@ class World:
                 events.append(event)
             directions.append(d)
             sent.append(rec.position)
-        told, kept_clear = out.directions[first:], self._rec.step_zones(self._route)  # roles keep clear
-        out.directions[first:] = self.teams.judge(told, self._units, zones_of=kept_clear, now=b.now)
-        if self.settings.origin is not None and sent:  # lat/lon for the whole tick in one conversion
-            out.directions[first:] = steering.geodetic(out.directions[first:], self.settings.origin, sent)
-        out.events += self._disp.right_of_way(out.directions, first, b.now)  # yield: hold, or back off
-        # a unit whose step failed lost its goal: told so, once the rest are out
-        out.directions += [self._no_goal(r) for r, _ in failed if r.id in self._units and r.live()]
 
     def _no_goal(self, rec: UnitRecord) -> Direction:
         self._book.steered(rec, steering.NO_GOAL)

@@ -71,8 +71,8 @@ PREVIEW_LOAD = ["--live-threats", "50", "--max-p99-ms", "10000"]
 SHRINK: dict[str, tuple[set[str], list[str]]] = {
     "engine": (set(), ["--quick", "--no-scale", "--repeat", "1", "--baseline-repeat", "1"]),
     "roundtrip": (set(), ["--count", "50"]),
-    "terrain": ({"--check"}, ["--repeat", "2"]),
-    "fuzz": (set(), ["--count", "20"]),
+    # the live rows (1,000 units) and the 10 m grid are test_terrain_cli's bench test's, at 40 m
+    "terrain": ({"--check"}, ["--repeat", "2", "--cell", "40", "--no-live"]),
     "service": (
         {"--find-max", "--echo"},
         ["--units", "20", "--rate", "5", "--threats", "5", "--duration", "2", "--no-storm", "--no-fanout"],
@@ -85,6 +85,48 @@ SHRINK: dict[str, tuple[set[str], list[str]]] = {
     "convergence": (set(), ["--quick"]),
     "quality": (set(), ["--scenarios", "2", "--modes", "none,contour", "--cells", "60"]),
 }
+# Doc lines another test runs as its own, with more to check than an exit code: the line's words
+# but ``--speed-up N`` -> that test (its module and function).  A demo's test sets its own speed-up,
+# one a neighbour's load cannot make late, so it runs beside others (here the line ran ``alone``);
+# the fuzz's runs it at a test's size (here it ran again, 30 s of fixed phases).
+# ``test_every_line_run_elsewhere_is_run_there`` holds the other side of the bargain.
+RUN_ELSEWHERE: dict[tuple[str, ...], tuple[str, str]] = {
+    ("pfp", "demo", "--quick"): (
+        "tests/proc/test_demo.py",
+        "test_demo_quick_runs_and_writes_summary_and_png",
+    ),
+    ("pfp", "demo", "--terrain"): (
+        "tests/proc/test_demo_terrain.py",
+        "test_the_terrain_demo_crosses_real_ground_and_every_expectation_holds",
+    ),
+    ("pfp", "bench", "fuzz"): (
+        "tests/proc/test_fuzz_live.py",
+        "test_a_planner_survives_malformed_input_on_every_key_and_queryable",
+    ),
+    ("pfp", "demo", "--teams"): (
+        "tests/proc/test_demo_teams.py",
+        "test_the_teaming_demo_gives_each_team_one_goal_and_every_expectation_holds",
+    ),
+}
+
+
+def _without_speed_up(words: list[str]) -> tuple[str, ...]:
+    out, skip = [], False
+    for w in words:
+        if skip:
+            skip = False
+        elif w == "--speed-up":
+            skip = True
+        elif not w.startswith("--speed-up="):
+            out.append(w)
+    return tuple(out)
+
+
+def run_here(line: Line) -> bool:
+    """A line this test runs: runnable, and not one ``RUN_ELSEWHERE`` names."""
+    return runnable(line) and _without_speed_up(line.words) not in RUN_ELSEWHERE
+
+
 START_TIMEOUT_S = 90.0
 RUN_TIMEOUT_S = 400.0
 
@@ -147,7 +189,7 @@ class Session:
     def __init__(self, block: Block, work: Path, shared_endpoint: str, tak: TakServer) -> None:
         self.block = block
         self.work = work
-        self.lines = [ln for ln in session_lines(block) if runnable(ln) or ln.program == "wait"]
+        self.lines = [ln for ln in session_lines(block) if run_here(ln) or ln.program == "wait"]
         own = any(_starts_a_router(ln) for ln in self.lines)
         self.port = str(free_port()) if own else shared_endpoint.rsplit(":", 1)[1]
         self.tak = tak
@@ -364,7 +406,7 @@ def tak_server() -> Iterator[TakServer]:
     server.close()
 
 
-SH_BLOCKS = [b for b in sh_blocks() if any(runnable(ln) for ln in session_lines(b))]
+SH_BLOCKS = [b for b in sh_blocks() if any(run_here(ln) for ln in session_lines(b))]
 
 
 def against_the_clock(block: Block) -> bool:
@@ -373,7 +415,7 @@ def against_the_clock(block: Block) -> bool:
     return any(
         ln.program in PFP and ln.words[1:2] in (["demo"], ["inject"]) and "--check" not in ln.words
         for ln in session_lines(block)
-        if runnable(ln)
+        if run_here(ln)
     )
 
 
@@ -393,3 +435,23 @@ def test_every_command_the_docs_show_runs(
     for name, text in named_files().items():
         (work / name).write_text(session.localise(text))
     session.run()
+
+
+@pytest.mark.unit
+def test_every_line_run_elsewhere_is_run_there():
+    """Each doc line ``RUN_ELSEWHERE`` names is shown by a doc, and its test runs those very words."""
+    shown = {
+        _without_speed_up(ln.words)
+        for b in sh_blocks()
+        for ln in session_lines(b)
+        if runnable(ln) and _without_speed_up(ln.words) in RUN_ELSEWHERE
+    }
+    assert shown == set(RUN_ELSEWHERE), f"no doc shows {set(RUN_ELSEWHERE) - shown}"
+    for words, (module, function) in RUN_ELSEWHERE.items():
+        source = (ROOT / module).read_text()
+        body = source.split(f"def {function}(", 1)
+        assert len(body) == 2, f"{module} has no {function}"
+        call = body[1].split("\ndef ", 1)[0]
+        assert all(f'"{w}"' in call for w in words[1:]), (
+            f"{module}::{function} does not run {' '.join(words)}"
+        )

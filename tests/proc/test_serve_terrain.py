@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pfp_service.terrain.planning import over_ground
 from pfp_service.wire import keys
 from pfp_service.wire.messages import decode_planner_status
 from tests.terrain_data import write_geographic
@@ -118,6 +119,11 @@ def test_serve_over_terrain_names_it_and_guides_a_unit_round_the_steep_ground(de
     k = np.floor((fine[:, 1] - g.y0_m) / g.cell_m).astype(int)
     assert not (steep[k, i] | unknown[k, i]).any()
     assert float(np.nanmax(g.slope_deg(fine[:, 0], fine[:, 1]))) <= ground.unit.max_slope_deg + 1e-9
+    # the preview measured its path over the ground: elevations, and the ETA at the unit's own speed
+    path = np.array(pv["path"])
+    np.testing.assert_allclose(pv["path_elevation_m"], g.elevation(path[:, 0], path[:, 1]), atol=1e-6)
+    assert pv["eta_s"] == pytest.approx(over_ground(g, path, ground.unit)["eta_s"], rel=1e-9)
+    assert pv["length"] / 1.7 < pv["eta_s"] and pv["climb_m"] > 0.0  # Tobler: 1.68 m/s at its fastest
     print(
         f"over terrain: {len(track)} steps, steepest {np.nanmax(g.slope_deg(fine[:, 0], fine[:, 1])):.1f} deg"
     )

@@ -235,3 +235,9 @@ def test_bench_terrain_reports_the_sweep_beside_gdal(dems):
     assert 0 < mem["terrain_added_mb"] < 150
     cost = doc["cost"]  # the 20 seeded Jacksboro plans, blind and over terrain
     assert cost["reached"] == 20 and cost["blind_ms_median"] > 0 and cost["terrain_ms_median"] > 0
+    live = doc[
+        "live"
+    ]  # pfp serve --terrain and 1,000 units: the wave and the bystanders ran, and nothing failed
+    assert live["units"] == 1000 and live["server"]["exit_code"] == 0 and live["server"]["error_lines"] == 0
+    assert live["wave"]["affected"] > 0 and live["wave"]["redirected"] > 0
+    assert live["bystanders"]["A"]["answered"] > 0 and live["bystanders"]["B"]["answered"] > 0

@@ -150,7 +150,7 @@ def test_every_example_decodes_and_re_encodes_identically(name: str) -> None:
 V1: dict[str, tuple[set[str], set[str]]] = {
     "UnitState": ({"position"}, {"t", "seq", "kind", "speed_mps", "heading_deg", "mobility"}),
     "Goal": ({"position"}, {"delta", "tolerance", "step", "mobility"}),
-    "GoalMobility": ({"class"}, {"max_slope_deg"}),
+    "GoalMobility": ({"class"}, {"max_slope_deg", "height_m", "speed_mps"}),
     "ThreatUpdate": (
         {"position", "sigma_range", "sigma_lateral"},
         {"facing_deg", "skew", "weight", "ttl_s"},

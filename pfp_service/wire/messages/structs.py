@@ -135,6 +135,10 @@ class _Message(msgspec.Struct, frozen=True, kw_only=True):
 # -- unit -> planner ------------------------------------------------------------
 MobilityName = Annotated[str, Meta(pattern="^[a-z][a-z0-9_]{0,31}$")]
 SlopeDeg = Annotated[float, Meta(ge=1.0, le=89.0)]
+UNIT_HEIGHT_M = (0.1, 20.0)  # a person lying down to a mast on a vehicle
+FLAT_SPEED_MPS = (0.1, 40.0)  # a crawl to a wheeled vehicle on a road
+UnitHeight = Annotated[float, Meta(ge=UNIT_HEIGHT_M[0], le=UNIT_HEIGHT_M[1])]
+FlatSpeed = Annotated[float, Meta(ge=FLAT_SPEED_MPS[0], le=FLAT_SPEED_MPS[1])]
 
 
 class GoalMobility(_Message, frozen=True, kw_only=True):
@@ -146,10 +150,16 @@ class GoalMobility(_Message, frozen=True, kw_only=True):
         max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's (the
             planner plans it at the steepest class limit not above it, and refuses one below them all);
             planned to the whole degree.
+        height_m: how tall it stands, metres (0.1 to 20), over the class's: what a threat over
+            terrain must see of it, and its end of a controller's link.
+        speed_mps: its speed on the flat, metres per second (0.1 to 40), over the class's: what its
+            time over the ground is reckoned at (on a slope, the class's model scales it).
     """
 
     kind: MobilityName = msgspec.field(name="class")
     max_slope_deg: SlopeDeg | None = None
+    height_m: UnitHeight | None = None
+    speed_mps: FlatSpeed | None = None
 
 
 class UnitState(_Message, frozen=True, kw_only=True):

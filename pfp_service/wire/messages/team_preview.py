@@ -40,7 +40,8 @@ class TeamPreviewRequest(_Message, frozen=True, kw_only=True):
             with a goal has arrived, or at the preview's budget).
         dt_s: the simulated vehicles' report period, seconds (the fleet's ``1 / rate_hz``).
         speeds: metres per second for members that report no speed of their own (a member held at
-            the moment reports 0); a member's reported speed comes first.
+            the moment reports 0); a member's reported speed comes first, its mobility's own
+            ``speed_mps`` (on its goal or state) last.
     """
 
     horizon_s: Annotated[float, Meta(gt=0.0, le=MAX_REPLAY_HORIZON_S)] = 600.0
