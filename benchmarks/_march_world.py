@@ -12,8 +12,9 @@ just ahead of the units' centre) is one ``World.apply``, timed alike.  The hash 
 event of every tick, warm ones included: two trees that give the same hash on
 the same seed made the same decisions.
 
-Run as ``python -m benchmarks._march_world [--teams-only] [--ticks N] [--rounds R] [--profile FILE]``;
-``--rounds`` alternates plain and teams worlds in one run.
+Run as ``python -m benchmarks._march_world [--teams-only] [--ticks N] [--rounds R] [--waves W] [--profile FILE]``;
+``--rounds`` alternates plain and teams worlds in one run; ``--waves`` puts and removes the threat
+``W`` more times, each wave's CPU apart (a median of several is steadier than one).
 """
 
 from __future__ import annotations
@@ -50,15 +51,21 @@ def _world(teams: bool) -> Any:
     return World(dataclasses.replace(settings, deliberation="inline"))
 
 
-def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None) -> dict[str, Any]:
-    """One world: ``WARM`` ticks, then ``ticks`` timed; CPU us per state and the hash of every output."""
+def drive(
+    teams: bool, ticks: int, seed: int = 2023, profile: str | None = None, waves: int = 0
+) -> dict[str, Any]:
+    """One world: ``WARM`` ticks, then ``ticks`` timed; CPU us per state and the hash of every output.
+
+    ``waves``: after the contingency wave, that many more put and removed in turn (the threat 5 m
+    further each put, 10 ms of the world's time apart), each until none of its shares is owed: the
+    CPU of each, its collections included (their directions join the hash)."""
     from benchmarks._layout import layout
     from benchmarks._phases import STEP_M
     from benchmarks._service_teams import march
     from benchmarks._service_teams import teams as make_teams
     from pfp_service.wire import Goal, UnitState
     from pfp_service.world.events import Tick
-    from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut
+    from pfp_service.world.world import GoalSet, StateReported, TeamPut, ThreatPut, ThreatRemoved
 
     lay = march(UNITS, layout(UNITS, 100, seed)["threats"], seed)
     ids = [f"u{i}" for i in range(UNITS + 1)]
@@ -157,19 +164,36 @@ def drive(teams: bool, ticks: int, seed: int = 2023, profile: str | None = None)
         wave_s += time.thread_time() - c0
         take(out)
         told.update(d.unit for d in out.directions)
+    put_ms: list[float] = []
+    removed_ms: list[float] = []
+    for k in range(waves):  # more waves on the same world: a wave's CPU is noisy, a median of several is not
+        for put in (True, False):
+            now += 0.01
+            moved = msgspec.structs.replace(threat, position=(at[0], at[1] + 5.0 * k))
+            c0 = time.thread_time()
+            take(w.apply([ThreatPut("contingency", moved) if put else ThreatRemoved("contingency")], now))
+            while w.wave_pending():
+                take(w.apply([Tick(now)], now))
+            (put_ms if put else removed_ms).append(round(1e3 * (time.thread_time() - c0), 1))
     gc.callbacks.remove(collected)
     if prof is not None:
         prof.disable()
         prof.dump_stats(profile)  # type: ignore[arg-type]
-    return {
-        "us_per_state": 1e6 * cpu / max(states, 1),
-        "judge_us_per_state": 1e6 * tick_judge_s / max(states, 1),
-        "gc_us_per_state": 1e6 * tick_gc_s / max(states, 1),  # the collector's share (also outside ``apply``)
-        "wave_ms": 1e3 * wave_s,
-        "wave_gc_ms": 1e3 * gc_s[0],  # a full collection (~0.1 s) lands in a wave or not: the wave less it
-        "wave_units": len(told),
-        "hash": digest.hexdigest()[:16],
-    }
+    return (
+        {
+            "us_per_state": 1e6 * cpu / max(states, 1),
+            "judge_us_per_state": 1e6 * tick_judge_s / max(states, 1),
+            "gc_us_per_state": 1e6
+            * tick_gc_s
+            / max(states, 1),  # the collector's share (also outside ``apply``)
+            "wave_ms": 1e3 * wave_s,
+            "wave_gc_ms": 1e3
+            * gc_s[0],  # a full collection (~0.1 s) lands in a wave or not: the wave less it
+            "wave_units": len(told),
+            "hash": digest.hexdigest()[:16],
+        }
+        | ({"waves_put_ms": put_ms, "waves_removed_ms": removed_ms} if waves else {})
+    )
 
 
 def main() -> None:
@@ -179,6 +203,9 @@ def main() -> None:
     p.add_argument("--teams-only", action="store_true", help="only the teams world")
     p.add_argument("--seed", type=int, default=2023)
     p.add_argument(
+        "--waves", type=int, default=0, help="then that many threats put and removed in turn (default 0)"
+    )
+    p.add_argument(
         "--profile",
         help="with --teams-only: cProfile the timed ticks into this file, the wave into FILE.wave",
     )
@@ -186,7 +213,7 @@ def main() -> None:
     for r in range(a.rounds):
         row: dict[str, Any] = {"round": r + 1, "loadavg": os.getloadavg()[0]}
         for kind in ("teams",) if a.teams_only else ("plain", "teams"):
-            row[kind] = drive(kind == "teams", a.ticks, a.seed, a.profile if a.teams_only else None)
+            row[kind] = drive(kind == "teams", a.ticks, a.seed, a.profile if a.teams_only else None, a.waves)
         print(json.dumps(row), flush=True)
 
 

@@ -161,6 +161,8 @@ class NeighbourIndex:
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
         self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
+        # row -> its neighbours, as ``query_ball_point`` found them (``_found``)
+        self._rows_found: dict[int, list[int]] = {}
 
     def unasked(self) -> NeighbourIndex:
         """This index as new-built: no ``near`` query remembered, so the next is asked afresh (and its pairs
@@ -217,7 +219,7 @@ class NeighbourIndex:
         if self.tree is None or len(rows) * FEW_ROWS >= len(self.points):
             i, j = _kept(*self.pairs(), rows, len(self.points))
         else:
-            found = self.tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
+            found = self._found(rows)
             counts = np.fromiter((len(f) for f in found), dtype=np.intp, count=len(rows))
             j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=int(counts.sum()))
             i = np.repeat(rows, counts)
@@ -225,6 +227,20 @@ class NeighbourIndex:
             i, j = i[other], j[other]
         self._near, self._near_s = (rows, i, j), None
         return i, j, None
+
+    def _found(self, rows: np.ndarray) -> list[list[int]]:
+        """Each row's neighbours within the widest reach, sorted (``query_ball_point``), each row queried
+        once in this index's life: a row's answer depends on nothing but the points, so a wave's later
+        shares (the same index, ``unasked``) take those its earlier ones found.  A micro-optimisation
+        (bench row: ``python -m benchmarks._march_world``, the wave)."""
+        memo, tree = self._rows_found, self.tree
+        assert tree is not None
+        wanted = rows.tolist()
+        new = [r for r in wanted if r not in memo]
+        if new:
+            got = tree.query_ball_point(self.points[new], self.radius, return_sorted=True)
+            memo.update(zip(new, got))
+        return [memo[r] for r in wanted]
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""

@@ -12,7 +12,10 @@ and the teams that set a separation (``TeamBook.version``) -- so
 ``FleetIndex`` keeps it while that key stands and hands it back as new
 (``NeighbourIndex.unasked``: the share's own queries are asked afresh, as on
 a new index, so a push and its right of way are the same numbers).
-``fleet_index`` is the plain computation it stands for.
+``fleet_index`` is the plain computation it stands for.  A live tick's
+reports move a quarter of the fleet and change nothing else the index is
+built from: then the kept arrays are taken again with the reported rows
+moved, and only the points and the k-d tree are new (``_moved``).
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ TEAM_WIDEST = 4.0
 TeamOf = Callable[[str], "tuple[str, float] | None"]
 # the index, the records of its rows in order, and each unit's row
 Fleet = tuple[NeighbourIndex, list[UnitRecord], dict[str, int]]
+# what an index was built from: its rows' records, their positions, goals and teams (``_moved``)
+_Built = tuple[list[UnitRecord], list[object], list[object], "list[tuple[str, float] | None] | None"]
 
 
 def fleet_index(
@@ -55,21 +60,37 @@ def fleet_index(
     Raises:
         ValueError: a position the k-d tree refuses (the push then goes without dispersion).
     """
-    recs = [r for r in units.values() if r.position is not None and not r.stale]
+    recs = _fresh(units)
+    return _built(recs, _teams(recs, team_of), settings, {} if seps is None else seps)
+
+
+def _fresh(units: Mapping[str, UnitRecord]) -> list[UnitRecord]:
+    """The units in the index, in its rows' order: those with a fresh position."""
+    return [r for r in units.values() if r.position is not None and not r.stale]
+
+
+def _teams(recs: list[UnitRecord], team_of: TeamOf | None) -> list[tuple[str, float] | None] | None:
+    return [team_of(r.id) for r in recs] if team_of is not None else None
+
+
+def _built(
+    recs: list[UnitRecord],
+    teams: list[tuple[str, float] | None] | None,
+    settings: DispersionSettings,
+    seps: dict[str, float],
+) -> Fleet:
+    """``fleet_index`` of ``recs`` (``_fresh``), each in ``teams`` (``_teams``)."""
     row = {r.id: k for k, r in enumerate(recs)}
     n = len(recs)
-    seps = {} if seps is None else seps
     sep = settings.separation
     team, team_sep = None, None
-    if team_of is not None:
-        teams = [team_of(r.id) for r in recs]
-        if any(t is not None for t in teams):
-            names = {t[0]: k for k, t in enumerate(sorted({t for t in teams if t is not None}))}
-            team = np.fromiter((-1 if t is None else names[t[0]] for t in teams), dtype=np.intp, count=n)
-            most = TEAM_WIDEST * max(settings.separation_m.values())  # the search's reach grows with it
-            team_sep = np.fromiter(
-                (math.nan if t is None else min(t[1], most) for t in teams), dtype=float, count=n
-            )
+    if teams is not None and any(t is not None for t in teams):
+        names = {t[0]: k for k, t in enumerate(sorted({t for t in teams if t is not None}))}
+        team = np.fromiter((-1 if t is None else names[t[0]] for t in teams), dtype=np.intp, count=n)
+        most = TEAM_WIDEST * max(settings.separation_m.values())  # the search's reach grows with it
+        team_sep = np.fromiter(
+            (math.nan if t is None else min(t[1], most) for t in teams), dtype=float, count=n
+        )
     goals = np.array(
         [r.goal.position if r.goal is not None else (math.nan, math.nan) for r in recs], dtype=float
     ).reshape(-1, 2)
@@ -112,6 +133,8 @@ class FleetIndex:
         self._seps: dict[str, float] = {}  # each unit's separation, by its class: fixed by the settings
         self._kept: Fleet | None = None
         self._key: object = None
+        # what the kept index was built from: its rows' records, positions, goals and teams (``_moved``)
+        self._from: _Built | None = None
 
     def __call__(self) -> Fleet:
         """The fleet's index as if new-built, its rows' records and each unit's row."""
@@ -120,9 +143,47 @@ class FleetIndex:
         if kept is not None and key is not None and key == self._key:
             kept[0].unasked()
             return kept
-        self._kept = None  # a build that raises keeps nothing
+        self._kept, was = None, self._from  # a build that raises keeps nothing
+        self._from = None
         if len(self._seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
             self._seps.clear()
-        self._kept = fleet_index(self._units, self.settings, self._team_of, self._seps)
+        recs = _fresh(self._units)
+        teams = _teams(recs, self._team_of)
+        moved = _moved(was, recs, teams) if kept is not None and key is not None else None
+        if kept is not None and moved is not None:
+            self._kept = _moved_index(kept, recs, moved)
+        else:
+            self._kept = _built(recs, teams, self.settings, self._seps)
         self._key = key
+        if key is not None:
+            self._from = (recs, [r.position for r in recs], [r.goal for r in recs], teams)
         return self._kept
+
+
+def _moved(
+    was: _Built | None,
+    recs: list[UnitRecord],
+    teams: list[tuple[str, float] | None] | None,
+) -> list[int] | None:
+    """The rows whose unit reported a new position since the index ``was`` built from, when nothing else
+    it is built from changed (the same records in the same rows, their goals, their teams); else ``None``."""
+    if was is None:
+        return None
+    recs_was, at_was, goals_was, teams_was = was
+    if len(recs) != len(recs_was) or teams != teams_was:
+        return None
+    if not all(a is b and a.goal is g for a, b, g in zip(recs, recs_was, goals_was)):
+        return None
+    return [k for k, (r, p) in enumerate(zip(recs, at_was)) if r.position is not p]
+
+
+def _moved_index(kept: Fleet, recs: list[UnitRecord], moved: list[int]) -> Fleet:
+    """``kept``'s index with the ``moved`` rows at their units' new positions: its other arrays are the
+    very ones a build makes (the same records, goals and teams), its points and k-d tree new.  A
+    micro-optimisation (bench row: ``python -m benchmarks._march_world``, a tick): a live tick moves a
+    quarter of the fleet, and a build walks every record for every array."""
+    index, _, row = kept
+    points = index.points.copy()
+    if moved:
+        points[moved] = np.array([recs[k].position for k in moved], dtype=float).reshape(-1, 2)
+    return NeighbourIndex(points, index.seps, index.team, index.team_sep, index.goals), recs, row

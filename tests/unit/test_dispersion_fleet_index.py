@@ -6,7 +6,9 @@ every write the book makes (reports, staleness, goals set and dropped,
 records made, forgotten and discarded) and of teams put and removed, with
 applies between them that write nothing: after each, the kept index must
 hold the arrays, rows and records ``fleet_index`` builds, and answer a
-share's queries in the very order and numbers a new one does.
+share's queries in the very order and numbers a new one does.  When only
+positions changed since (a tick's reports), the index is the kept one's with
+the reported rows moved (``neighbours._moved``): the same arrays again.
 """
 
 from __future__ import annotations
@@ -75,13 +77,15 @@ def test_the_kept_index_is_the_one_built_afresh(seed: int) -> None:
     book, teams = Units(), TeamBook()
     settings = DispersionSettings(enabled=True, classes={u: rng.choice(["foot", "wheeled"]) for u in IDS})
     kept = FleetIndex(settings, book.records, teams.dispersed, lambda: (book.version, teams.version))
-    hits, last = 0, None
+    hits, moved, last = 0, 0, None
     try:
         for step in range(400):
             _write(rng, book, teams, float(step))
             got = kept()
             index, recs, row = got
             hits += got is last
+            # rebuilt where only positions changed: the reports' rows moved on the arrays kept (``_moved``)
+            moved += last is not None and got is not last and index.goals is last[0].goals
             last = got
             plain, precs, prow = fleet_index(book.records, settings, teams.dispersed)
             assert [r.id for r in recs] == [r.id for r in precs] and all(a is b for a, b in zip(recs, precs))
@@ -103,6 +107,7 @@ def test_the_kept_index_is_the_one_built_afresh(seed: int) -> None:
         print(f"seed {seed}, step {step}")
         raise
     assert hits > 20  # the index was kept, not only rebuilt
+    assert moved > 20  # ... and moved by reports, not only built afresh
 
 
 def test_without_a_version_it_is_built_every_call() -> None:

@@ -5,18 +5,22 @@ A team's track is grown as a ``Polyline`` a few points at a time
 equal the one made from all the points at once, bit for bit, or a verdict at
 an edge could move.  ``NeighbourIndex.near_seps`` hands a tick's later callers
 the separations of the first query's pairs: they must equal ``pair_seps`` of
-the same pairs.
+the same pairs, and a row's neighbours found in an earlier share of a wave must be
+a new query's.  Without terrain, a robot's or controller's step inside every
+radio disc goes without sampling: its verdict must be the sampled one.
 """
 
 from __future__ import annotations
 
+import math
 import random
 
 import numpy as np
 import pytest
 
 from pfp_service.core.dispersion import NeighbourIndex
-from pfp_service.world.teams import Polyline
+from pfp_service.world import teams as roles
+from pfp_service.world.teams import Point, Polyline
 
 pytestmark = pytest.mark.unit
 
@@ -55,3 +59,60 @@ def test_near_seps_are_the_pairs_separations(seed: int) -> None:
         fi, fj = index.near(rows)
         assert np.array_equal(i, fi) and np.array_equal(j, fj), f"seed {seed}"
         assert np.array_equal(s, index.pair_seps(i, j)), f"seed {seed}"
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_a_row_s_neighbours_found_before_are_a_new_query_s(seed: int) -> None:
+    """A wave's shares ask one kept index (``unasked``) for rows, some asked before: each answer must be
+    the very arrays a new index gives for those rows, in its order."""
+    rng = np.random.default_rng(seed)
+    n = 400
+    points = rng.uniform(0.0, 1500.0, (n, 2))
+    seps = rng.choice([10.0, 25.0, 50.0], n)
+    kept = NeighbourIndex(points, seps)
+    asked: list[int] = []
+    for _ in range(12):
+        rows = rng.choice(n, int(rng.integers(1, 90)), replace=False)
+        if asked and rng.random() < 0.7:  # a later share: partly rows an earlier one asked
+            rows = np.concatenate([rows[: len(rows) // 2], rng.choice(asked, min(len(asked), 20))])
+        asked += rows.tolist()
+        fresh = NeighbourIndex(points, seps)
+        for a, b in zip(kept.unasked().near_seps(rows), fresh.near_seps(rows)):
+            assert a.dtype == b.dtype and np.array_equal(a, b), f"seed {seed}"
+        assert np.array_equal(kept.gradients(rows), fresh.gradients(rows)), f"seed {seed}"
+
+
+def _sampled(at: Point, to: Point, centres: list[Point], radio_range_m: float) -> float:
+    """How much of the step keeps every link, sampled as ``teams._kept`` samples it without terrain."""
+    spacing = max(radio_range_m / 16.0, 1.0)
+    return roles._kept(
+        at, to, lambda p: all(roles.in_link(c, p, radio_range_m) for c in centres), spacing, None
+    )
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_step_inside_every_disc_is_the_sampled_verdict(seed: int) -> None:
+    """Without terrain a step whose ends lie inside every radio disc goes without sampling
+    (``teams._within``): ``link`` and ``control`` must say what sampling the step says, steps
+    grazing the discs' edges included."""
+    rng = random.Random(seed)
+    for _ in range(400):
+        r = rng.choice([50.0, 300.0, 1500.0])
+        c = (rng.uniform(-5e3, 5e3), rng.uniform(-5e3, 5e3))
+
+        def near_edge() -> Point:  # a point about the disc's edge: inside, on it, or just past it
+            a, f = (
+                rng.uniform(0.0, 2.0 * math.pi),
+                rng.choice([rng.uniform(0.0, 1.0), 1.0, 1.0 - 1e-9, 1.0 + 1e-9]),
+            )
+            return (c[0] + r * f * math.cos(a), c[1] + r * f * math.sin(a))
+
+        at, to = near_edge(), near_edge()
+        if not roles.in_link(c, at, r):
+            continue
+        kept = _sampled(at, to, [c], r)
+        v = roles.link(at, to, c, r, "c", "")
+        assert (v == roles.GO) == (kept >= 1.0), f"seed {seed}: {at} -> {to}, {v}"
+        robots = [("r1", c)] + ([("r2", q)] if roles.in_link(at, q := near_edge(), r) else [])
+        got, _ = roles.control(at, to, robots, r)
+        assert (got == roles.GO) == (_sampled(at, to, [p for _, p in robots], r) >= 1.0), f"seed {seed}"
