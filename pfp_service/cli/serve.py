@@ -195,6 +195,12 @@ def register(sub: Any) -> None:
         choices=("foot", "wheeled", "tracked"),
         help="the mobility class planned for over --terrain: its height and slope limit (default: foot)",
     )
+    p.add_argument(
+        "--sight-wait-s",
+        type=positive_float,
+        help="over --terrain, how long a threat put waits for its window of sight before it takes force "
+        "blind, seeing through the ground, until the window lands (default: 0.25)",
+    )
     p.set_defaults(func=run)
 
 
@@ -237,6 +243,7 @@ _FLAG_KEYS = [
     "cluster",
     "terrain",
     "terrain_unit",
+    "sight_wait_s",
     "dispersion",
 ]
 

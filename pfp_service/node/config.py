@@ -127,6 +127,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
     # a DEM planned over (terrain.live): threats masked by line of sight, slopes past the class a barrier
     terrain: str | None = None
     terrain_unit: Literal["foot", "wheeled", "tracked"] = "foot"  # the mobility class planned for
+    sight_wait_s: Positive = 0.25  # a threat over terrain held this long for its window, then in force blind
     # dispersion between friendly units (docs/operations.md, "Dispersion"): off unless turned on
     dispersion: bool = False
     separation_m: dict[MobilityClass, Positive] = {}  # a class's separation, over the defaults
@@ -166,6 +167,7 @@ class ServeConfig(msgspec.Struct, kw_only=True, frozen=True, forbid_unknown_fiel
             origin=self.origin,
             cluster=self.cluster,
             dispersion=self.dispersion_settings(),
+            sight_wait_s=self.sight_wait_s,
         )
         if self.terrain is not None:  # loaded once per process (terrain.live.load), then shared
             from pfp_service.terrain.live import load

@@ -13,6 +13,7 @@ import hashlib
 import json
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 import pytest
 
 from pfp_service.terrain.planning import over_ground
-from pfp_service.wire import keys
+from pfp_service.wire import decode_world_snapshot, keys
 from pfp_service.wire.messages import decode_planner_status
 from tests.terrain_data import write_geographic
 from tests.zenoh_util import ROOT, Inbox, client, planner_process, put_json
@@ -51,6 +52,21 @@ def test_a_bad_dem_is_refused_with_one_line_and_exit_2(tmp_path: Path) -> None:
     assert "Traceback" not in done.stderr
 
 
+def _snapshot(s, m: str):
+    (reply,) = [r for r in s.get(keys.worlds(m), timeout=5) if r.ok is not None]
+    return decode_world_snapshot(reply.ok.payload.to_bytes())
+
+
+def _deliberations_landed(s, m: str, within_s: float = 60.0) -> None:
+    deadline = time.monotonic() + within_s
+    while True:
+        (reply,) = [r for r in s.get(keys.planner_statuses(m), timeout=5) if r.ok is not None]
+        if decode_planner_status(reply.ok.payload.to_bytes()).deliberating == 0:
+            return
+        assert time.monotonic() < deadline, f"deliberations still running after {within_s:g} s"
+        time.sleep(0.05)
+
+
 def test_serve_over_terrain_names_it_and_guides_a_unit_round_the_steep_ground(dem: Path) -> None:
     from pfp_service.terrain.barriers import barrier_cells
     from pfp_service.terrain.live import load
@@ -60,6 +76,9 @@ def test_serve_over_terrain_names_it_and_guides_a_unit_round_the_steep_ground(de
     # search past the default 5 s, the unit descended without it, and its track left the preview's
     args = ("--terrain", str(dem), "--state-dir", "none", "--preview-budget-ms", "20000")
     args += ("--deliberation-budget-s", "20")
+    # and the threat held for its window of sight until it lands (the default 0.25 s puts it in force
+    # blind first on a loaded machine; masked mid-route, the field then changed under the walk below)
+    args += ("--sight-wait-s", "60")
     with planner_process(*args, mission=m) as (ep, _proc), client(ep) as s:
         (reply,) = [r for r in s.get(keys.planner_statuses(m), timeout=10) if r.ok is not None]
         st = decode_planner_status(reply.ok.payload.to_bytes())
@@ -80,6 +99,10 @@ def test_serve_over_terrain_names_it_and_guides_a_unit_round_the_steep_ground(de
             keys.threat(m, "t1"),
             {"position": list(THREAT), "sigma_range": 600, "sigma_lateral": 400, "facing_deg": 0},
         )
+        deadline = time.monotonic() + 60  # in force with its window: listed in the world's snapshot
+        while not any(t.id == "t1" for t in _snapshot(s, m).threats):
+            assert time.monotonic() < deadline, "t1 never took force"
+            time.sleep(0.05)
         inbox = Inbox(s, keys.unit_direction(m, "u1"))
         pos, seq = START, 0
 
@@ -100,6 +123,9 @@ def test_serve_over_terrain_names_it_and_guides_a_unit_round_the_steep_ground(de
         track = [pos]
         for _ in range(2000):
             d = report()
+            while d.get("deliberating"):  # the preview is the route once it has landed: hold until then
+                _deliberations_landed(s, m)  # (a loaded machine's worker can take seconds; descending
+                d = report()  # meanwhile, the track left the preview's)
             if d["status"] != "en_route":
                 break
             move = min(step, d["distance_to_goal"]) if d.get("distance_to_goal") is not None else step
