@@ -27,13 +27,14 @@ from pfp_service.world.terrain import SightLanded, answer
 from pfp_service.world.timers import Timers
 from pfp_service.world.world_records import Records, ThreatRecord
 
-__all__ = ["ThreatPuts"]
+__all__ = ["Puts", "ThreatPuts"]
 
 Reject = Callable[[str, InputError, Batch, "keys.KeyKind | None"], None]
 
 
-class ThreatPuts:
-    """The world's threat inputs (the world's own ``Records``, ``Timers`` and ``Limits``, and its ``reject``)."""
+class Puts:
+    """What a kind's inputs are applied with: the world's own ``Records``, ``Timers`` and ``Limits``, and its
+    ``reject``."""
 
     def __init__(self, settings: WorldSettings, rec: Records, timers: Timers, limits: Limits, reject: Reject):
         self.settings, self._rec, self._timers, self._limits, self._reject = (
@@ -43,6 +44,10 @@ class ThreatPuts:
             limits,
             reject,
         )
+
+
+class ThreatPuts(Puts):
+    """The world's threat inputs."""
 
     def put(self, tid: str, msg: ThreatUpdate, b: Batch) -> None:
         """A threat put: in force now, or held for its sight (asked, or computed here when inline)."""

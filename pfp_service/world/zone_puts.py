@@ -12,26 +12,15 @@ from pfp_service.errors import InputError
 from pfp_service.wire import keys
 from pfp_service.wire.messages import ZoneUpdate
 from pfp_service.world import translate
-from pfp_service.world.events import Batch, WorldSettings
-from pfp_service.world.limits import Limits
-from pfp_service.world.threat_puts import Reject
-from pfp_service.world.timers import Timers
-from pfp_service.world.world_records import Records, ZoneRecord
+from pfp_service.world.events import Batch
+from pfp_service.world.threat_puts import Puts
+from pfp_service.world.world_records import ZoneRecord
 
 __all__ = ["ZonePuts"]
 
 
-class ZonePuts:
-    """The world's zone inputs (the world's own ``Records``, ``Timers`` and ``Limits``, and its ``reject``)."""
-
-    def __init__(self, settings: WorldSettings, rec: Records, timers: Timers, limits: Limits, reject: Reject):
-        self.settings, self._rec, self._timers, self._limits, self._reject = (
-            settings,
-            rec,
-            timers,
-            limits,
-            reject,
-        )
+class ZonePuts(Puts):
+    """The world's zone inputs."""
 
     def put(self, zid: str, msg: ZoneUpdate, b: Batch) -> None:
         """``msg`` put as zone ``zid``, or refused on its key."""
