@@ -241,3 +241,19 @@ def test_bench_terrain_reports_the_sweep_beside_gdal(dems):
     assert live["units"] == 1000 and live["server"]["exit_code"] == 0 and live["server"]["error_lines"] == 0
     assert live["wave"]["affected"] > 0 and live["wave"]["redirected"] > 0
     assert live["bystanders"]["A"]["answered"] > 0 and live["bystanders"]["B"]["answered"] > 0
+
+
+def test_bench_terrain_runs_only_the_parts_named_and_judges_only_theirs():
+    r = run_pfp("bench", "terrain", "--only", "memory", "--cell", "40", "--json", "--check")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["parts"] == ["memory"] and 0 < doc["memory"]["terrain_added_mb"] < 150
+    assert not {"sweep_ms_median", "cost", "live"} & set(doc), sorted(doc)
+    text = run_pfp("bench", "terrain", "--only", "memory", "--cell", "40")
+    marks = [ln for ln in text.stdout.splitlines() if ln.lstrip().startswith("[")]
+    assert text.returncode == 0 and len(marks) == 1 and "MB PSS" in marks[0], text.stdout
+    bad = run_pfp("bench", "terrain", "--only", "memory,sky")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
+    assert [ln for ln in bad.stderr.splitlines() if ln.strip()] == [
+        "pfp bench terrain: error: argument --only: unknown part sky (parts: viewshed, memory, cost, live)"
+    ]
