@@ -116,3 +116,50 @@ def test_a_step_inside_every_disc_is_the_sampled_verdict(seed: int) -> None:
         robots = [("r1", c)] + ([("r2", q)] if roles.in_link(at, q := near_edge(), r) else [])
         got, _ = roles.control(at, to, robots, r)
         assert (got == roles.GO) == (_sampled(at, to, [p for _, p in robots], r) >= 1.0), f"seed {seed}"
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_rows_among_the_last_query_s_are_isin_s(seed: int) -> None:
+    """A query's rows all among the last query's rows take its pairs (``dispersion._among``, a mask over the
+    fleet): it must say what ``np.isin(rows, asked).all()`` says (both unique, as ``_near_rows`` keeps them)."""
+    from pfp_service.core import dispersion
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    for _ in range(200):
+        asked = np.unique(rng.choice(n, int(rng.integers(0, n + 1)), replace=True))
+        rows = np.unique(rng.choice(n, int(rng.integers(0, n + 1)), replace=True))
+        if len(asked) and rng.random() < 0.5:  # often a subset, the wave's later callers' case
+            rows = np.unique(rng.choice(asked, int(rng.integers(0, len(asked) + 1))))
+        want = bool(np.isin(rows, asked, assume_unique=True).all())
+        assert dispersion._among(rows, asked, n) == want, f"seed {seed}: {rows} in {asked}"
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_member_s_run_is_the_longest_of_its_last_runs(seed: int) -> None:
+    """``Trails.run`` hands back the longest run kept when the member last moved: it must be the maximum
+    of its last ``_RUNS`` runs (the oldest ones dropped), as taken afresh from them."""
+    from collections import deque
+
+    from pfp_service.world import team_link
+
+    rng = random.Random(seed)
+    trails = team_link.Trails()
+    was: dict[str, Point] = {}
+    runs: dict[str, deque[float]] = {}
+    for _ in range(300):
+        u = rng.choice(["r1", "r2", "m1"])
+        if rng.random() < 0.05:
+            trails.forget({u})
+            was.pop(u, None)
+            runs.pop(u, None)
+            continue
+        at = was.get(u) if rng.random() < 0.2 else (rng.uniform(-50, 50), rng.uniform(-50, 50))
+        at = at if at is not None else (0.0, 0.0)
+        trails.moved(u, at)
+        if u in was and was[u] is not at and math.dist(was[u], at) > 0.0:
+            runs.setdefault(u, deque(maxlen=team_link._RUNS)).append(math.dist(was[u], at))
+        was[u] = at
+        for v in ("r1", "r2", "m1"):
+            want = max(runs[v]) if runs.get(v) else None
+            assert trails.run(v) == want, f"seed {seed}: {v}"
