@@ -211,7 +211,9 @@ class NeighbourIndex:
         """``near``'s pairs, and which of the last query's they are (``None``: all, a new query)."""
         rows = np.unique(np.asarray(rows, dtype=np.intp))
         last = self._near
-        if last is not None and np.isin(rows, last[0], assume_unique=True).all():
+        # whether every row was among the last query's: a mask over the fleet, not ``np.isin`` (which sorts
+        # both; a micro-optimisation, bench row: ``python -m benchmarks._march_world``, the wave)
+        if last is not None and _among(rows, last[0], len(self.points)):
             wanted = np.zeros(len(self.points), dtype=bool)
             wanted[rows] = True
             keep = wanted[last[1]]
@@ -248,6 +250,15 @@ class NeighbourIndex:
         i, j, pair_s = self.near_seps(rows)
         gx, gy = _pair_terms(self.points, pair_s, i, j, len(self.points))
         return np.column_stack([gx[rows], gy[rows]])
+
+
+def _among(rows: np.ndarray, asked: np.ndarray, n: int) -> bool:
+    """Whether every one of ``rows`` (rows of an index of ``n``) is one of ``asked``: ``np.isin(rows, asked).all()``."""
+    if len(rows) > len(asked):
+        return False  # both are unique: more rows than were asked cannot all have been
+    seen = np.zeros(n, dtype=bool)
+    seen[asked] = True
+    return bool(seen[rows].all())
 
 
 def _kept(i: np.ndarray, j: np.ndarray, rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

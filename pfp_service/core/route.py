@@ -238,11 +238,14 @@ class EscapeRun:
         ``None`` when the run would end within those steps (its exit, or its
         advisory limit): plain descent takes over there, so walk a ghost.
         """
+        out = self.ahead_points(unit, x, y, steps)
+        return None if out is None else list(map(tuple, out.tolist()))
+
+    def ahead_points(self, unit: np.ndarray, x: float, y: float, steps: int) -> np.ndarray | None:
+        """``ahead``'s positions as an array ``(n, 2)``: for a caller that wants the numbers, not points."""
         out = np.empty((steps + 1, 2))
         n = ahead_walk(*self._track(), unit, x, y, steps, out, *self.zones.packed())
-        if n < 0:
-            return None
-        return list(map(tuple, out[:n].tolist()))
+        return None if n < 0 else out[:n]
 
     def direction(self, x: float, y: float) -> tuple[float, float] | None:
         """``(dx, dy)``: the heading towards the path ahead; ``None`` once at the exit (or abandoned)."""

@@ -45,6 +45,8 @@ import copy
 import math
 import weakref
 
+import numpy as np
+
 from pfp_service.core import foresight, steprule, tracking, zones
 from pfp_service.core.advice import Advice, Need, StepStatus
 from pfp_service.core.descent_stepper import Bounds, DescentStepper, _tuple
@@ -343,6 +345,12 @@ class Stepper(DescentStepper):
         if self._run is None or self._terminal is not None:
             return None
         return self._run.ahead(self._unit, x, y, steps)
+
+    def route_ahead_points(self, x: float, y: float, steps: int) -> np.ndarray | None:
+        """``route_ahead`` as an array ``(n, 2)`` (``EscapeRun.ahead_points``)."""
+        if self._run is None or self._terminal is not None:
+            return None
+        return self._run.ahead_points(self._unit, x, y, steps)
 
     def _escaping(
         self,

@@ -36,7 +36,7 @@ class Polyline:
 
     __slots__ = ("ab", "cum", "pts", "seg", "sq")
 
-    def __init__(self, line: Sequence[Point]) -> None:
+    def __init__(self, line: Sequence[Point] | np.ndarray) -> None:
         self.pts = np.asarray(line, dtype=float).reshape(-1, 2)
         self.ab = np.diff(self.pts, axis=0)  # each segment, start to end: made once for every walk
         self.seg = np.hypot(self.ab[:, 0], self.ab[:, 1]) if len(self.pts) > 1 else np.zeros(0)

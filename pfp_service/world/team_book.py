@@ -356,7 +356,8 @@ class TeamBook:
         Each is judged on the step the one before left (a lead's place is then checked against the link).
         """
         out: list[Verdict] = []
-        linked = masts.pair(sight, units, team, unit)  # a robot's link: each end at its own height
+        # a robot's link: each end at its own height (no terrain, no sight line to set heights on)
+        linked = masts.pair(sight, units, team, unit) if sight is not None else None
         if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
             ctl = units.get(team.controller) if team.controller is not None else None
             if ctl is not None and ctl.position is not None and math.dist(at, ctl.position) > 1.0:

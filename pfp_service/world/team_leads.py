@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+
 from pfp_service.wire import Direction
 from pfp_service.wire.messages import TeamUpdate
 from pfp_service.world import teams as roles
@@ -30,7 +32,7 @@ def verdicts(
 ) -> dict[str, Verdict]:
     """The ``lead`` verdict of each team whose lead moves in ``directions`` (``of``: unit -> its teams),
     all in one call (``teams.leads``): team -> verdict."""
-    asks: list[tuple[Point, Sequence[Point], float, str]] = []
+    asks: list[tuple[Point, Sequence[Point] | np.ndarray, float, str]] = []
     tids: list[str] = []
     for d in directions:
         rec = units.get(d.unit)
@@ -59,13 +61,20 @@ def rearmost(follow: Sequence[str], units: Mapping[str, UnitRecord]) -> UnitReco
     return best
 
 
-def main_route(main: UnitRecord) -> list[Point]:
-    """The main element's route from where it is: its committed route ahead, if any, then straight to its goal."""
+def main_route(main: UnitRecord) -> np.ndarray:
+    """The main element's route from where it is: its committed route ahead, if any, then straight to its
+    goal; ``(n, 2)``, the ghost walk's numbers as it wrote them (``Stepper.route_ahead_points``), not made
+    points and flattened again for ``teams.leads`` (a micro-optimisation, bench row: ``python -m
+    benchmarks._march_world``, the judge)."""
     assert main.position is not None
-    route = [main.position]
+    ahead = None
     if main.stepper is not None:
-        ahead = main.stepper.route_ahead(main.position[0], main.position[1], ROUTE_STEPS)
-        route += ahead or []
+        ahead = main.stepper.route_ahead_points(main.position[0], main.position[1], ROUTE_STEPS)
+    n = len(ahead) if ahead is not None else 0
+    route = np.empty((1 + n + (main.goal is not None), 2))
+    route[0] = main.position
+    if ahead is not None:
+        route[1 : 1 + n] = ahead
     if main.goal is not None:
-        route.append(main.goal.position)
+        route[-1] = main.goal.position
     return route

@@ -125,7 +125,7 @@ def _shortened(at: Point, to: Point, kept: float, reason: str) -> Verdict:
     return Verdict("to", end, reason)
 
 
-def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Verdict:
+def lead(at: Point, route: Sequence[Point] | np.ndarray, standoff_m: float, main: str) -> Verdict:
     """The scout's step: make for the point ``standoff_m`` ahead of the main element along its route.
 
     Args:
@@ -142,15 +142,20 @@ def lead(at: Point, route: Sequence[Point], standoff_m: float, main: str) -> Ver
     return leads([(at, route, standoff_m, main)])[0]
 
 
-def leads(asks: Sequence[tuple[Point, Sequence[Point], float, str]]) -> list[Verdict]:
+def leads(asks: Sequence[tuple[Point, Sequence[Point] | np.ndarray, float, str]]) -> list[Verdict]:
     """``lead`` for each ``(at, route, standoff_m, main)``: every route's numbers in one compiled call
-    (``polyline_kernels.places``), not a polyline made per lead."""
+    (``polyline_kernels.places``), not a polyline made per lead.  A route is points, or their array
+    ``(n, 2)`` (``team_leads.main_route``): the same numbers either way."""
     out: list[Verdict] = [GO] * len(asks)
     many = [k for k, ask in enumerate(asks) if len(ask[1]) > 1]
-    if many:  # flat iterators: a list of tuples made an array is NumPy's slow, general path
+    if many:
         counts = [len(asks[k][1]) for k in many]
-        flat = chain.from_iterable(p for k in many for p in asks[k][1])
-        pts = np.fromiter(flat, dtype=float, count=2 * sum(counts)).reshape(-1, 2)
+        routes = [asks[k][1] for k in many]
+        if all(isinstance(r, np.ndarray) for r in routes):
+            pts = np.concatenate(routes).astype(float, copy=False).reshape(-1, 2)
+        else:  # flat iterators: a list of tuples made an array is NumPy's slow, general path
+            flat = chain.from_iterable(p for r in routes for p in r)
+            pts = np.fromiter(flat, dtype=float, count=2 * sum(counts)).reshape(-1, 2)
         first = np.zeros(len(many) + 1, dtype=np.intp)
         first[1:] = np.cumsum(counts)
         ats = np.fromiter(chain.from_iterable(asks[k][0] for k in many), dtype=float, count=2 * len(many))
@@ -164,7 +169,7 @@ def leads(asks: Sequence[tuple[Point, Sequence[Point], float, str]]) -> list[Ver
     for k, (at, route, standoff_m, main) in enumerate(asks):
         if len(route) > 1:
             continue
-        if not route:
+        if len(route) == 0:
             out[k] = _hold(f"no route of {main} to lead along")
             continue
         line = Polyline(route)  # one point: a line of no length

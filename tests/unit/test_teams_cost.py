@@ -116,3 +116,115 @@ def test_a_step_inside_every_disc_is_the_sampled_verdict(seed: int) -> None:
         robots = [("r1", c)] + ([("r2", q)] if roles.in_link(at, q := near_edge(), r) else [])
         got, _ = roles.control(at, to, robots, r)
         assert (got == roles.GO) == (_sampled(at, to, [p for _, p in robots], r) >= 1.0), f"seed {seed}"
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_rows_among_the_last_query_s_are_isin_s(seed: int) -> None:
+    """A query's rows all among the last query's rows take its pairs (``dispersion._among``, a mask over the
+    fleet): it must say what ``np.isin(rows, asked).all()`` says (both unique, as ``_near_rows`` keeps them)."""
+    from pfp_service.core import dispersion
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    for _ in range(200):
+        asked = np.unique(rng.choice(n, int(rng.integers(0, n + 1)), replace=True))
+        rows = np.unique(rng.choice(n, int(rng.integers(0, n + 1)), replace=True))
+        if len(asked) and rng.random() < 0.5:  # often a subset, the wave's later callers' case
+            rows = np.unique(rng.choice(asked, int(rng.integers(0, len(asked) + 1))))
+        want = bool(np.isin(rows, asked, assume_unique=True).all())
+        assert dispersion._among(rows, asked, n) == want, f"seed {seed}: {rows} in {asked}"
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_member_s_run_is_the_longest_of_its_last_runs(seed: int) -> None:
+    """``Trails.run`` hands back the longest run kept when the member last moved: it must be the maximum
+    of its last ``_RUNS`` runs (the oldest ones dropped), as taken afresh from them."""
+    from collections import deque
+
+    from pfp_service.world import team_link
+
+    rng = random.Random(seed)
+    trails = team_link.Trails()
+    was: dict[str, Point] = {}
+    runs: dict[str, deque[float]] = {}
+    for _ in range(300):
+        u = rng.choice(["r1", "r2", "m1"])
+        if rng.random() < 0.05:
+            trails.forget({u})
+            was.pop(u, None)
+            runs.pop(u, None)
+            continue
+        at = was.get(u) if rng.random() < 0.2 else (rng.uniform(-50, 50), rng.uniform(-50, 50))
+        at = at if at is not None else (0.0, 0.0)
+        trails.moved(u, at)
+        if u in was and was[u] is not at and math.dist(was[u], at) > 0.0:
+            runs.setdefault(u, deque(maxlen=team_link._RUNS)).append(math.dist(was[u], at))
+        was[u] = at
+        for v in ("r1", "r2", "m1"):
+            want = max(runs[v]) if runs.get(v) else None
+            assert trails.run(v) == want, f"seed {seed}: {v}"
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_leads_on_route_arrays_are_leads_on_route_points(seed: int) -> None:
+    """``team_leads.main_route`` hands ``teams.leads`` each route as an array, not points: every verdict
+    must be the one its points give, to the bit (the places are the numbers ``to`` carries)."""
+    rng = random.Random(seed)
+    asks = []
+    for k in range(rng.randint(1, 40)):
+        at = (rng.uniform(-500, 500), rng.uniform(-500, 500))
+        route = [
+            (rng.uniform(-500, 500), rng.uniform(-500, 500)) for _ in range(rng.choice([0, 1, 2, 5, 18]))
+        ]
+        if route and rng.random() < 0.3:
+            route.insert(1, route[0])  # the walk's first point is where the main element stands
+        asks.append((at, route, rng.uniform(0.0, 400.0), f"m{k}"))
+    want = roles.leads(asks)
+    got = roles.leads([(at, np.array(r, dtype=float).reshape(-1, 2), s, m) for at, r, s, m in asks])
+    assert got == want, f"seed {seed}"
+    mixed = [
+        (at, np.array(r, dtype=float).reshape(-1, 2) if k % 2 else r, s, m)
+        for k, (at, r, s, m) in enumerate(asks)
+    ]
+    assert roles.leads(mixed) == want, f"seed {seed}"
+
+
+def test_a_main_element_s_route_array_is_its_route_s_points() -> None:
+    """``team_leads.main_route`` takes the ghost walk's array (``Stepper.route_ahead_points``): row for row
+    it must be where the unit is, then ``route_ahead``'s points, then its goal, to the bit."""
+    from benchmarks.service import layout
+    from pfp_service.core import PlannerParams
+    from pfp_service.wire import Goal, UnitState
+    from pfp_service.world import team_leads
+    from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+
+    n = 40
+    lay = layout(n, 100, 7)
+    w = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_stale_s=1e9))
+    w.apply([ThreatPut(t, u) for t, u in lay["threats"]], 0.0)
+    ids = [f"u{i}" for i in range(n)]
+    pos = np.array(lay["starts"][:n])
+    w.apply([StateReported(u, UnitState(position=tuple(p), seq=0)) for u, p in zip(ids, pos)], 0.1)
+    out = w.apply([GoalSet(u, Goal(position=g)) for u, g in zip(ids, lay["goals"][:n])], 0.2)
+    out = w.apply([j.run() for j in out.jobs], 0.3)
+    vec = {d.unit: d.vector for d in out.directions}
+    on_route = 0
+    for k in range(30):
+        pos += 5.0 * np.array([vec.get(u, (0.0, 0.0)) for u in ids])
+        states = [
+            StateReported(u, UnitState(position=(float(x), float(y)), seq=k + 1))
+            for u, (x, y) in zip(ids, pos)
+        ]
+        out = w.apply(states, 1.0 + 0.1 * k)
+        w.apply([j.run() for j in out.jobs], 1.0 + 0.1 * k)
+        vec.update({d.unit: d.vector for d in out.directions})
+        for u in ids:
+            rec = w._units[u]
+            assert rec.position is not None
+            st = rec.stepper
+            ahead = st.route_ahead(*rec.position, team_leads.ROUTE_STEPS) if st is not None else None
+            want = [rec.position, *(ahead or []), *([rec.goal.position] if rec.goal is not None else [])]
+            got = team_leads.main_route(rec)
+            assert got.shape == (len(want), 2) and got.tolist() == [list(p) for p in want], u
+            on_route += ahead is not None
+    assert on_route > 300, on_route  # the layout keeps most units on routes
