@@ -6,7 +6,9 @@ dropped.  Every position field on the wire and in files may be written as
 ``[x, y]`` metres or as ``{"lat": …, "lon": …}``; ``localise`` turns the second
 form into the first at the edge, so the core never sees a degree.  The maths
 is pymap3d's (WGS-84 ellipsoid, via ECEF); this module adds only the 2-D
-projection and its exact inverse.
+projection and its exact inverse.  The inverse and a bearing's rotation, on
+every tick's directions, are pymap3d's formulas written out for their cost
+(tests/unit/test_geo.py checks them against pymap3d).
 
 Accuracy.  Dropping the up component shortens a distance ``d`` from the origin
 by about ``d**3 / (6 R**2)``: 1.4 cm at 15 km and 3.8 cm at 21 km, the corner
@@ -40,6 +42,7 @@ __all__ = [
     "POSITION_FIELDS",
     "LatLon",
     "Origin",
+    "bearings_at",
     "localise",
     "localise_document",
     "lookahead_geodetic",
@@ -60,6 +63,13 @@ def _radii(sin_lat: Any) -> tuple[Any, Any]:
     """Meridian and prime-vertical radii of curvature, metres (scalars or arrays)."""
     w = (1.0 - _E2 * sin_lat * sin_lat) ** 0.5
     return _A_M * (1.0 - _E2) / w**3, _A_M / w
+
+
+def _plane(p: Any, z: Any, sin_dlon: Any, cos_dlon: Any, s0: float, c0: float, n0: float) -> tuple[Any, Any]:
+    """``(east, north)`` metres on the plane of the origin at latitude ``asin(s0)`` (prime-vertical radius
+    ``n0``) of a point ``p`` from the earth's axis, ``z`` over the equator, ``dlon`` east of the origin: the
+    ENU of ``pymap3d.geodetic2enu`` without its up, in the origin's frame directly (no ECEF difference)."""
+    return p * sin_dlon, c0 * z - s0 * p * cos_dlon + s0 * c0 * n0 * _E2
 
 
 class _Wgs84:
@@ -132,38 +142,42 @@ class Origin(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=Tr
     def to_geodetic_many(self, xy: np.ndarray) -> np.ndarray:
         """``(n, 2)`` of ``[lat, lon]`` degrees for ``(n, 2)`` local metres: the inverse of ``to_local``.
 
-        Newton's method on pymap3d's ``geodetic2enu`` (at the plane's height),
-        from the origin's radii of curvature; the Jacobian's columns are the
-        point's own north and east axes, scaled by its radii and turned into
-        the origin's frame.  Two or three steps reach 1e-8 m within ``MAX_RANGE_M``.
+        Newton's method on the plane's map in closed form (``_plane``: pymap3d's
+        ``geodetic2enu`` at the plane's height, its up dropped) and its exact
+        Jacobian.  Two or three steps reach 1e-8 m within ``MAX_RANGE_M``
+        (tests/unit/test_geo.py checks every result with pymap3d's own inverse).
+        Written out, not through pymap3d, for its cost: pymap3d's three calls a
+        step cost ~0.2 ms whatever the size, most of a tick's lat/lon (issue 32).
         """
         import numpy as np
-        import pymap3d
 
         e = np.asarray(xy[:, 0], dtype=float)
         n = np.asarray(xy[:, 1], dtype=float)
+        if not len(e):
+            return np.zeros((0, 2))
         lat0, h = math.radians(self.lat), self.alt
-        m0, n0 = _radii(math.sin(lat0))
-        lat = np.full_like(e, lat0) + n / (m0 + h)
-        lon = np.full_like(e, math.radians(self.lon)) + e / ((n0 + h) * math.cos(lat0))
-        for _ in range(8):
-            ee, nn, _u = pymap3d.geodetic2enu(
-                lat, lon, h, lat0, math.radians(self.lon), h, _Wgs84.get(), deg=False
-            )
-            re, rn = e - ee, n - nn
-            if max(float(np.max(np.abs(re), initial=0.0)), float(np.max(np.abs(rn), initial=0.0))) < 1e-8:
-                break
-            s, c = np.sin(lat), np.cos(lat)
-            mp, np_ = _radii(s)
-            # d(e, n)/d(lat): (M + h) times the point's north axis; d/d(lon): (N + h) cos(lat) its east axis
-            ne, nn_, _ = pymap3d.uvw2enu(-s * np.cos(lon), -s * np.sin(lon), c, self.lat, self.lon)
-            ee_, en, _ = pymap3d.uvw2enu(-np.sin(lon), np.cos(lon), np.zeros_like(lon), self.lat, self.lon)
-            a, b = (mp + h) * ne, (np_ + h) * c * ee_
-            cc, d = (mp + h) * nn_, (np_ + h) * c * en
-            det = a * d - b * cc
-            lat = lat + (d * re - b * rn) / det
-            lon = lon + (a * rn - cc * re) / det
-        lon = (np.degrees(lon) + 180.0) % 360.0 - 180.0
+        s0, c0 = math.sin(lat0), math.cos(lat0)
+        m0, n0 = _radii(s0)
+        lat = lat0 + n / (m0 + h)
+        dlon = e / ((n0 + h) * c0)
+        with np.errstate(all="ignore"):  # a point off the globe comes out NaN, as its caller expects
+            for _ in range(8):
+                s, c, sd, cd = np.sin(lat), np.cos(lat), np.sin(dlon), np.cos(dlon)
+                meridian, vertical = _radii(s)
+                p = (vertical + h) * c  # from the earth's axis
+                z = (vertical * (1.0 - _E2) + h) * s  # over the equator
+                at_e, at_n = _plane(p, z, sd, cd, s0, c0, n0)
+                miss_e, miss_n = e - at_e, n - at_n
+                if max(float(np.abs(miss_e).max()), float(np.abs(miss_n).max())) < 1e-8:
+                    break
+                # d(p, z)/d(lat) = (M + h) (-sin(lat), cos(lat)); d/d(dlon) turns p about the axis
+                ml = meridian + h
+                a, b = -ml * s * sd, p * cd  # d(e)/d(lat), d(e)/d(dlon)
+                cc, d = ml * (c0 * c + s0 * s * cd), s0 * p * sd  # d(n)/d(lat), d(n)/d(dlon)
+                det = a * d - b * cc
+                lat = lat + (d * miss_e - b * miss_n) / det
+                dlon = dlon + (a * miss_n - cc * miss_e) / det
+        lon = (self.lon + np.degrees(dlon) + 180.0) % 360.0 - 180.0
         return np.column_stack([np.degrees(lat), lon])
 
     def localise_point(self, p: LatLon, path: str = "position") -> tuple[float, float]:
@@ -301,12 +315,31 @@ def true_bearing_deg(origin: Origin, position: tuple[float, float], vector: tupl
 
 
 def _bearing_at(origin: Origin, lat: float, lon: float, vector: tuple[float, float]) -> float:
-    import pymap3d
+    import numpy as np
 
-    u, v, w = pymap3d.enu2uvw(vector[0], vector[1], 0.0, origin.lat, origin.lon)
-    e, n, _up = pymap3d.uvw2enu(u, v, w, lat, lon)
-    bearing = math.degrees(math.atan2(e, n)) % 360.0
-    return 0.0 if bearing >= 360.0 else float(bearing)  # a tiny negative angle rounds to 360.0
+    b = bearings_at(origin, np.array([lat]), np.array([lon]), np.array([vector], dtype=float))
+    return float(b[0])
+
+
+def bearings_at(origin: Origin, lat: np.ndarray, lon: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Degrees clockwise from true north, in ``[0, 360)``, of planner vectors ``(n, 2)`` at ``lat``, ``lon``
+    (degrees, ``(n,)`` each): each vector of the origin's ENU frame, turned into the point's.
+
+    The rotation written out (pymap3d's ``enu2uvw`` at the origin, then ``uvw2enu`` at the point:
+    tests/unit/test_geo.py compares), without their cost on a tick's few points.
+    """
+    import numpy as np
+
+    lat0 = math.radians(origin.lat)
+    s0, c0 = math.sin(lat0), math.cos(lat0)
+    phi, dlon = np.radians(lat), np.radians(lon - origin.lon)
+    s, c, sd, cd = np.sin(phi), np.cos(phi), np.sin(dlon), np.cos(dlon)
+    ve, vn = vectors[:, 0], vectors[:, 1]
+    east = ve * cd + vn * s0 * sd
+    north = vn * (s * s0 * cd + c * c0) - ve * s * sd
+    b = np.degrees(np.arctan2(east, north)) % 360.0
+    out: np.ndarray = np.where(b >= 360.0, 0.0, b)  # a tiny negative angle rounds to 360.0
+    return out
 
 
 def lookahead_geodetic(origin: Origin, points: Iterable[tuple[float, float]]) -> list[LatLon]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import msgspec
 
-from pfp_service.geo import LatLon, Origin, round_many
+from pfp_service.geo import LatLon, Origin, bearings_at, round_many
 from pfp_service.wire.messages import Direction
 
 __all__ = ["with_geodetic", "with_geodetic_many"]
@@ -41,7 +41,6 @@ def with_geodetic_many(
     if origin is None or not directions:
         return list(directions)
     import numpy as np
-    import pymap3d
 
     rows: list[tuple[float, float]] = []
     spans = []  # per direction: (row of its position or -1, first look-ahead row, count)
@@ -58,11 +57,8 @@ def with_geodetic_many(
     bearing = np.full(len(directions), np.nan)
     ask = np.flatnonzero((where >= 0) & np.any(vec != 0.0, axis=1))
     if ask.size:  # the local plane's vector, turned into each position's own east and north
-        u, v, w = pymap3d.enu2uvw(vec[ask, 0], vec[ask, 1], 0.0, origin.lat, origin.lon)
         at_rows = where[ask]
-        e, n, _up = pymap3d.uvw2enu(u, v, w, ll[at_rows, 0], ll[at_rows, 1])
-        b = np.degrees(np.arctan2(e, n)) % 360.0
-        bearing[ask] = np.where(b >= 360.0, 0.0, b)  # a tiny negative angle rounds to 360.0
+        bearing[ask] = bearings_at(origin, ll[at_rows, 0], ll[at_rows, 1], vec[ask])
     look = np.ones(len(ll), dtype=bool)
     look[where[where >= 0]] = False  # the units' own positions: bearings only
     # the look-ahead points, direction by direction
