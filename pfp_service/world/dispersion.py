@@ -209,7 +209,8 @@ class Dispersion:
         if not go:
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
-        stopped = keep_apart.cut(index, rows, directions, go)
+        gives_way = self._giving_way(directions, moving)
+        stopped = keep_apart.cut(index, rows, directions, go, gives_way)
         at = {directions[k].unit: k for k, _ in stopped}
         events: list[Event] = []
         for a, b, held_s in self._facing.pairs(
@@ -220,8 +221,31 @@ class Dispersion:
                 k = at[lock.unit]
                 i, j = self._row[lock.unit], self._row[lock.other]
                 directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
-                keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k])
+                keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k], gives_way)
         return events
+
+    def _giving_way(self, directions: list[Direction], moving: list[int]) -> np.ndarray | None:
+        """Each row's unit it gives way to in this tick (``-1``: none), for ``keep_apart.cut``: a unit
+        yielding to another, or backing off from it, whose direction does not close on it."""
+        index = self._index
+        assert index is not None
+        gives_way = None
+        for k in moving:
+            d = directions[k]
+            hold = self._held.get(d.unit)
+            if d.status is not DirectionStatus.YIELDING or hold is None or hold.round:
+                continue
+            j = self._row.get(hold.other)
+            if j is None:
+                continue
+            i = self._row[d.unit]
+            rx, ry = (index.points[i] - index.points[j]).tolist()
+            if d.vector[0] * rx + d.vector[1] * ry < 0.0:  # coming at it: the margin stands
+                continue
+            if gives_way is None:
+                gives_way = np.full(len(index.points), -1, dtype=np.intp)
+            gives_way[i] = j
+        return gives_way
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
         """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: when both are going

@@ -4,6 +4,13 @@ Apart from ``dispersion`` (the right of way and deadlocks), which calls it
 last in each ``apply``.  ``cut`` also says which units it left cut to
 nothing, and by whom: two units each stopped by the other's disc hold each
 other (``dispersion`` makes two going round units at rest so one deadlock).
+
+The margin beyond the separation is for a neighbour that moves meanwhile,
+perhaps towards the unit; a unit giving way to another (yielding, or
+backing off from it) does not come at it, so against the unit it gives way
+to its disc is the separation alone (``GIVEN``).  With the margin, a unit
+holding still for another stopped that very unit whose way leaned into
+its disc, and each held the other for good (the gaps crowd's seed 4).
 """
 
 from __future__ import annotations
@@ -14,14 +21,19 @@ import numpy as np
 from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.wire import Direction
 
-__all__ = ["KEEP", "cut"]
+__all__ = ["GIVEN", "KEEP", "cut"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
+GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
 _GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 
 
 def cut(
-    index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go: list[int]
+    index: NeighbourIndex,
+    rows: np.ndarray,
+    directions: list[Direction],
+    go: list[int],
+    gives_way: np.ndarray | None = None,
 ) -> list[tuple[int, int]]:
     """Cut each of ``directions[go]`` (the units at ``index`` rows ``rows``) where it would enter a neighbour's disc.
 
@@ -36,6 +48,8 @@ def cut(
         rows: each moving direction's row in ``index``.
         directions: the tick's directions, cut in place; those at ``go`` have a non-zero vector.
         go: the positions in ``directions`` of the moving ones, in the order of ``rows``.
+        gives_way: for each ``index`` row, the row of the unit it gives way to in this tick (``-1``:
+            none); that unit keeps only ``GIVEN`` separations from it (``None``: no unit gives way).
 
     Returns:
         Each unit left cut to nothing (its position in ``directions``) with
@@ -49,6 +63,8 @@ def cut(
     rel = index.points[j] - index.points[i]
     along = (rel * vec[n]).sum(axis=1)
     keep_m = KEEP * pair_s
+    if gives_way is not None:
+        keep_m = np.where(gives_way[j] == i, GIVEN * pair_s, keep_m)
     across2 = (rel * rel).sum(axis=1) - along * along
     hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
     enter = np.full(len(rel), np.inf)
