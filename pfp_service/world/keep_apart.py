@@ -21,11 +21,11 @@ import numpy as np
 from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.wire import Direction
 
-__all__ = ["GIVEN", "KEEP", "cut"]
+__all__ = ["GIVEN", "GRAZE_M", "KEEP", "cut", "free_m"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
 GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
-_GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
+GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 
 
 def cut(
@@ -60,15 +60,8 @@ def cut(
     vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
     i, j, pair_s = index.near_seps(rows)
     n = at[i]
-    rel = index.points[j] - index.points[i]
-    along = (rel * vec[n]).sum(axis=1)
-    keep_m = KEEP * pair_s
-    if gives_way is not None:
-        keep_m = np.where(gives_way[j] == i, GIVEN * pair_s, keep_m)
-    across2 = (rel * rel).sum(axis=1) - along * along
-    hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
-    enter = np.full(len(rel), np.inf)
-    enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+    enter = _entries(index, i, j, pair_s, vec[n], gives_way)
+    hit = np.isfinite(enter)
     safe = np.full(len(go), np.inf)
     np.minimum.at(safe, n[hit], enter[hit])
     for m in np.flatnonzero(np.isfinite(safe)).tolist():
@@ -76,5 +69,34 @@ def cut(
         d = directions[k]
         if d.reach_m is None or reach < d.reach_m:
             directions[k] = msgspec.structs.replace(d, reach_m=reach)
-    held = (enter <= _GRAZE_M) & (safe[n] <= _GRAZE_M)
+    held = (enter <= GRAZE_M) & (safe[n] <= GRAZE_M)
     return [(go[m], jj) for m, jj in zip(n[held].tolist(), j[held].tolist())]
+
+
+def free_m(index: NeighbourIndex, row: int, vec: tuple[float, float]) -> float:
+    """How far the unit at ``row`` could go along ``vec`` (a unit vector) before ``cut`` would stop it, in
+    metres (``inf``: nothing in the way); 0 when it would be cut to nothing."""
+    i, j, pair_s = index.near_seps(np.array([row], dtype=np.intp))
+    enter = _entries(index, i, j, pair_s, np.broadcast_to(np.asarray(vec, dtype=float), (len(i), 2)), None)
+    return float(enter.min(initial=np.inf))
+
+
+def _entries(
+    index: NeighbourIndex,
+    i: np.ndarray,
+    j: np.ndarray,
+    pair_s: np.ndarray,
+    vec: np.ndarray,
+    gives_way: np.ndarray | None,
+) -> np.ndarray:
+    """How far along ``vec`` (one per pair) each unit ``i`` enters ``j``'s disc (``inf``: never)."""
+    rel = index.points[j] - index.points[i]
+    along = (rel * vec).sum(axis=1)
+    keep_m = KEEP * pair_s
+    if gives_way is not None:
+        keep_m = np.where(gives_way[j] == i, GIVEN * pair_s, keep_m)
+    across2 = (rel * rel).sum(axis=1) - along * along
+    hit = (along > GRAZE_M) & (across2 < keep_m * keep_m)
+    enter = np.full(len(rel), np.inf)
+    enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+    return enter
