@@ -128,19 +128,13 @@ class Locks:
             return False
         return True
 
-    def who_backs_off(self, lower: str, higher: str, now: float, boxed: Container[str] = ()) -> bool:
-        """Whether the lower-priority unit of a deadlocked pair backs off (``False``: the higher one does).
-
-        A unit in ``boxed`` (its back-off cut to nothing) does not, when the other is not: a back-off
-        that gives no ground ends with the deadlock as it was, and forms it again.
-        """
+    def who_backs_off(self, lower: str, higher: str, now: float) -> bool:
+        """Whether the lower-priority unit of a deadlocked pair backs off (``False``: the higher one does)."""
         s = self.settings
         window = ESCALATE * (s.deadlock_s + s.backoff_s)
         key = (lower, higher) if lower < higher else (higher, lower)
         last = self._pairs.get(key)
         lower_goes = last is None or now - last[0] >= window or last[1] != lower
-        if ((lower if lower_goes else higher) in boxed) and ((higher if lower_goes else lower) not in boxed):
-            lower_goes = not lower_goes
         self._pairs[key] = (now, lower if lower_goes else higher)
         if len(self._pairs) > 4096:  # bounded: only the pairs that locked within the window matter
             self._pairs = {k: v for k, v in self._pairs.items() if now - v[0] < window}

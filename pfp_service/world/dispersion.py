@@ -334,11 +334,8 @@ class Dispersion:
         else:
             first = s.manned_first
             lower, higher = (other, me) if priority(other, first) > priority(me, first) else (me, other)
-            boxed = {u.id for u, v in ((me, other), (other, me)) if self._boxed(u.id, v.id)}
             mover, blocker = (
-                (lower, higher)
-                if self._locks.who_backs_off(lower.id, higher.id, now, boxed)
-                else (higher, lower)
+                (lower, higher) if self._locks.who_backs_off(lower.id, higher.id, now) else (higher, lower)
             )
             round_ = False
         until = now + (deadlocks.ROUND_BACKOFFS * s.backoff_s if round_ else s.backoff_s)
@@ -350,14 +347,6 @@ class Dispersion:
         return deadlocks.event(
             mover.id, blocker.id, index.points[m], held_s, until - now, round_, other.last_status
         )
-
-    def _boxed(self, unit: str, other: str) -> bool:
-        """Whether ``unit``'s back-off from ``other`` would be cut to nothing (``keep_apart.free_m``)."""
-        index = self._index
-        assert index is not None
-        i, j = self._row[unit], self._row[other]
-        vec = deadlocks.back_off_vector(index.points[i] - index.points[j], self._pushed.get(unit, (0.0, 0.0)))
-        return vec == (0.0, 0.0) or keep_apart.free_m(index, i, vec) <= keep_apart.GRAZE_M
 
     def _towards(self, i: int, otherwise: tuple[float, float]) -> tuple[float, float]:
         """The unit's way to its goal, as a unit vector (``otherwise`` when it has no goal, or is on it)."""
