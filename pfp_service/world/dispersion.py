@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
+import msgspec
 import numpy as np
 
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
@@ -210,7 +211,7 @@ class Dispersion:
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
         gives_way = self._giving_way(directions, moving)
-        stopped = keep_apart.cut(index, rows, directions, go, gives_way)
+        stopped = self._free_ways(directions, keep_apart.cut(index, rows, directions, go, gives_way), now)
         at = {directions[k].unit: k for k, _ in stopped}
         events: list[Event] = []
         for a, b, held_s in self._facing.pairs(
@@ -223,6 +224,33 @@ class Dispersion:
                 directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
                 keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k], gives_way)
         return events
+
+    def _free_ways(
+        self, directions: list[Direction], stopped: list[tuple[int, int]], now: float
+    ) -> list[tuple[int, int]]:
+        """Turn each back-off the cut left nothing of to a free way off it (``keep_apart.free_way``), still
+        away from the unit it backs off from; the stopped pairs left."""
+        index = self._index
+        assert index is not None
+        turned: set[int] = set()
+        for k in sorted({k for k, _ in stopped}):
+            d = directions[k]
+            hold = self._held.get(d.unit)
+            if hold is None or hold.round or not hold.until > now or hold.other not in self._row:
+                continue
+            i, j = self._row[d.unit], self._row[hold.other]
+            pair = self._resolving.get((i, j))
+            if pair is None:
+                pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+            way = keep_apart.free_way(index, i, d.vector, index.points[i] - index.points[j], pair)
+            if way is not None:
+                vx, vy, reach = way
+                heading = math.degrees(math.atan2(vx, vy)) % 360.0
+                directions[k] = msgspec.structs.replace(
+                    d, vector=(vx, vy), heading_deg=heading, reach_m=reach
+                )
+                turned.add(k)
+        return [(k, j) for k, j in stopped if k not in turned]
 
     def _giving_way(self, directions: list[Direction], moving: list[int]) -> np.ndarray | None:
         """Each row's unit it gives way to in this tick (``-1``: none), for ``keep_apart.cut``: a unit

@@ -21,10 +21,11 @@ import numpy as np
 from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.wire import Direction
 
-__all__ = ["GIVEN", "GRAZE_M", "KEEP", "cut", "free_m"]
+__all__ = ["GIVEN", "GRAZE_M", "KEEP", "TURNS_DEG", "cut", "free_way"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
 GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
+TURNS_DEG = (30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # ``free_way``'s turns, nearest first
 GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 
 
@@ -73,12 +74,35 @@ def cut(
     return [(go[m], jj) for m, jj in zip(n[held].tolist(), j[held].tolist())]
 
 
-def free_m(index: NeighbourIndex, row: int, vec: tuple[float, float]) -> float:
-    """How far the unit at ``row`` could go along ``vec`` (a unit vector) before ``cut`` would stop it, in
-    metres (``inf``: nothing in the way); 0 when it would be cut to nothing."""
+def free_way(
+    index: NeighbourIndex, row: int, way: tuple[float, float], away: np.ndarray, reach_m: float
+) -> tuple[float, float, float] | None:
+    """A turn of ``way`` (``TURNS_DEG``, nearest first) for the unit at ``row``, whose ``way`` the cut
+    leaves nothing of: the one ``cut`` would leave the longest reach, up to ``reach_m``, among those not
+    turning against ``away``; ``(dx, dy, reach)``, or ``None`` when each is cut to nothing too.
+
+    For a unit backing off: a back-off cut to nothing gives no ground, and the deadlock it was to
+    clear forms again as it ends.
+    """
     i, j, pair_s = index.near_seps(np.array([row], dtype=np.intp))
-    enter = _entries(index, i, j, pair_s, np.broadcast_to(np.asarray(vec, dtype=float), (len(i), 2)), None)
-    return float(enter.min(initial=np.inf))
+    t = np.radians(np.array(TURNS_DEG))
+    wx, wy = way
+    turns = np.stack([wx * np.cos(t) - wy * np.sin(t), wx * np.sin(t) + wy * np.cos(t)], axis=1)
+    m = len(i)
+    enter = _entries(
+        index,
+        np.tile(i, len(t)),
+        np.tile(j, len(t)),
+        np.tile(pair_s, len(t)),
+        np.repeat(turns, m, axis=0),
+        None,
+    ).reshape(len(t), m)
+    reach = np.minimum(enter.min(axis=1, initial=np.inf), reach_m)
+    reach[turns @ np.asarray(away, dtype=float) < 0.0] = 0.0
+    best = int(np.argmax(reach))  # the first of the longest: the nearest turn
+    if not reach[best] > GRAZE_M:
+        return None
+    return float(turns[best, 0]), float(turns[best, 1]), float(reach[best])
 
 
 def _entries(
