@@ -84,3 +84,43 @@ def test_a_deadlock_found_from_both_its_units_in_one_tick_is_resolved_once():
     first = [(e.unit, e.other) for t, e in locks if t == locks[0][0]]
     assert first == [("u0000", "u0001")], f"one resolution, the unmanned one's: {first}"
     assert set(out.arrived_s) == set(crowd.ids()) and out.not_cleared == 0 and out.longest_clearing_s <= 30.0
+
+
+def test_a_unit_yielding_does_not_stop_with_its_disc_the_unit_it_yields_to():
+    """Gaps crowd, seed 4 (81 s to clear on main): unmanned ``u0001`` yields to manned ``u0000`` 55 m west
+    of it (their paths meet), holding still; ``u0000``'s way leans into ``u0001``'s disc of 1.1
+    separations, and the cut held it there; ``u0001``'s back-off was cut by a unit at rest behind it.
+    Each held the other for good: on main neither moving unit arrives in 400 s, a deadlock every 18 s."""
+    crowd = _crowd.jam()
+    records: list = []
+    tracks: list = []
+    out = _crowd.simulate(crowd, ON, record=records, tracks=tracks)
+    first = [d for t, d in records if t == 0.0 and d.unit in ("u0000", "u0001")]
+    assert [d.status for d in first] == [DirectionStatus.EN_ROUTE, DirectionStatus.YIELDING], first
+    assert first[0].reach_m is not None and first[0].reach_m > 0.0, (
+        "held by the disc of the unit yielding to it"
+    )
+    assert set(out.arrived_s) == set(crowd.ids()), f"arrived: {sorted(out.arrived_s)}"
+    assert out.deadlocks == 0 and out.not_cleared == 0
+    assert min(float(np.hypot(*(p[0] - p[1]))) for p in tracks) >= 0.9 * SEP
+
+
+def test_the_cut_keeps_a_unit_only_its_separation_from_a_unit_giving_way_to_it_and_the_margin_from_others():
+    points = [(0.0, 0.0), (-55.0, 0.0)]  # leaning 5.5 m into the neighbour's disc of 1.1 separations
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    way = (-0.1, math.sqrt(1.0 - 0.01))
+    for gives_way, reach in ((None, 0.0), (np.array([-1, 0]), 40.0), (np.array([1, -1]), 0.0)):
+        dirs = [
+            Direction(unit="a", status=DirectionStatus.EN_ROUTE, vector=way, heading_deg=354.3, reach_m=40.0)
+        ]
+        stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+        assert dirs[0].reach_m == pytest.approx(reach) and bool(stopped) == (reach == 0.0), gives_way
+    dirs = [
+        Direction(
+            unit="a", status=DirectionStatus.EN_ROUTE, vector=(-1.0, 0.0), heading_deg=270.0, reach_m=40.0
+        )
+    ]
+    keep_apart.cut(
+        index, np.array([0]), dirs, [0], np.array([-1, 0])
+    )  # straight at it: stops at the separation
+    assert dirs[0].reach_m == pytest.approx(55.0 - SEP)
