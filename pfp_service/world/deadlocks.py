@@ -50,6 +50,7 @@ __all__ = [
     "Facing",
     "Hold",
     "Locks",
+    "aside_vector",
     "back_off_vector",
     "event",
     "held",
@@ -209,6 +210,21 @@ def back_off_vector(away: np.ndarray, push: tuple[float, float] | list[float]) -
     vx, vy = ax - ay - px, ay + ax - py
     v = math.hypot(vx, vy)
     return (vx / v, vy / v) if v > 0.0 else (0.0, 0.0)
+
+
+def aside_vector(rel: np.ndarray, way: tuple[float, float]) -> tuple[float, float]:
+    """Out of the way ``way`` of another unit, square to it, on the side ``rel`` (from that unit) lies.
+
+    Dead ahead, to the left as seen along ``way``.
+    """
+    wx, wy = way
+    norm = math.hypot(wx, wy)
+    if norm == 0.0:
+        return (0.0, 0.0)
+    wx, wy = wx / norm, wy / norm
+    rx, ry = rel.tolist()
+    side = -wy * rx + wx * ry  # along the left of ``way``
+    return (-wy, wx) if side >= 0.0 else (wy, -wx)
 
 
 def meet(rel: np.ndarray, closing: np.ndarray, pair_s: np.ndarray) -> np.ndarray:

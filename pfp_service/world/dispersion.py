@@ -212,6 +212,8 @@ class Dispersion:
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
         gives_way = self._giving_way(directions, moving)
         stopped = self._free_ways(directions, keep_apart.cut(index, rows, directions, go, gives_way), now)
+        if gives_way is not None:
+            self._make_room(directions, moving, stopped, gives_way)
         at = {directions[k].unit: k for k, _ in stopped}
         events: list[Event] = []
         for a, b, held_s in self._facing.pairs(
@@ -224,6 +226,35 @@ class Dispersion:
                 directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
                 keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k], gives_way)
         return events
+
+    def _make_room(
+        self,
+        directions: list[Direction],
+        moving: list[int],
+        stopped: list[tuple[int, int]],
+        gives_way: np.ndarray,
+    ) -> None:
+        """A unit holding still for another whose disc stops that very unit moves out of its way, square to it
+        (``deadlocks.aside_vector``): a yielding unit in the way of the unit it yields to held both."""
+        index = self._index
+        assert index is not None
+        blocking = {j: k for k, j in stopped if gives_way[j] == self._row[directions[k].unit]}
+        if not blocking:
+            return
+        for m in moving:
+            d = directions[m]
+            j = self._row[d.unit]
+            if j not in blocking or d.vector != (0.0, 0.0):
+                continue
+            k = blocking.pop(j)
+            other = directions[k]
+            vec = deadlocks.aside_vector(index.points[j] - index.points[self._row[other.unit]], other.vector)
+            pair = float(index.pair_seps(np.array([j]), np.array([self._row[other.unit]]))[0])
+            reason = (d.reason or "").replace("; goes when", "; making room, goes when")
+            rec = self._recs[j]
+            self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
+            directions[m] = deadlocks.held(d, vec, pair, reason)
+            keep_apart.cut(index, np.array([j], dtype=np.intp), directions, [m], gives_way)
 
     def _free_ways(
         self, directions: list[Direction], stopped: list[tuple[int, int]], now: float
