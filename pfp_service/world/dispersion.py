@@ -103,9 +103,6 @@ class Dispersion:
         self._row: dict[str, int] = {}
         self._pushed: dict[str, list[float]] = {}  # each unit advised in this ``apply``: its push
         self._resolving: dict[tuple[int, int], float] = {}  # this tick's resolutions' pair separations
-        self._went: dict[
-            str, tuple[float, float, float, float]
-        ] = {}  # last tick's moving units: where, which way
 
     def holding(self) -> int:
         """How many units hold (yield, back off or go round) now."""
@@ -147,11 +144,8 @@ class Dispersion:
             if (d := directions[k]).status in _MOVING and d.unit in self._row
         ]
         locks = self._locks
-        if (
-            len(self._held) + len(locks) + len(self._went) > 3 * len(self._row) + 64
-        ):  # units forgotten meanwhile: theirs go
+        if len(self._held) + len(locks) > 2 * len(self._row) + 64:  # units forgotten meanwhile: theirs go
             self._held = {u: h for u, h in self._held.items() if u in self._row}
-            self._went = {u: w for u, w in self._went.items() if u in self._row}
             locks.keep(self._row)
         for k in moving:  # who is coming nearer its goal, before anyone is judged by it
             d = directions[k]
@@ -213,10 +207,6 @@ class Dispersion:
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
-        for k in moving:  # where each went last, and which way: only its latest step counts
-            went = self._went.pop(directions[k].unit, None)
-            if went is not None and k in go:
-                self._settle(directions, k, went)
         if not go:
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
@@ -235,33 +225,7 @@ class Dispersion:
                 i, j = self._row[lock.unit], self._row[lock.other]
                 directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
                 keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k], gives_way)
-        for k in go:
-            d = directions[k]
-            x, y = index.points[self._row[d.unit]].tolist()
-            self._went[d.unit] = (x, y, d.vector[0], d.vector[1])
         return events
-
-    def _settle(self, directions: list[Direction], k: int, went: tuple[float, float, float, float]) -> None:
-        """A pushed descent that turns back on its last step goes back at most half that step.
-
-        Turning back, it stepped over the point where its neighbours' push and
-        the field's pull balance: stepping the whole way back, it flipped
-        across that point each report (5 m one way, 5 m back, for good); half
-        the step each time settles it there, where the pull along its way is left.
-        """
-        index = self._index
-        assert index is not None
-        d = directions[k]
-        x0, y0, vx, vy = went
-        if d.status not in _MOVING or d.vector[0] * vx + d.vector[1] * vy >= 0.0:
-            return
-        px, py = self._pushed.get(d.unit, (0.0, 0.0))
-        if px == 0.0 and py == 0.0:
-            return
-        x, y = index.points[self._row[d.unit]].tolist()
-        half = 0.5 * math.hypot(x - x0, y - y0)
-        if half > 0.0 and (d.reach_m is None or half < d.reach_m):
-            directions[k] = msgspec.structs.replace(d, reach_m=half)
 
     def _make_room(
         self,
