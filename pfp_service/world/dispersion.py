@@ -28,9 +28,11 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    one, ``_short`` still keeps it apart), so no unit yields for longer than
    ``deadlock_s`` plus its resolution with a deadlock in it.
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
-   separations of another; its reach is cut at that disc's edge
-   (``keep_apart``).  Two units going round units at rest, each cut to
-   nothing by the other, are one deadlock (``_facing_lock``).
+   separations of another (its separation alone from a unit giving way to
+   it); its reach is cut at that disc's edge (``keep_apart``).  A back-off
+   cut to nothing turns to a free way, and a unit holding still in the way
+   of the unit it yields to makes room.  Two units going round units at
+   rest, each cut to nothing by the other, are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -44,7 +46,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
-import msgspec
 import numpy as np
 
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
@@ -210,10 +211,12 @@ class Dispersion:
         if not go:
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
-        gives_way = self._giving_way(directions, moving)
-        stopped = self._free_ways(directions, keep_apart.cut(index, rows, directions, go, gives_way), now)
-        if gives_way is not None:
-            self._make_room(directions, moving, stopped, gives_way)
+        gives_way = keep_apart.giving_way(index, self._row, self._held, directions, moving)
+        stopped = keep_apart.cut(index, rows, directions, go, gives_way)
+        stopped = keep_apart.free_ways(index, self._row, self._held, directions, stopped, now)
+        for m in keep_apart.make_room(index, self._row, directions, moving, stopped, gives_way):
+            rec, d = self._recs[self._row[directions[m].unit]], directions[m]
+            self._yielded(rec, Verdict(DirectionStatus.YIELDING, d.reason, rec.last_distance, d.vector))
         at = {directions[k].unit: k for k, _ in stopped}
         events: list[Event] = []
         for a, b, held_s in self._facing.pairs(
@@ -226,85 +229,6 @@ class Dispersion:
                 directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
                 keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k], gives_way)
         return events
-
-    def _make_room(
-        self,
-        directions: list[Direction],
-        moving: list[int],
-        stopped: list[tuple[int, int]],
-        gives_way: np.ndarray,
-    ) -> None:
-        """A unit holding still for another whose disc stops that very unit moves out of its way, square to it
-        (``deadlocks.aside_vector``): a yielding unit in the way of the unit it yields to held both."""
-        index = self._index
-        assert index is not None
-        blocking = {j: k for k, j in stopped if gives_way[j] == self._row[directions[k].unit]}
-        if not blocking:
-            return
-        for m in moving:
-            d = directions[m]
-            j = self._row[d.unit]
-            if j not in blocking or d.vector != (0.0, 0.0):
-                continue
-            k = blocking.pop(j)
-            other = directions[k]
-            vec = deadlocks.aside_vector(index.points[j] - index.points[self._row[other.unit]], other.vector)
-            pair = float(index.pair_seps(np.array([j]), np.array([self._row[other.unit]]))[0])
-            reason = (d.reason or "").replace("; goes when", "; making room, goes when")
-            rec = self._recs[j]
-            self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))
-            directions[m] = deadlocks.held(d, vec, pair, reason)
-            keep_apart.cut(index, np.array([j], dtype=np.intp), directions, [m], gives_way)
-
-    def _free_ways(
-        self, directions: list[Direction], stopped: list[tuple[int, int]], now: float
-    ) -> list[tuple[int, int]]:
-        """Turn each back-off the cut left nothing of to a free way off it (``keep_apart.free_way``), still
-        away from the unit it backs off from; the stopped pairs left."""
-        index = self._index
-        assert index is not None
-        turned: set[int] = set()
-        for k in sorted({k for k, _ in stopped}):
-            d = directions[k]
-            hold = self._held.get(d.unit)
-            if hold is None or hold.round or not hold.until > now or hold.other not in self._row:
-                continue
-            i, j = self._row[d.unit], self._row[hold.other]
-            pair = self._resolving.get((i, j))
-            if pair is None:
-                pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
-            way = keep_apart.free_way(index, i, d.vector, index.points[i] - index.points[j], pair)
-            if way is not None:
-                vx, vy, reach = way
-                heading = math.degrees(math.atan2(vx, vy)) % 360.0
-                directions[k] = msgspec.structs.replace(
-                    d, vector=(vx, vy), heading_deg=heading, reach_m=reach
-                )
-                turned.add(k)
-        return [(k, j) for k, j in stopped if k not in turned]
-
-    def _giving_way(self, directions: list[Direction], moving: list[int]) -> np.ndarray | None:
-        """Each row's unit it gives way to in this tick (``-1``: none), for ``keep_apart.cut``: a unit
-        yielding to another, or backing off from it, whose direction does not close on it."""
-        index = self._index
-        assert index is not None
-        gives_way = None
-        for k in moving:
-            d = directions[k]
-            hold = self._held.get(d.unit)
-            if d.status is not DirectionStatus.YIELDING or hold is None or hold.round:
-                continue
-            j = self._row.get(hold.other)
-            if j is None:
-                continue
-            i = self._row[d.unit]
-            rx, ry = (index.points[i] - index.points[j]).tolist()
-            if d.vector[0] * rx + d.vector[1] * ry < 0.0:  # coming at it: the margin stands
-                continue
-            if gives_way is None:
-                gives_way = np.full(len(index.points), -1, dtype=np.intp)
-            gives_way[i] = j
-        return gives_way
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
         """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: when both are going

@@ -11,17 +11,27 @@ backing off from it) does not come at it, so against the unit it gives way
 to its disc is the separation alone (``GIVEN``).  With the margin, a unit
 holding still for another stopped that very unit whose way leaned into
 its disc, and each held the other for good (the gaps crowd's seed 4).
+
+Two ways out of a stop, for the units that give way: a back-off the cut
+leaves nothing of turns to the nearest free way off it, still away from
+the other unit (``free_ways``: backing off from nothing, the deadlock
+formed again as it ended); and a unit holding still for another whose disc
+stops that very unit moves out of its way, square to it (``make_room``).
 """
 
 from __future__ import annotations
+
+import math
+from collections.abc import Mapping
 
 import msgspec
 import numpy as np
 
 from pfp_service.core.dispersion import NeighbourIndex
-from pfp_service.wire import Direction
+from pfp_service.wire import Direction, DirectionStatus
+from pfp_service.world.deadlocks import Hold, aside_vector, held
 
-__all__ = ["GIVEN", "GRAZE_M", "KEEP", "TURNS_DEG", "cut", "free_way"]
+__all__ = ["GIVEN", "GRAZE_M", "KEEP", "TURNS_DEG", "cut", "free_way", "free_ways", "giving_way", "make_room"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
 GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
@@ -124,3 +134,90 @@ def _entries(
     enter = np.full(len(rel), np.inf)
     enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
     return enter
+
+
+def giving_way(
+    index: NeighbourIndex,
+    row: Mapping[str, int],
+    holds: Mapping[str, Hold],
+    directions: list[Direction],
+    moving: list[int],
+) -> np.ndarray | None:
+    """Each ``index`` row's unit it gives way to in this tick (``-1``: none; ``None``: no unit does), for
+    ``cut``: a unit yielding to another (``holds``), or backing off from it, whose direction does not close
+    on it.  ``row``: each unit's row; ``moving``: the positions in ``directions`` judged in this tick."""
+    gives_way = None
+    for k in moving:
+        d = directions[k]
+        hold = holds.get(d.unit)
+        if d.status is not DirectionStatus.YIELDING or hold is None or hold.round or hold.other not in row:
+            continue
+        i, j = row[d.unit], row[hold.other]
+        rx, ry = (index.points[i] - index.points[j]).tolist()
+        if d.vector[0] * rx + d.vector[1] * ry < 0.0:  # coming at it: the margin stands
+            continue
+        if gives_way is None:
+            gives_way = np.full(len(index.points), -1, dtype=np.intp)
+        gives_way[i] = j
+    return gives_way
+
+
+def free_ways(
+    index: NeighbourIndex,
+    row: Mapping[str, int],
+    holds: Mapping[str, Hold],
+    directions: list[Direction],
+    stopped: list[tuple[int, int]],
+    now: float,
+) -> list[tuple[int, int]]:
+    """Turn each back-off that ``cut`` left nothing of (``stopped``) to a free way off it (``free_way``),
+    still away from the unit it backs off from, in place; the stopped pairs left."""
+    turned: set[int] = set()
+    for k in sorted({k for k, _ in stopped}):
+        d = directions[k]
+        hold = holds.get(d.unit)
+        if hold is None or hold.round or not hold.until > now or hold.other not in row:
+            continue
+        i, j = row[d.unit], row[hold.other]
+        pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+        way = free_way(index, i, d.vector, index.points[i] - index.points[j], pair)
+        if way is not None:
+            vx, vy, reach = way
+            heading = math.degrees(math.atan2(vx, vy)) % 360.0
+            directions[k] = msgspec.structs.replace(d, vector=(vx, vy), heading_deg=heading, reach_m=reach)
+            turned.add(k)
+    return [(k, j) for k, j in stopped if k not in turned]
+
+
+def make_room(
+    index: NeighbourIndex,
+    row: Mapping[str, int],
+    directions: list[Direction],
+    moving: list[int],
+    stopped: list[tuple[int, int]],
+    gives_way: np.ndarray | None,
+) -> list[int]:
+    """Send each unit holding still for another whose disc stops (``stopped``) that very unit out of its
+    way, square to it (``deadlocks.aside_vector``), in place; their positions in ``directions``.
+
+    A unit holding still in the way of the unit it yields to held both: that
+    one waited at its disc, it waited for that one to pass.
+    """
+    if gives_way is None:
+        return []
+    blocking = {j: k for k, j in stopped if gives_way[j] == row[directions[k].unit]}
+    made: list[int] = []
+    for m in moving:
+        d = directions[m]
+        j = row[d.unit]
+        if j not in blocking or d.vector != (0.0, 0.0):
+            continue
+        other = directions[blocking.pop(j)]
+        vec = aside_vector(index.points[j] - index.points[row[other.unit]], other.vector)
+        pair = float(index.pair_seps(np.array([j]), np.array([row[other.unit]]))[0])
+        directions[m] = held(
+            d, vec, pair, (d.reason or "").replace("; goes when", "; making room, goes when")
+        )
+        cut(index, np.array([j], dtype=np.intp), directions, [m], gives_way)
+        made.append(m)
+    return made

@@ -124,3 +124,35 @@ def test_the_cut_keeps_a_unit_only_its_separation_from_a_unit_giving_way_to_it_a
         index, np.array([0]), dirs, [0], np.array([-1, 0])
     )  # straight at it: stops at the separation
     assert dirs[0].reach_m == pytest.approx(55.0 - SEP)
+
+
+def test_a_back_off_cut_to_nothing_turns_to_the_nearest_free_way_still_away_from_the_other():
+    """Gaps crowd, seeds 3 and 4: a unit backing off into a neighbour's disc was cut to nothing for the
+    whole back-off, and the deadlock it was to clear formed again as it ended."""
+    # backing off south from the other (north), a unit 55 m due south of it and one 55 m east of it
+    points = [(0.0, 0.0), (0.0, 60.0), (0.0, -55.0), (55.0, 0.0)]
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    away = np.array([0.0, -60.0])
+    dirs = [Direction(unit="a", status=DirectionStatus.YIELDING, vector=(0.0, -1.0), reach_m=SEP)]
+    assert keep_apart.cut(index, np.array([0]), dirs, [0]) and dirs[0].reach_m == 0.0  # the case
+    # on the southern unit's disc every turn towards it is cut, and east is the other's: due west is free
+    assert keep_apart.free_way(index, 0, (0.0, -1.0), away, SEP) == pytest.approx((-1.0, 0.0, SEP))
+    points[2] = (0.0, -70.0)  # 15 m off its disc: 30 degrees west of south reaches 8.6 m, 60 the whole way
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    assert keep_apart.free_way(index, 0, (0.0, -1.0), away, SEP) == pytest.approx(
+        (-math.sqrt(0.75), -0.5, SEP)
+    )
+    boxed = NeighbourIndex(
+        np.array(points + [(-55.0, 0.0), (-39.0, -39.0), (39.0, -39.0)], dtype=float), np.full(7, SEP)
+    )
+    assert keep_apart.free_way(boxed, 0, (0.0, -1.0), away, SEP) is None  # every turn away from it is cut
+
+
+def test_a_unit_making_room_goes_square_to_the_way_of_the_unit_it_yields_to_on_its_own_side():
+    from pfp_service.world.deadlocks import aside_vector
+
+    north = (0.0, 1.0)
+    assert aside_vector(np.array([-5.0, 50.0]), north) == pytest.approx((-1.0, 0.0))  # ahead, to the west
+    assert aside_vector(np.array([5.0, 50.0]), north) == pytest.approx((1.0, 0.0))
+    assert aside_vector(np.array([0.0, 50.0]), north) == pytest.approx((-1.0, 0.0))  # dead ahead: its left
+    assert aside_vector(np.array([0.0, 50.0]), (0.0, 0.0)) == (0.0, 0.0)
