@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -156,3 +157,35 @@ def test_a_unit_making_room_goes_square_to_the_way_of_the_unit_it_yields_to_on_i
     assert aside_vector(np.array([5.0, 50.0]), north) == pytest.approx((1.0, 0.0))
     assert aside_vector(np.array([0.0, 50.0]), north) == pytest.approx((-1.0, 0.0))  # dead ahead: its left
     assert aside_vector(np.array([0.0, 50.0]), (0.0, 0.0)) == (0.0, 0.0)
+
+
+def test_a_unit_holding_still_in_the_way_of_the_unit_it_yields_to_makes_room_square_to_its_way():
+    """Gaps crowd, seed 3 (39 s to clear with the separation alone against a unit giving way): ``u0111``
+    yielded to ``u0108`` holding still right in its way, and ``u0108`` waited at its disc for 20 s."""
+    from pfp_service.world.deadlocks import Hold
+
+    # ``a`` (row 0) going north; ``b`` (row 1), at its separation north-west of it, yields to it, holding still
+    points = np.array([(0.0, 0.0), (-20.0, 45.8)], dtype=float)
+    index = NeighbourIndex(points, np.full(2, SEP))
+    row = {"a": 0, "b": 1}
+    yielding = "yielding to a (right of way by id): 50 m away, separation 50 m; goes when it has passed"
+    dirs = [
+        Direction(
+            unit="a", status=DirectionStatus.EN_ROUTE, vector=(0.0, 1.0), heading_deg=0.0, reach_m=40.0
+        ),
+        Direction(unit="b", status=DirectionStatus.YIELDING, vector=(0.0, 0.0), reach_m=0.0, reason=yielding),
+    ]
+    holds = {"b": Hold("a", 0.0, 50.0)}
+    gives_way = keep_apart.giving_way(index, row, holds, dirs, [0, 1])
+    assert gives_way is not None and gives_way.tolist() == [-1, 0]
+    stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+    assert stopped == [(0, 1)] and dirs[0].reach_m == 0.0  # the case: its disc stops the unit it yields to
+    assert keep_apart.make_room(index, row, dirs, [0, 1], stopped, gives_way) == [1]
+    b = dirs[1]
+    assert b.status is DirectionStatus.YIELDING and b.vector == pytest.approx((-1.0, 0.0))  # west: its side
+    assert b.reach_m is not None and b.reach_m > 0.0 and "making room" in b.reason
+    # the unit it yields to going east, off its disc: not in its way, it holds still
+    dirs[0] = msgspec.structs.replace(dirs[0], vector=(1.0, 0.0), reach_m=40.0)
+    dirs[1] = msgspec.structs.replace(dirs[1], vector=(0.0, 0.0), reach_m=0.0, reason=yielding)
+    stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+    assert not stopped and keep_apart.make_room(index, row, dirs, [0, 1], stopped, gives_way) == []
