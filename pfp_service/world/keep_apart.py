@@ -31,12 +31,12 @@ from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.wire import Direction, DirectionStatus
 from pfp_service.world.deadlocks import Hold, aside_vector, held
 
-__all__ = ["GIVEN", "GRAZE_M", "KEEP", "TURNS_DEG", "cut", "free_way", "free_ways", "giving_way", "make_room"]
+__all__ = ["GIVEN", "KEEP", "TURNS_DEG", "cut", "free_way", "free_ways", "giving_way", "make_room"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
 GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
 TURNS_DEG = (30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # ``free_way``'s turns, nearest first
-GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
+_GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 
 
 def cut(
@@ -80,7 +80,7 @@ def cut(
         d = directions[k]
         if d.reach_m is None or reach < d.reach_m:
             directions[k] = msgspec.structs.replace(d, reach_m=reach)
-    held = (enter <= GRAZE_M) & (safe[n] <= GRAZE_M)
+    held = (enter <= _GRAZE_M) & (safe[n] <= _GRAZE_M)
     return [(go[m], jj) for m, jj in zip(n[held].tolist(), j[held].tolist())]
 
 
@@ -110,7 +110,7 @@ def free_way(
     reach = np.minimum(enter.min(axis=1, initial=np.inf), reach_m)
     reach[turns @ np.asarray(away, dtype=float) < 0.0] = 0.0
     best = int(np.argmax(reach))  # the first of the longest: the nearest turn
-    if not reach[best] > GRAZE_M:
+    if not reach[best] > _GRAZE_M:
         return None
     return float(turns[best, 0]), float(turns[best, 1]), float(reach[best])
 
@@ -130,7 +130,7 @@ def _entries(
     if gives_way is not None:
         keep_m = np.where(gives_way[j] == i, GIVEN * pair_s, keep_m)
     across2 = (rel * rel).sum(axis=1) - along * along
-    hit = (along > GRAZE_M) & (across2 < keep_m * keep_m)
+    hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
     enter = np.full(len(rel), np.inf)
     enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
     return enter
