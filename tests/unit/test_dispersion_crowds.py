@@ -5,7 +5,10 @@ for its whole route, and it never arrived); one deadlock found from both its uni
 resolved once (both backed off, the second as escalation's, met again and locked again); the cut
 stops a unit at a neighbour's disc; and two units going round units at rest, each cut to nothing by
 the other, are one deadlock (towards each other in the one lane between them, they held each other
-for good: seed 3 of the gaps crowd with a slide along the disc, tried and not kept).
+for good: seed 3 of the gaps crowd with a slide along the disc, tried and not kept). Jams (issue
+33's seeds 1-8): a unit giving way keeps the unit it gives way to only its separation, a back-off
+cut to nothing turns to a free way, and a yielding unit in the way of the unit it yields to makes
+room.
 The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
 and measured on the tracks.
 """
