@@ -192,3 +192,15 @@ def test_a_unit_holding_still_in_the_way_of_the_unit_it_yields_to_makes_room_squ
     dirs[1] = msgspec.structs.replace(dirs[1], vector=(0.0, 0.0), reach_m=0.0, reason=yielding)
     stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
     assert not stopped and keep_apart.make_room(index, row, dirs, [0, 1], stopped, gives_way) == []
+
+
+def test_a_back_off_goes_more_aside_than_away_still_drawing_away():
+    """Gaps crowd, seeds 1 and 2 (42 and 38 s to clear at 45 degrees): a back-off gives ground its unit must
+    win back before the deadlock counts as cleared; aside is what clears the line between the two."""
+    from pfp_service.world.deadlocks import back_off_vector
+
+    vx, vy = back_off_vector(np.array([0.0, -60.0]), (0.0, 0.0))  # the other unit 60 m north of it
+    away = -vy  # the share of the back-off that is ground given
+    assert 0.0 < away < math.cos(math.radians(60.0)) and vx > 0.0  # east: left as seen from the other
+    assert math.hypot(vx, vy) == pytest.approx(1.0)
+    assert back_off_vector(np.array([0.0, -60.0]), (0.0, 0.0)) == pytest.approx((2.0 / 5**0.5, -1.0 / 5**0.5))
