@@ -43,6 +43,7 @@ __all__ = [
     "crowded_goal",
     "gaps",
     "head_on",
+    "jam",
     "lane",
     "near_its_goal",
     "one_gap",
@@ -405,6 +406,21 @@ def lane(c_start: tuple[float, float] = (-85.0, 0.0), d_start: tuple[float, floa
         "two units crossing between two at rest",
         starts=[(0.0, 66.5), (0.0, -66.5), c_start, d_start],
         goals=[(0.0, 66.5), (0.0, -66.5), (154.0, 65.0), (-154.0, -65.0)],
+        kinds=["manned", "unmanned", "unmanned", "unmanned"],
+        threats={},
+        limit_s=400.0,
+    )
+
+
+def jam() -> Crowd:
+    """Unmanned ``u0001`` 55 m west of manned ``u0000`` (1.1 separations), two units at rest on their goals
+    55 m east and west of the pair: ``u0000``'s way north-west meets ``u0001``'s north-east, so ``u0001``
+    yields to it, and ``u0001``'s back-off west is into the disc of the unit at rest behind it (the head
+    of the gaps crowd's jam at seed 4)."""
+    return Crowd(
+        "a unit yielding beside the one it yields to, between units at rest",
+        starts=[(0.0, 0.0), (-55.0, 0.0), (55.0, 0.0), (-110.0, 0.0)],
+        goals=[(-150.0, 1500.0), (400.0, 1500.0), (55.0, 0.0), (-110.0, 0.0)],
         kinds=["manned", "unmanned", "unmanned", "unmanned"],
         threats={},
         limit_s=400.0,

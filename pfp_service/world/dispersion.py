@@ -28,9 +28,11 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    one, ``_short`` still keeps it apart), so no unit yields for longer than
    ``deadlock_s`` plus its resolution with a deadlock in it.
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
-   separations of another; its reach is cut at that disc's edge
-   (``keep_apart``).  Two units going round units at rest, each cut to
-   nothing by the other, are one deadlock (``_facing_lock``).
+   separations of another (its separation alone from a unit giving way to
+   it); its reach is cut at that disc's edge (``keep_apart``).  A back-off
+   cut to nothing turns to a free way, and a unit holding still in the way
+   of the unit it yields to makes room.  Two units going round units at
+   rest, each cut to nothing by the other, are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -209,7 +211,12 @@ class Dispersion:
         if not go:
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
-        stopped = keep_apart.cut(index, rows, directions, go)
+        gives_way = keep_apart.giving_way(index, self._row, self._held, directions, moving)
+        stopped = keep_apart.cut(index, rows, directions, go, gives_way)
+        stopped = keep_apart.free_ways(index, self._row, self._held, directions, stopped, now)
+        for m in keep_apart.make_room(index, self._row, directions, moving, stopped, gives_way):
+            rec, d = self._recs[self._row[directions[m].unit]], directions[m]
+            self._yielded(rec, Verdict(DirectionStatus.YIELDING, d.reason, rec.last_distance, d.vector))
         at = {directions[k].unit: k for k, _ in stopped}
         events: list[Event] = []
         for a, b, held_s in self._facing.pairs(
@@ -220,7 +227,7 @@ class Dispersion:
                 k = at[lock.unit]
                 i, j = self._row[lock.unit], self._row[lock.other]
                 directions[k] = self._resolve(directions[k], i, j, self._held[lock.unit])
-                keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k])
+                keep_apart.cut(index, np.array([i], dtype=np.intp), directions, [k], gives_way)
         return events
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:

@@ -4,24 +4,47 @@ Apart from ``dispersion`` (the right of way and deadlocks), which calls it
 last in each ``apply``.  ``cut`` also says which units it left cut to
 nothing, and by whom: two units each stopped by the other's disc hold each
 other (``dispersion`` makes two going round units at rest so one deadlock).
+
+The margin beyond the separation is for a neighbour that moves meanwhile,
+perhaps towards the unit; a unit giving way to another (yielding, or
+backing off from it) does not come at it, so against the unit it gives way
+to its disc is the separation alone (``GIVEN``).  With the margin, a unit
+holding still for another stopped that very unit whose way leaned into
+its disc, and each held the other for good (the gaps crowd's seed 4).
+
+Two ways out of a stop, for the units that give way: a back-off the cut
+leaves nothing of turns to the nearest free way off it, still away from
+the other unit (``free_ways``: backing off from nothing, the deadlock
+formed again as it ended); and a unit holding still for another whose disc
+stops that very unit moves out of its way, square to it (``make_room``).
 """
 
 from __future__ import annotations
+
+import math
+from collections.abc import Mapping
 
 import msgspec
 import numpy as np
 
 from pfp_service.core.dispersion import NeighbourIndex
-from pfp_service.wire import Direction
+from pfp_service.wire import Direction, DirectionStatus
+from pfp_service.world.deadlocks import Hold, aside_vector, held
 
-__all__ = ["KEEP", "cut"]
+__all__ = ["GIVEN", "KEEP", "TURNS_DEG", "cut", "free_way", "free_ways", "giving_way", "make_room"]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
+GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
+TURNS_DEG = (30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # ``free_way``'s turns, nearest first
 _GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 
 
 def cut(
-    index: NeighbourIndex, rows: np.ndarray, directions: list[Direction], go: list[int]
+    index: NeighbourIndex,
+    rows: np.ndarray,
+    directions: list[Direction],
+    go: list[int],
+    gives_way: np.ndarray | None = None,
 ) -> list[tuple[int, int]]:
     """Cut each of ``directions[go]`` (the units at ``index`` rows ``rows``) where it would enter a neighbour's disc.
 
@@ -36,6 +59,8 @@ def cut(
         rows: each moving direction's row in ``index``.
         directions: the tick's directions, cut in place; those at ``go`` have a non-zero vector.
         go: the positions in ``directions`` of the moving ones, in the order of ``rows``.
+        gives_way: for each ``index`` row, the row of the unit it gives way to in this tick (``-1``:
+            none); that unit keeps only ``GIVEN`` separations from it (``None``: no unit gives way).
 
     Returns:
         Each unit left cut to nothing (its position in ``directions``) with
@@ -46,13 +71,8 @@ def cut(
     vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
     i, j, pair_s = index.near_seps(rows)
     n = at[i]
-    rel = index.points[j] - index.points[i]
-    along = (rel * vec[n]).sum(axis=1)
-    keep_m = KEEP * pair_s
-    across2 = (rel * rel).sum(axis=1) - along * along
-    hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
-    enter = np.full(len(rel), np.inf)
-    enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+    enter = _entries(index, i, j, pair_s, vec[n], gives_way)
+    hit = np.isfinite(enter)
     safe = np.full(len(go), np.inf)
     np.minimum.at(safe, n[hit], enter[hit])
     for m in np.flatnonzero(np.isfinite(safe)).tolist():
@@ -62,3 +82,142 @@ def cut(
             directions[k] = msgspec.structs.replace(d, reach_m=reach)
     held = (enter <= _GRAZE_M) & (safe[n] <= _GRAZE_M)
     return [(go[m], jj) for m, jj in zip(n[held].tolist(), j[held].tolist())]
+
+
+def free_way(
+    index: NeighbourIndex, row: int, way: tuple[float, float], away: np.ndarray, reach_m: float
+) -> tuple[float, float, float] | None:
+    """A turn of ``way`` (``TURNS_DEG``, nearest first) for the unit at ``row``, whose ``way`` the cut
+    leaves nothing of: the one ``cut`` would leave the longest reach, up to ``reach_m``, among those not
+    turning against ``away``; ``(dx, dy, reach)``, or ``None`` when each is cut to nothing too.
+
+    For a unit backing off: a back-off cut to nothing gives no ground, and the deadlock it was to
+    clear forms again as it ends.
+    """
+    i, j, pair_s = index.near_seps(np.array([row], dtype=np.intp))
+    t = np.radians(np.array(TURNS_DEG))
+    wx, wy = way
+    turns = np.stack([wx * np.cos(t) - wy * np.sin(t), wx * np.sin(t) + wy * np.cos(t)], axis=1)
+    m = len(i)
+    enter = _entries(
+        index,
+        np.tile(i, len(t)),
+        np.tile(j, len(t)),
+        np.tile(pair_s, len(t)),
+        np.repeat(turns, m, axis=0),
+        None,
+    ).reshape(len(t), m)
+    reach = np.minimum(enter.min(axis=1, initial=np.inf), reach_m)
+    reach[turns @ np.asarray(away, dtype=float) < 0.0] = 0.0
+    best = int(np.argmax(reach))  # the first of the longest: the nearest turn
+    if not reach[best] > _GRAZE_M:
+        return None
+    return float(turns[best, 0]), float(turns[best, 1]), float(reach[best])
+
+
+def _entries(
+    index: NeighbourIndex,
+    i: np.ndarray,
+    j: np.ndarray,
+    pair_s: np.ndarray,
+    vec: np.ndarray,
+    gives_way: np.ndarray | None,
+) -> np.ndarray:
+    """How far along ``vec`` (one per pair) each unit ``i`` enters ``j``'s disc (``inf``: never)."""
+    rel = index.points[j] - index.points[i]
+    along = (rel * vec).sum(axis=1)
+    keep_m = KEEP * pair_s
+    if gives_way is not None:
+        keep_m = np.where(gives_way[j] == i, GIVEN * pair_s, keep_m)
+    across2 = (rel * rel).sum(axis=1) - along * along
+    hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
+    enter = np.full(len(rel), np.inf)
+    enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
+    return enter
+
+
+def giving_way(
+    index: NeighbourIndex,
+    row: Mapping[str, int],
+    holds: Mapping[str, Hold],
+    directions: list[Direction],
+    moving: list[int],
+) -> np.ndarray | None:
+    """Each ``index`` row's unit it gives way to in this tick (``-1``: none; ``None``: no unit does), for
+    ``cut``: a unit yielding to another (``holds``), or backing off from it, whose direction does not close
+    on it.  ``row``: each unit's row; ``moving``: the positions in ``directions`` judged in this tick."""
+    gives_way = None
+    for k in moving:
+        d = directions[k]
+        hold = holds.get(d.unit)
+        if d.status is not DirectionStatus.YIELDING or hold is None or hold.round or hold.other not in row:
+            continue
+        i, j = row[d.unit], row[hold.other]
+        rx, ry = (index.points[i] - index.points[j]).tolist()
+        if d.vector[0] * rx + d.vector[1] * ry < 0.0:  # coming at it: the margin stands
+            continue
+        if gives_way is None:
+            gives_way = np.full(len(index.points), -1, dtype=np.intp)
+        gives_way[i] = j
+    return gives_way
+
+
+def free_ways(
+    index: NeighbourIndex,
+    row: Mapping[str, int],
+    holds: Mapping[str, Hold],
+    directions: list[Direction],
+    stopped: list[tuple[int, int]],
+    now: float,
+) -> list[tuple[int, int]]:
+    """Turn each back-off that ``cut`` left nothing of (``stopped``) to a free way off it (``free_way``),
+    still away from the unit it backs off from, in place; the stopped pairs left."""
+    turned: set[int] = set()
+    for k in sorted({k for k, _ in stopped}):
+        d = directions[k]
+        hold = holds.get(d.unit)
+        if hold is None or hold.round or not hold.until > now or hold.other not in row:
+            continue
+        i, j = row[d.unit], row[hold.other]
+        pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+        way = free_way(index, i, d.vector, index.points[i] - index.points[j], pair)
+        if way is not None:
+            vx, vy, reach = way
+            heading = math.degrees(math.atan2(vx, vy)) % 360.0
+            directions[k] = msgspec.structs.replace(d, vector=(vx, vy), heading_deg=heading, reach_m=reach)
+            turned.add(k)
+    return [(k, j) for k, j in stopped if k not in turned]
+
+
+def make_room(
+    index: NeighbourIndex,
+    row: Mapping[str, int],
+    directions: list[Direction],
+    moving: list[int],
+    stopped: list[tuple[int, int]],
+    gives_way: np.ndarray | None,
+) -> list[int]:
+    """Send each unit holding still for another whose disc stops (``stopped``) that very unit out of its
+    way, square to it (``deadlocks.aside_vector``), in place; their positions in ``directions``.
+
+    A unit holding still in the way of the unit it yields to held both: that
+    one waited at its disc, it waited for that one to pass.
+    """
+    if gives_way is None:
+        return []
+    blocking = {j: k for k, j in stopped if gives_way[j] == row[directions[k].unit]}
+    made: list[int] = []
+    for m in moving:
+        d = directions[m]
+        j = row[d.unit]
+        if j not in blocking or d.vector != (0.0, 0.0):
+            continue
+        other = directions[blocking.pop(j)]
+        vec = aside_vector(index.points[j] - index.points[row[other.unit]], other.vector)
+        pair = float(index.pair_seps(np.array([j]), np.array([row[other.unit]]))[0])
+        directions[m] = held(
+            d, vec, pair, (d.reason or "").replace("; goes when", "; making room, goes when")
+        )
+        cut(index, np.array([j], dtype=np.intp), directions, [m], gives_way)
+        made.append(m)
+    return made

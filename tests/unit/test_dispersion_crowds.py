@@ -5,7 +5,10 @@ for its whole route, and it never arrived); one deadlock found from both its uni
 resolved once (both backed off, the second as escalation's, met again and locked again); the cut
 stops a unit at a neighbour's disc; and two units going round units at rest, each cut to nothing by
 the other, are one deadlock (towards each other in the one lane between them, they held each other
-for good: seed 3 of the gaps crowd with a slide along the disc, tried and not kept).
+for good: seed 3 of the gaps crowd with a slide along the disc, tried and not kept). Jams (issue
+33's seeds 1-8): a unit giving way keeps the unit it gives way to only its separation, a back-off
+cut to nothing turns to a free way, and a yielding unit in the way of the unit it yields to makes
+room.
 The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
 and measured on the tracks.
 """
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -84,3 +88,119 @@ def test_a_deadlock_found_from_both_its_units_in_one_tick_is_resolved_once():
     first = [(e.unit, e.other) for t, e in locks if t == locks[0][0]]
     assert first == [("u0000", "u0001")], f"one resolution, the unmanned one's: {first}"
     assert set(out.arrived_s) == set(crowd.ids()) and out.not_cleared == 0 and out.longest_clearing_s <= 30.0
+
+
+def test_a_unit_yielding_does_not_stop_with_its_disc_the_unit_it_yields_to():
+    """Gaps crowd, seed 4 (81 s to clear on main): unmanned ``u0001`` yields to manned ``u0000`` 55 m west
+    of it (their paths meet), holding still; ``u0000``'s way leans into ``u0001``'s disc of 1.1
+    separations, and the cut held it there; ``u0001``'s back-off was cut by a unit at rest behind it.
+    Each held the other for good: on main neither moving unit arrives in 400 s, a deadlock every 18 s."""
+    crowd = _crowd.jam()
+    records: list = []
+    tracks: list = []
+    out = _crowd.simulate(crowd, ON, record=records, tracks=tracks)
+    first = [d for t, d in records if t == 0.0 and d.unit in ("u0000", "u0001")]
+    assert [d.status for d in first] == [DirectionStatus.EN_ROUTE, DirectionStatus.YIELDING], first
+    assert first[0].reach_m is not None and first[0].reach_m > 0.0, (
+        "held by the disc of the unit yielding to it"
+    )
+    assert set(out.arrived_s) == set(crowd.ids()), f"arrived: {sorted(out.arrived_s)}"
+    assert out.deadlocks == 0 and out.not_cleared == 0
+    assert min(float(np.hypot(*(p[0] - p[1]))) for p in tracks) >= 0.9 * SEP
+
+
+def test_the_cut_keeps_a_unit_only_its_separation_from_a_unit_giving_way_to_it_and_the_margin_from_others():
+    points = [(0.0, 0.0), (-55.0, 0.0)]  # leaning 5.5 m into the neighbour's disc of 1.1 separations
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    way = (-0.1, math.sqrt(1.0 - 0.01))
+    for gives_way, reach in ((None, 0.0), (np.array([-1, 0]), 40.0), (np.array([1, -1]), 0.0)):
+        dirs = [
+            Direction(unit="a", status=DirectionStatus.EN_ROUTE, vector=way, heading_deg=354.3, reach_m=40.0)
+        ]
+        stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+        assert dirs[0].reach_m == pytest.approx(reach) and bool(stopped) == (reach == 0.0), gives_way
+    dirs = [
+        Direction(
+            unit="a", status=DirectionStatus.EN_ROUTE, vector=(-1.0, 0.0), heading_deg=270.0, reach_m=40.0
+        )
+    ]
+    keep_apart.cut(
+        index, np.array([0]), dirs, [0], np.array([-1, 0])
+    )  # straight at it: stops at the separation
+    assert dirs[0].reach_m == pytest.approx(55.0 - SEP)
+
+
+def test_a_back_off_cut_to_nothing_turns_to_the_nearest_free_way_still_away_from_the_other():
+    """Gaps crowd, seeds 3 and 4: a unit backing off into a neighbour's disc was cut to nothing for the
+    whole back-off, and the deadlock it was to clear formed again as it ended."""
+    # backing off south from the other (north), a unit 55 m due south of it and one 55 m east of it
+    points = [(0.0, 0.0), (0.0, 60.0), (0.0, -55.0), (55.0, 0.0)]
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    away = np.array([0.0, -60.0])
+    dirs = [Direction(unit="a", status=DirectionStatus.YIELDING, vector=(0.0, -1.0), reach_m=SEP)]
+    assert keep_apart.cut(index, np.array([0]), dirs, [0]) and dirs[0].reach_m == 0.0  # the case
+    # on the southern unit's disc every turn towards it is cut, and east is the other's: due west is free
+    assert keep_apart.free_way(index, 0, (0.0, -1.0), away, SEP) == pytest.approx((-1.0, 0.0, SEP))
+    points[2] = (0.0, -70.0)  # 15 m off its disc: 30 degrees west of south reaches 8.6 m, 60 the whole way
+    index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
+    assert keep_apart.free_way(index, 0, (0.0, -1.0), away, SEP) == pytest.approx(
+        (-math.sqrt(0.75), -0.5, SEP)
+    )
+    boxed = NeighbourIndex(
+        np.array(points + [(-55.0, 0.0), (-39.0, -39.0), (39.0, -39.0)], dtype=float), np.full(7, SEP)
+    )
+    assert keep_apart.free_way(boxed, 0, (0.0, -1.0), away, SEP) is None  # every turn away from it is cut
+
+
+def test_a_unit_making_room_goes_square_to_the_way_of_the_unit_it_yields_to_on_its_own_side():
+    from pfp_service.world.deadlocks import aside_vector
+
+    north = (0.0, 1.0)
+    assert aside_vector(np.array([-5.0, 50.0]), north) == pytest.approx((-1.0, 0.0))  # ahead, to the west
+    assert aside_vector(np.array([5.0, 50.0]), north) == pytest.approx((1.0, 0.0))
+    assert aside_vector(np.array([0.0, 50.0]), north) == pytest.approx((-1.0, 0.0))  # dead ahead: its left
+    assert aside_vector(np.array([0.0, 50.0]), (0.0, 0.0)) == (0.0, 0.0)
+
+
+def test_a_unit_holding_still_in_the_way_of_the_unit_it_yields_to_makes_room_square_to_its_way():
+    """Gaps crowd, seed 3 (39 s to clear with the separation alone against a unit giving way): ``u0111``
+    yielded to ``u0108`` holding still right in its way, and ``u0108`` waited at its disc for 20 s."""
+    from pfp_service.world.deadlocks import Hold
+
+    # ``a`` (row 0) going north; ``b`` (row 1), at its separation north-west of it, yields to it, holding still
+    points = np.array([(0.0, 0.0), (-20.0, 45.8)], dtype=float)
+    index = NeighbourIndex(points, np.full(2, SEP))
+    row = {"a": 0, "b": 1}
+    yielding = "yielding to a (right of way by id): 50 m away, separation 50 m; goes when it has passed"
+    dirs = [
+        Direction(
+            unit="a", status=DirectionStatus.EN_ROUTE, vector=(0.0, 1.0), heading_deg=0.0, reach_m=40.0
+        ),
+        Direction(unit="b", status=DirectionStatus.YIELDING, vector=(0.0, 0.0), reach_m=0.0, reason=yielding),
+    ]
+    holds = {"b": Hold("a", 0.0, 50.0)}
+    gives_way = keep_apart.giving_way(index, row, holds, dirs, [0, 1])
+    assert gives_way is not None and gives_way.tolist() == [-1, 0]
+    stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+    assert stopped == [(0, 1)] and dirs[0].reach_m == 0.0  # the case: its disc stops the unit it yields to
+    assert keep_apart.make_room(index, row, dirs, [0, 1], stopped, gives_way) == [1]
+    b = dirs[1]
+    assert b.status is DirectionStatus.YIELDING and b.vector == pytest.approx((-1.0, 0.0))  # west: its side
+    assert b.reach_m is not None and b.reach_m > 0.0 and "making room" in b.reason
+    # the unit it yields to going east, off its disc: not in its way, it holds still
+    dirs[0] = msgspec.structs.replace(dirs[0], vector=(1.0, 0.0), reach_m=40.0)
+    dirs[1] = msgspec.structs.replace(dirs[1], vector=(0.0, 0.0), reach_m=0.0, reason=yielding)
+    stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+    assert not stopped and keep_apart.make_room(index, row, dirs, [0, 1], stopped, gives_way) == []
+
+
+def test_a_back_off_goes_more_aside_than_away_still_drawing_away():
+    """Gaps crowd, seeds 1 and 2 (42 and 38 s to clear at 45 degrees): a back-off gives ground its unit must
+    win back before the deadlock counts as cleared; aside is what clears the line between the two."""
+    from pfp_service.world.deadlocks import back_off_vector
+
+    vx, vy = back_off_vector(np.array([0.0, -60.0]), (0.0, 0.0))  # the other unit 60 m north of it
+    away = -vy  # the share of the back-off that is ground given
+    assert 0.0 < away < math.cos(math.radians(60.0)) and vx > 0.0  # east: left as seen from the other
+    assert math.hypot(vx, vy) == pytest.approx(1.0)
+    assert back_off_vector(np.array([0.0, -60.0]), (0.0, 0.0)) == pytest.approx((2.0 / 5**0.5, -1.0 / 5**0.5))
