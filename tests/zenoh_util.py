@@ -69,18 +69,44 @@ def client(endpoint: str):
         session.close()
 
 
-def wait_for_planner(endpoint: str, mission: str, timeout: float = 180.0) -> None:
-    """Until the planner answers its status; a first start on a fresh checkout compiles its kernels (a minute of CPU)."""
+class PlannerExited(RuntimeError):
+    """A planner ``wait_for_planner`` waited for exited first."""
+
+
+def wait_for_planner(
+    endpoint: str, mission: str, timeout: float = 180.0, proc: subprocess.Popen | None = None, log: Any = None
+) -> None:
+    """Until the planner answers its status; a first start on a fresh checkout compiles its kernels (a minute of CPU).
+
+    With ``proc``, a planner that exits meanwhile (its port taken, a bad flag) fails at once, with the
+    end of its output (``log``, a file it writes to), not after ``timeout``.
+    """
     deadline = time.monotonic() + timeout
     last: Exception | None = None
+
+    def exited() -> None:
+        if proc is not None and proc.poll() is not None:
+            tail = ""
+            if log is not None:
+                log.flush()
+                log.seek(0)
+                tail = log.read()[-2000:]
+            raise PlannerExited(
+                f"planner on {endpoint} exited with {proc.returncode} before it answered:\n{tail}"
+            )
+
     while time.monotonic() < deadline:
+        exited()
         try:
             with client(endpoint) as s:
                 while time.monotonic() < deadline:
                     for r in s.get(f"mumt/{mission}/planner/*/status", timeout=1.0):
                         if r.ok is not None:
                             return
+                    exited()
                     time.sleep(0.1)
+        except PlannerExited:
+            raise
         except Exception as exc:  # router not listening yet
             last = exc
             time.sleep(0.2)
@@ -103,7 +129,7 @@ def planner_process(*extra: str, mission: str = "default"):
         text=True,
     )
     try:
-        wait_for_planner(endpoint, mission)
+        wait_for_planner(endpoint, mission, proc=proc, log=log)
         yield endpoint, proc
     finally:
         if proc.poll() is None:
