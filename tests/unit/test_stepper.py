@@ -156,31 +156,11 @@ def test_trapped_unit_walked_away_is_guided_again():
 
 def test_route_ahead_is_what_a_ghost_walks():
     """The compiled look-ahead along a committed route gives a ghost's own track, point for point."""
-    from benchmarks.service import layout
     from pfp_service.core.plan import walk_many
-    from pfp_service.wire import Goal, UnitState
-    from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+    from tests.routed_fleet import walk
 
-    n = 40
-    lay = layout(n, 100, 7)
-    w = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_stale_s=1e9))
-    w.apply([ThreatPut(t, u) for t, u in lay["threats"]], 0.0)
-    ids = [f"u{i}" for i in range(n)]
-    pos = np.array(lay["starts"][:n])
-    w.apply([StateReported(u, UnitState(position=tuple(p), seq=0)) for u, p in zip(ids, pos)], 0.1)
-    out = w.apply([GoalSet(u, Goal(position=g)) for u, g in zip(ids, lay["goals"][:n])], 0.2)
-    out = w.apply([j.run() for j in out.jobs], 0.3)
-    vec = {d.unit: d.vector for d in out.directions}
     compared = ended = 0
-    for k in range(80):
-        pos += 5.0 * np.array([vec.get(u, (0.0, 0.0)) for u in ids])
-        states = [
-            StateReported(u, UnitState(position=(float(x), float(y)), seq=k + 1))
-            for u, (x, y) in zip(ids, pos)
-        ]
-        out = w.apply(states, 1.0 + 0.1 * k)
-        w.apply([j.run() for j in out.jobs], 1.0 + 0.1 * k)
-        vec.update({d.unit: d.vector for d in out.directions})
+    for w, ids, pos in walk(40, 80):
         for u, (x, y) in zip(ids, pos.tolist()):
             s = w.view(u).stepper
             if s is None or not s.escaping:

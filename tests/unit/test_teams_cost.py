@@ -192,32 +192,11 @@ def test_leads_on_route_arrays_are_leads_on_route_points(seed: int) -> None:
 def test_a_main_element_s_route_array_is_its_route_s_points() -> None:
     """``team_leads.main_route`` takes the ghost walk's array (``Stepper.route_ahead_points``): row for row
     it must be where the unit is, then ``route_ahead``'s points, then its goal, to the bit."""
-    from benchmarks.service import layout
-    from pfp_service.core import PlannerParams
-    from pfp_service.wire import Goal, UnitState
     from pfp_service.world import team_leads
-    from pfp_service.world.world import GoalSet, StateReported, ThreatPut, World, WorldSettings
+    from tests.routed_fleet import walk
 
-    n = 40
-    lay = layout(n, 100, 7)
-    w = World(WorldSettings(planner=PlannerParams(), deliberation="deferred", unit_stale_s=1e9))
-    w.apply([ThreatPut(t, u) for t, u in lay["threats"]], 0.0)
-    ids = [f"u{i}" for i in range(n)]
-    pos = np.array(lay["starts"][:n])
-    w.apply([StateReported(u, UnitState(position=tuple(p), seq=0)) for u, p in zip(ids, pos)], 0.1)
-    out = w.apply([GoalSet(u, Goal(position=g)) for u, g in zip(ids, lay["goals"][:n])], 0.2)
-    out = w.apply([j.run() for j in out.jobs], 0.3)
-    vec = {d.unit: d.vector for d in out.directions}
     on_route = 0
-    for k in range(30):
-        pos += 5.0 * np.array([vec.get(u, (0.0, 0.0)) for u in ids])
-        states = [
-            StateReported(u, UnitState(position=(float(x), float(y)), seq=k + 1))
-            for u, (x, y) in zip(ids, pos)
-        ]
-        out = w.apply(states, 1.0 + 0.1 * k)
-        w.apply([j.run() for j in out.jobs], 1.0 + 0.1 * k)
-        vec.update({d.unit: d.vector for d in out.directions})
+    for w, ids, _pos in walk(40, 30):
         for u in ids:
             rec = w._units[u]
             assert rec.position is not None
