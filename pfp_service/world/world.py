@@ -429,12 +429,7 @@ class World:
         steered: steering.Steered = []
         lost_all: steering.Failed = []
         wave_first = n > 0 and first
-        # a field per slope limit, corridor and height; with no terrain and no team every key is plain
-        # (``RouteKeys``), not asked unit by unit: a micro-optimisation, ~1 us a unit (BENCHMARKS.md, issue 31)
-        if self.settings.terrain is None and not self.teams.teams:
-            groups = {team_route.PLAIN: (guided, later)}
-        else:
-            groups = team_route.groups(guided, later, self._route)
+        groups = self._route.groups(guided, later)  # a field per slope limit, corridor and height
         for key, (group, owed) in groups.items():
             fld, cull = field_for(*key), cull_for(key[3])
             lost: steering.Failed = []
