@@ -26,6 +26,7 @@ change does.  A TTL lives on the wire and in the world, not here.
 from __future__ import annotations
 
 import math
+import pickle
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -186,6 +187,25 @@ class Zone:
         return float(self.geometry.area)
 
 
+_UNPICKLED: dict[bytes, ZoneSet] = {}  # the last few sets unpickled in this process, by their bytes
+_UNPICKLED_KEPT = 4
+
+
+def _unpickled(data: bytes) -> ZoneSet:
+    """The ``ZoneSet`` pickled as ``data`` (``ZoneSet.__reduce__``): the same object again while it is among the
+    last ``_UNPICKLED_KEPT`` (a worker is sent the set in force with every chunk; a bytes key hashes once)."""
+    got = _UNPICKLED.get(data)
+    if got is not None:
+        return got
+    zs = ZoneSet.__new__(ZoneSet)
+    (zs.zones, zs.ids, zs.edges, zs.offsets, zs.circles, zs.boxes, zs.search_margin_m) = pickle.loads(data)
+    zs._pickled = data
+    while len(_UNPICKLED) >= _UNPICKLED_KEPT:
+        del _UNPICKLED[next(iter(_UNPICKLED))]
+    _UNPICKLED[data] = zs
+    return zs
+
+
 class ZoneSet:
     """The zones in force, packed for the kernels.  Immutable; empty is the common case.
 
@@ -196,9 +216,20 @@ class ZoneSet:
         ValueError: a repeated id.
     """
 
-    __slots__ = ("__weakref__", "boxes", "circles", "edges", "ids", "offsets", "search_margin_m", "zones")
+    __slots__ = (
+        "__weakref__",
+        "_pickled",
+        "boxes",
+        "circles",
+        "edges",
+        "ids",
+        "offsets",
+        "search_margin_m",
+        "zones",
+    )
 
     def __init__(self, zones: Iterable[Zone] = ()) -> None:
+        self._pickled: bytes | None = None  # ``__reduce__``'s, made at the first pickling
         self.zones: tuple[Zone, ...] = tuple(zones)
         self.ids: tuple[str, ...] = tuple(z.id for z in self.zones)
         if len(set(self.ids)) != len(self.ids):
@@ -226,6 +257,31 @@ class ZoneSet:
         extent = float(np.max(boxes[:, 2:] - boxes[:, :2])) if len(boxes) else 0.0
         scale = float(np.max(np.abs(boxes))) if len(boxes) else 0.0
         self.search_margin_m = SEARCH_MARGIN_REL * max(extent, 1.0) + 1e-9 * scale
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        """Pickled once, then the same bytes each time: a zone set is immutable, and every deliberation chunk
+        and preview sent to a worker carries the one in force.  A terrain's slope barriers (346 zones over
+        the Jacksboro DEM at 10 m) took 4.1-4.5 ms to pickle, in a pool thread holding the GIL, on every
+        chunk of 8 jobs (BENCHMARKS.md, "Zone sets pickled once")."""
+        got = self._pickled
+        if got is None:
+            state = (
+                self.zones,
+                self.ids,
+                self.edges,
+                self.offsets,
+                self.circles,
+                self.boxes,
+                self.search_margin_m,
+            )
+            got = self._pickled = pickle.dumps(state, protocol=pickle.HIGHEST_PROTOCOL)
+        return _unpickled, (got,)
+
+    def __copy__(self) -> ZoneSet:
+        return self  # immutable
+
+    def __deepcopy__(self, memo: dict[int, object]) -> ZoneSet:
+        return self  # immutable: a copied stepper or view shares it
 
     def __len__(self) -> int:
         return len(self.zones)

@@ -211,7 +211,9 @@ def _run_chunk(
     """
     started = time.monotonic()
     field = world_field(intensity, sight)
-    if zones:  # few, and pickled with the chunk: the threats' blob stays cached in the worker
+    if (
+        zones
+    ):  # pickled with the chunk, its bytes made once a set (``ZoneSet.__reduce__``), unpickled once a worker
         field = field.with_zones(zones)
     out: list[tuple[Deliberated | None, str]] = []
     for unit, token, kind, stepper, left_s in items:

@@ -108,6 +108,7 @@ def _planner(tmp_path, monkeypatch):
                 ),
             ]
             try:
+                _heard(c)
                 yield c, directions, rejected, places
             finally:
                 for s in subs:
@@ -115,6 +116,17 @@ def _planner(tmp_path, monkeypatch):
     finally:
         node.stop()
         session.close()
+
+
+def _heard(c: zenoh.Session, timeout: float = 60.0) -> None:
+    """Until the planner answers its status through ``c``: a put before its subscriptions reached the client's
+    session is dropped there (under load the start of the test raced them and timed out)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if any(r.ok is not None for r in c.get(f"mumt/{MISSION}/planner/*/status", timeout=1.0)):
+            return
+        time.sleep(0.05)
+    raise AssertionError("the planner never answered its status")
 
 
 def _foot_goes_and_wheeled_is_trapped(directions: queue.Queue) -> None:
