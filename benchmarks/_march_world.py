@@ -12,7 +12,7 @@ just ahead of the units' centre) is one ``World.apply``, timed alike.  The hash 
 event of every tick, warm ones included: two trees that give the same hash on
 the same seed made the same decisions.
 
-Run as ``python -m benchmarks._march_world [--teams-only] [--ticks N] [--rounds R] [--waves W] [--profile FILE]``;
+Run as ``python -m benchmarks._march_world [--teams-only] [--ticks N] [--tick N] [--rounds R] [--waves W] [--profile FILE]``;
 ``--rounds`` alternates plain and teams worlds in one run; ``--waves`` puts and removes the threat
 ``W`` more times, each wave's CPU apart (a median of several is steadier than one).
 """
@@ -52,13 +52,20 @@ def _world(teams: bool) -> Any:
 
 
 def drive(
-    teams: bool, ticks: int, seed: int = 2023, profile: str | None = None, waves: int = 0
+    teams: bool,
+    ticks: int,
+    seed: int = 2023,
+    profile: str | None = None,
+    waves: int = 0,
+    tick: int = TICK,
 ) -> dict[str, Any]:
     """One world: ``WARM`` ticks, then ``ticks`` timed; CPU us per state and the hash of every output.
 
     ``waves``: after the contingency wave, that many more put and removed in turn (the threat 5 m
     further each put, 10 ms of the world's time apart), each until none of its shares is owed: the
-    CPU of each, its collections included (their directions join the hash)."""
+    CPU of each, its collections included (their directions join the hash).  ``tick``: reports a tick
+    (the world's time a tick is ``tick / RATE_PER_S`` s); the live planner's ticks at ``pfp bench
+    service``'s steady rate are a few states each, where a tick's work over the whole fleet weighs."""
     from benchmarks._layout import layout
     from benchmarks._phases import STEP_M
     from benchmarks._service_teams import march
@@ -111,24 +118,25 @@ def drive(
             gc_s[0] += time.thread_time() - gc_at[0]
 
     gc.callbacks.append(collected)
-    for t in range(WARM + ticks):
+    warm = WARM * TICK // tick  # as many reports warm whatever the tick's size
+    for t in range(warm + ticks):
         batch = []
-        for _ in range(TICK):
+        for _ in range(tick):
             i, nxt = nxt, (nxt + 1) % len(ids)
             vx, vy = vec.get(ids[i], (0.0, 0.0))
             pos[i][0] += STEP_M * vx
             pos[i][1] += STEP_M * vy
             batch.append(StateReported(ids[i], UnitState(position=(pos[i][0], pos[i][1]), seq=seq)))
             seq += 1
-        now += TICK / RATE_PER_S
-        if t == WARM and profile:
+        now += tick / RATE_PER_S
+        if t == warm and profile:
             prof = cProfile.Profile()
             prof.enable()
-        if t == WARM:
+        if t == warm:
             gc_s[0] = judge_s[0] = 0.0
         c0 = time.thread_time()
         out = w.apply(batch, now)
-        if t >= WARM:
+        if t >= warm:
             cpu += time.thread_time() - c0
             states += len(batch)
         else:
@@ -203,6 +211,9 @@ def main() -> None:
     p.add_argument("--teams-only", action="store_true", help="only the teams world")
     p.add_argument("--seed", type=int, default=2023)
     p.add_argument(
+        "--tick", type=int, default=TICK, help=f"reports a tick (default {TICK}; the live bench's are a few)"
+    )
+    p.add_argument(
         "--waves", type=int, default=0, help="then that many threats put and removed in turn (default 0)"
     )
     p.add_argument(
@@ -213,7 +224,9 @@ def main() -> None:
     for r in range(a.rounds):
         row: dict[str, Any] = {"round": r + 1, "loadavg": os.getloadavg()[0]}
         for kind in ("teams",) if a.teams_only else ("plain", "teams"):
-            row[kind] = drive(kind == "teams", a.ticks, a.seed, a.profile if a.teams_only else None, a.waves)
+            row[kind] = drive(
+                kind == "teams", a.ticks, a.seed, a.profile if a.teams_only else None, a.waves, a.tick
+            )
         print(json.dumps(row), flush=True)
 
 

@@ -15,13 +15,16 @@ a new index, so a push and its right of way are the same numbers).
 ``fleet_index`` is the plain computation it stands for.  A live tick's
 reports move a quarter of the fleet and change nothing else the index is
 built from: then the kept arrays are taken again with the reported rows
-moved, and only the points and the k-d tree are new (``_moved``).
+moved, and only the points and the k-d tree are new (``_moved``).  With a key
+in two parts (``FleetKey``: the units', the teams'), the same records under the
+same teams are not asked their teams again.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 
@@ -29,7 +32,7 @@ from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord
 
-__all__ = ["TEAM_WIDEST", "Fleet", "FleetIndex", "TeamOf", "fleet_index"]
+__all__ = ["TEAM_WIDEST", "Fleet", "FleetIndex", "FleetKey", "TeamOf", "fleet_index"]
 
 # a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
 # reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
@@ -41,6 +44,15 @@ TeamOf = Callable[[str], "tuple[str, float] | None"]
 Fleet = tuple[NeighbourIndex, list[UnitRecord], dict[str, int]]
 # what an index was built from: its rows' records, their positions, goals and teams (``_moved``)
 _Built = tuple[list[UnitRecord], list[object], list[object], "list[tuple[str, float] | None] | None"]
+
+
+class FleetKey(NamedTuple):
+    """A key in two parts for ``FleetIndex``'s ``version``: ``units`` changes whenever a unit's position,
+    staleness, goal or record may have, ``teams`` whenever what ``team_of`` says of a unit may have
+    (``TeamBook.where``).  While ``teams`` stands, the same records are in the same teams."""
+
+    units: object
+    teams: object
 
 
 def fleet_index(
@@ -148,8 +160,14 @@ class FleetIndex:
         if len(self._seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
             self._seps.clear()
         recs = _fresh(self._units)
-        teams = _teams(recs, self._team_of)
+        # the teams as they were, while the teams' part of the key stands: right if the records are the same
+        # ones (``_moved`` says so), else asked afresh.  A micro-optimisation (bench row: ``python -m
+        # benchmarks._march_world --tick 16``, the fleet index): ``team_of`` is a call per unit
+        stand = was is not None and was[3] is not None and _teams_stand(self._key, key)
+        teams = was[3] if stand and was is not None else _teams(recs, self._team_of)
         moved = _moved(was, recs, teams) if kept is not None and key is not None else None
+        if stand and moved is None:  # other records (or none kept): their teams as ``team_of`` says
+            teams = _teams(recs, self._team_of)
         if kept is not None and moved is not None:
             self._kept = _moved_index(kept, recs, moved)
         else:
@@ -158,6 +176,11 @@ class FleetIndex:
         if key is not None:
             self._from = (recs, [r.position for r in recs], [r.goal for r in recs], teams)
         return self._kept
+
+
+def _teams_stand(was: object, key: object) -> bool:
+    """Whether two keys' teams' parts are the same (both ``FleetKey``s)."""
+    return isinstance(was, FleetKey) and isinstance(key, FleetKey) and was.teams == key.teams
 
 
 def _moved(
@@ -172,9 +195,15 @@ def _moved(
     recs_was, at_was, goals_was, teams_was = was
     if len(recs) != len(recs_was) or teams != teams_was:
         return None
-    if not all(a is b and a.goal is g for a, b, g in zip(recs, recs_was, goals_was)):
-        return None
-    return [k for k, (r, p) in enumerate(zip(recs, at_was)) if r.position is not p]
+    # one pass, not a check of every record and then a look at every position: a micro-optimisation
+    # (bench row: ``python -m benchmarks._march_world --tick 16``, the fleet index)
+    moved = []
+    for k, (r, b, g, p) in enumerate(zip(recs, recs_was, goals_was, at_was)):
+        if r is not b or r.goal is not g:
+            return None
+        if r.position is not p:
+            moved.append(k)
+    return moved
 
 
 def _moved_index(kept: Fleet, recs: list[UnitRecord], moved: list[int]) -> Fleet:

@@ -31,6 +31,7 @@ from pfp_service.world import team_place as places
 from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
+from pfp_service.world.neighbours import FleetKey
 from pfp_service.world.teams import Point, Polyline, Sight, Verdict
 from pfp_service.world.units import UnitRecord
 
@@ -240,10 +241,10 @@ class TeamBook:
             self.sent[d.unit] = judged
         return out
 
-    def where(self) -> object:
-        """A key that changes whenever a unit's position, staleness, goal or record (``seen``) or a team may
-        have: while it stands, no lead has moved (``_track``) nor has dispersion's index; ``None``: unknown."""
-        return (self._seen(), self.version) if self._seen is not None else None
+    def where(self) -> FleetKey | None:
+        """A key (units', teams') that changes whenever a unit's position, staleness, goal or record (``seen``) or
+        a team may have: while it stands, no lead has moved (``_track``) nor dispersion's index; ``None``: unknown."""
+        return FleetKey(self._seen(), self.version) if self._seen is not None else None
 
     def _track(self, units: Mapping[str, UnitRecord]) -> None:
         """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
