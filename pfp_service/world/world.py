@@ -47,7 +47,7 @@ from pfp_service.world.terrain import link_sight
 from pfp_service.world.threat_puts import ThreatPuts
 from pfp_service.world.timers import Timers
 from pfp_service.world.units import Answer, UnitRecord
-from pfp_service.world.wave import WAVE_CHUNK, WAVE_PER_TICK, Wave, split
+from pfp_service.world.wave import POINTS_CHUNK, WAVE_CHUNK, WAVE_PER_TICK, Wave, split
 from pfp_service.world.world_records import Records
 from pfp_service.world.zone_puts import ZonePuts
 
@@ -406,7 +406,8 @@ class World:
     ) -> None:
         """A timed apply's share of a wave: its next units, ``WAVE_CHUNK`` at a time while ``budget`` lasts (one chunk at
         least, ``WAVE_PER_TICK`` at most; ``split`` drew one in the change's own apply); once every direction is out
-        and none went out in this apply, their points the same way (at most ``OWED_PER_TICK``)."""
+        and none went out in this apply, their points ``POINTS_CHUNK`` at a time while its points' budget lasts (at most
+        ``OWED_PER_TICK``)."""
         while self._wave and b.shared < WAVE_PER_TICK and not (b.shared and budget.spent()):
             drew = self._wave.take(b.dirty, self._units, WAVE_CHUNK)
             b.dirty.update(drew)
@@ -415,8 +416,8 @@ class World:
         if b.shared:  # no points in an apply that told a wave's directions: those go out first
             return
         drawn = 0
-        while self._owed and drawn < OWED_PER_TICK and not (drawn and budget.spent()):
-            later, self._owed = owed_share(self._owed, b.dirty, self._units, WAVE_CHUNK)
+        while self._owed and drawn < OWED_PER_TICK and not (drawn and budget.points_spent()):
+            later, self._owed = owed_share(self._owed, b.dirty, self._units, POINTS_CHUNK)
             drawn += len(later) or OWED_PER_TICK
             self._steer(b, [], later, False, sent, failed)
 

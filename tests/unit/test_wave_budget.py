@@ -18,7 +18,7 @@ import pytest
 from pfp_service.core import PlannerParams
 from pfp_service.wire import Goal, ReplanEvent, ThreatUpdate, UnitState
 from pfp_service.world import world as world_mod
-from pfp_service.world.wave import WAVE_BUDGET_S, WAVE_CHUNK, WAVE_PER_TICK
+from pfp_service.world.wave import POINTS_BUDGET_S, POINTS_CHUNK, WAVE_BUDGET_S, WAVE_CHUNK, WAVE_PER_TICK
 from pfp_service.world.world import GoalSet, Outputs, StateReported, ThreatPut, Tick, World, WorldSettings
 
 pytestmark = pytest.mark.unit
@@ -119,3 +119,18 @@ def test_with_look_ahead_timed_points_follow_once_every_direction_is_out_and_non
     assert min(pointed.values()) > max(told.values())  # no points in an apply that told a direction
     per_apply = [sum(1 for d in o.directions if d.lookahead) for o in outs]
     assert max(per_apply) <= world_mod.OWED_PER_TICK and max(per_apply) < N  # in shares, by time
+
+
+@pytest.mark.parametrize(
+    ("step", "share"),
+    [
+        (POINTS_BUDGET_S * 2, POINTS_CHUNK),  # every read past the points' budget: one chunk an apply
+        (POINTS_BUDGET_S / 2.5, 3 * POINTS_CHUNK),  # the third chunk finds it spent
+    ],
+)
+def test_a_waves_points_are_drawn_in_smaller_chunks_on_a_smaller_budget(step: float, share: int):
+    w = _fleet(lookahead=3)
+    outs = [w.apply([ThreatPut("c", THREAT)], 1.0, Clock(1.0, step)), *_follow(w, 1.0, step)]
+    per_apply = [n for o in outs if (n := sum(1 for d in o.directions if d.lookahead))]
+    assert sum(per_apply) == N and len(per_apply) > 2, per_apply
+    assert all(n == share for n in per_apply[:-1]) and 0 < per_apply[-1] <= share, per_apply
