@@ -440,6 +440,7 @@ class PlannerNode:
         self._deliberators.cancel(out.cancelled)
         self._deliberators.submit(out.jobs)
         self._sights.submit(out.sights)
+        self._sights.build(out.slopes)
         self._deliberators.feed()
         done = self.clock()
         for _msg, t_recv in states.values():

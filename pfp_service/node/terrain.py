@@ -15,6 +15,14 @@ back to the node's inbox as a ``SightLanded``.  The sweep is compiled
 without the GIL (``viewshed._sweep``), so the loop runs on beside it; a
 window that fails is logged and never lands, and the world's ``sight``
 timer puts its threat in force blind.
+
+``Sights.build`` builds the barrier sets of override slope limits the world
+asks for (``Outputs.slopes``, ``world.slopes``) on a second thread, so that a
+set (0.5-1.3 s over the Jacksboro DEM) never holds a threat's window up: one
+ask per limit, each handed back as a ``SlopeLanded`` (a failure too, as a
+value: ``world.terrain.answer_slope``).  Unlike the sweep, a set's build
+holds the GIL for most of its time (rasterio's polygons and shapely's
+checks), so the loop runs beside it slowed, not stopped (BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -28,7 +36,7 @@ import msgspec
 from pfp_service.node.config import ServeConfig
 from pfp_service.node.log import get_logger
 from pfp_service.wire.messages import TerrainInfo
-from pfp_service.world.terrain import Ground, SightAsk, SightLanded
+from pfp_service.world.terrain import Ground, SightAsk, SightLanded, SlopeAsk, SlopeLanded, answer_slope
 from pfp_service.world.wave import answered
 
 __all__ = ["Sights", "placed", "terrain_info"]
@@ -72,13 +80,15 @@ def terrain_info(cfg: ServeConfig) -> TerrainInfo | None:
 class Sights:
     """The world's asks for threats' windows, computed on one thread off the loop, latest wins."""
 
-    def __init__(self, ground: Ground | None, deliver: Callable[[SightLanded], None]) -> None:
+    def __init__(self, ground: Ground | None, deliver: Callable[[SightLanded | SlopeLanded], None]) -> None:
         self._ground = ground
         self._deliver = deliver
         self._lock = threading.Lock()
         self._waiting: dict[str, SightAsk] = {}  # by threat: the newest ask only
         self._thread: threading.Thread | None = None
         self._logged_at = 0.0
+        self._slopes: dict[int, SlopeAsk] = {}  # by limit: the newest ask only
+        self._builder: threading.Thread | None = None
 
     def submit(self, asks: Sequence[SightAsk]) -> None:
         """Compute ``asks`` off the loop (one waiting for the same threat is replaced)."""
@@ -92,10 +102,36 @@ class Sights:
                 self._thread = threading.Thread(target=self._run, name="pfp-sight", daemon=True)
                 self._thread.start()
 
+    def build(self, asks: Sequence[SlopeAsk]) -> None:
+        """Build the barrier sets ``asks`` want off the loop, on a thread of their own (latest wins per limit)."""
+        if not asks or self._ground is None:
+            return
+        with self._lock:
+            for ask in asks:
+                self._slopes.pop(ask.limit, None)
+                self._slopes[ask.limit] = ask
+            if self._builder is None:
+                self._builder = threading.Thread(target=self._build, name="pfp-slope", daemon=True)
+                self._builder.start()
+
     def idle(self) -> bool:
         """Whether nothing waits or runs (the tests' condition)."""
         with self._lock:
-            return self._thread is None
+            return self._thread is None and self._builder is None
+
+    def _build(self) -> None:
+        assert self._ground is not None
+        while True:
+            with self._lock:
+                if not self._slopes:
+                    self._builder = None
+                    return
+                ask = self._slopes.pop(next(iter(self._slopes)))
+            landed = answer_slope(self._ground, ask)  # a failure lands too: its units stay at the class's
+            if landed.zones is None:
+                fields = {"max_slope_deg": ask.limit, "error": landed.error}
+                log.error("a slope limit's barriers failed", extra={"fields": fields})
+            self._deliver(landed)
 
     def _run(self) -> None:
         assert self._ground is not None
