@@ -251,6 +251,7 @@ class PlannerNode:
         if twins is not None:
             twins.join(timeout=2.0)
         self._deliberators.shutdown()
+        self._sights.shutdown()
         self._previews.shutdown()
         self._trace.close()
         for d in self._declared:

@@ -160,18 +160,3 @@ def test_classes_named_on_the_states_plan_each_unit_and_a_class_changed_mid_rout
         c.put(keys.unit_state(MISSION, "truck"), encode(tracked))
         d = _until(directions, lambda d: d.unit == "truck" and d.seq == 2, 60.0)
         assert d.status.value == "en_route", d
-
-
-def test_a_wheeled_unit_told_it_climbs_25_degrees_is_guided_up_a_slope_once_its_barriers_land(
-    tmp_path, monkeypatch
-):
-    """At wheels' 17 degrees first (the safe side), then, its own set built off the loop, up a slope between
-    17 and 25 degrees, pushed without a report asking."""
-    with _planner(tmp_path, monkeypatch, upper_deg=25.0) as (c, directions, _rejected, (goal, start)):
-        mob = GoalMobility(kind="wheeled", max_slope_deg=25.0)
-        c.put(keys.unit_state(MISSION, "truck"), encode(UnitState(position=start, seq=1, mobility=mob)))
-        c.put(keys.unit_goal(MISSION, "truck"), encode(Goal(position=goal, tolerance=1.0)))
-        first = _until(directions, lambda d: d.unit == "truck" and d.status.value != "no_goal", 120.0)
-        assert first.status.value == "trapped" and "slope>17deg" in (first.reason or ""), first
-        d = _until(directions, lambda d: d.unit == "truck" and d.status.value == "en_route", 60.0)
-        assert "slope>17deg" not in (d.reason or ""), d

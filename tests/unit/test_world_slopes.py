@@ -173,3 +173,29 @@ def test_a_class_limit_override_asks_for_nothing_and_below_every_class_is_refuse
     assert not out.slopes
     refused = refusal(Goal(position=ON_THE_WALL, mobility=GoalMobility(kind="foot", max_slope_deg=16.0)))
     assert refused is not None and refused.path == "$.mobility.max_slope_deg"
+
+
+def test_the_nodes_builder_lands_a_set_and_a_failure_as_values_off_the_calling_thread(ground):
+    """A terrain made from a grid (no name to pass a worker) is built on the builder's thread."""
+    import queue
+    import threading
+
+    from pfp_service.node.terrain import Sights
+    from pfp_service.world.terrain import SlopeAsk
+
+    landed: queue.Queue = queue.Queue()
+    s = Sights(ground, lambda x: landed.put((threading.get_ident(), x)))
+    s.build([SlopeAsk(20, 1), SlopeAsk(20, 2)])  # latest wins per limit
+    who, got = landed.get(timeout=60.0)
+    assert who != threading.get_ident() and (got.limit, got.serial) == (20, 2) and got.zones
+    assert got.zones == ground.build_barriers(20)
+
+    class Broken:
+        def build_barriers(self, max_slope_deg):
+            raise MemoryError("no room")
+
+    s = Sights(Broken(), lambda x: landed.put((threading.get_ident(), x)))  # type: ignore[arg-type]
+    s.build([SlopeAsk(21, 3)])
+    _, bad = landed.get(timeout=60.0)
+    assert bad.zones is None and "MemoryError: no room" in bad.error  # a failure lands, as a value
+    assert landed.empty()
