@@ -24,7 +24,8 @@ polygons, shapely's checks): on a thread beside the loop it would slow the
 loop by a third for that second (BENCHMARKS.md).  So a terrain that is passed
 by name (``terrain.live.load``'s) is built in a worker process of its own
 (``workers.WorkerPool``, one slot, started at the first ask, ``nice`` below
-the loop), killed past ``SLOPE_BUILD_S``; only the set's unpickling (a few
+the loop), killed past ``SLOPE_BUILD_S``: a fork of the warm planner holds the
+terrain already, a fresh interpreter loads it first; only the set's unpickling (a few
 milliseconds) is the loop process's.  A terrain made from a grid in this
 process (the tests', the warm-up's) is built on a thread (``answer_slope``),
 never on the loop either.
@@ -50,7 +51,9 @@ from pfp_service.world.wave import answered
 __all__ = ["Sights", "placed", "terrain_info"]
 
 log = get_logger("terrain")
-SLOPE_BUILD_S = 20.0  # a set's build in its worker is killed past this (the world gives up at SLOPE_WAIT_S)
+SLOPE_BUILD_S = (
+    60.0  # a build (a fresh worker's DEM load with it) is killed past this; the world waits SLOPE_WAIT_S
+)
 SLOPE_WORKER_MEMORY_MB = 1024.0  # address space the builder may add to its warm size
 SLOPE_WORKER_NICE = 5  # below the live loop, as deliberation
 

@@ -52,7 +52,9 @@ __all__ = ["SLOPE_RETRY_S", "SLOPE_SETS", "SLOPE_SET_ZONES", "SLOPE_WAIT_S", "Sl
 # the Jacksboro's size, and a 9th distinct limit is rare enough to say so rather than evict a set in use.
 SLOPE_SETS = 8
 SLOPE_SET_ZONES = 20_000  # zones in one override set at most: a bound on its memory (about 40 MB)
-SLOPE_WAIT_S = 30.0  # an ask not landed this long after it is a failure: its units stay at the class limit
+# an ask not landed this long after it is a failure, its units at the class limit meanwhile (safe): room for a
+# worker started fresh, where no fork server holds the terrain, to load the DEM before it builds (node.terrain)
+SLOPE_WAIT_S = 90.0
 SLOPE_RETRY_S = 60.0  # a limit whose set failed, or that was beyond the cap, is asked again after this
 
 

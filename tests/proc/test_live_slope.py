@@ -35,7 +35,7 @@ def test_a_wheeled_unit_told_it_climbs_25_degrees_is_guided_up_a_slope_once_its_
             c.put(keys.unit_goal(MISSION, "truck"), encode(Goal(position=goal, tolerance=1.0)))
             first = _until(directions, lambda d: d.unit == "truck" and d.status.value != "no_goal", 120.0)
             assert first.status.value == "trapped" and "slope>17deg" in (first.reason or ""), first
-            d = _until(directions, lambda d: d.unit == "truck" and d.status.value == "en_route", 90.0)
+            d = _until(directions, lambda d: d.unit == "truck" and d.status.value == "en_route", 150.0)
             assert "slope>17deg" not in (d.reason or ""), d
             said = _until(replans, lambda e: isinstance(e, ReplanEvent) and "25deg" in e.reason, 10.0)
             assert said.units == ["truck"] and "built" in said.reason, said
