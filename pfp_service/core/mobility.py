@@ -72,15 +72,17 @@ CLASSES: dict[str, Mobility] = {
     "wheeled": Mobility("wheeled", max_slope_deg=17.0, height_m=2.5, speed_mps=10.0),
     "tracked": Mobility("tracked", max_slope_deg=31.0, height_m=2.5, speed_mps=8.0),
 }
-# The whole-degree slope limits the live planner holds barriers for: the classes' own.  A barrier
-# set over a 1,000 x 1,000-cell DEM takes 0.3-2.2 s to build (docs/terrain.md), too long for the
-# live loop, so these are built when the terrain loads and an override is planned at one of them.
+# The whole-degree slope limits the live planner always holds barriers for: the classes' own.  A
+# barrier set over a 1,000 x 1,000-cell DEM takes 0.3-2.2 s to build (docs/terrain.md), too long for
+# the live loop, so these are built when the terrain loads; an override's is built off the loop when
+# a unit wants it, and the unit planned at one of these meanwhile (``world.slopes``).
 CLASS_LIMITS: tuple[int, ...] = tuple(sorted({round(c.max_slope_deg) for c in CLASSES.values()}))
 
 
 def planned_limit(max_slope_deg: float) -> int | None:
-    """The class limit a unit that climbs ``max_slope_deg`` is planned at: the steepest of
-    ``CLASS_LIMITS`` not above it, the safe side (``None``: below every one of them)."""
+    """The class limit a unit that climbs ``max_slope_deg`` is planned at while its own barriers are
+    not held: the steepest of ``CLASS_LIMITS`` not above it, the safe side (``None``: below every one of
+    them)."""
     fit = [lim for lim in CLASS_LIMITS if lim <= round(max_slope_deg)]
     return fit[-1] if fit else None
 

@@ -251,6 +251,7 @@ class PlannerNode:
         if twins is not None:
             twins.join(timeout=2.0)
         self._deliberators.shutdown()
+        self._sights.shutdown()
         self._previews.shutdown()
         self._trace.close()
         for d in self._declared:
@@ -440,6 +441,7 @@ class PlannerNode:
         self._deliberators.cancel(out.cancelled)
         self._deliberators.submit(out.jobs)
         self._sights.submit(out.sights)
+        self._sights.build(out.slopes)
         self._deliberators.feed()
         done = self.clock()
         for _msg, t_recv in states.values():

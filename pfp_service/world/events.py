@@ -29,7 +29,7 @@ from pfp_service.wire import (
 )
 from pfp_service.wire.messages import GoalMobility, TeamUpdate, TerrainInfo, ZoneCircle, ZoneUpdate
 from pfp_service.world.separations import DispersionSettings
-from pfp_service.world.terrain import SightAsk, SightLanded
+from pfp_service.world.terrain import SightAsk, SightLanded, SlopeAsk, SlopeLanded
 
 if TYPE_CHECKING:  # the compiled core's types: loaded by the planner, not by whoever reads the kinds' table
     from pfp_service.core import Stepper, Threat, ThreatField
@@ -52,6 +52,8 @@ __all__ = [
     "PeerTerrain",
     "SightAsk",
     "SightLanded",
+    "SlopeAsk",
+    "SlopeLanded",
     "StateReported",
     "TeamPut",
     "TeamRemoved",
@@ -263,6 +265,7 @@ Input = Union[  # noqa: UP007
     PeerPlanner,
     PeerTerrain,
     SightLanded,
+    SlopeLanded,
     Tick,
 ]
 
@@ -366,11 +369,12 @@ class Outputs:
     faults: list[Fault] = field(default_factory=list)
     cancelled: list[Job] = field(default_factory=list)  # jobs returned before and no longer wanted
     sights: list[SightAsk] = field(default_factory=list)  # threats' windows to compute off the loop
+    slopes: list[SlopeAsk] = field(default_factory=list)  # override slope limits' barriers, ditto
 
     def __bool__(self) -> bool:
         return bool(
             self.directions or self.events or self.jobs or self.missions or self.faults or self.cancelled
-        ) or bool(self.sights)
+        ) or bool(self.sights or self.slopes)
 
 
 @dataclass(slots=True)

@@ -9,12 +9,13 @@ own).  Absent both, the planner's class (``--terrain-unit``).  A class is a
 class of ``core.mobility.CLASSES`` and optionally its ``max_slope_deg``
 overridden.  Over terrain the unit then plans around the ground steeper than
 that limit (``terrain.live.LiveTerrain.barriers``) instead of the planner's
-class's; without terrain it changes nothing.  The limit is planned at a
-class's limit (``core.mobility.CLASS_LIMITS``): an override at the steepest
-of them not above it, the safe side, since a barrier set for a new limit
-takes seconds to build over a large DEM and none is built on the live loop;
-an override below every class's limit is refused.  A state that changes the
-limit a unit is planned at re-judges it at once (``units.Units.classed``).
+class's; without terrain it changes nothing.  An override is the unit's own
+limit, to the whole degree (``slope_limit``): its barriers are built off the
+loop when first wanted and held by the world (``world.slopes``), the unit
+planned meanwhile at the steepest class limit not above it (the safe side),
+and re-judged at its own when they land.  An override below every class's
+limit is refused: no set is held to plan it at meanwhile.  A state that
+changes the limit a unit wants re-judges it at once (``units.Units.classed``).
 Its ``height_m`` and ``speed_mps`` override the class's too, as the
 scenario's ``unit:`` block's do (``core.mobility.Mobility.merged``;
 ``mobility_of``).  A threat's window is swept once, at the planner's
@@ -27,6 +28,7 @@ judged from the controller's own height to the robot's (``team_book``).
 
 from __future__ import annotations
 
+import math
 from typing import Any, TypeVar
 
 from pfp_service.core.mobility import CLASS_LIMITS, CLASSES, Mobility, planned_height, planned_limit
@@ -63,7 +65,7 @@ def refusal(msg: Goal | UnitState) -> InputError | None:
     if mob.max_slope_deg is not None and planned_limit(mob.max_slope_deg) is None:
         return InputError(
             "$.mobility.max_slope_deg",
-            f"{mob.max_slope_deg:g} is below {CLASS_LIMITS[0]}, the gentlest class limit the planner holds barriers for",
+            f"{mob.max_slope_deg:g} is below {CLASS_LIMITS[0]}, the gentlest class limit (a unit plans at it while its own barriers are built)",
         )
     return None
 
@@ -85,12 +87,16 @@ def check(msg: M) -> M:
 
 def slope_limit(goal: Goal | None, standing: GoalMobility | None = None) -> int | None:
     """The whole degrees of slope a unit climbs toward ``goal``: its goal's class, else its ``standing`` one
-    (its states'), else ``None``: the planner's class's (a class unknown too: refused, ``refusal``)."""
+    (its states'), else ``None``: the planner's class's (a class unknown too: refused, ``refusal``).  An
+    override is its own limit rounded (planned at it once its set is held, ``world.slopes``); one below
+    every class's limit (refused on the wire) is ``None``."""
     mob = goal.mobility if goal is not None and goal.mobility is not None else standing
     if mob is None or mob.kind not in CLASSES:
         return None
-    limit = mob.max_slope_deg if mob.max_slope_deg is not None else CLASSES[mob.kind].max_slope_deg
-    return planned_limit(limit)
+    limit = mob.max_slope_deg
+    if limit is None or not math.isfinite(limit):  # the class's (a NaN put in-process: no limit of its own)
+        return planned_limit(CLASSES[mob.kind].max_slope_deg)
+    return round(limit) if planned_limit(limit) is not None else None
 
 
 def limit_of(rec: Any) -> int | None:

@@ -29,6 +29,13 @@ it lands, masks it then.  A world that deliberates inline (tests, the
 warm-up) computes the window in ``apply``.  ``Looks`` is the world's
 book of windows landed; the world's rows and ``reach.reached`` read it,
 never the ground.
+
+Slope barriers off the loop.  The barriers of a unit's own slope limit, when
+it is not a class's (those are built when the terrain loads), are asked the
+same way: a ``SlopeAsk`` (``Outputs.slopes``), built by the node's thread
+(``answer_slope``: ``Ground.build_barriers``, 0.5-1.3 s) and landed as a
+``SlopeLanded``; until then the unit plans at its class's safe side
+(``world.slopes``).
 """
 
 from __future__ import annotations
@@ -51,7 +58,10 @@ __all__ = [
     "Looks",
     "SightAsk",
     "SightLanded",
+    "SlopeAsk",
+    "SlopeLanded",
     "answer",
+    "answer_slope",
     "ground_zones",
     "link_sight",
     "sight_key",
@@ -71,6 +81,8 @@ class Ground(Protocol):
     def __call__(self, threat: object, box: tuple[float, float, float, float]) -> Window | None: ...
 
     def barriers(self, max_slope_deg: int | None) -> Sequence[Zone]: ...
+
+    def build_barriers(self, max_slope_deg: int) -> Sequence[Zone]: ...
 
     def sees(
         self,
@@ -107,6 +119,34 @@ class SightLanded:
     key: SightKey
     window: Window | None
     judged: Any = None  # ``wave.Judged``: which of the ask's corridors it reaches, judged off the loop
+
+
+@dataclass(frozen=True, slots=True)
+class SlopeAsk:
+    """The barrier set of an override slope limit to build off the loop (``answer_slope``; ``world.slopes``),
+    ``serial`` its version: a landing for an ask given up since is dropped."""
+
+    limit: int
+    serial: int
+
+
+@dataclass(frozen=True, slots=True)
+class SlopeLanded:
+    """An input: the barrier set ``SlopeAsk`` asked for, or ``zones`` ``None`` and why it failed (``error``)."""
+
+    limit: int
+    serial: int
+    zones: tuple[Zone, ...] | None
+    error: str = ""
+
+
+def answer_slope(ground: Ground, ask: SlopeAsk) -> SlopeLanded:
+    """The barrier set ``ask`` wants, landed; a build that raises lands as its failure (call it off the loop)."""
+    try:
+        zones = tuple(ground.build_barriers(ask.limit))
+    except Exception as exc:  # failure as a value: its units stay at the class limit (``world.slopes``)
+        return SlopeLanded(ask.limit, ask.serial, None, f"{type(exc).__name__}: {str(exc)[:160]}")
+    return SlopeLanded(ask.limit, ask.serial, zones)
 
 
 def sight_key(threat: Any, box: tuple[float, float, float, float]) -> SightKey:

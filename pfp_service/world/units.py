@@ -368,9 +368,9 @@ class Units:
         return answer
 
     def classed(self, rec: UnitRecord, mobility: GoalMobility) -> None:
-        """A state names the unit's class: kept, and a guided unit whose planned slope limit or height it
-        changes is re-judged (``rejudge``) under its new barriers, built when the terrain loaded, and its
-        new sight (``world.mobility``)."""
+        """A state names the unit's class: kept, and a guided unit whose own slope limit or height it
+        changes is re-judged (``rejudge``) under its new barriers (a class's, or an override's once held,
+        ``world.slopes``; its class's safe side till then) and its new sight (``world.mobility``)."""
         before = slope_limit(rec.goal, rec.mobility), sight_height(rec.goal, rec.mobility)
         rec.mobility = mobility
         now = slope_limit(rec.goal, mobility), sight_height(rec.goal, mobility)

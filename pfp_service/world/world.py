@@ -32,7 +32,7 @@ from pfp_service.errors import InputError
 from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
 from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
 from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS
-from pfp_service.world import dispersion, heights, kinds, missions, steering, team_route, wave
+from pfp_service.world import dispersion, heights, kinds, missions, slopes, steering, team_route, wave
 from pfp_service.world import events as ev
 from pfp_service.world.bulkheads import Bulkheads
 from pfp_service.world.cluster import Cluster
@@ -196,6 +196,7 @@ class World:
             zones = [(z, c) for z, c, _ in b.zones if c]
             p, later = self.settings.planner_id, self._wave.ids()  # a wave's units owed: named now, told soon
             b.out.events.append(steering.replan(p, b.changes, b.out.directions, zones, later))
+        slopes.said(self._rec, b, self.settings.planner_id)
         b.out.cancelled, self._book.superseded = self._book.superseded, []
         return b.out
 
@@ -218,6 +219,8 @@ class World:
                 self._puts.gone(self._rec.remove_threat(tid), tid, "removed", b)
             case ev.SightLanded():
                 self._puts.landed(inp, b)
+            case ev.SlopeLanded():
+                slopes.land(self._rec, inp, b, self.settings.planner_id)
             case ev.ZonePut(zid, update):
                 self._zones.put(zid, update, b)
             case ev.ZoneRemoved(zid):

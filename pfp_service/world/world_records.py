@@ -25,13 +25,15 @@ from pfp_service.wire import Mission, ThreatUpdate
 from pfp_service.wire.messages import ZoneUpdate
 from pfp_service.world import team_route
 from pfp_service.world.mobility import limit_of
+from pfp_service.world.slopes import SLOPE_SETS, Slopes
 from pfp_service.world.team_route import RouteKey
 from pfp_service.world.terrain import Ground, Looks, SightAsk, SightKey, ground_zones, sight_key
 from pfp_service.world.units import UnitRecord, Units
 
 __all__ = ["MAX_HEIGHTS", "MAX_SLOPE_SETS", "Records", "ThreatRecord", "UnitRecord", "ZoneRecord"]
 
-MAX_SLOPE_SETS = 8  # slope limits whose zone sets and fields are kept at once (classes and a few overrides)
+# slope limits' zone sets and fields kept at once (the classes', the overrides held, a few grown by a margin)
+MAX_SLOPE_SETS = 3 + SLOPE_SETS + 4
 # heights other than the planner's class's whose threats' fields (each a copy of the packed rows) are kept
 MAX_HEIGHTS = 4
 
@@ -72,6 +74,8 @@ class Records:
         self.ground, self._barriers = ground, ground_zones(ground)
         self.sight: Looks | None = Looks() if ground is not None else None
         self.held: dict[str, tuple[ThreatRecord, float]] = {}
+        # the override slope limits' barrier sets (``world.slopes``): asked off the loop, held, evicted
+        self.slopes = Slopes(lambda: (limit_of(r) for r in self.units.values() if r.goal is not None))
         # per slope limit a goal names (``world.mobility``): its zone set and field, while the world's stand
         # and per lead's route key (``team_route``): its zones grown by its followers' corridor
         self._sets: tuple[ZoneSet | None, dict[tuple[int | None, float, tuple[str, ...]], ZoneSet]] = (
@@ -121,6 +125,7 @@ class Records:
         base = self.zone_set
         if (slope is None or self.ground is None) and margin_m <= 0.0:
             return base
+        slope = self._planned(slope)
         of, sets = self._sets
         if of is not base:
             sets = {}
@@ -136,9 +141,8 @@ class Records:
                 got = grown.plus(z for z in plain if z.id in keep) if keep else grown
             else:
                 assert self.ground is not None and slope is not None
-                got = ZoneSet(
-                    [*self.ground.barriers(slope), *(self.zones[k].zone for k in sorted(self.zones))]
-                )
+                barriers = self.slopes.held.get(slope) or self.ground.barriers(slope)  # a class's: loaded
+                got = ZoneSet([*barriers, *(self.zones[k].zone for k in sorted(self.zones))])
             sets[key] = got
         return got
 
@@ -155,6 +159,7 @@ class Records:
         base = self.field
         if (slope is None or self.ground is None) and margin_m <= 0.0 and height_m is None:
             return base
+        slope = self._planned(slope)
         of, fields = self._fields
         if of is not base:
             fields = {}
@@ -168,6 +173,26 @@ class Records:
             bare = self._seen_at(height_m)[0]
             got = fields[key] = bare.with_zones(zones) if len(zones) else bare
         return got
+
+    def _planned(self, slope: int | None) -> int | None:
+        """The limit a unit wanting ``slope`` is planned at now (``world.slopes.Slopes.planned``); the zone
+        sets and fields of a limit evicted since are dropped with it."""
+        if self.ground is None:
+            return slope
+        planned = self.slopes.planned(slope)
+        if self.slopes.evicted:
+            gone = set(self.slopes.evicted)
+            self.slopes.evicted.clear()
+            sets, fields = self._sets[1], self._fields[1]
+            for k in [k for k in sets if k[0] in gone]:
+                del sets[k]
+            for f in [f for f in fields if f[0] in gone]:
+                del fields[f]
+        return planned
+
+    def wanting(self, slope: int) -> list[UnitRecord]:
+        """The guided units this planner owns whose own limit is ``slope`` (``world.mobility.limit_of``)."""
+        return [r for r in self.units.values() if r.owned and r.stepper is not None and limit_of(r) == slope]
 
     def step_zones(self, route: Callable[[UnitRecord], RouteKey]) -> Callable[[UnitRecord], ZoneSet] | None:
         """Per unit, the zones its step is kept clear of: its own limit's, not a column's margin (``route``

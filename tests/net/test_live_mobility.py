@@ -45,12 +45,13 @@ pytestmark = pytest.mark.net
 MISSION = "livemobility"
 
 
-def _places(ground) -> tuple[tuple[float, float], tuple[float, float]]:
-    """A goal on a cell a wheeled unit cannot enter and a soldier can, and a start near it a wheeled unit can."""
+def _places(ground, upper_deg: float = 30.0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A goal on a cell a wheeled unit cannot enter and a soldier (or one climbing ``upper_deg``) can, and a
+    start near it a wheeled unit can."""
     g = ground.grid
     c = g.cell_m
     wheeled, _ = barrier_cells(g, 17.0)
-    foot, unknown = barrier_cells(g, 30.0)
+    foot, unknown = barrier_cells(g, upper_deg)
     ny, nx = wheeled.shape
     mid = np.array([ny // 2, nx // 2])
     goals = np.argwhere(wheeled & ~foot & ~unknown)
@@ -62,7 +63,7 @@ def _places(ground) -> tuple[tuple[float, float], tuple[float, float]]:
             if 0 <= kk < ny and 0 <= ii < nx and flat[max(kk - 1, 0) : kk + 2, max(ii - 1, 0) : ii + 2].all():
                 centre = lambda a, b: (float(g.x0_m + (b + 0.5) * c), float(g.y0_m + (a + 0.5) * c))
                 return centre(k, i), centre(kk, ii)
-    raise AssertionError("no slope between 17 and 30 degrees on the DEM")
+    raise AssertionError(f"no slope between 17 and {upper_deg:g} degrees on the DEM")
 
 
 def _until(q: queue.Queue, want, timeout: float):
@@ -77,7 +78,7 @@ def _until(q: queue.Queue, want, timeout: float):
 
 
 @contextlib.contextmanager
-def _planner(tmp_path, monkeypatch):
+def _planner(tmp_path, monkeypatch, upper_deg: float = 30.0):
     """A planner over the Jacksboro DEM on a loopback router, and a client's queues of directions and rejections:
     ``(client, directions, rejected, (goal, start))``."""
     from pfp_service.node.previews import PreviewService
@@ -89,7 +90,7 @@ def _planner(tmp_path, monkeypatch):
     cfg = placed(ServeConfig(mission=MISSION, listen=[ep], terrain=dem, lookahead=0, unit_stale_s=120.0))
     ground = load(dem, cfg.origin, cfg.bounds_tuple(), cfg.terrain_unit)
     assert ground.barriers(30) is ground.zones  # a soldier's goal over a foot planner: its own barriers
-    places = _places(ground)
+    places = _places(ground, upper_deg)
     session = zenoh.open(zenoh_config(cfg))
     node = PlannerNode(session, cfg)
     try:

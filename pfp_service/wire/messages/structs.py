@@ -147,9 +147,9 @@ class GoalMobility(_Message, frozen=True, kw_only=True):
     Attributes:
         kind: the class, ``foot``, ``wheeled`` or ``tracked`` (JSON ``class``); a name the
             planner does not know is refused on the goal's or the state's key (field ``$.mobility.class``).
-        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's (the
-            planner plans it at the steepest class limit not above it, and refuses one below them all);
-            planned to the whole degree.
+        max_slope_deg: the steepest ground it climbs, degrees (1 to 89), over the class's, planned to
+            the whole degree (at the steepest class limit not above it until the planner has built its
+            barriers, off its loop; it refuses one below every class's limit).
         height_m: how tall it stands, metres (0.1 to 20), over the class's: what a threat over
             terrain must see of it, and its end of a controller's link.
         speed_mps: its speed on the flat, metres per second (0.1 to 40), over the class's: what its
