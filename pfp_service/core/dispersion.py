@@ -60,6 +60,9 @@ PUSH = 3.0  # the term's weight in units of the field's own slope where the unit
 RELAX = 0.6  # near a shared goal a pair keeps at least this share of its goals' gap (4/3 of it < 1)
 RELAX_OVER = 2.0  # ... relaxing as the farther of the two comes within this many separations of its goal
 FEW_ROWS = 4  # ``near`` queries its rows alone while they are under a quarter of the units
+# an index with a few units moved keeps its k-d tree while no unit is further than this share of the reach from
+# where the tree holds it, each query widened by that distance and its answers measured at the units' positions
+STALE_SHARE = 0.25
 
 
 def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
@@ -140,6 +143,10 @@ class NeighbourIndex:
         points: ``(N, 2)`` positions in metres.
         seps: ``(N,)`` each unit's separation in metres (a pair keeps the larger).
         team, team_sep, goals: as ``pair_separation``'s (``None``: no teams, no goals).
+        moved_from: an index of the same units with the same separations, some of them elsewhere: its k-d
+            tree is kept while every unit is within ``STALE_SHARE`` of the reach of where the tree holds it
+            (a live tick moves a few units, and a tree over 1,000 took 234 us to build against 63 us for
+            16 queries: BENCHMARKS.md, "The k-d tree kept"); the same neighbours either way.
     """
 
     def __init__(
@@ -149,20 +156,33 @@ class NeighbourIndex:
         team: np.ndarray | None = None,
         team_sep: np.ndarray | None = None,
         goals: np.ndarray | None = None,
+        moved_from: NeighbourIndex | None = None,
     ) -> None:
         self.points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
         self.team, self.team_sep, self.goals = team, team_sep, goals
-        self.tree = cKDTree(self.points) if len(self.points) else None
         widest = max(
             float(self.seps.max()), float(np.nanmax(team_sep, initial=0.0)) if team_sep is not None else 0.0
         )
         self.radius = REACH * widest if len(self.seps) else 0.0
+        # the tree, the points it was built on, and how far any unit is from its point there (0: built on these)
+        self.tree, self._treed, self._slack = self._tree(moved_from)
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
         self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
         # row -> its neighbours, as ``query_ball_point`` found them (``_found``)
         self._rows_found: dict[int, list[int]] = {}
+
+    def _tree(self, moved_from: NeighbourIndex | None) -> tuple[cKDTree | None, np.ndarray, float]:
+        if not len(self.points):
+            return None, self.points, 0.0
+        was = moved_from
+        if was is not None and was.tree is not None and len(was.points) == len(self.points):
+            d = self.points - was._treed
+            slack = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+            if slack <= STALE_SHARE * self.radius and was.radius == self.radius:
+                return was.tree, was._treed, slack
+        return cKDTree(self.points), self.points, 0.0
 
     def unasked(self) -> NeighbourIndex:
         """This index as new-built: no ``near`` query remembered, so the next is asked afresh (and its pairs
@@ -180,8 +200,9 @@ class NeighbourIndex:
             if self.tree is None:
                 none = np.zeros(0, np.intp)
                 self._pairs = (none, none)
-            else:
-                ij = self.tree.query_pairs(self.radius, output_type="ndarray").astype(np.intp)
+            else:  # a tree kept from other points is built afresh here: the fleet's pairs come in its order
+                tree = self.tree if not self._slack else cKDTree(self.points)
+                ij = tree.query_pairs(self.radius, output_type="ndarray").astype(np.intp)
                 self._pairs = (np.concatenate([ij[:, 0], ij[:, 1]]), np.concatenate([ij[:, 1], ij[:, 0]]))
         return self._pairs
 
@@ -240,9 +261,26 @@ class NeighbourIndex:
         wanted = rows.tolist()
         new = [r for r in wanted if r not in memo]
         if new:
-            got = tree.query_ball_point(self.points[new], self.radius, return_sorted=True)
+            got = tree.query_ball_point(self.points[new], self.radius + self._slack, return_sorted=True)
+            if self._slack:  # a kept tree's answers, widened by its slack, measured at the units' positions
+                got = self._within(new, got)
             memo.update(zip(new, got))
         return [memo[r] for r in wanted]
+
+    def _within(self, rows: list[int], found: list[list[int]]) -> list[list[int]]:
+        """Of each row's candidates (sorted), those within the reach of its position, as a tree built on
+        ``points`` finds them (its test: the squared distance at most the squared reach)."""
+        counts = [len(f) for f in found]
+        j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=sum(counts))
+        i = np.repeat(np.asarray(rows, dtype=np.intp), counts)
+        dx = self.points[i, 0] - self.points[j, 0]
+        dy = self.points[i, 1] - self.points[j, 1]
+        keep = dx * dx + dy * dy <= self.radius * self.radius
+        out, at = [], 0
+        for c in counts:
+            out.append(j[at : at + c][keep[at : at + c]].tolist())
+            at += c
+        return out
 
     def gradients(self, rows: np.ndarray) -> np.ndarray:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
