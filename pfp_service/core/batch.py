@@ -23,6 +23,7 @@ from pfp_service.core.tracking import Route
 __all__ = ["advise_many"]
 
 _OWN = (Route.NONE, Route.DESCENT)  # routes whose heading is the batch's (pushed) descent
+SIDE_CLEAR = math.sin(math.radians(15.0))  # a push this near the heading's line has no clear side
 
 
 def advise_many(
@@ -111,7 +112,8 @@ def _turn(
 
     The heading becomes ``h - push`` normalised, or where that would turn
     back along the route, square across the push on ``h``'s side (the unit
-    goes round its neighbours, not back); the advice holds for one step at
+    goes round its neighbours, not back), or on the goal's side where the
+    push runs along ``h`` (``_across``); the advice holds for one step at
     most (to where that step ends): the route or the zone rule judges again
     at the next report.
     """
@@ -124,7 +126,9 @@ def _turn(
             continue
         vx, vy = adv.dx - px, adv.dy - py
         if vx * adv.dx + vy * adv.dy < 0.0:  # not back along a route: round the neighbours, across the push
-            vx, vy = (-py, px) if px * adv.dy - py * adv.dx >= 0.0 else (py, -px)
+            x, y = coords[k]
+            gx, gy = steppers[k].goal
+            vx, vy = _across(px, py, adv.dx, adv.dy, gx - x, gy - y)
         v = math.hypot(vx, vy)
         if not v > 0.0:
             continue
@@ -132,3 +136,19 @@ def _turn(
         dx, dy = vx / v, vy / v
         x, y = coords[k]
         result[k] = adv._replace(dx=dx, dy=dy, reach=r, to_x=x + r * dx, to_y=y + r * dy)
+
+
+def _across(px: float, py: float, hx: float, hy: float, gx: float, gy: float) -> tuple[float, float]:
+    """Square across the push ``(px, py)``: on the heading ``(hx, hy)``'s side, or where the push runs
+    along the heading (no clear side), on the side of the goal ``(gx, gy)`` (from the unit).
+
+    The heading's side alone flipped at each report where the route ran
+    straight at the neighbours (the sign of a cross product near 0): 5 m
+    one way, 5 m back, for as long as the push stayed on the route's line.
+    """
+    p = math.hypot(px, py)
+    cross = px * hy - py * hx
+    if not abs(cross) > SIDE_CLEAR * p * math.hypot(hx, hy):
+        goal = px * gy - py * gx
+        cross = goal if goal != 0.0 else cross
+    return (-py, px) if cross >= 0.0 else (py, -px)

@@ -178,3 +178,33 @@ def test_serve_config_turns_dispersion_on_with_classes_and_units(tmp_path):
     d = load_config(toml, {}, {"dispersion": True}).world_settings().dispersion
     assert d.enabled and not d.manned_first and d.deadlock_s == d.backoff_s == 4.0
     assert (d.separation("d1"), d.separation("v1"), d.separation_m["tracked"]) == (8.0, 50.0, 50.0)
+
+
+def test_a_unit_on_a_route_squared_across_a_push_along_it_keeps_to_the_goals_side():
+    """Gaps crowd, seed 5 (35 s to clear on main): ``u0192``'s route ran west, straight at its neighbours,
+    and the push along it turned it back; squared across the push on the heading's side, the side
+    flipped with the cross product's sign at each report, 5 m south, 5 m north, for 15 s.  The reports
+    below are its own (heading, push); its goal lies north."""
+    from types import SimpleNamespace
+
+    from pfp_service.core import batch
+    from pfp_service.core.advice import Advice, StepStatus
+    from pfp_service.core.tracking import Route
+
+    stepper = SimpleNamespace(goal=(385.0, 1760.0), params=SimpleNamespace(step=5.0))
+    x, y = 147.3, -818.3
+    sides = []
+    for (hx, hy), push in (((-1.0, 0.06), (-1.67, 0.17)), ((-0.99, 0.15), (-1.62, -0.04))):
+        adv = Advice(StepStatus.EN_ROUTE, hx, hy, 0.0, 2330.0, reach=55.0, route=Route.LOWER_EXPOSURE)
+        out = [adv]
+        batch._turn(out, [stepper], [[x, y]], np.array([push]), [])
+        assert out[0].reach == 5.0 and out[0].dx * push[0] + out[0].dy * push[1] == pytest.approx(
+            0.0, abs=1e-9
+        )
+        sides.append(out[0].dy > 0.0)
+    assert sides == [True, True], "north both times: the goal's side, not the heading's flip"
+    # a push clearly off the heading's line keeps the heading's side, whatever the goal's
+    adv = Advice(StepStatus.EN_ROUTE, 1.0, 0.0, 0.0, 2330.0, reach=55.0, route=Route.LOWER_EXPOSURE)
+    out = [adv]
+    batch._turn(out, [stepper], [[x, y]], np.array([(1.5, 1.0)]), [])
+    assert out[0].dx > 0.0 and out[0].dy < 0.0  # south-east: round the neighbours, on the heading's side

@@ -7,8 +7,8 @@ stops a unit at a neighbour's disc; and two units going round units at rest, eac
 the other, are one deadlock (towards each other in the one lane between them, they held each other
 for good: seed 3 of the gaps crowd with a slide along the disc, tried and not kept). Jams (issue
 33's seeds 1-8): a unit giving way keeps the unit it gives way to only its separation, a back-off
-cut to nothing turns to a free way, and a yielding unit in the way of the unit it yields to makes
-room.
+cut to nothing turns to a free way, a yielding unit in the way of the unit it yields to makes
+room, and a unit on a neighbour's disc may lean into the margin, no nearer than its inner half.
 The crowds are driven through the sans-I/O world in process (``benchmarks._crowd.simulate``)
 and measured on the tracks.
 """
@@ -109,32 +109,47 @@ def test_a_unit_yielding_does_not_stop_with_its_disc_the_unit_it_yields_to():
     assert min(float(np.hypot(*(p[0] - p[1]))) for p in tracks) >= 0.9 * SEP
 
 
-def test_the_cut_keeps_a_unit_only_its_separation_from_a_unit_giving_way_to_it_and_the_margin_from_others():
-    points = [(0.0, 0.0), (-55.0, 0.0)]  # leaning 5.5 m into the neighbour's disc of 1.1 separations
+def _cut_from(points: list[tuple[float, float]], way: tuple[float, float], gives_way=None) -> float:
+    """The first unit's reach along ``way`` after the cut, the others standing at ``points[1:]``."""
     index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
-    way = (-0.1, math.sqrt(1.0 - 0.01))
-    for gives_way, reach in ((None, 0.0), (np.array([-1, 0]), 40.0), (np.array([1, -1]), 0.0)):
-        dirs = [
-            Direction(unit="a", status=DirectionStatus.EN_ROUTE, vector=way, heading_deg=354.3, reach_m=40.0)
-        ]
-        stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
-        assert dirs[0].reach_m == pytest.approx(reach) and bool(stopped) == (reach == 0.0), gives_way
-    dirs = [
-        Direction(
-            unit="a", status=DirectionStatus.EN_ROUTE, vector=(-1.0, 0.0), heading_deg=270.0, reach_m=40.0
-        )
-    ]
-    keep_apart.cut(
-        index, np.array([0]), dirs, [0], np.array([-1, 0])
-    )  # straight at it: stops at the separation
-    assert dirs[0].reach_m == pytest.approx(55.0 - SEP)
+    dirs = [Direction(unit="a", status=DirectionStatus.EN_ROUTE, vector=way, reach_m=40.0)]
+    stopped = keep_apart.cut(index, np.array([0]), dirs, [0], gives_way)
+    assert dirs[0].reach_m is not None and bool(stopped) == (dirs[0].reach_m <= 1e-6)
+    return dirs[0].reach_m
+
+
+def test_the_cut_keeps_a_unit_only_its_separation_from_a_unit_giving_way_to_it_and_the_margin_from_others():
+    west = (-1.0, 0.0)  # straight at a unit 60 m west of it
+    assert _cut_from([(0.0, 0.0), (-60.0, 0.0)], west) == pytest.approx(60.0 - DISC)
+    assert _cut_from([(0.0, 0.0), (-60.0, 0.0)], west, np.array([-1, 0])) == pytest.approx(60.0 - SEP)
+    assert _cut_from([(0.0, 0.0), (-60.0, 0.0)], west, np.array([1, -1])) == pytest.approx(60.0 - DISC)
+
+
+def test_a_unit_on_a_neighbours_disc_may_lean_into_the_margin_but_no_nearer_than_its_inner_disc():
+    """Gaps crowds, seeds 1-8 (the front rows of the middle gap's column, every unit parked on a
+    neighbour's disc of 1.1 separations by the cut): a unit on that disc whose way leaned into it however
+    slightly was cut to nothing, and stood while the neighbour stood; on main every way below leaning
+    into the disc is cut to 0 m.  Now the margin's inner half is kept (``keep_apart.INSIDE``): at most
+    0.05 separations of it are given up, so a step of 5 m leaves every pair at 0.95 separations."""
+    inner = 1.05 * SEP  # keep_apart.INSIDE: the margin's inner half
+    lean = (-0.1, math.sqrt(1.0 - 0.01))  # 5.5 m into the disc of a unit 55 m west: passes at 54.7 m
+    assert _cut_from([(0.0, 0.0), (-DISC, 0.0)], lean) == pytest.approx(40.0)
+    west = (-1.0, 0.0)  # straight at it: to the inner disc, or to its separation when it gives way
+    assert _cut_from([(0.0, 0.0), (-DISC, 0.0)], west) == pytest.approx(DISC - inner)
+    assert _cut_from([(0.0, 0.0), (-DISC, 0.0)], west, np.array([-1, 0])) == pytest.approx(DISC - SEP)
+    steep = (-0.6, 0.8)  # into the inner disc: stops on it
+    reach = _cut_from([(0.0, 0.0), (-DISC, 0.0)], steep)
+    end = np.array(steep) * reach
+    assert 0.0 < reach < 40.0 and float(np.hypot(*(end - (-DISC, 0.0)))) == pytest.approx(inner)
+    assert _cut_from([(0.0, 0.0), (-51.0, 0.0)], west) == 0.0  # inside the inner disc: held, as before
 
 
 def test_a_back_off_cut_to_nothing_turns_to_the_nearest_free_way_still_away_from_the_other():
     """Gaps crowd, seeds 3 and 4: a unit backing off into a neighbour's disc was cut to nothing for the
     whole back-off, and the deadlock it was to clear formed again as it ended."""
-    # backing off south from the other (north), a unit 55 m due south of it and one 55 m east of it
-    points = [(0.0, 0.0), (0.0, 60.0), (0.0, -55.0), (55.0, 0.0)]
+    # backing off south from the other (north), a unit 52 m due south of it (within the margin's inner
+    # half, 1.05 separations) and one 55 m east of it (on its disc: it may lean 2.5 m into it)
+    points = [(0.0, 0.0), (0.0, 60.0), (0.0, -52.0), (55.0, 0.0)]
     index = NeighbourIndex(np.array(points, dtype=float), np.full(len(points), SEP))
     away = np.array([0.0, -60.0])
     dirs = [Direction(unit="a", status=DirectionStatus.YIELDING, vector=(0.0, -1.0), reach_m=SEP)]
@@ -147,7 +162,7 @@ def test_a_back_off_cut_to_nothing_turns_to_the_nearest_free_way_still_away_from
         (-math.sqrt(0.75), -0.5, SEP)
     )
     boxed = NeighbourIndex(
-        np.array(points + [(-55.0, 0.0), (-39.0, -39.0), (39.0, -39.0)], dtype=float), np.full(7, SEP)
+        np.array(points + [(-52.0, 0.0), (-37.0, -37.0), (37.0, -37.0)], dtype=float), np.full(7, SEP)
     )
     assert keep_apart.free_way(boxed, 0, (0.0, -1.0), away, SEP) is None  # every turn away from it is cut
 
