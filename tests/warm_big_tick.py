@@ -34,7 +34,7 @@ def main() -> None:
     import pfp_service.node.previews as previews
 
     if "--no-wide" in sys.argv:
-        previews.warm_wide = lambda base: None  # type: ignore[assignment]
+        previews.warm_wide = lambda base, terrain=True: None  # type: ignore[assignment]
     previews.warm_up(None)
     before = signatures()
 

@@ -225,6 +225,6 @@ def _run_chunk(
 
 
 def _warm_worker() -> None:
-    from pfp_service.node.previews import warm_up
+    from pfp_service.node.previews import WORKERS_WARM_TERRAIN, warm_up
 
-    warm_up(None)
+    warm_up(None, terrain=WORKERS_WARM_TERRAIN[0])

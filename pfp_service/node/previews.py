@@ -373,14 +373,26 @@ def _decode_error(body: bytes) -> ErrorReply:
     return decode_error_reply(body)
 
 
+# whether a worker warms the terrain's kernels: set by a planner without terrain before it forks its fork
+# server (``run._fork_server``), so the workers forked from it skip them as it does
+WORKERS_WARM_TERRAIN = [True]
+
+
 def _warm_worker() -> None:
-    warm_up(None)
+    warm_up(None, terrain=WORKERS_WARM_TERRAIN[0])
 
 
-def warm_up(settings: WorldSettings | None) -> None:
-    """Load (or compile) the numba kernels before serving, so no first direction or preview pays for it."""
+def warm_up(settings: WorldSettings | None, terrain: bool | None = None) -> None:
+    """Load (or compile) the numba kernels before serving, so no first direction or preview pays for it.
+
+    ``terrain``: the terrain's kernels (the sweep, the masked rows) too; ``None``: when ``settings`` has a terrain,
+    or has none (``None``: every kernel, as a fresh clone's tests and a worker want them).  A planner without
+    terrain never runs them, and loading them (with rasterio) cost its process 26 MB (BENCHMARKS.md).
+    """
     from pfp_service.world.world import World
 
+    if terrain is None:
+        terrain = settings is None or settings.terrain is not None
     base = settings if settings is not None else WorldSettings()
     w = World(dataclasses.replace(base, deliberation="inline", bounds=None))
     threat = ThreatUpdate(position=(5.0, 5.0), sigma_range=1.0, sigma_lateral=0.7)
@@ -415,7 +427,9 @@ def warm_up(settings: WorldSettings | None) -> None:
     )
     preview(zoned.view("z"), None, time.monotonic, 5.0, 10_000, zoned.field)
     assert out.directions
-    warm_wide(base)  # and what only a big world reaches: many threats, shared routes, storms, terrain
+    warm_wide(
+        base, terrain
+    )  # and what only a big world reaches: many threats, shared routes, storms, terrain
 
 
 def preview_service(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewService:

@@ -181,10 +181,12 @@ def _fork_server(cfg: ServeConfig) -> Iterator[None]:
     import gc
 
     from pfp_service.node.forkserver import ForkServer, install_fork_server
-    from pfp_service.node.previews import warm_up
+    from pfp_service.node.previews import WORKERS_WARM_TERRAIN, warm_up
 
-    warm_up(None)
-    warm_up(cfg.world_settings())
+    settings = cfg.world_settings()
+    WORKERS_WARM_TERRAIN[0] = settings.terrain is not None
+    warm_up(None, terrain=settings.terrain is not None)  # the workers forked from here plan as it does
+    warm_up(settings)
     gc.collect()
     gc.freeze()
     young, middle, _ = gc.get_threshold()

@@ -48,8 +48,9 @@ __all__ = ["warm_wide"]
 CROWD_THREATS = MIN_THREATS + 8
 
 
-def warm_wide(base: WorldSettings) -> None:
-    """Run the big tick's kernels once (``base``'s planner parameters, deliberation inline, no bounds)."""
+def warm_wide(base: WorldSettings, terrain: bool = True) -> None:
+    """Run the big tick's kernels once (``base``'s planner parameters, deliberation inline, no bounds); the
+    terrain's with ``terrain``."""
     from pfp_service.world.world import World
 
     settings = dataclasses.replace(base, deliberation="inline", bounds=None, terrain=None)
@@ -65,7 +66,8 @@ def warm_wide(base: WorldSettings) -> None:
     lone = Stepper((0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0)), None, 0)
     lone.follow(-30.0, 0.0, 1.0, 0.0, 0.0, 1.0, world.field)
     _team()
-    _terrain(settings)
+    if terrain:
+        _terrain(settings)
 
 
 def _team() -> None:
