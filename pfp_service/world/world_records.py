@@ -141,7 +141,10 @@ class Records:
                 got = grown.plus(z for z in plain if z.id in keep) if keep else grown
             else:
                 assert self.ground is not None and slope is not None
-                barriers = self.slopes.held.get(slope) or self.ground.barriers(slope)  # a class's: loaded
+                held = self.slopes.held.get(
+                    slope
+                )  # an override's, built off the loop (an empty set is a set)
+                barriers = held if held is not None else self.ground.barriers(slope)  # else a class's: loaded
                 got = ZoneSet([*barriers, *(self.zones[k].zone for k in sorted(self.zones))])
             sets[key] = got
         return got
