@@ -427,9 +427,8 @@ def warm_up(settings: WorldSettings | None, terrain: bool | None = None) -> None
     )
     preview(zoned.view("z"), None, time.monotonic, 5.0, 10_000, zoned.field)
     assert out.directions
-    warm_wide(
-        base, terrain
-    )  # and what only a big world reaches: many threats, shared routes, storms, terrain
+    # and what only a big world reaches: many threats, shared routes, storms, terrain (when it has one)
+    warm_wide(base, terrain)
 
 
 def preview_service(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewService:
