@@ -153,9 +153,14 @@ class Sights:
 
     def _built(self, ask: SlopeAsk, out: Outcome) -> None:
         if out.kind == "done":
-            landed: SlopeLanded = out.value
+            self._slope_landed(ask, out.value)
         else:  # killed past its budget, out of memory, late, or the planner is stopping: a failure
-            landed = SlopeLanded(ask.limit, ask.serial, None, f"{out.kind}: {out.detail}"[:200])
+            self._slope_landed(
+                ask, SlopeLanded(ask.limit, ask.serial, None, f"{out.kind}: {out.detail}"[:200])
+            )
+
+    def _slope_landed(self, ask: SlopeAsk, landed: SlopeLanded) -> None:
+        """Hand a set (or its failure, logged: its units stay at the class's) to the node's inbox."""
         if landed.zones is None:
             fields = {"max_slope_deg": ask.limit, "error": landed.error}
             log.error("a slope limit's barriers failed", extra={"fields": fields})
@@ -171,28 +176,22 @@ class Sights:
         with self._lock:
             return self._thread is None and self._builder is None
 
+    def _next(self, waiting: dict[Any, Any], thread: str) -> Any:
+        """The oldest ask in ``waiting``; ``None``, with the thread's slot (``thread``) emptied, when none is."""
+        with self._lock:
+            if not waiting:
+                setattr(self, thread, None)
+                return None
+            return waiting.pop(next(iter(waiting)))
+
     def _build(self) -> None:
         assert self._ground is not None
-        while True:
-            with self._lock:
-                if not self._slopes:
-                    self._builder = None
-                    return
-                ask = self._slopes.pop(next(iter(self._slopes)))
-            landed = answer_slope(self._ground, ask)  # a failure lands too: its units stay at the class's
-            if landed.zones is None:
-                fields = {"max_slope_deg": ask.limit, "error": landed.error}
-                log.error("a slope limit's barriers failed", extra={"fields": fields})
-            self._deliver(landed)
+        while (ask := self._next(self._slopes, "_builder")) is not None:
+            self._slope_landed(ask, answer_slope(self._ground, ask))  # a failure lands too
 
     def _run(self) -> None:
         assert self._ground is not None
-        while True:
-            with self._lock:
-                if not self._waiting:
-                    self._thread = None
-                    return
-                ask = self._waiting.pop(next(iter(self._waiting)))
+        while (ask := self._next(self._waiting, "_thread")) is not None:
             try:
                 landed = answered(self._ground, ask)  # and the reach of its landing (``wave.judge``)
             except Exception as exc:  # never lands: the world's timer puts the threat in force blind
