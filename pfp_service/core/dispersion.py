@@ -177,10 +177,15 @@ class NeighbourIndex:
         if not len(self.points):
             return None, self.points, 0.0
         was = moved_from
-        if was is not None and was.tree is not None and len(was.points) == len(self.points):
+        if (
+            was is not None
+            and was.tree is not None
+            and was.radius == self.radius
+            and len(was.points) == len(self.points)
+        ):
             d = self.points - was._treed
             slack = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
-            if slack <= STALE_SHARE * self.radius and was.radius == self.radius:
+            if slack <= STALE_SHARE * self.radius:
                 return was.tree, was._treed, slack
         return cKDTree(self.points), self.points, 0.0
 

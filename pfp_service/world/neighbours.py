@@ -15,7 +15,8 @@ a new index, so a push and its right of way are the same numbers).
 ``fleet_index`` is the plain computation it stands for.  A live tick's
 reports move a quarter of the fleet and change nothing else the index is
 built from: then the kept arrays are taken again with the reported rows
-moved, and only the points and the k-d tree are new (``_moved``).  With a key
+moved, and only the points are new, the k-d tree too once a unit has gone far
+from where it holds it (``_moved``; ``NeighbourIndex``'s ``moved_from``).  With a key
 in two parts (``FleetKey``: the units', the teams'), the same records under the
 same teams are not asked their teams again.
 """
@@ -208,9 +209,9 @@ def _moved(
 
 def _moved_index(kept: Fleet, recs: list[UnitRecord], moved: list[int]) -> Fleet:
     """``kept``'s index with the ``moved`` rows at their units' new positions: its other arrays are the
-    very ones a build makes (the same records, goals and teams), its points and k-d tree new.  A
-    micro-optimisation (bench row: ``python -m benchmarks._march_world``, a tick): a live tick moves a
-    quarter of the fleet, and a build walks every record for every array."""
+    very ones a build makes (the same records, goals and teams), its points new, its k-d tree kept while
+    the moves are small.  A micro-optimisation (bench row: ``python -m benchmarks._march_world``, a
+    tick): a live tick moves a quarter of the fleet, and a build walks every record for every array."""
     index, _, row = kept
     points = index.points.copy()
     if moved:

@@ -141,10 +141,9 @@ class Records:
                 got = grown.plus(z for z in plain if z.id in keep) if keep else grown
             else:
                 assert self.ground is not None and slope is not None
-                held = self.slopes.held.get(
-                    slope
-                )  # an override's, built off the loop (an empty set is a set)
-                barriers = held if held is not None else self.ground.barriers(slope)  # else a class's: loaded
+                # an override's, built off the loop (an empty set is a set), else a class's: loaded
+                held = self.slopes.held.get(slope)
+                barriers = held if held is not None else self.ground.barriers(slope)
                 got = ZoneSet([*barriers, *(self.zones[k].zone for k in sorted(self.zones))])
             sets[key] = got
         return got
