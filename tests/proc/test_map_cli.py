@@ -111,64 +111,71 @@ EDIT = {"X-PFP-Edit": "1", "Content-Type": "application/json"}
 @pytest.mark.proc
 def test_the_api_puts_through_the_same_keys_and_validates_first(router):
     mission = "api" + uuid.uuid4().hex[:8]
-    with client(router) as s, map_process(router, mission, "--allow-edit") as url:
+    with client(router) as s:
+        # subscribed before the map's session opens: the router hands our subscribers to it
+        # as it joins, so its first put cannot go out before it knows we listen
         threats = Inbox(s, keys.threats(mission))
         goals = Inbox(s, keys.goals(mission))
-        t = {"position": [3, 4], "sigma_range": 2, "sigma_lateral": 1, "facing_deg": 90, "ttl_s": 30}
-        assert _http("PUT", url + "api/threat/t1", t, EDIT) == (
-            200,
-            {"ok": True, "key": keys.threat(mission, "t1")},
-        )
-        assert threats.get(timeout=5)["sigma_range"] == 2
-        code, body = _http("DELETE", url + "api/threat/t1", None, EDIT)
-        assert code == 200 and threats.get(timeout=5) is None  # a DELETE, as pfp inject's remove_threat
-        assert _http("PUT", url + "api/goal/u1", {"position": [9, 9]}, EDIT)[0] == 200
-        assert goals.get(timeout=5)["position"] == [9, 9]
-        assert _http("DELETE", url + "api/goal/u1", None, EDIT)[0] == 200
-        assert goals.get(timeout=5) is None
+        with map_process(router, mission, "--allow-edit") as url:
+            _puts_through_and_validates(s, url, mission, threats, goals)
 
-        # refused before anything is sent: a bad field names its path, a bad id its chunk
-        code, body = _http(
-            "PUT", url + "api/threat/t2", {"position": [1, "x"], "sigma_range": 1, "sigma_lateral": 1}, EDIT
-        )
-        assert code == 400 and body["field"] == "$.position[1]"
-        code, body = _http(
-            "PUT", url + "api/threat/t2", {"position": [1, 1], "sigma_range": 0, "sigma_lateral": 1}, EDIT
-        )
-        assert code == 400 and body["field"] == "$.sigma_range"
-        code, body = _http("PUT", url + "api/threat/bad*id", t, EDIT)
-        assert code == 400 and body["field"] == "threat"
-        code, body = _http("PUT", url + "api/threat/t3", t, {"Content-Type": "application/json"})
-        assert code == 403 and "X-PFP-Edit" in body["error"]  # another web page cannot send that header
-        with pytest.raises(TimeoutError):
-            threats.get(timeout=0.5)
 
-        # the page, its script and the vendored Leaflet are served from the package
-        for path in (
-            "",
-            "static/map.js",
-            "static/vendor/leaflet/leaflet.js",
-            "static/vendor/leaflet/LICENSE",
-        ):
-            with urllib.request.urlopen(url + path, timeout=10) as r:
-                assert r.status == 200
-        # no planner: a preview is news for the page, not an HTTP failure
-        code, body = _http("GET", url + "api/preview/u1")
-        assert code == 200 and body["error"] == "no planner of this mission answered"
+def _puts_through_and_validates(s, url: str, mission: str, threats: Inbox, goals: Inbox) -> None:
+    t = {"position": [3, 4], "sigma_range": 2, "sigma_lateral": 1, "facing_deg": 90, "ttl_s": 30}
+    assert _http("PUT", url + "api/threat/t1", t, EDIT) == (
+        200,
+        {"ok": True, "key": keys.threat(mission, "t1")},
+    )
+    assert threats.get(timeout=5)["sigma_range"] == 2
+    code, body = _http("DELETE", url + "api/threat/t1", None, EDIT)
+    assert code == 200 and threats.get(timeout=5) is None  # a DELETE, as pfp inject's remove_threat
+    assert _http("PUT", url + "api/goal/u1", {"position": [9, 9]}, EDIT)[0] == 200
+    assert goals.get(timeout=5)["position"] == [9, 9]
+    assert _http("DELETE", url + "api/goal/u1", None, EDIT)[0] == 200
+    assert goals.get(timeout=5) is None
 
-        # what the map saw, as JSON
-        put_json(s, keys.unit_state(mission, "u1"), {"position": [1, 2], "kind": "manned"})
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline:
-            state = _http("GET", url + "api/state")[1]
-            if "u1" in state["units"] and state["units"]["u1"]["position"] == [1, 2]:
-                break
-            time.sleep(0.1)
-        else:
-            raise AssertionError(state)
-        assert state["units"]["u1"]["goal"] is None and state["config"]["allow_edit"] is True
-        stats = _http("GET", url + "api/stats")[1]
-        assert stats["samples_in"] >= 5 and stats["backlog"] == 0
+    # refused before anything is sent: a bad field names its path, a bad id its chunk
+    code, body = _http(
+        "PUT", url + "api/threat/t2", {"position": [1, "x"], "sigma_range": 1, "sigma_lateral": 1}, EDIT
+    )
+    assert code == 400 and body["field"] == "$.position[1]"
+    code, body = _http(
+        "PUT", url + "api/threat/t2", {"position": [1, 1], "sigma_range": 0, "sigma_lateral": 1}, EDIT
+    )
+    assert code == 400 and body["field"] == "$.sigma_range"
+    code, body = _http("PUT", url + "api/threat/bad*id", t, EDIT)
+    assert code == 400 and body["field"] == "threat"
+    code, body = _http("PUT", url + "api/threat/t3", t, {"Content-Type": "application/json"})
+    assert code == 403 and "X-PFP-Edit" in body["error"]  # another web page cannot send that header
+    with pytest.raises(TimeoutError):
+        threats.get(timeout=0.5)
+
+    # the page, its script and the vendored Leaflet are served from the package
+    for path in (
+        "",
+        "static/map.js",
+        "static/vendor/leaflet/leaflet.js",
+        "static/vendor/leaflet/LICENSE",
+    ):
+        with urllib.request.urlopen(url + path, timeout=10) as r:
+            assert r.status == 200
+    # no planner: a preview is news for the page, not an HTTP failure
+    code, body = _http("GET", url + "api/preview/u1")
+    assert code == 200 and body["error"] == "no planner of this mission answered"
+
+    # what the map saw, as JSON
+    put_json(s, keys.unit_state(mission, "u1"), {"position": [1, 2], "kind": "manned"})
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        state = _http("GET", url + "api/state")[1]
+        if "u1" in state["units"] and state["units"]["u1"]["position"] == [1, 2]:
+            break
+        time.sleep(0.1)
+    else:
+        raise AssertionError(state)
+    assert state["units"]["u1"]["goal"] is None and state["config"]["allow_edit"] is True
+    stats = _http("GET", url + "api/stats")[1]
+    assert stats["samples_in"] >= 5 and stats["backlog"] == 0
 
 
 @pytest.mark.proc
