@@ -46,7 +46,7 @@ from pfp_service.node.deliberation import Deliberators
 from pfp_service.node.duplicates import Peers, watch_duplicates
 from pfp_service.node.log import get_logger, log_changes
 from pfp_service.node.loopstats import Latency, LoopTrace, Trim, demote_native_threads
-from pfp_service.node.previews import PreviewService, preview_service, warm_up
+from pfp_service.node.previews import PreviewService, preview_service, warm_once
 from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
 from pfp_service.node.startup import join, restore, restored_event
@@ -175,7 +175,7 @@ class PlannerNode:
         # Python threads (previews, deliberation) take the GIL for 5 ms at a time by default, which
         # the loop's p99 pays (docs/operations.md, "Figures behind the code's choices").
         sys.setswitchinterval(SWITCH_INTERVAL_S)
-        warm_up(self.world.settings)
+        warm_once(self.world.settings)  # a no-op where the fork server's warm-up ran
         self._previews.wait_ready()  # the deliberation workers warm up meanwhile; jobs wait for them
         restored = restore(self.world, self.store, self._writes, self.cfg, self.clock)
         join(s, self.world, self.cfg, self.clock)

@@ -62,7 +62,7 @@ from pfp_service.node.config import ServeConfig
 from pfp_service.node.log import get_logger
 from pfp_service.node.preview_work import ALARM_GRACE_S, compute, compute_team
 from pfp_service.node.tasks import Blobs, Outcome, Task
-from pfp_service.node.warmup import warm_wide
+from pfp_service.node.warmup import forget_warm_worlds, warm_wide
 from pfp_service.node.workers import WorkerPool
 from pfp_service.wire import (
     ErrorReply,
@@ -382,6 +382,24 @@ def _warm_worker() -> None:
     warm_up(None, terrain=WORKERS_WARM_TERRAIN[0])
 
 
+_WARMED: set[str] = set()  # what this process's warm-ups covered (``warm_once``)
+
+
+def _warm_key(base: WorldSettings, terrain: bool) -> str:
+    return repr((dataclasses.replace(base, deliberation="inline", bounds=None, terrain=None), terrain))
+
+
+def warm_once(settings: WorldSettings) -> None:
+    """``warm_up(settings)``, unless this process has already run it for the same planner.
+
+    A planner with a fork server warmed before forking it (``run._fork_server``); a second pass
+    would load no kernel, and its worlds' searches would peak the process's memory again, on top of
+    the session's own by then (BENCHMARKS.md, "The warm-up's worlds forgotten").
+    """
+    if _warm_key(settings, settings.terrain is not None) not in _WARMED:
+        warm_up(settings)
+
+
 def warm_up(settings: WorldSettings | None, terrain: bool | None = None) -> None:
     """Load (or compile) the numba kernels before serving, so no first direction or preview pays for it.
 
@@ -429,6 +447,8 @@ def warm_up(settings: WorldSettings | None, terrain: bool | None = None) -> None
     assert out.directions
     # and what only a big world reaches: many threats, shared routes, storms, terrain (when it has one)
     warm_wide(base, terrain)
+    forget_warm_worlds()  # their routes and freed pages: no caller keeps them
+    _WARMED.add(_warm_key(base, terrain))
 
 
 def preview_service(cfg: ServeConfig, clock: Callable[[], float] = time.monotonic) -> PreviewService:

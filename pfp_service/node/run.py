@@ -106,9 +106,9 @@ def _open(zenoh: Any, conf: Any, cfg: ServeConfig, stop: threading.Event, log: A
             log.warning("waiting for the router", extra={"fields": {"connect": cfg.connect}})
             next_log = time.monotonic() + WAITING_LOG_S
         if not warmed:  # the kernels load while the router is away, not once it has come
-            from pfp_service.node.previews import warm_up
+            from pfp_service.node.previews import warm_once
 
-            warm_up(cfg.world_settings())
+            warm_once(cfg.world_settings())
             warmed = True
         if stop.is_set():
             return None
