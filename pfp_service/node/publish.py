@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import collections
 import time
+from collections.abc import Callable
 
 import msgspec
 import zenoh
 
 from pfp_service.node.log import get_logger
-from pfp_service.wire import ConflictEvent, Event, RejectedEvent, encode, keys
+from pfp_service.node.loopstats import LoopTrace
+from pfp_service.wire import ConflictEvent, Direction, Event, RejectedEvent, encode, keys
 
 __all__ = ["EVENT_LOG_LINES", "Publisher"]
 
@@ -44,6 +46,25 @@ class Publisher:
         else:
             self.session.put(key, payload, encoding=_JSON)
         self.counters["msgs_out"] += 1
+
+    def directions(
+        self,
+        directions: list[Direction],
+        key_of: Callable[[str], zenoh.KeyExpr],
+        trace: LoopTrace,
+        clock: Callable[[], float],
+    ) -> None:
+        """Put each of ``directions`` on its unit's key (``key_of``), each put timed on ``clock`` when ``trace`` is
+        on: a put that waits (Zenoh's queue, the GIL) shows apart from its CPU."""
+        if trace.on:
+            for d in directions:
+                key, body = key_of(d.unit), encode(d)
+                t = clock()
+                self.put(key, body, direction=True)
+                trace.put(clock() - t)
+        else:
+            for d in directions:
+                self.put(key_of(d.unit), encode(d), direction=True)
 
     def event(self, ev: Event, logged: collections.Counter[str]) -> None:
         """Publish ``ev`` with the wall-clock time, and log it (``EVENT_LOG_LINES`` a kind in ``logged``)."""

@@ -8,6 +8,7 @@ missions one ``apply`` returns.  Pure values: no zenoh, no clock.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import traceback
 import zlib
 from dataclasses import dataclass, field
@@ -375,6 +376,11 @@ class Outputs:
         return bool(
             self.directions or self.events or self.jobs or self.missions or self.faults or self.cancelled
         ) or bool(self.sights or self.slopes)
+
+    def extend(self, other: Outputs) -> None:
+        """Append ``other``'s outputs to these (a second ``apply`` in one of the driver's ticks)."""
+        for f in dataclasses.fields(self):
+            getattr(self, f.name).extend(getattr(other, f.name))
 
 
 @dataclass(slots=True)

@@ -22,6 +22,10 @@ from pfp_service.world.units import UnitRecord, Units
 __all__ = ["UNIT_TIMERS", "Liveness"]
 
 UNIT_TIMERS = ("silence", "token", "push", "forget")  # the kinds of timer ``Liveness.due`` answers
+# pushes sent again in one ``apply`` at most: a wave's re-sends come due together (270 puts in one tick, 8 ms of
+# the loop), so the rest wait ``RESEND_LATER_S`` each time, a few ticks in all (BENCHMARKS.md, issue 32)
+RESENDS_PER_APPLY = 32
+RESEND_LATER_S = 0.002
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 
 
@@ -34,6 +38,7 @@ class Liveness:
         self.timers = timers
         self.pushes = 0  # directions sent without a report asking
         self.pushes_resent = 0
+        self._resending = (float("nan"), 0)  # the apply's ``now`` and the pushes sent again in it
 
     def counts(self) -> dict[str, int]:
         return {"pushes": self.pushes, "pushes_resent": self.pushes_resent}
@@ -77,6 +82,12 @@ class Liveness:
             if gone is not None and now - gone >= s.liveliness_debounce_s:
                 self._go_stale(rec, now, "liveliness token gone", out)
         elif kind == "push" and rec.push is not None and rec.push_tries > 0 and not rec.stale:
+            at, n = self._resending
+            n = n + 1 if at == now else 1
+            self._resending = (now, n)
+            if n > RESENDS_PER_APPLY:  # enough for this apply: the next one's, or the one after
+                self.timers.set(now + RESEND_LATER_S, "push", rec.id)
+                return
             rec.push_tries -= 1
             self.pushes_resent += 1
             out.directions.append(rec.push)

@@ -167,13 +167,18 @@ class World:
 
     # -- the one way in -----------------------------------------------------------
     def apply(
-        self, inputs: list[Input] | tuple[Input, ...], now: float, clock: Callable[[], float] | None = None
+        self,
+        inputs: list[Input] | tuple[Input, ...],
+        now: float,
+        clock: Callable[[], float] | None = None,
+        share: bool = True,
     ) -> Outputs:
         """Apply a batch of inputs at ``now``; return what must go out.
 
         ``clock``: the driver's (the node's loop passes its thread's CPU clock): a wave's share is then
         steered while the apply's budget lasts (``wave.Budget``), not ``WAVE_PER_TICK`` units; the world
-        reads it for that alone.
+        reads it for that alone.  ``share=False`` (timed only): none of an owed wave is drawn, so the
+        batch's directions go out before it (the node then applies nothing but the share).
         Its driver holds the cyclic collector off around the call (``gcpause``: the node's
         loop until the directions are out), not the world, which imports no collector.
         """
@@ -187,7 +192,7 @@ class World:
         if b.changes or b.zones:
             self._world_changed(b, WAVE_PER_TICK if budget is None else WAVE_CHUNK)
         first = len(b.out.directions)  # before: pushes sent again by the timers
-        self._directions(b, budget)
+        self._directions(b, budget if share else None, timed=budget is not None)
         pushed = b.out.directions[first:]
         if b.wave:  # a wave's directions are pushes once they carry their points, in the next apply
             pushed = [d for d in pushed if d.unit not in b.wave]
@@ -371,11 +376,11 @@ class World:
         b.shared = len(now) if later else 0
         b.dirty.update(r.id for r in now if r.position is not None and not r.stale)  # as ``_direct``
 
-    def _directions(self, b: Batch, budget: wave.Budget | None = None) -> None:
+    def _directions(self, b: Batch, budget: wave.Budget | None = None, timed: bool = False) -> None:
         """A fresh direction for each live unit of the batch, and a wave's share; one whose step fails loses its goal.
         Untimed (no ``clock``) the share is the next ``WAVE_PER_TICK`` owed, steered with the batch; timed, the
         batch's own units go first (their directions first out), then the share while the budget lasts (``_shares``)."""
-        out, timed = b.out, budget is not None
+        out, timed = b.out, timed or budget is not None  # timed with no budget: no share drawn
         drawing = not (
             timed or b.changes or b.zones
         )  # untimed, none in the change's own apply: ``split`` drew

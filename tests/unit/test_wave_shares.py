@@ -96,3 +96,19 @@ def test_with_look_ahead_the_points_follow_once_every_direction_is_out(shares):
     pointed = {d.unit: k for k, o in enumerate(outs) for d in o.directions if d.lookahead}
     assert set(pointed) == set(told)  # then each its points
     assert min(pointed.values()) >= last_direction  # no points while a direction of the wave is owed
+
+
+def test_a_timed_apply_without_its_share_answers_the_batch_alone_and_the_next_draws_it(shares):
+    """The node's loop: a tick's states first (``share=False``), then an apply of nothing but the share."""
+    w = _fleet()
+    clock = iter(range(10**6)).__next__  # a CPU clock that never runs out of budget within one chunk
+    w.apply([ThreatPut("c", THREAT)], 1.0, lambda: 0.0)
+    owed = w.wave_pending()
+    assert owed
+    bystander = f"u{N - 1:03d}"
+    alone = w.apply([StateReported(bystander, UnitState(position=(0.0, 3.0 * (N - 1) * (-1) ** (N - 1)), seq=2))],
+                    1.002, lambda: 0.0, share=False)  # fmt: skip
+    assert [d.unit for d in alone.directions] == [bystander]  # no unit of the wave with it
+    assert w.wave_pending()
+    share = w.apply([], 1.002, lambda: float(clock()))  # the budget spent after one chunk
+    assert share.directions and bystander not in {d.unit for d in share.directions}

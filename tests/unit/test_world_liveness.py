@@ -91,3 +91,22 @@ def test_a_push_is_sent_again_until_the_next_report_and_no_more_than_its_retries
     again = [x.unit for t in (1.25, 1.5, 1.75, 2.0) for x in _run(live, timers, recs, t).directions]
     assert again == ["a", "a"] and live.pushes_resent == 2
     assert live.counts() == {"pushes": 2, "pushes_resent": 2}
+
+
+def test_a_wave_s_re_sends_go_a_bounded_number_an_apply_and_every_one_goes():
+    from pfp_service.world.liveness import RESEND_LATER_S, RESENDS_PER_APPLY
+
+    live, recs, timers = _live(push_retry_s=0.25, push_retries=1, unit_stale_s=1e9)
+    n = 2 * RESENDS_PER_APPLY + 5
+    units = [f"u{i:03d}" for i in range(n)]
+    for u in units:
+        _report(live, recs, u, 0.0)
+    live.pushed([Direction(unit=u, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0)) for u in units], 1.0)
+    sent, t = [], 1.25
+    while len(sent) < n:
+        assert t < 1.3, "re-sends left behind"
+        out = [x.unit for x in _run(live, timers, recs, t).directions]
+        assert len(out) <= RESENDS_PER_APPLY  # the tick's puts bounded
+        sent += out
+        t += RESEND_LATER_S
+    assert sorted(sent) == units and live.pushes_resent == n  # each once, as its one retry
