@@ -247,7 +247,9 @@ class FleetIndex:
         """The rows of the units reported since the kept index, when those reports are all that changed
         of the units (``Reports.since``), the teams stand, and every reported unit was in the index (fresh,
         the same record); ``None`` otherwise (``_moved`` then looks at every record).  The positions the
-        kept index was built from are brought up to the reports', for ``_moved`` after it."""
+        kept index was built from are brought up to the reports', for ``_moved`` after it.  A
+        micro-optimisation (bench row: BENCHMARKS.md "The live ticks' work over the fleet"): a live tick
+        reports a few units, and ``_fresh`` and ``_moved`` walked the 1,000 records each ``apply``."""
         was, got = self._key, None
         if (
             isinstance(key, FleetKey)
