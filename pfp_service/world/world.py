@@ -87,10 +87,8 @@ class World:
         )
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
         self._zones = ZonePuts(s, self._rec, self._timers, self.limits, self._reject)  # zones' inputs
-        # the units reported, for the leads' tracks and dispersion's index to look at those alone (``Reports``)
-        self._reports = Reports(self._book.seen)
-        sight = link_sight(s.terrain)  # a robot's link: range and sight
-        self.teams = TeamBook(sight, self._book.seen, self._reports)
+        self._reports = Reports(self._book.seen)  # the units reported (``Reports``): looked at alone
+        self.teams = TeamBook(link_sight(s.terrain), self._book.seen, self._reports)  # a link's range, sight
         self._route = team_route.RouteKeys(self._rec, self.teams, s.terrain)  # a lead's, for its followers
         self._disp = dispersion.Dispersion(  # off unless enabled; a team's separation_m among its members
             s.dispersion, self._units, self._book.yielded, self.teams.dispersed, self.teams.where
