@@ -18,7 +18,10 @@ built from: then the kept arrays are taken again with the reported rows
 moved, and only the points are new, the k-d tree too once a unit has gone far
 from where it holds it (``_moved``; ``NeighbourIndex``'s ``moved_from``).  With a key
 in two parts (``FleetKey``: the units', the teams'), the same records under the
-same teams are not asked their teams again.
+same teams are not asked their teams again.  And when the units' book was
+told of reports alone since the kept index (``Reports``: the world notes each
+report, and the units' version moved by one a report), the reported rows
+are the moved ones: no pass over the fleet's records to find them.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord
 
-__all__ = ["TEAM_WIDEST", "Fleet", "FleetIndex", "FleetKey", "TeamOf", "fleet_index"]
+__all__ = ["TEAM_WIDEST", "Fleet", "FleetIndex", "FleetKey", "Reports", "TeamOf", "fleet_index"]
 
 # a team's separation_m is kept up to this many times the widest class's: every unit's neighbour search
 # reaches two of the widest separations, so a hostile 100 km would make every pair a neighbour
@@ -47,13 +50,63 @@ Fleet = tuple[NeighbourIndex, list[UnitRecord], dict[str, int]]
 _Built = tuple[list[UnitRecord], list[object], list[object], "list[tuple[str, float] | None] | None"]
 
 
+# the units' version and how many reports ``Reports`` had been told of, when a reader last looked
+Mark = tuple[object, int]
+REPORTS_KEPT = 4096  # reports noted at most: a reader further behind looks at every record
+
+
+class Reports:
+    """The records the world was told of by reports, in order (``World._state`` notes each after the units'
+    book took it), so that a reader of where the units are asks which units may have moved since it last
+    looked (``since``), not every record (``FleetIndex``, the team book's leads' tracks).
+
+    Args:
+        seen: the units' ``Units.version``, bumped once by each report (``Units.reported``) and by every
+            other write of a position, staleness, goal or record.
+    """
+
+    def __init__(self, seen: Callable[[], object]) -> None:
+        self._seen = seen
+        self._recs: list[UnitRecord] = []
+        self._dropped = 0  # noted and dropped from the front (``REPORTS_KEPT``)
+
+    def note(self, rec: UnitRecord) -> None:
+        """A report of ``rec`` that the units' book has taken."""
+        recs = self._recs
+        recs.append(rec)
+        if len(recs) > REPORTS_KEPT:
+            drop = len(recs) // 2
+            del recs[:drop]
+            self._dropped += drop
+
+    def mark(self) -> Mark:
+        """Where the units and the reports stand now, for ``since``."""
+        return self._seen(), self._dropped + len(self._recs)
+
+    def since(self, mark: Mark | None) -> list[UnitRecord] | None:
+        """The records reported since ``mark`` (in order, a unit as often as it reported), when those
+        reports are all that was written of the units meanwhile: the units' version moved by exactly one
+        a report.  ``None`` when anything else was (a goal, staleness, a record made or dropped, a report
+        that failed half-way), or the reports since were dropped: the reader looks at every record."""
+        if mark is None:
+            return None
+        version, at = mark
+        now, start = self._seen(), at - self._dropped
+        if start < 0 or not isinstance(version, int) or not isinstance(now, int):
+            return None
+        got = self._recs[start:]
+        return got if now - version == len(got) else None
+
+
 class FleetKey(NamedTuple):
     """A key in two parts for ``FleetIndex``'s ``version``: ``units`` changes whenever a unit's position,
     staleness, goal or record may have, ``teams`` whenever what ``team_of`` says of a unit may have
-    (``TeamBook.where``).  While ``teams`` stands, the same records are in the same teams."""
+    (``TeamBook.where``).  While ``teams`` stands, the same records are in the same teams.  ``reports``:
+    the world's, when it notes them (the same object in every key)."""
 
     units: object
     teams: object
+    reports: Reports | None = None
 
 
 def fleet_index(
@@ -148,6 +201,7 @@ class FleetIndex:
         self._key: object = None
         # what the kept index was built from: its rows' records, positions, goals and teams (``_moved``)
         self._from: _Built | None = None
+        self._mark: Mark | None = None  # where the reports stood then (``Reports.mark``)
 
     def __call__(self) -> Fleet:
         """The fleet's index as if new-built, its rows' records and each unit's row."""
@@ -156,6 +210,12 @@ class FleetIndex:
         if kept is not None and key is not None and key == self._key:
             kept[0].unasked()
             return kept
+        # reports alone since: their rows moved, without a pass over the fleet's records
+        reported = self._reported(key) if kept is not None else None
+        if kept is not None and reported is not None:
+            self._kept = _moved_index(kept, kept[1], reported)
+            self._key, self._mark = key, self._mark_of(key)
+            return self._kept
         self._kept, was = None, self._from  # a build that raises keeps nothing
         self._from = None
         if len(self._seps) > 2 * len(self._units) + 64:  # forgotten units' go (bounded by the fleet)
@@ -176,7 +236,48 @@ class FleetIndex:
         self._key = key
         if key is not None:
             self._from = (recs, [r.position for r in recs], [r.goal for r in recs], teams)
+            self._mark = self._mark_of(key)
         return self._kept
+
+    @staticmethod
+    def _mark_of(key: object) -> Mark | None:
+        return key.reports.mark() if isinstance(key, FleetKey) and key.reports is not None else None
+
+    def _reported(self, key: object) -> list[int] | None:
+        """The rows of the units reported since the kept index, when those reports are all that changed
+        of the units (``Reports.since``), the teams stand, and every reported unit was in the index (fresh,
+        the same record); ``None`` otherwise (``_moved`` then looks at every record).  The positions the
+        kept index was built from are brought up to the reports', for ``_moved`` after it.  A
+        micro-optimisation (bench row: BENCHMARKS.md "The live ticks' work over the fleet"): a live tick
+        reports a few units, and ``_fresh`` and ``_moved`` walked the 1,000 records each ``apply``."""
+        was, got = self._key, None
+        if (
+            isinstance(key, FleetKey)
+            and isinstance(was, FleetKey)
+            and key.reports is not None
+            and key.reports is was.reports
+            and key.teams == was.teams
+            and self._kept is not None
+            and self._from is not None
+        ):
+            got = key.reports.since(self._mark)
+        if got is None or self._kept is None or self._from is None:
+            return None
+        _, recs, row = self._kept
+        _, at, goals, _ = self._from
+        rows = []
+        for r in got:  # all looked at before any is taken: a unit not in the index is a build's
+            k = row.get(r.id)
+            if k is None or recs[k] is not r or r.stale or r.position is None or r.goal is not goals[k]:
+                return None
+            rows.append(k)
+        moved = []
+        for k in rows:
+            p = recs[k].position
+            if p is not at[k]:
+                at[k] = p
+                moved.append(k)
+        return moved
 
 
 def _teams_stand(was: object, key: object) -> bool:

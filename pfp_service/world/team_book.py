@@ -31,22 +31,28 @@ from pfp_service.world import team_place as places
 from pfp_service.world import team_steps as steps
 from pfp_service.world import teams as roles
 from pfp_service.world.events import TeamPut, TeamRemoved
-from pfp_service.world.neighbours import FleetKey
+from pfp_service.world.neighbours import FleetKey, Reports
+from pfp_service.world.team_tracks import MAX_TRACK_POINTS, LeadTracks
 from pfp_service.world.teams import Point, Polyline, Sight, Verdict
 from pfp_service.world.units import UnitRecord
 
 __all__ = ["MAX_TRACK_POINTS", "TeamBook"]
 
-MAX_TRACK_POINTS = 4096  # a lead's track kept at most: the part behind every follower goes first
-
 
 class TeamBook:
     """The teams in force, keyed by id, and what their roles need remembered: each lead's track."""
 
-    def __init__(self, sight: Sight | None = None, seen: Callable[[], object] | None = None) -> None:
+    def __init__(
+        self,
+        sight: Sight | None = None,
+        seen: Callable[[], object] | None = None,
+        reports: Reports | None = None,
+    ) -> None:
         self.sight = sight  # line of sight over the world's terrain, for the controllers' links (fixed)
         self.teams: dict[str, TeamUpdate] = {}
-        self.tracks: dict[str, list[Point]] = {}  # team -> its lead's positions since the team was put
+        # team -> its lead's positions since the team was put, looked at for the leads that moved (``reports``)
+        self._leads = LeadTracks(reports)
+        self.tracks = self._leads.tracks
         self._of: dict[str, list[str]] = {}  # unit -> the teams it is in
         self._checks = TeamIndex()  # the teams in force, as the checks across teams read them
         self.held: set[str] = set()  # units the last ``judge`` held (a hold is not a stop)
@@ -59,8 +65,6 @@ class TeamBook:
         self.said: dict[str, str] = {}  # unit -> what its roles last said of its direction, if anything
         self._placing: dict[str, Goal] = {}  # a team goal just put: each member's place, for the world to set
         self.sent: dict[str, Direction] = {}  # member -> its direction last judged (a preview's first move)
-        # team -> its lead's position ``_track`` last looked at: unmoved, a tick looks no further
-        self._looked: dict[str, object] = {}
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
@@ -74,7 +78,7 @@ class TeamBook:
         self._now: float | None = None  # the time of the ``judge`` under way
         self.version = 0  # bumped by every team put or removed: what a cache of ``dispersed`` keys on
         self._seen = seen  # the units' ``Units.version``: ``where``
-        self._tracked: object = None  # ``where`` when ``_track`` last looked
+        self._reports = reports  # the world's reports (``neighbours.Reports``), in ``where``'s key
 
     def apply(self, inp: TeamPut | TeamRemoved) -> tuple[InputError | None, set[str]]:
         """A team put or dissolved: why it is refused (``None``: taken), and the units whose roles changed."""
@@ -121,7 +125,7 @@ class TeamBook:
         self._checks = index
         self.teams[tid] = team
         self._columns, self._dispersed, self.version = {}, {}, self.version + 1
-        self._looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
+        self._leads.looked.pop(tid, None)  # its lead or corridor may be new: looked at afresh
         if old is None or old.lead != team.lead:
             self.tracks[tid] = []
         if old is None:
@@ -139,7 +143,7 @@ class TeamBook:
             return False
         self._columns, self._dispersed, self.version = {}, {}, self.version + 1
         self.tracks.pop(tid, None)
-        self._looked.pop(tid, None)
+        self._leads.looked.pop(tid, None)
         self._lines.pop(tid, None)
         self._checks = _index_of(self.teams)
         self._index()
@@ -216,7 +220,7 @@ class TeamBook:
         sight = sight if sight is not None else self.sight
         if not self.teams:
             return list(directions)
-        self._track(units)
+        self._leads.look(self.teams, self._of, units, self.where())
         held_before, self.held = self.held, set()
         self._waited, self.waits = self.waits, set()
         self._pulled, self.pulls = self.pulls, {}
@@ -243,44 +247,9 @@ class TeamBook:
 
     def where(self) -> FleetKey | None:
         """A key (units', teams') that changes whenever a unit's position, staleness, goal or record (``seen``) or
-        a team may have: while it stands, no lead has moved (``_track``) nor dispersion's index; ``None``: unknown."""
-        return FleetKey(self._seen(), self.version) if self._seen is not None else None
-
-    def _track(self, units: Mapping[str, UnitRecord]) -> None:
-        """Each lead's position joins its team's track once it has moved a sixteenth of the corridor (a chord cuts a bend by less than its reports do)."""
-        key = self.where()
-        if key is not None and key == self._tracked:
-            return  # no unit reported, went stale or was dropped, no team changed: no lead has moved
-        looked = self._looked
-        for tid, team in self.teams.items():
-            rec = units.get(team.lead) if team.lead is not None else None
-            if rec is None or rec.position is None or rec.stale or looked.get(tid) is rec.position:
-                continue  # no lead to track, or the very position looked at before (a report makes a new one)
-            looked[tid] = rec.position
-            track = self.tracks.setdefault(tid, [])
-            if not track or math.dist(track[-1], rec.position) >= max(team.corridor_m / 16.0, 0.1):
-                track.append(rec.position)
-            if len(track) > MAX_TRACK_POINTS:
-                self._trim(tid, team, units)
-        self._tracked = key
-
-    def _trim(self, tid: str, team: TeamUpdate, units: Mapping[str, UnitRecord]) -> None:
-        """Drop the track behind the rearmost follower; then every other point, if it is still too long."""
-        track = self.tracks[tid]
-        behind = [
-            roles.project(r.position, track)[0]
-            for f in team.follow
-            if (r := units.get(f)) is not None and r.position is not None
-        ]
-        s = min(behind, default=0.0)
-        start = 0
-        for i in range(1, len(track)):
-            s -= math.dist(track[i - 1], track[i])
-            if s < team.corridor_m:
-                break
-            start = i
-        track = track[start:]
-        self.tracks[tid] = track if len(track) <= MAX_TRACK_POINTS else track[::2] + track[-1:]
+        a team may have: while it stands, no lead has moved (``LeadTracks``) nor dispersion's index; ``None``: unknown.
+        With the world's ``Reports`` in it, its readers ask which units reported since they last looked."""
+        return FleetKey(self._seen(), self.version, self._reports) if self._seen is not None else None
 
     def _line(self, tid: str) -> Polyline:
         """The team's track as a polyline, made once for all its followers and grown with the track."""

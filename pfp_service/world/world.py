@@ -41,6 +41,7 @@ from pfp_service.world.events import Batch, Input, Outputs, UnitView, WorldSetti
 from pfp_service.world.limits import Limits
 from pfp_service.world.liveness import UNIT_TIMERS, Liveness
 from pfp_service.world.lookahead import Owed, owed_share
+from pfp_service.world.neighbours import Reports
 from pfp_service.world.snapshot import page as snapshot_page
 from pfp_service.world.team_book import TeamBook
 from pfp_service.world.terrain import link_sight
@@ -86,7 +87,8 @@ class World:
         )
         self._puts = ThreatPuts(s, self._rec, self._timers, self.limits, self._reject)  # threats' inputs
         self._zones = ZonePuts(s, self._rec, self._timers, self.limits, self._reject)  # zones' inputs
-        self.teams = TeamBook(link_sight(s.terrain), self._book.seen)  # a robot's link: range and sight
+        self._reports = Reports(self._book.seen)  # the units reported (``Reports``): looked at alone
+        self.teams = TeamBook(link_sight(s.terrain), self._book.seen, self._reports)  # a link's range, sight
         self._route = team_route.RouteKeys(self._rec, self.teams, s.terrain)  # a lead's, for its followers
         self._disp = dispersion.Dispersion(  # off unless enabled; a team's separation_m among its members
             s.dispersion, self._units, self._book.yielded, self.teams.dispersed, self.teams.where
@@ -281,6 +283,7 @@ class World:
         if rec is None:
             return
         self._live.reported(rec, state, b.now)
+        self._reports.note(rec)  # taken: the leads' tracks and dispersion's index look at it (``Reports``)
         if rec.owned:  # else another planner guides it; its report keeps it fresh here too
             if rec.goal is not None and rec.stepper is None:
                 self._start(rec, b)

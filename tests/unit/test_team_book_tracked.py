@@ -63,10 +63,10 @@ def test_a_keyed_book_tracks_as_one_that_looks_every_judge(seed: int) -> None:
                 # else: nothing written, as between a wave's shares
             except PhaseError:
                 pass
-            before = keyed._tracked
+            before = keyed._leads.key
             keyed.judge([], book.records)
             plain.judge([], book.records)
-            skipped += before is not None and before == keyed._tracked
+            skipped += before is not None and before == keyed._leads.key
             assert keyed.tracks == plain.tracks
             longest = max([longest, *map(len, plain.tracks.values())])
     except AssertionError:
