@@ -106,16 +106,18 @@ class Locks:
             self._best[unit] = (distance, now)
             self._afresh.discard(unit)
 
-    def progressing(self, unit: str, now: float) -> bool:
+    def progressing(self, unit: str, now: float, strict: bool = False) -> bool:
         """Whether the unit came nearer its goal within the last ``deadlock_s``.
 
-        A unit counted afresh (``forget``) has not, until it does: two units stuck against each other,
-        each found stuck a few ticks after the other and counted afresh, each saw the other as a queue
-        that moves, and neither deadlock was ever found (the gaps crowd's seed 2, issue 33: two units
-        crossing, each cut to nothing by the other, from 885 s until the run ended).
+        ``strict``: a unit counted afresh (``forget``) has not, until it does.  Two units stuck against
+        each other, each found stuck a few ticks after the other and counted afresh, each saw the other
+        as a queue that moves, and neither deadlock was ever found (the gaps crowd's seed 2, issue 33:
+        two units crossing, each cut to nothing by the other, from 885 s until the run ended).
         """
         best = self._best.get(unit)
-        return best is not None and unit not in self._afresh and now - best[1] < self.settings.deadlock_s
+        if best is None or (strict and unit in self._afresh):
+            return False
+        return now - best[1] < self.settings.deadlock_s
 
     def stuck_for(self, unit: str, now: float) -> float:
         """How long the unit has come no nearer its goal, in seconds (0 when unknown)."""
