@@ -86,7 +86,6 @@ class Locks:
     def __init__(self, settings: DispersionSettings) -> None:
         self.settings = settings
         self._best: dict[str, tuple[float, float]] = {}  # unit -> (its best distance to goal, since when)
-        self._afresh: set[str] = set()  # units counted afresh (``forget``) that have not come nearer since
         self._grace: dict[str, float] = {}  # unit -> until when it yields to no one
         self._pairs: dict[tuple[str, str], tuple[float, str]] = {}  # pair -> (when it locked, who backed off)
 
@@ -100,24 +99,13 @@ class Locks:
             self._best.pop(unit, None)
             return
         best = self._best.get(unit)
-        if best is None:
+        if best is None or distance < best[0] - PROGRESS * sep_m:
             self._best[unit] = (distance, now)
-        elif distance < best[0] - PROGRESS * sep_m:
-            self._best[unit] = (distance, now)
-            self._afresh.discard(unit)
 
-    def progressing(self, unit: str, now: float, strict: bool = False) -> bool:
-        """Whether the unit came nearer its goal within the last ``deadlock_s``.
-
-        ``strict``: a unit counted afresh (``forget``) has not, until it does.  Two units stuck against
-        each other, each found stuck a few ticks after the other and counted afresh, each saw the other
-        as a queue that moves, and neither deadlock was ever found (the gaps crowd's seed 2, issue 33:
-        two units crossing, each cut to nothing by the other, from 885 s until the run ended).
-        """
+    def progressing(self, unit: str, now: float) -> bool:
+        """Whether the unit came nearer its goal within the last ``deadlock_s``."""
         best = self._best.get(unit)
-        if best is None or (strict and unit in self._afresh):
-            return False
-        return now - best[1] < self.settings.deadlock_s
+        return best is not None and now - best[1] < self.settings.deadlock_s
 
     def stuck_for(self, unit: str, now: float) -> float:
         """How long the unit has come no nearer its goal, in seconds (0 when unknown)."""
@@ -127,7 +115,6 @@ class Locks:
     def forget(self, unit: str) -> None:
         """Count the unit's progress afresh from its next distance (a deadlock found, or resolved)."""
         self._best.pop(unit, None)
-        self._afresh.add(unit)
 
     def resolved(self, unit: str, now: float) -> None:
         """The unit's resolution ended: grace for ``deadlock_s``, and its progress counted afresh."""
@@ -159,7 +146,6 @@ class Locks:
     def keep(self, units: Container[str]) -> None:
         """Forget every unit not in ``units`` (the world forgot them): the memory stays bounded."""
         self._best = {u: b for u, b in self._best.items() if u in units}
-        self._afresh = {u for u in self._afresh if u in units}
         self._grace = {u: g for u, g in self._grace.items() if u in units}
 
 

@@ -274,20 +274,19 @@ class Dispersion:
         ahead = (rel @ np.array(self._towards(i, d.vector))) > 0.0
         j = int(jj[int(np.where(ahead, gaps, gaps + 1e9).argmin())])
         self._locks.forget(d.unit)
-        if self._queue(i, j, now, strict=True):  # behind a unit that comes nearer its goal: a queue
+        if self._queue(i, j, now):  # behind a unit that comes nearer its goal: a queue
             return None
         return self._lock(i, j, stuck, now)
 
-    def _queue(self, i: int, j: int, now: float, strict: bool = False) -> bool:
+    def _queue(self, i: int, j: int, now: float) -> bool:
         """Whether the unit at row ``i``, held or stopped by the one at ``j``, is in a queue that moves.
 
         It is when ``j`` comes nearer its goal, unless that goal lies straight
         through ``i`` (``STRAIGHT_AT``): head on, on one line, the push has no
         side to it, and ``j``'s progress is ``i`` pushed back before it for
-        as long as ``j`` goes.  ``strict`` (a unit found stuck): ``j`` counted
-        afresh has not come nearer until it does (``Locks.progressing``).
+        as long as ``j`` goes.
         """
-        if not self._locks.progressing(self._recs[j].id, now, strict):
+        if not self._locks.progressing(self._recs[j].id, now):
             return False
         index = self._index
         assert index is not None
