@@ -194,7 +194,7 @@ class World:
         if b.changes or b.zones:
             self._world_changed(b, WAVE_PER_TICK if budget is None else WAVE_CHUNK)
         first = len(b.out.directions)  # before: pushes sent again by the timers
-        self._directions(b, budget if share else None, timed=budget is not None)
+        self._directions(b, budget, share)
         pushed = b.out.directions[first:]
         if b.wave:  # a wave's directions are pushes once they carry their points, in the next apply
             pushed = [d for d in pushed if d.unit not in b.wave]
@@ -379,11 +379,11 @@ class World:
         b.shared = len(now) if later else 0
         b.dirty.update(r.id for r in now if r.position is not None and not r.stale)  # as ``_direct``
 
-    def _directions(self, b: Batch, budget: wave.Budget | None = None, timed: bool = False) -> None:
+    def _directions(self, b: Batch, budget: wave.Budget | None = None, share: bool = True) -> None:
         """A fresh direction for each live unit of the batch, and a wave's share; one whose step fails loses its goal.
         Untimed (no ``clock``) the share is the next ``WAVE_PER_TICK`` owed, steered with the batch; timed, the
         batch's own units go first (their directions first out), then the share while the budget lasts (``_shares``)."""
-        out, timed = b.out, timed or budget is not None  # timed with no budget: no share drawn
+        out, timed = b.out, budget is not None
         drawing = not (
             timed or b.changes or b.zones
         )  # untimed, none in the change's own apply: ``split`` drew
@@ -400,7 +400,7 @@ class World:
         big = (b.changes or b.zones) and (len(guided) > WAVE_FIRST or self._wave)  # a wave, large or owed
         if guided or later:
             self._steer(b, guided, later, bool(drew or big), sent, failed)
-        if budget is not None:
+        if budget is not None and share:  # ``share=False``: the driver applies the share on its own
             self._shares(b, budget, sent, failed)
         if len(out.directions) == first and not failed:  # none steered: the roles are not judged
             return
