@@ -34,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -56,11 +57,12 @@ def warm_wide(base: WorldSettings, terrain: bool = True) -> None:
 
     settings = dataclasses.replace(base, deliberation="inline", bounds=None, terrain=None)
     world = World(settings)
-    world.apply(_crowd(), 0.0)
-    for k in range(1, 4):  # the trapped pair moves a little: their routes are walked, and shared
-        world.apply(
-            [StateReported(f"c{i}", UnitState(position=(0.01 * k, 2.0 * i - 1.0))) for i in (0, 1)], k
-        )
+    with _tight_routes():
+        world.apply(_crowd(), 0.0)
+        for k in range(1, 4):  # the trapped pair moves a little: their routes are walked, and shared
+            world.apply(
+                [StateReported(f"c{i}", UnitState(position=(0.01 * k, 2.0 * i - 1.0))) for i in (0, 1)], k
+            )
     _parallel(world.field.packed, world.field.zones)
     _shortcut(world.field.threats)
     # a batch's unit in plain descent among zones, its gradient given (``advise_many``): judged from Python
@@ -69,6 +71,24 @@ def warm_wide(base: WorldSettings, terrain: bool = True) -> None:
     _team()
     if terrain:
         _terrain(settings)
+
+
+@contextlib.contextmanager
+def _tight_routes() -> Iterator[None]:
+    """The shared route cache without room round a shared goal's grid while the warm-up's crowd searches.
+
+    The kernels are the same on a tight grid (``grid._edges``, ``cores._raster``); the room and the finer
+    cell of a shared goal's grid (``routes.RouteCache._shape``) made the crowd's 63,210 nodes, 20 MB held
+    while the warm-up ran and the process's peak with them.  Tight, its grid holds 5,656 nodes (1.8 MB).
+    A planner's own searches run in its deliberation workers, which share goals with room as before.
+    """
+    from pfp_service.core.routes import ROUTES
+
+    room, ROUTES.room = ROUTES.room, 0.0
+    try:
+        yield
+    finally:
+        ROUTES.room = room
 
 
 def forget_warm_worlds() -> None:
@@ -104,8 +124,9 @@ def _team() -> None:
 def _crowd() -> list[Input]:
     """Threats on a ring far off, a cup of zone round two units whose goal lies past its bottom.
 
-    The threats' sigmas set the shared route grid's cell: at 24 / 16 m it holds 63,210 nodes (77,106 at
-    6 / 4 m), the same kernels for a smaller peak while the warm-up runs."""
+    The threats' sigmas set the route grid's cell: at 24 / 16 m it holds 5,656 nodes searched tight
+    (``_tight_routes``; 63,210 with a shared goal's room, 77,106 at 6 / 4 m), the same kernels for a smaller
+    peak while the warm-up runs."""
     inputs: list[Input] = []
     for j in range(CROWD_THREATS):
         a = 2.0 * math.pi * j / CROWD_THREATS

@@ -29,3 +29,22 @@ def test_warm_once_warms_a_planner_once(monkeypatch):
     assert len(wide) == 1
     previews.warm_once(WorldSettings(lookahead=6))  # another planner's parameters: warmed for them
     assert len(wide) == 2
+
+
+def test_the_warm_up_s_crowd_searches_a_tight_grid_and_leaves_the_cache_s_room_as_it_was(monkeypatch):
+    from pfp_service.core import routes
+
+    built: list[int] = []
+    build = routes.RouteCache._build
+
+    def spy(self, ask, slot, shared):  # type: ignore[no-untyped-def]
+        entry = build(self, ask, slot, shared)
+        built.append(len(entry.grid.nodes))
+        return entry
+
+    monkeypatch.setattr(routes.RouteCache, "_build", spy)
+    room = ROUTES.room
+    previews.warm_up(WorldSettings(), terrain=False)
+    assert built  # the trapped pair's shared goal was searched ...
+    assert max(built) < 10_000  # ... on the asked box and cell (63,210 nodes with a shared goal's room)
+    assert ROUTES.room == room == routes.ROOM
