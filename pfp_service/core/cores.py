@@ -184,6 +184,33 @@ class Cores:
             out |= self.zones.contains(pts, self.zone_margin_m)
         return out
 
+    def first_clear(self, rays: np.ndarray, chunk: int = 64) -> np.ndarray:
+        """Per ray of ``(m, n, 2)`` points, the index of its first point ``inside`` holds not (``n``: none).
+
+        What ``argmin`` over ``inside`` of every point gives, but only the rays still undecided are
+        measured, ``chunk`` points of each at a time, and the zones (a
+        terrain's hundreds of slope barriers, tested edge by edge) only at points in no core: a ray is
+        decided at its first clear point, and nothing beyond it is asked.  (Every point of 72 rays of
+        2,000 measured took 0.5 s a unit inside a wide threat's core over the Jacksboro DEM's barriers.)
+        """
+        m, n = rays.shape[0], rays.shape[1]
+        out = np.full(m, n, dtype=np.int64)
+        undecided = np.arange(m)
+        a = 0
+        while a < n and len(undecided):
+            b = min(a + chunk, n)
+            asked = np.ascontiguousarray(rays[undecided, a:b], dtype=np.float64).reshape(-1, 2)
+            clear = ~self.inside_cores(asked)
+            if self.zones:
+                free = np.flatnonzero(clear)
+                clear[free] = ~self.zones.contains(asked[free], self.zone_margin_m)
+            clear = clear.reshape(len(undecided), b - a)
+            done = clear.any(axis=1)
+            out[undecided[done]] = a + np.argmax(clear[done], axis=1)
+            undecided = undecided[~done]
+            a = b
+        return out
+
     def inside_cores(self, points: np.ndarray) -> np.ndarray:
         """``inside`` for the threat cores alone (zones are tested exactly, segment by segment)."""
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)

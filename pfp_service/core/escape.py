@@ -281,8 +281,7 @@ class Escaper:
         angles = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
         d = np.arange(1, n + 1) * (reach / n)
         rays = np.stack([x + np.sin(angles)[:, None] * d, y + np.cos(angles)[:, None] * d], axis=-1)
-        blocked = cores.inside(rays.reshape(-1, 2)).reshape(len(angles), n)
-        out = np.where(blocked.all(axis=1), n, np.argmin(blocked, axis=1))
+        out = cores.first_clear(rays)  # per ray, its first point in no core and no zone (n: none)
         k = int(np.argmin(out))
         if out[k] >= n:
             return None  # no straight way out within reach: descend as usual
