@@ -188,10 +188,10 @@ class Cores:
         """Per ray of ``(m, n, 2)`` points, the index of its first point ``inside`` holds not (``n``: none).
 
         What ``argmin`` over ``inside`` of every point gives, but only the rays still undecided are
-        measured, ``chunk`` points of each at a time, and the zones (a
-        terrain's hundreds of slope barriers, tested edge by edge) only at points in no core: a ray is
-        decided at its first clear point, and nothing beyond it is asked.  (Every point of 72 rays of
-        2,000 measured took 0.5 s a unit inside a wide threat's core over the Jacksboro DEM's barriers.)
+        measured, ``chunk`` points of each at a time, and the zones (a terrain's hundreds of slope
+        barriers, tested edge by edge) only at points in no core: a ray is decided at its first clear
+        point, and nothing beyond it is asked.  (Every point of 72 rays of 2,000 measured took 0.5 s a
+        unit inside a wide threat's core over the Jacksboro DEM's barriers; BENCHMARKS.md.)
         """
         m, n = rays.shape[0], rays.shape[1]
         out = np.full(m, n, dtype=np.int64)

@@ -80,7 +80,8 @@ def _tight_routes() -> Iterator[None]:
     The kernels are the same on a tight grid (``grid._edges``, ``cores._raster``); the room and the finer
     cell of a shared goal's grid (``routes.RouteCache._shape``) made the crowd's 63,210 nodes, 20 MB held
     while the warm-up ran and the process's peak with them.  Tight, its grid holds 5,656 nodes (1.8 MB).
-    A planner's own searches run in its deliberation workers, which share goals with room as before.
+    A planner's own searches run in its deliberation workers, which share goals with room as before; a
+    process warms before it plans, so no search of its own sees the room at nothing.
     """
     from pfp_service.core.routes import ROUTES
 
