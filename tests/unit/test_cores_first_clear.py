@@ -44,15 +44,15 @@ def _rays(x: float, y: float, reach: float, n: int, m: int = 72) -> np.ndarray:
     return np.stack([x + np.sin(angles)[:, None] * d, y + np.cos(angles)[:, None] * d], axis=-1)
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("zones", [0, 5, 60])
 @pytest.mark.parametrize("fraction", [None, 0.5])
 def test_the_first_clear_point_of_each_ray_is_the_one_every_point_s_inside_gives(seed, zones, fraction):
     field = _field(seed, zones)
     cores = Cores.of(field) if fraction is None else Cores.of(field, fraction)
     rng = np.random.default_rng(100 + seed)
-    for x, y in rng.uniform(-250.0, 250.0, (4, 2)):
-        for n, chunk in ((400, 64), (37, 5), (1, 64)):
+    for x, y in rng.uniform(-250.0, 250.0, (3, 2)):
+        for n, chunk in ((300, 64), (37, 5), (1, 64)):
             rays = _rays(float(x), float(y), 500.0, n)
             blocked = cores.inside(rays.reshape(-1, 2)).reshape(rays.shape[0], n)
             want = np.where(blocked.all(axis=1), n, np.argmin(blocked, axis=1))
