@@ -110,11 +110,11 @@ def _pushed(grad: np.ndarray, norm: np.ndarray, push: np.ndarray) -> np.ndarray:
     A pushed descent never turns back, as a route's heading does not (``_turn``): pushed back by a
     neighbour between it and its goal (within 4/3 separations the push outweighs the pull), a unit
     was herded away from its goal for as long as that neighbour came on, or stepped back and forth
-    where push and pull balanced, until a deadlock was found (the gaps crowd's seeds 21 and 23, issue
-    33: 56 and 85 s from a deadlock's start to cleared); it now goes round the neighbour.  Head on (no
-    part across the push), the sum stands.
+    where push and pull balanced, until a deadlock was found (the gaps crowd's seed 21, issue 33:
+    ``u0170`` herded from 119 to 205 m off its goal, 86 s from the deadlock's start to cleared); it now
+    goes round the neighbour.  Head on (no part across the push), the sum stands.
     """
-    total = grad + norm * push
+    total: np.ndarray = grad + norm * push
     back = np.flatnonzero((total * grad).sum(axis=1) < 0.0)
     if not len(back):
         return total
