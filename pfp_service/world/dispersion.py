@@ -31,8 +31,9 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    separations of another (its separation alone from a unit giving way to
    it); its reach is cut at that disc's edge (``keep_apart``).  A back-off
    cut to nothing turns to a free way, and a unit holding still in the way
-   of the unit it yields to makes room.  Two units going round units at
-   rest, each cut to nothing by the other, are one deadlock (``_facing_lock``).
+   of the unit it yields to makes room.  Two units each cut to nothing by
+   the other for ``deadlock_s`` (two going round units at rest: at once)
+   are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -204,7 +205,7 @@ class Dispersion:
 
     def _short(self, directions: list[Direction], moving: list[int], now: float) -> list[Event]:
         """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations
-        (``keep_apart``); two going round units at rest that stop each other are one deadlock (``_facing_lock``)."""
+        (``keep_apart``); two that stop each other are one deadlock (``_facing_lock``)."""
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
@@ -231,16 +232,23 @@ class Dispersion:
         return events
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
-        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: when both are going
-        round units at rest, their two resolutions are one deadlock (``deadlocks.Facing``), found once.
+        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: for ``deadlock_s``,
+        whatever they are doing, one deadlock (``deadlocks.Facing``), found once; when both are going
+        round units at rest, their two resolutions are one at once.
 
         The one that backs off (right of way, ``Locks.who_backs_off``) gives
         way, backing off from the other for ``backoff_s``; the other passes.
+        Found stuck (``_stalled``) a few ticks apart, each is counted
+        afresh and the other sees it as a queue that moves: the cut sees
+        the standstill as it is.
         """
         s, index = self.settings, self._index
         assert index is not None
-        live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.round and h.until > now]
-        if len(live) < 2 or any(h.other in (a, b) for h in live):  # not two going round, or this one's
+        live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.until > now]
+        if any(h.other in (a, b) for h in live):  # this one's, in resolution already
+            return None
+        rounds = len(live) == 2 and all(h.round for h in live)
+        if not rounds and held_s < s.deadlock_s:
             return None
         first = s.manned_first
         ra, rb = self._units[a], self._units[b]
@@ -249,7 +257,9 @@ class Dispersion:
         g, p = self._row[giver], self._row[passer]
         gap = float(np.hypot(*(index.points[g] - index.points[p])))
         self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
-        return deadlocks.event(giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True)
+        return deadlocks.event(
+            giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True, rounds=rounds
+        )
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
