@@ -210,6 +210,7 @@ class Dispersion:
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
         if not go:
+            self._facing.pairs([], now)  # no unit stopped in this apply
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
         gives_way = keep_apart.giving_way(index, self._row, self._held, directions, moving)
@@ -265,8 +266,12 @@ class Dispersion:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
 
         Two units pushing each other to a standstill (head on, or one against
-        a unit at rest) are a deadlock too, with the nearest unit ahead (on
-        the goal's side; else the nearest): ``_lock`` says who resolves it.
+        a unit at rest) are a deadlock too, with the unit whose disc cut it to
+        nothing in the last ``apply`` (``Facing.stopping``), else the nearest
+        unit ahead (on the goal's side; else the nearest): ``_lock`` says who
+        resolves it.  The nearest ahead may only stand beside it: stopped by
+        a unit at rest, a unit took one just beside it, itself found stuck
+        and so counted afresh, for a queue that moves, and stood for good.
         """
         index = self._index
         assert index is not None
@@ -276,7 +281,8 @@ class Dispersion:
         stuck = self._locks.stuck_for(d.unit, now)
         if stuck < self.settings.deadlock_s:
             return None
-        _, jj = index.near(np.array([i]))
+        stops = [self._row[u] for u in self._facing.stopping(d.unit) if u in self._row]
+        jj = np.array(stops, dtype=np.intp) if stops else index.near(np.array([i]))[1]
         if not len(jj):
             return None
         rel = index.points[jj] - index.points[i]
