@@ -20,9 +20,9 @@ other passes.  Two going round units at rest are one at the first tick:
 towards each other in the one lane between the units at rest, they stopped
 each other for as long as their rounds lasted, then found their units at
 rest again and went round them again, for ever.  A unit found stuck
-(``dispersion``'s ``_stalled``) is stuck against the unit whose disc
-stopped it (``Facing.stopping``), when one did, not the nearest unit ahead,
-which may merely stand beside it.
+(``dispersion``'s ``_stalled``) is stuck against the unit at rest whose
+disc stopped it (``Facing.stopping``), when one did, not the nearest unit
+ahead, which may merely stand beside it.
 
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation

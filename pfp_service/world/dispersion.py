@@ -73,6 +73,7 @@ AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
 STRAIGHT_AT = math.cos(math.radians(1.0))
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
+_GOING = (*_MOVING, DirectionStatus.YIELDING)  # a unit in none of these is at rest (``_lock``)
 
 
 def priority(rec: UnitRecord, manned_first: bool) -> tuple[int, str]:
@@ -266,12 +267,14 @@ class Dispersion:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
 
         Two units pushing each other to a standstill (head on, or one against
-        a unit at rest) are a deadlock too, with the unit whose disc cut it to
-        nothing in the last ``apply`` (``Facing.stopping``), else the nearest
-        unit ahead (on the goal's side; else the nearest): ``_lock`` says who
-        resolves it.  The nearest ahead may only stand beside it: stopped by
-        a unit at rest, a unit took one just beside it, itself found stuck
-        and so counted afresh, for a queue that moves, and stood for good.
+        a unit at rest) are a deadlock too, with the nearest unit at rest
+        whose disc cut it to nothing in the last ``apply``
+        (``Facing.stopping``), else the nearest unit ahead (on the goal's
+        side; else the nearest): ``_lock`` says who resolves it.  A unit at
+        rest never draws away, so waiting is no way past it; the nearest
+        ahead may only stand beside it: stopped by a unit at rest, a unit
+        took one just beside it, itself found stuck and so counted afresh,
+        for a queue that moves, and stood for good.
         """
         index = self._index
         assert index is not None
@@ -281,7 +284,11 @@ class Dispersion:
         stuck = self._locks.stuck_for(d.unit, now)
         if stuck < self.settings.deadlock_s:
             return None
-        stops = [self._row[u] for u in self._facing.stopping(d.unit) if u in self._row]
+        stops = [
+            self._row[u]
+            for u in self._facing.stopping(d.unit)
+            if u in self._row and self._recs[self._row[u]].last_status not in _GOING
+        ]
         jj = np.array(stops, dtype=np.intp) if stops else index.near(np.array([i]))[1]
         if not len(jj):
             return None
