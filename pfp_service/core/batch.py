@@ -116,10 +116,11 @@ def _pushed(grad: np.ndarray, norm: np.ndarray, push: np.ndarray) -> np.ndarray:
 
     Where the push runs within ``SIDE_CLEAR`` (15 degrees) of the descent's line, the descent's side
     is no side: it flipped with each 5 m step (a cross product near 0), and the unit stepped across
-    and back at every report (the gaps crowd's seed 12, issue 33: ``u0110``, 70 m from ``u0131``, which
-    held 6 s for it and backed off from it 40 m off its own goal, 41 s to cleared); there it keeps to
-    the right of its descent, as two vessels meeting head on each alter to starboard (COLREGS, rule
-    14): two units nearly head on pass each other, and one going round another keeps to one side.
+    and back at every report (the gaps crowd's seed 12 with the rules before, issue 33: ``u0110``,
+    75 m from ``u0131``, which held 6 s for it and backed off from it 40 m off its own goal, 41 s to
+    cleared); there it keeps to the right of its descent, as two vessels meeting head on each alter
+    to starboard (COLREGS, rule 14): two units nearly head on pass each other, and one going round
+    another keeps to one side.
     """
     total: np.ndarray = grad + norm * push
     back = np.flatnonzero((total * grad).sum(axis=1) < 0.0)

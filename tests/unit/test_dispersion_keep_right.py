@@ -1,10 +1,10 @@
-"""A pushed descent with no clear side keeps to its right (issue 33, the gaps crowd's seeds 5 and 12).
+"""A pushed descent with no clear side keeps to its right (issue 33, the gaps crowd's seed 12).
 
 A pushed descent that would turn back goes square across the push on the side it was going
 (``core.batch._pushed``).  Where the push runs within ``SIDE_CLEAR`` (15 degrees) of the descent's
 line, that side is the sign of a cross product near 0: it flipped with each 5 m step, and the unit
 stepped across and back at every report while the units round it waited for it (seed 12's ``u0110``
-70 m from ``u0131``, which held 6 s for it and backed off from it 40 m off its own goal: 41 s to
+75 m from ``u0131``, which held 6 s for it and backed off from it 40 m off its own goal: 41 s to
 cleared).  There it now keeps to the right of its descent, as vessels meeting head on each alter
 to starboard; outside that band, and exactly head on, as before.
 """
