@@ -113,30 +113,16 @@ def _pushed(grad: np.ndarray, norm: np.ndarray, push: np.ndarray) -> np.ndarray:
     where push and pull balanced, until a deadlock was found (the gaps crowd's seed 21, issue 33:
     ``u0170`` herded from 119 to 205 m off its goal, 86 s from the deadlock's start to cleared); it now
     goes round the neighbour.  Head on (no part across the push), the sum stands.
-
-    Where the push runs within ``SIDE_CLEAR`` (15 degrees) of the descent's line, the descent's side
-    is no side: it flipped with each 5 m step (a cross product near 0), and the unit stepped across
-    and back at every report (the gaps crowd's seed 12 with the rules before, issue 33: ``u0110``,
-    75 m from ``u0131``, which held 6 s for it and backed off from it 40 m off its own goal, 41 s to
-    cleared); there it keeps to the right of its descent, as two vessels meeting head on each alter
-    to starboard (COLREGS, rule 14): two units nearly head on pass each other, and one going round
-    another keeps to one side.
     """
     total: np.ndarray = grad + norm * push
     back = np.flatnonzero((total * grad).sum(axis=1) < 0.0)
     if not len(back):
         return total
-    g = grad[back]
     p = push[back] / np.hypot(push[back, 0], push[back, 1])[:, None]
-    across = g - (g * p).sum(axis=1)[:, None] * p
+    across = grad[back] - (grad[back] * p).sum(axis=1)[:, None] * p
     length = np.hypot(across[:, 0], across[:, 1])[:, None]
     side = length[:, 0] > 1e-9 * norm[back, 0]
-    way = across / np.where(length > 0.0, length, 1.0)
-    right = np.stack([p[:, 1], -p[:, 0]], axis=1)  # square to the push, the descent's right: (gy, -gx)'s side
-    right[(right[:, 0] * g[:, 1] - right[:, 1] * g[:, 0]) < 0.0] *= -1.0
-    unclear = length[:, 0] <= SIDE_CLEAR * norm[back, 0]
-    way[unclear] = right[unclear]
-    total[back[side]] = way[side] * norm[back[side]]
+    total[back[side]] = across[side] / length[side] * norm[back[side]]
     return total
 
 
