@@ -1,4 +1,4 @@
-"""A unit found stuck is stuck against the unit whose disc stopped it (issue 33, the gaps crowd's seed 2).
+"""A unit found stuck is stuck against the unit at rest whose disc stopped it (issue 33, gaps seed 2).
 
 With the cut moving a neighbour going the unit's way and a pushed descent never turning back (issue
 33's rules 1 and 2), seed 2's ``u0102`` and ``u0105`` stood from 885 s until the run ended (198/200):
@@ -6,8 +6,8 @@ With the cut moving a neighbour going the unit's way and a pushed descent never 
 stuck (``_stalled``) against the nearest unit ahead, ``u0105`` just beside it, which was coming nearer
 its goal or had just been counted afresh: a queue that moves, so no deadlock; found stuck in turn 3 s
 later, ``u0105`` (stopped by ``u0102``'s disc) took ``u0102``, just counted afresh, for a queue too,
-and so on every 7 s.  Now a unit found stuck is stuck against the unit whose disc cut it to nothing
-(``deadlocks.Facing.stopping``): ``u0102`` goes round ``u0124``, and both arrive.
+and so on every 7 s.  Now a unit found stuck is stuck against the unit at rest whose disc cut it to
+nothing (``deadlocks.Facing.stopping``): ``u0102`` goes round ``u0124``, and both arrive.
 """
 
 from __future__ import annotations
