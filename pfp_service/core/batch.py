@@ -44,7 +44,8 @@ def advise_many(
         push: ``(N, 2)`` an extra gradient per unit in units of its field's
             slope where it stands (dispersion, ``core.dispersion``): row i's
             descent (plain, or a tracked descent) follows ``grad f + |grad f|
-            push[i]``.  A unit steered otherwise (another route, a keep-out
+            push[i]`` (square across the push where that would turn it
+            back, ``_pushed``).  A unit steered otherwise (another route, a keep-out
             zone) turns its heading ``h`` to ``h - push[i]`` (normalised), the
             same sum with the heading as the field's slope, for one step.
 
@@ -62,7 +63,7 @@ def advise_many(
         kernels.descent_many(field.packed, pts, goals, gains, out)
     if push is not None:  # only rows with a neighbour near: a unit alone is advised as without dispersion
         near = push.any(axis=1)
-        out[near, :2] += out[near, 3:4] * push[near]
+        out[near, :2] = _pushed(out[near, :2], out[near, 3:4], push[near])
         out[near, 3] = np.hypot(out[near, 0], out[near, 1])
     rows = out.tolist()
     coords = pts.tolist()
@@ -99,6 +100,30 @@ def advise_many(
     if push is not None:
         _turn(result, steppers, coords, push, alone)
     return result
+
+
+def _pushed(grad: np.ndarray, norm: np.ndarray, push: np.ndarray) -> np.ndarray:
+    """Each unit's gradient ``grad`` (``(M, 2)``, of length ``norm``) with its ``push``: ``grad + norm push``,
+    or where that would turn its descent back (against the unpushed one), ``grad`` less its part along
+    the push, at its length: square across the push, on the side the unit was going.
+
+    A pushed descent never turns back, as a route's heading does not (``_turn``): pushed back by a
+    neighbour between it and its goal (within 4/3 separations the push outweighs the pull), a unit
+    was herded away from its goal for as long as that neighbour came on, or stepped back and forth
+    where push and pull balanced, until a deadlock was found (the gaps crowd's seed 21, issue 33:
+    ``u0170`` herded from 119 to 205 m off its goal, 86 s from the deadlock's start to cleared); it now
+    goes round the neighbour.  Head on (no part across the push), the sum stands.
+    """
+    total: np.ndarray = grad + norm * push
+    back = np.flatnonzero((total * grad).sum(axis=1) < 0.0)
+    if not len(back):
+        return total
+    p = push[back] / np.hypot(push[back, 0], push[back, 1])[:, None]
+    across = grad[back] - (grad[back] * p).sum(axis=1)[:, None] * p
+    length = np.hypot(across[:, 0], across[:, 1])[:, None]
+    side = length[:, 0] > 1e-9 * norm[back, 0]
+    total[back[side]] = across[side] / length[side] * norm[back[side]]
+    return total
 
 
 def _turn(

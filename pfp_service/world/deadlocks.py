@@ -12,13 +12,17 @@ grace (``Locks.in_grace``): it yields to no one meanwhile, so it gets a
 chance to go, and no stretch of yielding with a deadlock in it outlasts
 ``deadlock_s`` plus one resolution.
 
-Two units going round units at rest, each cut to nothing by the other's
-disc (``keep_apart.cut``, ``Facing``), hold each other: towards each other
-in the one lane between the units at rest, they stopped each other for as
-long as their rounds lasted, then found their units at rest again and went
-round them again, for ever.  The two resolutions are one deadlock, between
-the two, resolved by right of way: the one that backs off
-(``Locks.who_backs_off``) gives way for ``backoff_s``, the other passes.
+Two units each cut to nothing by the other's disc (``keep_apart.cut``,
+``Facing``) hold each other, whatever they are doing: for ``deadlock_s``,
+they are one deadlock, found at once, resolved by right of way: the one
+that backs off (``Locks.who_backs_off``) gives way for ``backoff_s``, the
+other passes.  Two going round units at rest are one at the first tick:
+towards each other in the one lane between the units at rest, they stopped
+each other for as long as their rounds lasted, then found their units at
+rest again and went round them again, for ever.  A unit found stuck
+(``dispersion``'s ``_stalled``) is stuck against the unit at rest whose
+disc stopped it (``Facing.stopping``), when one did, not the nearest unit
+ahead, which may merely stand beside it.
 
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation
@@ -150,10 +154,16 @@ class Locks:
 
 
 class Facing:
-    """Pairs of units each cut to nothing by the other, and since when (``keep_apart.cut``'s stopped pairs)."""
+    """Pairs of units each cut to nothing by the other, and since when (``keep_apart.cut``'s stopped pairs);
+    and who stopped each unit in the last ``apply``."""
 
     def __init__(self) -> None:
         self._since: dict[tuple[str, str], float] = {}  # (a, b), a < b -> since when each stops the other
+        self._by: dict[str, list[str]] = {}  # unit -> the units whose discs stopped it, in the last apply
+
+    def stopping(self, unit: str) -> list[str]:
+        """The units whose discs cut ``unit`` to nothing in the last ``apply`` (none: it was not stopped)."""
+        return self._by.get(unit, [])
 
     def pairs(self, stopped: list[tuple[str, str]], now: float) -> list[tuple[str, str, float]]:
         """Each pair in ``stopped`` (unit, the unit whose disc stops it) both ways, with how long it has held.
@@ -162,6 +172,9 @@ class Facing:
         meets again starts afresh, and the memory is this tick's pairs.
         """
         cut = set(stopped)
+        self._by = {}
+        for a, b in stopped:
+            self._by.setdefault(a, []).append(b)
         since = {}
         for a, b in sorted(cut):
             if a < b and (b, a) in cut:
@@ -285,14 +298,18 @@ def event(
     round_: bool,
     status: DirectionStatus | None,
     facing: bool = False,
+    rounds: bool = False,
 ) -> DeadlockEvent:
     """The deadlock's event: who resolves it (``unit``), with whom, and how long at most (``backoff_s``).
 
-    ``facing``: two units going round units at rest that stop each other (``Facing``).
+    ``facing``: two units each cut to nothing by the other (``Facing``); ``rounds``: both going round
+    units at rest.
     """
     x, y = at.tolist()
-    if facing:
+    if facing and rounds:
         why = f"{mover} and {blocker}, each going round a unit at rest, stop each other: {mover} gives way"
+    elif facing:
+        why = f"{mover} and {blocker}, each cut to nothing by the other for {held_s:.0f} s: {mover} gives way"
     elif round_:
         what = status.value if status is not None else "at rest"
         why = f"{mover} came no nearer its goal for {held_s:.0f} s against {blocker} ({what}): goes round it"

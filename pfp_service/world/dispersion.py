@@ -31,8 +31,9 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    separations of another (its separation alone from a unit giving way to
    it); its reach is cut at that disc's edge (``keep_apart``).  A back-off
    cut to nothing turns to a free way, and a unit holding still in the way
-   of the unit it yields to makes room.  Two units going round units at
-   rest, each cut to nothing by the other, are one deadlock (``_facing_lock``).
+   of the unit it yields to makes room.  Two units each cut to nothing by
+   the other for ``deadlock_s`` (two going round units at rest: at once)
+   are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
 team's ``separation_m`` towards the members of its team; a pair keeps the
@@ -72,6 +73,7 @@ AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
 STRAIGHT_AT = math.cos(math.radians(1.0))
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
+_GOING = (*_MOVING, DirectionStatus.YIELDING)  # a unit in none of these is at rest (``_lock``)
 
 
 def priority(rec: UnitRecord, manned_first: bool) -> tuple[int, str]:
@@ -204,11 +206,12 @@ class Dispersion:
 
     def _short(self, directions: list[Direction], moving: list[int], now: float) -> list[Event]:
         """Cut each moving direction's reach where it would enter a neighbour's ``KEEP`` separations
-        (``keep_apart``); two going round units at rest that stop each other are one deadlock (``_facing_lock``)."""
+        (``keep_apart``); two that stop each other are one deadlock (``_facing_lock``)."""
         index = self._index
         assert index is not None
         go = [k for k in moving if directions[k].vector != (0.0, 0.0)]
         if not go:
+            self._facing.pairs([], now)  # no unit stopped in this apply
             return []
         rows = np.array([self._row[directions[k].unit] for k in go], dtype=np.intp)
         gives_way = keep_apart.giving_way(index, self._row, self._held, directions, moving)
@@ -231,16 +234,23 @@ class Dispersion:
         return events
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
-        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: when both are going
-        round units at rest, their two resolutions are one deadlock (``deadlocks.Facing``), found once.
+        """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: for ``deadlock_s``,
+        whatever they are doing, one deadlock (``deadlocks.Facing``), found once; when both are going
+        round units at rest, their two resolutions are one at once.
 
         The one that backs off (right of way, ``Locks.who_backs_off``) gives
         way, backing off from the other for ``backoff_s``; the other passes.
+        Found stuck (``_stalled``) a few ticks apart, each is counted
+        afresh and the other sees it as a queue that moves: the cut sees
+        the standstill as it is.
         """
         s, index = self.settings, self._index
         assert index is not None
-        live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.round and h.until > now]
-        if len(live) < 2 or any(h.other in (a, b) for h in live):  # not two going round, or this one's
+        live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.until > now]
+        if any(h.other in (a, b) for h in live):  # this one's, in resolution already
+            return None
+        rounds = len(live) == 2 and all(h.round for h in live)
+        if not rounds and held_s < s.deadlock_s:
             return None
         first = s.manned_first
         ra, rb = self._units[a], self._units[b]
@@ -249,14 +259,22 @@ class Dispersion:
         g, p = self._row[giver], self._row[passer]
         gap = float(np.hypot(*(index.points[g] - index.points[p])))
         self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
-        return deadlocks.event(giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True)
+        return deadlocks.event(
+            giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True, rounds=rounds
+        )
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
         """A deadlock without a hold: a pushed unit that has not come nearer its goal for ``deadlock_s``.
 
         Two units pushing each other to a standstill (head on, or one against
-        a unit at rest) are a deadlock too, with the nearest unit ahead (on
-        the goal's side; else the nearest): ``_lock`` says who resolves it.
+        a unit at rest) are a deadlock too, with the nearest unit at rest
+        whose disc cut it to nothing in the last ``apply``
+        (``Facing.stopping``), else the nearest unit ahead (on the goal's
+        side; else the nearest): ``_lock`` says who resolves it.  A unit at
+        rest never draws away, so waiting is no way past it; the nearest
+        ahead may only stand beside it: stopped by a unit at rest, a unit
+        took one just beside it, itself found stuck and so counted afresh,
+        for a queue that moves, and stood for good.
         """
         index = self._index
         assert index is not None
@@ -266,7 +284,12 @@ class Dispersion:
         stuck = self._locks.stuck_for(d.unit, now)
         if stuck < self.settings.deadlock_s:
             return None
-        _, jj = index.near(np.array([i]))
+        stops = [
+            self._row[u]
+            for u in self._facing.stopping(d.unit)
+            if u in self._row and self._recs[self._row[u]].last_status not in _GOING
+        ]
+        jj = np.array(stops, dtype=np.intp) if stops else index.near(np.array([i]))[1]
         if not len(jj):
             return None
         rel = index.points[jj] - index.points[i]

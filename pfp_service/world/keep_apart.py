@@ -18,6 +18,21 @@ packed at the margin (the gaps crowd's column at its middle gap) a unit
 stood while the neighbours it touched stood.  A step of 5 m still leaves
 such a pair 0.95 separations apart.
 
+A neighbour going the unit's way moves too (``_moving_with``): against a
+neighbour on its own way in this tick (en route or escaping, as the unit
+is), within 60 degrees of the unit's (``WITH``, as ``dispersion.FOLLOW``),
+the unit's ray is cut as the two would move, the neighbour along its way
+as far as the cut with every neighbour standing leaves it, at the unit's
+speed; once within the margin, that disc is the separation alone; and
+wherever the neighbour stands, the unit keeps its separation from it.
+Treated as standing for the tick, a slower neighbour beside the unit,
+within the margin, held it while it crept on, in every column packed at
+the margin (the gaps crowd's seeds 9-16, issue 33: seed 11's ``u0128``
+beside ``u0131``).  Moving as told, the two keep their separation; if the
+neighbour stands after all, the unit is at its separation from it; a pair
+comes no nearer than its separation less a step (0.9 with 5 m steps) in
+the worst case, and 0.98 in the gaps crowd's 24 seeds.
+
 Two ways out of a stop, for the units that give way: a back-off the cut
 leaves nothing of turns to the nearest free way off it, still away from
 the other unit (``free_ways``: backing off from nothing, the deadlock
@@ -37,13 +52,26 @@ from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.wire import Direction, DirectionStatus
 from pfp_service.world.deadlocks import Hold, aside_vector, held
 
-__all__ = ["GIVEN", "INSIDE", "KEEP", "TURNS_DEG", "cut", "free_way", "free_ways", "giving_way", "make_room"]
+__all__ = [
+    "GIVEN",
+    "INSIDE",
+    "KEEP",
+    "TURNS_DEG",
+    "WITH",
+    "cut",
+    "free_way",
+    "free_ways",
+    "giving_way",
+    "make_room",
+]
 
 KEEP = 1.1  # no direction drives a unit within this many separations of another
 GIVEN = 1.0  # ... nor within its separation of a unit giving way to it (which does not come at it)
 TURNS_DEG = (30.0, -30.0, 60.0, -60.0, 90.0, -90.0)  # ``free_way``'s turns, nearest first
 INSIDE = 1.05  # ... nor, once on or within that disc, within this many separations of the other
+WITH = 0.5  # a neighbour on its own way within 60 degrees of the unit's goes its way: it moves meanwhile
 _GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
+_OWN = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)  # on its own way: no hold turns it after the cut
 
 
 def cut(
@@ -79,6 +107,7 @@ def cut(
     i, j, pair_s = index.near_seps(rows)
     n = at[i]
     enter = _entries(index, i, j, pair_s, vec[n], gives_way)
+    _moving_with(index, directions, go, at, i, j, pair_s, vec, enter)
     hit = np.isfinite(enter)
     safe = np.full(len(go), np.inf)
     np.minimum.at(safe, n[hit], enter[hit])
@@ -144,6 +173,65 @@ def _entries(
     enter = np.full(len(rel), np.inf)
     enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
     return enter
+
+
+def _moving_with(
+    index: NeighbourIndex,
+    directions: list[Direction],
+    go: list[int],
+    at: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    pair_s: np.ndarray,
+    vec: np.ndarray,
+    enter: np.ndarray,
+) -> None:
+    """Lengthen, in place, each pair's ``enter`` (``cut``'s, every neighbour standing) where the neighbour
+    ``j`` goes the way of unit ``i``, both on their own ways in this tick (``WITH``): the two moving as
+    told (``_along``, the disc of ``KEEP`` separations, the separation alone once within it), and no
+    nearer than the separation to where ``j`` stands; never shorter than with ``j`` standing."""
+    if not len(i):
+        return
+    own = np.fromiter((directions[k].status in _OWN for k in go), dtype=bool, count=len(go))
+    m = at[j]  # the neighbour's place among the moving directions (-1: it does not move in this tick)
+    mm = np.maximum(m, 0)
+    n = at[i]
+    pick = np.flatnonzero((m >= 0) & own[mm] & own[n] & ((vec[mm] * vec[n]).sum(axis=1) > WITH))
+    if not len(pick):
+        return
+    hit = np.isfinite(enter)
+    safe = np.full(len(go), np.inf)
+    np.minimum.at(safe, n[hit], enter[hit])
+    told = np.fromiter((directions[k].reach_m or 0.0 for k in go), dtype=float, count=len(go))
+    cap = np.minimum(told, safe)[
+        m[pick]
+    ]  # how far the neighbour goes at least, as told and cut (no reach: 0)
+    rel = index.points[j[pick]] - index.points[i[pick]]
+    s = pair_s[pick]
+    keep = np.where(np.hypot(rel[:, 0], rel[:, 1]) <= KEEP * s + _GRAZE_M, GIVEN * s, KEEP * s)
+    v, w = vec[n[pick]], vec[mm[pick]]
+    moving = np.minimum(_along(rel, v, w, cap, keep), _ray(rel, v, GIVEN * s))
+    enter[pick] = np.maximum(enter[pick], moving)
+
+
+def _ray(rel: np.ndarray, u: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The first ``t >= 0`` (in lengths of ``u``, one per row) where ``|rel - t u| < keep``; ``inf``: never."""
+    a = (u * u).sum(axis=1)
+    b = (rel * u).sum(axis=1)
+    c = (rel * rel).sum(axis=1) - keep * keep
+    disc = b * b - a * c
+    hit = (b > _GRAZE_M) & (disc > 0.0) & (a > 0.0)
+    out = np.full(len(rel), np.inf)
+    out[hit] = np.maximum((b[hit] - np.sqrt(disc[hit])) / a[hit], 0.0)
+    return out
+
+
+def _along(rel: np.ndarray, v: np.ndarray, w: np.ndarray, cap: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """How far a unit goes along ``v`` before it is within ``keep`` of a neighbour at ``rel`` that goes along
+    ``w`` at the unit's speed for ``cap`` metres, then stands."""
+    first = _ray(rel, v - w, keep)
+    rest = cap + _ray(rel - cap[:, None] * (v - w), v, keep)
+    return np.where(first <= cap, first, rest)
 
 
 def giving_way(

@@ -15,6 +15,7 @@ and measured on the tracks.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import msgspec
@@ -80,8 +81,14 @@ def test_two_units_head_on_on_one_line_both_arrive_and_the_deadlock_clears_withi
 
 
 def test_a_deadlock_found_from_both_its_units_in_one_tick_is_resolved_once():
-    """Each resolving it, both backed off (the second as escalation's): they met again, and locked again."""
-    crowd = _crowd.near_its_goal()
+    """Each resolving it, both backed off (the second as escalation's): they met again, and locked again.
+
+    On one line (``near_its_goal`` with ``u0001``'s start and goal moved onto x = 0, ``u0000``'s way):
+    off it, a pushed descent goes round the unit ahead rather than back (``core.batch._pushed``), and
+    no deadlock arises; head on, the sum stands, and the deadlock does.
+    """
+    crowd = dataclasses.replace(_crowd.near_its_goal(), starts=[(0.0, 0.0), (0.0, 56.0)])
+    crowd = dataclasses.replace(crowd, goals=[(0.0, 600.0), (0.0, 10.0)])
     locks: list = []
     out = _crowd.simulate(crowd, ON, locks=locks)
     assert locks and all(t == locks[0][0] for t, _ in locks[:1]), "the case is a real one: a deadlock arises"
