@@ -43,6 +43,8 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
+from pfp_service.core.neighbour_kernels import within
+
 __all__ = [
     "PUSH",
     "REACH",
@@ -266,24 +268,28 @@ class NeighbourIndex:
         wanted = rows.tolist()
         new = [r for r in wanted if r not in memo]
         if new:
-            got = tree.query_ball_point(self.points[new], self.radius + self._slack, return_sorted=True)
-            if self._slack:  # a kept tree's answers, widened by its slack, measured at the units' positions
-                got = self._within(new, got)
-            memo.update(zip(new, got))
+            memo.update(zip(new, self._measured(new) if self._slack else self._asked(tree, new)))
         return [memo[r] for r in wanted]
 
-    def _within(self, rows: list[int], found: list[list[int]]) -> list[list[int]]:
-        """Of each row's candidates (sorted), those within the reach of its position, as a tree built on
-        ``points`` finds them (its test: the squared distance at most the squared reach)."""
-        counts = [len(f) for f in found]
-        j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=sum(counts))
-        i = np.repeat(np.asarray(rows, dtype=np.intp), counts)
-        dx = self.points[i, 0] - self.points[j, 0]
-        dy = self.points[i, 1] - self.points[j, 1]
-        keep = dx * dx + dy * dy <= self.radius * self.radius
-        out, at = [], 0
-        for c in counts:
-            out.append(j[at : at + c][keep[at : at + c]].tolist())
+    def _asked(self, tree: cKDTree, rows: list[int]) -> list[list[int]]:
+        """The tree's own answers: built on these points."""
+        got: list[list[int]] = tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
+        return got
+
+    def _measured(self, rows: list[int]) -> list[list[int]]:
+        """A kept tree's answers (widened by its slack) measured at the units' positions with the tree's test
+        (the squared distance at most the squared reach): that test over every point, one compiled pass
+        (``neighbour_kernels.within``; the same neighbours in the same order, without the tree's widened
+        query and a list per row measured apart).  A micro-optimisation (bench row: BENCHMARKS.md "A
+        tick's fixed cost", ``python -m benchmarks._march_world --tick 4``)."""
+        found = np.empty(len(rows) * len(self.points), dtype=np.intp)
+        counts = np.empty(len(rows), dtype=np.intp)
+        got = found[
+            : within(self.points, np.asarray(rows, dtype=np.intp), self.radius * self.radius, found, counts)
+        ]
+        flat, out, at = got.tolist(), [], 0
+        for c in counts.tolist():
+            out.append(flat[at : at + c])
             at += c
         return out
 

@@ -375,29 +375,28 @@ class Dispersion:
             rel[close],
             pair_s[close],
         )
-        # the order of right of way among the units of the pairs left (0 first): compared only within
-        # them, it is the total order's, at the cost of the tick's reports, not of the fleet
-        n = len(self._recs)
-        used = np.unique(np.concatenate([i, j]))
-        recs = [self._recs[u] for u in used.tolist()]
-        first = np.fromiter((priority(r, s.manned_first)[0] for r in recs), dtype=np.intp, count=len(recs))
-        rank = np.zeros(n, dtype=np.intp)
-        rank[used[np.lexsort((np.array([r.id for r in recs]), first))]] = np.arange(len(recs))
-        goes = np.zeros(n, dtype=bool)
-        goes[used] = np.fromiter((self._goes(r) for r in recs), dtype=bool, count=len(recs))
-        way = np.zeros((n, 2), dtype=float)
-        way[used] = np.array([r.last_vector or (0.0, 0.0) for r in recs], dtype=float).reshape(-1, 2)
-        k = at[i]
-        ahead = along > AHEAD * gap
-        behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = (rank[j] < rank[i]) & goes[j] & ~behind & deadlocks.meet(rel, way[j] - vec[k], pair_s)
-        # each direction's nearest (the first of equals, in the pairs' order): one sort, not a loop
-        k, j, gap = k[keep], j[keep], gap[keep]
-        order = np.lexsort((np.arange(len(k)), gap, k))
-        first_of = order[np.unique(k[order], return_index=True)[1]]
+        # the pairs left are a few (ahead and near): right of way's order, who goes and their ways read off
+        # their records, not arrays over the fleet; the order compared pair by pair is the total order's
+        # (``priority``).  A micro-optimisation (bench row: BENCHMARKS.md "A tick's fixed cost", ``python
+        # -m benchmarks._march_world --tick 4``): a live tick's few pairs paid some twenty NumPy calls
         best = np.full(len(moving), -1, dtype=np.intp)
         near = np.full(len(moving), np.inf)
-        best[k[first_of]], near[k[first_of]] = j[first_of], gap[first_of]
+        if not len(i):
+            return best, near
+        recs, first = self._recs, s.manned_first
+        them = [recs[u] for u in j.tolist()]
+        yields = [
+            priority(r, first) < priority(recs[u], first) and self._goes(r) for r, u in zip(them, i.tolist())
+        ]
+        way = np.array([r.last_vector or (0.0, 0.0) for r in them], dtype=float).reshape(-1, 2)
+        k = at[i]
+        ahead = along > AHEAD * gap
+        behind = ahead & ((way * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
+        keep = np.array(yields, dtype=bool) & ~behind & deadlocks.meet(rel, way - vec[k], pair_s)
+        # each direction's nearest: the first of equals, in the pairs' order
+        for kk, jj, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
+            if g < near[kk]:
+                best[kk], near[kk] = jj, g
         return best, near
 
     def _goes(self, rec: UnitRecord) -> bool:
