@@ -43,7 +43,7 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
-from pfp_service.core.neighbour_kernels import within
+from pfp_service.core import neighbour_kernels as kernels
 
 __all__ = [
     "PUSH",
@@ -65,6 +65,8 @@ FEW_ROWS = 4  # ``near`` queries its rows alone while they are under a quarter o
 # an index with a few units moved keeps its k-d tree while no unit is further than this share of the reach from
 # where the tree holds it, each query widened by that distance and its answers measured at the units' positions
 STALE_SHARE = 0.25
+_NO = (np.zeros(0, dtype=np.intp), np.zeros(0))  # no teams, for ``neighbour_kernels.pair_seps``
+_NO_GOALS = np.zeros((0, 2))
 
 
 def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
@@ -198,8 +200,16 @@ class NeighbourIndex:
         return self
 
     def pair_seps(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        """The separation of each pair ``(i, j)`` (``pair_separation``) in metres."""
-        return pair_separation(self.points, self.seps, i, j, self.team, self.team_sep, self.goals)
+        """The separation of each pair ``(i, j)`` (``pair_separation``) in metres: its numbers, compiled
+        (``neighbour_kernels.pair_seps``)."""
+        i, j = np.asarray(i, dtype=np.intp).reshape(-1), np.asarray(j, dtype=np.intp).reshape(-1)
+        out = np.empty(len(i))
+        team, team_sep = (
+            (self.team, self.team_sep) if self.team is not None and self.team_sep is not None else _NO
+        )
+        goals = self.goals if self.goals is not None else _NO_GOALS
+        kernels.pair_seps(self.points, self.seps, i, j, team, team_sep, goals, RELAX, RELAX_OVER, out)
+        return out
 
     def pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ordered pair ``(i, j)``, ``i != j``, within the widest reach: one compiled query, kept."""
@@ -284,10 +294,9 @@ class NeighbourIndex:
         tick's fixed cost", ``python -m benchmarks._march_world --tick 4``)."""
         found = np.empty(len(rows) * len(self.points), dtype=np.intp)
         counts = np.empty(len(rows), dtype=np.intp)
-        got = found[
-            : within(self.points, np.asarray(rows, dtype=np.intp), self.radius * self.radius, found, counts)
-        ]
-        flat, out, at = got.tolist(), [], 0
+        asked = np.asarray(rows, dtype=np.intp)
+        got = kernels.within(self.points, asked, self.radius * self.radius, found, counts)
+        flat, out, at = found[:got].tolist(), [], 0
         for c in counts.tolist():
             out.append(flat[at : at + c])
             at += c
@@ -297,8 +306,10 @@ class NeighbourIndex:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
         rows = np.asarray(rows, dtype=np.intp)
         i, j, pair_s = self.near_seps(rows)
-        gx, gy = _pair_terms(self.points, pair_s, i, j, len(self.points))
-        return np.column_stack([gx[rows], gy[rows]])
+        # ``_pair_terms``, compiled (``neighbour_kernels.pair_terms``): the same sums in the same order
+        g = np.zeros((len(self.points), 2))
+        kernels.pair_terms(self.points, pair_s, i, j, REACH, g)
+        return g[rows]
 
 
 def _among(rows: np.ndarray, asked: np.ndarray, n: int) -> bool:
