@@ -309,7 +309,8 @@ class NeighbourIndex:
         # ``_pair_terms``, compiled (``neighbour_kernels.pair_terms``): the same sums in the same order
         g = np.zeros((len(self.points), 2))
         kernels.pair_terms(self.points, pair_s, i, j, REACH, g)
-        return g[rows]
+        got: np.ndarray = g[rows]
+        return got
 
 
 def _among(rows: np.ndarray, asked: np.ndarray, n: int) -> bool:
