@@ -39,6 +39,7 @@ advised are found in compiled code (``query_ball_point`` for a few of them,
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -151,6 +152,10 @@ class NeighbourIndex:
             tree is kept while every unit is within ``STALE_SHARE`` of the reach of where the tree holds it
             (a live tick moves a few units, and a tree over 1,000 took 234 us to build against 63 us for
             16 queries: BENCHMARKS.md, "The k-d tree kept"); the same neighbours either way.
+        moved: with ``moved_from``, the rows whose points may differ from its (every other row's is its very
+            point): only theirs are measured for the slack, and its separations, when the very arrays, are
+            not searched for the widest again.  A micro-optimisation (bench row: BENCHMARKS.md "A tick's
+            fixed cost"): a live tick moves a few of the fleet's rows.
     """
 
     def __init__(
@@ -161,25 +166,37 @@ class NeighbourIndex:
         team_sep: np.ndarray | None = None,
         goals: np.ndarray | None = None,
         moved_from: NeighbourIndex | None = None,
+        moved: Sequence[int] | None = None,
     ) -> None:
+        self.seps: np.ndarray
+        self.radius: float
+        self.team_sep: np.ndarray | None
+        was = moved_from
+        if was is not None and seps is was.seps and team_sep is was.team_sep:  # the very arrays: their widest
+            self.seps, self.radius = was.seps, was.radius
+        else:
+            self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
+            widest = max(
+                float(self.seps.max()),
+                float(np.nanmax(team_sep, initial=0.0)) if team_sep is not None else 0.0,
+            )
+            self.radius = REACH * widest if len(self.seps) else 0.0
         self.points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
-        self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
         self.team, self.team_sep, self.goals = team, team_sep, goals
-        widest = max(
-            float(self.seps.max()), float(np.nanmax(team_sep, initial=0.0)) if team_sep is not None else 0.0
-        )
-        self.radius = REACH * widest if len(self.seps) else 0.0
-        # the tree, the points it was built on, and how far any unit is from its point there (0: built on these)
-        self.tree, self._treed, self._slack = self._tree(moved_from)
+        # the tree, the points it was built on, how far any unit is from its point there (0: built on these)
+        # and each unit's squared distance from it
+        self.tree, self._treed, self._slack, self._d2 = self._tree(moved_from, moved)
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
         self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
         # row -> its neighbours, as ``query_ball_point`` found them (``_found``)
         self._rows_found: dict[int, list[int]] = {}
 
-    def _tree(self, moved_from: NeighbourIndex | None) -> tuple[cKDTree | None, np.ndarray, float]:
+    def _tree(
+        self, moved_from: NeighbourIndex | None, moved: Sequence[int] | None
+    ) -> tuple[cKDTree | None, np.ndarray, float, np.ndarray]:
         if not len(self.points):
-            return None, self.points, 0.0
+            return None, self.points, 0.0, np.zeros(0)
         was = moved_from
         if (
             was is not None
@@ -187,11 +204,18 @@ class NeighbourIndex:
             and was.radius == self.radius
             and len(was.points) == len(self.points)
         ):
-            d = self.points - was._treed
-            slack = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+            if moved is not None:  # the other rows' points are ``was``'s: their distances are its
+                d2 = was._d2.copy()
+                if len(moved):
+                    d = self.points[moved] - was._treed[moved]
+                    d2[moved] = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+            else:
+                d = self.points - was._treed
+                d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+            slack = float(np.sqrt(np.max(d2)))
             if slack <= STALE_SHARE * self.radius:
-                return was.tree, was._treed, slack
-        return cKDTree(self.points), self.points, 0.0
+                return was.tree, was._treed, slack, d2
+        return cKDTree(self.points), self.points, 0.0, np.zeros(len(self.points))
 
     def unasked(self) -> NeighbourIndex:
         """This index as new-built: no ``near`` query remembered, so the next is asked afresh (and its pairs

@@ -187,3 +187,27 @@ def test_right_of_ways_blockers_are_the_fleet_arrays(seed: int, monkeypatch: pyt
             0.5 * t,
         )
     assert compared[0] > 100 and found[0] > 10  # judged often, and some held for another
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_kept_trees_slack_from_its_moved_rows_is_the_slack_over_every_row(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = 300
+    points = rng.uniform(0.0, 2_000.0, size=(n, 2))
+    seps = rng.choice([5.0, 50.0], n)
+    team = rng.integers(-1, 20, n).astype(np.intp)
+    team_sep = np.where(team >= 0, 60.0, math.nan)
+    told = plain = NeighbourIndex(points, seps, team, team_sep)
+    rebuilt = 0
+    for _ in range(60):  # small moves and back, some past the share: the tree rebuilt now and then
+        moved = sorted(set(rng.choice(n, size=int(rng.integers(0, 6))).tolist()))
+        points = points.copy()
+        points[moved] += rng.normal(0.0, 15.0, size=(len(moved), 2))
+        told = NeighbourIndex(points, told.seps, told.team, told.team_sep, moved_from=told, moved=moved)
+        plain = NeighbourIndex(points, plain.seps, plain.team, plain.team_sep, moved_from=plain)
+        assert told._slack == plain._slack and told.radius == plain.radius
+        assert np.array_equal(told._treed, plain._treed)
+        rebuilt += told._slack == 0.0
+        rows = np.array(moved or [0])
+        assert _same(told.gradients(rows), plain.gradients(rows))
+    assert 0 < rebuilt < 60
