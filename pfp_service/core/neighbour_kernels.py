@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["pair_seps", "pair_terms", "within"]
+__all__ = ["ahead_near", "pair_seps", "pair_terms", "within"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -120,3 +120,31 @@ def pair_terms(
         w = (1.0 - d / rho) / d
         out[a, 0] += -w * dx
         out[a, 1] += -w * dy
+
+
+@numba.njit(cache=True, nogil=True)
+def ahead_near(
+    points: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    pair_s: np.ndarray,
+    vec: np.ndarray,
+    at: np.ndarray,
+    near: float,
+    gap: np.ndarray,
+    along: np.ndarray,
+) -> np.ndarray:
+    """For each pair ``(i[k], j[k])``: the gap between the two (``np.hypot``) into ``gap[k]``, how far ``j``
+    lies along ``i``'s way ``vec[at[i[k]]]`` into ``along[k]``, and whether it is ahead (``along > 0``) and
+    within ``near`` pair separations: right of way's first look at a tick's pairs (``world.dispersion``),
+    NumPy's operations pair by pair."""
+    close = np.zeros(i.shape[0], dtype=np.bool_)
+    for k in range(i.shape[0]):
+        a, b, m = i[k], j[k], at[i[k]]
+        rx = points[b, 0] - points[a, 0]
+        ry = points[b, 1] - points[a, 1]
+        g = math.hypot(rx, ry)
+        w = rx * vec[m, 0] + ry * vec[m, 1]
+        gap[k], along[k] = g, w
+        close[k] = w > 0.0 and g < near * pair_s[k]
+    return close

@@ -48,6 +48,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from pfp_service.core import neighbour_kernels as kernels
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
 from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus, Event
 from pfp_service.world import deadlocks, keep_apart
@@ -354,7 +355,7 @@ class Dispersion:
         return bool(rx * tx + ry * ty <= 0.0)
 
     def _blockers(self, moving: list[Direction], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For each direction, the row of the nearest unit it must yield to (or -1) and how far it is: one vectorised pass."""
+        """For each direction, the row of the nearest unit it must yield to (or -1) and how far it is."""
         index, s = self._index, self.settings
         assert index is not None
         if not moving:
@@ -363,18 +364,11 @@ class Dispersion:
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
         i, j, pair_s = index.near_seps(rows)
+        # ahead, and near: NumPy's arithmetic a pair at a time, compiled (``neighbour_kernels.ahead_near``)
+        gap, along = np.empty(len(i)), np.empty(len(i))
+        close = kernels.ahead_near(index.points, i, j, pair_s, vec, at, YIELD_AT, gap, along)
+        i, j, gap, along, pair_s = i[close], j[close], gap[close], along[close], pair_s[close]
         rel = index.points[j] - index.points[i]
-        gap = np.hypot(rel[:, 0], rel[:, 1])
-        along = (rel * vec[at[i]]).sum(axis=1)
-        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # ahead, and near
-        i, j, gap, along, rel, pair_s = (
-            i[close],
-            j[close],
-            gap[close],
-            along[close],
-            rel[close],
-            pair_s[close],
-        )
         # the pairs left are a few (ahead and near): right of way's order, who goes and their ways read off
         # their records, not arrays over the fleet; the order compared pair by pair is the total order's
         # (``priority``).  A micro-optimisation (bench row: BENCHMARKS.md "A tick's fixed cost", ``python
