@@ -15,11 +15,12 @@ import random
 import numpy as np
 import pytest
 
-from pfp_service.core import dispersion
+from pfp_service.core import dispersion, polyline_kernels
 from pfp_service.core.dispersion import NeighbourIndex, pair_separation
 from pfp_service.wire import Goal, UnitKind, UnitState
 from pfp_service.world import deadlocks
 from pfp_service.world import dispersion as world_dispersion
+from pfp_service.world import teams as roles
 from pfp_service.world.dispersion import AHEAD, FOLLOW, YIELD_AT, Dispersion, priority
 from pfp_service.world.events import GoalSet, StateReported
 from pfp_service.world.separations import DispersionSettings
@@ -211,3 +212,27 @@ def test_a_kept_trees_slack_from_its_moved_rows_is_the_slack_over_every_row(seed
         rows = np.array(moved or [0])
         assert _same(told.gradients(rows), plain.gradients(rows))
     assert 0 < rebuilt < 60
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_few_leads_one_route_at_a_time_are_the_batched_leads(seed: int) -> None:
+    """``teams.leads`` asks up to ``_ONE_BY_ONE`` array routes one at a time (``polyline_kernels.place``):
+    every verdict is the one the batched call (``places``, the routes as points) gives, to the bit."""
+    rng = random.Random(seed)
+    asks = []
+    for k in range(rng.randint(1, roles._ONE_BY_ONE)):
+        at = (rng.uniform(-500, 500), rng.uniform(-500, 500))
+        route = [(rng.uniform(-500, 500), rng.uniform(-500, 500)) for _ in range(rng.choice([2, 3, 5, 18]))]
+        if rng.random() < 0.3:
+            route.insert(1, route[0])  # the walk's first point is where the main element stands
+        asks.append((at, route, rng.choice([0.0, rng.uniform(0.0, 400.0)]), f"m{k}"))
+    want = roles.leads(asks)  # points: the batched call
+    got = roles.leads([(at, np.array(r, dtype=float).reshape(-1, 2), s, m) for at, r, s, m in asks])
+    assert got == want
+    for at, route, standoff, _ in asks:  # and the numbers a Polyline gives
+        line = roles.Polyline(route)
+        out = np.empty(4)
+        polyline_kernels.place(np.array(route, dtype=float), at[0], at[1], standoff, out)
+        assert out[0] == line.length
+        if line.length > standoff:
+            assert out[1] == line.project(at)[0] and tuple(out[2:].tolist()) == tuple(line.point_at(standoff))
