@@ -378,11 +378,11 @@ class Dispersion:
         if not len(i):
             return best, near
         recs, first = self._recs, s.manned_first
-        them = [recs[u] for u in j.tolist()]
-        yields = [
-            priority(r, first) < priority(recs[u], first) and self._goes(r) for r, u in zip(them, i.tolist())
-        ]
-        way = np.array([r.last_vector or (0.0, 0.0) for r in them], dtype=float).reshape(-1, 2)
+        ii, jj = i.tolist(), j.tolist()
+        rank = {u: priority(recs[u], first) for u in {*ii, *jj}}  # each unit's once (a big tick: many pairs)
+        goes = {u: self._goes(recs[u]) for u in set(jj)}
+        yields = [rank[b] < rank[a] and goes[b] for a, b in zip(ii, jj)]
+        way = np.array([recs[u].last_vector or (0.0, 0.0) for u in jj], dtype=float).reshape(-1, 2)
         k = at[i]
         ahead = along > AHEAD * gap
         behind = ahead & ((way * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
