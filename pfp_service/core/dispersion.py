@@ -34,6 +34,11 @@ stopping distance (``4/3 RELAX < 1`` of the goals' gap).
 position, built once per tick; the pairs within reach of the units being
 advised are found in compiled code (``query_ball_point`` for a few of them,
 ``query_pairs`` once for many) and ``gradients`` sums them.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
+The index's few rows' neighbours on a kept tree, its pairs' separations and
+their gradient terms are compiled (``neighbour_kernels``: a live tick asks
+for a few units, where NumPy's call cost was most of it); ``pair_separation``
+and ``_pair_terms`` are the NumPy they are held to, bit for bit, and what
+``brute_gradients`` sums.
 """
 
 from __future__ import annotations
