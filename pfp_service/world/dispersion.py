@@ -388,9 +388,9 @@ class Dispersion:
         behind = ahead & ((way * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
         keep = np.array(yields, dtype=bool) & ~behind & deadlocks.meet(rel, way - vec[k], pair_s)
         # each direction's nearest: the first of equals, in the pairs' order
-        for kk, jj, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
-            if g < near[kk]:
-                best[kk], near[kk] = jj, g
+        for m, b, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
+            if g < near[m]:
+                best[m], near[m] = b, g
         return best, near
 
     def _goes(self, rec: UnitRecord) -> bool:
