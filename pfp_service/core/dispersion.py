@@ -34,14 +34,22 @@ stopping distance (``4/3 RELAX < 1`` of the goals' gap).
 position, built once per tick; the pairs within reach of the units being
 advised are found in compiled code (``query_ball_point`` for a few of them,
 ``query_pairs`` once for many) and ``gradients`` sums them.  ``brute_gradients`` is the ``O(N^2)`` reference the tests hold it to.
+The index's few rows' neighbours on a kept tree, its pairs' separations and
+their gradient terms are compiled (``neighbour_kernels``: a live tick asks
+for a few units, where NumPy's call cost was most of it); ``pair_separation``
+and ``_pair_terms`` are the NumPy they are held to, bit for bit, and what
+``brute_gradients`` sums.
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from pfp_service.core import neighbour_kernels as kernels
 
 __all__ = [
     "PUSH",
@@ -63,6 +71,8 @@ FEW_ROWS = 4  # ``near`` queries its rows alone while they are under a quarter o
 # an index with a few units moved keeps its k-d tree while no unit is further than this share of the reach from
 # where the tree holds it, each query widened by that distance and its answers measured at the units' positions
 STALE_SHARE = 0.25
+_NO = (np.zeros(0, dtype=np.intp), np.zeros(0))  # no teams, for ``neighbour_kernels.pair_seps``
+_NO_GOALS = np.zeros((0, 2))
 
 
 def potential(p: np.ndarray, q: np.ndarray, rho: np.ndarray) -> float:
@@ -147,6 +157,10 @@ class NeighbourIndex:
             tree is kept while every unit is within ``STALE_SHARE`` of the reach of where the tree holds it
             (a live tick moves a few units, and a tree over 1,000 took 234 us to build against 63 us for
             16 queries: BENCHMARKS.md, "The k-d tree kept"); the same neighbours either way.
+        moved: with ``moved_from``, the rows whose points may differ from its (every other row's is its very
+            point): only theirs are measured for the slack, and its separations, when the very arrays, are
+            not searched for the widest again.  A micro-optimisation (bench row: BENCHMARKS.md "A tick's
+            fixed cost"): a live tick moves a few of the fleet's rows.
     """
 
     def __init__(
@@ -157,25 +171,37 @@ class NeighbourIndex:
         team_sep: np.ndarray | None = None,
         goals: np.ndarray | None = None,
         moved_from: NeighbourIndex | None = None,
+        moved: Sequence[int] | None = None,
     ) -> None:
+        self.seps: np.ndarray
+        self.radius: float
+        self.team_sep: np.ndarray | None
+        was = moved_from
+        if was is not None and seps is was.seps and team_sep is was.team_sep:  # the very arrays: their widest
+            self.seps, self.radius = was.seps, was.radius
+        else:
+            self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
+            widest = max(
+                float(self.seps.max()),
+                float(np.nanmax(team_sep, initial=0.0)) if team_sep is not None else 0.0,
+            )
+            self.radius = REACH * widest if len(self.seps) else 0.0
         self.points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
-        self.seps = np.asarray(seps, dtype=np.float64).reshape(-1)
         self.team, self.team_sep, self.goals = team, team_sep, goals
-        widest = max(
-            float(self.seps.max()), float(np.nanmax(team_sep, initial=0.0)) if team_sep is not None else 0.0
-        )
-        self.radius = REACH * widest if len(self.seps) else 0.0
-        # the tree, the points it was built on, and how far any unit is from its point there (0: built on these)
-        self.tree, self._treed, self._slack = self._tree(moved_from)
+        # the tree, the points it was built on, how far any unit is from its point there (0: built on these)
+        # and each unit's squared distance from it
+        self.tree, self._treed, self._slack, self._d2 = self._tree(moved_from, moved)
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
         self._near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last ``near``: rows, i, j
         self._near_s: np.ndarray | None = None  # the separations of its pairs, once asked for
         # row -> its neighbours, as ``query_ball_point`` found them (``_found``)
         self._rows_found: dict[int, list[int]] = {}
 
-    def _tree(self, moved_from: NeighbourIndex | None) -> tuple[cKDTree | None, np.ndarray, float]:
+    def _tree(
+        self, moved_from: NeighbourIndex | None, moved: Sequence[int] | None
+    ) -> tuple[cKDTree | None, np.ndarray, float, np.ndarray]:
         if not len(self.points):
-            return None, self.points, 0.0
+            return None, self.points, 0.0, np.zeros(0)
         was = moved_from
         if (
             was is not None
@@ -183,11 +209,18 @@ class NeighbourIndex:
             and was.radius == self.radius
             and len(was.points) == len(self.points)
         ):
-            d = self.points - was._treed
-            slack = float(np.sqrt(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])))
+            if moved is not None:  # the other rows' points are ``was``'s: their distances are its
+                d2 = was._d2.copy()
+                if len(moved):
+                    d = self.points[moved] - was._treed[moved]
+                    d2[moved] = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+            else:
+                d = self.points - was._treed
+                d2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+            slack = float(np.sqrt(np.max(d2)))
             if slack <= STALE_SHARE * self.radius:
-                return was.tree, was._treed, slack
-        return cKDTree(self.points), self.points, 0.0
+                return was.tree, was._treed, slack, d2
+        return cKDTree(self.points), self.points, 0.0, np.zeros(len(self.points))
 
     def unasked(self) -> NeighbourIndex:
         """This index as new-built: no ``near`` query remembered, so the next is asked afresh (and its pairs
@@ -196,8 +229,16 @@ class NeighbourIndex:
         return self
 
     def pair_seps(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        """The separation of each pair ``(i, j)`` (``pair_separation``) in metres."""
-        return pair_separation(self.points, self.seps, i, j, self.team, self.team_sep, self.goals)
+        """The separation of each pair ``(i, j)`` (``pair_separation``) in metres: its numbers, compiled
+        (``neighbour_kernels.pair_seps``)."""
+        i, j = np.asarray(i, dtype=np.intp).reshape(-1), np.asarray(j, dtype=np.intp).reshape(-1)
+        out = np.empty(len(i))
+        team, team_sep = (
+            (self.team, self.team_sep) if self.team is not None and self.team_sep is not None else _NO
+        )
+        goals = self.goals if self.goals is not None else _NO_GOALS
+        kernels.pair_seps(self.points, self.seps, i, j, team, team_sep, goals, RELAX, RELAX_OVER, out)
+        return out
 
     def pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every ordered pair ``(i, j)``, ``i != j``, within the widest reach: one compiled query, kept."""
@@ -266,24 +307,27 @@ class NeighbourIndex:
         wanted = rows.tolist()
         new = [r for r in wanted if r not in memo]
         if new:
-            got = tree.query_ball_point(self.points[new], self.radius + self._slack, return_sorted=True)
-            if self._slack:  # a kept tree's answers, widened by its slack, measured at the units' positions
-                got = self._within(new, got)
-            memo.update(zip(new, got))
+            memo.update(zip(new, self._measured(new) if self._slack else self._asked(tree, new)))
         return [memo[r] for r in wanted]
 
-    def _within(self, rows: list[int], found: list[list[int]]) -> list[list[int]]:
-        """Of each row's candidates (sorted), those within the reach of its position, as a tree built on
-        ``points`` finds them (its test: the squared distance at most the squared reach)."""
-        counts = [len(f) for f in found]
-        j = np.fromiter(itertools.chain.from_iterable(found), dtype=np.intp, count=sum(counts))
-        i = np.repeat(np.asarray(rows, dtype=np.intp), counts)
-        dx = self.points[i, 0] - self.points[j, 0]
-        dy = self.points[i, 1] - self.points[j, 1]
-        keep = dx * dx + dy * dy <= self.radius * self.radius
-        out, at = [], 0
-        for c in counts:
-            out.append(j[at : at + c][keep[at : at + c]].tolist())
+    def _asked(self, tree: cKDTree, rows: list[int]) -> list[list[int]]:
+        """The tree's own answers: built on these points."""
+        got: list[list[int]] = tree.query_ball_point(self.points[rows], self.radius, return_sorted=True)
+        return got
+
+    def _measured(self, rows: list[int]) -> list[list[int]]:
+        """A kept tree's answers (widened by its slack) measured at the units' positions with the tree's test
+        (the squared distance at most the squared reach): that test over every point, one compiled pass
+        (``neighbour_kernels.within``; the same neighbours in the same order, without the tree's widened
+        query and a list per row measured apart).  A micro-optimisation (bench row: BENCHMARKS.md "A
+        tick's fixed cost", ``python -m benchmarks._march_world --tick 4``)."""
+        found = np.empty(len(rows) * len(self.points), dtype=np.intp)
+        counts = np.empty(len(rows), dtype=np.intp)
+        asked = np.asarray(rows, dtype=np.intp)
+        got = kernels.within(self.points, asked, self.radius * self.radius, found, counts)
+        flat, out, at = found[:got].tolist(), [], 0
+        for c in counts.tolist():
+            out.append(flat[at : at + c])
             at += c
         return out
 
@@ -291,8 +335,11 @@ class NeighbourIndex:
         """``grad phi`` for the units at ``rows`` (indices into ``points``): ``(len(rows), 2)``."""
         rows = np.asarray(rows, dtype=np.intp)
         i, j, pair_s = self.near_seps(rows)
-        gx, gy = _pair_terms(self.points, pair_s, i, j, len(self.points))
-        return np.column_stack([gx[rows], gy[rows]])
+        # ``_pair_terms``, compiled (``neighbour_kernels.pair_terms``): the same sums in the same order
+        g = np.zeros((len(self.points), 2))
+        kernels.pair_terms(self.points, pair_s, i, j, REACH, g)
+        got: np.ndarray = g[rows]
+        return got
 
 
 def _among(rows: np.ndarray, asked: np.ndarray, n: int) -> bool:

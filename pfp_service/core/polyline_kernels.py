@@ -18,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["kept", "places", "project", "shared"]
+__all__ = ["kept", "place", "places", "project", "shared"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -133,35 +133,46 @@ def places(
     segment, the segment the standoff ends on), so the numbers are the same.
     """
     for k in range(first.shape[0] - 1):
-        a, n = first[k], first[k + 1] - first[k]
-        seg = np.empty(n - 1)
-        cum = np.empty(n)
-        cum[0] = 0.0
-        for i in range(n - 1):
-            seg[i] = math.hypot(pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1])
-            cum[i + 1] = cum[i] + seg[i]
-        out[k, 0] = cum[n - 1]
-        out[k, 1:] = math.nan
-        stand = standoffs[k]
-        if cum[n - 1] <= stand:
-            continue
-        px, py = ats[k, 0], ats[k, 1]
-        best, bi, bt = math.inf, 0, 0.0
-        for i in range(n - 1):
-            abx, aby = pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1]
-            sq = seg[i] * seg[i]
-            if not sq > 0.0:  # a segment too short for its square (below 1e-154 m): as a point's
-                sq = 1.0
-            t = ((px - pts[a + i, 0]) * abx + (py - pts[a + i, 1]) * aby) / sq
-            t = min(max(t, 0.0), 1.0)
-            off = math.hypot(pts[a + i, 0] + abx * t - px, pts[a + i, 1] + aby * t - py)
-            if off < best:
-                best, bi, bt = off, i, t
-        out[k, 1] = cum[bi] + bt * seg[bi]
-        if stand <= 0.0:
-            out[k, 2], out[k, 3] = pts[a, 0], pts[a, 1]
-            continue
-        i = np.searchsorted(cum, stand, side="right") - 1  # cum[i] <= stand < cum[i + 1]
-        f = (stand - cum[i]) / (cum[i + 1] - cum[i])
-        out[k, 2] = pts[a + i, 0] + (pts[a + i + 1, 0] - pts[a + i, 0]) * f
-        out[k, 3] = pts[a + i, 1] + (pts[a + i + 1, 1] - pts[a + i, 1]) * f
+        _place(pts, first[k], first[k + 1] - first[k], ats[k, 0], ats[k, 1], standoffs[k], out[k])
+
+
+@numba.njit(cache=True, nogil=True)
+def place(pts: np.ndarray, px: float, py: float, standoff: float, out: np.ndarray) -> None:
+    """``places`` of one route, all of ``pts`` (two points or more), into ``out`` (4): no arrays made to
+    ask it.  A micro-optimisation (bench row: BENCHMARKS.md "A tick's fixed cost", the judge): a live
+    tick's reports move a lead or two."""
+    _place(pts, 0, pts.shape[0], px, py, standoff, out)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _place(pts: np.ndarray, a: int, n: int, px: float, py: float, stand: float, out: np.ndarray) -> None:
+    """``places``' answer for the route ``pts[a:a + n]`` into ``out`` (4)."""
+    seg = np.empty(n - 1)
+    cum = np.empty(n)
+    cum[0] = 0.0
+    for i in range(n - 1):
+        seg[i] = math.hypot(pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1])
+        cum[i + 1] = cum[i] + seg[i]
+    out[0] = cum[n - 1]
+    out[1:] = math.nan
+    if cum[n - 1] <= stand:
+        return
+    best, bi, bt = math.inf, 0, 0.0
+    for i in range(n - 1):
+        abx, aby = pts[a + i + 1, 0] - pts[a + i, 0], pts[a + i + 1, 1] - pts[a + i, 1]
+        sq = seg[i] * seg[i]
+        if not sq > 0.0:  # a segment too short for its square (below 1e-154 m): as a point's
+            sq = 1.0
+        t = ((px - pts[a + i, 0]) * abx + (py - pts[a + i, 1]) * aby) / sq
+        t = min(max(t, 0.0), 1.0)
+        off = math.hypot(pts[a + i, 0] + abx * t - px, pts[a + i, 1] + aby * t - py)
+        if off < best:
+            best, bi, bt = off, i, t
+    out[1] = cum[bi] + bt * seg[bi]
+    if stand <= 0.0:
+        out[2], out[3] = pts[a, 0], pts[a, 1]
+        return
+    e = np.searchsorted(cum, stand, side="right") - 1  # cum[e] <= stand < cum[e + 1]
+    f = (stand - cum[e]) / (cum[e + 1] - cum[e])
+    out[2] = pts[a + e, 0] + (pts[a + e + 1, 0] - pts[a + e, 0]) * f
+    out[3] = pts[a + e, 1] + (pts[a + e + 1, 1] - pts[a + e, 1]) * f

@@ -49,6 +49,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from pfp_service.core import neighbour_kernels as kernels
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
 from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus, Event
 from pfp_service.world import deadlocks, keep_apart
@@ -377,7 +378,7 @@ class Dispersion:
         return bool(rx * tx + ry * ty <= 0.0)
 
     def _blockers(self, moving: list[Direction], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For each direction, the row of the nearest unit it must yield to (or -1) and how far it is: one vectorised pass."""
+        """For each direction, the row of the nearest unit it must yield to (or -1) and how far it is."""
         index, s = self._index, self.settings
         assert index is not None
         if not moving:
@@ -386,41 +387,33 @@ class Dispersion:
         at = np.full(len(self._recs), -1, dtype=np.intp)
         at[rows] = np.arange(len(rows))
         i, j, pair_s = index.near_seps(rows)
+        # ahead, and near: NumPy's arithmetic a pair at a time, compiled (``neighbour_kernels.ahead_near``)
+        gap, along = np.empty(len(i)), np.empty(len(i))
+        close = kernels.ahead_near(index.points, i, j, pair_s, vec, at, YIELD_AT, gap, along)
+        i, j, gap, along, pair_s = i[close], j[close], gap[close], along[close], pair_s[close]
         rel = index.points[j] - index.points[i]
-        gap = np.hypot(rel[:, 0], rel[:, 1])
-        along = (rel * vec[at[i]]).sum(axis=1)
-        close = (along > 0.0) & (gap < YIELD_AT * pair_s)  # ahead, and near
-        i, j, gap, along, rel, pair_s = (
-            i[close],
-            j[close],
-            gap[close],
-            along[close],
-            rel[close],
-            pair_s[close],
-        )
-        # the order of right of way among the units of the pairs left (0 first): compared only within
-        # them, it is the total order's, at the cost of the tick's reports, not of the fleet
-        n = len(self._recs)
-        used = np.unique(np.concatenate([i, j]))
-        recs = [self._recs[u] for u in used.tolist()]
-        first = np.fromiter((priority(r, s.manned_first)[0] for r in recs), dtype=np.intp, count=len(recs))
-        rank = np.zeros(n, dtype=np.intp)
-        rank[used[np.lexsort((np.array([r.id for r in recs]), first))]] = np.arange(len(recs))
-        goes = np.zeros(n, dtype=bool)
-        goes[used] = np.fromiter((self._goes(r) for r in recs), dtype=bool, count=len(recs))
-        way = np.zeros((n, 2), dtype=float)
-        way[used] = np.array([r.last_vector or (0.0, 0.0) for r in recs], dtype=float).reshape(-1, 2)
-        k = at[i]
-        ahead = along > AHEAD * gap
-        behind = ahead & ((way[j] * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = (rank[j] < rank[i]) & goes[j] & ~behind & deadlocks.meet(rel, way[j] - vec[k], pair_s)
-        # each direction's nearest (the first of equals, in the pairs' order): one sort, not a loop
-        k, j, gap = k[keep], j[keep], gap[keep]
-        order = np.lexsort((np.arange(len(k)), gap, k))
-        first_of = order[np.unique(k[order], return_index=True)[1]]
+        # the pairs left are a few (ahead and near): right of way's order, who goes and their ways read off
+        # their records, not arrays over the fleet; the order compared pair by pair is the total order's
+        # (``priority``).  A micro-optimisation (bench row: BENCHMARKS.md "A tick's fixed cost", ``python
+        # -m benchmarks._march_world --tick 4``): a live tick's few pairs paid some twenty NumPy calls
         best = np.full(len(moving), -1, dtype=np.intp)
         near = np.full(len(moving), np.inf)
-        best[k[first_of]], near[k[first_of]] = j[first_of], gap[first_of]
+        if not len(i):
+            return best, near
+        recs, first = self._recs, s.manned_first
+        ii, jj = i.tolist(), j.tolist()
+        rank = {u: priority(recs[u], first) for u in {*ii, *jj}}  # each unit's once (a big tick: many pairs)
+        goes = {u: self._goes(recs[u]) for u in set(jj)}
+        yields = [rank[b] < rank[a] and goes[b] for a, b in zip(ii, jj)]
+        way = np.array([recs[u].last_vector or (0.0, 0.0) for u in jj], dtype=float).reshape(-1, 2)
+        k = at[i]
+        ahead = along > AHEAD * gap
+        behind = ahead & ((way * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
+        keep = np.array(yields, dtype=bool) & ~behind & deadlocks.meet(rel, way - vec[k], pair_s)
+        # each direction's nearest: the first of equals, in the pairs' order
+        for m, b, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
+            if g < near[m]:
+                best[m], near[m] = b, g
         return best, near
 
     def _goes(self, rec: UnitRecord) -> bool:

@@ -318,7 +318,9 @@ def _moved_index(kept: Fleet, recs: list[UnitRecord], moved: list[int]) -> Fleet
     if moved:
         points[moved] = np.array([recs[k].position for k in moved], dtype=float).reshape(-1, 2)
     return (
-        NeighbourIndex(points, index.seps, index.team, index.team_sep, index.goals, moved_from=index),
+        NeighbourIndex(
+            points, index.seps, index.team, index.team_sep, index.goals, moved_from=index, moved=moved
+        ),
         recs,
         row,
     )

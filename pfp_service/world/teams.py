@@ -66,6 +66,7 @@ _SAMPLES_MAX = 64
 _CLOSE_M = 1.0  # a point this close to where the unit is: it is there
 # a step's ends this far inside every radio disc: its samples are too (``_within``), rounding aside
 _DISC_MARGIN_M = 1e-6
+_ONE_BY_ONE = 4  # ``leads`` asks this many routes or fewer one at a time, more in one call
 # A follower is kept this share of the corridor's half-width inside its edge: a step cut where it would
 # leave ends on the edge itself, which a check of the track (rounding, another buffer) may put outside.
 _EDGE_SHARE = 0.02
@@ -148,6 +149,17 @@ def leads(asks: Sequence[tuple[Point, Sequence[Point] | np.ndarray, float, str]]
     ``(n, 2)`` (``team_leads.main_route``): the same numbers either way."""
     out: list[Verdict] = [GO] * len(asks)
     many = [k for k, ask in enumerate(asks) if len(ask[1]) > 1]
+    if len(many) <= _ONE_BY_ONE and all(isinstance(asks[k][1], np.ndarray) for k in many):
+        # a route at a time (``polyline_kernels.place``, the same numbers): no arrays made to ask for a few.
+        # A micro-optimisation (bench row: BENCHMARKS.md "A tick's fixed cost", the judge)
+        for k in many:
+            at, route, standoff_m, main = asks[k]
+            got1 = np.empty(4)
+            pts1 = np.ascontiguousarray(route, dtype=float).reshape(-1, 2)
+            kernels.place(pts1, float(at[0]), float(at[1]), float(standoff_m), got1)
+            length, s, px, py = got1.tolist()
+            out[k] = _lead(at, standoff_m, main, length, s, (px, py))
+        many = []
     if many:
         counts = [len(asks[k][1]) for k in many]
         routes = [asks[k][1] for k in many]
