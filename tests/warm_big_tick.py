@@ -78,6 +78,23 @@ def main() -> None:
         tick += [StateReported(f"in{u}", UnitState(position=(0.01 * k, 10.0 * u))) for u in range(3)]
         out = world.apply([*tick, Tick(float(k))], float(k))
         reasons |= {d.reason for d in out.directions if d.unit.startswith("in")}
+    # a crowd with dispersion on, its units crossing within each other's separation, then a few reports a
+    # tick as live: the tick's neighbour passes and a kept tree asked at the rows that moved
+    from pfp_service.world.separations import DispersionSettings
+
+    crowd = World(WorldSettings(deliberation="inline", dispersion=DispersionSettings(enabled=True)))
+    spots = rng.uniform(-300.0, 300.0, (120, 2))
+    first: list = []
+    for u, (x, y) in enumerate(spots.tolist()):
+        first += [
+            StateReported(f"d{u}", UnitState(position=(x, y))),
+            GoalSet(f"d{u}", Goal(position=(-x, -y))),
+        ]
+    crowd.apply(first, 0.0)
+    for k in range(1, 4):
+        for u in range(5):
+            x, y = spots[u].tolist()
+            crowd.apply([StateReported(f"d{u}", UnitState(position=(x + k, y)))], k + u / 10.0)
     after = signatures()
     grown = {k: [before.get(k, 0), v] for k, v in after.items() if v != before.get(k, 0)}
     print(json.dumps({"grown": grown, "reasons": sorted(reasons)}))

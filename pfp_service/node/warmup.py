@@ -18,7 +18,9 @@ live loop takes:
   ``kernels.batch_descent``, and past ``PARALLEL_MIN_PAIRS_LEVEL``
   ``kernels._parallel_level``;
 * a team's follower stepping out of its corridor: ``polyline_kernels.project``,
-  ``shared`` and ``kept``; its lead making for its place: ``places``;
+  ``shared`` and ``kept``; its lead making for its place: ``places``, and ``place`` for one;
+* six units crowding each other with dispersion on: the tick's neighbour passes
+  (``core.neighbour_kernels``);
 * a threat over terrain (a synthetic hill): the viewshed sweep
   (``terrain.viewshed._sweep``) and every kernel on rows that carry a
   visibility window.
@@ -69,6 +71,7 @@ def warm_wide(base: WorldSettings, terrain: bool = True) -> None:
     lone = Stepper((0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0)), None, 0)
     lone.follow(-30.0, 0.0, 1.0, 0.0, 0.0, 1.0, world.field)
     _team()
+    _dispersion(settings)
     if terrain:
         _terrain(settings)
 
@@ -120,6 +123,26 @@ def _team() -> None:
 
     teams.follow((5.0, 0.0), (15.0, 5.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 4.0, "lead", "")
     teams.lead((0.0, 1.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 5.0, "main")
+    teams.lead(
+        (0.0, 1.0), np.array([(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)]), 5.0, "main"
+    )  # one route: ``place``
+
+
+def _dispersion(settings: WorldSettings) -> None:
+    """Six units within each other's separation, crossing, with dispersion on, then one of them moving: the
+    tick's compiled neighbour passes (``core.neighbour_kernels``: the pairs' separations and push terms,
+    right of way's first look, a kept tree's moved rows), which only dispersion reaches."""
+    from pfp_service.world.separations import DispersionSettings
+    from pfp_service.world.world import World
+
+    world = World(dataclasses.replace(settings, dispersion=DispersionSettings(enabled=True)))
+    inputs: list[Input] = []
+    for i in range(6):
+        inputs.append(StateReported(f"d{i}", UnitState(position=(10.0 * i, 0.0))))
+        inputs.append(GoalSet(f"d{i}", Goal(position=(50.0 - 10.0 * i, 5.0))))
+    world.apply(inputs, 0.0)
+    for k in range(1, 4):  # one unit's small move a tick: the kept tree, asked again at the row that moved
+        world.apply([StateReported("d0", UnitState(position=(0.5 * k, 0.1 * k)))], float(k))
 
 
 def _crowd() -> list[Input]:

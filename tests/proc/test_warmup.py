@@ -44,5 +44,12 @@ def test_nothing_compiles_in_a_big_tick_after_the_warm_up() -> None:
 
 def test_the_big_tick_reaches_kernels_only_the_wide_warm_up_loads() -> None:
     grown = _tick("--no-wide")["grown"]
-    for kernel in ("cull._culled_descent", "grid._edges", "cores._raster", "viewshed._sweep"):
+    for kernel in (
+        "cull._culled_descent",
+        "grid._edges",
+        "cores._raster",
+        "viewshed._sweep",
+        "neighbour_kernels.pair_terms",
+        "neighbour_kernels.within",
+    ):
         assert any(k.endswith(kernel) for k in grown), (kernel, grown)  # type: ignore[union-attr]
