@@ -107,7 +107,9 @@ def advise_many(
     return result
 
 
-def _pushed(grad: np.ndarray, norm: np.ndarray, push: np.ndarray, last: np.ndarray | None = None) -> np.ndarray:
+def _pushed(
+    grad: np.ndarray, norm: np.ndarray, push: np.ndarray, last: np.ndarray | None = None
+) -> np.ndarray:
     """Each unit's gradient ``grad`` (``(M, 2)``, of length ``norm``) with its ``push``: ``grad + norm push``,
     or where that would turn its descent back (against the unpushed one), ``grad`` less its part along
     the push, at its length: square across the push, on the side the unit was going.
