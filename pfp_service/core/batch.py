@@ -125,7 +125,8 @@ def _pushed(
     side: the sign of a cross product near 0 flipped with each 5 m step, and the unit stepped across
     and back at every report while its neighbours waited (the gaps crowd's seed 12, issue 33:
     ``u0110``, 41 s to cleared).  There a unit keeps the side of its ``last`` direction (``(M, 2)``,
-    the way it moved, zeros where none), which it took the step before: hysteresis, not a fixed hand.
+    the way it moved, zeros where none) where that went across the push (within the same band of
+    square), the step before: hysteresis, not a fixed hand.
     """
     total: np.ndarray = grad + norm * push
     back = np.flatnonzero((total * grad).sum(axis=1) < 0.0)
@@ -139,7 +140,8 @@ def _pushed(
     if last is not None:  # no clear side: the side it went last (its move is against the gradient)
         q = np.stack([-p[:, 1], p[:, 0]], axis=1)  # square to the push
         was = -(last[back] * q).sum(axis=1)
-        keep = (length[:, 0] <= SIDE_CLEAR * norm[back, 0]) & (was != 0.0)
+        went = np.abs((last[back] * p).sum(axis=1)) <= SIDE_CLEAR * np.hypot(last[back, 0], last[back, 1])
+        keep = (length[:, 0] <= SIDE_CLEAR * norm[back, 0]) & went & (was != 0.0)  # it went across last
         way[keep] = q[keep] * np.sign(was[keep])[:, None]
         side |= keep
     total[back[side]] = way[side] * norm[back[side]]
