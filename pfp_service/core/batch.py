@@ -32,7 +32,6 @@ def advise_many(
     positions: np.ndarray,
     cull: CullIndex | None = None,
     push: np.ndarray | None = None,
-    last: np.ndarray | None = None,
 ) -> list[Advice]:
     """``advise`` for many units under one field, with one vectorised kernel call.
 
@@ -49,9 +48,6 @@ def advise_many(
             back, ``_pushed``).  A unit steered otherwise (another route, a keep-out
             zone) turns its heading ``h`` to ``h - push[i]`` (normalised), the
             same sum with the heading as the field's slope, for one step.
-        last: ``(N, 2)`` each unit's last direction (zeros where it has none):
-            where the push runs within ``SIDE_CLEAR`` of a pushed descent's
-            line (no clear side), the unit keeps the side it last went (``_pushed``).
 
     Returns:
         One ``Advice`` per stepper, in order; identical to calling ``advise`` one by one.
@@ -67,8 +63,7 @@ def advise_many(
         kernels.descent_many(field.packed, pts, goals, gains, out)
     if push is not None:  # only rows with a neighbour near: a unit alone is advised as without dispersion
         near = push.any(axis=1)
-        was = None if last is None else last[near]
-        out[near, :2] = _pushed(out[near, :2], out[near, 3:4], push[near], was)
+        out[near, :2] = _pushed(out[near, :2], out[near, 3:4], push[near])
         out[near, 3] = np.hypot(out[near, 0], out[near, 1])
     rows = out.tolist()
     coords = pts.tolist()
@@ -107,9 +102,7 @@ def advise_many(
     return result
 
 
-def _pushed(
-    grad: np.ndarray, norm: np.ndarray, push: np.ndarray, last: np.ndarray | None = None
-) -> np.ndarray:
+def _pushed(grad: np.ndarray, norm: np.ndarray, push: np.ndarray) -> np.ndarray:
     """Each unit's gradient ``grad`` (``(M, 2)``, of length ``norm``) with its ``push``: ``grad + norm push``,
     or where that would turn its descent back (against the unpushed one), ``grad`` less its part along
     the push, at its length: square across the push, on the side the unit was going.
@@ -120,13 +113,6 @@ def _pushed(
     where push and pull balanced, until a deadlock was found (the gaps crowd's seed 21, issue 33:
     ``u0170`` herded from 119 to 205 m off its goal, 86 s from the deadlock's start to cleared); it now
     goes round the neighbour.  Head on (no part across the push), the sum stands.
-
-    Where the descent runs within ``SIDE_CLEAR`` (15 degrees) of the push's line, its side is no
-    side: the sign of a cross product near 0 flipped with each 5 m step, and the unit stepped across
-    and back at every report while its neighbours waited (the gaps crowd's seed 12, issue 33:
-    ``u0110``, 41 s to cleared).  There a unit keeps the side of its ``last`` direction (``(M, 2)``,
-    the way it moved, zeros where none) where that went across the push (within the same band of
-    square), the step before: hysteresis, not a fixed hand.
     """
     total: np.ndarray = grad + norm * push
     back = np.flatnonzero((total * grad).sum(axis=1) < 0.0)
@@ -136,15 +122,7 @@ def _pushed(
     across = grad[back] - (grad[back] * p).sum(axis=1)[:, None] * p
     length = np.hypot(across[:, 0], across[:, 1])[:, None]
     side = length[:, 0] > 1e-9 * norm[back, 0]
-    way = across / np.where(length > 0.0, length, 1.0)
-    if last is not None:  # no clear side: the side it went last (its move is against the gradient)
-        q = np.stack([-p[:, 1], p[:, 0]], axis=1)  # square to the push
-        was = -(last[back] * q).sum(axis=1)
-        went = np.abs((last[back] * p).sum(axis=1)) <= SIDE_CLEAR * np.hypot(last[back, 0], last[back, 1])
-        keep = (length[:, 0] <= SIDE_CLEAR * norm[back, 0]) & went & (was != 0.0)  # it went across last
-        way[keep] = q[keep] * np.sign(was[keep])[:, None]
-        side |= keep
-    total[back[side]] = way[side] * norm[back[side]]
+    total[back[side]] = across[side] / length[side] * norm[back[side]]
     return total
 
 

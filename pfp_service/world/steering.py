@@ -170,8 +170,7 @@ def _advise(
 ) -> list[Advice]:
     steppers = [r.stepper for r in guided]
     at = np.array([r.position for r in guided], dtype=float)
-    last = None if push is None else np.array([r.last_vector or (0.0, 0.0) for r in guided], dtype=float)
-    return advise_many(steppers, fld, at, cull, push, None if last is None else last.reshape(-1, 2))  # type: ignore[arg-type]
+    return advise_many(steppers, fld, at, cull, push)  # type: ignore[arg-type]
 
 
 def _ahead(
