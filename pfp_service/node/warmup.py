@@ -123,9 +123,8 @@ def _team() -> None:
 
     teams.follow((5.0, 0.0), (15.0, 5.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 4.0, "lead", "")
     teams.lead((0.0, 1.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 5.0, "main")
-    teams.lead(
-        (0.0, 1.0), np.array([(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)]), 5.0, "main"
-    )  # one route: ``place``
+    one_route = np.array([(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)])  # a route as an array: ``place``
+    teams.lead((0.0, 1.0), one_route, 5.0, "main")
 
 
 def _dispersion(settings: WorldSettings) -> None:

@@ -108,9 +108,7 @@ def cut(
     n = at[i]
     enter = _entries(index, i, j, pair_s, vec[n], gives_way)
     _moving_with(index, directions, go, at, i, j, pair_s, vec, enter)
-    hit = np.isfinite(enter)
-    safe = np.full(len(go), np.inf)
-    np.minimum.at(safe, n[hit], enter[hit])
+    safe = _nearest(enter, n, len(go))
     for m in np.flatnonzero(np.isfinite(safe)).tolist():
         k, reach = go[m], float(safe[m])
         d = directions[k]
@@ -199,19 +197,23 @@ def _moving_with(
     pick = np.flatnonzero((m >= 0) & own[mm] & own[n] & ((vec[mm] * vec[n]).sum(axis=1) > WITH))
     if not len(pick):
         return
-    hit = np.isfinite(enter)
-    safe = np.full(len(go), np.inf)
-    np.minimum.at(safe, n[hit], enter[hit])
     told = np.fromiter((directions[k].reach_m or 0.0 for k in go), dtype=float, count=len(go))
-    cap = np.minimum(told, safe)[
-        m[pick]
-    ]  # how far the neighbour goes at least, as told and cut (no reach: 0)
+    # how far the neighbour goes at least, as told and cut with every neighbour standing (no reach: 0)
+    cap = np.minimum(told, _nearest(enter, n, len(go)))[m[pick]]
     rel = index.points[j[pick]] - index.points[i[pick]]
     s = pair_s[pick]
     keep = np.where(np.hypot(rel[:, 0], rel[:, 1]) <= KEEP * s + _GRAZE_M, GIVEN * s, KEEP * s)
     v, w = vec[n[pick]], vec[mm[pick]]
     moving = np.minimum(_along(rel, v, w, cap, keep), _ray(rel, v, GIVEN * s))
     enter[pick] = np.maximum(enter[pick], moving)
+
+
+def _nearest(enter: np.ndarray, n: np.ndarray, count: int) -> np.ndarray:
+    """Each of ``count`` moving units' nearest entry into a disc: the least ``enter`` of its pairs (by ``n``)."""
+    hit = np.isfinite(enter)
+    safe = np.full(count, np.inf)
+    np.minimum.at(safe, n[hit], enter[hit])
+    return safe
 
 
 def _ray(rel: np.ndarray, u: np.ndarray, keep: np.ndarray) -> np.ndarray:
