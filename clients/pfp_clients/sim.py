@@ -5,12 +5,18 @@ asks it whether a report is due (``due``, at its own ``rate_hz``) and for a
 ``UnitState`` (which bumps ``seq``), hands it every ``Direction`` received,
 and calls ``advance(dt_s, t_s)`` once per tick: it then moves
 ``speed_mps * dt_s`` along the newest direction -- never past the goal, and
-never further from where it reported than the direction's ``reach_m`` --
-unless the planner said it is arrived, trapped or has no goal, or it is in
+never further than the direction's ``reach_m`` from where it reported in the
+state the direction answers (its ``seq``) -- unless the planner said it is arrived, trapped or has no goal, or it is in
 one of its ``stops``.  It behaves as a real vehicle does, not as the
 planner's step: its own speed and report rate, its stops (reported as
 ``speed_mps`` 0), a fix off by a seeded Gaussian ``gps_sigma_m`` per
-axis, and its mobility class on every state.  Arrival is only ever what the planner reported (status ``arrived``
+axis, and its mobility class on every state.  A direction that comes after the
+vehicle has moved on from that report (sent again for the same report when
+the world changed, or answered late) is a leg from where it reported: the
+vehicle drives from where it is to the leg's end, ``reach_m`` along the
+direction's ``vector`` from that report, and stops there, rather than taking
+``reach_m`` afresh from where the direction found it (which would carry it
+past ground the planner judged, out of a follower's cleared corridor).  Arrival is only ever what the planner reported (status ``arrived``
 within its tolerance).
 """
 
@@ -28,6 +34,7 @@ from pfp_service.wire import Direction, DirectionStatus, GoalMobility, UnitState
 __all__ = ["SimUnit", "TrackPoint"]
 
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
+_REPORTS_KEPT = 32  # the newest reports whose positions a direction's leg may start from
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,6 +68,9 @@ class SimUnit:
     reported_at: tuple[float, float] | None = None  # the true position when it last reported
     _rng: random.Random = field(init=False, repr=False)
     _left_m: float = field(default=math.inf, init=False, repr=False)  # reach_m left of the newest direction
+    # seq -> the true position when it reported (the newest ``_REPORTS_KEPT``): where a direction's leg starts
+    _reported: dict[int, tuple[float, float]] = field(default_factory=dict, init=False, repr=False)
+    _aim: tuple[float, float] | None = field(default=None, init=False, repr=False)  # the newest leg's end
 
     def __post_init__(self) -> None:
         self.position = (float(self.spec.start[0]), float(self.spec.start[1]))
@@ -112,6 +122,9 @@ class SimUnit:
             heading = self.direction.heading_deg
         x, y = self.position
         self.reported_at = self.position
+        self._reported[self.seq] = self.position
+        if len(self._reported) > _REPORTS_KEPT:
+            del self._reported[next(iter(self._reported))]  # the oldest
         if self.gps_sigma_m > 0.0:
             x += self._rng.gauss(0.0, self.gps_sigma_m)
             y += self._rng.gauss(0.0, self.gps_sigma_m)
@@ -140,6 +153,7 @@ class SimUnit:
         self.direction = d
         self.replies += 1
         self._left_m = math.inf if d.reach_m is None else d.reach_m
+        self._aim = self._leg_end(d)
         if d.status is DirectionStatus.ARRIVED:
             if self.arrived_at_s is None:
                 self.arrived_at_s = t_s
@@ -156,12 +170,27 @@ class SimUnit:
             return f"{self.id} trapped {where}: {d.reason}"
         return f"{self.id} {d.status.value} {where}" + (f" ({d.reason})" if d.reason else "")
 
+    def _leg_end(self, d: Direction) -> tuple[float, float] | None:
+        """Where ``d``'s leg ends: ``reach_m`` (or the goal, if nearer) along its vector from where the unit
+        reported in the state ``d`` answers; ``None`` when that report is not known here or the leg has no end."""
+        start = self._reported.get(d.seq) if d.seq is not None else None
+        leg = math.inf if d.reach_m is None else d.reach_m
+        if d.distance_to_goal is not None:
+            leg = min(leg, d.distance_to_goal)
+        vx, vy = d.vector
+        norm = math.hypot(vx, vy)
+        if start is None or not math.isfinite(leg) or norm == 0.0:
+            return None
+        return (start[0] + leg * vx / norm, start[1] + leg * vy / norm)
+
     def advance(self, dt_s: float, t_s: float, wall_s: float) -> None:
         """Move for ``dt_s`` along the newest direction and record the track point at ``t_s``."""
         d = self.direction
         if not self.track:
             self.track.append(TrackPoint(t_s - dt_s, wall_s, *self.position))
-        if d is not None and d.status in _MOVING and not self.stopped(t_s - dt_s):
+        if d is not None and d.status in _MOVING and not self.stopped(t_s - dt_s) and self._aim is not None:
+            self._to_leg_end(d, self.spec.speed_mps * dt_s)
+        elif d is not None and d.status in _MOVING and not self.stopped(t_s - dt_s):
             dist = min(self.spec.speed_mps * dt_s, self._left_m)  # never past how far the direction is good
             if d.distance_to_goal is not None:
                 dist = min(dist, d.distance_to_goal)  # slow down at the goal rather than overshoot it
@@ -171,6 +200,16 @@ class SimUnit:
                 self.position = (self.position[0] + dist * vx / norm, self.position[1] + dist * vy / norm)
                 self._left_m -= dist
         self.track.append(TrackPoint(t_s, wall_s, *self.position))
+
+    def _to_leg_end(self, d: Direction, run_m: float) -> None:
+        """Up to ``run_m`` straight toward the leg's end; none once it is there or no longer ahead along ``d``."""
+        assert self._aim is not None
+        dx, dy = self._aim[0] - self.position[0], self._aim[1] - self.position[1]
+        gap = math.hypot(dx, dy)
+        if gap <= 1e-9 or dx * d.vector[0] + dy * d.vector[1] <= 0.0:
+            return  # at the leg's end, or past it along the direction: it goes no further, and never back
+        dist = min(run_m, gap)
+        self.position = (self.position[0] + dist * dx / gap, self.position[1] + dist * dy / gap)
 
     def path_length_m(self) -> float:
         return sum(math.hypot(b.x - a.x, b.y - a.y) for a, b in zip(self.track, self.track[1:]))

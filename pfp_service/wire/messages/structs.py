@@ -399,8 +399,10 @@ class Direction(_Message, frozen=True, kw_only=True):
         reach_m: how far along ``vector`` this direction stays good: on a route, to the point the
             unit is steered at (a few seconds of driving ahead at its own speed; the goal, on the
             final approach); before a route is chosen, one planner step; less where it stops
-            short of a keep-out zone (0: hold here); null when not moving.  A unit may drive at its
-            own speed and should not go further than this before its next direction.
+            short of a keep-out zone (0: hold here); null when not moving.  It is measured from
+            the position in the state the direction answers (``seq``): a unit may drive at its own
+            speed and should not go further than this before its next direction; one that has
+            moved on since that report (a direction sent again, or late) drives to that leg's end.
         route: what the route behind the direction is (``descent``, ``lower_exposure``,
             ``around_trap``, ``escape``, ``leave``; empty before one is chosen).
         progress: what the unit's own reports show: ``moving``, ``holding`` (it said
