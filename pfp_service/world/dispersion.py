@@ -310,6 +310,9 @@ class Dispersion:
         side to it, and ``j``'s progress is ``i`` pushed back before it for
         as long as ``j`` goes.
         """
+        theirs = self._held.get(self._recs[j].id)
+        if theirs is not None and theirs.other != self._recs[i].id and theirs.other in self._row:
+            return True  # ``j`` waits on a third (or clears a deadlock with it): a queue, whose head resolves
         if not self._locks.progressing(self._recs[j].id, now):
             return False
         index = self._index
