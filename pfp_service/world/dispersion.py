@@ -311,8 +311,8 @@ class Dispersion:
         as long as ``j`` goes.
         """
         theirs = self._held.get(self._recs[j].id)
-        if theirs is not None and theirs.other != self._recs[i].id and theirs.other in self._row:
-            return True  # ``j`` waits on a third (or clears a deadlock with it): a queue, whose head resolves
+        if theirs is not None and not theirs.round and theirs.other != self._recs[i].id and theirs.other in self._row:
+            return True  # ``j`` waits on a third (or backs off from it): a queue, whose head resolves
         if not self._locks.progressing(self._recs[j].id, now):
             return False
         index = self._index
