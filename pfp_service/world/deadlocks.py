@@ -147,6 +147,11 @@ class Locks:
             self._pairs = {k: v for k, v in self._pairs.items() if now - v[0] < window}
         return lower_goes
 
+    def backed_off(self, mover: str, other: str, now: float) -> None:
+        """Note that ``mover`` backs off from ``other`` now, whoever right of way would have sent."""
+        key = (mover, other) if mover < other else (other, mover)
+        self._pairs[key] = (now, mover)
+
     def keep(self, units: Container[str]) -> None:
         """Forget every unit not in ``units`` (the world forgot them): the memory stays bounded."""
         self._best = {u: b for u, b in self._best.items() if u in units}

@@ -347,6 +347,10 @@ class Dispersion:
             mover, blocker = (
                 (lower, higher) if self._locks.who_backs_off(lower.id, higher.id, now) else (higher, lower)
             )
+            busy = self._held.get(other.id)
+            if mover is other and busy is not None and busy.until > now and busy.other in self._row:
+                mover, blocker = me, other  # ``other`` resolves a deadlock with a third: not undone for this one
+                self._locks.backed_off(me.id, other.id, now)
             round_ = False
         until = now + (deadlocks.ROUND_BACKOFFS * s.backoff_s if round_ else s.backoff_s)
         m, b = self._row[mover.id], self._row[blocker.id]
