@@ -257,6 +257,9 @@ class Dispersion:
         ra, rb = self._units[a], self._units[b]
         lower, higher = (a, b) if priority(ra, first) > priority(rb, first) else (b, a)
         giver, passer = (lower, higher) if self._locks.who_backs_off(lower, higher, now) else (higher, lower)
+        if self._busy(giver, now) and not self._busy(passer, now):  # resolving with a third: not undone
+            giver, passer = passer, giver
+            self._locks.backed_off(giver, passer, now)
         g, p = self._row[giver], self._row[passer]
         gap = float(np.hypot(*(index.points[g] - index.points[p])))
         self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
@@ -347,8 +350,7 @@ class Dispersion:
             mover, blocker = (
                 (lower, higher) if self._locks.who_backs_off(lower.id, higher.id, now) else (higher, lower)
             )
-            busy = self._held.get(other.id)
-            if mover is other and busy is not None and busy.until > now and busy.other in self._row:
+            if mover is other and self._busy(other.id, now):
                 mover, blocker = me, other  # ``other`` resolves a deadlock with a third: not undone for this one
                 self._locks.backed_off(me.id, other.id, now)
             round_ = False
@@ -361,6 +363,11 @@ class Dispersion:
         return deadlocks.event(
             mover.id, blocker.id, index.points[m], held_s, until - now, round_, other.last_status
         )
+
+    def _busy(self, unit: str, now: float) -> bool:
+        """Whether ``unit`` resolves a deadlock (backing off, going round) in force now."""
+        hold = self._held.get(unit)
+        return hold is not None and hold.until > now and hold.other in self._row
 
     def _towards(self, i: int, otherwise: tuple[float, float]) -> tuple[float, float]:
         """The unit's way to its goal, as a unit vector (``otherwise`` when it has no goal, or is on it)."""
