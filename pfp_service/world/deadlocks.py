@@ -24,6 +24,21 @@ rest again and went round them again, for ever.  A unit found stuck
 disc stopped it (``Facing.stopping``), when one did, not the nearest unit
 ahead, which may merely stand beside it.
 
+Deadlocks of three (issue 33, ``h-deadlock7``): a unit stopped behind one
+that waits on a third (yields to it, or backs off from it) is in a queue,
+not in a deadlock with the one ahead: the deadlock, if any, is at the
+queue's head, found and resolved there within ``deadlock_s`` plus one
+resolution (or ``STARVED``), and the queue then moves.  Found deadlocked
+with the one ahead, the unit behind backed off some 30 m from its goal,
+opened nothing (the one ahead was not waiting on it), and won the ground
+back in slow traffic: the gaps crowd's longest clearings (31-41 s).  A unit
+going round one at rest is no such head: its round may stand as long as
+``ROUND_BACKOFFS``.  And a unit resolving a deadlock with a third (going
+round, backing off) is not handed a second resolution by right of way, which
+undid the first (a round given up for a back-off, then begun again): the
+other unit of the new deadlock resolves it (``Locks.backed_off``), unless it
+resolves one too.
+
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation
 within ``deadlock_s`` is coming nearer it, and a unit yielding to it (or

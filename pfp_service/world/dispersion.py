@@ -239,8 +239,9 @@ class Dispersion:
         whatever they are doing, one deadlock (``deadlocks.Facing``), found once; when both are going
         round units at rest, their two resolutions are one at once.
 
-        The one that backs off (right of way, ``Locks.who_backs_off``) gives
-        way, backing off from the other for ``backoff_s``; the other passes.
+        The one that backs off (right of way, ``Locks.who_backs_off``; not one
+        resolving a deadlock with a third, ``_busy``, when the other is free)
+        gives way, backing off from the other for ``backoff_s``; the other passes.
         Found stuck (``_stalled``) a few ticks apart, each is counted
         afresh and the other sees it as a queue that moves: the cut sees
         the standstill as it is.
@@ -311,10 +312,16 @@ class Dispersion:
         It is when ``j`` comes nearer its goal, unless that goal lies straight
         through ``i`` (``STRAIGHT_AT``): head on, on one line, the push has no
         side to it, and ``j``'s progress is ``i`` pushed back before it for
-        as long as ``j`` goes.
+        as long as ``j`` goes.  It is, too, when ``j`` waits on a third unit
+        (yields to it, or backs off from it): the queue's head (``deadlocks``).
         """
         theirs = self._held.get(self._recs[j].id)
-        if theirs is not None and not theirs.round and theirs.other != self._recs[i].id and theirs.other in self._row:
+        if (
+            theirs is not None
+            and not theirs.round
+            and theirs.other != self._recs[i].id
+            and theirs.other in self._row
+        ):
             return True  # ``j`` waits on a third (or backs off from it): a queue, whose head resolves
         if not self._locks.progressing(self._recs[j].id, now):
             return False
@@ -331,7 +338,9 @@ class Dispersion:
         ``None`` when ``j`` already resolves a deadlock with ``i``: the same
         one, found from its other side (two units head on are each blocked by
         the other in one tick). A second resolution would be escalation's,
-        and both would back off, meet again and lock again.
+        and both would back off, meet again and lock again.  The unit right of
+        way would send resolves it, unless it resolves one with a third
+        (``_busy``): then the one found blocked does (``deadlocks``).
         """
         index, s = self._index, self.settings
         assert index is not None
@@ -350,8 +359,8 @@ class Dispersion:
             mover, blocker = (
                 (lower, higher) if self._locks.who_backs_off(lower.id, higher.id, now) else (higher, lower)
             )
-            if mover is other and self._busy(other.id, now):
-                mover, blocker = me, other  # ``other`` resolves a deadlock with a third: not undone for this one
+            if mover is other and self._busy(other.id, now):  # resolving one with a third: not undone
+                mover, blocker = me, other
                 self._locks.backed_off(me.id, other.id, now)
             round_ = False
         until = now + (deadlocks.ROUND_BACKOFFS * s.backoff_s if round_ else s.backoff_s)

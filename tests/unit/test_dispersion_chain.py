@@ -58,9 +58,14 @@ def _run(
     for seq in range(1, seconds + 1):
         t = float(seq - 1)
         here = [k for k in range(len(ids)) if t >= late.get(k, 0.0)]
-        inputs = [*done, *(ev.GoalSet(ids[k], Goal(position=goals[k])) for k in here if t == late.get(k, 0.0))]
+        inputs = [
+            *done,
+            *(ev.GoalSet(ids[k], Goal(position=goals[k])) for k in here if t == late.get(k, 0.0)),
+        ]
         inputs += [
-            ev.StateReported(ids[k], UnitState(position=(float(pos[k, 0]), float(pos[k, 1])), seq=seq, kind=kinds[k]))
+            ev.StateReported(
+                ids[k], UnitState(position=(float(pos[k, 0]), float(pos[k, 1])), seq=seq, kind=kinds[k])
+            )
             for k in here
         ]
         track.append(pos.copy())
