@@ -24,6 +24,21 @@ rest again and went round them again, for ever.  A unit found stuck
 disc stopped it (``Facing.stopping``), when one did, not the nearest unit
 ahead, which may merely stand beside it.
 
+Deadlocks of three (issue 33, ``h-deadlock7``): a unit stopped behind one
+that waits on a third (yields to it, or backs off from it) is in a queue,
+not in a deadlock with the one ahead: the deadlock, if any, is at the
+queue's head, found and resolved there within ``deadlock_s`` plus one
+resolution (or ``STARVED``), and the queue then moves.  Found deadlocked
+with the one ahead, the unit behind backed off some 30 m from its goal,
+opened nothing (the one ahead was not waiting on it), and won the ground
+back in slow traffic: the gaps crowd's longest clearings (31-41 s).  A unit
+going round one at rest is no such head: its round may stand as long as
+``ROUND_BACKOFFS``.  And a unit resolving a deadlock with a third (going
+round, backing off) is not handed a second resolution by right of way, which
+undid the first (a round given up for a back-off, then begun again): the
+other unit of the new deadlock resolves it (``Locks.backed_off``), unless it
+resolves one too.
+
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation
 within ``deadlock_s`` is coming nearer it, and a unit yielding to it (or
@@ -146,6 +161,11 @@ class Locks:
         if len(self._pairs) > 4096:  # bounded: only the pairs that locked within the window matter
             self._pairs = {k: v for k, v in self._pairs.items() if now - v[0] < window}
         return lower_goes
+
+    def backed_off(self, mover: str, other: str, now: float) -> None:
+        """Note that ``mover`` backs off from ``other`` now, whoever right of way would have sent."""
+        key = (mover, other) if mover < other else (other, mover)
+        self._pairs[key] = (now, mover)
 
     def keep(self, units: Container[str]) -> None:
         """Forget every unit not in ``units`` (the world forgot them): the memory stays bounded."""

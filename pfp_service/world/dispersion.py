@@ -239,8 +239,9 @@ class Dispersion:
         whatever they are doing, one deadlock (``deadlocks.Facing``), found once; when both are going
         round units at rest, their two resolutions are one at once.
 
-        The one that backs off (right of way, ``Locks.who_backs_off``) gives
-        way, backing off from the other for ``backoff_s``; the other passes.
+        The one that backs off (right of way, ``Locks.who_backs_off``; not one
+        resolving a deadlock with a third, ``_busy``, when the other is free)
+        gives way, backing off from the other for ``backoff_s``; the other passes.
         Found stuck (``_stalled``) a few ticks apart, each is counted
         afresh and the other sees it as a queue that moves: the cut sees
         the standstill as it is.
@@ -257,6 +258,9 @@ class Dispersion:
         ra, rb = self._units[a], self._units[b]
         lower, higher = (a, b) if priority(ra, first) > priority(rb, first) else (b, a)
         giver, passer = (lower, higher) if self._locks.who_backs_off(lower, higher, now) else (higher, lower)
+        if self._busy(giver, now) and not self._busy(passer, now):  # resolving with a third: not undone
+            giver, passer = passer, giver
+            self._locks.backed_off(giver, passer, now)
         g, p = self._row[giver], self._row[passer]
         gap = float(np.hypot(*(index.points[g] - index.points[p])))
         self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
@@ -308,8 +312,17 @@ class Dispersion:
         It is when ``j`` comes nearer its goal, unless that goal lies straight
         through ``i`` (``STRAIGHT_AT``): head on, on one line, the push has no
         side to it, and ``j``'s progress is ``i`` pushed back before it for
-        as long as ``j`` goes.
+        as long as ``j`` goes.  It is, too, when ``j`` waits on a third unit
+        (yields to it, or backs off from it): the queue's head (``deadlocks``).
         """
+        theirs = self._held.get(self._recs[j].id)
+        if (
+            theirs is not None
+            and not theirs.round
+            and theirs.other != self._recs[i].id
+            and theirs.other in self._row
+        ):
+            return True  # ``j`` waits on a third (or backs off from it): a queue, whose head resolves
         if not self._locks.progressing(self._recs[j].id, now):
             return False
         index = self._index
@@ -325,7 +338,9 @@ class Dispersion:
         ``None`` when ``j`` already resolves a deadlock with ``i``: the same
         one, found from its other side (two units head on are each blocked by
         the other in one tick). A second resolution would be escalation's,
-        and both would back off, meet again and lock again.
+        and both would back off, meet again and lock again.  The unit right of
+        way would send resolves it, unless it resolves one with a third
+        (``_busy``): then the one found blocked does (``deadlocks``).
         """
         index, s = self._index, self.settings
         assert index is not None
@@ -344,6 +359,9 @@ class Dispersion:
             mover, blocker = (
                 (lower, higher) if self._locks.who_backs_off(lower.id, higher.id, now) else (higher, lower)
             )
+            if mover is other and self._busy(other.id, now):  # resolving one with a third: not undone
+                mover, blocker = me, other
+                self._locks.backed_off(me.id, other.id, now)
             round_ = False
         until = now + (deadlocks.ROUND_BACKOFFS * s.backoff_s if round_ else s.backoff_s)
         m, b = self._row[mover.id], self._row[blocker.id]
@@ -354,6 +372,11 @@ class Dispersion:
         return deadlocks.event(
             mover.id, blocker.id, index.points[m], held_s, until - now, round_, other.last_status
         )
+
+    def _busy(self, unit: str, now: float) -> bool:
+        """Whether ``unit`` resolves a deadlock (backing off, going round) in force now."""
+        hold = self._held.get(unit)
+        return hold is not None and hold.until > now and hold.other in self._row
 
     def _towards(self, i: int, otherwise: tuple[float, float]) -> tuple[float, float]:
         """The unit's way to its goal, as a unit vector (``otherwise`` when it has no goal, or is on it)."""
