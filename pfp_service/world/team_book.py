@@ -326,6 +326,9 @@ class TeamBook:
         Each is judged on the step the one before left (a lead's place is then checked against the link).
         """
         out: list[Verdict] = []
+        # whether no verdict so far holds, kept as they are added: asked per role and
+        # member (a micro-optimisation, bench row: BENCHMARKS.md "The judge's members", the judge)
+        moving = True
         # a robot's link: each end at its own height (no terrain, no sight line to set heights on)
         linked = masts.pair(sight, units, team, unit) if sight is not None else None
         if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
@@ -344,14 +347,15 @@ class TeamBook:
                 else:
                     got = roles.lead(at, leads.main_route(main), team.standoff_m, main.id)
             out.append(got)
-            to = _end(out, to)
-        if unit in team.follow and _moving(out):
+            moving, to = _after(got, moving, to)
+        if unit in team.follow and moving:
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
             me = units.get(unit)
             goal = me.goal.position if me is not None and me.goal is not None else None
-            out.append(roles.follow(at, to, self._line(tid), team.corridor_m, str(team.lead), lost, goal))
-            to = _end(out, to)
-        if unit in team.robots and _moving(out):
+            v = roles.follow(at, to, self._line(tid), team.corridor_m, str(team.lead), lost, goal)
+            out.append(v)
+            moving, to = _after(v, moving, to)
+        if unit in team.robots and moving:
             ctl = units.get(team.controller) if team.controller is not None else None
             lost = self._lost(team.controller, units, held)
             c_at = ctl.position if ctl is not None else None
@@ -360,9 +364,10 @@ class TeamBook:
                 self.trails, unit, at, to, team, c_at, lost, linked, c_dir, self._now
             )
             out.append(v)
+            moving = v.kind != "hold"
             if pull:
                 self.pulls.setdefault(str(team.controller), set()).add(unit)
-        if unit == team.controller and _moving(out):
+        if unit == team.controller and moving:
             robots = [
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
             ]
@@ -375,10 +380,12 @@ class TeamBook:
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
-        pulling = (
-            self.pulls.get(unit, set()) | self._pulled.get(unit, set()) if unit == team.controller else set()
-        )
-        if pulling and (not _moving(out) or team.lead in pulling):  # its lead waits for it: it goes to it
+                moving = False
+        if unit != team.controller:
+            return out
+        now, was = self.pulls.get(unit), self._pulled.get(unit)
+        pulling = (now or set()) | (was or set()) if now or was else None
+        if pulling and (not moving or team.lead in pulling):  # its lead waits for it: it goes to it
             return self._closing(tid, team, unit, at, pulling, units, held, sight) or out
         return out
 
@@ -460,10 +467,9 @@ def _guided(rec: UnitRecord) -> bool:
     return rec.position is not None and not rec.stale and rec.goal is not None and not done
 
 
-def _moving(verdicts: list[Verdict]) -> bool:
-    return all(v.kind != "hold" for v in verdicts)
-
-
-def _end(verdicts: list[Verdict], to: Point) -> Point:
-    last = verdicts[-1] if verdicts else None
-    return last.to if last is not None and last.kind == "to" and last.to is not None else to
+def _after(v: Verdict, moving: bool, to: Point) -> tuple[bool, Point]:
+    """Whether no verdict holds and where the step ends, once ``v`` is added to verdicts of which none held
+    (``moving``) and whose step ended at ``to``."""
+    if v.kind == "hold":
+        return False, to
+    return moving, v.to if v.kind == "to" and v.to is not None else to

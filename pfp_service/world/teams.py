@@ -113,7 +113,12 @@ def _within(radio_range_m: float, ends: Sequence[Point], centres: Sequence[Point
     link ``_kept`` would sample along it.  A micro-optimisation (bench row: ``python -m
     benchmarks._march_world``, the judge's CPU): the samples are skipped, not changed."""
     inside = radio_range_m - _DISC_MARGIN_M
-    return all(_dist(p, q) <= inside for q in centres for p in ends)
+    hypot = math.hypot  # ``_dist(p, q)`` inlined, its very numbers: a loop, not a generator a pair
+    for q in centres:
+        for p in ends:
+            if not hypot(q[0] - p[0], q[1] - p[1]) <= inside:
+                return False
+    return True
 
 
 def _shortened(at: Point, to: Point, kept: float, reason: str) -> Verdict:
@@ -356,7 +361,14 @@ def link(
     def linked(p: Point, clearance_m: float = 0.0) -> bool:
         return in_link(c, p, radio_range_m, sight, clearance_m)
 
-    if not linked(at):
+    # ``linked(at)`` and, without terrain, the checks before ``_within`` inlined (their very numbers): a
+    # robot's step is judged per report.  A micro-optimisation (bench row: BENCHMARKS.md "The judge's
+    # members", the judge)
+    if sight is None:
+        here = math.hypot(at[0] - c[0], at[1] - c[1]) <= radio_range_m
+    else:
+        here = linked(at)
+    if not here:
         far = _dist(at, c)
         why = (
             f"{far:,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
@@ -373,13 +385,13 @@ def link(
     ):
         n = None  # not moving, or out of its sight however the robot holds: judged where it is
 
+    if sight is None and _within(radio_range_m, (at, to), (c,) if n is None else (c, n)):
+        return GO  # every sample of the step is in both discs (``_within``): ``_kept`` would keep it all
+
     def kept_by_both(p: Point) -> bool:
         return linked(p, SIGHT_CLEARANCE_M) and (
             n is None or in_link(n, p, radio_range_m, sight, SIGHT_CLEARANCE_M)
         )
-
-    if sight is None and _within(radio_range_m, (at, to), (c,) if n is None else (c, n)):
-        return GO  # every sample of the step is in both discs (``_within``): ``_kept`` would keep it all
     # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
     # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
     spacing = (
@@ -432,13 +444,24 @@ def control(
     def linked(p: Point, rid: str, r: Point) -> bool:
         return in_link(p, r, radio_range_m, sights.get(rid, sight) if sights else sight)
 
-    kept = [(rid, r) for rid, r in robots if linked(at, rid, r)]
     ahead = next_of or {}
-    kept += [
-        (rid, n)
-        for rid, r in kept
-        if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, rid, n)
-    ]
+    if sight is None and not sights:  # ``linked`` and ``_dist`` inlined, their very numbers (as ``link``'s)
+        hypot = math.hypot
+        kept = [(rid, r) for rid, r in robots if hypot(r[0] - at[0], r[1] - at[1]) <= radio_range_m]
+        kept += [
+            (rid, n)
+            for rid, r in kept
+            if (n := ahead.get(rid)) is not None
+            and hypot(r[0] - n[0], r[1] - n[1]) >= _CLOSE_M
+            and hypot(n[0] - at[0], n[1] - at[1]) <= radio_range_m
+        ]
+    else:
+        kept = [(rid, r) for rid, r in robots if linked(at, rid, r)]
+        kept += [
+            (rid, n)
+            for rid, r in kept
+            if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, rid, n)
+        ]
     if not kept or (
         sight is None and not sights and _within(radio_range_m, (at, to), [r for _, r in kept])
     ):  # no link to keep, or (no sight line to ask) every sample of the step keeps them all (``_within``)
