@@ -255,10 +255,11 @@ class TeamBook:
         """The team's track as a polyline, made once for all its followers and grown with the track."""
         track = self.tracks.get(tid, [])
         kept = self._lines.get(tid)
-        if kept is not None and kept[0] is track and len(kept[1]) == len(track):
+        # its points' count read off its array, not ``len(line)`` (a call): asked per follower and report
+        if kept is not None and kept[0] is track and len(kept[1].pts) == len(track):
             return kept[1]  # not grown since (its other followers, or no report of its lead)
-        if kept is not None and kept[0] is track and len(kept[1]) <= len(track):
-            line = kept[1].extended(track[len(kept[1]) :])
+        if kept is not None and kept[0] is track and len(kept[1].pts) <= len(track):
+            line = kept[1].extended(track[len(kept[1].pts) :])
         else:
             line = Polyline(track)
         self._lines[tid] = (track, line)

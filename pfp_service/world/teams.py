@@ -152,6 +152,15 @@ def leads(asks: Sequence[tuple[Point, Sequence[Point] | np.ndarray, float, str]]
     """``lead`` for each ``(at, route, standoff_m, main)``: every route's numbers in one compiled call
     (``polyline_kernels.places``), not a polyline made per lead.  A route is points, or their array
     ``(n, 2)`` (``team_leads.main_route``): the same numbers either way."""
+    if len(asks) == 1 and isinstance(asks[0][1], np.ndarray) and len(asks[0][1]) > 1:
+        # a live tick's one lead, as the loop below asks it (``polyline_kernels.place``), without the lists
+        # made to sort a few asks.  A micro-optimisation (bench row: BENCHMARKS.md "The judge's members")
+        at, route, standoff_m, main = asks[0]
+        got1 = np.empty(4)
+        pts1 = np.ascontiguousarray(route, dtype=float).reshape(-1, 2)
+        kernels.place(pts1, float(at[0]), float(at[1]), float(standoff_m), got1)
+        length, s, px, py = got1.tolist()
+        return [_lead(at, standoff_m, main, length, s, (px, py))]
     out: list[Verdict] = [GO] * len(asks)
     many = [k for k, ask in enumerate(asks) if len(ask[1]) > 1]
     if len(many) <= _ONE_BY_ONE and all(isinstance(asks[k][1], np.ndarray) for k in many):
@@ -238,11 +247,17 @@ def follow(
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
     half = corridor_m / 2.0 * (1.0 - _EDGE_SHARE)
     line = track if isinstance(track, Polyline) else Polyline(track)
-    s_at, off_at = line.project(at)
+    if len(line.pts) > 1:  # ``project`` and ``shared`` in one compiled call, their numbers
+        s_at, off_at, both = kernels.project_shared(
+            line.pts, line.ab, line.sq, line.seg, line.cum, at[0], at[1], to[0], to[1], half, half + 1e-6
+        )
+    else:
+        s_at, off_at = line.project(at)
+        both = None
     if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
-    if line.shared(at, to, half):
+    if both if both is not None else line.shared(at, to, half):
         return GO  # both ends within one segment's stadium, which is convex: the whole step is
     room = corridor.near(line.pts, half, at, max(_dist(at, to), _CLOSE_M))
     kept = room.kept(at, to)
