@@ -25,6 +25,7 @@ from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
 from pfp_service.world import team_leads as leads
+from pfp_service.world import team_lines as lines
 from pfp_service.world import team_link as link_memory
 from pfp_service.world import team_masts as masts
 from pfp_service.world import team_place as places
@@ -68,6 +69,7 @@ class TeamBook:
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
+        self._grown: dict[str, lines.Grown] = {}  # team -> the arrays its line is a view of (``team_lines``)
         self._columns: dict[str, list[TeamUpdate]] = {}  # unit -> ``columns``, until the teams change
         self._dispersed: dict[str, tuple[str, float] | None] = {}  # unit -> ``dispersed``, likewise
         self._leading: dict[str, Verdict] = {}  # team -> its lead's verdict in this ``judge`` (team_leads)
@@ -145,6 +147,7 @@ class TeamBook:
         self.tracks.pop(tid, None)
         self._leads.looked.pop(tid, None)
         self._lines.pop(tid, None)
+        self._grown.pop(tid, None)
         self._checks = _index_of(self.teams)
         self._index()
         self.said = {u: why for u, why in self.said.items() if u in self._of}
@@ -259,7 +262,10 @@ class TeamBook:
         if kept is not None and kept[0] is track and len(kept[1].pts) == len(track):
             return kept[1]  # not grown since (its other followers, or no report of its lead)
         if kept is not None and kept[0] is track and len(kept[1].pts) <= len(track):
-            line = kept[1].extended(track[len(kept[1].pts) :])
+            # grown in place (``team_lines``), the numbers of ``extended``
+            line, grown = lines.grow(self._grown.get(tid), kept[1], track[len(kept[1].pts) :])
+            if grown is not None:
+                self._grown[tid] = grown
         else:
             line = Polyline(track)
         self._lines[tid] = (track, line)

@@ -376,13 +376,9 @@ def link(
     def linked(p: Point, clearance_m: float = 0.0) -> bool:
         return in_link(c, p, radio_range_m, sight, clearance_m)
 
-    # ``linked(at)`` and, without terrain, the checks before ``_within`` inlined (their very numbers): a
-    # robot's step is judged per report.  A micro-optimisation (bench row: BENCHMARKS.md "The judge's
-    # members", the judge)
-    if sight is None:
-        here = math.hypot(at[0] - c[0], at[1] - c[1]) <= radio_range_m
-    else:
-        here = linked(at)
+    # without terrain ``linked(at)`` inlined, its very numbers: a robot's step is judged per report (a
+    # micro-optimisation, bench row: BENCHMARKS.md "The judge's members", the judge)
+    here = math.hypot(at[0] - c[0], at[1] - c[1]) <= radio_range_m if sight is None else linked(at)
     if not here:
         far = _dist(at, c)
         why = (
@@ -407,6 +403,7 @@ def link(
         return linked(p, SIGHT_CLEARANCE_M) and (
             n is None or in_link(n, p, radio_range_m, sight, SIGHT_CLEARANCE_M)
         )
+
     # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
     # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
     spacing = (
