@@ -18,10 +18,13 @@ import numpy as np
 
 from pfp_service.core import polyline_kernels as kernels
 from pfp_service.world.polyline import Point, Polyline
+from pfp_service.world.team_tracks import MAX_TRACK_POINTS
 
 __all__ = ["Grown", "grow"]
 
-_ROOM = 64  # points a line's arrays hold at least; then twice what they hold, when full
+_ROOM = 64  # points a line's arrays hold at least; then twice what they hold, when full ...
+# ... but no more than a track keeps (``team_tracks`` trims it past that): the arrays are then at most a
+# ``Polyline`` of the longest track's, bounded by construction
 
 
 class Grown:
@@ -57,7 +60,7 @@ def grow(grown: Grown | None, line: Polyline, more: Sequence[Point]) -> tuple[Po
         return Polyline(more), None
     n = m + len(more)
     if grown is None or grown.line is not line or grown.n != m or n > len(grown.pts):
-        grown = Grown(line, max(2 * n, _ROOM))
+        grown = Grown(line, max(n, min(2 * n, MAX_TRACK_POINTS), _ROOM))
     for k, (x, y) in enumerate(more):
         kernels.extend_one(grown.pts, grown.ab, grown.seg, grown.sq, grown.cum, m + k, float(x), float(y))
     out = Polyline.__new__(Polyline)

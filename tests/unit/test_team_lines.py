@@ -81,3 +81,15 @@ def test_the_books_line_follows_its_track_grown_trimmed_and_replaced() -> None:
         track.append((rng.uniform(0, 1e3), rng.uniform(0, 1e3)))
         if rng.random() < 0.7:  # not every point is seen by a follower
             assert _same(book._line("t"), Polyline(track)), step
+
+
+def test_the_arrays_hold_no_more_than_the_longest_track_kept() -> None:
+    from pfp_service.world.team_tracks import MAX_TRACK_POINTS
+
+    track = [(float(k), 0.0) for k in range(MAX_TRACK_POINTS - 10)]
+    line, grown = team_lines.grow(None, Polyline(track[:-1]), track[-1:])
+    assert grown is not None and len(grown.pts) == MAX_TRACK_POINTS
+    more = [(float(k), 1.0) for k in range(20)]  # past it (a track is trimmed before): room made for them
+    line, grown = team_lines.grow(grown, line, more)
+    assert grown is not None and len(grown.pts) >= len(track) + 20
+    assert _same(line, Polyline(track + more))
