@@ -333,8 +333,8 @@ class TeamBook:
         Each is judged on the step the one before left (a lead's place is then checked against the link).
         """
         out: list[Verdict] = []
-        # whether no verdict so far holds, kept as they are added: asked per role and
-        # member (a micro-optimisation, bench row: BENCHMARKS.md "The judge's members", the judge)
+        # whether no verdict so far holds, kept as they are added: asked per role and member (a
+        # micro-optimisation, bench row: BENCHMARKS.md "The judge's members", the judge)
         moving = True
         # a robot's link: each end at its own height (no terrain, no sight line to set heights on)
         linked = masts.pair(sight, units, team, unit) if sight is not None else None
