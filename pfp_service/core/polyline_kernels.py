@@ -6,7 +6,8 @@ segments a question, with no temporary array per question, where NumPy made
 a dozen arrays of the track's length for each.  The arrays are a
 ``world.teams.Polyline``'s: points ``pts``, segments ``ab``, their squared
 lengths ``sq`` (1 for a segment of no length), lengths ``seg``, cumulated
-``cum``.  ``kept`` is ``world.corridor.Room``'s closed form.  ``places`` is every lead's
+``cum``.  ``extend_one`` grows those arrays by a point in place (``world.team_lines``).
+``kept`` is ``world.corridor.Room``'s closed form.  ``places`` is every lead's
 place on its main element's route in one call (``world.teams.leads``): the same numbers a
 ``Polyline`` of each route gives, without making one per lead per tick.
 """
@@ -18,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["kept", "place", "places", "project", "shared"]
+__all__ = ["extend_one", "kept", "place", "places", "project", "project_shared", "shared"]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -53,6 +54,28 @@ def shared(
         if _off(pts, ab, sq, i, ax, ay)[1] <= half and _off(pts, ab, sq, i, bx, by)[1] <= half:
             return True
     return False
+
+
+@numba.njit(cache=True, nogil=True)
+def project_shared(
+    pts: np.ndarray,
+    ab: np.ndarray,
+    sq: np.ndarray,
+    seg: np.ndarray,
+    cum: np.ndarray,
+    ax: float,
+    ay: float,
+    bx: float,
+    by: float,
+    half: float,
+    outside: float,
+) -> tuple[float, float, bool]:
+    """``project`` of ``a``, and, when it lies no further off than ``outside``, ``shared`` of ``a`` and ``b``
+    (``False`` when it lies further): a follower's first two questions (``world.teams.follow``) in one
+    call, the same numbers.  A micro-optimisation (bench row: BENCHMARKS.md "The judge's members", the
+    judge): a follower is judged per report."""
+    s, off = project(pts, ab, sq, seg, cum, ax, ay)
+    return s, off, not off > outside and shared(pts, ab, sq, ax, ay, bx, by, half)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -176,3 +199,28 @@ def _place(pts: np.ndarray, a: int, n: int, px: float, py: float, stand: float, 
     f = (stand - cum[e]) / (cum[e + 1] - cum[e])
     out[2] = pts[a + e, 0] + (pts[a + e + 1, 0] - pts[a + e, 0]) * f
     out[3] = pts[a + e, 1] + (pts[a + e + 1, 1] - pts[a + e, 1]) * f
+
+
+@numba.njit(cache=True, nogil=True)
+def extend_one(
+    pts: np.ndarray,
+    ab: np.ndarray,
+    seg: np.ndarray,
+    sq: np.ndarray,
+    cum: np.ndarray,
+    m: int,
+    x: float,
+    y: float,
+) -> None:
+    """A line's arrays of ``m`` points (one or more), held in longer ones, grown by the point ``(x, y)`` in
+    place: its segment, length, squared length (1 for none) and cumulated length written after the last,
+    ``Polyline``'s arithmetic in its order (``np.diff``, ``np.hypot``, ``_squares``, a running sum), so the
+    numbers are a ``Polyline`` of them all's (``world.team_lines``)."""
+    pts[m, 0] = x
+    pts[m, 1] = y
+    ab[m - 1, 0] = pts[m, 0] - pts[m - 1, 0]
+    ab[m - 1, 1] = pts[m, 1] - pts[m - 1, 1]
+    seg[m - 1] = math.hypot(ab[m - 1, 0], ab[m - 1, 1])
+    s2 = seg[m - 1] * seg[m - 1]
+    sq[m - 1] = s2 if s2 > 0.0 else 1.0
+    cum[m] = cum[m - 1] + seg[m - 1]

@@ -17,8 +17,9 @@ live loop takes:
   ``cull._culled_descent_parallel``, ``cull._predict_parallel``,
   ``kernels.batch_descent``, and past ``PARALLEL_MIN_PAIRS_LEVEL``
   ``kernels._parallel_level``;
-* a team's follower stepping out of its corridor: ``polyline_kernels.project``,
-  ``shared`` and ``kept``; its lead making for its place: ``places``, and ``place`` for one;
+* a team's follower stepping out of its corridor: ``polyline_kernels.project_shared``
+  (``project`` and ``shared`` in one call), ``project`` and ``kept``; its lead making for its
+  place: ``places``, and ``place`` for one; its lead's track grown by a point: ``extend_one``;
 * six units crowding each other with dispersion on: the tick's neighbour passes
   (``core.neighbour_kernels``);
 * a threat over terrain (a synthetic hill): the viewshed sweep
@@ -117,14 +118,16 @@ def forget_warm_worlds() -> None:
 
 def _team() -> None:
     """A follower's step leaving its corridor at a bend, and a lead making for its place: the compiled
-    walks of a team's polylines (``core.polyline_kernels``: projection, shared stadium, capsule run,
-    the leads' places), which only teams reach."""
-    from pfp_service.world import teams
+    walks of a team's polylines (``core.polyline_kernels``: projection, shared stadium and the two in one
+    call, capsule run, the leads' places, a track grown in place), which only teams reach."""
+    from pfp_service.world import team_lines, teams
 
     teams.follow((5.0, 0.0), (15.0, 5.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 4.0, "lead", "")
     teams.lead((0.0, 1.0), [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)], 5.0, "main")
     one_route = np.array([(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)])  # a route as an array: ``place``
     teams.lead((0.0, 1.0), one_route, 5.0, "main")
+    # a lead's track grown by a point for its followers (``team_lines``): ``extend_one``
+    team_lines.grow(None, teams.Polyline([(0.0, 0.0), (10.0, 0.0)]), [(10.0, 10.0)])
 
 
 def _dispersion(settings: WorldSettings) -> None:

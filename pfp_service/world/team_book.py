@@ -25,6 +25,7 @@ from pfp_service.wire import Direction, DirectionStatus, Goal, Progress
 from pfp_service.wire.messages import TeamIndex, TeamSummary, TeamUpdate
 from pfp_service.world import team_goal
 from pfp_service.world import team_leads as leads
+from pfp_service.world import team_lines as lines
 from pfp_service.world import team_link as link_memory
 from pfp_service.world import team_masts as masts
 from pfp_service.world import team_place as places
@@ -68,6 +69,7 @@ class TeamBook:
         # team -> its track as a polyline and the list it was made of: grown as that list grows, made
         # afresh when the track is another list (trimmed, a new lead, a preview's)
         self._lines: dict[str, tuple[list[Point], Polyline]] = {}
+        self._grown: dict[str, lines.Grown] = {}  # team -> the arrays its line is a view of (``team_lines``)
         self._columns: dict[str, list[TeamUpdate]] = {}  # unit -> ``columns``, until the teams change
         self._dispersed: dict[str, tuple[str, float] | None] = {}  # unit -> ``dispersed``, likewise
         self._leading: dict[str, Verdict] = {}  # team -> its lead's verdict in this ``judge`` (team_leads)
@@ -145,6 +147,7 @@ class TeamBook:
         self.tracks.pop(tid, None)
         self._leads.looked.pop(tid, None)
         self._lines.pop(tid, None)
+        self._grown.pop(tid, None)
         self._checks = _index_of(self.teams)
         self._index()
         self.said = {u: why for u, why in self.said.items() if u in self._of}
@@ -255,10 +258,14 @@ class TeamBook:
         """The team's track as a polyline, made once for all its followers and grown with the track."""
         track = self.tracks.get(tid, [])
         kept = self._lines.get(tid)
-        if kept is not None and kept[0] is track and len(kept[1]) == len(track):
+        # its points' count read off its array, not ``len(line)`` (a call): asked per follower and report
+        if kept is not None and kept[0] is track and len(kept[1].pts) == len(track):
             return kept[1]  # not grown since (its other followers, or no report of its lead)
-        if kept is not None and kept[0] is track and len(kept[1]) <= len(track):
-            line = kept[1].extended(track[len(kept[1]) :])
+        if kept is not None and kept[0] is track and len(kept[1].pts) <= len(track):
+            # grown in place (``team_lines``), the numbers of ``extended``
+            line, grown = lines.grow(self._grown.get(tid), kept[1], track[len(kept[1].pts) :])
+            if grown is not None:
+                self._grown[tid] = grown
         else:
             line = Polyline(track)
         self._lines[tid] = (track, line)
@@ -326,6 +333,9 @@ class TeamBook:
         Each is judged on the step the one before left (a lead's place is then checked against the link).
         """
         out: list[Verdict] = []
+        # whether no verdict so far holds, kept as they are added: asked per role and member (a
+        # micro-optimisation, bench row: BENCHMARKS.md "The judge's members", the judge)
+        moving = True
         # a robot's link: each end at its own height (no terrain, no sight line to set heights on)
         linked = masts.pair(sight, units, team, unit) if sight is not None else None
         if unit in team.robots and unit not in team.follow and (unit in self._waited or unit in self.waits):
@@ -344,14 +354,15 @@ class TeamBook:
                 else:
                     got = roles.lead(at, leads.main_route(main), team.standoff_m, main.id)
             out.append(got)
-            to = _end(out, to)
-        if unit in team.follow and _moving(out):
+            moving, to = _after(got, moving, to)
+        if unit in team.follow and moving:
             lost = self._lost(team.lead, units, held, moved=len(self.tracks.get(tid, ())) > 1)
             me = units.get(unit)
             goal = me.goal.position if me is not None and me.goal is not None else None
-            out.append(roles.follow(at, to, self._line(tid), team.corridor_m, str(team.lead), lost, goal))
-            to = _end(out, to)
-        if unit in team.robots and _moving(out):
+            v = roles.follow(at, to, self._line(tid), team.corridor_m, str(team.lead), lost, goal)
+            out.append(v)
+            moving, to = _after(v, moving, to)
+        if unit in team.robots and moving:
             ctl = units.get(team.controller) if team.controller is not None else None
             lost = self._lost(team.controller, units, held)
             c_at = ctl.position if ctl is not None else None
@@ -360,9 +371,10 @@ class TeamBook:
                 self.trails, unit, at, to, team, c_at, lost, linked, c_dir, self._now
             )
             out.append(v)
+            moving = v.kind != "hold"
             if pull:
                 self.pulls.setdefault(str(team.controller), set()).add(unit)
-        if unit == team.controller and _moving(out):
+        if unit == team.controller and moving:
             robots = [
                 (r, p) for r in team.robots if (rr := units.get(r)) and (p := rr.position) and _guided(rr)
             ]
@@ -375,10 +387,12 @@ class TeamBook:
             out.append(verdict)
             if verdict.kind == "hold":
                 self.waits.add(robot)
-        pulling = (
-            self.pulls.get(unit, set()) | self._pulled.get(unit, set()) if unit == team.controller else set()
-        )
-        if pulling and (not _moving(out) or team.lead in pulling):  # its lead waits for it: it goes to it
+                moving = False
+        if unit != team.controller:
+            return out
+        now, was = self.pulls.get(unit), self._pulled.get(unit)
+        pulling = (now or set()) | (was or set()) if now or was else None
+        if pulling and (not moving or team.lead in pulling):  # its lead waits for it: it goes to it
             return self._closing(tid, team, unit, at, pulling, units, held, sight) or out
         return out
 
@@ -460,10 +474,9 @@ def _guided(rec: UnitRecord) -> bool:
     return rec.position is not None and not rec.stale and rec.goal is not None and not done
 
 
-def _moving(verdicts: list[Verdict]) -> bool:
-    return all(v.kind != "hold" for v in verdicts)
-
-
-def _end(verdicts: list[Verdict], to: Point) -> Point:
-    last = verdicts[-1] if verdicts else None
-    return last.to if last is not None and last.kind == "to" and last.to is not None else to
+def _after(v: Verdict, moving: bool, to: Point) -> tuple[bool, Point]:
+    """Whether no verdict holds and where the step ends, once ``v`` is added to verdicts of which none held
+    (``moving``) and whose step ended at ``to``."""
+    if v.kind == "hold":
+        return False, to
+    return moving, v.to if v.kind == "to" and v.to is not None else to

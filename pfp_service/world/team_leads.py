@@ -43,6 +43,8 @@ def verdicts(
             if team.lead == d.unit and team.follow and (main := rearmost(team.follow, units)) is not None:
                 asks.append((rec.position, main_route(main), team.standoff_m, main.id))
                 tids.append(tid)
+    if not asks:  # no lead moves in this batch (a live tick's few reports, often): nothing to ask
+        return {}
     return dict(zip(tids, roles.leads(asks)))
 
 

@@ -62,7 +62,9 @@ class Trails:
         """``unit`` is judged at ``at``: how far it went since it was judged last is one of its runs."""
         was = self._was.get(unit)
         if was is not None and was is not at and (run := math.dist(was, at)) > 0.0:
-            runs = self._runs.setdefault(unit, deque(maxlen=_RUNS))
+            runs = self._runs.get(unit)
+            if runs is None:  # not ``setdefault``: that would make a deque per report to throw away
+                runs = self._runs[unit] = deque(maxlen=_RUNS)
             runs.append(run)
             self._longest[unit] = max(runs)
         self._was[unit] = at

@@ -93,9 +93,14 @@ def place(
         return None
     end = at if judged.kind == "hold" else (judged.to if judged.to is not None else to)
 
-    base = (sum(roles.in_link(end, q, radio_range_m, seen_by(rid)) for rid, q in robots), -_dist(end, to))
-    if judged.kind == "go" and base[0] == len(robots):
+    if sight is None and not sights:  # ``in_link`` inlined, its very numbers: asked per controller and report
+        hypot = math.hypot
+        linked_end = sum(1 for _, q in robots if hypot(q[0] - end[0], q[1] - end[1]) <= radio_range_m)
+    else:
+        linked_end = sum(roles.in_link(end, q, radio_range_m, seen_by(rid)) for rid, q in robots)
+    if judged.kind == "go" and linked_end == len(robots):
         return None  # its own step keeps them all
+    base = (linked_end, -_dist(end, to))
     pts = np.array([p for _, p in robots], dtype=float)
     cs = [(float(x), float(y)) for x, y in _places(at, to, pts, run_m)]
     # each place's distance to each robot at once: its robots in range bound its robots linked, so the

@@ -113,7 +113,12 @@ def _within(radio_range_m: float, ends: Sequence[Point], centres: Sequence[Point
     link ``_kept`` would sample along it.  A micro-optimisation (bench row: ``python -m
     benchmarks._march_world``, the judge's CPU): the samples are skipped, not changed."""
     inside = radio_range_m - _DISC_MARGIN_M
-    return all(_dist(p, q) <= inside for q in centres for p in ends)
+    hypot = math.hypot  # ``_dist(p, q)`` inlined, its very numbers: a loop, not a generator a pair
+    for q in centres:
+        for p in ends:
+            if not hypot(q[0] - p[0], q[1] - p[1]) <= inside:
+                return False
+    return True
 
 
 def _shortened(at: Point, to: Point, kept: float, reason: str) -> Verdict:
@@ -147,6 +152,15 @@ def leads(asks: Sequence[tuple[Point, Sequence[Point] | np.ndarray, float, str]]
     """``lead`` for each ``(at, route, standoff_m, main)``: every route's numbers in one compiled call
     (``polyline_kernels.places``), not a polyline made per lead.  A route is points, or their array
     ``(n, 2)`` (``team_leads.main_route``): the same numbers either way."""
+    if len(asks) == 1 and isinstance(asks[0][1], np.ndarray) and len(asks[0][1]) > 1:
+        # a live tick's one lead, as the loop below asks it (``polyline_kernels.place``), without the lists
+        # made to sort a few asks.  A micro-optimisation (bench row: BENCHMARKS.md "The judge's members")
+        at, route, standoff_m, main = asks[0]
+        got1 = np.empty(4)
+        pts1 = np.ascontiguousarray(route, dtype=float).reshape(-1, 2)
+        kernels.place(pts1, float(at[0]), float(at[1]), float(standoff_m), got1)
+        length, s, px, py = got1.tolist()
+        return [_lead(at, standoff_m, main, length, s, (px, py))]
     out: list[Verdict] = [GO] * len(asks)
     many = [k for k, ask in enumerate(asks) if len(ask[1]) > 1]
     if len(many) <= _ONE_BY_ONE and all(isinstance(asks[k][1], np.ndarray) for k in many):
@@ -233,11 +247,17 @@ def follow(
         return _hold(f"holding: lead {lead_id} has cleared no ground yet")
     half = corridor_m / 2.0 * (1.0 - _EDGE_SHARE)
     line = track if isinstance(track, Polyline) else Polyline(track)
-    s_at, off_at = line.project(at)
+    if len(line.pts) > 1:  # ``project`` and ``shared`` in one compiled call, their numbers
+        s_at, off_at, both = kernels.project_shared(
+            line.pts, line.ab, line.sq, line.seg, line.cum, at[0], at[1], to[0], to[1], half, half + 1e-6
+        )
+    else:
+        s_at, off_at = line.project(at)
+        both = None
     if off_at > half + 1e-6:  # outside (a step cut at its edge ends there, to rounding)
         nearest = line.point_at(s_at)
         return Verdict("to", nearest, f"back into the corridor {lead_id} cleared")
-    if line.shared(at, to, half):
+    if both if both is not None else line.shared(at, to, half):
         return GO  # both ends within one segment's stadium, which is convex: the whole step is
     room = corridor.near(line.pts, half, at, max(_dist(at, to), _CLOSE_M))
     kept = room.kept(at, to)
@@ -356,7 +376,10 @@ def link(
     def linked(p: Point, clearance_m: float = 0.0) -> bool:
         return in_link(c, p, radio_range_m, sight, clearance_m)
 
-    if not linked(at):
+    # without terrain ``linked(at)`` inlined, its very numbers: a robot's step is judged per report (a
+    # micro-optimisation, bench row: BENCHMARKS.md "The judge's members", the judge)
+    here = math.hypot(at[0] - c[0], at[1] - c[1]) <= radio_range_m if sight is None else linked(at)
+    if not here:
         far = _dist(at, c)
         why = (
             f"{far:,.0f} m from {controller}, radio range {radio_range_m:,.0f} m"
@@ -373,13 +396,14 @@ def link(
     ):
         n = None  # not moving, or out of its sight however the robot holds: judged where it is
 
+    if sight is None and _within(radio_range_m, (at, to), (c,) if n is None else (c, n)):
+        return GO  # every sample of the step is in both discs (``_within``): ``_kept`` would keep it all
+
     def kept_by_both(p: Point) -> bool:
         return linked(p, SIGHT_CLEARANCE_M) and (
             n is None or in_link(n, p, radio_range_m, sight, SIGHT_CLEARANCE_M)
         )
 
-    if sight is None and _within(radio_range_m, (at, to), (c,) if n is None else (c, n)):
-        return GO  # every sample of the step is in both discs (``_within``): ``_kept`` would keep it all
     # a disc is left once, so the range alone is judged coarsely; a ridge's shadow may be narrow, but
     # not narrower than the ground's resolution shows (each sight line costs a profile of the DEM)
     spacing = (
@@ -432,13 +456,24 @@ def control(
     def linked(p: Point, rid: str, r: Point) -> bool:
         return in_link(p, r, radio_range_m, sights.get(rid, sight) if sights else sight)
 
-    kept = [(rid, r) for rid, r in robots if linked(at, rid, r)]
     ahead = next_of or {}
-    kept += [
-        (rid, n)
-        for rid, r in kept
-        if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, rid, n)
-    ]
+    if sight is None and not sights:  # ``linked`` and ``_dist`` inlined, their very numbers (as ``link``'s)
+        hypot = math.hypot
+        kept = [(rid, r) for rid, r in robots if hypot(r[0] - at[0], r[1] - at[1]) <= radio_range_m]
+        kept += [
+            (rid, n)
+            for rid, r in kept
+            if (n := ahead.get(rid)) is not None
+            and hypot(r[0] - n[0], r[1] - n[1]) >= _CLOSE_M
+            and hypot(n[0] - at[0], n[1] - at[1]) <= radio_range_m
+        ]
+    else:
+        kept = [(rid, r) for rid, r in robots if linked(at, rid, r)]
+        kept += [
+            (rid, n)
+            for rid, r in kept
+            if (n := ahead.get(rid)) is not None and _dist(n, r) >= _CLOSE_M and linked(at, rid, n)
+        ]
     if not kept or (
         sight is None and not sights and _within(radio_range_m, (at, to), [r for _, r in kept])
     ):  # no link to keep, or (no sight line to ask) every sample of the step keeps them all (``_within``)
