@@ -39,6 +39,16 @@ undid the first (a round given up for a back-off, then begun again): the
 other unit of the new deadlock resolves it (``Locks.backed_off``), unless it
 resolves one too.
 
+A round stopped (issue 33, ``h-deadlock8``): a unit going round one at rest
+and a unit it stops, each cut to nothing by the other, are one deadlock at
+once (a round is a resolution already, bounded, and waiting ``deadlock_s``
+spent a quarter of it); and the unit that gave way to it, its back-off
+over, waits for the round (``Hold.waits``: it yields to the unit going
+round, holding still) until that one's way is past it, it has drawn away,
+or its round ends, and only then has its grace: at once under its grace, it
+drove back into the round and backed off again (the gaps crowd's seed 2,
+42 s).
+
 Progress (``Locks.progressed``) is what tells a queue from a deadlock: a
 unit whose distance to its goal fell by ``PROGRESS`` of its separation
 within ``deadlock_s`` is coming nearer it, and a unit yielding to it (or
@@ -97,6 +107,7 @@ class Hold:
     until: float = -math.inf  # a deadlock's resolution in force until then
     began: float = -math.inf  # when the unit began to yield (to whomever), for ``STARVED``
     round: bool = False  # the resolution goes round ``other`` (at rest), rather than backing off
+    waits: bool = False  # it backed off from ``other`` and waits while ``other`` resolves its own deadlock
 
 
 class Locks:
@@ -319,15 +330,21 @@ def event(
     status: DirectionStatus | None,
     facing: bool = False,
     rounds: bool = False,
+    rounding: str | None = None,
 ) -> DeadlockEvent:
     """The deadlock's event: who resolves it (``unit``), with whom, and how long at most (``backoff_s``).
 
     ``facing``: two units each cut to nothing by the other (``Facing``); ``rounds``: both going round
-    units at rest.
+    units at rest; ``rounding``: the one of the two going round one (found at once).
     """
     x, y = at.tolist()
     if facing and rounds:
         why = f"{mover} and {blocker}, each going round a unit at rest, stop each other: {mover} gives way"
+    elif facing and rounding is not None:
+        why = (
+            f"{mover} and {blocker}, each cut to nothing by the other, {rounding} going round a unit at rest:"
+            f" {mover} gives way"
+        )
     elif facing:
         why = f"{mover} and {blocker}, each cut to nothing by the other for {held_s:.0f} s: {mover} gives way"
     elif round_:

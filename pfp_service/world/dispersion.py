@@ -9,12 +9,10 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    the repulsive term (``core.dispersion``), which it descends with the
    field (``core.batch.advise_many``: a unit on another route turns by it).
 2. ``Dispersion.right_of_way``: a unit whose direction closes on a moving
-   unit of higher priority within ``YIELD_AT`` separations holds, with
-   status ``yielding`` and a reason naming the other unit, and goes when the
-   other has drawn away (or makes room, when a unit is within about its
-   separation).  Priority: manned before unmanned (unless ``manned_first``
-   is off), then the smaller id.  The order is total, so no two units ever
-   yield to each other.
+   unit of higher priority within ``YIELD_AT`` separations (``right_of_way``)
+   holds, with status ``yielding`` and a reason naming the other unit, and
+   goes when the other has drawn away (or makes room, when a unit is within
+   about its separation).
 3. Deadlocks (``deadlocks``): a unit yielding for ``deadlock_s`` while the
    units it yields to neither draw away nor come nearer their own goals (a
    queue that moves is no deadlock), or a pushed unit no nearer its goal
@@ -26,13 +24,15 @@ bit for bit.  On, each ``apply`` that advises units does four things:
    soon after, the other one does (escalation).  A unit whose resolution
    ends goes under its own right of way for ``deadlock_s`` (it yields to no
    one, ``_short`` still keeps it apart), so no unit yields for longer than
-   ``deadlock_s`` plus its resolution with a deadlock in it.
+   ``deadlock_s`` plus its resolution with a deadlock in it; but a unit that
+   backed off from one going round a third waits for that round first
+   (``_waits``, bounded by the round).
 4. ``_short``: no direction takes a unit within ``keep_apart.KEEP``
    separations of another (its separation alone from a unit giving way to
    it); its reach is cut at that disc's edge (``keep_apart``).  A back-off
    cut to nothing turns to a free way, and a unit holding still in the way
    of the unit it yields to makes room.  Two units each cut to nothing by
-   the other for ``deadlock_s`` (two going round units at rest: at once)
+   the other for ``deadlock_s`` (one going round a unit at rest: at once)
    are one deadlock (``_facing_lock``).
 
 A unit's separation is its mobility class's (``separations``), or its
@@ -49,25 +49,20 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from pfp_service.core import neighbour_kernels as kernels
 from pfp_service.core.dispersion import PUSH, REACH, NeighbourIndex
 from pfp_service.wire import DeadlockEvent, Direction, DirectionStatus, Event
 from pfp_service.world import deadlocks, keep_apart
 from pfp_service.world.deadlocks import Hold
 from pfp_service.world.neighbours import TEAM_WIDEST, FleetIndex, TeamOf
+from pfp_service.world.right_of_way import YIELD_AT, blockers, priority
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.units import UnitRecord, Verdict
 
 __all__ = ["STRAIGHT_AT", "TEAM_WIDEST", "YIELD_AT", "Dispersion", "TeamOf", "priority"]
 
-YIELD_AT = 1.5  # a lower-priority unit closing on a higher one within this many separations holds
 # a yielding unit pushed this hard (a neighbour within about its separation: PUSH (1 - 1 / REACH) is
 # one at exactly the separation) moves away along its push instead of holding still
 CROWDED = PUSH * (1.0 - 1.0 / REACH)
-# a unit with another straight ahead (within 45 degrees) going its way (within 60) follows it, kept back
-# by ``_short``, rather than yielding: right of way is for paths that meet, and a queue that holds still
-# at every gap never flows
-AHEAD, FOLLOW = math.cos(math.pi / 4), 0.5
 # a unit whose way to its goal points this straight at another (within a degree) comes at it head on: its
 # push on the other is along their line, with nothing to turn either aside (off the line by half a metre
 # in 60 m, the push turns them, and they pass)
@@ -75,11 +70,6 @@ STRAIGHT_AT = math.cos(math.radians(1.0))
 _DRAWN_AWAY = 0.25  # a held-for unit that opens the gap by this share of the separation is passing
 _MOVING = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)
 _GOING = (*_MOVING, DirectionStatus.YIELDING)  # a unit in none of these is at rest (``_lock``)
-
-
-def priority(rec: UnitRecord, manned_first: bool) -> tuple[int, str]:
-    """The unit's right of way as a sort key: smaller goes first."""
-    return (0 if manned_first and rec.kind == "manned" else 1, rec.id)
 
 
 class Dispersion:
@@ -155,7 +145,9 @@ class Dispersion:
             d = directions[k]
             locks.progressed(d.unit, d.distance_to_goal, float(index.seps[self._row[d.unit]]), now)
         rows = np.array([self._row[directions[k].unit] for k in moving], dtype=np.intp)
-        found, gaps = self._blockers([directions[k] for k in moving], rows)
+        found, gaps = blockers(
+            index, self._recs, self._held, s.manned_first, [directions[k] for k in moving], rows
+        )
         # each blocked unit's pair separation, all in one pass (elementwise: as one pair's alone)
         pairs = np.zeros(len(moving))
         blocked = found >= 0
@@ -165,11 +157,16 @@ class Dispersion:
         for k, i, j, gap, pair in zip(moving, rows.tolist(), found.tolist(), gaps.tolist(), pairs.tolist()):
             d = directions[k]
             hold = self._held.get(d.unit)
-            if hold is not None and hold.until > -math.inf:  # a deadlock's resolution
+            if hold is not None and (
+                hold.until > -math.inf or hold.waits
+            ):  # a resolution, or a wait after one
                 if hold.until > now and hold.other in self._row and not self._passed(hold, i):
                     directions[k] = self._resolve(d, i, self._row[hold.other], hold)
                     continue
                 del self._held[d.unit]
+                if (waits := self._waits(d, i, hold, now)) is not None:
+                    directions[k] = waits
+                    continue
                 locks.resolved(d.unit, now)
                 hold = None
             if locks.in_grace(d.unit, now):
@@ -236,8 +233,11 @@ class Dispersion:
 
     def _facing_lock(self, a: str, b: str, held_s: float, now: float) -> DeadlockEvent | None:
         """Units ``a`` and ``b``, each cut to nothing by the other for ``held_s``: for ``deadlock_s``,
-        whatever they are doing, one deadlock (``deadlocks.Facing``), found once; when both are going
-        round units at rest, their two resolutions are one at once.
+        whatever they are doing, one deadlock (``deadlocks.Facing``), found once; when either is going
+        round a unit at rest, at once (two rounds: their two resolutions are one).  A round cut to nothing
+        is a resolution failing: waiting ``deadlock_s`` on it spent a quarter of the round (the gaps
+        crowd's seed 2, issue 33).  The one that gave way waits after its back-off while the other's
+        round lasts (``_waits``).
 
         The one that backs off (right of way, ``Locks.who_backs_off``; not one
         resolving a deadlock with a third, ``_busy``, when the other is free)
@@ -251,8 +251,8 @@ class Dispersion:
         live = [h for u in (a, b) if (h := self._held.get(u)) is not None and h.until > now]
         if any(h.other in (a, b) for h in live):  # this one's, in resolution already
             return None
-        rounds = len(live) == 2 and all(h.round for h in live)
-        if not rounds and held_s < s.deadlock_s:
+        going = [u for u in (a, b) if (h := self._held.get(u)) is not None and h.until > now and h.round]
+        if not going and held_s < s.deadlock_s:  # a round stopped is a resolution failing: found at once
             return None
         first = s.manned_first
         ra, rb = self._units[a], self._units[b]
@@ -265,7 +265,16 @@ class Dispersion:
         gap = float(np.hypot(*(index.points[g] - index.points[p])))
         self._held[giver] = Hold(passer, now, gap, until=now + s.backoff_s)
         return deadlocks.event(
-            giver, passer, index.points[g], held_s, s.backoff_s, False, None, facing=True, rounds=rounds
+            giver,
+            passer,
+            index.points[g],
+            held_s,
+            s.backoff_s,
+            False,
+            None,
+            facing=True,
+            rounds=len(going) == 2,
+            rounding=going[0] if len(going) == 1 else None,
         )
 
     def _stalled(self, d: Direction, i: int, now: float) -> DeadlockEvent | None:
@@ -373,6 +382,36 @@ class Dispersion:
             mover.id, blocker.id, index.points[m], held_s, until - now, round_, other.last_status
         )
 
+    def _waits(self, d: Direction, i: int, hold: Hold, now: float) -> Direction | None:
+        """A unit whose back-off ended (or that waits after one), while the unit it gave way to resolves a
+        deadlock with a third and has not drawn away: it yields to that one, its grace from when it stops.
+
+        Under its grace at once, it drove straight back into the round it had
+        made way for, was stopped by it and backed off again (``deadlocks``).
+        """
+        other = self._held.get(hold.other)
+        if hold.round or other is None or other.other == d.unit or not self._busy(hold.other, now):
+            return None
+        index = self._index
+        assert index is not None
+        j = self._row[hold.other]
+        gap = float(np.hypot(*(index.points[i] - index.points[j])))
+        pair = float(index.pair_seps(np.array([i]), np.array([j]))[0])
+        start = gap if not hold.waits else hold.gap
+        # the other's way: its round's (backing off, its push's: not known before it is advised)
+        wx, wy = 0.0, 0.0
+        if other.round:
+            rest = self._row[other.other]
+            sep = float(index.pair_seps(np.array([j]), np.array([rest]))[0])
+            wx, wy = deadlocks.round_vector(
+                index.points[j] - index.points[rest], self._towards(j, (0.0, 0.0)), sep
+            )
+        rx, ry = (index.points[i] - index.points[j]).tolist()
+        if gap > start + _DRAWN_AWAY * pair or wx * rx + wy * ry <= 0.0:  # drawn away, or its way past
+            return None
+        self._held[d.unit] = Hold(hold.other, hold.since, start, began=hold.began, waits=True)
+        return self._yield(d, i, j, gap, pair, room=False)
+
     def _busy(self, unit: str, now: float) -> bool:
         """Whether ``unit`` resolves a deadlock (backing off, going round) in force now."""
         hold = self._held.get(unit)
@@ -400,50 +439,7 @@ class Dispersion:
         rx, ry = (index.points[j] - index.points[i]).tolist()
         return bool(rx * tx + ry * ty <= 0.0)
 
-    def _blockers(self, moving: list[Direction], rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For each direction, the row of the nearest unit it must yield to (or -1) and how far it is."""
-        index, s = self._index, self.settings
-        assert index is not None
-        if not moving:
-            return np.zeros(0, dtype=np.intp), np.zeros(0)
-        vec = np.array([d.vector for d in moving], dtype=float).reshape(-1, 2)
-        at = np.full(len(self._recs), -1, dtype=np.intp)
-        at[rows] = np.arange(len(rows))
-        i, j, pair_s = index.near_seps(rows)
-        # ahead, and near: NumPy's arithmetic a pair at a time, compiled (``neighbour_kernels.ahead_near``)
-        gap, along = np.empty(len(i)), np.empty(len(i))
-        close = kernels.ahead_near(index.points, i, j, pair_s, vec, at, YIELD_AT, gap, along)
-        i, j, gap, along, pair_s = i[close], j[close], gap[close], along[close], pair_s[close]
-        rel = index.points[j] - index.points[i]
-        # the pairs left are a few (ahead and near): right of way's order, who goes and their ways read off
-        # their records, not arrays over the fleet; the order compared pair by pair is the total order's
-        # (``priority``).  A micro-optimisation (bench row: BENCHMARKS.md "A tick's fixed cost", ``python
-        # -m benchmarks._march_world --tick 4``): a live tick's few pairs paid some twenty NumPy calls
-        best = np.full(len(moving), -1, dtype=np.intp)
-        near = np.full(len(moving), np.inf)
-        if not len(i):
-            return best, near
-        recs, first = self._recs, s.manned_first
-        ii, jj = i.tolist(), j.tolist()
-        rank = {u: priority(recs[u], first) for u in {*ii, *jj}}  # each unit's once (a big tick: many pairs)
-        goes = {u: self._goes(recs[u]) for u in set(jj)}
-        yields = [rank[b] < rank[a] and goes[b] for a, b in zip(ii, jj)]
-        way = np.array([recs[u].last_vector or (0.0, 0.0) for u in jj], dtype=float).reshape(-1, 2)
-        k = at[i]
-        ahead = along > AHEAD * gap
-        behind = ahead & ((way * vec[k]).sum(axis=1) > FOLLOW)  # in a queue: followed, not yielded to
-        keep = np.array(yields, dtype=bool) & ~behind & deadlocks.meet(rel, way - vec[k], pair_s)
-        # each direction's nearest: the first of equals, in the pairs' order
-        for m, b, g in zip(k[keep].tolist(), j[keep].tolist(), gap[keep].tolist()):
-            if g < near[m]:
-                best[m], near[m] = b, g
-        return best, near
-
-    def _goes(self, rec: UnitRecord) -> bool:
-        """Whether a unit is moving under its own right of way (not holding, not still)."""
-        return rec.last_vector is not None and rec.last_status in _MOVING and rec.id not in self._held
-
-    def _yield(self, d: Direction, i: int, j: int, gap: float, pair: float) -> Direction:
+    def _yield(self, d: Direction, i: int, j: int, gap: float, pair: float, room: bool = True) -> Direction:
         rec, other = self._recs[i], self._recs[j]
         why = "manned first" if other.kind == "manned" and rec.kind != "manned" else "by id"
         if why == "manned first" and not self.settings.manned_first:
@@ -454,7 +450,9 @@ class Dispersion:
         )
         px, py = self._pushed.get(rec.id, (0.0, 0.0))
         crowded = math.hypot(px, py)
-        if crowded > CROWDED:  # a unit within about its separation: holding still is no place to wait
+        if (
+            room and crowded > CROWDED
+        ):  # a unit within about its separation: holding still is no place to wait
             vec = (-px / crowded, -py / crowded)
             reason = reason.replace("; goes when", "; making room, goes when")
             self._yielded(rec, Verdict(DirectionStatus.YIELDING, reason, rec.last_distance, vec))

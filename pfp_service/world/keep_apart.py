@@ -20,7 +20,7 @@ such a pair 0.95 separations apart.
 
 A neighbour going the unit's way moves too (``_moving_with``): against a
 neighbour on its own way in this tick (en route or escaping, as the unit
-is), within 60 degrees of the unit's (``WITH``, as ``dispersion.FOLLOW``),
+is), within 60 degrees of the unit's (``WITH``, as ``right_of_way.FOLLOW``),
 the unit's ray is cut as the two would move, the neighbour along its way
 as far as the cut with every neighbour standing leaves it, at the unit's
 speed; once within the margin, that disc is the separation alone; and

@@ -3,7 +3,7 @@
 ``NeighbourIndex``'s few rows' neighbours on a kept tree (``neighbour_kernels.within``) are those the tree,
 widened by its slack, finds and the tree's test keeps; its pairs' separations (``pair_seps``) are
 ``pair_separation``'s and its gradients (``pair_terms``) ``_pair_terms``', bit for bit.  Right of way's
-nearest blocker (``Dispersion._blockers``, its few close pairs read off their records) is the one the
+nearest blocker (``right_of_way.blockers``, its few close pairs read off their records) is the one the
 arrays over the fleet found, at every tick of a crowd.
 """
 
@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Container
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,11 +20,11 @@ import pytest
 from pfp_service.core import dispersion, polyline_kernels
 from pfp_service.core.dispersion import NeighbourIndex, pair_separation
 from pfp_service.wire import Goal, UnitKind, UnitState
-from pfp_service.world import deadlocks
+from pfp_service.world import deadlocks, right_of_way
 from pfp_service.world import dispersion as world_dispersion
 from pfp_service.world import teams as roles
-from pfp_service.world.dispersion import AHEAD, FOLLOW, YIELD_AT, Dispersion, priority
 from pfp_service.world.events import GoalSet, StateReported
+from pfp_service.world.right_of_way import AHEAD, FOLLOW, YIELD_AT, priority
 from pfp_service.world.separations import DispersionSettings
 from pfp_service.world.world import World, WorldSettings
 
@@ -100,13 +102,16 @@ def test_gradients_are_the_pairs_terms(seed: int) -> None:
 
 
 def _blockers_over_the_fleet(
-    disp: Dispersion, moving: list, rows: np.ndarray
+    index: NeighbourIndex,
+    all_recs: list,
+    held: Container[str],
+    manned_first: bool,
+    moving: list,
+    rows: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``Dispersion._blockers`` as it was: right of way's order, who goes and their ways as arrays over the fleet."""
-    index, s = disp._index, disp.settings
-    assert index is not None
+    """``right_of_way.blockers`` as it was: right of way's order, who goes and their ways as arrays over the fleet."""
     vec = np.array([d.vector for d in moving], dtype=float).reshape(-1, 2)
-    at = np.full(len(disp._recs), -1, dtype=np.intp)
+    at = np.full(len(all_recs), -1, dtype=np.intp)
     at[rows] = np.arange(len(rows))
     i, j, pair_s = index.near_seps(rows)
     rel = index.points[j] - index.points[i]
@@ -114,14 +119,14 @@ def _blockers_over_the_fleet(
     along = (rel * vec[at[i]]).sum(axis=1)
     close = (along > 0.0) & (gap < YIELD_AT * pair_s)
     i, j, gap, along, rel, pair_s = i[close], j[close], gap[close], along[close], rel[close], pair_s[close]
-    n = len(disp._recs)
+    n = len(all_recs)
     used = np.unique(np.concatenate([i, j]))
-    recs = [disp._recs[u] for u in used.tolist()]
-    first = np.fromiter((priority(r, s.manned_first)[0] for r in recs), dtype=np.intp, count=len(recs))
+    recs = [all_recs[u] for u in used.tolist()]
+    first = np.fromiter((priority(r, manned_first)[0] for r in recs), dtype=np.intp, count=len(recs))
     rank = np.zeros(n, dtype=np.intp)
     rank[used[np.lexsort((np.array([r.id for r in recs]), first))]] = np.arange(len(recs))
     goes = np.zeros(n, dtype=bool)
-    goes[used] = np.fromiter((disp._goes(r) for r in recs), dtype=bool, count=len(recs))
+    goes[used] = np.fromiter((right_of_way._goes(r, held) for r in recs), dtype=bool, count=len(recs))
     way = np.zeros((n, 2), dtype=float)
     way[used] = np.array([r.last_vector or (0.0, 0.0) for r in recs], dtype=float).reshape(-1, 2)
     k = at[i]
@@ -157,17 +162,17 @@ def test_right_of_ways_blockers_are_the_fleet_arrays(seed: int, monkeypatch: pyt
         0.0,
     )
     compared, found = [0], [0]
-    plain = world_dispersion.Dispersion._blockers
+    plain = right_of_way.blockers
 
-    def both(self: Dispersion, moving: list, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        got = plain(self, moving, rows)
-        want = _blockers_over_the_fleet(self, moving, rows)
+    def both(*args: Any) -> tuple[np.ndarray, np.ndarray]:
+        got = plain(*args)
+        want = _blockers_over_the_fleet(*args)
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
         compared[0] += 1
         found[0] += int((got[0] >= 0).sum())
         return got
 
-    monkeypatch.setattr(world_dispersion.Dispersion, "_blockers", both)
+    monkeypatch.setattr(world_dispersion, "blockers", both)
     units = list(at)
     for t in range(1, 240):
         k = t % len(units)
