@@ -90,7 +90,7 @@ def test_pfp_fleet_puts_the_teams_zones_and_its_unit_goes_round_them(tmp_path):
         )  # fmt: skip
         sub.undeclare()
         assert r.returncode == 0, r.stdout + r.stderr
-        assert "keep-out zone wall put" in r.stdout and "all arrived" in r.stdout
+        assert "keep-out zone wall put" in r.stdout and "all arrived" in r.stdout, r.stdout[-3000:]
         (reply,) = [x for x in s.get(keys.worlds(mission), timeout=5) if x.ok is not None]
         snap = decode_world_snapshot(reply.ok.payload.to_bytes())
         assert sorted(z.id for z in snap.zones) == ["wall", "z2"]
