@@ -65,7 +65,6 @@ class SimUnit:
     mobility: GoalMobility | None = None  # its class on every state (the spec's, else the fleet's)
     seed: int = 0
     next_report_s: float = 0.0
-    reported_at: tuple[float, float] | None = None  # the true position when it last reported
     _rng: random.Random = field(init=False, repr=False)
     _left_m: float = field(default=math.inf, init=False, repr=False)  # reach_m left of the newest direction
     # seq -> the true position when it reported (the newest ``_REPORTS_KEPT``): where a direction's leg starts
@@ -121,7 +120,6 @@ class SimUnit:
         if self.direction is not None and self.direction.heading_deg is not None:
             heading = self.direction.heading_deg
         x, y = self.position
-        self.reported_at = self.position
         self._reported[self.seq] = self.position
         if len(self._reported) > _REPORTS_KEPT:
             del self._reported[next(iter(self._reported))]  # the oldest
