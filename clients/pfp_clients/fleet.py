@@ -55,6 +55,7 @@ from pfp_service.wire import (
     GoalMobility,
     TeamUpdate,
     decode_direction,
+    decode_goal,
     encode,
     keys,
 )
@@ -234,12 +235,19 @@ def run_fleet(
             new_planner.set()
 
     cancelled: set[str] = set()  # goals someone cancelled on the wire are not put again
+    on_wire: dict[str, Goal] = {}  # the goal last put on the wire for a unit, by anyone (a map, a commander)
 
     def on_goal(sample: zenoh.Sample) -> None:
         with contextlib.suppress(InputError):
             uid = keys.parse(str(sample.key_expr)).id
+            if uid not in by_id:
+                return
             if sample.kind == zenoh.SampleKind.DELETE:
                 cancelled.add(uid)
+                on_wire.pop(uid, None)
+            else:
+                on_wire[uid] = decode_goal(sample.payload.to_bytes())
+                cancelled.discard(uid)
 
     enc = zenoh_encoding()
     declared: list[Any] = [
@@ -250,8 +258,15 @@ def run_fleet(
     reput_at: dict[str, float] = {}
 
     def reput(u: SimUnit, why: str) -> None:
-        """Belt and braces: a planner that lost a unit's goal gets it again (at most every 2 s)."""
-        goal = _goal_of(u) if opts.set_goals and not u.arrived and u.id not in cancelled else None
+        """Belt and braces: a planner that lost a unit's goal gets it again (at most every 2 s).
+
+        The goal is the one last put on the wire (the team file's until somebody puts another).
+        """
+        goal = (
+            (on_wire.get(u.id) or _goal_of(u))
+            if opts.set_goals and not u.arrived and u.id not in cancelled
+            else None
+        )
         if goal is None or clock() - reput_at.get(u.id, -1e9) < 2.0:
             return
         reput_at[u.id] = clock()
@@ -281,7 +296,9 @@ def run_fleet(
             line = by_id[uid].on_direction(d, t_s, coords.point)
             if line is not None:
                 say(f"t={t_s:7.2f}s  {line}")
-            if d.status is DirectionStatus.NO_GOAL and tick > 0:
+            if d.status is DirectionStatus.NO_GOAL and not d.reason and tick > 0:
+                # a reason says why the goal went (cancelled: the planner saw a delete whose own sample may
+                # reach us later; refused): the same goal again would not help. None: the planner lost it.
                 reput(by_id[uid], "the planner answered no_goal")
 
     say(f"fleet {team.name}: {len(units)} units, {opts.rate_hz:g} Hz, speed-up x{opts.speed_up:g}")

@@ -17,7 +17,15 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Final
 
-from pfp_service.wire import Direction, DirectionStatus, Goal, GoalMobility, Progress, UnitKind, UnitState
+from pfp_service.wire import (
+    Direction,
+    DirectionStatus,
+    Goal,
+    GoalMobility,
+    Progress,
+    UnitKind,
+    UnitState,
+)
 
 __all__ = [
     "CARDINALS",
@@ -275,8 +283,9 @@ class HandheldModel:
         self.counts["directions"] += 1
         if d.status is not DirectionStatus.NO_GOAL:
             self._goal_acked = True
-        elif self.goal is not None and self._goal_acked:
-            # the planner lost it (restarted, or raced a goal put): a cancel would have come as GoalIn(None)
+        elif self.goal is not None and self._goal_acked and not d.reason:
+            # the planner lost it (restarted, or raced a goal put). A reason says why it went: cancelled (a
+            # delete, whose own sample, GoalIn(None), may reach us after this direction), or refused.
             self._goal_acked = False
 
     def on_link(self, up: bool, text: str) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from pfp_service.wire import keys
 from pfp_service.wire.messages import (
     CONTENT_TYPE,
+    GOAL_CANCELLED,
     MAX_PAYLOAD_BYTES,
     ArrivedEvent,
     Bounds,
@@ -69,6 +70,7 @@ from pfp_service.wire.messages import (
 
 __all__ = [
     "CONTENT_TYPE",
+    "GOAL_CANCELLED",
     "MAX_PAYLOAD_BYTES",
     "ArrivedEvent",
     "Bounds",

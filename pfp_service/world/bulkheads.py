@@ -52,7 +52,9 @@ class Bulkheads:
             try:
                 said = "; the unit's goal was dropped" if rec.goal is not None else ""
                 if rec.goal is not None or rec.shared is not None:
-                    self._book.drop_mission(rec)
+                    self._book.drop_mission(
+                        rec, "goal dropped: the planner failed on it (see its fault event)"
+                    )
                 if rec.position is not None and not rec.stale:  # told so in this batch (``World._direct``)
                     b.dirty.add(rec.id)
             except Exception:  # a record too broken to reset: forget it (a report makes it afresh)

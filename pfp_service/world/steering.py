@@ -264,7 +264,12 @@ def _straight_reach(
 def no_goal(rec: UnitRecord, planner: str) -> Direction:
     """The direction of a unit with no goal: stand still (its verdict: ``NO_GOAL``)."""
     return Direction(
-        unit=rec.id, seq=rec.seq, status=DirectionStatus.NO_GOAL, vector=(0.0, 0.0), planner=planner
+        unit=rec.id,
+        seq=rec.seq,
+        status=DirectionStatus.NO_GOAL,
+        vector=(0.0, 0.0),
+        planner=planner,
+        reason=rec.goal_gone,
     )
 
 

@@ -118,6 +118,7 @@ class UnitRecord:
     mobility: GoalMobility | None = None  # the class its states name (``world.mobility``): kept till another
     last_seen: float = -math.inf
     goal: Goal | None = None
+    goal_gone: str = ""  # why it has none since one was dropped: its ``no_goal`` directions' reason
     origin: tuple[float, float] | None = None  # x0: where the unit was when its goal was set
     stepper: Stepper | None = None
     epoch: int = 0  # bumped by every goal set or cancelled
@@ -291,13 +292,19 @@ class Units:
     ) -> None:
         """A goal set, or a mission restored (``shared``): a new epoch, its former mission and job gone."""
         self._drop(rec)
-        rec.goal, rec.shared = goal, shared
+        rec.goal, rec.shared, rec.goal_gone = goal, shared, ""
         self.version += 1
         self._to(rec, Step.GOAL_SET)
 
-    def drop_mission(self, rec: UnitRecord) -> None:
-        """The unit's goal, mission, stepper and last verdict go; a new epoch starts, and its job is superseded."""
+    def drop_mission(self, rec: UnitRecord, why: str = "") -> None:
+        """The unit's goal, mission, stepper and last verdict go; a new epoch starts, and its job is superseded.
+
+        ``why`` (``GOAL_CANCELLED``, or words for a refusal or a fault) is the reason its ``no_goal``
+        directions give until a goal is set again: a client puts its goal again on a ``no_goal`` that
+        says nothing (a restarted planner), never on one that says it was cancelled.
+        """
         self._drop(rec)
+        rec.goal_gone = why
         self._to(rec, Step.GOAL_DROPPED)
 
     def started(self, rec: UnitRecord, mission: Started) -> None:

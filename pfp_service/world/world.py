@@ -29,9 +29,9 @@ from collections.abc import Callable
 from pfp_service.core import ThreatField
 from pfp_service.core.advice import Advice
 from pfp_service.errors import InputError
-from pfp_service.wire import Direction, Goal, UnitState, WorldSnapshot, keys
+from pfp_service.wire import GOAL_CANCELLED, Direction, Goal, UnitState, WorldSnapshot, keys
 from pfp_service.wire import ThreatUpdate as ThreatUpdate  # named from here by its callers
-from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS
+from pfp_service.wire.messages import MAX_SNAPSHOT_ITEMS, fit_text
 from pfp_service.world import dispersion, heights, kinds, missions, slopes, steering, team_route, wave
 from pfp_service.world import events as ev
 from pfp_service.world.bulkheads import Bulkheads
@@ -218,7 +218,7 @@ class World:
             case ev.GoalCancelled(unit):
                 rec = self._units.get(unit)
                 if rec is not None and rec.goal is not None:
-                    self._rec.drop_mission(rec)
+                    self._rec.drop_mission(rec, GOAL_CANCELLED)
                     self._direct(rec, b)
             case ev.ThreatPut(tid, update):
                 self._puts.put(tid, update, b)
@@ -348,7 +348,7 @@ class World:
         started = missions.start(rec, self.settings, fld, self._rec.stats)
         if isinstance(started, InputError):
             self._reject(self._key(K.UNIT_GOAL, rec.id), started, b, K.UNIT_GOAL)
-            self._book.drop_mission(rec)
+            self._book.drop_mission(rec, fit_text(f"goal refused: {started.reason}"))
             return
         self._book.started(rec, started[0])
         if record:
@@ -484,7 +484,7 @@ class World:
             sent.append(rec.position)
 
     def _no_goal(self, rec: UnitRecord) -> Direction:
-        self._book.steered(rec, steering.NO_GOAL)
+        self._book.steered(rec, steering.NO_GOAL._replace(reason=rec.goal_gone))
         return steering.no_goal(rec, self.settings.planner_id)
 
     def _deliberate(self, rec: UnitRecord, fld: ThreatField, b: Batch) -> None:

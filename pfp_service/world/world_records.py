@@ -243,8 +243,8 @@ class Records:
         return self.field_for(limit_of(rec))
 
     # the world's input handlers name these two here; the writes are the units' owner's
-    def drop_mission(self, rec: UnitRecord) -> None:
-        self.book.drop_mission(rec)
+    def drop_mission(self, rec: UnitRecord, why: str) -> None:
+        self.book.drop_mission(rec, why)
 
     def share(self, rec: UnitRecord, mission: Mission) -> None:
         self.book.share(rec, mission)

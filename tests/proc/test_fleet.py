@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import io
+import json
 import queue
 import re
+import threading
 import uuid
 
 import pytest
@@ -13,7 +15,7 @@ from pfp_clients.sim import SimUnit
 
 from pfp_service.errors import InputError
 from pfp_service.team import UnitSpec, generate_team, load_team
-from pfp_service.wire import Direction, DirectionStatus, keys
+from pfp_service.wire import GOAL_CANCELLED, Direction, DirectionStatus, decode_unit_state, encode, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, planner_process, put_json
 
@@ -260,3 +262,55 @@ def test_a_fleet_with_an_origin_against_a_planner_without_one_is_one_line_exit_2
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     line = r.stderr.strip()
     assert len(line.splitlines()) == 1 and "50.01,8" in line and "has none" in line, line
+
+
+@pytest.mark.proc
+@pytest.mark.parametrize(
+    ("reason", "put_again"), [("", True), (GOAL_CANCELLED, False), ("goal refused: x", False)]
+)
+def test_the_fleet_puts_a_goal_again_only_on_a_no_goal_that_says_nothing(
+    mission, tmp_path, reason, put_again
+):
+    """A planner that lost a goal (restarted) says ``no_goal`` and nothing more: the fleet puts it again,
+    the goal last put on the wire (here an operator's, not the team file's). One that says why
+    (cancelled: it saw a delete whose own sample may reach the fleet later; refused) is left be.
+    A hand-driven planner answers every state so; no delete is ever put."""
+    team = tmp_path / "team.yaml"
+    team.write_text("units:\n  - {id: a1, kind: unmanned, start: [0, 0], goal: [30, 0], speed_mps: 1.0}\n")
+    with planner_process(mission="router-" + mission) as (endpoint, _), client(endpoint) as s:
+        goals: queue.Queue[tuple[str, list[float] | None]] = queue.Queue()
+
+        def seen(smp: zenoh.Sample) -> None:
+            put = smp.kind == zenoh.SampleKind.PUT
+            goals.put((str(smp.kind), json.loads(smp.payload.to_bytes())["position"] if put else None))
+
+        goal_sub = s.declare_subscriber(keys.goals(mission), seen)
+        operator_put = threading.Event()
+
+        def answer(smp: zenoh.Sample) -> None:
+            st = decode_unit_state(smp.payload.to_bytes())
+            if (
+                not operator_put.is_set()
+            ):  # before the first answer, on the same link: the fleet sees it first
+                operator_put.set()
+                put_json(s, keys.unit_goal(mission, "a1"), {"position": [12, 9]})
+            d = Direction(
+                unit="a1", seq=st.seq, status=DirectionStatus.NO_GOAL, vector=(0.0, 0.0), reason=reason
+            )
+            s.put(keys.unit_direction(mission, "a1"), encode(d))
+
+        state_sub = s.declare_subscriber(keys.sharded_states(mission), answer)
+        r = run_pfp(
+            "fleet", "--team", str(team), "--connect", endpoint, "--mission", mission, "--duration-s", "5",
+            timeout=60,
+        )  # fmt: skip
+        state_sub.undeclare()
+        goal_sub.undeclare()
+    puts = [goals.get_nowait() for _ in range(goals.qsize())]
+    assert r.returncode in (0, 1), r.stdout + r.stderr
+    assert puts[:2] == [("SampleKind.PUT", [30, 0]), ("SampleKind.PUT", [12, 9])], (
+        puts
+    )  # the file's, the operator's
+    again = puts[2:]
+    assert bool(again) is put_again and ("goal put again" in r.stdout) is put_again, (puts, r.stdout)
+    assert all(p == ("SampleKind.PUT", [12, 9]) for p in again), puts

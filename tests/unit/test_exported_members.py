@@ -13,6 +13,7 @@ pytestmark = pytest.mark.unit
 
 EXPECTED = [
     "CONTENT_TYPE",
+    "GOAL_CANCELLED",
     "MAX_PAYLOAD_BYTES",
     "ArrivedEvent",
     "Bounds",

@@ -9,6 +9,7 @@ import uuid
 from collections.abc import Callable
 from pathlib import Path
 
+import msgspec
 import pytest
 from pfp_clients.handheld import HandheldApp
 from pfp_clients.handheld_link import open_link
@@ -26,7 +27,7 @@ from pfp_clients.handheld_model import (
 from pfp_clients.nmea import LocalFrame
 from pfp_clients.nmea_feed import NmeaReader, open_nmea
 
-from pfp_service.wire import Direction, DirectionStatus, GoalMobility, keys
+from pfp_service.wire import GOAL_CANCELLED, Direction, DirectionStatus, GoalMobility, keys
 from tests.conftest import run_pfp
 from tests.zenoh_util import Inbox, client, free_port, planner_process, put_json
 
@@ -222,6 +223,21 @@ def test_goal_is_resent_until_acted_on_then_left_alone():
     assert m.goal_to_send(20.0) is None
     m.set_goal((7.0, 1.0))  # the g prompt
     assert m.goal_to_send(20.1).position == (7.0, 1.0)
+
+
+@pytest.mark.unit
+def test_a_no_goal_that_says_cancelled_is_not_answered_with_the_goal_again():
+    # the planner saw a delete; its direction may reach us before the delete's own sample does
+    m = HandheldModel(Settings(unit="u1", goal=(5.0, 5.0), goal_retry_s=2.0), (0.0, 0.0), now=0.0)
+    assert m.goal_to_send(0.0) is not None
+    m.on_direction(_direction(), now=0.5)
+    cancelled = msgspec.structs.replace(
+        _direction(status="no_goal", vector=(0.0, 0.0), distance=None), reason=GOAL_CANCELLED
+    )
+    m.on_direction(cancelled, now=1.0)
+    assert m.goal_to_send(5.0) is None
+    m.on_goal(None)  # the delete's sample, later
+    assert m.goal is None and m.goal_to_send(9.0) is None
 
 
 @pytest.mark.unit

@@ -10,6 +10,7 @@ import pytest
 from pfp_service.core import PlannerParams
 from pfp_service.errors import InputError
 from pfp_service.wire import (
+    GOAL_CANCELLED,
     ArrivedEvent,
     DirectionStatus,
     ForgottenEvent,
@@ -71,11 +72,16 @@ def test_a_state_for_an_unknown_unit_gets_no_goal_then_a_goal_guides_it():
     out = w.apply([_state("u1", 0, 0, 1)], 0.0)
     d = _one(out, "u1")
     assert d.status is DirectionStatus.NO_GOAL and d.seq == 1 and d.vector == (0.0, 0.0)
+    assert d.reason == ""  # none was ever put: a client puts its goal (again) on this one
     d = _one(w.apply([GoalSet("u1", Goal(position=(10, 10)))], 0.0), "u1")
     assert d.status is DirectionStatus.EN_ROUTE
     assert abs(d.heading_deg - 45.0) < 1e-9 and len(d.lookahead) == 5
-    assert _one(w.apply([GoalCancelled("u1")], 0.0), "u1").status is DirectionStatus.NO_GOAL
+    d = _one(w.apply([GoalCancelled("u1")], 0.0), "u1")
+    assert d.status is DirectionStatus.NO_GOAL and d.reason == GOAL_CANCELLED  # and leaves this one be
     assert not w.apply([GoalCancelled("u1")], 0.0)  # nothing to cancel: nothing goes out
+    assert _one(w.apply([_state("u1", 0, 0, 2)], 0.1), "u1").reason == GOAL_CANCELLED  # said every report
+    assert w.snapshot(0.1).units[0].reason == GOAL_CANCELLED  # and in the world reply
+    assert _one(w.apply([GoalSet("u1", Goal(position=(10, 10)))], 0.2), "u1").reason == ""
 
 
 def test_a_goal_before_any_report_waits_for_the_report():

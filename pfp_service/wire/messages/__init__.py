@@ -52,6 +52,7 @@ from pfp_service.wire.messages.guidance import Progress, RouteKind
 from pfp_service.wire.messages.structs import (
     CHOICES,
     CONTENT_TYPE,
+    GOAL_CANCELLED,
     MAX_EVENT_ITEMS,
     MAX_LOOKAHEAD,
     MAX_PAYLOAD_BYTES,
@@ -116,6 +117,7 @@ __all__ = [
     "CHOICES",
     "CONTENT_TYPE",
     "EVENT_KINDS",
+    "GOAL_CANCELLED",
     "MAX_EVENT_ITEMS",
     "MAX_LOOKAHEAD",
     "MAX_PAYLOAD_BYTES",

@@ -120,6 +120,10 @@ class DirectionStatus(StrEnum):
     YIELDING = "yielding"  # holding: right of way to a friendly unit (dispersion); goes when it has passed
 
 
+# The ``reason`` of a ``no_goal`` direction once a delete on the wire took the unit's goal: a client
+# that puts its goal again on ``no_goal`` (a restarted planner says nothing) leaves this one be.
+GOAL_CANCELLED = "goal cancelled"
+
 CHOICES: dict[str, tuple[str, ...]] = {
     "kind": tuple(k.value for k in UnitKind),
     "status": tuple(s.value for s in DirectionStatus),
@@ -389,7 +393,8 @@ class Direction(_Message, frozen=True, kw_only=True):
         distance_to_goal: metres, null without a goal.
         threat_level: weighted threat level at the unit's position.
         lookahead: the next positions the same stepper predicts, ``[[x, y], ...]``.
-        reason: why, for ``trapped`` and ``escaping``.
+        reason: why, for ``trapped``, ``escaping`` and ``yielding``; for ``no_goal``, why the goal went
+            (``goal cancelled``, ``goal refused: ...``, ``goal dropped: ...``; empty when none was held).
         true_bearing_deg: the vector as a bearing from true north at the unit,
             when the mission has an origin (``geo.with_geodetic``); null otherwise.
         lookahead_geo: ``lookahead`` as ``[{"lat", "lon"}, ...]`` when the mission has an origin.
