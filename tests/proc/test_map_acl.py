@@ -54,7 +54,10 @@ def test_the_map_as_injector_sees_the_unit_and_edits_through_the_acl(acl):
     planner = _as(acl, "planner")
     unit = _as(acl, "unit-u1")
     observer = _as(acl, "observer")
-    node = PlannerNode(planner, ServeConfig(mission=M, planner_id="planner", mode="client"))
+    # The preview's budget is generous: this test is of the ACL, and under a loaded CI a first preview's
+    # route search took the default 500 ms, its walk cut at its first check (64 steps, at (3.94, -1.97)).
+    conf = ServeConfig(mission=M, planner_id="planner", mode="client", preview_budget_ms=10_000.0)
+    node = PlannerNode(planner, conf)
     node.start()
     try:
         token = unit.liveliness().declare_token(f"mumt/{M}/alive/unit/u1")
