@@ -7,7 +7,12 @@ is in one of its stops (``sim.SimUnit``: real speeds, report rates, stops and
 GPS noise, never the planner's step).  Ticks are paced at ``dt / speed_up`` of wall time, so
 ``--speed-up 10`` runs ten simulated seconds per second; if the planner answers
 late the fleet waits up to ``reply_timeout_s`` (lockstep), so acceleration never
-outruns the planner.  A unit whose answer still has not come moves along the
+outruns the planner.  Nor does it outrun the planner's deliberation: while a
+unit's newest direction says a route is being computed off the loop
+(``deliberating``), ticks are paced at real time, so a vehicle drives no
+further on plain descent while a search runs than a real one would (at
+``--speed-up 40`` a 2 s search would otherwise be 80 s of driving, and a
+run's outcome would depend on how busy the machine is).  A unit whose answer still has not come moves along the
 direction it had, as a vehicle would.  Each unit holds a liveliness token
 ``mumt/{m}/alive/unit/{u}`` while the fleet runs.
 
@@ -277,7 +282,7 @@ def run_fleet(
     goals = Deliverer(session, m, lambda line: say(f"t={t_s:7.2f}s  {line}"))
     tokens = [session.liveliness().declare_token(keys.alive_unit(m, u.id)) for u in units]
     pubs = {u.id: session.declare_publisher(keys.shard_state(m, u.id), encoding=enc) for u in units}
-    t_s, tick, late = 0.0, 0, 0
+    t_s, tick, late, real_time = 0.0, 0, 0, 0
     reason = "stopped"
     last_answer = clock()
     silent_warned = False
@@ -327,8 +332,12 @@ def run_fleet(
                 if u.due(t_s):
                     pubs[u.id].put(encode(u.state(t_s)))
                     need[u.id] = u.seq
-            # pace the tick, then (lockstep) wait a while longer for answers still missing
-            drain(tick_start + dt_s / opts.speed_up, None)
+            # pace the tick (at real time while a route is deliberated), then (lockstep) wait a while
+            # longer for answers still missing
+            speed_up = opts.speed_up
+            if speed_up > 1.0 and any(u.deliberating for u in units):
+                speed_up, real_time = 1.0, real_time + 1
+            drain(tick_start + dt_s / speed_up, None)
             if clock() - last_answer < 2 * opts.reply_timeout_s:  # lockstep only while a planner answers
                 drain(clock() + opts.reply_timeout_s, need)
             late += sum(1 for uid, seq in need.items() if by_id[uid].answered < seq)
@@ -350,7 +359,8 @@ def run_fleet(
                 reason = f"duration {opts.duration_s:g} s reached"
                 break
         wall = clock() - started
-        say(f"t={t_s:7.2f}s  fleet stops: {reason} ({tick} ticks in {wall:.1f} s wall)")
+        paced = f"; {real_time} at real time while a route was deliberated" if real_time else ""
+        say(f"t={t_s:7.2f}s  fleet stops: {reason} ({tick} ticks in {wall:.1f} s wall{paced})")
     finally:
         goals.close()
         for d in [*declared, *pubs.values(), *tokens]:

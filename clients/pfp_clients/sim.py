@@ -108,6 +108,11 @@ class SimUnit:
         return self.direction is not None and self.direction.status is DirectionStatus.ARRIVED
 
     @property
+    def deliberating(self) -> bool:
+        """The newest direction says a route is being computed off the planner's loop (plain descent until then)."""
+        return self.direction is not None and self.direction.deliberating and not self.arrived
+
+    @property
     def answered(self) -> int:
         """The ``seq`` of the newest direction received (-1 before any)."""
         d = self.direction

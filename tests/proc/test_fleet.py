@@ -314,3 +314,37 @@ def test_the_fleet_puts_a_goal_again_only_on_a_no_goal_that_says_nothing(
     again = puts[2:]
     assert bool(again) is put_again and ("goal put again" in r.stdout) is put_again, (puts, r.stdout)
     assert all(p == ("SampleKind.PUT", [12, 9]) for p in again), puts
+
+
+@pytest.mark.proc
+@pytest.mark.parametrize("deliberating", [True, False])
+def test_the_fleet_runs_at_real_time_while_a_route_is_deliberated(mission, tmp_path, deliberating):
+    """At ``--speed-up 20`` three simulated seconds take 0.15 s of wall time, unless a unit's direction says a
+    route is being computed off the planner's loop: then they take three, as they would a real vehicle,
+    so a search's wall time is never twenty times the driving. A hand-driven planner answers every state."""
+    team = tmp_path / "team.yaml"
+    team.write_text("units:\n  - {id: a1, kind: unmanned, start: [0, 0], goal: [300, 0], speed_mps: 1.0}\n")
+    with planner_process(mission="router-" + mission) as (endpoint, _), client(endpoint) as s:
+
+        def answer(smp: zenoh.Sample) -> None:
+            st = decode_unit_state(smp.payload.to_bytes())
+            d = Direction(
+                unit="a1", seq=st.seq, status=DirectionStatus.EN_ROUTE, vector=(1.0, 0.0), reach_m=5.0,
+                deliberating=deliberating,
+            )  # fmt: skip
+            s.put(keys.unit_direction(mission, "a1"), encode(d))
+
+        state_sub = s.declare_subscriber(keys.sharded_states(mission), answer)
+        r = run_pfp(
+            "fleet", "--team", str(team), "--connect", endpoint, "--mission", mission, "--duration-s", "3",
+            "--speed-up", "20", "--no-goals", timeout=60,
+        )  # fmt: skip
+        state_sub.undeclare()
+    assert r.returncode in (0, 1), r.stdout + r.stderr
+    stop = re.search(r"fleet stops: .*\((\d+) ticks in ([\d.]+) s wall(; (\d+) at real time)?", r.stdout)
+    assert stop is not None, r.stdout
+    ticks, wall, real = int(stop.group(1)), float(stop.group(2)), int(stop.group(4) or 0)
+    if deliberating:
+        assert real == ticks - 1 and wall >= 2.7, r.stdout  # the first tick is paced before any answer came
+    else:
+        assert real == 0 and wall < 2.7, r.stdout
