@@ -4,15 +4,14 @@
 pair's entry into the neighbour's disc, lengthened where the neighbour goes
 the unit's way, each unit's nearest entry, and the pairs that hold each
 other.  A live tick has a few reports, so a few pairs, and as NumPy that
-was some fifty calls on arrays of a dozen rows: 12 % of ``World.apply``
-in the teams march at 8 reports a tick, its per-call overhead.  Here it is
-one call, a pair at a time.  A micro-optimisation, issue 33 (bench row:
-BENCHMARKS.md "keep_apart's cut compiled (issue 33)", ``python -m
-benchmarks._march_world --tick 8``).  No fast-math: NumPy's floating-point
-operations in its order (a row's ``(a * b).sum(axis=1)`` is
-``a0 * b0 + a1 * b1``, ``np.hypot`` and ``np.sqrt`` are ``math``'s), so the
-same numbers; ``tests/unit/test_keep_apart_kernels.py`` holds the NumPy
-they stand for.
+was some fifty calls on arrays of a dozen rows, each paying NumPy's cost
+of a call more than its arithmetic.  Here it is one call, a pair at a
+time.  A micro-optimisation, issue 33 (bench row: BENCHMARKS.md
+"keep_apart's cut compiled (issue 33)", ``python -m benchmarks._march_world
+--tick 8``).  No fast-math: NumPy's floating-point operations in its order
+(a row's ``(a * b).sum(axis=1)`` is ``a0 * b0 + a1 * b1``, ``np.hypot`` and
+``np.sqrt`` are ``math``'s), so the same numbers;
+``tests/unit/test_keep_apart_kernels.py`` holds the NumPy they stand for.
 
 The rule's constants (``keep_apart``'s ``KEEP``, ``GIVEN``, ``INSIDE``,
 ``WITH`` and its grazing tolerance) come in as one tuple, ``rule``: a
@@ -134,7 +133,8 @@ def cut(
         gives_way: each row's unit it gives way to (``-1``: none); empty when no unit does.
         rule: ``keep_apart``'s ``(KEEP, GIVEN, INSIDE, WITH, graze_m)``.
         enter: each pair's entry, written here: with every neighbour standing, lengthened where the
-            neighbour goes the unit's way (``keep_apart._moving_with``'s rule).
+            neighbour goes the unit's way (``keep_apart``'s docstring: a neighbour going the unit's
+            way moves too).
 
     Returns:
         Each moving unit's nearest entry (``inf``: none), and the held pairs ``(m, j)`` (the moving
