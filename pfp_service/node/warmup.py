@@ -21,7 +21,9 @@ live loop takes:
   (``project`` and ``shared`` in one call), ``project`` and ``kept``; its lead making for its
   place: ``places``, and ``place`` for one; its lead's track grown by a point: ``extend_one``;
 * six units crowding each other with dispersion on: the tick's neighbour passes
-  (``core.neighbour_kernels``);
+  (``core.neighbour_kernels``) and the cut of their ways at each other's discs
+  (``core.keep_apart_kernels.cut``); a back-off cut to nothing turning to a free
+  way (``keep_apart_kernels.entries``);
 * a threat over terrain (a synthetic hill): the viewshed sweep
   (``terrain.viewshed._sweep``) and every kernel on rows that carry a
   visibility window.
@@ -133,7 +135,11 @@ def _team() -> None:
 def _dispersion(settings: WorldSettings) -> None:
     """Six units within each other's separation, crossing, with dispersion on, then one of them moving: the
     tick's compiled neighbour passes (``core.neighbour_kernels``: the pairs' separations and push terms,
-    right of way's first look, a kept tree's moved rows), which only dispersion reaches."""
+    right of way's first look, a kept tree's moved rows) and its cut (``core.keep_apart_kernels.cut``),
+    which only dispersion reaches; and a back-off cut to nothing turned to a free way
+    (``keep_apart.free_way``: ``keep_apart_kernels.entries``), which the six do not reach."""
+    from pfp_service.core.dispersion import NeighbourIndex
+    from pfp_service.world import keep_apart
     from pfp_service.world.separations import DispersionSettings
     from pfp_service.world.world import World
 
@@ -145,6 +151,8 @@ def _dispersion(settings: WorldSettings) -> None:
     world.apply(inputs, 0.0)
     for k in range(1, 4):  # one unit's small move a tick: the kept tree, asked again at the row that moved
         world.apply([StateReported("d0", UnitState(position=(0.5 * k, 0.1 * k)))], float(k))
+    facing = NeighbourIndex(np.array([(0.0, 0.0), (0.0, 10.0)]), np.full(2, 10.0))
+    keep_apart.free_way(facing, 0, (0.0, 1.0), np.array([0.0, -1.0]), 10.0)
 
 
 def _crowd() -> list[Input]:

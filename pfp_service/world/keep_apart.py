@@ -18,7 +18,7 @@ packed at the margin (the gaps crowd's column at its middle gap) a unit
 stood while the neighbours it touched stood.  A step of 5 m still leaves
 such a pair 0.95 separations apart.
 
-A neighbour going the unit's way moves too (``_moving_with``): against a
+A neighbour going the unit's way moves too (``keep_apart_kernels.cut``): against a
 neighbour on its own way in this tick (en route or escaping, as the unit
 is), within 60 degrees of the unit's (``WITH``, as ``right_of_way.FOLLOW``),
 the unit's ray is cut as the two would move, the neighbour along its way
@@ -48,6 +48,7 @@ from collections.abc import Mapping
 import msgspec
 import numpy as np
 
+from pfp_service.core import keep_apart_kernels as kernels
 from pfp_service.core.dispersion import NeighbourIndex
 from pfp_service.wire import Direction, DirectionStatus
 from pfp_service.world.deadlocks import Hold, aside_vector, held
@@ -72,6 +73,8 @@ INSIDE = 1.05  # ... nor, once on or within that disc, within this many separati
 WITH = 0.5  # a neighbour on its own way within 60 degrees of the unit's goes its way: it moves meanwhile
 _GRAZE_M = 1e-6  # along a disc's tangent: rounding, not a way into it
 _OWN = (DirectionStatus.EN_ROUTE, DirectionStatus.ESCAPING)  # on its own way: no hold turns it after the cut
+_RULE = (KEEP, GIVEN, INSIDE, WITH, _GRAZE_M)  # for the compiled cut (``core.keep_apart_kernels``)
+_NONE = np.zeros(0, dtype=np.intp)  # no unit gives way, for the compiled cut
 
 
 def cut(
@@ -84,7 +87,8 @@ def cut(
     """Cut each of ``directions[go]`` (the units at ``index`` rows ``rows``) where it would enter a neighbour's disc.
 
     A direction's ray against every neighbour's disc of ``KEEP`` times the
-    pair's separation, in one vectorised pass: the unit goes no further
+    pair's separation, in one compiled pass (``keep_apart_kernels.cut``,
+    a tick's few pairs without NumPy's per-call cost): the unit goes no further
     than the disc's edge (0, holding, when it is inside one and closing),
     so no direction ever drives a unit into another's separation, whatever
     pushes it.  The margin is for the other unit, which moves meanwhile.
@@ -101,21 +105,27 @@ def cut(
         Each unit left cut to nothing (its position in ``directions``) with
         the row of every neighbour whose disc stops it, one pair each.
     """
-    at = np.full(len(index.points), -1, dtype=np.intp)
-    at[rows] = np.arange(len(rows))
-    vec = np.array([directions[k].vector for k in go], dtype=float).reshape(-1, 2)
+    ways = np.array(
+        [(*d.vector, d.status in _OWN, d.reach_m or 0.0) for d in (directions[k] for k in go)], dtype=float
+    ).reshape(-1, 4)
     i, j, pair_s = index.near_seps(rows)
-    n = at[i]
-    enter = _entries(index, i, j, pair_s, vec[n], gives_way)
-    _moving_with(index, directions, go, at, i, j, pair_s, vec, enter)
-    safe = _nearest(enter, n, len(go))
-    for m in np.flatnonzero(np.isfinite(safe)).tolist():
-        k, reach = go[m], float(safe[m])
-        d = directions[k]
-        if d.reach_m is None or reach < d.reach_m:
-            directions[k] = msgspec.structs.replace(d, reach_m=reach)
-    held = (enter <= _GRAZE_M) & (safe[n] <= _GRAZE_M)
-    return [(go[m], jj) for m, jj in zip(n[held].tolist(), j[held].tolist())]
+    safe, held = kernels.cut(
+        index.points,
+        rows,
+        i,
+        j,
+        pair_s,
+        ways,
+        _NONE if gives_way is None else gives_way,
+        _RULE,
+        np.empty(len(i)),
+    )
+    for m, reach in enumerate(safe.tolist()):
+        if math.isfinite(reach):
+            d = directions[go[m]]
+            if d.reach_m is None or reach < d.reach_m:
+                directions[go[m]] = msgspec.structs.replace(d, reach_m=reach)
+    return [(go[m], jj) for m, jj in held.tolist()]
 
 
 def free_way(
@@ -133,107 +143,23 @@ def free_way(
     wx, wy = way
     turns = np.stack([wx * np.cos(t) - wy * np.sin(t), wx * np.sin(t) + wy * np.cos(t)], axis=1)
     m = len(i)
-    enter = _entries(
-        index,
+    enter = np.empty((len(t), m))
+    kernels.entries(
+        index.points,
         np.tile(i, len(t)),
         np.tile(j, len(t)),
         np.tile(pair_s, len(t)),
         np.repeat(turns, m, axis=0),
-        None,
-    ).reshape(len(t), m)
+        _NONE,
+        _RULE,
+        enter.reshape(-1),  # a view: the kernel writes ``enter``
+    )
     reach = np.minimum(enter.min(axis=1, initial=np.inf), reach_m)
     reach[turns @ np.asarray(away, dtype=float) < 0.0] = 0.0
     best = int(np.argmax(reach))  # the first of the longest: the nearest turn
     if not reach[best] > _GRAZE_M:
         return None
     return float(turns[best, 0]), float(turns[best, 1]), float(reach[best])
-
-
-def _entries(
-    index: NeighbourIndex,
-    i: np.ndarray,
-    j: np.ndarray,
-    pair_s: np.ndarray,
-    vec: np.ndarray,
-    gives_way: np.ndarray | None,
-) -> np.ndarray:
-    """How far along ``vec`` (one per pair) each unit ``i`` enters ``j``'s disc (``inf``: never)."""
-    rel = index.points[j] - index.points[i]
-    along = (rel * vec).sum(axis=1)
-    keep_m = KEEP * pair_s
-    if gives_way is not None:
-        keep_m = np.where(gives_way[j] == i, GIVEN * pair_s, keep_m)
-    gap2 = (rel * rel).sum(axis=1)
-    within = np.sqrt(gap2) <= keep_m + _GRAZE_M  # on the disc's edge (where the cut parks it) or inside it
-    keep_m = np.where(within, np.minimum(keep_m, INSIDE * pair_s), keep_m)
-    across2 = gap2 - along * along
-    hit = (along > _GRAZE_M) & (across2 < keep_m * keep_m)
-    enter = np.full(len(rel), np.inf)
-    enter[hit] = np.maximum(along[hit] - np.sqrt(np.maximum(keep_m[hit] ** 2 - across2[hit], 0.0)), 0.0)
-    return enter
-
-
-def _moving_with(
-    index: NeighbourIndex,
-    directions: list[Direction],
-    go: list[int],
-    at: np.ndarray,
-    i: np.ndarray,
-    j: np.ndarray,
-    pair_s: np.ndarray,
-    vec: np.ndarray,
-    enter: np.ndarray,
-) -> None:
-    """Lengthen, in place, each pair's ``enter`` (``cut``'s, every neighbour standing) where the neighbour
-    ``j`` goes the way of unit ``i``, both on their own ways in this tick (``WITH``): the two moving as
-    told (``_along``, the disc of ``KEEP`` separations, the separation alone once within it), and no
-    nearer than the separation to where ``j`` stands; never shorter than with ``j`` standing."""
-    if not len(i):
-        return
-    own = np.fromiter((directions[k].status in _OWN for k in go), dtype=bool, count=len(go))
-    m = at[j]  # the neighbour's place among the moving directions (-1: it does not move in this tick)
-    mm = np.maximum(m, 0)
-    n = at[i]
-    pick = np.flatnonzero((m >= 0) & own[mm] & own[n] & ((vec[mm] * vec[n]).sum(axis=1) > WITH))
-    if not len(pick):
-        return
-    told = np.fromiter((directions[k].reach_m or 0.0 for k in go), dtype=float, count=len(go))
-    # how far the neighbour goes at least, as told and cut with every neighbour standing (no reach: 0)
-    cap = np.minimum(told, _nearest(enter, n, len(go)))[m[pick]]
-    rel = index.points[j[pick]] - index.points[i[pick]]
-    s = pair_s[pick]
-    keep = np.where(np.hypot(rel[:, 0], rel[:, 1]) <= KEEP * s + _GRAZE_M, GIVEN * s, KEEP * s)
-    v, w = vec[n[pick]], vec[mm[pick]]
-    moving = np.minimum(_along(rel, v, w, cap, keep), _ray(rel, v, GIVEN * s))
-    enter[pick] = np.maximum(enter[pick], moving)
-
-
-def _nearest(enter: np.ndarray, n: np.ndarray, count: int) -> np.ndarray:
-    """Each of ``count`` moving units' nearest entry into a disc: the least ``enter`` of its pairs (by ``n``)."""
-    hit = np.isfinite(enter)
-    safe = np.full(count, np.inf)
-    np.minimum.at(safe, n[hit], enter[hit])
-    return safe
-
-
-def _ray(rel: np.ndarray, u: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """The first ``t >= 0`` (in lengths of ``u``, one per row) where ``|rel - t u| < keep``; ``inf``: never."""
-    a = (u * u).sum(axis=1)
-    b = (rel * u).sum(axis=1)
-    c = (rel * rel).sum(axis=1) - keep * keep
-    disc = b * b - a * c
-    hit = (b > _GRAZE_M) & (disc > 0.0) & (a > 0.0)
-    out = np.full(len(rel), np.inf)
-    out[hit] = np.maximum((b[hit] - np.sqrt(disc[hit])) / a[hit], 0.0)
-    return out
-
-
-def _along(rel: np.ndarray, v: np.ndarray, w: np.ndarray, cap: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """How far a unit goes along ``v`` before it is within ``keep`` of a neighbour at ``rel`` that goes along
-    ``w`` at the unit's speed for ``cap`` metres, then stands."""
-    first = _ray(rel, v - w, keep)
-    rest = cap + _ray(rel - cap[:, None] * (v - w), v, keep)
-    return np.where(first <= cap, first, rest)
 
 
 def giving_way(
