@@ -128,6 +128,7 @@ def planner_process(*extra: str, mission: str = "default"):
         stderr=subprocess.STDOUT,
         text=True,
     )
+    proc.pfp_log = log  # type: ignore[attr-defined]  # a test may show what the planner said
     try:
         wait_for_planner(endpoint, mission, proc=proc, log=log)
         yield endpoint, proc

@@ -21,8 +21,7 @@
   Directions go out batched by Zenoh, not express: a fifth of the cost per
   put, and no bursts lost from the transmit queue.
 * Deliberation jobs the world asks for run in worker processes (``Deliberators``) and come back as
-  ``Deliberated`` inputs; previews run on another pool, each with a deadline.
-  Neither ever holds up the loop.
+  ``Deliberated`` inputs; previews run on another pool, each with a deadline: neither holds up the loop.
 """
 
 from __future__ import annotations
@@ -49,6 +48,7 @@ from pfp_service.node.loopstats import Latency, LoopTrace, Trim, demote_native_t
 from pfp_service.node.previews import PreviewService, preview_service, warm_once
 from pfp_service.node.publish import EVENT_LOG_LINES, Publisher
 from pfp_service.node.rings import StateRings
+from pfp_service.node.shutdown import join_within, run_steps
 from pfp_service.node.startup import join, restore, restored_event
 from pfp_service.node.status import planner_status
 from pfp_service.node.store import Store
@@ -235,19 +235,29 @@ class PlannerNode:
                 assert_never(kind.mode)
 
     def stop(self) -> None:
+        """Stop the loop and the pools, a step at a time (``shutdown.run_steps``: a slow step is named)."""
         self._stop.set()
         self._wake.set()
-        if self._loop_thread is not None:
-            self._loop_thread.join(timeout=2.0)
+        loop, twins = self._loop_thread, getattr(self, "_duplicates_thread", None)
+        run_steps(
+            [
+                ("loop", lambda: join_within(loop, 2.0)),
+                ("rings", self._drain_rings),
+                ("duplicates", lambda: join_within(twins, 2.0)),
+                ("deliberators", self._deliberators.shutdown),
+                ("sights", self._sights.shutdown),
+                ("previews", self._previews.shutdown),
+                ("trace", self._trace.close),
+                ("undeclare", self._undeclare),
+            ],
+            log,
+        )
+
+    def _drain_rings(self) -> None:
         for name in self._rings.names():
             self._states(self._rings.remove(name), self.clock())
-        twins = getattr(self, "_duplicates_thread", None)
-        if twins is not None:
-            twins.join(timeout=2.0)
-        self._deliberators.shutdown()
-        self._sights.shutdown()
-        self._previews.shutdown()
-        self._trace.close()
+
+    def _undeclare(self) -> None:
         for d in self._declared:
             with contextlib.suppress(Exception):  # already gone with the session: nothing to release
                 d.undeclare()
