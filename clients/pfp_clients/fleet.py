@@ -12,8 +12,8 @@ unit's newest direction says a route is being computed off the loop
 (``deliberating``), ticks are paced at real time, so a vehicle drives no
 further on plain descent while a search runs than a real one would (at
 ``--speed-up 40`` a 2 s search would otherwise be 80 s of driving, and a
-run's outcome would depend on how busy the machine is).  A unit whose answer still has not come moves along the
-direction it had, as a vehicle would.  Each unit holds a liveliness token
+run's outcome would depend on how busy the machine is).  A unit whose answer
+still has not come moves along the direction it had, as a vehicle would.  Each unit holds a liveliness token
 ``mumt/{m}/alive/unit/{u}`` while the fleet runs.
 
 Goals from the team file are put with no ``step``: the planning resolution is
