@@ -49,6 +49,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks._terrain_live import ROUNDS as LIVE_ROUNDS
 from benchmarks._terrain_live import met as live_met
 from benchmarks._terrain_live import print_live
 
@@ -71,6 +72,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PART[,PART]",
         help=f"run only these parts, comma-separated: {', '.join(PARTS)} (default: all)",
     )
+    p.add_argument(
+        "--rounds",
+        type=_rounds,
+        default=LIVE_ROUNDS,
+        help=f"the live bystanders' A/B window pairs (default: {LIVE_ROUNDS}; 2 or more give the A/A noise floor)",
+    )
     p.add_argument("--check", action="store_true", help="exit 1 when a target is missed")
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -87,6 +94,17 @@ def _parts(text: str) -> tuple[str, ...]:
             f"unknown part {', '.join(sorted(unknown)) or repr(text)} (parts: {', '.join(PARTS)})"
         )
     return tuple(p for p in PARTS if p in got)
+
+
+def _rounds(text: str) -> int:
+    """``--rounds``: a whole number from 1 to 20 (else argparse's one-line error, exit 2)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if not 1 <= n <= 20:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number from 1 to 20")
+    return n
 
 
 def _grid(cell_m: float):  # type: ignore[no-untyped-def]
@@ -139,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     if "cost" in parts:
         out["cost"] = _cost()
     if "live" in parts:
-        out["live"] = _live(grid, origin)
+        out["live"] = _live(grid, origin, args.rounds)
     elif args.no_live:
         out["live"] = {"not_run": "--no-live"}
     out["load_average"] = {"before": list(load_before), "after": list(os.getloadavg())}
@@ -319,7 +337,7 @@ def _print_viewshed(out: dict[str, Any]) -> None:
     )
 
 
-def _live(grid: Any, origin: Any) -> dict[str, Any]:
+def _live(grid: Any, origin: Any, rounds: int) -> dict[str, Any]:
     """The live rows (``_terrain_live``), against ``pfp serve`` over this grid written as a GeoTIFF."""
     from benchmarks._terrain_live import live
 
@@ -327,7 +345,7 @@ def _live(grid: Any, origin: Any) -> dict[str, Any]:
         tif = Path(tmp) / "grid.tif"
         _write(tif, grid, origin)
         try:
-            return live(grid, tif)
+            return live(grid, tif, rounds=rounds)
         except Exception as exc:  # a planner that would not start, a session that would not open
             return {"not_run": f"{type(exc).__name__}: {exc}"[:300]}
 

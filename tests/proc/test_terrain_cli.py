@@ -221,7 +221,7 @@ def test_bad_input_is_one_line_and_exit_2(dems, tmp_path):
 
 def test_bench_terrain_reports_the_sweep_beside_gdal(dems):
     _gdal_viewshed()
-    r = run_pfp("bench", "terrain", "--cell", "40", "--repeat", "2", "--json")
+    r = run_pfp("bench", "terrain", "--cell", "40", "--repeat", "2", "--rounds", "2", "--json")
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
     assert doc["grid"] == [251, 251] and doc["cells_within_radius"] > 0.7 * 251 * 251
@@ -240,7 +240,9 @@ def test_bench_terrain_reports_the_sweep_beside_gdal(dems):
     ]  # pfp serve --terrain and 1,000 units: the wave and the bystanders ran, and nothing failed
     assert live["units"] == 1000 and live["server"]["exit_code"] == 0 and live["server"]["error_lines"] == 0
     assert live["wave"]["affected"] > 0 and live["wave"]["redirected"] > 0
-    assert live["bystanders"]["A"]["answered"] > 0 and live["bystanders"]["B"]["answered"] > 0
+    by = live["bystanders"]
+    assert by["rounds"] == 2 and by["A"]["answered"] > 0 and by["B"]["answered"] > 0
+    assert by["A_halves_p99_ratio"] > 0  # the noise floor: the A windows split in two
 
 
 def test_bench_terrain_runs_only_the_parts_named_and_judges_only_theirs():
@@ -257,3 +259,9 @@ def test_bench_terrain_runs_only_the_parts_named_and_judges_only_theirs():
     assert [ln for ln in bad.stderr.splitlines() if ln.strip()] == [
         "pfp bench terrain: error: argument --only: unknown part sky (parts: viewshed, memory, cost, live)"
     ]
+    for rounds in ("0", "21", "two"):
+        bad = run_pfp("bench", "terrain", "--only", "live", "--rounds", rounds)
+        assert bad.returncode == 2 and "Traceback" not in bad.stderr
+        assert [ln for ln in bad.stderr.splitlines() if ln.strip()] == [
+            f"pfp bench terrain: error: argument --rounds: {rounds!r} is not a whole number from 1 to 20"
+        ]
