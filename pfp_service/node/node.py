@@ -3,8 +3,8 @@
 * Unit states, the flood, wake no Python thread per state: Zenoh keeps them in
   rings the loop drains (``rings.StateRings``: one on the plain key, one per
   shard this planner owns, all on one while it owns them all), latest-wins per unit.
-* Ticks amortise: the loop ticks at most every ``MIN_TICK_S`` while states keep
-  coming, so the per-tick cost is shared; idle, it sleeps until a ring's waiter or an
+* Ticks amortise: the loop ticks at most every ``MIN_TICK_S`` while states keep coming, so the per-tick
+  cost is shared (a wave's shares wait for no pause); idle, it sleeps until a ring's waiter or an
   input wakes it or the world's next deadline comes: no polling, no period.
 * Under ``--cluster`` the planner subscribes to the states of its own shards
   only (``World.shards``, rendezvous hashing); as they change, the new rings
@@ -356,7 +356,7 @@ class PlannerNode:
                 self._rings.arm()
                 self._wake.wait(None if due is None else max(due - self.clock(), 0.0))
             pause = last + MIN_TICK_S - self.clock()
-            if pause > 0:  # amortise: the states and inputs of the next MIN_TICK_S share one tick
+            if pause > 0 and not self.world.directions_owed():  # amortise; a wave's shares (not points) go on
                 time.sleep(pause)
             woke = self._wake.is_set()
             self._wake.clear()

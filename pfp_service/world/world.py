@@ -155,6 +155,10 @@ class World:
         (``OWED_PER_TICK``), wait for the next ``apply`` (a ``Tick`` will do): call it soon."""
         return bool(self._owed) or bool(self._wave)
 
+    def directions_owed(self) -> bool:
+        """Whether units a change reached still wait for their first direction (not only for their points)."""
+        return bool(self._wave)
+
     def owns(self, unit_id: str) -> bool:
         """Whether this planner guides ``unit_id`` (``Ownership.owns``)."""
         return self._cluster.own.owns(unit_id)
