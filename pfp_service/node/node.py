@@ -103,9 +103,8 @@ class PlannerNode:
         clock: monotonic seconds; the world sees only this.
         store: durable state (``Store``); goals and threats are committed to it
             before they are applied, and restored from it at ``start``.
-        previews: the preview service made by ``preview_service`` before the session opened, so its
-            worker processes warm up while a client-mode planner waits for its router; the
-            node shuts it down.  A new one when not given.
+        previews: the preview service made by ``preview_service`` before the session opened, so its workers
+            warm up while a client-mode planner waits for its router; the node shuts it down (or makes one).
     """
 
     def __init__(
@@ -374,6 +373,7 @@ class PlannerNode:
                 self._sync_shards()
             except Exception:  # never let one bad batch kill the planner; say so loudly
                 log.exception("planning loop error")
+                time.sleep(MIN_TICK_S)  # and never spin: a wave's owed shares skip the pause above
 
     def _due(self, last: float) -> float | None:
         """When to tick if nothing comes: the world's deadline, or ``tick_s`` on while the node's work waits."""

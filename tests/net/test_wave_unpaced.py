@@ -89,3 +89,36 @@ def test_a_waves_shares_follow_one_another_without_the_ticks_pause(monkeypatch):
     finally:
         node.stop()
         session.close()
+
+
+def test_a_failing_tick_never_spins_the_loop_while_a_wave_is_owed(monkeypatch):
+    """A tick that raises (logged, the planner carries on) is followed by the pause even while directions are
+    owed: a loop woken again and again would otherwise retry it as fast as the CPU allows."""
+    from pfp_service.node.previews import PreviewService
+
+    real_wait = PreviewService.wait_ready
+    monkeypatch.setattr(PreviewService, "wait_ready", lambda self, timeout_s=0.0: real_wait(self, 0.0))
+    monkeypatch.setattr(node_module, "MIN_TICK_S", 0.05)
+    cfg = ServeConfig(mission="spin" + str(os.getpid()), listen=[f"tcp/127.0.0.1:{free_port()}"], lookahead=0)
+    session = zenoh.open(zenoh_config(cfg))
+    node = PlannerNode(session, cfg)
+    calls: list[float] = []
+
+    def failing() -> None:
+        calls.append(time.monotonic())
+        raise RuntimeError("a bad batch")
+
+    try:
+        node.start()
+        monkeypatch.setattr(node.world, "directions_owed", lambda: True)
+        monkeypatch.setattr(node, "_tick", failing)
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:  # woken every millisecond, as a stream of states would
+            node._wake.set()
+            time.sleep(0.001)
+        n = len(calls)
+    finally:
+        monkeypatch.undo()
+        node.stop()
+        session.close()
+    assert 1 <= n <= 0.5 / 0.05 + 3, f"{n} failing ticks in 0.5 s"
