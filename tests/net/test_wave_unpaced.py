@@ -4,8 +4,7 @@ While states keep coming the loop ticks at most every ``MIN_TICK_S``, so that
 the states of a few milliseconds share one tick.  A contingency's wave goes out
 a share an ``apply`` (``world/wave.py``); were each share to wait for that
 pause, a wave of ``k`` shares would take ``k - 1`` pauses more than its work
-(the service bench's fan-out: 40-43 ms, of it some 14 ms of pauses, against
-28-29 ms without, 2026-12-07).  The pause is set to a quarter of a second
+(BENCHMARKS.md, "A wave's shares without the tick's pause").  The pause is set to a quarter of a second
 here, so a wave paced by it takes seconds and one that is not takes a few
 milliseconds: the test tells the two apart on any machine.  The wave's points
 (its look-aheads, owed once every direction is out) are still paced.
