@@ -159,9 +159,10 @@ def _ab(g: Any, bystanders: set[str], latency: Any, rounds: int = ROUNDS) -> dic
         g.settle(0.5, 3.0)
 
     def pooled(keep: Any) -> dict[str, Any]:
-        return dict(
-            latency(g, [s for i, (ph, seqs) in enumerate(windows) if keep(i, ph) for s in seqs], g.recv)
+        got: dict[str, Any] = latency(
+            g, [s for i, (ph, seqs) in enumerate(windows) if keep(i, ph) for s in seqs], g.recv
         )
+        return got
 
     a, b = pooled(lambda _i, ph: ph == "A"), pooled(lambda _i, ph: ph == "B")
     out = {"bystanders": len(bystanders), "rounds": rounds, "A": a, "B": b, "p99_ratio": _ratio(b, a)}

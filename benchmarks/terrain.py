@@ -52,6 +52,7 @@ from typing import Any
 from benchmarks._terrain_live import ROUNDS as LIVE_ROUNDS
 from benchmarks._terrain_live import met as live_met
 from benchmarks._terrain_live import print_live
+from pfp_service.argtypes import bounded_int
 
 TARGET_MS = 50.0
 RADIUS_M = 5_000.0
@@ -74,7 +75,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--rounds",
-        type=_rounds,
+        type=bounded_int(1, 20),
         default=LIVE_ROUNDS,
         help=f"the live bystanders' A/B window pairs (default: {LIVE_ROUNDS}; 2 or more give the A/A noise floor)",
     )
@@ -94,17 +95,6 @@ def _parts(text: str) -> tuple[str, ...]:
             f"unknown part {', '.join(sorted(unknown)) or repr(text)} (parts: {', '.join(PARTS)})"
         )
     return tuple(p for p in PARTS if p in got)
-
-
-def _rounds(text: str) -> int:
-    """``--rounds``: a whole number from 1 to 20 (else argparse's one-line error, exit 2)."""
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if not 1 <= n <= 20:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number from 1 to 20")
-    return n
 
 
 def _grid(cell_m: float):  # type: ignore[no-untyped-def]

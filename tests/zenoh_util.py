@@ -168,6 +168,30 @@ class Inbox:
                 return msg
 
 
+def guide_in_a_column(
+    session: zenoh.Session, mission: str, ids: list[str], inbox: Inbox, timeout: float = 60.0
+) -> set[str]:
+    """Report unit ``ids[i]`` at ``(0, i)`` (their goals put already), again until each has had a moving
+    direction (``inbox`` hears the directions) or ``timeout`` passes; the units that had one."""
+    from pfp_service.wire import keys
+
+    answered: set[str] = set()
+    deadline = time.monotonic() + timeout
+    seq = 0
+    while answered != set(ids) and time.monotonic() < deadline:
+        seq += 1
+        for i, u in enumerate(ids):
+            put_json(session, keys.shard_state(mission, u), {"position": [0.0, float(i)], "seq": seq})
+        while answered != set(ids):  # until every unit or a second without a direction
+            try:
+                d = inbox.get(timeout=1.0)
+            except TimeoutError:
+                break
+            if d["status"] in ("en_route", "escaping"):
+                answered.add(d["unit"])
+    return answered
+
+
 def put_json(session: zenoh.Session, key: str, obj: Any) -> None:
     session.put(key, json.dumps(obj).encode(), encoding=zenoh.Encoding.APPLICATION_JSON)
 

@@ -23,7 +23,7 @@ from pfp_service.node.config import ServeConfig, zenoh_config
 from pfp_service.node.node import PlannerNode
 from pfp_service.wire import keys
 from pfp_service.world.wave import WAVE_PER_TICK
-from tests.zenoh_util import Inbox, client, free_port, put_in_force, put_json
+from tests.zenoh_util import Inbox, client, free_port, guide_in_a_column, put_in_force, put_json
 
 pytestmark = pytest.mark.net
 
@@ -50,21 +50,7 @@ def test_a_waves_shares_follow_one_another_without_the_ticks_pause(monkeypatch):
             put_in_force(
                 s, m, {keys.unit_goal(m, u): {"position": [60.0, float(i)]} for i, u in enumerate(ids)}
             )
-            answered: set[str] = set()
-            deadline = time.monotonic() + 60
-            seq = 0
-            while answered != set(ids) and time.monotonic() < deadline:  # every unit guided once
-                seq += 1
-                for i, u in enumerate(ids):
-                    put_json(s, keys.shard_state(m, u), {"position": [0.0, float(i)], "seq": seq})
-                end = time.monotonic() + 2.0
-                while answered != set(ids) and time.monotonic() < end:
-                    try:
-                        d = inbox.get(timeout=0.5)
-                    except TimeoutError:
-                        break
-                    if d["status"] in ("en_route", "escaping"):
-                        answered.add(d["unit"])
+            answered = guide_in_a_column(s, m, ids, inbox)  # every unit guided once
             assert answered == set(ids)
             time.sleep(2.0)  # the units quiet: only the wave's directions come now
             inbox.sub.undeclare()

@@ -259,9 +259,13 @@ def test_bench_terrain_runs_only_the_parts_named_and_judges_only_theirs():
     assert [ln for ln in bad.stderr.splitlines() if ln.strip()] == [
         "pfp bench terrain: error: argument --only: unknown part sky (parts: viewshed, memory, cost, live)"
     ]
-    for rounds in ("0", "21", "two"):
+    for rounds, why in (
+        ("0", "must be 1 to 20"),
+        ("21", "must be 1 to 20"),
+        ("two", "expected a whole number"),
+    ):
         bad = run_pfp("bench", "terrain", "--only", "live", "--rounds", rounds)
         assert bad.returncode == 2 and "Traceback" not in bad.stderr
         assert [ln for ln in bad.stderr.splitlines() if ln.strip()] == [
-            f"pfp bench terrain: error: argument --rounds: {rounds!r} is not a whole number from 1 to 20"
+            f"pfp bench terrain: error: argument --rounds: {why}, got {rounds!r}"
         ]

@@ -10,7 +10,7 @@ import pytest
 
 from pfp_service.wire import keys
 from pfp_service.world.world import WAVE_FIRST
-from tests.zenoh_util import Inbox, client, planner_process, put_in_force, put_json
+from tests.zenoh_util import Inbox, client, guide_in_a_column, planner_process, put_in_force
 
 pytestmark = pytest.mark.proc
 
@@ -34,20 +34,7 @@ def test_a_wave_reaches_every_unit_first_and_its_points_follow():
     with planner_process("--state-dir", "none", mission=m) as (endpoint, _proc), client(endpoint) as s:
         inbox = Inbox(s, f"mumt/{m}/unit/*/direction")
         put_in_force(s, m, {keys.unit_goal(m, u): {"position": [60.0, float(i)]} for i, u in enumerate(ids)})
-        answered: set[str] = set()
-        deadline = time.monotonic() + 60
-        seq = 0
-        while answered != set(ids) and time.monotonic() < deadline:  # every unit guided once
-            seq += 1
-            for i, u in enumerate(ids):
-                put_json(s, keys.shard_state(m, u), {"position": [0.0, float(i)], "seq": seq})
-            while True:
-                try:
-                    d = inbox.get(timeout=1.0)
-                except TimeoutError:
-                    break
-                if d["status"] in ("en_route", "escaping"):
-                    answered.add(d["unit"])
+        answered = guide_in_a_column(s, m, ids, inbox)  # every unit guided once
         assert answered == set(ids)
         _deliberations_landed(s, m)
         time.sleep(1.5)  # the units quiet, the re-sends of the routes that landed past
