@@ -24,6 +24,11 @@ each with a goal a short way off (``benchmarks._load.LoadGen``).
   at all.  A p99 of a few milliseconds is the 1 % tail of a 2-core machine's
   scheduling: A's own p99 moved from 4.0 to 6.5 ms between runs of one tree
   with two pairs (2026-12-07), so the default pools six.
+* **Since the move.**  The B windows' bystander answers by the time their
+  state was sent after the threat moved (``SINCE_MOVE_MS``: before it, the
+  window's sweep, the wave, the deliberation that follows): how many, their
+  p50 and p99, and the fraction slower than A's p99 and than the target's
+  line (1.2x A's p99).  Where B's tail comes from, in the bench's own output.
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ WINDOW_S = 3.0
 ROUNDS = 6  # A/B pairs, alternating (``pfp bench terrain --rounds``)
 SIGMA_M = 1_500.0  # the threat's reach: its term is above 1e-9 of its peak to about 6.4 sigma
 GOAL_M = 250.0
+# the edges of ``since_move``'s bins, ms after the move (the first bin: the window before it)
+SINCE_MOVE_MS = (0.0, 50.0, 110.0, 300.0, 600.0, 1_000.0)  # the move is 1.5 s before the window ends
 
 
 def live(grid: Any, tif: Path, seed: int = 32, rounds: int = ROUNDS) -> dict[str, Any]:
@@ -144,14 +151,15 @@ def _ab(g: Any, bystanders: set[str], latency: Any, rounds: int = ROUNDS) -> dic
     from pfp_service.wire import ThreatUpdate, keys
 
     windows: list[tuple[str, list[int]]] = []
+    moves: dict[int, float] = {}  # B window -> when its threat was moved (``perf_counter``, as ``g.sent``)
     everyone = list(range(UNITS + 1))
     for k in range(2 * rounds):
         phase = "AB"[k % 2]
         moved = ThreatUpdate(position=(5.0 * (k + 1), 0.0), sigma_range=SIGMA_M, sigma_lateral=SIGMA_M)
 
-        def put_once(done: float, phase: str = phase, moved: Any = moved, box: list[bool] = [False]) -> None:  # noqa: B006
-            if phase == "B" and done >= 0.5 and not box[0]:
-                box[0] = True
+        def put_once(done: float, phase: str = phase, moved: Any = moved, k: int = k) -> None:
+            if phase == "B" and done >= 0.5 and k not in moves:  # once, half-way through
+                moves[k] = time.perf_counter()
                 g.put_json(keys.threat(MISSION, "ridge"), moved)
 
         first, end, _spent = g.pace((UNITS + 1) * LIVE_HZ, WINDOW_S, everyone, tick=put_once)
@@ -173,6 +181,43 @@ def _ab(g: Any, bystanders: set[str], latency: Any, rounds: int = ROUNDS) -> dic
         )
         out["A_halves_p99_ms"] = [odd["p99_ms"], even["p99_ms"]]
         out["A_halves_p99_ratio"] = _ratio(even, odd)
+    if a["p99_ms"] is not None:
+        out["since_move"] = since_move(g, windows, moves, a["p99_ms"])
+    return out
+
+
+def since_move(
+    g: Any, windows: list[tuple[str, list[int]]], moves: dict[int, float], a_p99_ms: float
+) -> list[dict[str, Any]]:
+    """The B windows' answered bystander states in ``SINCE_MOVE_MS``'s bins of the time each was sent after
+    its window's move: count, p50, p99, and the fractions slower than ``a_p99_ms`` and than 1.2x it."""
+    first: dict[int, float] = {}
+    for rc in g.recv:
+        first.setdefault(rc.seq, rc.t)
+    edges = [-math.inf, *SINCE_MOVE_MS, math.inf]
+    bins: list[list[float]] = [[] for _ in range(len(edges) - 1)]
+    for k, (phase, seqs) in enumerate(windows):
+        if phase != "B" or k not in moves:
+            continue
+        for s in seqs:
+            if s in first:
+                after_ms = 1e3 * (g.sent[s] - moves[k])
+                i = next(j for j in range(len(bins)) if after_ms < edges[j + 1])
+                bins[i].append(1e3 * (first[s] - g.sent[s]))
+    out = []
+    for i, ms in enumerate(bins):
+        a = np.asarray(ms)
+        out.append(
+            {
+                "from_ms": None if i == 0 else edges[i],
+                "to_ms": None if i == len(bins) - 1 else edges[i + 1],
+                "answers": len(ms),
+                "p50_ms": float(np.percentile(a, 50)) if len(ms) else None,
+                "p99_ms": float(np.percentile(a, 99)) if len(ms) else None,
+                "over_A_p99": float((a > a_p99_ms).mean()) if len(ms) else None,
+                "over_target": float((a > BYSTANDER_TARGET * a_p99_ms).mean()) if len(ms) else None,
+            }
+        )
     return out
 
 
@@ -213,6 +258,20 @@ def print_live(out: dict[str, Any]) -> None:
         f" {_ms(by['B']['p99_ms'])} with a threat moved ({_x(by['p99_ratio'])}; {by.get('rounds', ROUNDS)} pairs"
         + (f", plain against plain {_x(floor)})" if floor is not None else ")")
     )
+    rows = by.get("since_move") or []
+    if rows:
+        print("    B's answers by when they were sent: over 1.2x plain's p99 (of how many)")
+        print("      " + ", ".join(f"{_span(r)} {_pct(r['over_target'])} ({r['answers']})" for r in rows))
+
+
+def _span(r: dict[str, Any]) -> str:
+    if r["from_ms"] is None:
+        return "before the move"
+    return f"{r['from_ms']:.0f}+ ms" if r["to_ms"] is None else f"{r['from_ms']:.0f}-{r['to_ms']:.0f} ms"
+
+
+def _pct(v: float | None) -> str:
+    return "n/a" if v is None else f"{100 * v:.1f} %"
 
 
 def _ms(v: float | None) -> str:
