@@ -37,7 +37,7 @@ from shapely.geometry import Point as _SPoint
 from shapely.geometry import Polygon as _SPolygon
 from shapely.validation import explain_validity
 
-from pfp_service.core import zone_kernels
+from pfp_service.core import zone_bins, zone_kernels
 from pfp_service.core.zone_kernels import TOUCH_M, point_zone, segment_hit
 
 __all__ = [
@@ -199,7 +199,7 @@ def _unpickled(data: bytes) -> ZoneSet:
         return got
     zs = ZoneSet.__new__(ZoneSet)
     (zs.zones, zs.ids, zs.edges, zs.offsets, zs.circles, zs.boxes, zs.search_margin_m) = pickle.loads(data)
-    zs._pickled = data
+    zs._pickled, zs._bins = data, None
     while len(_UNPICKLED) >= _UNPICKLED_KEPT:
         del _UNPICKLED[next(iter(_UNPICKLED))]
     _UNPICKLED[data] = zs
@@ -218,6 +218,7 @@ class ZoneSet:
 
     __slots__ = (
         "__weakref__",
+        "_bins",
         "_pickled",
         "boxes",
         "circles",
@@ -230,6 +231,7 @@ class ZoneSet:
 
     def __init__(self, zones: Iterable[Zone] = ()) -> None:
         self._pickled: bytes | None = None  # ``__reduce__``'s, made at the first pickling
+        self._bins: tuple[zone_bins.Bins | None] | None = None  # ``signed_distance``'s, made at its first use
         self.zones: tuple[Zone, ...] = tuple(zones)
         self.ids: tuple[str, ...] = tuple(z.id for z in self.zones)
         if len(set(self.ids)) != len(self.ids):
@@ -314,8 +316,12 @@ class ZoneSet:
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.full(len(pts), math.inf)
         if self.zones and len(pts):
-            zone_kernels.signed_many(
-                self.edges, self.offsets, self.circles, self.boxes, pts, out, float(reach)
+            if self._bins is None:  # ``zone_bins``: of a terrain's hundreds of slope barriers, a point's few
+                self._bins = (
+                    zone_bins.bins_of(self.boxes) if len(self.zones) >= zone_bins.BINNED_FROM else None,
+                )
+            zone_bins.signed(
+                self.edges, self.offsets, self.circles, self.boxes, self._bins[0], pts, out, reach
             )
         return out
 

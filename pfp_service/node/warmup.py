@@ -69,6 +69,7 @@ def warm_wide(base: WorldSettings, terrain: bool = True) -> None:
                 [StateReported(f"c{i}", UnitState(position=(0.01 * k, 2.0 * i - 1.0))) for i in (0, 1)], k
             )
     _parallel(world.field.packed, world.field.zones)
+    _binned()
     _shortcut(world.field.threats)
     # a batch's unit in plain descent among zones, its gradient given (``advise_many``): judged from Python
     lone = Stepper((0.0, 0.0), (100.0, 0.0), resolve(PlannerParams(), (0.0, 0.0), (100.0, 0.0)), None, 0)
@@ -206,6 +207,18 @@ def _parallel(packed: np.ndarray, zones: ZoneSet) -> None:
                 predict(packed, idx, pts[:m], units[:m], 4, among)
     big = max(1, math.ceil(kernels.PARALLEL_MIN_PAIRS_LEVEL / max(packed.shape[0], 1)))
     kernels.batch_level(packed, np.ascontiguousarray(rng.uniform(-200.0, 300.0, (big, 2))), np.empty(big))
+
+
+def _binned() -> None:
+    """A zone set as large as a terrain's slope barriers, asked which points lie near it (``zone_bins``)."""
+    from pfp_service.core.zone_bins import BINNED_FROM
+    from pfp_service.core.zones import Zone
+
+    zones = ZoneSet(
+        Zone.polygon(f"w{k}", [(10.0 * k, 0.0), (10.0 * k + 5.0, 0.0), (10.0 * k + 5.0, 5.0)])
+        for k in range(BINNED_FROM)
+    )
+    zones.contains(np.array([[2.0, 1.0], [math.nan, 0.0], [500.0, 500.0]]), 1.0)
 
 
 def _terrain(settings: WorldSettings) -> None:
