@@ -30,6 +30,7 @@ __all__ = ["BINNED_FROM", "MAX_ENTRIES", "Bins", "bins_of", "signed"]
 BINNED_FROM = 16  # zones in a set from which its points are measured through bins
 MAX_SIDE = 256  # cells a side at most
 MAX_ENTRIES = 1 << 20  # zones listed over all cells at most (8 MB); past it, every zone's box as before
+FAR_M = 1e15  # a point or reach past this has no cell a whole number can name: every zone's box, as before
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,8 +83,8 @@ def signed(
     out: np.ndarray,
     reach: float,
 ) -> None:
-    """``zone_kernels.signed_many(..., pts, out, reach)``: through ``bins`` when there are bins and ``reach`` is finite."""
-    if bins is None or not math.isfinite(reach):
+    """``zone_kernels.signed_many(..., pts, out, reach)``: through ``bins`` when there are bins and ``reach`` is short."""
+    if bins is None or not reach < FAR_M:  # an unbounded reach (or NaN): every zone's box, as before
         zone_kernels.signed_many(edges, offsets, circles, boxes, pts, out, float(reach))
         return
     _signed_binned(
@@ -122,7 +123,7 @@ def _signed_binned(
     for p in range(pts.shape[0]):
         x = pts[p, 0]
         y = pts[p, 1]
-        if not (math.isfinite(x) and math.isfinite(y)):  # no cell to look in: every zone, as before
+        if not (abs(x) < FAR_M and abs(y) < FAR_M):  # no cell to look in (NaN, inf): every zone, as before
             out[p] = point_zone(edges, offsets, circles, boxes, x, y, reach)[0]
             continue
         i0, i1 = _cells(x, reach, x0, cell, nx)

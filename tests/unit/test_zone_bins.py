@@ -87,9 +87,17 @@ def test_points_off_the_grid_and_not_finite_are_answered_as_before() -> None:
     zs = _random_set(np.random.default_rng(7))
     assert len(zs) >= BINNED_FROM
     pts = np.array(
-        [[math.nan, 0.0], [0.0, math.inf], [-math.inf, 3.0], [1e300, -1e300], [5e3, 5e3], [-9e5, 0.0]]
+        [
+            [math.nan, 0.0],
+            [0.0, math.inf],
+            [-math.inf, 3.0],
+            [1e300, -1e300],
+            [5e3, 5e3],
+            [-9e5, 0.0],
+            [2e15, 0.0],
+        ]
     )
-    for reach in REACHES:
+    for reach in [*REACHES, 1e300, math.nan]:
         got = zs.signed_distance(pts, reach)
         assert np.array_equal(got, _every_zone(zs, pts, reach), equal_nan=True), reach
 
