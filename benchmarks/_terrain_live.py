@@ -33,6 +33,7 @@ each with a goal a short way off (``benchmarks._load.LoadGen``).
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from pathlib import Path
@@ -200,9 +201,8 @@ def since_move(
         if phase != "B" or k not in moves:
             continue
         for s in seqs:
-            if s in first:
-                after_ms = 1e3 * (g.sent[s] - moves[k])
-                i = next(j for j in range(len(bins)) if after_ms < edges[j + 1])
+            if s in first:  # bin 0: sent before the move; bin i: at least SINCE_MOVE_MS[i - 1] after it
+                i = bisect.bisect_right(SINCE_MOVE_MS, 1e3 * (g.sent[s] - moves[k]))
                 bins[i].append(1e3 * (first[s] - g.sent[s]))
     out = []
     for i, ms in enumerate(bins):
