@@ -31,8 +31,9 @@ each with a goal a short way off (``benchmarks._load.LoadGen``).
   line (1.2x A's p99).  Where B's tail comes from, in the bench's own output.
 * **What the row can settle.**  With the A windows apart by more than the
   20 % the row tests (``unresolved``: 1.05-3.83x in one afternoon's runs,
-  BENCHMARKS.md "The bystanders' row again"), or with no floor (one pair), a
-  ratio within 20 % is noise: ``--check`` counts it as not met, and says why.
+  the generator's own collector's pauses, since fixed: BENCHMARKS.md "The
+  load generator's own pauses"), or with no floor (one pair), a ratio within
+  20 % is noise: ``--check`` counts it as not met, and says why.
 """
 
 from __future__ import annotations
