@@ -201,7 +201,7 @@ def unresolved(by: dict[str, Any]) -> str | None:
     errs towards "not met"."""
     floor = by.get("A_halves_p99_ratio")
     if floor is None or not floor > 0.0 or not math.isfinite(floor):
-        return "one window pair: no noise floor to judge it against"
+        return "no noise floor to judge it against (one window pair, or a half without answers)"
     spread = max(floor, 1.0 / floor)
     if spread > BYSTANDER_TARGET:
         return f"plain against plain already differs by {spread:.2f}x"

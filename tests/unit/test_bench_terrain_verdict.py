@@ -40,8 +40,9 @@ def test_the_reason_names_the_floor_or_its_absence():
     assert unresolved({"A_halves_p99_ratio": 1.05}) is None
     assert unresolved({"A_halves_p99_ratio": 3.83}) == "plain against plain already differs by 3.83x"
     assert unresolved({"A_halves_p99_ratio": 0.5}) == "plain against plain already differs by 2.00x"
-    assert unresolved({}) == "one window pair: no noise floor to judge it against"
-    assert unresolved({"A_halves_p99_ratio": 0.0}) == "one window pair: no noise floor to judge it against"
+    none = "no noise floor to judge it against (one window pair, or a half without answers)"
+    assert unresolved({}) == none and unresolved({"A_halves_p99_ratio": None}) == none
+    assert unresolved({"A_halves_p99_ratio": 0.0}) == none
     assert unresolved({"A_halves_p99_ratio": BYSTANDER_TARGET}) is None
 
 
